@@ -1,0 +1,1 @@
+"""The ``tetc`` command-line front end (installed as ``gatun_py.cli``)."""

@@ -1,0 +1,54 @@
+"""Atomic output: write to a temporary file beside the target, then rename over it."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+
+from .errors import OutputError
+
+
+def check_output_path(path: str | os.PathLike, *, force: bool = False) -> Path:
+    """Refuse to clobber an existing file unless ``force``; check the directory is writable."""
+    path = Path(path)
+    if path.exists() and not force:
+        raise OutputError(f"{path} already exists (use --force to overwrite)")
+    if path.is_dir():
+        raise OutputError(f"{path} is a directory")
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise OutputError(f"cannot write {path}: directory {parent} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise OutputError(f"cannot write {path}: directory {parent} is not writable")
+    return path
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike, *, force: bool = False):
+    """Yield a temporary path next to ``path``; rename it onto ``path`` if the block succeeds.
+
+    The temporary file keeps the target's suffix so that format detection by extension (meshio,
+    PNG writers) works on it. On any exception the temporary file is removed and the target is
+    left untouched.
+    """
+    path = check_output_path(path, force=force)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent or ".")
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def write_bytes_atomic(path: str | os.PathLike, data: bytes, *, force: bool = False) -> None:
+    """Write ``data`` to ``path`` atomically."""
+    with atomic_path(path, force=force) as tmp:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())

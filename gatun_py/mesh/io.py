@@ -1,0 +1,257 @@
+"""Reading any supported mesh file into a validated :class:`TetMesh`, and writing one out.
+
+Supported inputs: every meshio format that carries volume cells (tets, hexahedra, wedges,
+pyramids, and their quadratic variants reduced to their corners), and single-block PLOT3D grids.
+``.tetc`` files are read by :mod:`gatun_py.codec`.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .._atomic import atomic_path
+from ..errors import MeshError, ReadError
+from . import plot3d
+from .model import TetMesh
+from .split import orient_positive, split_hexes_two_colour, split_min_id_star, two_colour
+from .validate import MeshReport, validate_tets
+
+# meshio cell type -> (linear type, number of corner vertices)
+VOLUME_CELLS = {
+    "tetra": ("tetra", 4), "tetra10": ("tetra", 4), "tetra20": ("tetra", 4),
+    "hexahedron": ("hexahedron", 8), "hexahedron20": ("hexahedron", 8), "hexahedron24": ("hexahedron", 8),
+    "hexahedron27": ("hexahedron", 8),
+    "wedge": ("wedge", 6), "wedge12": ("wedge", 6), "wedge15": ("wedge", 6), "wedge18": ("wedge", 6),
+    "pyramid": ("pyramid", 5), "pyramid13": ("pyramid", 5), "pyramid14": ("pyramid", 5),
+}
+
+
+@dataclass
+class ReadOptions:
+    """How to turn a file into a mesh: which scalar, which Q variable, cell-to-point or not."""
+
+    scalar: str | None = None
+    q_file: str | os.PathLike | None = None
+    q_var: str = "density"
+    cell_to_point: bool = False
+
+
+def read_mesh(path, *, scalar: str | None = None, q_file=None, q_var: str = "density",
+              cell_to_point: bool = False) -> tuple[TetMesh, MeshReport]:
+    """Read, split into tets, validate.
+
+    Parameters
+    ----------
+    path : path-like
+        Any meshio volume format, or a PLOT3D XYZ grid.
+    scalar : str, optional
+        Point-data array to use as density. Without it: the only scalar array, else an error that
+        lists the names.
+    q_file : path-like, optional
+        PLOT3D Q file (default: the ``...q...`` file beside an ``...xyz...`` grid).
+    q_var : str
+        Which PLOT3D quantity to use (see :data:`plot3d.Q_VARIABLES`).
+    cell_to_point : bool
+        Allow a cell-data scalar, averaged to the points weighted by cell volume.
+
+    Raises
+    ------
+    ReadError, MeshError
+    """
+    path = Path(path)
+    if not path.exists():
+        raise ReadError(f"no such file: {path}")
+    if path.is_dir():
+        raise ReadError(f"{path} is a directory, not a mesh file")
+    if q_file is not None or (path.suffix.lower() in plot3d.PLOT3D_SUFFIXES and plot3d.looks_like_plot3d_xyz(path)):
+        return _read_plot3d(path, q_file, q_var)
+    if path.suffix.lower() in plot3d.PLOT3D_SUFFIXES:
+        raise ReadError(f"{path}: not a PLOT3D grid nor a mesh format known by extension")
+    return _read_meshio(path, scalar, cell_to_point)
+
+
+def _read_plot3d(path: Path, q_file, q_var: str) -> tuple[TetMesh, MeshReport]:
+    grid = plot3d.read_xyz(path)
+    notes = []
+    if q_file is None:
+        q_file = plot3d.find_q_file(path)
+        if q_file is None:
+            raise ReadError(f"{path} is a PLOT3D grid: give its solution file with --q FILE")
+        notes.append(f"scalar from {Path(q_file).name}")
+    dens = plot3d.read_q(q_file, grid.dims, q_var)
+    hexes, colour = plot3d.grid_hexes(grid.dims)
+    if grid.iblank is not None:
+        keep = (grid.iblank[hexes] != 0).all(axis=1)
+        if not keep.all():
+            notes.append(f"{int((~keep).sum())} cells dropped by IBLANK")
+        hexes = hexes[keep]
+    tets = orient_positive(grid.xyz, split_hexes_two_colour(hexes, colour))
+    mesh, report = validate_tets(grid.xyz, dens, tets, scalar_name=q_var)
+    report.notes += notes
+    return mesh, report
+
+
+def _read_meshio(path: Path, scalar: str | None, cell_to_point: bool) -> tuple[TetMesh, MeshReport]:
+    import meshio
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            m = meshio.read(str(path))
+    except meshio.ReadError as e:
+        raise ReadError(f"cannot read {path}: {e}") from None
+    except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError, EOFError, UnicodeDecodeError,
+            AssertionError, StopIteration) as e:
+        raise ReadError(f"cannot read {path}: {type(e).__name__}: {e}") from None
+    except Exception as e:  # meshio readers raise many unrelated types on malformed input
+        raise ReadError(f"cannot read {path}: {type(e).__name__}: {e}") from None
+    return mesh_from_meshio(m, scalar=scalar, cell_to_point=cell_to_point, source=str(path))
+
+
+def mesh_from_meshio(m, *, scalar: str | None = None, cell_to_point: bool = False,
+                     source: str = "mesh") -> tuple[TetMesh, MeshReport]:
+    """Turn a ``meshio.Mesh`` into a validated :class:`TetMesh` (see :func:`read_mesh`)."""
+    points = np.asarray(m.points)
+    if points.ndim != 2 or points.shape[1] not in (2, 3):
+        raise ReadError(f"{source}: points have shape {points.shape}")
+    if points.shape[1] == 2:
+        raise ReadError(f"{source}: a 2-D mesh has no volume cells")
+    notes = []
+    p32 = points.astype(np.float32)
+    if points.dtype != np.float32:
+        with np.errstate(invalid="ignore"):
+            changed = int((p32.astype(points.dtype) != points)[np.isfinite(points)].sum())
+        if changed:
+            notes.append(f"{changed} coordinates rounded from {points.dtype} to float32")
+
+    blocks = []  # (linear type, corner ids, block index)
+    other = set()
+    for bi, cb in enumerate(m.cells):
+        if cb.type in VOLUME_CELLS:
+            lin, k = VOLUME_CELLS[cb.type]
+            data = np.asarray(cb.data)[:, :k].astype(np.int64)
+            blocks.append((lin, data, bi))
+        else:
+            other.add(cb.type)
+    if not blocks:
+        kinds = ", ".join(sorted(other)) or "none"
+        raise MeshError(f"{source}: no volume cells (cell types present: {kinds})")
+    if other:
+        notes.append(f"ignored non-volume cells: {', '.join(sorted(other))}")
+
+    n = len(points)
+    for lin, data, _ in blocks:
+        bad = (data < 0) | (data >= n)
+        if bad.any():
+            i = int(np.flatnonzero(bad.any(axis=1))[0])
+            raise MeshError(f"{source}: {lin} cell {i} refers to vertex {int(data[i][bad[i]][0])} but the mesh has "
+                            f"{n} points; {int(bad.any(axis=1).sum())} cells affected")
+
+    types = {b[0] for b in blocks}
+    tet_chunks, cell_of_tet = [], []
+    colour = None
+    if types <= {"hexahedron", "tetra"} and "hexahedron" in types:
+        colour = two_colour(np.concatenate([d for t, d, _ in blocks if t == "hexahedron"]), n)
+        if colour is None:
+            notes.append("hex graph not two-colourable: min-id 6-tet split")
+    offset = 0
+    for lin, data, bi in blocks:
+        if lin == "tetra":
+            tt = data
+            per = 1
+        elif lin == "hexahedron" and colour is not None:
+            tt = split_hexes_two_colour(data, colour)
+            per = 5
+        else:
+            tt = split_min_id_star(data, lin)
+            per = len(tt) // max(len(data), 1)
+        if lin != "tetra":  # our own split: orient it; only the file's own tets count as re-oriented
+            tt = orient_positive(p32, tt)
+        tet_chunks.append(tt)
+        cell_of_tet.append((bi, offset, per, len(data)))
+        offset += len(data)
+    tets = np.concatenate(tet_chunks)
+
+    density, name = _choose_scalar(m, n, scalar, cell_to_point, p32, tet_chunks, cell_of_tet, source)
+    mesh, report = validate_tets(p32, density, tets, scalar_name=name)
+    report.notes += notes
+    return mesh, report
+
+
+def _scalar_arrays(data: dict, n: int) -> dict:
+    out = {}
+    for k, v in data.items():
+        a = np.asarray(v)
+        if a.shape[0] == n and (a.ndim == 1 or (a.ndim == 2 and a.shape[1] == 1)) and np.issubdtype(a.dtype, np.number):
+            out[k] = a.reshape(-1)
+    return out
+
+
+def _choose_scalar(m, n, scalar, cell_to_point, p32, tet_chunks, cell_of_tet, source):
+    point_scalars = _scalar_arrays(m.point_data, n)
+    if scalar is not None:
+        if scalar in point_scalars:
+            return point_scalars[scalar], scalar
+        if scalar in m.cell_data:
+            if not cell_to_point:
+                raise ReadError(f"{source}: {scalar!r} is cell data; add --cell-to-point to average it to the points")
+            return _cell_to_point(m, scalar, p32, tet_chunks, cell_of_tet, n), scalar
+        names = sorted(point_scalars) + [f"{k} (cell data)" for k in sorted(m.cell_data)]
+        raise ReadError(f"{source}: no point scalar named {scalar!r}; available: {', '.join(names) or 'none'}")
+    if len(point_scalars) == 1:
+        (name, arr), = point_scalars.items()
+        return arr, name
+    if len(point_scalars) > 1:
+        raise ReadError(f"{source}: several point scalars, choose one with --scalar: {', '.join(sorted(point_scalars))}")
+    cell_names = sorted(m.cell_data)
+    if cell_names:
+        raise ReadError(f"{source}: no point scalar; cell data {', '.join(cell_names)} can be used with "
+                        f"--scalar NAME --cell-to-point")
+    raise ReadError(f"{source}: the mesh has no scalar data")
+
+
+def _cell_to_point(m, name, p32, tet_chunks, cell_of_tet, n):
+    """Volume-weighted average of a cell scalar onto the points (only on request)."""
+    from .model import signed_volumes
+
+    acc = np.zeros(n)
+    w = np.zeros(n)
+    for (bi, _, per, ncell), tt in zip(cell_of_tet, tet_chunks):
+        vals = np.asarray(m.cell_data[name][bi])
+        if vals.ndim > 1:
+            if vals.shape[1] != 1:
+                raise ReadError(f"cell data {name!r} is not a scalar (shape {vals.shape})")
+            vals = vals[:, 0]
+        vol = np.abs(signed_volumes(p32, tt))
+        per_tet = np.repeat(vals.astype(np.float64), per)[: len(tt)]
+        for c in range(4):
+            np.add.at(acc, tt[:, c], vol * per_tet)
+            np.add.at(w, tt[:, c], vol)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.where(w > 0, acc / np.where(w > 0, w, 1), 0.0)
+    return out
+
+
+def write_mesh(mesh: TetMesh, path, *, force: bool = False) -> None:
+    """Write a linear tet mesh with density as point data, format from the extension, atomically."""
+    import meshio
+
+    path = Path(path)
+    try:
+        fmt = meshio._helpers._filetypes_from_path(path)[0]
+    except Exception:
+        raise ReadError(f"cannot tell the output format from {path.name!r}; use an extension such as .vtu, .vtk, .msh, .xdmf") from None
+    m = meshio.Mesh(np.asarray(mesh.points), [("tetra", np.asarray(mesh.tets))],
+                    point_data={mesh.scalar_name: np.asarray(mesh.density)})
+    with atomic_path(path, force=force) as tmp:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                meshio.write(str(tmp), m, file_format=fmt)
+        except (OSError, ValueError, TypeError, KeyError) as e:
+            raise ReadError(f"cannot write {path}: {e}") from None

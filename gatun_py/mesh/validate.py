@@ -1,0 +1,136 @@
+"""Validation of a tetrahedral mesh on input.
+
+Errors (raise :class:`~gatun_py.errors.MeshError`, naming the first offender and the count):
+non-finite coordinates or scalars, ids out of range, a tet repeating a vertex, duplicate tets,
+a triangle shared by more than two tets, no tets at all.
+
+Repairs, always counted in the :class:`MeshReport`: negatively oriented tets are re-oriented by
+swapping their last two ids (the set of simplices is unchanged).
+
+Legal and reported: zero-volume tets, coincident points, unreferenced points.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from ..errors import MeshError
+from .model import TetMesh, face_multiplicity, signed_volumes
+
+
+@dataclass
+class MeshReport:
+    """What validation found and repaired; merged into ``tetc info``."""
+
+    reoriented_tets: int = 0
+    zero_volume_tets: int = 0
+    coincident_points: int = 0
+    unreferenced_points: int = 0
+    notes: list[str] = field(default_factory=list)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
+def validate_tets(points: np.ndarray, density: np.ndarray, tets: np.ndarray, *, scalar_name: str = "density",
+                  orient: bool = True) -> tuple[TetMesh, MeshReport]:
+    """Check a raw mesh, orient its tets positively, and return it with a report.
+
+    Parameters
+    ----------
+    points : (n, 3) array, converted to float32
+    density : (n,) array, converted to float32
+    tets : (m, 4) integer array of vertex ids
+    orient : bool
+        Re-orient negative tets (default). With ``False`` a negative tet is an error.
+
+    Raises
+    ------
+    MeshError
+        With a message naming the first offending element and how many there are.
+    """
+    points = np.asarray(points)
+    density = np.asarray(density)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise MeshError(f"points must be an (n, 3) array, got shape {points.shape}")
+    n = points.shape[0]
+    if density.reshape(-1).shape[0] != n:
+        raise MeshError(f"scalar has {density.reshape(-1).shape[0]} values for {n} points")
+    pts = points.astype(np.float32)
+    den = density.reshape(-1).astype(np.float32)
+    t = np.asarray(tets)
+    if t.ndim != 2 or t.shape[1] != 4:
+        raise MeshError(f"tets must be an (m, 4) array, got shape {t.shape}")
+    if not np.issubdtype(t.dtype, np.integer):
+        raise MeshError("tet vertex ids must be integers")
+    t = t.astype(np.int64)
+    m = t.shape[0]
+
+    bad = ~np.isfinite(pts).all(axis=1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise MeshError(f"point {i} has a non-finite coordinate {tuple(float(x) for x in pts[i])}; "
+                        f"{_plural(int(bad.sum()), 'point')} affected")
+    bad = ~np.isfinite(den)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise MeshError(f"scalar {scalar_name!r} is {float(den[i])} at point {i}; "
+                        f"{_plural(int(bad.sum()), 'point')} affected")
+    if m == 0:
+        raise MeshError("the mesh has no tetrahedra (no volume cells)")
+    if m >= 2**31 or n >= 2**31:
+        raise MeshError(f"mesh too large for 32-bit ids ({n} points, {m} tets)")
+
+    bad = ((t < 0) | (t >= n)).any(axis=1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        v = int(t[i][(t[i] < 0) | (t[i] >= n)][0])
+        raise MeshError(f"tet {i} refers to vertex {v} but the mesh has {n} points (valid ids 0..{n - 1}); "
+                        f"{_plural(int(bad.sum()), 'tet')} affected")
+    s = np.sort(t, axis=1)
+    bad = (s[:, 1:] == s[:, :-1]).any(axis=1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise MeshError(f"tet {i} repeats a vertex id {t[i].tolist()}; {_plural(int(bad.sum()), 'tet')} affected")
+
+    order = np.lexsort(s.T[::-1])
+    ss = s[order]
+    dup = np.zeros(m, bool)
+    dup[order[1:]] = (ss[1:] == ss[:-1]).all(axis=1)
+    if dup.any():
+        i = int(np.flatnonzero(dup)[0])
+        twin = int(order[np.flatnonzero(order == i)[0] - 1])
+        raise MeshError(f"tet {i} {t[i].tolist()} duplicates tet {twin}; {_plural(int(dup.sum()), 'duplicate tet')}")
+
+    counts, over = face_multiplicity(t)
+    if len(over):
+        n_over = int((counts > 2).sum())
+        f = over[0].tolist()
+        owners = np.flatnonzero(np.isin(s, f).sum(axis=1) == 3)[:4].tolist()
+        raise MeshError(f"non-conforming mesh: triangle {f} is shared by more than two tets "
+                        f"(tets {owners}); {_plural(n_over, 'such triangle')}")
+
+    report = MeshReport()
+    vol = signed_volumes(pts, t)
+    neg = vol < 0
+    if neg.any():
+        if not orient:
+            i = int(np.flatnonzero(neg)[0])
+            raise MeshError(f"tet {i} is negatively oriented; {_plural(int(neg.sum()), 'tet')} affected")
+        t[neg] = t[neg][:, [0, 1, 3, 2]]
+        vol = np.abs(vol)
+        report.reoriented_tets = int(neg.sum())
+    report.zero_volume_tets = int((vol == 0).sum())
+    report.coincident_points = n - int(np.unique(pts, axis=0).shape[0]) if n else 0
+    used = np.zeros(n, bool)
+    used[t.reshape(-1)] = True
+    report.unreferenced_points = int(n - used.sum())
+    mesh = TetMesh(pts, den, t.astype(np.int32), scalar_name)
+    mesh._cache["vol"] = vol
+    return mesh, report

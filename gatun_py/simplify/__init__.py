@@ -1,0 +1,1 @@
+"""Stage 3: offline Van Gelder decimation (merge forest, pre-simplified levels) and the run-time filter."""

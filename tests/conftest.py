@@ -1,0 +1,46 @@
+"""Shared fixtures: the bundled real samples and small generated meshes."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+SAMPLES = ROOT / "sample_meshes"
+
+# name -> (path, read_mesh keyword arguments)
+SAMPLE_FILES = {
+    "bluntfin": (SAMPLES / "bluntfin" / "bluntfinxyz.bin", {}),
+    "combustion": (SAMPLES / "combustion_chamber" / "combxyz.bin", {}),
+    "post": (SAMPLES / "lox_post_tets" / "post.vtk", {}),
+    "fire": (SAMPLES / "room_fire" / "fire_ug.vtu", {"scalar": "t"}),
+}
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "2")
+
+
+_cache: dict = {}
+
+
+def load_sample(name: str):
+    """Read a bundled sample once per test session (returns (TetMesh, MeshReport))."""
+    from gatun_py.mesh import read_mesh
+
+    if name not in _cache:
+        path, kw = SAMPLE_FILES[name]
+        _cache[name] = read_mesh(path, **kw)
+    return _cache[name]
+
+
+@pytest.fixture(params=sorted(SAMPLE_FILES))
+def sample(request):
+    """Each real sample mesh in turn: (name, TetMesh)."""
+    return request.param, load_sample(request.param)[0]
+
+
+@pytest.fixture
+def small_sample():
+    """The smallest real sample (post.vtk), for tests that must stay quick."""
+    return load_sample("post")[0]

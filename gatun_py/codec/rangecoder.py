@@ -1,0 +1,373 @@
+"""Adaptive binary range coder usable from inside numba kernels.
+
+This is an LZMA-style binary range coder (a carry-propagating range encoder with 32-bit range,
+adaptive probabilities of the bit being 0). Multi-symbol alphabets are binarised with a bit tree
+of adaptive bits (one probability per tree node), integers with an Elias-gamma style bucket (the
+bit length, itself a bit-tree symbol) followed by the mantissa, whose top bits are modelled and the
+rest sent as raw (equiprobable) bits.
+
+Everything is plain arrays so that the kernels can be ``@njit(cache=True)`` and called from other
+``@njit`` kernels (no jitclass, which cannot be cached).
+
+Kernel-level API
+----------------
+Encoder state: ``st = enc_state()`` (int64 array) and an output buffer ``out`` (uint8 array whose
+capacity the caller chooses, e.g. :func:`capacity_hint`). If the buffer fills up the encoder sets
+``st[ENC_OVERFLOW]`` and drops further bytes: the Python caller then retries with a bigger buffer
+(:func:`run_encoder` does this).
+
+Decoder state: ``st = dec_state()`` then ``dec_init(st, data)`` (``data`` uint8 array). Reading
+past the end of ``data`` yields zero bytes and counts them in ``st[DEC_OVERRUN]``; any overrun
+or an impossible code value marks the stream corrupt: check ``dec_ok(st, data)`` after decoding
+(or :func:`check_decoder`, which raises :class:`~gatun_py.errors.CorruptFileError`). Kernels
+that loop on decoded values should also test ``st[DEC_ERROR]`` / ``st[DEC_OVERRUN]`` to stop early.
+
+Models are ``uint16`` probability arrays (``new_model(n)`` gives n probabilities at 1/2); the
+caller selects a context simply by choosing the offset ``base`` into a model array.
+
+=====================================================  ==================================================
+encoder (all ``@njit``)                                decoder (all ``@njit``)
+=====================================================  ==================================================
+``enc_bit(st, out, probs, i, bit)``                    ``dec_bit(st, data, probs, i) -> int``
+``enc_raw(st, out, value, nbits)``   (nbits <= 32)     ``dec_raw(st, data, nbits) -> int``
+``enc_sym(st, out, probs, base, nbits, sym)``          ``dec_sym(st, data, probs, base, nbits) -> int``
+``enc_uint(st, out, probs, base, value)``  (< 2**40)   ``dec_uint(st, data, probs, base) -> int``
+``enc_sint(st, out, probs, base, value)``  (|v|<2**40) ``dec_sint(st, data, probs, base) -> int``
+``enc_finish(st, out) -> n_bytes``                     ``dec_init(st, data)``, ``dec_ok(st, data)``
+=====================================================  ==================================================
+
+``enc_sym`` codes ``sym`` in ``[0, 2**nbits)`` and uses ``probs[base : base + 2**nbits]``.
+``enc_uint``/``enc_sint`` use ``probs[base : base + INT_MODEL_SIZE]`` (``new_int_model(k)`` makes
+k such contexts; context c starts at ``c * INT_MODEL_SIZE``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..errors import CorruptFileError
+
+PROB_BITS = 12
+PROB_ONE = 1 << PROB_BITS
+PROB_INIT = PROB_ONE // 2
+ADAPT_SHIFT = 5
+TOP = 1 << 24
+MASK32 = (1 << 32) - 1
+
+# encoder state slots
+ENC_LOW, ENC_RANGE, ENC_CACHE, ENC_CACHE_SIZE, ENC_POS, ENC_OVERFLOW = 0, 1, 2, 3, 4, 5
+# decoder state slots
+DEC_CODE, DEC_RANGE, DEC_POS, DEC_OVERRUN, DEC_ERROR = 0, 1, 2, 3, 4
+
+# integer model layout: bucket bit tree (64) + 3 modelled mantissa bits per bucket (8 each) + sign (4)
+INT_BUCKET_BITS = 6
+INT_MODELLED_BITS = 3
+_INT_MANT_BASE = 1 << INT_BUCKET_BITS
+_INT_MAX_BUCKET = 41
+_INT_SIGN_BASE = _INT_MANT_BASE + _INT_MAX_BUCKET * (1 << INT_MODELLED_BITS)
+INT_MODEL_SIZE = _INT_SIGN_BASE + 2
+INT_MAX = (1 << 40) - 1
+
+
+def new_model(n: int) -> np.ndarray:
+    """``n`` adaptive binary probabilities, all starting at 1/2."""
+    return np.full(int(n), PROB_INIT, dtype=np.uint16)
+
+
+def new_int_model(n_contexts: int = 1) -> np.ndarray:
+    """Model array for ``n_contexts`` integer contexts (context c at offset ``c * INT_MODEL_SIZE``)."""
+    return new_model(int(n_contexts) * INT_MODEL_SIZE)
+
+
+def enc_state() -> np.ndarray:
+    """A fresh encoder state."""
+    st = np.zeros(8, dtype=np.int64)
+    st[ENC_RANGE] = MASK32
+    st[ENC_CACHE_SIZE] = 1
+    return st
+
+
+def dec_state() -> np.ndarray:
+    """A fresh decoder state (call :func:`dec_init` before decoding)."""
+    return np.zeros(8, dtype=np.int64)
+
+
+def capacity_hint(n_symbols: int) -> int:
+    """A first guess of the output size for ``n_symbols`` coded bits/symbols."""
+    return 64 + int(n_symbols) // 2
+
+
+# ---------------------------------------------------------------- encoder
+
+
+@njit(cache=True, inline="always")
+def _put_byte(st, out, b):
+    pos = st[ENC_POS]
+    if pos < out.shape[0]:
+        out[pos] = b
+    else:
+        st[ENC_OVERFLOW] = 1
+    st[ENC_POS] = pos + 1
+
+
+@njit(cache=True)
+def _shift_low(st, out):
+    low = st[ENC_LOW]
+    if low < 0xFF000000 or low > MASK32:
+        carry = low >> 32
+        temp = st[ENC_CACHE]
+        while True:
+            _put_byte(st, out, (temp + carry) & 0xFF)
+            temp = 0xFF
+            st[ENC_CACHE_SIZE] -= 1
+            if st[ENC_CACHE_SIZE] == 0:
+                break
+        st[ENC_CACHE] = (low >> 24) & 0xFF
+    st[ENC_CACHE_SIZE] += 1
+    st[ENC_LOW] = (low & 0x00FFFFFF) << 8
+
+
+@njit(cache=True)
+def enc_bit(st, out, probs, i, bit):
+    """Code one bit with the adaptive probability ``probs[i]``."""
+    p = np.int64(probs[i])
+    rng = st[ENC_RANGE]
+    bound = (rng >> PROB_BITS) * p
+    if bit == 0:
+        st[ENC_RANGE] = bound
+        probs[i] = p + ((PROB_ONE - p) >> ADAPT_SHIFT)
+    else:
+        st[ENC_LOW] += bound
+        st[ENC_RANGE] = rng - bound
+        probs[i] = p - (p >> ADAPT_SHIFT)
+    while st[ENC_RANGE] < TOP:
+        st[ENC_RANGE] <<= 8
+        _shift_low(st, out)
+
+
+@njit(cache=True)
+def enc_raw(st, out, value, nbits):
+    """Code the low ``nbits`` bits of ``value`` (most significant first) at probability 1/2."""
+    for k in range(nbits - 1, -1, -1):
+        st[ENC_RANGE] >>= 1
+        if (value >> k) & 1:
+            st[ENC_LOW] += st[ENC_RANGE]
+        while st[ENC_RANGE] < TOP:
+            st[ENC_RANGE] <<= 8
+            _shift_low(st, out)
+
+
+@njit(cache=True)
+def enc_sym(st, out, probs, base, nbits, sym):
+    """Code ``sym`` in ``[0, 2**nbits)`` with the bit tree ``probs[base : base + 2**nbits]``."""
+    node = 1
+    for k in range(nbits - 1, -1, -1):
+        b = (sym >> k) & 1
+        enc_bit(st, out, probs, base + node, b)
+        node = (node << 1) | b
+
+
+@njit(cache=True)
+def enc_uint(st, out, probs, base, value):
+    """Code an integer ``0 <= value < 2**40`` (bucket = bit length, then the mantissa)."""
+    nb = 0
+    v = value
+    while v > 0:
+        nb += 1
+        v >>= 1
+    enc_sym(st, out, probs, base, INT_BUCKET_BITS, nb)
+    if nb <= 1:
+        return
+    mbits = nb - 1  # bits below the leading one
+    nmod = mbits if mbits < INT_MODELLED_BITS else INT_MODELLED_BITS
+    mbase = base + _INT_MANT_BASE + nb * (1 << INT_MODELLED_BITS)
+    node = 1
+    for k in range(nmod):
+        b = (value >> (mbits - 1 - k)) & 1
+        enc_bit(st, out, probs, mbase + node, b)
+        node = (node << 1) | b
+    rest = mbits - nmod
+    if rest > 0:
+        enc_raw(st, out, value, rest)
+
+
+@njit(cache=True)
+def enc_sint(st, out, probs, base, value):
+    """Code a signed integer ``|value| < 2**40``: magnitude, then an adaptive sign bit."""
+    mag = value if value >= 0 else -value
+    enc_uint(st, out, probs, base, mag)
+    if mag != 0:
+        enc_bit(st, out, probs, base + _INT_SIGN_BASE, 1 if value < 0 else 0)
+
+
+@njit(cache=True)
+def enc_finish(st, out):
+    """Flush the encoder; returns the number of bytes written (may exceed ``len(out)`` on overflow)."""
+    for _ in range(5):
+        _shift_low(st, out)
+    return st[ENC_POS]
+
+
+# ---------------------------------------------------------------- decoder
+
+
+@njit(cache=True, inline="always")
+def _get_byte(st, data):
+    pos = st[DEC_POS]
+    st[DEC_POS] = pos + 1
+    if pos < data.shape[0]:
+        return np.int64(data[pos])
+    st[DEC_OVERRUN] += 1
+    return np.int64(0)
+
+
+@njit(cache=True)
+def dec_init(st, data):
+    """Start decoding ``data`` (uint8 array)."""
+    st[DEC_POS] = 0
+    st[DEC_OVERRUN] = 0
+    st[DEC_ERROR] = 0
+    st[DEC_RANGE] = MASK32
+    first = _get_byte(st, data)
+    if first != 0:
+        st[DEC_ERROR] = 1
+    code = 0
+    for _ in range(4):
+        code = (code << 8) | _get_byte(st, data)
+    st[DEC_CODE] = code
+
+
+@njit(cache=True)
+def dec_bit(st, data, probs, i):
+    """Decode one bit with the adaptive probability ``probs[i]``."""
+    p = np.int64(probs[i])
+    rng = st[DEC_RANGE]
+    code = st[DEC_CODE]
+    bound = (rng >> PROB_BITS) * p
+    if code < bound:
+        rng = bound
+        probs[i] = p + ((PROB_ONE - p) >> ADAPT_SHIFT)
+        bit = 0
+    else:
+        code -= bound
+        rng -= bound
+        probs[i] = p - (p >> ADAPT_SHIFT)
+        bit = 1
+    while rng < TOP:
+        rng <<= 8
+        code = ((code << 8) | _get_byte(st, data)) & MASK32
+    st[DEC_RANGE] = rng
+    st[DEC_CODE] = code
+    return bit
+
+
+@njit(cache=True)
+def dec_raw(st, data, nbits):
+    """Decode ``nbits`` raw bits (most significant first)."""
+    value = 0
+    rng = st[DEC_RANGE]
+    code = st[DEC_CODE]
+    for _ in range(nbits):
+        rng >>= 1
+        b = 0
+        if code >= rng:
+            code -= rng
+            b = 1
+        value = (value << 1) | b
+        while rng < TOP:
+            rng <<= 8
+            code = ((code << 8) | _get_byte(st, data)) & MASK32
+    st[DEC_RANGE] = rng
+    st[DEC_CODE] = code
+    return value
+
+
+@njit(cache=True)
+def dec_sym(st, data, probs, base, nbits):
+    """Decode a symbol in ``[0, 2**nbits)`` coded by :func:`enc_sym`."""
+    node = 1
+    for _ in range(nbits):
+        node = (node << 1) | dec_bit(st, data, probs, base + node)
+    return node - (1 << nbits)
+
+
+@njit(cache=True)
+def dec_uint(st, data, probs, base):
+    """Decode an integer coded by :func:`enc_uint` (a corrupt bucket sets the error flag, returns 0)."""
+    nb = dec_sym(st, data, probs, base, INT_BUCKET_BITS)
+    if nb == 0:
+        return np.int64(0)
+    if nb > _INT_MAX_BUCKET - 1:
+        st[DEC_ERROR] = 1
+        return np.int64(0)
+    mbits = nb - 1
+    nmod = mbits if mbits < INT_MODELLED_BITS else INT_MODELLED_BITS
+    mbase = base + _INT_MANT_BASE + nb * (1 << INT_MODELLED_BITS)
+    value = np.int64(1)
+    node = 1
+    for _ in range(nmod):
+        b = dec_bit(st, data, probs, mbase + node)
+        node = (node << 1) | b
+        value = (value << 1) | b
+    rest = mbits - nmod
+    if rest > 0:
+        value = (value << rest) | dec_raw(st, data, rest)
+    return value
+
+
+@njit(cache=True)
+def dec_sint(st, data, probs, base):
+    """Decode a signed integer coded by :func:`enc_sint`."""
+    mag = dec_uint(st, data, probs, base)
+    if mag != 0 and dec_bit(st, data, probs, base + _INT_SIGN_BASE) == 1:
+        return -mag
+    return mag
+
+
+@njit(cache=True)
+def dec_ok(st, data):
+    """True when the decoder saw no error and did not read past the end of ``data``.
+
+    A finished encoder emits exactly the bytes the decoder consumes, so after decoding the whole
+    stream ``st[DEC_POS]`` also equals ``len(data)`` (:func:`check_decoder` tests that too).
+    """
+    return st[DEC_ERROR] == 0 and st[DEC_OVERRUN] == 0
+
+
+@njit(cache=True, inline="always")
+def dec_failed(st):
+    """Cheap test for kernels' loops: an error or overrun has happened."""
+    return st[DEC_ERROR] != 0 or st[DEC_OVERRUN] != 0
+
+
+# ---------------------------------------------------------------- Python helpers
+
+
+def check_decoder(st: np.ndarray, data: np.ndarray, what: str = "stream", *, complete: bool = True) -> None:
+    """Raise :class:`CorruptFileError` if the decoder reports an error or an overrun.
+
+    With ``complete`` (after the last symbol) it also requires that every byte was consumed: the
+    decoder reads exactly the bytes the encoder wrote, so leftover bytes mean a damaged stream.
+    """
+    if st[DEC_ERROR] != 0 or st[DEC_OVERRUN] != 0:
+        raise CorruptFileError(f"corrupt {what}: the coded data is damaged or truncated")
+    if complete and int(st[DEC_POS]) != len(data):
+        raise CorruptFileError(f"corrupt {what}: {len(data) - int(st[DEC_POS])} unexpected trailing bytes")
+
+
+def run_encoder(kernel, *args, capacity: int = 1 << 16):
+    """Call ``kernel(st, out, *args)`` (which must end with :func:`enc_finish`) with a growing buffer.
+
+    The kernel is re-run from scratch with a buffer twice as large whenever it overflowed, so it
+    must not mutate its other arguments (copy models inside it). Returns ``bytes``.
+    """
+    capacity = max(int(capacity), 64)
+    while True:
+        st = enc_state()
+        out = np.empty(capacity, dtype=np.uint8)
+        kernel(st, out, *args)
+        n = int(st[ENC_POS])
+        if not st[ENC_OVERFLOW]:
+            return out[:n].tobytes()
+        capacity = max(2 * capacity, n + 64)

@@ -1,0 +1,841 @@
+"""Numba kernels of the cut-border connectivity coder (see :mod:`gatun_py.codec.cutborder`).
+
+The *border* is a set of live elements with up to three vertices each: oriented triangles (the
+current surface T of the tet phase) or directed edges (the border of the boundary-surface phase,
+column 2 then holds the apex of the triangle that created the edge, used only as a geometry
+predictor). Elements live in slots; every vertex has a doubly linked list of the (slot, corner)
+nodes incident to it, so adjacency queries cost the vertex degree in the border. Elements are
+processed first-in first-out (a ring buffer of (slot, sequence) pairs with lazy deletion), which is
+the breadth-first, iteration-by-iteration growth of the paper.
+
+Encoder and decoder share every rule that shapes the state (candidate lists, additions,
+removals); only the symbol I/O differs. Decoders check every index and count they read and stop
+with an error code instead of touching memory out of bounds.
+
+Border arrays, passed as a tuple ``B``:
+``ev (cap,3) int32`` element vertices, ``eseq (cap) int64`` sequence number (-1: free slot),
+``lnext, lprev (3*cap) int32`` incidence lists, ``vhead (nv) int32`` list heads,
+``fstack (cap) int32`` free slots, ``q (qcap) int32`` / ``qs (qcap) int64`` FIFO ring,
+``bs int64`` scalars (see ``BS_*``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from . import rangecoder as rc
+
+BS_NFREE, BS_QHEAD, BS_QTAIL, BS_SEQ, BS_LIVE, BS_PEAK = 0, 1, 2, 3, 4, 5
+
+MAX_C1 = 15  # coded edge-adjacent candidates (symbol 15 = escape)
+MAX_C2 = 64  # vertex-adjacent candidates
+ESC = 15
+
+# model layout of the tet phase
+N_C1_CTX = 5 * 4 * 4 * 2
+TM_C1 = 0
+TM_KIND = TM_C1 + N_C1_CTX * 16
+TM_C2 = TM_KIND + 8 * 4
+TM_SIZE = TM_C2 + 2 * rc.INT_MODEL_SIZE
+
+# model layout of the boundary phase
+N_S1_CTX = 5 * 3 * 3 * 2
+SM_C1 = 0
+SM_NEW = SM_C1 + N_S1_CTX * 16
+SM_SEED = SM_NEW + 8
+SM_SIZE = SM_SEED + 8
+
+# status codes of the resumable decoder
+ST_DONE, ST_BATCH, ST_GROW, ST_ERROR = 0, 1, 2, 3
+
+
+def new_border(n_vertices: int, cap: int, qcap: int):
+    """Allocate an empty border for ``n_vertices`` vertices."""
+    cap = max(int(cap), 16)
+    qcap = max(int(qcap), 16)
+    ev = np.zeros((cap, 3), np.int32)
+    eseq = np.full(cap, -1, np.int64)
+    lnext = np.full(3 * cap, -1, np.int32)
+    lprev = np.full(3 * cap, -1, np.int32)
+    vhead = np.full(max(int(n_vertices), 1), -1, np.int32)
+    fstack = np.arange(cap - 1, -1, -1, dtype=np.int32)
+    q = np.zeros(qcap, np.int32)
+    qs = np.zeros(qcap, np.int64)
+    bs = np.zeros(8, np.int64)
+    bs[BS_NFREE] = cap
+    return (ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs)
+
+
+def grow_border(B, need_slots: int, need_queue: int):
+    """A copy of border ``B`` with room for at least ``need_slots`` more elements and queue entries."""
+    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
+    cap = ev.shape[0]
+    nfree = int(bs[BS_NFREE])
+    if nfree < need_slots:
+        new_cap = max(2 * cap, cap + need_slots)
+        ev = np.concatenate([ev, np.zeros((new_cap - cap, 3), np.int32)])
+        eseq = np.concatenate([eseq, np.full(new_cap - cap, -1, np.int64)])
+        lnext = np.concatenate([lnext, np.full(3 * (new_cap - cap), -1, np.int32)])
+        lprev = np.concatenate([lprev, np.full(3 * (new_cap - cap), -1, np.int32)])
+        extra = np.arange(new_cap - 1, cap - 1, -1, dtype=np.int32)
+        fs = np.empty(new_cap, np.int32)
+        fs[: new_cap - cap] = extra
+        fs[new_cap - cap : new_cap - cap + nfree] = fstack[:nfree]
+        fstack = fs
+        bs = bs.copy()
+        bs[BS_NFREE] = nfree + new_cap - cap
+    qcap = q.shape[0]
+    used = int(bs[BS_QTAIL] - bs[BS_QHEAD])
+    if qcap - used < need_queue:
+        new_qcap = max(2 * qcap, used + need_queue)
+        idx = (int(bs[BS_QHEAD]) + np.arange(used)) % qcap
+        nq = np.zeros(new_qcap, np.int32)
+        nqs = np.zeros(new_qcap, np.int64)
+        nq[:used] = q[idx]
+        nqs[:used] = qs[idx]
+        q, qs = nq, nqs
+        bs = bs.copy()
+        bs[BS_QHEAD] = 0
+        bs[BS_QTAIL] = used
+    return (ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs)
+
+
+@njit(cache=True)
+def _room(B, slots, entries):
+    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
+    return bs[BS_NFREE] >= slots and q.shape[0] - (bs[BS_QTAIL] - bs[BS_QHEAD]) >= entries
+
+
+@njit(cache=True)
+def _add(B, k, v0, v1, v2):
+    """Add an element with ``k`` listed vertices (v2 is stored even when k == 2); returns its slot."""
+    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
+    bs[BS_NFREE] -= 1
+    s = fstack[bs[BS_NFREE]]
+    ev[s, 0] = v0
+    ev[s, 1] = v1
+    ev[s, 2] = v2
+    seq = bs[BS_SEQ]
+    bs[BS_SEQ] = seq + 1
+    eseq[s] = seq
+    for c in range(k):
+        v = ev[s, c]
+        node = 3 * s + c
+        h = vhead[v]
+        lnext[node] = h
+        lprev[node] = -1
+        if h != -1:
+            lprev[h] = node
+        vhead[v] = node
+    t = bs[BS_QTAIL] % q.shape[0]
+    q[t] = s
+    qs[t] = seq
+    bs[BS_QTAIL] += 1
+    bs[BS_LIVE] += 1
+    if bs[BS_LIVE] > bs[BS_PEAK]:
+        bs[BS_PEAK] = bs[BS_LIVE]
+    return s
+
+
+@njit(cache=True)
+def _remove(B, k, s):
+    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
+    for c in range(k):
+        node = 3 * s + c
+        p = lprev[node]
+        n = lnext[node]
+        if p != -1:
+            lnext[p] = n
+        else:
+            vhead[ev[s, c]] = n
+        if n != -1:
+            lprev[n] = p
+    eseq[s] = -1
+    fstack[bs[BS_NFREE]] = s
+    bs[BS_NFREE] += 1
+    bs[BS_LIVE] -= 1
+
+
+@njit(cache=True)
+def _pop(B):
+    """The oldest live element's slot (it stays live), or -1 when the border is empty."""
+    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
+    qcap = q.shape[0]
+    while bs[BS_QHEAD] < bs[BS_QTAIL]:
+        h = bs[BS_QHEAD] % qcap
+        bs[BS_QHEAD] += 1
+        s = q[h]
+        if eseq[s] == qs[h]:
+            return s
+    return -1
+
+
+@njit(cache=True)
+def _find_face(B, a, b, c):
+    """Slot of the live triangle with vertex set {a, b, c}; second value: 1 same cyclic orientation
+    as (a, b, c), 0 opposite; (-1, 0) if absent."""
+    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
+    node = vhead[a]
+    while node != -1:
+        s = node // 3
+        c0 = node - 3 * s
+        x = ev[s, (c0 + 1) % 3]
+        y = ev[s, (c0 + 2) % 3]
+        if x == b and y == c:
+            return s, 1
+        if x == c and y == b:
+            return s, 0
+        node = lnext[node]
+    return -1, 0
+
+
+@njit(cache=True)
+def _find_edge(B, p, r):
+    """Slot of a live directed edge p -> r (the oldest one when several), or -1."""
+    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
+    node = vhead[p]
+    best = -1
+    best_seq = np.int64(-1)
+    while node != -1:
+        s = node // 3
+        if node - 3 * s == 0 and ev[s, 1] == r:
+            if best == -1 or eseq[s] < best_seq:
+                best = s
+                best_seq = eseq[s]
+        node = lnext[node]
+    return best
+
+
+@njit(cache=True)
+def _insert_candidate(cand, cscore, cseq, n, x, seq):
+    """Add vertex x (seen on an adjacent element with sequence ``seq``) to the candidate list."""
+    for i in range(n):
+        if cand[i] == x:
+            cscore[i] += 1
+            if seq < cseq[i]:
+                cseq[i] = seq
+            return n
+    if n < cand.shape[0]:
+        cand[n] = x
+        cscore[n] = 1
+        cseq[n] = seq
+        return n + 1
+    return n
+
+
+@njit(cache=True)
+def _sort_candidates(cand, cscore, cseq, n):
+    """Order by score (descending), then by first-seen sequence (ascending): insertion sort."""
+    for i in range(1, n):
+        x, sc, sq = cand[i], cscore[i], cseq[i]
+        j = i - 1
+        while j >= 0 and (cscore[j] < sc or (cscore[j] == sc and cseq[j] > sq)):
+            cand[j + 1] = cand[j]
+            cscore[j + 1] = cscore[j]
+            cseq[j + 1] = cseq[j]
+            j -= 1
+        cand[j + 1] = x
+        cscore[j + 1] = sc
+        cseq[j + 1] = sq
+
+
+@njit(cache=True)
+def _gather_face(B, s, cand, cscore, cseq, c2, c2seq):
+    """Candidates for the fourth vertex of the tet behind border face ``s``.
+
+    ``cand`` (sorted, scores = number of the face's edges whose adjacent faces hold the vertex)
+    are the apexes of edge-adjacent faces; ``c2`` (in traversal order) the other vertices of
+    faces that share only a vertex with ``s``. Returns (n1, n2).
+    """
+    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
+    a = np.int64(ev[s, 0])
+    b = np.int64(ev[s, 1])
+    c = np.int64(ev[s, 2])
+    n1 = 0
+    n2 = 0
+    for ci in range(3):
+        u = np.int64(ev[s, ci])
+        node = vhead[u]
+        while node != -1:
+            g = node // 3
+            node = lnext[node]
+            if g == s:
+                continue
+            shared = 0
+            first_shared = 3
+            other0 = -1
+            other1 = -1
+            for cj in range(3):
+                w = np.int64(ev[g, cj])
+                if w == a or w == b or w == c:
+                    shared += 1
+                    if w == a:
+                        pos = 0
+                    elif w == b:
+                        pos = 1
+                    else:
+                        pos = 2
+                    if pos < first_shared:
+                        first_shared = pos
+                elif other0 == -1:
+                    other0 = w
+                else:
+                    other1 = w
+            if shared == 2:
+                if first_shared == ci:  # count each edge-adjacent face once
+                    n1 = _insert_candidate(cand, cscore, cseq, n1, other0, eseq[g])
+            elif shared == 1:
+                for kk in range(2):
+                    w = other0 if kk == 0 else other1
+                    # ordered by traversal: insertion keeps the first (oldest) sighting's position
+                    dup = False
+                    for i in range(n2):
+                        if c2[i] == w:
+                            dup = True
+                            if eseq[g] < c2seq[i]:
+                                c2seq[i] = eseq[g]
+                            break
+                    if not dup and n2 < c2.shape[0]:
+                        c2[n2] = w
+                        c2seq[n2] = eseq[g]
+                        n2 += 1
+    _sort_candidates(cand, cscore, cseq, n1)
+    # vertex-adjacent list: traversal order, without the edge candidates
+    m = 0
+    for i in range(n2):
+        w = c2[i]
+        inc1 = False
+        for j in range(n1):
+            if cand[j] == w:
+                inc1 = True
+                break
+        if not inc1:
+            c2[m] = w
+            c2seq[m] = c2seq[i]
+            m += 1
+    # stable insertion sort by sequence
+    for i in range(1, m):
+        x, sq = c2[i], c2seq[i]
+        j = i - 1
+        while j >= 0 and c2seq[j] > sq:
+            c2[j + 1] = c2[j]
+            c2seq[j + 1] = c2seq[j]
+            j -= 1
+        c2[j + 1] = x
+        c2seq[j + 1] = sq
+    return n1, m
+
+
+@njit(cache=True)
+def _c1_context(n1, cscore, prev_esc):
+    s1 = cscore[0] if n1 > 0 else 0
+    s2 = cscore[1] if n1 > 1 else 0
+    if s1 > 3:
+        s1 = 3
+    if s2 > 3:
+        s2 = 3
+    nn = n1 if n1 < 4 else 4
+    return ((nn * 4 + s1) * 4 + s2) * 2 + prev_esc
+
+
+@njit(cache=True)
+def _apply_tet(B, a, b, c, d):
+    """Attach apex d to the current face (a, b, c): the three other faces of the new tet either
+    close a border face (removed) or join the border. Returns False on an inconsistent state
+    (only possible with corrupt input)."""
+    # new tet is (a, c, b, d); its outward faces other than (a, b, c) are these three
+    # (c, b, d), (a, d, b), (a, c, d)
+    ok = True
+    for k in range(3):
+        if k == 0:
+            x, y, z = c, b, d
+        elif k == 1:
+            x, y, z = a, d, b
+        else:
+            x, y, z = a, c, d
+        s, same = _find_face(B, x, y, z)
+        if s != -1:
+            if same != 1:
+                ok = False
+            _remove(B, 3, s)
+        else:
+            # stored reversed: outward from the unvisited tet on the other side
+            _add(B, 3, x, z, y)
+    return ok
+
+
+@njit(cache=True)
+def _bitlen(n):
+    k = 0
+    while n > 0:
+        k += 1
+        n >>= 1
+    return k
+
+
+# ------------------------------------------------------------------ boundary surface phase
+
+
+@njit(cache=True)
+def _gather_edge(B, s, cand, cscore, cseq):
+    """Candidates for the apex of the unvisited triangle on border edge s = (p -> r): apexes x
+    that would close border edges r -> x or x -> p. Returns n1 (sorted like the tet phase)."""
+    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
+    p = np.int64(ev[s, 0])
+    r = np.int64(ev[s, 1])
+    n1 = 0
+    node = vhead[r]
+    while node != -1:
+        g = node // 3
+        if node - 3 * g == 0 and g != s:  # edge r -> x
+            x = np.int64(ev[g, 1])
+            if x != p:
+                n1 = _insert_candidate(cand, cscore, cseq, n1, x, eseq[g])
+        node = lnext[node]
+    node = vhead[p]
+    while node != -1:
+        g = node // 3
+        if node - 3 * g == 1 and g != s:  # edge x -> p
+            x = np.int64(ev[g, 0])
+            if x != r:
+                n1 = _insert_candidate(cand, cscore, cseq, n1, x, eseq[g])
+        node = lnext[node]
+    _sort_candidates(cand, cscore, cseq, n1)
+    return n1
+
+
+@njit(cache=True)
+def _apply_triangle(B, p, r, x):
+    """Visit triangle (p, r, x) across border edge p -> r (already removed)."""
+    for k in range(2):
+        # the new triangle's edges r -> x and x -> p; apex = its vertex off that edge
+        h0 = r if k == 0 else x
+        h1 = x if k == 0 else p
+        apex = p if k == 0 else r
+        s = _find_edge(B, h0, h1)
+        if s != -1:
+            _remove(B, 2, s)
+        else:
+            _add(B, 2, h1, h0, apex)
+
+
+@njit(cache=True)
+def _s1_context(n1, cscore, prev_new):
+    s1 = cscore[0] if n1 > 0 else 0
+    s2 = cscore[1] if n1 > 1 else 0
+    if s1 > 2:
+        s1 = 2
+    if s2 > 2:
+        s2 = 2
+    nn = n1 if n1 < 4 else 4
+    return ((nn * 3 + s1) * 3 + s2) * 2 + prev_new
+
+
+@njit(cache=True)
+def _lookup_halfedge(hkey, hface, fvisited, p, r):
+    """An unvisited face holding the directed edge p -> r (hkey sorted lexicographically), or -1."""
+    lo = 0
+    hi = hkey.shape[0]
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if hkey[mid, 0] < p or (hkey[mid, 0] == p and hkey[mid, 1] < r):
+            lo = mid + 1
+        else:
+            hi = mid
+    i = lo
+    while i < hkey.shape[0] and hkey[i, 0] == p and hkey[i, 1] == r:
+        if not fvisited[hface[i]]:
+            return hface[i]
+        i += 1
+    return -1
+
+
+@njit(cache=True)
+def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pred, out_faces):
+    """Code the boundary surface ``faces`` (original ids). Fills ``dec_of`` (original -> decode id),
+    ``order`` (decode -> original), ``pred`` (geometry predictors, decode ids) and ``out_faces``
+    (faces in decode order and decode ids). Returns (number of vertices, 0) or (-1, code) on error."""
+    nf = faces.shape[0]
+    probs = np.full(SM_SIZE, rc.PROB_INIT, np.uint16)
+    fvisited = np.zeros(nf, np.bool_)
+    cand = np.empty(MAX_C1, np.int64)
+    cscore = np.empty(MAX_C1, np.int64)
+    cseq = np.empty(MAX_C1, np.int64)
+    nv = 0
+    done = 0
+    seed_ptr = 0
+    prev_new = 0
+    while done < nf:
+        s = _pop(B)
+        if s == -1:
+            while fvisited[seed_ptr]:
+                seed_ptr += 1
+            f = seed_ptr
+            tri = np.empty(3, np.int64)
+            for k in range(3):
+                v = faces[f, k]
+                if dec_of[v] == -1:
+                    rc.enc_bit(st, out, probs, SM_SEED + k, 1)
+                    dec_of[v] = nv
+                    order[nv] = v
+                    for j in range(3):
+                        pred[nv, j] = tri[j] if j < k else -1
+                    nv += 1
+                else:
+                    rc.enc_bit(st, out, probs, SM_SEED + k, 0)
+                    rc.enc_raw(st, out, dec_of[v], _bitlen(nv - 1))
+                tri[k] = dec_of[v]
+            fvisited[f] = True
+            out_faces[done, 0] = tri[0]
+            out_faces[done, 1] = tri[1]
+            out_faces[done, 2] = tri[2]
+            done += 1
+            # the seed's three edges join the border (no border edge exists yet to close)
+            for k in range(3):
+                _add(B, 2, tri[(k + 1) % 3], tri[k], tri[(k + 2) % 3])
+            continue
+        ev = B[0]
+        p = np.int64(ev[s, 0])
+        r = np.int64(ev[s, 1])
+        n1 = _gather_edge(B, s, cand, cscore, cseq)
+        _remove(B, 2, s)
+        f = _lookup_halfedge(hkey, hface, fvisited, order[p], order[r])
+        if f == -1:
+            return -1, 1
+        xo = -1
+        for k in range(3):
+            if faces[f, k] == order[p] and faces[f, (k + 1) % 3] == order[r]:
+                xo = faces[f, (k + 2) % 3]
+        ctx = _s1_context(n1, cscore, prev_new)
+        x = dec_of[xo]
+        sym = ESC
+        if x != -1:
+            for i in range(n1):
+                if cand[i] == x:
+                    sym = i
+                    break
+        rc.enc_sym(st, out, probs, SM_C1 + ctx * 16, 4, sym)
+        prev_new = 0
+        if sym == ESC:
+            if x == -1:
+                rc.enc_bit(st, out, probs, SM_NEW + (1 if n1 > 0 else 0), 1)
+                x = nv
+                dec_of[xo] = nv
+                order[nv] = xo
+                pred[nv, 0] = p
+                pred[nv, 1] = r
+                pred[nv, 2] = ev[s, 2]
+                nv += 1
+                prev_new = 1
+            else:
+                rc.enc_bit(st, out, probs, SM_NEW + (1 if n1 > 0 else 0), 0)
+                rc.enc_raw(st, out, x, _bitlen(nv - 1))
+        fvisited[f] = True
+        out_faces[done, 0] = p
+        out_faces[done, 1] = r
+        out_faces[done, 2] = x
+        done += 1
+        _apply_triangle(B, p, r, x)
+        if not _room(B, 4, 4):
+            return -1, 2
+    if B[8][BS_LIVE] != 0:
+        return -1, 3
+    rc.enc_finish(st, out)
+    return nv, 0
+
+
+@njit(cache=True)
+def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
+    """Inverse of :func:`encode_boundary`; returns (number of vertices, status)."""
+    probs = np.full(SM_SIZE, rc.PROB_INIT, np.uint16)
+    cand = np.empty(MAX_C1, np.int64)
+    cscore = np.empty(MAX_C1, np.int64)
+    cseq = np.empty(MAX_C1, np.int64)
+    rc.dec_init(st, data)
+    nv = 0
+    done = 0
+    prev_new = 0
+    tri = np.empty(3, np.int64)
+    while done < nf:
+        if rc.dec_failed(st):
+            return nv, ST_ERROR
+        if not _room(B, 4, 4):
+            return nv, ST_GROW
+        s = _pop(B)
+        if s == -1:
+            for k in range(3):
+                if rc.dec_bit(st, data, probs, SM_SEED + k) == 1:
+                    if nv >= n_points:
+                        return nv, ST_ERROR
+                    for j in range(3):
+                        pred[nv, j] = tri[j] if j < k else -1
+                    tri[k] = nv
+                    nv += 1
+                else:
+                    v = rc.dec_raw(st, data, _bitlen(nv - 1))
+                    if v >= nv:
+                        return nv, ST_ERROR
+                    tri[k] = v
+            if tri[0] == tri[1] or tri[1] == tri[2] or tri[0] == tri[2]:
+                return nv, ST_ERROR
+            out_faces[done, 0] = tri[0]
+            out_faces[done, 1] = tri[1]
+            out_faces[done, 2] = tri[2]
+            done += 1
+            for k in range(3):
+                _add(B, 2, tri[(k + 1) % 3], tri[k], tri[(k + 2) % 3])
+            continue
+        ev = B[0]
+        p = np.int64(ev[s, 0])
+        r = np.int64(ev[s, 1])
+        apex = np.int64(ev[s, 2])
+        n1 = _gather_edge(B, s, cand, cscore, cseq)
+        _remove(B, 2, s)
+        ctx = _s1_context(n1, cscore, prev_new)
+        sym = rc.dec_sym(st, data, probs, SM_C1 + ctx * 16, 4)
+        prev_new = 0
+        if sym < ESC:
+            if sym >= n1:
+                return nv, ST_ERROR
+            x = cand[sym]
+        elif rc.dec_bit(st, data, probs, SM_NEW + (1 if n1 > 0 else 0)) == 1:
+            if nv >= n_points:
+                return nv, ST_ERROR
+            x = nv
+            pred[nv, 0] = p
+            pred[nv, 1] = r
+            pred[nv, 2] = apex
+            nv += 1
+            prev_new = 1
+        else:
+            x = rc.dec_raw(st, data, _bitlen(nv - 1))
+            if x >= nv:
+                return nv, ST_ERROR
+        if x == p or x == r:
+            return nv, ST_ERROR
+        out_faces[done, 0] = p
+        out_faces[done, 1] = r
+        out_faces[done, 2] = x
+        done += 1
+        _apply_triangle(B, p, r, x)
+    if B[8][BS_LIVE] != 0 or rc.dec_failed(st):
+        return nv, ST_ERROR
+    return nv, ST_DONE
+
+
+# ------------------------------------------------------------------ tet phase
+
+
+@njit(cache=True)
+def _lookup_tet(fkey, ftet, tvisited, a, b, c):
+    """An unvisited tet with face {a, b, c} (fkey: sorted triples, sorted lexicographically)."""
+    x, y, z = a, b, c
+    if x > y:
+        x, y = y, x
+    if y > z:
+        y, z = z, y
+    if x > y:
+        x, y = y, x
+    lo = 0
+    hi = fkey.shape[0]
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        k0 = fkey[mid, 0]
+        k1 = fkey[mid, 1]
+        k2 = fkey[mid, 2]
+        if k0 < x or (k0 == x and (k1 < y or (k1 == y and k2 < z))):
+            lo = mid + 1
+        else:
+            hi = mid
+    i = lo
+    while i < fkey.shape[0] and fkey[i, 0] == x and fkey[i, 1] == y and fkey[i, 2] == z:
+        if not tvisited[ftet[i]]:
+            return ftet[i]
+        i += 1
+    return -1
+
+
+@njit(cache=True)
+def encode_tets(st, out, tets, fkey, ftet, B, dec_of, order, pred, nv0, out_tets):
+    """Code the tets growing inward from the border ``B`` (the boundary, in decode ids).
+
+    ``tets`` and ``fkey``/``ftet`` (sorted face triples -> tet, sorted lexicographically) use
+    original ids; ``dec_of``/``order`` map between original and decode ids and are extended for
+    the new (interior) vertices, numbered from ``nv0`` on, with their predictors in ``pred``.
+    ``out_tets`` receives the tets in decode order and decode ids. Returns (vertices, status)."""
+    m = tets.shape[0]
+    probs = np.full(TM_SIZE, rc.PROB_INIT, np.uint16)
+    tvisited = np.zeros(m, np.bool_)
+    cand = np.empty(MAX_C1, np.int64)
+    cscore = np.empty(MAX_C1, np.int64)
+    cseq = np.empty(MAX_C1, np.int64)
+    c2 = np.empty(MAX_C2, np.int64)
+    c2seq = np.empty(MAX_C2, np.int64)
+    nv = nv0
+    prev_esc = 0
+    for done in range(m):
+        s = _pop(B)
+        if s == -1:
+            return nv, 1
+        ev = B[0]
+        a = np.int64(ev[s, 0])
+        b = np.int64(ev[s, 1])
+        c = np.int64(ev[s, 2])
+        ao = order[a]
+        bo = order[b]
+        co = order[c]
+        t = _lookup_tet(fkey, ftet, tvisited, ao, bo, co)
+        if t == -1:
+            return nv, 2
+        tvisited[t] = True
+        do = -1
+        for k in range(4):
+            w = tets[t, k]
+            if w != ao and w != bo and w != co:
+                do = w
+        d = dec_of[do]
+        n1, n2 = _gather_face(B, s, cand, cscore, cseq, c2, c2seq)
+        _remove(B, 3, s)
+        ctx = _c1_context(n1, cscore, prev_esc)
+        sym = ESC
+        if d != -1:
+            lim = n1 if n1 < MAX_C1 else MAX_C1
+            for i in range(lim):
+                if cand[i] == d:
+                    sym = i
+                    break
+        rc.enc_sym(st, out, probs, TM_C1 + ctx * 16, 4, sym)
+        if sym == ESC:
+            kctx = TM_KIND + 4 * ((1 if n1 > 0 else 0) + (2 if n2 > 0 else 0) + 4 * prev_esc)
+            if d == -1:
+                rc.enc_sym(st, out, probs, kctx, 2, 0)
+                d = nv
+                dec_of[do] = nv
+                order[nv] = do
+                pred[nv, 0] = a
+                pred[nv, 1] = b
+                pred[nv, 2] = c
+                nv += 1
+            else:
+                j = -1
+                for i in range(n2):
+                    if c2[i] == d:
+                        j = i
+                        break
+                if j >= 0:
+                    rc.enc_sym(st, out, probs, kctx, 2, 1)
+                    rc.enc_uint(st, out, probs, TM_C2 + (rc.INT_MODEL_SIZE if n2 > 8 else 0), j)
+                else:
+                    rc.enc_sym(st, out, probs, kctx, 2, 2)
+                    rc.enc_raw(st, out, d, _bitlen(nv - 1))
+            prev_esc = 1
+        else:
+            prev_esc = 0
+        out_tets[done, 0] = a
+        out_tets[done, 1] = c
+        out_tets[done, 2] = b
+        out_tets[done, 3] = d
+        if not _apply_tet(B, a, b, c, d):
+            return nv, 3
+        if not _room(B, 4, 4):
+            return nv, 4
+    if B[8][BS_LIVE] != 0:
+        return nv, 5
+    rc.enc_finish(st, out)
+    return nv, 0
+
+
+@njit(cache=True)
+def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
+    """Resumable inverse of :func:`encode_tets`.
+
+    ``tstate`` int64 array: [vertices known, tets done, prev_esc]; ``probs`` persists between
+    calls. Decodes until ``out_tets`` is full (status ST_BATCH), the border needs more room
+    (ST_GROW: enlarge it and call again), all ``m`` tets are done (ST_DONE) or the data is
+    inconsistent (ST_ERROR). New vertices (ids < ``n_limit``) get their predictors in ``pred``
+    (indexed by decode id). Returns (number of tets written to ``out_tets``, status)."""
+    cand = np.empty(MAX_C1, np.int64)
+    cscore = np.empty(MAX_C1, np.int64)
+    cseq = np.empty(MAX_C1, np.int64)
+    c2 = np.empty(MAX_C2, np.int64)
+    c2seq = np.empty(MAX_C2, np.int64)
+    nv = tstate[0]
+    done = tstate[1]
+    prev_esc = tstate[2]
+    n_out = 0
+    status = ST_DONE
+    while done < m:
+        if rc.dec_failed(st):
+            status = ST_ERROR
+            break
+        if n_out >= out_tets.shape[0]:
+            status = ST_BATCH
+            break
+        if not _room(B, 4, 4):
+            status = ST_GROW
+            break
+        s = _pop(B)
+        if s == -1:
+            status = ST_ERROR
+            break
+        ev = B[0]
+        a = np.int64(ev[s, 0])
+        b = np.int64(ev[s, 1])
+        c = np.int64(ev[s, 2])
+        n1, n2 = _gather_face(B, s, cand, cscore, cseq, c2, c2seq)
+        _remove(B, 3, s)
+        ctx = _c1_context(n1, cscore, prev_esc)
+        sym = rc.dec_sym(st, data, probs, TM_C1 + ctx * 16, 4)
+        d = -1
+        if sym < ESC:
+            if sym >= n1:
+                status = ST_ERROR
+                break
+            d = cand[sym]
+            prev_esc = 0
+        else:
+            kctx = TM_KIND + 4 * ((1 if n1 > 0 else 0) + (2 if n2 > 0 else 0) + 4 * prev_esc)
+            kind = rc.dec_sym(st, data, probs, kctx, 2)
+            if kind == 0:
+                if nv >= n_limit:
+                    status = ST_ERROR
+                    break
+                d = nv
+                pred[nv, 0] = a
+                pred[nv, 1] = b
+                pred[nv, 2] = c
+                nv += 1
+            elif kind == 1:
+                j = rc.dec_uint(st, data, probs, TM_C2 + (rc.INT_MODEL_SIZE if n2 > 8 else 0))
+                if j >= n2:
+                    status = ST_ERROR
+                    break
+                d = c2[j]
+            elif kind == 2:
+                d = rc.dec_raw(st, data, _bitlen(nv - 1))
+                if d >= nv:
+                    status = ST_ERROR
+                    break
+            else:
+                status = ST_ERROR
+                break
+            prev_esc = 1
+        if d == a or d == b or d == c:
+            status = ST_ERROR
+            break
+        out_tets[n_out, 0] = a
+        out_tets[n_out, 1] = c
+        out_tets[n_out, 2] = b
+        out_tets[n_out, 3] = d
+        n_out += 1
+        done += 1
+        if not _apply_tet(B, a, b, c, d):
+            status = ST_ERROR
+            break
+    if status == ST_DONE and (B[8][BS_LIVE] != 0 or rc.dec_failed(st)):
+        status = ST_ERROR
+    tstate[0] = nv
+    tstate[1] = done
+    tstate[2] = prev_esc
+    return n_out, status

@@ -1,0 +1,261 @@
+"""Cut-border connectivity coding (paper section 3.1).
+
+Two range-coded streams:
+
+* **boundary**: the boundary surface, coded first with a breadth-first triangle cut-border (as in
+  [MC98]): a FIFO of directed border edges; the unvisited triangle across each edge is given by
+  its apex, coded as an index into the candidate apexes that would close adjacent border edges,
+  or as a new vertex, or as a vertex-table index. A new connected piece of the surface starts
+  with a seed triangle (three vertices, each new or a table index).
+* **tets**: the current surface T starts as the boundary; each face of T, first in first out,
+  pairs with its unvisited tet, whose fourth vertex is coded as one of the paper's four cases:
+  (a) one of the apexes of faces of T adjacent to an edge of the current face, (b) a new vertex,
+  (c) an index into the ordered list of vertices of faces that share only a vertex with the
+  current face, (d) a vertex-table index. The three other faces of the tet close faces of T or
+  join it.
+
+The paper orders the edge-adjacent faces by edge and then traversal order; we rank the distinct
+apexes instead by how many faces of T they would close (3, 2, 1) and then by traversal order,
+which makes index 0 far more likely, and code the index with adaptive models whose context is
+(number of candidates, scores of the first two, whether the previous tet escaped).
+
+Vertex numbering (decode order): boundary vertices in the order the boundary code meets them,
+then interior vertices in the order the tet code meets them, then unreferenced vertices.
+Every new vertex gets up to three *predictor* vertices (decode ids, -1 if none) for the
+geometry coder: the current face for interior vertices, the border edge and the apex of the
+triangle it came from for boundary vertices.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import CorruptFileError, MeshError
+from . import _cutborder_kernels as K
+from . import rangecoder as rc
+
+
+@dataclass
+class EncodedConnectivity:
+    """The output of :func:`encode_connectivity`.
+
+    Attributes
+    ----------
+    boundary_code, tet_code : bytes
+        The two range-coded streams.
+    n_points, n_tets, n_boundary_faces, n_boundary_vertices, n_referenced : int
+        Counts the decoder needs (stored in the container's section header).
+    vertex_order : (n_points,) int64
+        ``vertex_order[k]`` = original id of the k-th decoded vertex.
+    predictors : (n_points, 3) int32
+        Predictor vertices (decode ids, -1 for none) of every vertex, in decode order.
+    boundary : (n_boundary_faces, 3) int32
+        Boundary faces in decode order and decode ids (what the decoder will produce).
+    tets : (n_tets, 4) int32
+        Tets in decode order and decode ids.
+    peak_border : int
+        Largest number of faces on the cut border during the tet phase.
+    """
+
+    boundary_code: bytes
+    tet_code: bytes
+    n_points: int
+    n_tets: int
+    n_boundary_faces: int
+    n_boundary_vertices: int
+    n_referenced: int
+    vertex_order: np.ndarray
+    predictors: np.ndarray
+    boundary: np.ndarray
+    tets: np.ndarray
+    peak_border: int
+
+
+def _sorted_halfedges(faces: np.ndarray):
+    he = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1).reshape(-1, 2)
+    fid = np.repeat(np.arange(len(faces), dtype=np.int64), 3)
+    order = np.lexsort((he[:, 1], he[:, 0]))
+    return np.ascontiguousarray(he[order], dtype=np.int64), fid[order]
+
+
+def _sorted_faces(tets: np.ndarray):
+    faces = np.sort(tets[:, [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]]].reshape(-1, 3), axis=1)
+    tid = np.repeat(np.arange(len(tets), dtype=np.int64), 4)
+    order = np.lexsort((faces[:, 2], faces[:, 1], faces[:, 0]))
+    return np.ascontiguousarray(faces[order], dtype=np.int64), tid[order]
+
+
+_ENCODER_ERRORS = {
+    1: "the cut border emptied before every tet was visited",
+    2: "a border face has no unvisited tet behind it",
+    3: "a tet face is shared inconsistently",
+    4: "internal capacity exceeded",
+    5: "faces left on the cut border after the last tet",
+}
+
+
+def encode_connectivity(points_count: int, tets: np.ndarray, boundary: np.ndarray | None = None) -> EncodedConnectivity:
+    """Code the connectivity of a valid tet mesh.
+
+    Parameters
+    ----------
+    points_count : int
+        Number of vertices (ids in ``tets`` are below it; unreferenced ones are allowed).
+    tets : (m, 4) int array
+        Positively oriented tets (as in :class:`~gatun_py.mesh.TetMesh`).
+    boundary : (k, 3) int array, optional
+        The outward boundary faces; computed from ``tets`` when omitted.
+
+    Returns
+    -------
+    EncodedConnectivity
+    """
+    from ..mesh.model import boundary_faces
+
+    n = int(points_count)
+    tets = np.ascontiguousarray(tets, dtype=np.int64)
+    if boundary is None:
+        boundary = boundary_faces(tets) if len(tets) else np.zeros((0, 3), np.int32)
+    faces = np.ascontiguousarray(boundary, dtype=np.int64)
+    nf, m = len(faces), len(tets)
+
+    dec_of = np.full(max(n, 1), -1, np.int64)
+    order = np.full(max(n, 1), -1, np.int64)
+    pred = np.full((max(n, 1), 3), -1, np.int32)
+    out_faces = np.zeros((nf, 3), np.int32)
+    hkey, hface = _sorted_halfedges(faces) if nf else (np.zeros((0, 2), np.int64), np.zeros(0, np.int64))
+
+    def run_boundary(st, out):
+        dec_of[:] = -1
+        order[:] = -1
+        pred[:] = -1
+        B = K.new_border(n, 3 * nf + 8, 3 * nf + 8)
+        res = K.encode_boundary(st, out, faces, hkey, hface, n, B, dec_of, order, pred, out_faces)
+        run_boundary.result = res
+
+    boundary_code = rc.run_encoder(run_boundary, capacity=rc.capacity_hint(nf * 4))
+    nbv, code = run_boundary.result
+    if code:
+        raise MeshError(f"boundary surface cannot be coded (code {code}): is the mesh valid?")
+
+    out_tets = np.zeros((m, 4), np.int32)
+    fkey, ftet = _sorted_faces(tets) if m else (np.zeros((0, 3), np.int64), np.zeros(0, np.int64))
+    dec_b, order_b, pred_b = dec_of.copy(), order.copy(), pred.copy()
+
+    def run_tets(st, out):
+        dec_of[:] = dec_b
+        order[:] = order_b
+        pred[:] = pred_b
+        B = K.new_border(n, nf + 3 * m + 8, nf + 3 * m + 8)
+        for f in out_faces:
+            K._add(B, 3, int(f[0]), int(f[1]), int(f[2]))
+        res = K.encode_tets(st, out, tets, fkey, ftet, B, dec_of, order, pred, nbv, out_tets)
+        run_tets.result = res
+        run_tets.peak = int(B[8][K.BS_PEAK])
+
+    tet_code = rc.run_encoder(run_tets, capacity=rc.capacity_hint(m * 2))
+    nref, code = run_tets.result
+    if code:
+        raise MeshError(f"tet connectivity cannot be coded: {_ENCODER_ERRORS.get(code, code)}; is the mesh valid?")
+    # unreferenced vertices: last, in their original order
+    rest = np.flatnonzero(dec_of[:n] == -1)
+    order[nref:n] = rest
+    return EncodedConnectivity(
+        boundary_code=boundary_code, tet_code=tet_code, n_points=n, n_tets=m, n_boundary_faces=nf,
+        n_boundary_vertices=int(nbv), n_referenced=int(nref), vertex_order=order[:n].copy(),
+        predictors=pred[:n].copy(), boundary=out_faces, tets=out_tets, peak_border=run_tets.peak,
+    )
+
+
+class ConnectivityDecoder:
+    """Streaming decoder of the two connectivity streams.
+
+    Parameters
+    ----------
+    boundary_code, tet_code : bytes
+        The streams written by :func:`encode_connectivity`.
+    n_points, n_tets, n_boundary_faces, n_referenced : int
+        Counts from the section header (checked against what the streams produce).
+    """
+
+    def __init__(self, boundary_code, tet_code, *, n_points, n_tets, n_boundary_faces, n_referenced):
+        self.n_points = int(n_points)
+        self.n_tets = int(n_tets)
+        self.n_boundary_faces = int(n_boundary_faces)
+        self.n_referenced = int(n_referenced)
+        if not (0 <= self.n_referenced <= self.n_points):
+            raise CorruptFileError("corrupt connectivity header: inconsistent vertex counts")
+        self._bdata = np.frombuffer(boundary_code, dtype=np.uint8)
+        self._tdata = np.frombuffer(tet_code, dtype=np.uint8)
+        self.predictors = np.full((max(self.n_points, 1), 3), -1, np.int32)
+        self.peak_border = 0
+        self._tstate = None
+
+    def boundary(self):
+        """Decode the boundary surface: returns (faces (b, 3) int32, number of boundary vertices)."""
+        nf = self.n_boundary_faces
+        faces = np.zeros((nf, 3), np.int32)
+        B = K.new_border(self.n_points, 3 * nf + 8, 3 * nf + 8)
+        st = rc.dec_state()
+        if nf:
+            nv, status = K.decode_boundary(st, self._bdata, nf, self.n_points, B, self.predictors, faces)
+            if status != K.ST_DONE:
+                raise CorruptFileError("corrupt boundary section: the surface code is inconsistent")
+            rc.check_decoder(st, self._bdata, "boundary section")
+        else:
+            nv = 0
+            if len(self._bdata):
+                raise CorruptFileError("corrupt boundary section: unexpected data")
+        if self.n_tets and nv > self.n_referenced:
+            raise CorruptFileError("corrupt boundary section: too many vertices")
+        self._nbv = int(nv)
+        self._faces = faces
+        return faces, int(nv)
+
+    def start_tets(self):
+        """Prepare the tet phase (after :meth:`boundary`)."""
+        nf = self.n_boundary_faces
+        cap = max(64, 2 * nf)
+        self._B = K.new_border(self.n_points, cap, cap)
+        for f in self._faces:
+            K._add(self._B, 3, int(f[0]), int(f[1]), int(f[2]))
+        self._tst = rc.dec_state()
+        self._tstate = np.array([self._nbv, 0, 0], np.int64)
+        self._probs = np.full(K.TM_SIZE, rc.PROB_INIT, np.uint16)
+        if self.n_tets:
+            rc.dec_init(self._tst, self._tdata)
+        elif len(self._tdata):
+            raise CorruptFileError("corrupt tet section: unexpected data")
+        elif self._nbv != self.n_referenced or nf:
+            raise CorruptFileError("corrupt connectivity: counts do not match")
+
+    @property
+    def vertices_known(self) -> int:
+        return int(self._tstate[0])
+
+    @property
+    def tets_done(self) -> int:
+        return int(self._tstate[1])
+
+    def next_tets(self, max_tets: int) -> np.ndarray:
+        """Decode up to ``max_tets`` more tets (fewer only at the end); (j, 4) int32 decode ids."""
+        out = np.zeros((min(max_tets, self.n_tets - self.tets_done), 4), np.int32)
+        filled = 0
+        while filled < len(out):
+            n, status = K.decode_tets(self._tst, self._tdata, self._probs, self.n_tets, self.n_referenced,
+                                      self._B, self.predictors, self._tstate, out[filled:])
+            filled += n
+            if status == K.ST_GROW:
+                self._B = K.grow_border(self._B, 64, 64)
+            elif status == K.ST_ERROR:
+                raise CorruptFileError("corrupt tet section: the connectivity code is inconsistent")
+            elif status == K.ST_DONE:
+                break
+        self.peak_border = max(self.peak_border, int(self._B[8][K.BS_PEAK]))
+        if self.tets_done == self.n_tets:
+            rc.check_decoder(self._tst, self._tdata, "tet section")
+            if self.vertices_known != self.n_referenced:
+                raise CorruptFileError("corrupt tet section: vertex count does not match the header")
+        return out[:filled]

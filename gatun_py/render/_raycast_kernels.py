@@ -1,0 +1,590 @@
+"""Numba kernels of the object-space ray caster (private; validated callers in ``raycast.py``).
+
+Geometry conventions
+--------------------
+All rays start at the camera position; points are stored relative to it (``P = points - eye``,
+float64). For a ray with unit direction ``d`` and a directed edge i -> j, the Pluecker side is the
+triple product ``d . (P_i x P_j)``. A triangle (i, j, k) is crossed by the ray iff the three sides
+of (i, j), (j, k), (k, i) share a sign: all positive = the ray leaves through the face along its
+winding normal, all negative = it enters. Each undirected edge is evaluated once in a canonical
+order (lower id first), so the two tets sharing a face always agree; exact zeros are broken by a
+symbolic perturbation of the ray direction (simulation of simplicity), which keeps the decisions
+those of a real, slightly moved ray: it enters and leaves every tet it meets exactly once, also
+through vertices, edges and zero-volume tets.
+
+Where a ray crosses a face, its parameter ``t`` (distance from the eye) and the scalar are the
+barycentric combination whose weights are the three edge sides; they depend only on the face's
+sorted vertex ids, so a face gives bit-identical values from both sides and in every walking
+direction. That is what makes the streaming render (front and back subsegments, any tet order)
+equal to the in-memory one.
+
+Face table
+----------
+Faces live in an open-addressing hash keyed by the sorted vertex triple (a < b < c). Side 0 of a
+face is the tet in which (a, b, c) is wound outward, side 1 the other one; ``hopp[slot, side]``
+holds that tet's fourth vertex (or -1), which is all a ray needs to step through the tet.
+``hpark[slot]`` heads a linked list of subsegments parked on the face.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int64)
+
+MODE_VOLUME = 0
+MODE_FACE = 1
+
+STATE_ACTIVE = 0
+STATE_DONE = 1
+STATE_STUCK = 2
+
+
+# ---------------------------------------------------------------------------------------------
+# geometry helpers
+@njit(cache=True, inline="always")
+def _side(P, dx, dy, dz, i, j):
+    """Pluecker side of the directed edge i -> j: (value, sign), sign never 0."""
+    if i < j:
+        lo, hi, flip = i, j, 1.0
+    else:
+        lo, hi, flip = j, i, -1.0
+    ax, ay, az = P[lo, 0], P[lo, 1], P[lo, 2]
+    bx, by, bz = P[hi, 0], P[hi, 1], P[hi, 2]
+    cx = ay * bz - az * by
+    cy = az * bx - ax * bz
+    cz = ax * by - ay * bx
+    v = dx * cx + dy * cy + dz * cz
+    if v > 0.0:
+        s = 1.0
+    elif v < 0.0:
+        s = -1.0
+    # symbolic perturbation d + (e, e^2, e^3): the first non-zero cross component decides
+    elif cx != 0.0:
+        s = 1.0 if cx > 0.0 else -1.0
+    elif cy != 0.0:
+        s = 1.0 if cy > 0.0 else -1.0
+    elif cz != 0.0:
+        s = 1.0 if cz > 0.0 else -1.0
+    else:  # edge collinear with the eye or of zero length: ids decide
+        s = 1.0
+    return v * flip, s * flip
+
+
+@njit(cache=True, inline="always")
+def _sort3(a, b, c):
+    """Sorted triple and the parity (0 even, 1 odd) of the sorting permutation."""
+    par = 0
+    if a > b:
+        a, b = b, a
+        par ^= 1
+    if b > c:
+        b, c = c, b
+        par ^= 1
+    if a > b:
+        a, b = b, a
+        par ^= 1
+    return a, b, c, par
+
+
+@njit(cache=True)
+def _face_values(P, dens, dx, dy, dz, a, b, c):
+    """Ray parameter t and scalar where the ray crosses the face with sorted ids a < b < c."""
+    wa, _ = _side(P, dx, dy, dz, b, c)
+    wb, _ = _side(P, dx, dy, dz, c, a)
+    wc, _ = _side(P, dx, dy, dz, a, b)
+    ta = P[a, 0] * dx + P[a, 1] * dy + P[a, 2] * dz
+    tb = P[b, 0] * dx + P[b, 1] * dy + P[b, 2] * dz
+    tc = P[c, 0] * dx + P[c, 1] * dy + P[c, 2] * dz
+    w = wa + wb + wc
+    if w == 0.0 or not math.isfinite(w):
+        return (ta + tb + tc) / 3.0, (dens[a] + dens[b] + dens[c]) / 3.0
+    wa /= w
+    wb /= w
+    wc /= w
+    return wa * ta + wb * tb + wc * tc, wa * dens[a] + wb * dens[b] + wc * dens[c]
+
+
+# ---------------------------------------------------------------------------------------------
+# face hash
+@njit(cache=True, inline="always")
+def _hash0(a, b, c, mask):
+    h = (np.int64(a) * 73856093) ^ (np.int64(b) * 19349663) ^ (np.int64(c) * 83492791)
+    return h & mask
+
+
+@njit(cache=True)
+def _hash_find(hkey, a, b, c):
+    mask = hkey.shape[0] - 1
+    h = _hash0(a, b, c, mask)
+    while True:
+        k0 = hkey[h, 0]
+        if k0 == -1:
+            return -1
+        if k0 == a and hkey[h, 1] == b and hkey[h, 2] == c:
+            return h
+        h = (h + 1) & mask
+
+
+@njit(cache=True)
+def _hash_insert(hkey, hopp, hpark, hcount, a, b, c):
+    mask = hkey.shape[0] - 1
+    h = _hash0(a, b, c, mask)
+    while True:
+        k0 = hkey[h, 0]
+        if k0 == -1:
+            hkey[h, 0] = a
+            hkey[h, 1] = b
+            hkey[h, 2] = c
+            hopp[h, 0] = -1
+            hopp[h, 1] = -1
+            hpark[h] = -1
+            hcount[0] += 1
+            return h
+        if k0 == a and hkey[h, 1] == b and hkey[h, 2] == c:
+            return h
+        h = (h + 1) & mask
+
+
+@njit(cache=True)
+def rehash(hkey, hopp, hpark, new_cap):
+    """Copy the face table into one of ``new_cap`` (a power of two) slots."""
+    nkey = np.full((new_cap, 3), -1, dtype=np.int32)
+    nopp = np.full((new_cap, 2), -1, dtype=np.int32)
+    npark = np.full(new_cap, -1, dtype=np.int32)
+    cnt = np.zeros(1, dtype=np.int64)
+    for h in range(hkey.shape[0]):
+        if hkey[h, 0] != -1:
+            g = _hash_insert(nkey, nopp, npark, cnt, hkey[h, 0], hkey[h, 1], hkey[h, 2])
+            nopp[g, 0] = hopp[h, 0]
+            nopp[g, 1] = hopp[h, 1]
+            npark[g] = hpark[h]
+    return nkey, nopp, npark
+
+
+@njit(cache=True)
+def insert_tets(tets, hkey, hopp, hpark, hcount, nodes, park_ver, in_list, seg_mark, mark, active):
+    """Enter a batch of tets into the face table; collect the segments parked on their faces.
+
+    ``nodes`` (k, 3) = (item, version, next) is the pool of park-list nodes; a node is live
+    while its version is the item's current one (an item that moves on is simply re-parked with a
+    new version, its old node goes stale). Returns (number of segments written to ``active``,
+    number of face conflicts).
+    """
+    n_active = 0
+    conflicts = 0
+    for t in range(tets.shape[0]):
+        for k in range(4):
+            a, b, c, par = _sort3(tets[t, TET_FACES[k, 0]], tets[t, TET_FACES[k, 1]], tets[t, TET_FACES[k, 2]])
+            slot = _hash_insert(hkey, hopp, hpark, hcount, a, b, c)
+            if hopp[slot, par] == -1:
+                hopp[slot, par] = tets[t, k]
+            else:
+                conflicts += 1
+            node = hpark[slot]
+            while node != -1:
+                item = nodes[node, 0]
+                if nodes[node, 1] == park_ver[item] and in_list[item]:
+                    in_list[item] = 0
+                    s = item >> 1
+                    if seg_mark[s] != mark:
+                        seg_mark[s] = mark
+                        active[n_active] = s
+                        n_active += 1
+                node = nodes[node, 2]
+            hpark[slot] = -1
+    return n_active, conflicts
+
+
+@njit(cache=True)
+def park(active, n_active, seg_face, seg_state, hkey, hopp, hpark, hcount, nodes, n_nodes, park_ver, in_list,
+         park_face):
+    """Hang the unfinished subsegments of ``active`` on the faces where they stopped.
+
+    A subsegment still live on the face it waits on is left alone. Returns the new node count.
+    """
+    for i in range(n_active):
+        s = active[i]
+        if seg_state[s] != STATE_ACTIVE:
+            continue
+        for sub in range(2):
+            item = 2 * s + sub
+            a, b, c = seg_face[s, sub, 0], seg_face[s, sub, 1], seg_face[s, sub, 2]
+            if in_list[item] and park_face[item, 0] == a and park_face[item, 1] == b and park_face[item, 2] == c:
+                continue
+            slot = _hash_insert(hkey, hopp, hpark, hcount, a, b, c)
+            park_ver[item] += 1
+            in_list[item] = 1
+            park_face[item, 0] = a
+            park_face[item, 1] = b
+            park_face[item, 2] = c
+            nodes[n_nodes, 0] = item
+            nodes[n_nodes, 1] = park_ver[item]
+            nodes[n_nodes, 2] = hpark[slot]
+            hpark[slot] = n_nodes
+            n_nodes += 1
+    return n_nodes
+
+
+# ---------------------------------------------------------------------------------------------
+# sampling and compositing
+@njit(cache=True, inline="always")
+def _lookup(tab, lo, inv, s, out):
+    n = tab.shape[0]
+    x = (s - lo) * inv
+    if not x > 0.0:  # also NaN
+        x = 0.0
+    if x > n - 1:
+        x = float(n - 1)
+    i = int(x)
+    if i >= n - 1:
+        i = n - 2
+    f = x - i
+    for c in range(4):
+        out[c] = tab[i, c] * (1.0 - f) + tab[i + 1, c] * f
+
+
+@njit(cache=True)
+def _first_sample(t0, step):
+    k = math.ceil(t0 / step)
+    if (k - 1) * step >= t0:
+        k -= 1
+    if k * step < t0:
+        k += 1
+    return k
+
+
+@njit(cache=True)
+def _composite(acc, t0, s0, t1, s1, forward, mode, step, tab, lo, inv, unit, buf, buf2):
+    """Composite the tet interval [t0, t1) (scalar s0 -> s1) into ``acc``; return samples taken.
+
+    forward: ``acc`` is a front subsegment (new samples go behind it); otherwise a back
+    subsegment walking toward the eye (new samples go in front of it).
+    """
+    if not t1 > t0:
+        return 0
+    if mode == MODE_VOLUME:
+        k0 = _first_sample(t0, step)
+        k1 = _first_sample(t1, step)  # first sample index not in [t0, t1)
+        if k1 <= k0:
+            return 0
+        scale = (s1 - s0) / (t1 - t0)
+        for q in range(k1 - k0):
+            k = k0 + q if forward else k1 - 1 - q
+            s = s0 + (k * step - t0) * scale
+            _lookup(tab, lo, inv, s, buf)
+            al = buf[3]
+            if forward:
+                w = (1.0 - acc[3]) * al
+                acc[0] += w * buf[0]
+                acc[1] += w * buf[1]
+                acc[2] += w * buf[2]
+                acc[3] += w
+            else:
+                r = 1.0 - al
+                acc[0] = al * buf[0] + r * acc[0]
+                acc[1] = al * buf[1] + r * acc[1]
+                acc[2] = al * buf[2] + r * acc[2]
+                acc[3] = al + r * acc[3]
+        return k1 - k0
+    # face mode: the interval takes the average of the samples at its two faces
+    _lookup(tab, lo, inv, s0, buf)
+    _lookup(tab, lo, inv, s1, buf2)
+    a = 0.5 * (buf[3] + buf2[3])
+    if a >= 1.0:
+        al = 1.0
+    else:
+        al = 1.0 - math.exp((t1 - t0) / unit * math.log1p(-a))
+    cr = 0.5 * (buf[0] + buf2[0])
+    cg = 0.5 * (buf[1] + buf2[1])
+    cb = 0.5 * (buf[2] + buf2[2])
+    if forward:
+        w = (1.0 - acc[3]) * al
+        acc[0] += w * cr
+        acc[1] += w * cg
+        acc[2] += w * cb
+        acc[3] += w
+    else:
+        r = 1.0 - al
+        acc[0] = al * cr + r * acc[0]
+        acc[1] = al * cg + r * acc[1]
+        acc[2] = al * cb + r * acc[2]
+        acc[3] = al + r * acc[3]
+    return 1
+
+
+# ---------------------------------------------------------------------------------------------
+# walking
+@njit(cache=True)
+def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_side, seg_ts, seg_acc, seg_state, seg_steps,
+          seg_samples, hkey, hopp, mode, step, tab, lo, inv, unit, max_steps, meet_is_end):
+    """Advance subsegment ``sub`` (0 front, 1 back) of segment ``s`` through every present tet.
+
+    Stops when the next tet is missing (the subsegment stays parked on that face), when it
+    reaches the other subsegment's face (segment done), or after ``max_steps`` steps in total
+    for the segment (stuck: it can only be looping on inconsistent geometry).
+    """
+    r = seg_ray[s]
+    dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
+    forward = sub == 0
+    want = 1.0 if forward else -1.0
+    a, b, c = seg_face[s, sub, 0], seg_face[s, sub, 1], seg_face[s, sub, 2]
+    oa, ob, oc = seg_face[s, 1 - sub, 0], seg_face[s, 1 - sub, 1], seg_face[s, 1 - sub, 2]
+    side = seg_side[s, sub]
+    t_here, s_here = seg_ts[s, sub, 0], seg_ts[s, sub, 1]
+    acc = seg_acc[s, sub]
+    v = np.empty(4, dtype=np.int64)
+    buf = np.empty(4, dtype=np.float64)
+    buf2 = np.empty(4, dtype=np.float64)
+    samples = 0
+    steps = seg_steps[s]
+    state = STATE_ACTIVE
+    while True:
+        slot = _hash_find(hkey, a, b, c)
+        if slot < 0:
+            break
+        e = hopp[slot, side]
+        if e < 0:
+            break
+        if steps >= max_steps:
+            state = STATE_STUCK
+            break
+        steps += 1
+        # the tet behind the face, positively oriented, entered through its local face 3
+        if side == 0:
+            v[0], v[1], v[2] = a, c, b
+        else:
+            v[0], v[1], v[2] = a, b, c
+        v[3] = e
+        best_k = -1
+        best_score = -1.0
+        best_min = -np.inf
+        for k in range(3):
+            i0, i1, i2 = v[TET_FACES[k, 0]], v[TET_FACES[k, 1]], v[TET_FACES[k, 2]]
+            v01, s01 = _side(P, dx, dy, dz, i0, i1)
+            v12, s12 = _side(P, dx, dy, dz, i1, i2)
+            v20, s20 = _side(P, dx, dy, dz, i2, i0)
+            score = (s01 * want > 0) + (s12 * want > 0) + (s20 * want > 0)
+            m = min(v01 * want, v12 * want, v20 * want)
+            if score == 3:
+                best_k = k
+                break
+            # inconsistent rounding can leave no clean exit: take the closest one
+            if score > best_score or (score == best_score and m > best_min):
+                best_score = score
+                best_min = m
+                best_k = k
+        k = best_k
+        na, nb, nc, par = _sort3(v[TET_FACES[k, 0]], v[TET_FACES[k, 1]], v[TET_FACES[k, 2]])
+        t_next, s_next = _face_values(P, dens, dx, dy, dz, na, nb, nc)
+        if forward:
+            samples += _composite(acc, t_here, s_here, t_next, s_next, True, mode, step, tab, lo, inv, unit,
+                                  buf, buf2)
+        else:
+            samples += _composite(acc, t_next, s_next, t_here, s_here, False, mode, step, tab, lo, inv, unit,
+                                  buf, buf2)
+        a, b, c = na, nb, nc
+        side = 1 - par  # this tet is on side `par` of the new face; the next one on the other
+        t_here, s_here = t_next, s_next
+        if a == oa and b == ob and c == oc:
+            state = STATE_DONE
+            break
+    seg_face[s, sub, 0] = a
+    seg_face[s, sub, 1] = b
+    seg_face[s, sub, 2] = c
+    seg_side[s, sub] = side
+    seg_ts[s, sub, 0] = t_here
+    seg_ts[s, sub, 1] = s_here
+    seg_steps[s] = steps
+    seg_samples[s] += samples
+    if state != STATE_ACTIVE:
+        seg_state[s] = state
+    elif meet_is_end:
+        # in-memory walk: stopped at a face with no tet behind it before the segment's exit
+        seg_state[s] = STATE_STUCK
+
+
+@njit(cache=True, parallel=True)
+def advance(active, n_active, front_only, P, dens, dirs, seg_ray, seg_face, seg_side, seg_ts, seg_acc,
+            seg_state, seg_steps, seg_samples, hkey, hopp, mode, step, tab, lo, inv, unit, max_steps):
+    """Advance every listed segment as far as the present tets allow (one bulk-synchronous phase).
+
+    Each segment is handled by one task that only writes its own state, and reads the face table,
+    which nobody writes during the phase: the result cannot depend on the thread count.
+    """
+    for i in prange(n_active):
+        s = active[i]
+        if seg_state[s] != STATE_ACTIVE:
+            continue
+        _walk(s, 0, P, dens, dirs, seg_ray, seg_face, seg_side, seg_ts, seg_acc, seg_state, seg_steps,
+              seg_samples, hkey, hopp, mode, step, tab, lo, inv, unit, max_steps, front_only)
+        if seg_state[s] == STATE_ACTIVE and not front_only:
+            _walk(s, 1, P, dens, dirs, seg_ray, seg_face, seg_side, seg_ts, seg_acc, seg_state, seg_steps,
+                  seg_samples, hkey, hopp, mode, step, tab, lo, inv, unit, max_steps, False)
+
+
+# ---------------------------------------------------------------------------------------------
+# boundary: rays -> segments
+@njit(cache=True, parallel=True)
+def _boundary_hits(P, dens, dirs, width, faces, bbox, counts, offsets, out_ray, out_t, out_face, out_enter,
+                   fill):
+    for f in prange(faces.shape[0]):
+        i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+        n = 0
+        base = offsets[f] if fill else 0
+        for row in range(bbox[f, 2], bbox[f, 3]):
+            for col in range(bbox[f, 0], bbox[f, 1]):
+                r = row * width + col
+                dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
+                _, s01 = _side(P, dx, dy, dz, i0, i1)
+                _, s12 = _side(P, dx, dy, dz, i1, i2)
+                if s01 != s12:
+                    continue
+                _, s20 = _side(P, dx, dy, dz, i2, i0)
+                if s20 != s01:
+                    continue
+                if fill:
+                    a, b, c, par = _sort3(i0, i1, i2)
+                    t, _ = _face_values(P, dens, dx, dy, dz, a, b, c)
+                    out_ray[base + n] = r
+                    out_t[base + n] = t
+                    out_face[base + n] = f
+                    out_enter[base + n] = s01 < 0
+                n += 1
+        if not fill:
+            counts[f] = n
+
+
+@njit(cache=True)
+def _pair_hits(n_rays, hit_ray, hit_t, hit_face, hit_enter):
+    """Sort each ray's boundary crossings by t and pair them into (entry, exit) segments."""
+    m = hit_ray.shape[0]
+    start = np.zeros(n_rays + 1, dtype=np.int64)
+    for i in range(m):
+        start[hit_ray[i] + 1] += 1
+    for r in range(n_rays):
+        start[r + 1] += start[r]
+    order = np.empty(m, dtype=np.int64)
+    pos = start[:-1].copy()
+    for i in range(m):
+        order[pos[hit_ray[i]]] = i
+        pos[hit_ray[i]] += 1
+    seg_ray = np.empty(m // 2 + 1, dtype=np.int64)
+    seg_in = np.empty(m // 2 + 1, dtype=np.int64)
+    seg_out = np.empty(m // 2 + 1, dtype=np.int64)
+    nseg = 0
+    anomalies = 0
+    for r in range(n_rays):
+        lo, hi = start[r], start[r + 1]
+        # insertion sort by (t, exits first): rays cross few boundary faces
+        for i in range(lo + 1, hi):
+            x = order[i]
+            j = i - 1
+            while j >= lo:
+                y = order[j]
+                if hit_t[y] > hit_t[x] or (hit_t[y] == hit_t[x] and hit_enter[y] and not hit_enter[x]):
+                    order[j + 1] = y
+                    j -= 1
+                else:
+                    break
+            order[j + 1] = x
+        # an entry a rounding error ahead of an exit at the same place (seams, touching parts)
+        for i in range(lo, hi - 1):
+            x, y = order[i], order[i + 1]
+            if hit_enter[x] and not hit_enter[y] and hit_t[y] - hit_t[x] <= 1e-9 * (abs(hit_t[x]) + 1e-30):
+                order[i], order[i + 1] = y, x
+        open_ = -1
+        for i in range(lo, hi):
+            x = order[i]
+            if hit_enter[x]:
+                if open_ == -1:
+                    open_ = x
+                else:
+                    anomalies += 1
+            elif open_ != -1:
+                seg_ray[nseg] = r
+                seg_in[nseg] = open_
+                seg_out[nseg] = x
+                nseg += 1
+                open_ = -1
+            else:
+                anomalies += 1
+        if open_ != -1:
+            anomalies += 1
+    return seg_ray[:nseg], seg_in[:nseg], seg_out[:nseg], anomalies
+
+
+@njit(cache=True)
+def _init_segments(P, dens, dirs, faces, seg_ray_, hit_face, hit_in, hit_out, seg_ray, seg_face, seg_side,
+                   seg_ts):
+    for s in range(seg_ray_.shape[0]):
+        r = seg_ray_[s]
+        seg_ray[s] = r
+        dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
+        for sub in range(2):
+            f = hit_face[hit_in[s]] if sub == 0 else hit_face[hit_out[s]]
+            a, b, c, par = _sort3(faces[f, 0], faces[f, 1], faces[f, 2])
+            seg_face[s, sub, 0] = a
+            seg_face[s, sub, 1] = b
+            seg_face[s, sub, 2] = c
+            seg_side[s, sub] = par  # the boundary face's own tet: (a, b, c) outward iff even
+            t, sv = _face_values(P, dens, dx, dy, dz, a, b, c)
+            seg_ts[s, sub, 0] = t
+            seg_ts[s, sub, 1] = sv
+
+
+def find_segments(P, dens, dirs, width, faces, bbox):
+    """All (ray, entry face, exit face) segments of the boundary ``faces`` (outward wound)."""
+    nf = faces.shape[0]
+    counts = np.zeros(nf, dtype=np.int64)
+    dummy_i = np.zeros(0, dtype=np.int64)
+    dummy_f = np.zeros(0, dtype=np.float64)
+    dummy_b = np.zeros(0, dtype=np.bool_)
+    _boundary_hits(P, dens, dirs, width, faces, bbox, counts, counts, dummy_i, dummy_f, dummy_i, dummy_b, False)
+    offsets = np.zeros(nf + 1, dtype=np.int64)
+    np.cumsum(counts, out=offsets[1:])
+    m = int(offsets[-1])
+    hit_ray = np.empty(m, dtype=np.int64)
+    hit_t = np.empty(m, dtype=np.float64)
+    hit_face = np.empty(m, dtype=np.int64)
+    hit_enter = np.empty(m, dtype=np.bool_)
+    _boundary_hits(P, dens, dirs, width, faces, bbox, counts, offsets, hit_ray, hit_t, hit_face, hit_enter, True)
+    seg_ray_, hit_in, hit_out, anomalies = _pair_hits(dirs.shape[0], hit_ray, hit_t, hit_face, hit_enter)
+    nseg = seg_ray_.shape[0]
+    seg_ray = np.empty(nseg, dtype=np.int32)
+    seg_face = np.empty((nseg, 2, 3), dtype=np.int32)
+    seg_side = np.empty((nseg, 2), dtype=np.int32)
+    seg_ts = np.empty((nseg, 2, 2), dtype=np.float64)
+    _init_segments(P, dens, dirs, faces, seg_ray_, hit_face, hit_in, hit_out, seg_ray, seg_face, seg_side, seg_ts)
+    return seg_ray, seg_face, seg_side, seg_ts, int(anomalies), m
+
+
+@njit(cache=True)
+def compose(n_rays, seg_ray, seg_acc, seg_state, image):
+    """Combine subsegments (eq. 3/4) and segments (in ray order) into premultiplied RGBA.
+
+    Segments are stored ray by ray, nearest first. Returns the number of rays with an
+    unfinished segment.
+    """
+    unfinished = 0
+    last_bad = -1
+    for s in range(seg_ray.shape[0]):
+        r = seg_ray[s]
+        of = seg_acc[s, 0, 3]
+        wb = 1.0 - of
+        seg_c0 = seg_acc[s, 0, 0] + wb * seg_acc[s, 1, 0]
+        seg_c1 = seg_acc[s, 0, 1] + wb * seg_acc[s, 1, 1]
+        seg_c2 = seg_acc[s, 0, 2] + wb * seg_acc[s, 1, 2]
+        seg_o = of + wb * seg_acc[s, 1, 3]
+        w = 1.0 - image[r, 3]
+        image[r, 0] += w * seg_c0
+        image[r, 1] += w * seg_c1
+        image[r, 2] += w * seg_c2
+        image[r, 3] += w * seg_o
+        if seg_state[s] != STATE_DONE and r != last_bad:
+            unfinished += 1
+            last_bad = r
+    return unfinished

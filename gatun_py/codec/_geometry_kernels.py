@@ -1,0 +1,451 @@
+"""Numba kernels of the lossless geometry/density coder (see :mod:`gatun_py.codec.geometry`).
+
+Every vertex carries four channels, x, y, z and density, each a float32 coded exactly through its
+*ordered integer* (the bit pattern with negative numbers flipped so integer order is float order,
+:func:`ordered_int`). Each channel has its own range-coded stream so that the encoder can pick, per
+channel, between two residual modes and keep whichever stream is smaller.
+
+Per vertex k and channel, with the refs ``(a, b, c, d)`` (face, apex) handed over by the
+connectivity coder:
+
+1. **Repetition**: the distinct values of the valid refs on this channel form a list of at most
+   four candidates; a symbol says "equal to candidate i" or "none of them". Real grids reuse a few
+   values per axis, so this alone codes most coordinates in well under a bit.
+2. Otherwise the value is predicted (the predictor is chosen backward-adaptively among a few
+   linear combinations of the refs, per ref pattern, by their recent residual sizes, so encoder and
+   decoder pick the same one without side information) and coded as
+
+   * ``MODE_PREDICT``: the integer difference of the ordered integers, or
+   * ``MODE_TABLE``: the difference of ranks in the channel's sorted table of distinct values, which
+     is sent once up front (worth it when a channel has few distinct values).
+
+All prediction arithmetic is float64 on float32 inputs, rounded to float32 once, without
+``fastmath``: encoder and decoder run the same kernels on the same bits, so they agree exactly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .rangecoder import (
+    PROB_INIT,
+    INT_MODEL_SIZE,
+    dec_bit,
+    dec_failed,
+    dec_init,
+    dec_sint,
+    dec_sym,
+    dec_uint,
+    enc_bit,
+    enc_finish,
+    enc_sint,
+    enc_sym,
+    enc_uint,
+)
+
+N_CHANNELS = 4
+MODE_PREDICT = 0
+MODE_TABLE = 1
+
+# ref patterns (which of the face refs and the apex are present) and their predictor candidates
+PAT_NONE, PAT_ONE, PAT_EDGE, PAT_EDGE_APEX, PAT_FACE, PAT_FACE_APEX = 0, 1, 2, 3, 4, 5
+N_PATTERNS = 6
+MAX_CANDS = 6
+N_CANDS = np.array([1, 1, 3, 3, 4, 6], dtype=np.int64)
+
+# model layout of one channel (uint16 probabilities)
+EQ_CONTEXTS = 8  # (number of distinct ref values - 1) x (neighbouring channel was a repeat)
+EQ_BASE = 0
+RES_BASE = EQ_BASE + EQ_CONTEXTS * 8
+N_RES_CONTEXTS = N_PATTERNS * 2
+RANK_BASE = RES_BASE + N_RES_CONTEXTS * INT_MODEL_SIZE
+TABLE_BASE = RANK_BASE + N_RES_CONTEXTS * INT_MODEL_SIZE
+MODEL_SIZE = TABLE_BASE + 2 * INT_MODEL_SIZE
+
+SCORE_SHIFT = 4  # predictor scores: exponentially decayed bit lengths, window ~16 vertices
+
+# decoder status codes
+OK = 0
+ERR_STREAM = 1
+ERR_REF = 2
+ERR_RANK = 3
+
+
+@njit(cache=True, inline="always")
+def ordered_int(bits):
+    """Map an int32 float bit pattern to an integer with the same order as the float."""
+    b = np.int64(bits)
+    if b < 0:
+        b = b ^ 0x7FFFFFFF
+    return b
+
+
+@njit(cache=True, inline="always")
+def ordered_to_bits(o):
+    """Inverse of :func:`ordered_int` (``o`` must lie in the int32 range)."""
+    if o < 0:
+        o = o ^ 0x7FFFFFFF
+    return np.int32(o)
+
+
+@njit(cache=True, inline="always")
+def _bit_length(v):
+    """Number of bits of ``|v|`` (``|v| < 2**63``), by halving steps rather than a bit loop."""
+    if v < 0:
+        v = -v
+    n = 0
+    if v >> 32:
+        n += 32
+        v >>= 32
+    if v >> 16:
+        n += 16
+        v >>= 16
+    if v >> 8:
+        n += 8
+        v >>= 8
+    if v >> 4:
+        n += 4
+        v >>= 4
+    if v >> 2:
+        n += 2
+        v >>= 2
+    if v >> 1:
+        n += 1
+        v >>= 1
+    return n + v
+
+
+@njit(cache=True)
+def _gather(k, r0, r1, r2, r3, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i):
+    """Predictor candidates and distinct repetition candidates of vertex ``k`` on channel ``ch``.
+
+    ``r0, r1, r2`` are the face refs and ``r3`` the apex (each ``-1`` or a checked id ``< k``).
+    Fills ``cand_o[:N_CANDS[pattern]]`` (ordered ints of the predictions) and ``eq_o[:m]`` (the
+    distinct ordered ints of the refs' values, in ref order); returns ``(pattern, m)``.
+    """
+    face0 = -1
+    face1 = -1
+    face2 = -1
+    nf = 0
+    for j in range(3):
+        r = r0 if j == 0 else (r1 if j == 1 else r2)
+        if r >= 0:
+            if nf == 0:
+                face0 = r
+            elif nf == 1:
+                face1 = r
+            else:
+                face2 = r
+            nf += 1
+    apex = r3
+    if nf == 0:
+        # no face: predict from the apex, else from the previous vertex (unreferenced vertices)
+        if apex >= 0:
+            face0 = apex
+            apex = -1
+            nf = 1
+        elif k > 0:
+            face0 = k - 1
+            nf = 1
+    m = 0
+    for j in range(4):
+        r = face0 if j == 0 else (face1 if j == 1 else (face2 if j == 2 else apex))
+        if r < 0:
+            continue
+        o = ordered_int(vi[r, ch])
+        dup = False
+        for q in range(m):
+            if eq_o[q] == o:
+                dup = True
+        if not dup:
+            eq_o[m] = o
+            m += 1
+    if nf == 0:
+        cand_o[0] = 0
+        return PAT_NONE, m
+    if nf == 1:
+        cand_o[0] = ordered_int(vi[face0, ch])
+        return PAT_ONE, m
+    a = np.float64(vf[face0, ch])
+    b = np.float64(vf[face1, ch])
+    if nf == 2:
+        nc = 3
+        if apex >= 0:
+            d = np.float64(vf[apex, ch])
+            scratch_f[0] = a + b - d  # parallelogram across the edge
+            scratch_f[1] = (a + b) * 0.5
+            scratch_f[2] = a
+            pat = PAT_EDGE_APEX
+        else:
+            scratch_f[0] = (a + b) * 0.5
+            scratch_f[1] = a
+            scratch_f[2] = b
+            pat = PAT_EDGE
+    else:
+        c = np.float64(vf[face2, ch])
+        if apex >= 0:
+            d = np.float64(vf[apex, ch])
+            # the far corner of the parallelepiped spanned by the apex and the face (exact on the
+            # 5-tet split of a uniform hexahedral grid), then the face centroid and parallelograms
+            scratch_f[0] = (a + b + c - d) * 0.5
+            scratch_f[1] = (a + b + c) / 3.0
+            scratch_f[2] = a + b - d
+            scratch_f[3] = a + c - d
+            scratch_f[4] = b + c - d
+            scratch_f[5] = a
+            pat = PAT_FACE_APEX
+            nc = 6
+        else:
+            scratch_f[0] = (a + b + c) / 3.0
+            scratch_f[1] = a
+            scratch_f[2] = b
+            scratch_f[3] = c
+            pat = PAT_FACE
+            nc = 4
+    for q in range(nc):
+        if scratch_f[q] != scratch_f[q]:  # NaN: payload bits are not portable, predict 0
+            scratch_f[q] = 0.0
+        cand_o[q] = ordered_int(scratch_i[q])
+    return pat, m
+
+
+@njit(cache=True, inline="always")
+def _best_cand(scores, ch, pat):
+    best = 0
+    for q in range(1, N_CANDS[pat]):
+        if scores[ch, pat, q] < scores[ch, pat, best]:
+            best = q
+    return best
+
+
+@njit(cache=True, inline="always")
+def _update_scores(scores, ch, pat, cand_o, o):
+    for q in range(N_CANDS[pat]):
+        s = scores[ch, pat, q]
+        scores[ch, pat, q] = s - (s >> SCORE_SHIFT) + (_bit_length(o - cand_o[q]) << 4)
+
+
+@njit(cache=True, inline="always")
+def _search(table, lo, hi, o):
+    """First index i in [lo, hi) with table[i] >= o (``hi`` if none)."""
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if table[mid] < o:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True, inline="always")
+def _eq_bits(m):
+    """Bits of the repetition symbol, which takes the m + 1 values 0 .. m (m = "none")."""
+    return 1 if m == 1 else (2 if m <= 3 else 3)
+
+
+@njit(cache=True, inline="always")
+def _is_big(mode, res):
+    if mode == MODE_TABLE:
+        return 1 if (res > 2 or res < -2) else 0
+    return 1 if _bit_length(res) > 12 else 0
+
+
+# ------------------------------------------------------------------------------------ encoder
+
+
+@njit(cache=True)
+def encode_kernel(st, out, vf, refs, modes, tables, tab_offs, trace):
+    """Encode every vertex into four channel streams.
+
+    ``st`` (4, 8) encoder states, ``out`` (4, cap) uint8 buffers, ``vf`` (n, 4) float32 values,
+    ``refs`` (n, 4) checked refs, ``modes`` (4,) per-channel mode, ``tables`` the sorted distinct
+    ordered ints of the table-mode channels (channel ch at ``tables[tab_offs[ch]:tab_offs[ch+1]]``).
+    Returns the byte count of each stream (larger than ``out.shape[1]`` on overflow). If
+    ``trace`` has n rows, ``trace[k, ch]`` records the coded (repetition symbol or -1, residual,
+    predictor index) for the tests.
+
+    The channels are coded one after the other (a channel only predicts from its own values), the
+    context of channel ch > 0 being whether channel ch - 1 of the same vertex was a repeat.
+    """
+    n = vf.shape[0]
+    vi = vf.view(np.int32)
+    scores = np.zeros((N_CHANNELS, N_PATTERNS, MAX_CANDS), dtype=np.int64)
+    cand_o = np.zeros(MAX_CANDS, dtype=np.int64)
+    eq_o = np.zeros(4, dtype=np.int64)
+    scratch_f = np.zeros(MAX_CANDS, dtype=np.float32)
+    scratch_i = scratch_f.view(np.int32)
+    was_eq = np.zeros(n, dtype=np.int8)
+    nbytes = np.zeros(N_CHANNELS, dtype=np.int64)
+    tracing = trace.shape[0] == n
+    for ch in range(N_CHANNELS):
+        stc = st[ch]
+        outc = out[ch]
+        probs = np.full(MODEL_SIZE, PROB_INIT, dtype=np.uint16)
+        mode = modes[ch]
+        lo = tab_offs[ch]
+        hi = tab_offs[ch + 1]
+        if mode == MODE_TABLE:
+            enc_uint(stc, outc, probs, TABLE_BASE, hi - lo)
+            if hi > lo:
+                enc_sint(stc, outc, probs, TABLE_BASE + INT_MODEL_SIZE, tables[lo])
+                for i in range(lo + 1, hi):
+                    enc_uint(stc, outc, probs, TABLE_BASE, tables[i] - tables[i - 1] - 1)
+        last_eq = 0
+        big = 0
+        for k in range(n):
+            pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], vf, vi, ch, cand_o, eq_o,
+                             scratch_f, scratch_i)
+            o = ordered_int(vi[k, ch])
+            is_eq = 0
+            sym = -1
+            res = np.int64(0)
+            best = -1
+            if m > 0:
+                flag = was_eq[k] if ch > 0 else last_eq
+                sym = m
+                for q in range(m):
+                    if eq_o[q] == o:
+                        sym = q
+                        break
+                enc_sym(stc, outc, probs, EQ_BASE + ((m - 1) * 2 + flag) * 8, _eq_bits(m), sym)
+                is_eq = 1 if sym < m else 0
+            if is_eq == 0:
+                best = _best_cand(scores, ch, pat)
+                ctx = pat * 2 + big
+                if mode == MODE_TABLE:
+                    rp = _search(tables, lo, hi, cand_o[best])
+                    if rp >= hi:
+                        rp = hi - 1
+                    res = _search(tables, lo, hi, o) - rp
+                    enc_sint(stc, outc, probs, RANK_BASE + ctx * INT_MODEL_SIZE, res)
+                else:
+                    res = o - cand_o[best]
+                    enc_sint(stc, outc, probs, RES_BASE + ctx * INT_MODEL_SIZE, res)
+                big = _is_big(mode, res)
+            if tracing:
+                trace[k, ch, 0] = sym
+                trace[k, ch, 1] = res
+                trace[k, ch, 2] = best
+            _update_scores(scores, ch, pat, cand_o, o)
+            last_eq = is_eq
+            was_eq[k] = is_eq
+        nbytes[ch] = enc_finish(stc, outc)
+    return nbytes
+
+
+# ------------------------------------------------------------------------------------ decoder
+
+
+@njit(cache=True)
+def decode_tables_kernel(st, buf, offs, probs, modes, n_points, tables, tab_offs):
+    """Start the four channel decoders and read the value tables of the table-mode channels.
+
+    ``tables`` must have room for ``n_points`` values per table-mode channel; fills ``tab_offs``
+    (5,). Returns a status (``OK`` or ``ERR_STREAM``).
+    """
+    pos = 0
+    for ch in range(N_CHANNELS):
+        data = buf[offs[ch]:offs[ch + 1]]
+        stc = st[ch]
+        pc = probs[ch]
+        dec_init(stc, data)
+        tab_offs[ch] = pos
+        if modes[ch] == MODE_TABLE:
+            count = dec_uint(stc, data, pc, TABLE_BASE)
+            if count > n_points or dec_failed(stc):
+                return ERR_STREAM
+            if count > 0:
+                v = dec_sint(stc, data, pc, TABLE_BASE + INT_MODEL_SIZE)
+                if v < -(1 << 31) or v >= (1 << 31):
+                    return ERR_STREAM
+                tables[pos] = v
+                pos += 1
+                for _ in range(1, count):
+                    v = v + dec_uint(stc, data, pc, TABLE_BASE) + 1
+                    if v >= (1 << 31) or dec_failed(stc):
+                        return ERR_STREAM
+                    tables[pos] = v
+                    pos += 1
+        if dec_failed(stc):
+            return ERR_STREAM
+    tab_offs[N_CHANNELS] = pos
+    return OK
+
+
+@njit(cache=True)
+def decode_vertices(st, buf, offs, probs, scores, flags, modes, tables, tab_offs, refs, vf, start, count):
+    """Decode vertices ``start .. start+count-1`` into ``vf`` (n, 4) float32.
+
+    ``refs`` (count, 4) int32 are the refs of those vertices. ``st`` (4, 8) decoder states,
+    ``probs`` (4, MODEL_SIZE) models, ``scores`` (4, N_PATTERNS, MAX_CANDS) predictor scores and
+    ``flags`` (8,) context flags carry the decoder's state from one call to the next. Every index
+    is checked: returns ``OK``, ``ERR_REF`` (a ref not in ``[-1, k)``), ``ERR_RANK`` (a table index
+    out of range) or ``ERR_STREAM`` (the range decoder failed).
+    """
+    vi = vf.view(np.int32)
+    n = vf.shape[0]
+    if start < 0 or count < 0 or start + count > n or refs.shape[0] < count or refs.shape[1] != 4:
+        return ERR_REF
+    for j in range(count):
+        k = start + j
+        for q in range(4):
+            if refs[j, q] < -1 or refs[j, q] >= k:
+                return ERR_REF
+    cand_o = np.zeros(MAX_CANDS, dtype=np.int64)
+    eq_o = np.zeros(4, dtype=np.int64)
+    scratch_f = np.zeros(MAX_CANDS, dtype=np.float32)
+    scratch_i = scratch_f.view(np.int32)
+    was_eq = np.zeros(count, dtype=np.int8)
+    for ch in range(N_CHANNELS):
+        data = buf[offs[ch]:offs[ch + 1]]
+        stc = st[ch]
+        pc = probs[ch]
+        mode = modes[ch]
+        lo = tab_offs[ch]
+        hi = tab_offs[ch + 1]
+        last_eq = flags[ch]
+        big = flags[N_CHANNELS + ch]
+        for j in range(count):
+            k = start + j
+            pat, m = _gather(k, refs[j, 0], refs[j, 1], refs[j, 2], refs[j, 3], vf, vi, ch, cand_o, eq_o,
+                             scratch_f, scratch_i)
+            is_eq = 0
+            o = np.int64(0)
+            if m > 0:
+                flag = was_eq[j] if ch > 0 else last_eq
+                sym = dec_sym(stc, data, pc, EQ_BASE + ((m - 1) * 2 + flag) * 8, _eq_bits(m))
+                if sym < m:
+                    o = eq_o[sym]
+                    is_eq = 1
+                elif sym > m:
+                    return ERR_STREAM
+            if is_eq == 0:
+                best = _best_cand(scores, ch, pat)
+                ctx = pat * 2 + big
+                if mode == MODE_TABLE:
+                    if hi <= lo:
+                        return ERR_RANK
+                    rp = _search(tables, lo, hi, cand_o[best])
+                    if rp >= hi:
+                        rp = hi - 1
+                    res = dec_sint(stc, data, pc, RANK_BASE + ctx * INT_MODEL_SIZE)
+                    r = rp + res
+                    if r < lo or r >= hi:
+                        return ERR_RANK
+                    o = tables[r]
+                else:
+                    res = dec_sint(stc, data, pc, RES_BASE + ctx * INT_MODEL_SIZE)
+                    o = cand_o[best] + res
+                    if o < -(1 << 31) or o >= (1 << 31):
+                        return ERR_STREAM
+                big = _is_big(mode, res)
+            if dec_failed(stc):
+                return ERR_STREAM
+            vi[k, ch] = ordered_to_bits(o)
+            _update_scores(scores, ch, pat, cand_o, o)
+            last_eq = is_eq
+            was_eq[j] = is_eq
+        flags[ch] = last_eq
+        flags[N_CHANNELS + ch] = big
+    return OK

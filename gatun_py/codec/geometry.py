@@ -1,0 +1,357 @@
+"""Lossless coding of vertex coordinates and density in decode order.
+
+The connectivity coder introduces vertices one at a time and, for each new vertex ``k``, knows a
+few already decoded vertices close to it: ``refs[k] = (a, b, c, d)``, decode ids ``< k`` or ``-1``.
+
+* ``(a, b, c)`` is the face the new vertex closes (an interior vertex is the fourth vertex of
+  the tet behind a cut-border face); a boundary vertex is attached across an edge: ``(u, v, -1)``.
+* ``d`` is the *apex* behind that face: the fourth vertex of the already decoded tet that owns
+  the face, or the third vertex of the boundary triangle across the edge; ``-1`` if there is none.
+
+Refs of shape ``(n, 3)`` are accepted too (no apex), at some cost in compression.
+
+Every float comes back bit for bit (``-0.0``, denormals, any magnitude; even NaN/inf bit patterns,
+although validation keeps those out of meshes). The model, per vertex and per channel (x, y, z,
+density), is described in :mod:`gatun_py.codec._geometry_kernels`: a cheap symbol for "equal to a
+ref's value", otherwise a backward-adaptively chosen linear prediction from the refs with an exact
+integer residual, either on the order-preserving integer of the float bits or on the rank in a
+table of the channel's distinct values (chosen per channel, whichever is smaller).
+
+Byte layout of the geometry block (little endian)::
+
+    u8  version (1)
+    u8  modes       bit ch set: channel ch uses the value table
+    u32 n_points
+    u32 length[4]   byte length of each channel's range-coded stream
+    ...             the four streams, channel 0 (x) to 3 (density)
+"""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+
+from ..errors import CorruptFileError
+from . import _geometry_kernels as K
+from .rangecoder import DEC_ERROR, DEC_OVERRUN, DEC_POS, dec_state, enc_state, new_model
+
+FORMAT_VERSION = 1
+_HEADER = struct.Struct("<BBI4I")
+HEADER_SIZE = _HEADER.size
+
+# A vertex costs at least 4 channels x 3 binary decisions x 0.011 bits (the most skewed
+# probability of the range coder), so a stream of L bytes cannot hold more than ~61 L vertices.
+_MAX_VERTICES_PER_BYTE = 64
+
+
+def _as_refs(refs, n: int) -> np.ndarray:
+    refs = np.asarray(refs)
+    if refs.ndim != 2 or refs.shape[0] != n or refs.shape[1] not in (3, 4):
+        raise ValueError(f"refs must have shape ({n}, 3) or ({n}, 4), got {refs.shape}")
+    if refs.dtype.kind not in "iu":
+        raise ValueError(f"refs must be integers, got {refs.dtype}")
+    out = np.full((n, 4), -1, dtype=np.int32)
+    out[:, : refs.shape[1]] = refs
+    return out
+
+
+def _channels(points, density) -> np.ndarray:
+    points = np.asarray(points)
+    density = np.asarray(density)
+    if points.ndim != 2 or points.shape[1] != 3 or points.dtype != np.float32:
+        raise ValueError(f"points must be a (n, 3) float32 array, got {points.shape} {points.dtype}")
+    if density.shape != (points.shape[0],) or density.dtype != np.float32:
+        raise ValueError(f"density must be a ({points.shape[0]},) float32 array, got {density.shape} {density.dtype}")
+    vf = np.empty((points.shape[0], 4), dtype=np.float32)
+    vf[:, :3] = points
+    vf[:, 3] = density
+    return vf
+
+
+def _ordered(vf: np.ndarray) -> np.ndarray:
+    """Order-preserving int64 image of float32 bit patterns (the kernels' ``ordered_int``)."""
+    b = vf.view(np.int32).astype(np.int64)
+    return np.where(b < 0, b ^ 0x7FFFFFFF, b)
+
+
+_NO_TRACE = np.zeros((0, 4, 3), dtype=np.int64)
+
+
+def _run_encode(vf, refs, modes, tables, tab_offs, trace=_NO_TRACE):
+    n = vf.shape[0]
+    cap = 256 + 8 * n
+    while True:
+        st = np.stack([enc_state() for _ in range(K.N_CHANNELS)])
+        out = np.empty((K.N_CHANNELS, cap), dtype=np.uint8)
+        nbytes = K.encode_kernel(st, out, vf, refs, modes, tables, tab_offs, trace)
+        if int(nbytes.max()) <= cap:
+            return [out[ch, : nbytes[ch]].tobytes() for ch in range(K.N_CHANNELS)]
+        cap = int(nbytes.max()) + 64
+
+
+def refs_from_predictors(predictors, n_boundary_vertices: int, interior_apex=None) -> np.ndarray:
+    """Geometry refs from the cut-border coder's predictor vertices.
+
+    Parameters
+    ----------
+    predictors : (n, 3) int array
+        ``(p, r, apex)`` for boundary vertices (the border edge and the third vertex of the
+        triangle it came from), the current face ``(a, b, c)`` for interior ones; ``-1`` for none.
+    n_boundary_vertices : int
+        The first ``n_boundary_vertices`` vertices come from the boundary-surface phase.
+    interior_apex : (n,) int array, optional
+        The apex behind the face of every interior vertex (ignored for boundary vertices).
+
+    Returns
+    -------
+    (n, 4) int32
+        Refs as :func:`encode_geometry` wants them.
+    """
+    predictors = np.asarray(predictors)
+    n = predictors.shape[0]
+    nb = min(max(int(n_boundary_vertices), 0), n)
+    refs = np.full((n, 4), -1, dtype=np.int32)
+    refs[:, :3] = predictors
+    # a boundary vertex hangs off the edge (p, r); the triangle's apex is behind that edge. Seed
+    # triangle vertices have only earlier seed vertices as predictors (no apex): leave them.
+    hanging = np.flatnonzero(predictors[:nb, 1] >= 0)
+    hanging = hanging[predictors[hanging, 2] >= 0]
+    refs[hanging, 3] = predictors[hanging, 2]
+    refs[hanging, 2] = -1
+    if interior_apex is not None:
+        refs[nb:, 3] = np.asarray(interior_apex)[nb:]
+    return refs
+
+
+def encode_geometry(points, density, refs, *, modes=None) -> bytes:
+    """Losslessly encode vertex coordinates and density given in decode order.
+
+    Parameters
+    ----------
+    points : (n, 3) float32 array
+        Coordinates in decode order.
+    density : (n,) float32 array
+        The scalar of every vertex, in decode order.
+    refs : (n, 4) or (n, 3) int array
+        For vertex k, the face ``(a, b, c)`` it closes and the apex ``d`` behind it, as decode
+        ids ``< k`` or ``-1`` (see the module docstring).
+    modes : sequence of 4 ints, optional
+        Force the residual mode per channel (0 prediction, 1 value table); by default both are
+        tried and the smaller stream is kept, channel by channel.
+
+    Returns
+    -------
+    bytes
+        The geometry block, decoded by :func:`decode_geometry` or :class:`GeometryDecoder`.
+
+    Raises
+    ------
+    ValueError
+        On arrays of the wrong shape or dtype, or refs outside ``[-1, k)``.
+    """
+    vf = _channels(points, density)
+    n = vf.shape[0]
+    refs = _as_refs(refs, n)
+    if n and (refs.min() < -1 or (refs >= np.arange(n, dtype=np.int64)[:, None]).any()):
+        raise ValueError("refs[k] must hold decode ids in [-1, k)")
+    ordered = _ordered(vf)
+    tables_list = [np.unique(ordered[:, ch]) for ch in range(K.N_CHANNELS)]
+    tables = np.concatenate(tables_list) if n else np.zeros(0, dtype=np.int64)
+    tab_offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
+    tab_offs[1:] = np.cumsum([len(t) for t in tables_list])
+    if modes is not None:
+        modes = np.asarray(modes, dtype=np.int64)
+        if modes.shape != (K.N_CHANNELS,) or not np.isin(modes, (0, 1)).all():
+            raise ValueError("modes must be 4 values, each 0 (prediction) or 1 (table)")
+        streams = _run_encode(vf, refs, modes, tables, tab_offs)
+    else:
+        pred = _run_encode(vf, refs, np.zeros(4, np.int64), tables, tab_offs)
+        # a table pays off only when values repeat: skip the trial when most values are distinct
+        use_table = np.array([len(t) <= n // 2 for t in tables_list], dtype=np.int64)
+        if use_table.any():
+            tab = _run_encode(vf, refs, use_table, tables, tab_offs)
+            modes = np.zeros(K.N_CHANNELS, dtype=np.int64)
+            streams = []
+            for ch in range(K.N_CHANNELS):
+                if use_table[ch] and len(tab[ch]) < len(pred[ch]):
+                    modes[ch] = 1
+                    streams.append(tab[ch])
+                else:
+                    streams.append(pred[ch])
+        else:
+            modes = np.zeros(K.N_CHANNELS, dtype=np.int64)
+            streams = pred
+    mode_bits = sum(int(m) << ch for ch, m in enumerate(modes))
+    header = _HEADER.pack(FORMAT_VERSION, mode_bits, n, *(len(s) for s in streams))
+    return header + b"".join(streams)
+
+
+def geometry_stream_sizes(data: bytes) -> dict:
+    """Byte sizes of the parts of a geometry block (header and the x, y, z, density streams)."""
+    version, mode_bits, n, *lengths = _HEADER.unpack_from(data)
+    sizes = {"header": HEADER_SIZE}
+    for name, ch_len, ch in zip(("x", "y", "z", "density"), lengths, range(4)):
+        sizes[name] = ch_len
+        sizes[name + "_mode"] = "table" if mode_bits >> ch & 1 else "predict"
+    return sizes
+
+
+class GeometryDecoder:
+    """Streaming decoder of a geometry block, batch by batch in decode order.
+
+    Parameters
+    ----------
+    data : bytes-like
+        The block written by :func:`encode_geometry`.
+    n_points : int, optional
+        The vertex count the container expects; a different count in the block is corruption.
+
+    Attributes
+    ----------
+    values : (n, 4) float32
+        x, y, z, density of every vertex decoded so far (the rest is uninitialised);
+        ``points`` and ``density`` are views of it.
+    n_decoded : int
+        Vertices decoded so far.
+
+    Notes
+    -----
+    The kernel :func:`gatun_py.codec._geometry_kernels.decode_vertices` can also be called
+    directly from another numba kernel with the arrays in :attr:`kernel_args`, to interleave
+    geometry with connectivity decoding.
+    """
+
+    def __init__(self, data, n_points: int | None = None):
+        buf = np.frombuffer(bytes(data), dtype=np.uint8)
+        if len(buf) < HEADER_SIZE:
+            raise CorruptFileError("corrupt geometry block: truncated header")
+        version, mode_bits, n, *lengths = _HEADER.unpack_from(buf)
+        if version != FORMAT_VERSION:
+            raise CorruptFileError(f"corrupt geometry block: unknown geometry format version {version}")
+        if mode_bits >> K.N_CHANNELS:
+            raise CorruptFileError("corrupt geometry block: invalid channel modes")
+        if n_points is not None and n != n_points:
+            raise CorruptFileError(f"corrupt geometry block: {n} vertices, expected {n_points}")
+        if HEADER_SIZE + sum(lengths) != len(buf):
+            raise CorruptFileError("corrupt geometry block: stream lengths do not match the block size")
+        if n > _MAX_VERTICES_PER_BYTE * (len(buf) + 16):
+            raise CorruptFileError(f"corrupt geometry block: {n} vertices cannot fit in {len(buf)} bytes")
+        self.n_points = int(n)
+        self.modes = np.array([(mode_bits >> ch) & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64)
+        self.offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
+        self.offs[0] = HEADER_SIZE
+        self.offs[1:] = HEADER_SIZE + np.cumsum(lengths)
+        self.buf = buf
+        self.st = np.stack([dec_state() for _ in range(K.N_CHANNELS)])
+        self.probs = np.stack([new_model(K.MODEL_SIZE) for _ in range(K.N_CHANNELS)])
+        self.scores = np.zeros((K.N_CHANNELS, K.N_PATTERNS, K.MAX_CANDS), dtype=np.int64)
+        self.flags = np.zeros(2 * K.N_CHANNELS, dtype=np.int64)
+        table_room = int(self.modes.sum()) * self.n_points
+        self.tables = np.zeros(table_room, dtype=np.int64)
+        self.tab_offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
+        status = K.decode_tables_kernel(self.st, buf, self.offs, self.probs, self.modes, self.n_points,
+                                        self.tables, self.tab_offs)
+        if status != K.OK:
+            raise CorruptFileError("corrupt geometry block: damaged value table")
+        self.values = np.empty((self.n_points, 4), dtype=np.float32)
+        self.n_decoded = 0
+
+    @property
+    def points(self) -> np.ndarray:
+        """(n, 3) view of the coordinates (valid for the first ``n_decoded`` rows)."""
+        return self.values[:, :3]
+
+    @property
+    def density(self) -> np.ndarray:
+        """(n,) view of the density (valid for the first ``n_decoded`` entries)."""
+        return self.values[:, 3]
+
+    @property
+    def kernel_args(self) -> tuple:
+        """``(st, buf, offs, probs, scores, flags, modes, tables, tab_offs)`` for ``decode_vertices``."""
+        return (self.st, self.buf, self.offs, self.probs, self.scores, self.flags, self.modes,
+                self.tables, self.tab_offs)
+
+    def decode(self, refs) -> tuple[np.ndarray, np.ndarray]:
+        """Decode the next ``len(refs)`` vertices.
+
+        Parameters
+        ----------
+        refs : (k, 4) or (k, 3) int array
+            Refs of vertices ``n_decoded .. n_decoded + k - 1`` (decode ids, see the module).
+
+        Returns
+        -------
+        points : (k, 3) float32
+        density : (k,) float32
+            Views into :attr:`values` for the new vertices.
+
+        Raises
+        ------
+        CorruptFileError
+            When the stream is damaged, a ref is out of range, or more vertices are asked for
+            than the block holds.
+        """
+        refs = np.asarray(refs)
+        count = int(refs.shape[0]) if refs.ndim == 2 else -1
+        if count < 0 or refs.shape[1] not in (3, 4) or refs.dtype.kind not in "iu":
+            raise CorruptFileError("corrupt geometry refs: expected a (k, 4) integer array")
+        if refs.shape[1] == 3 or refs.dtype != np.int32:
+            # out-of-range values are clipped to values the kernel still rejects
+            full = np.full((count, 4), -1, dtype=np.int32)
+            full[:, : refs.shape[1]] = np.clip(refs, -2, np.iinfo(np.int32).max)
+            refs = full
+        start = self.n_decoded
+        if start + count > self.n_points:
+            raise CorruptFileError(
+                f"corrupt geometry block: {start + count} vertices requested, the block holds {self.n_points}")
+        status = K.decode_vertices(*self.kernel_args, refs, self.values, start, count)
+        if status != K.OK:
+            what = {K.ERR_REF: "a vertex reference is out of range",
+                    K.ERR_RANK: "a value-table index is out of range"}.get(status, "the coded data is damaged")
+            raise CorruptFileError(f"corrupt geometry block: {what}")
+        self.n_decoded = start + count
+        return self.values[start:start + count, :3], self.values[start:start + count, 3]
+
+    def finish(self) -> None:
+        """Check that every vertex was decoded and every byte of the block consumed."""
+        if self.n_decoded != self.n_points:
+            raise CorruptFileError(
+                f"corrupt geometry block: {self.n_decoded} of {self.n_points} vertices decoded")
+        for ch in range(K.N_CHANNELS):
+            st = self.st[ch]
+            length = int(self.offs[ch + 1] - self.offs[ch])
+            if st[DEC_ERROR] != 0 or st[DEC_OVERRUN] != 0 or int(st[DEC_POS]) != length:
+                raise CorruptFileError("corrupt geometry block: the coded data is damaged or truncated")
+
+
+def decode_geometry(data, refs, n_points: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Decode a whole geometry block.
+
+    Parameters
+    ----------
+    data : bytes-like
+        The block written by :func:`encode_geometry`.
+    refs : (n, 4) or (n, 3) int array
+        The same refs the encoder was given.
+    n_points : int, optional
+        Expected vertex count.
+
+    Returns
+    -------
+    points : (n, 3) float32
+    density : (n,) float32
+
+    Raises
+    ------
+    CorruptFileError
+        When the block is damaged or does not match ``refs``.
+    """
+    dec = GeometryDecoder(data, n_points)
+    refs = np.asarray(refs)
+    if refs.ndim != 2 or refs.shape[0] != dec.n_points:
+        raise CorruptFileError(f"corrupt geometry block: {dec.n_points} vertices, {len(refs)} refs given")
+    dec.decode(refs)
+    dec.finish()
+    return np.ascontiguousarray(dec.points), np.ascontiguousarray(dec.density)

@@ -92,7 +92,14 @@ def _sort3(a, b, c):
 
 @njit(cache=True)
 def _face_values(P, dens, dx, dy, dz, a, b, c):
-    """Ray parameter t and scalar where the ray crosses the face with sorted ids a < b < c."""
+    """Ray parameter t and scalar where the ray crosses the face with sorted ids a < b < c.
+
+    The barycentric weights of the crossing are the three edge sides. Rounding can give them
+    mixed signs near an edge; the wrong-signed ones are dropped so the point stays on the face.
+    When all vanish the ray lies in the face's plane (e.g. along one of its edges): the crossing
+    of the slightly moved ray is somewhere on the chord of the ray inside the triangle, and its
+    midpoint is taken.
+    """
     wa, _ = _side(P, dx, dy, dz, b, c)
     wb, _ = _side(P, dx, dy, dz, c, a)
     wc, _ = _side(P, dx, dy, dz, a, b)
@@ -100,12 +107,67 @@ def _face_values(P, dens, dx, dy, dz, a, b, c):
     tb = P[b, 0] * dx + P[b, 1] * dy + P[b, 2] * dz
     tc = P[c, 0] * dx + P[c, 1] * dy + P[c, 2] * dz
     w = wa + wb + wc
-    if w == 0.0 or not math.isfinite(w):
+    if w < 0.0:
+        wa, wb, wc = -wa, -wb, -wc
+    wa = max(wa, 0.0)
+    wb = max(wb, 0.0)
+    wc = max(wc, 0.0)
+    w = wa + wb + wc
+    if w > 0.0 and math.isfinite(w):
+        wa /= w
+        wb /= w
+        wc /= w
+        return wa * ta + wb * tb + wc * tc, wa * dens[a] + wb * dens[b] + wc * dens[c]
+    return _chord_midpoint(P, dens, dx, dy, dz, a, b, c)
+
+
+@njit(cache=True)
+def _chord_midpoint(P, dens, dx, dy, dz, a, b, c):
+    """Midpoint (t, scalar) of the part of the ray inside triangle (a, b, c), ray in its plane."""
+    tmin = np.inf
+    tmax = -np.inf
+    smin = 0.0
+    smax = 0.0
+    for q in range(3):
+        if q == 0:
+            i, j = a, b
+        elif q == 1:
+            i, j = b, c
+        else:
+            i, j = c, a
+        ex, ey, ez = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1], P[j, 2] - P[i, 2]
+        cx = dy * ez - dz * ey
+        cy = dz * ex - dx * ez
+        cz = dx * ey - dy * ex
+        n2 = cx * cx + cy * cy + cz * cz
+        e2 = ex * ex + ey * ey + ez * ez
+        for end in range(2):
+            if n2 > 0.0:  # where the ray meets the edge's line
+                if end == 1:
+                    break
+                px = P[i, 1] * ez - P[i, 2] * ey
+                py = P[i, 2] * ex - P[i, 0] * ez
+                pz = P[i, 0] * ey - P[i, 1] * ex
+                t = (px * cx + py * cy + pz * cz) / n2
+                u = ((t * dx - P[i, 0]) * ex + (t * dy - P[i, 1]) * ey + (t * dz - P[i, 2]) * ez) / e2
+                if not (-1e-9 <= u <= 1.0 + 1e-9):
+                    continue
+                u = min(max(u, 0.0), 1.0)
+                sv = dens[i] + u * (dens[j] - dens[i])
+            else:  # edge parallel to the ray (or a point): its ends
+                k = i if end == 0 else j
+                t = P[k, 0] * dx + P[k, 1] * dy + P[k, 2] * dz
+                sv = dens[k]
+            if t < tmin:
+                tmin, smin = t, sv
+            if t > tmax:
+                tmax, smax = t, sv
+    if tmin > tmax:  # numerically nowhere: the centroid's depth
+        ta = P[a, 0] * dx + P[a, 1] * dy + P[a, 2] * dz
+        tb = P[b, 0] * dx + P[b, 1] * dy + P[b, 2] * dz
+        tc = P[c, 0] * dx + P[c, 1] * dy + P[c, 2] * dz
         return (ta + tb + tc) / 3.0, (dens[a] + dens[b] + dens[c]) / 3.0
-    wa /= w
-    wb /= w
-    wc /= w
-    return wa * ta + wb * tb + wc * tc, wa * dens[a] + wb * dens[b] + wc * dens[c]
+    return 0.5 * (tmin + tmax), 0.5 * (smin + smax)
 
 
 # ---------------------------------------------------------------------------------------------

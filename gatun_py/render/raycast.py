@@ -210,7 +210,7 @@ class StreamingRaycaster:
         self._n_rays = cam.width * cam.height
         self._dirs = cam.ray_directions()
         P = self._points[: self._nv]
-        self._check_camera_outside(pts_rel=P, faces=faces, cam=cam)
+        faces = self._faces_in_front(P, faces, cam)
         bbox = _pixel_boxes(P, faces, cam)
         (self._seg_ray, self._seg_face, self._seg_side, self._seg_ts, self._anomalies,
          self._boundary_hits) = K.find_segments(P, self._dens, self._dirs, cam.width, faces, bbox)
@@ -258,12 +258,19 @@ class StreamingRaycaster:
                                self._park_face)
         return self._n_nodes
 
-    def _check_camera_outside(self, pts_rel, faces, cam):
+    @staticmethod
+    def _faces_in_front(P, faces, cam):
+        """The boundary, or nothing if it is all behind the eye; an error if the eye's plane cuts it."""
         if len(faces) == 0:
-            return
+            return faces
         fwd, _, _ = cam.basis()
-        if np.any(pts_rel[np.unique(faces)] @ fwd <= 0):
-            raise OptionError("the camera is inside or behind part of the mesh; rays would start inside")
+        depth = P[np.unique(faces)] @ fwd
+        if np.all(depth <= 0):
+            return faces[:0]
+        if np.any(depth <= 0):
+            raise OptionError("the camera is inside the mesh or too close to it (part of the mesh is behind "
+                              "the eye); use a smaller --zoom or move the camera out")
+        return faces
 
     def _ensure_capacity(self, extra):
         cap = len(self._hkey)

@@ -1,0 +1,104 @@
+"""A slow, obviously correct ray caster: the reference the fast kernels are compared against.
+
+For every pixel ray: clip the ray against every tet (the four face planes), cut the ray at every
+crossing, and composite the pieces between consecutive cuts front to back. In volume mode the scalar at each sample
+point t = k * step (k integer) in a piece [t_in, t_out) is interpolated with the barycentric
+coordinates of the point in that tet; in face mode each piece takes the average of the transfer
+function at its entry and exit points. The transfer function is read from the same lookup
+table as the kernels (``TransferFunction.table``), interpolated with ``np.interp``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gatun_py.mesh.model import TET_FACES
+
+
+def _table_eval(tab, lo, inv, s):
+    xs = lo + np.arange(len(tab)) / inv
+    return np.array([np.interp(s, xs, tab[:, c]) for c in range(4)])
+
+
+def naive_render(mesh, fitted, tf, *, mode="volume", step=None, scalar_range=None):
+    """Premultiplied RGBA (H, W, 4) float64 of ``mesh`` seen by the fitted camera ``fitted``."""
+    from gatun_py.render.raycast import default_step
+    from gatun_py.render.transfer import load_transfer_function
+
+    tf = load_transfer_function(tf)
+    rng = mesh.scalar_range if scalar_range is None else scalar_range
+    if step is None:
+        step = default_step(mesh.points, mesh.boundary_faces())
+    tab, lo, inv = tf.table(rng)
+    unit = tf.resolve(rng).unit_distance
+    if mode == "volume":
+        tab = tab.copy()
+        tab[:, 3] = 1.0 - (1.0 - tab[:, 3]) ** (step / unit)
+    eye = np.asarray(fitted.position, dtype=np.float64)
+    pts = mesh.points.astype(np.float64)
+    dens = mesh.density.astype(np.float64)
+    tets = mesh.tets.astype(np.int64)
+    vol = mesh.signed_volumes()
+    keep = vol > 0  # zero-volume tets hold no part of any ray
+    tets = tets[keep]
+    corners = pts[tets]  # (m, 4, 3)
+    # outward face normals and a point on each face
+    fa = corners[:, TET_FACES[:, 0]]
+    fb = corners[:, TET_FACES[:, 1]]
+    fc = corners[:, TET_FACES[:, 2]]
+    normals = np.cross(fb - fa, fc - fa)  # (m, 4, 3)
+    dirs = fitted.ray_directions()
+    image = np.zeros((len(dirs), 4))
+    # barycentric solve matrices
+    T = np.transpose(corners[:, 1:] - corners[:, :1], (0, 2, 1))  # (m, 3, 3)
+    Tinv = np.linalg.inv(T)
+    for r, d in enumerate(dirs):
+        # inside face k iff (eye + t d - fa) . n <= 0  <=>  t * (d.n) <= (fa - eye).n
+        dn = normals @ d  # (m, 4)
+        rhs = np.einsum("mkj,mkj->mk", fa - eye, normals)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tq = rhs / dn
+        t_in = np.where(dn < 0, tq, -np.inf).max(axis=1)
+        t_out = np.where(dn > 0, tq, np.inf).min(axis=1)
+        parallel_out = np.any((dn == 0) & (rhs < 0), axis=1)
+        hit = (t_in < t_out) & ~parallel_out
+        idx = np.flatnonzero(hit)
+        # Cut the ray at every place it crosses a tet face; each piece between two consecutive
+        # cuts lies in the tets containing its midpoint (several when the ray runs along shared
+        # faces or edges: they agree there, so the first one is taken).
+        cuts = np.sort(np.concatenate([t_in[idx], t_out[idx]]))
+        merged = []
+        for t in cuts:
+            if not merged or t - merged[-1] > 1e-9 * (1.0 + abs(t)):
+                merged.append(t)
+        C = np.zeros(3)
+        O = 0.0
+
+        def scalar_at(m, t):
+            x = eye + t * d
+            l123 = Tinv[m] @ (x - corners[m, 0])
+            w = np.concatenate([[1.0 - l123.sum()], l123])
+            return float(w @ dens[tets[m]])
+
+        for a, b in zip(merged[:-1], merged[1:]):
+            mid = 0.5 * (a + b)
+            inside = idx[(t_in[idx] <= mid) & (mid <= t_out[idx])]
+            if len(inside) == 0:
+                continue  # between two parts of the mesh
+            m = inside[0]
+            if mode == "volume":
+                ks = np.arange(np.floor(a / step) - 1, np.ceil(b / step) + 2)
+                ts = ks * step
+                for t in ts[(ts >= a) & (ts < b)]:
+                    rgba = _table_eval(tab, lo, inv, scalar_at(m, t))
+                    al = rgba[3]
+                    C += (1 - O) * al * rgba[:3]
+                    O += (1 - O) * al
+            else:
+                avg = 0.5 * (_table_eval(tab, lo, inv, scalar_at(m, a)) + _table_eval(tab, lo, inv, scalar_at(m, b)))
+                al = 1.0 - (1.0 - min(avg[3], 1.0)) ** ((b - a) / unit)
+                C += (1 - O) * al * avg[:3]
+                O += (1 - O) * al
+        image[r, :3] = C
+        image[r, 3] = O
+    return image.reshape(fitted.height, fitted.width, 4)

@@ -1,0 +1,170 @@
+"""The ray caster against the slow reference, streaming against in-memory, and robustness."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from meshgen import AWKWARD, delaunay_mesh, grid_mesh, mesh_strategy
+from naive_render import naive_render
+
+from gatun_py.mesh import TetMesh
+from gatun_py.render import Camera, FittedCamera, StreamingRaycaster, render_mesh
+from gatun_py.render.transfer import from_dict
+
+# Semi-transparent everywhere, so that every tet along a ray shows in the pixel.
+TF = from_dict({
+    "color": [{"x": 0.0, "rgb": [0.1, 0.2, 1.0]}, {"x": 0.5, "rgb": [0.2, 1.0, 0.3]}, {"x": 1.0, "rgb": [1.0, 0.1, 0.0]}],
+    "opacity": [{"x": 0.0, "a": 0.05}, {"x": 0.6, "a": 0.3}, {"x": 1.0, "a": 0.15}],
+    "unit_distance": 3.0,
+})
+
+
+def fitted(mesh, camera):
+    used = np.unique(mesh.boundary_faces())
+    return camera.fit(mesh.points[used].min(axis=0), mesh.points[used].max(axis=0))
+
+
+def seam_mesh() -> TetMesh:
+    """Two grid blocks touching along a plane with duplicated (coincident) vertices."""
+    a = grid_mesh(3, 3, 3)
+    b = grid_mesh(3, 3, 3)
+    pts = np.concatenate([a.points, b.points + np.float32([2.0, 0.0, 0.0])])
+    return TetMesh(pts, np.concatenate([a.density, b.density + 0.5]), np.concatenate([a.tets, b.tets + a.n_points]))
+
+
+MESHES = dict(AWKWARD, seam=seam_mesh)
+
+
+def stream(mesh, camera, mode, order_seed=0, n_batches=5, tf=TF):
+    rc = StreamingRaycaster(camera, tf, mode=mode, scalar_range=mesh.scalar_range)
+    rng = np.random.default_rng(order_seed)
+    # vertices arrive in pieces too; the whole boundary comes before the first tet
+    cut = mesh.n_points // 2
+    rc.add_vertices(mesh.points[:cut], mesh.density[:cut])
+    rc.add_vertices(mesh.points[cut:], mesh.density[cut:])
+    faces = mesh.boundary_faces()
+    rc.set_boundary(faces[: len(faces) // 3])
+    rc.set_boundary(faces[len(faces) // 3:])
+    tets = mesh.tets[rng.permutation(mesh.n_tets)]
+    for chunk in np.array_split(tets, min(n_batches, max(1, len(tets)))):
+        rc.add_tets(chunk)
+    return rc.finish()
+
+
+@pytest.mark.parametrize("mode", ["volume", "face"])
+@pytest.mark.parametrize("name", sorted(MESHES))
+def test_matches_reference_and_streaming(name, mode):
+    mesh = MESHES[name]()
+    cam = Camera(18, 14, azimuth=25.0, elevation=15.0)
+    ours = render_mesh(mesh, cam, TF, mode=mode)
+    ref = naive_render(mesh, fitted(mesh, cam), TF, mode=mode)
+    assert ours.image.shape == (14, 18, 4)
+    assert ours.stats["rays_unfinished"] == 0
+    assert ours.stats["nan_pixels"] == 0
+    assert 0.01 < ref[..., 3].max() < 0.999  # semi-transparent: every tet counts
+    np.testing.assert_allclose(ours.image, ref, atol=1e-5, rtol=0)
+    streamed = stream(mesh, cam, mode, order_seed=1)
+    assert streamed.stats["rays_unfinished"] == 0
+    np.testing.assert_allclose(streamed.image, ours.image, atol=1e-5, rtol=0)
+    assert streamed.stats["samples"] == ours.stats["samples"]
+
+
+def test_several_segments_per_ray():
+    mesh = MESHES["l_shaped"]()
+    centre = np.array([2.5, 2.5, 1.0])
+    cam = FittedCamera(24, 24, centre + 20 * np.array([0.7071, -0.7071, 0.0]), centre, np.array([0.0, 0.0, 1.0]), 30.0)
+    res = render_mesh(mesh, cam, TF)
+    assert res.stats["segments"] > res.stats["rays_hit"]  # rays across the notch leave and re-enter
+    np.testing.assert_allclose(res.image, naive_render(mesh, cam, TF), atol=1e-5, rtol=0)
+    np.testing.assert_allclose(stream(mesh, cam, "volume", 4).image, res.image, atol=1e-5, rtol=0)
+    mesh = MESHES["cavity"]()
+    res = render_mesh(mesh, Camera(24, 24), TF)
+    assert res.stats["segments"] > res.stats["rays_hit"]
+
+
+@pytest.mark.parametrize("mode", ["volume", "face"])
+@pytest.mark.parametrize("target", [(1.0, 1.0, 1.0), (1.0, 1.0, 0.5), (1.5, 1.0, 1.0), (1.0, 2.0, 0.0)])
+def test_rays_exactly_through_vertices_and_edges(target, mode):
+    """A 1x1 image looks down its exact centre: along a grid line (through every vertex of the
+    column, along edges parallel to the ray) or through edge midpoints: exact zero sides."""
+    mesh = grid_mesh(4, 4, 3)
+    target = np.asarray(target)
+    for offset in ([0.0, 0.0, 10.0], [10.0, 0.0, 0.0], [0.0, -7.0, 0.0]):
+        cam = FittedCamera(1, 1, target + np.asarray(offset), target, np.array([0.0, 0.0, 1.0]) if offset[2] == 0
+                           else np.array([0.0, 1.0, 0.0]), 30.0)
+        ours = render_mesh(mesh, cam, TF, mode=mode)
+        ref = naive_render(mesh, cam, TF, mode=mode)
+        assert ours.stats["rays_unfinished"] == 0
+        assert ref[0, 0, 3] > 0.05
+        np.testing.assert_allclose(ours.image, ref, atol=1e-5, rtol=0)
+        np.testing.assert_allclose(stream(mesh, cam, mode, 3).image, ours.image, atol=1e-5, rtol=0)
+
+
+@settings(max_examples=15, deadline=None)
+@given(mesh=mesh_strategy(), seed=st.integers(0, 1000), az=st.floats(-180, 180), el=st.floats(-80, 80),
+       mode=st.sampled_from(["volume", "face"]), n_batches=st.integers(1, 9))
+def test_streaming_equals_in_memory_any_order(mesh, seed, az, el, mode, n_batches):
+    cam = Camera(12, 10, azimuth=az, elevation=el)
+    whole = render_mesh(mesh, cam, TF, mode=mode)
+    streamed = stream(mesh, cam, mode, order_seed=seed, n_batches=n_batches)
+    assert whole.stats["rays_unfinished"] == 0 and streamed.stats["rays_unfinished"] == 0
+    np.testing.assert_allclose(streamed.image, whole.image, atol=1e-5, rtol=0)
+
+
+def test_image_independent_of_thread_count():
+    mesh = delaunay_mesh(80, 5)
+    cam = Camera(40, 30, azimuth=10.0)
+    images = []
+    for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+        numba.set_num_threads(threads)
+        try:
+            images.append(stream(mesh, cam, "volume", order_seed=2).image)
+            images.append(render_mesh(mesh, cam, TF).image)
+        finally:
+            numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    assert np.array_equal(images[0], images[2])
+    assert np.array_equal(images[1], images[3])
+
+
+def test_real_sample_post_several_views(small_sample):
+    mesh = small_sample
+    for az, el in [(0, 0), (90, 30), (200, -60)]:
+        res = render_mesh(mesh, Camera(48, 40, azimuth=az, elevation=el), "post")
+        assert res.stats["rays_unfinished"] == 0
+        assert res.stats["boundary_anomalies"] == 0
+        assert res.stats["nan_pixels"] == 0
+        assert res.stats["rays_hit"] > 0
+
+
+def test_mesh_out_of_view_gives_black_image():
+    mesh = delaunay_mesh(20)
+    cam = FittedCamera(8, 8, np.array([5.0, 0.5, 10.0]), np.array([30.0, 0.5, 10.0]), np.array([0.0, 1.0, 0.0]), 10.0)
+    res = render_mesh(mesh, cam, TF)
+    assert res.stats["rays_hit"] == 0
+    assert not res.image.any()
+
+
+def test_bad_input():
+    from gatun_py.errors import MeshError, OptionError
+
+    mesh = delaunay_mesh(20)
+    with pytest.raises(OptionError):
+        StreamingRaycaster(Camera(8, 8), TF, mode="nope")
+    with pytest.raises(OptionError):
+        StreamingRaycaster(Camera(8, 8), TF, step=-1.0)
+    rc = StreamingRaycaster(Camera(8, 8), TF)
+    rc.add_vertices(mesh.points, mesh.density)
+    with pytest.raises(MeshError):
+        rc.set_boundary([[0, 1, mesh.n_points]])
+    rc.set_boundary(mesh.boundary_faces())
+    with pytest.raises(MeshError):
+        rc.add_tets([[0, 1, 2, -1]])
+    with pytest.raises(MeshError):
+        rc.add_vertices([[np.nan, 0, 0]], [0.0])
+    # the camera inside the mesh: rays would start inside
+    cam = FittedCamera(8, 8, np.array([0.5, 0.5, 0.5]), np.array([0.5, 0.5, 0.0]), np.array([0.0, 1.0, 0.0]), 30.0)
+    with pytest.raises(OptionError):
+        render_mesh(mesh, cam, TF)

@@ -1,1 +1,10 @@
 """Stage 3: offline Van Gelder decimation (merge forest, pre-simplified levels) and the run-time filter."""
+
+from .decimate import DEFAULT_W_DENSITY, DEFAULT_W_GEOMETRY, decimate
+from .forest import (ROOT_RANK, MergeForest, ancestors, check_forest, decode_forest, encode_forest,
+                     simplified_mesh)
+from .levels import MAX_LEVEL, LevelMesh, available_levels, build_levels, level_forest, level_merges
+
+__all__ = ["decimate", "DEFAULT_W_DENSITY", "DEFAULT_W_GEOMETRY", "ROOT_RANK", "MergeForest", "ancestors",
+           "check_forest", "encode_forest", "decode_forest", "simplified_mesh", "MAX_LEVEL", "LevelMesh",
+           "available_levels", "build_levels", "level_forest", "level_merges"]

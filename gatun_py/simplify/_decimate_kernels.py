@@ -1,0 +1,647 @@
+"""Numba kernels of the Van Gelder decimation (see :mod:`gatun_py.simplify.decimate`).
+
+Everything here works on plain arrays; :func:`gatun_py.simplify.decimate.decimate` builds them,
+validates the input and drives the loop. The mesh state during decimation:
+
+``T`` (m, 4) int32
+    current vertex ids of every tet (a merged vertex is replaced by its target in place);
+``alive`` (m,) bool
+    False once a tet has collapsed (it contained both ends of a merged edge);
+``nbr`` (m, 4) int32
+    the tet across face k (the face opposite corner k), -1 on the boundary;
+``head`` (n,), ``nxt`` (4m,) int32
+    per-vertex singly linked lists of "slots" 4*t + c (tet t has this vertex at corner c).
+    Merging a into b splices a's list onto b's; slots of dead tets are unlinked lazily.
+
+A merge a -> b is legal when every surviving tet of a's star stays positive, every boundary face
+around a keeps its orientation, a boundary vertex only goes into a boundary vertex, and the link
+condition holds (Dey et al.; the boundary is handled with a virtual vertex joined to every boundary
+simplex), which guarantees that the collapse keeps the mesh a manifold with a closed boundary
+(no face shared by three tets, no duplicate tets, no pinched boundary).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+ROOT_RANK = 2**31 - 1
+
+# Face k of a positively oriented tet, opposite corner k, wound outward (as gatun_py.mesh.TET_FACES).
+_TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int64)
+
+# A surviving tet must keep at least this fraction of (longest edge)^3 as 6x its volume, or not
+# shrink below its current volume: far above float64 rounding of the triple product, so "positive
+# here" means "positive" for any other evaluation of the same determinant.
+VOLUME_EPS = 1e-10
+# A boundary face may not turn by 90 degrees or more (that is the paper's "negative area").
+NORMAL_EPS = 1e-6
+
+# Indices into the float parameter array.
+P_WD, P_WG = 0, 1
+# Indices into the int64 counter array.
+C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS = 0, 1, 2, 3, 4
+
+
+@njit(cache=True)
+def _orient6(p, a, b, c, d):
+    """6 x signed volume of (a, b, c, d), evaluated like ``TetMesh.signed_volumes`` (same order)."""
+    ax = p[a, 0]
+    ay = p[a, 1]
+    az = p[a, 2]
+    ux = p[b, 0] - ax
+    uy = p[b, 1] - ay
+    uz = p[b, 2] - az
+    vx = p[c, 0] - ax
+    vy = p[c, 1] - ay
+    vz = p[c, 2] - az
+    wx = p[d, 0] - ax
+    wy = p[d, 1] - ay
+    wz = p[d, 2] - az
+    cx = vy * wz - vz * wy
+    cy = vz * wx - vx * wz
+    cz = vx * wy - vy * wx
+    return (ux * cx + uy * cy) + uz * cz
+
+
+@njit(cache=True)
+def _max_edge2(p, q):
+    best = 0.0
+    for i in range(4):
+        for j in range(i + 1, 4):
+            dx = p[q[i], 0] - p[q[j], 0]
+            dy = p[q[i], 1] - p[q[j], 1]
+            dz = p[q[i], 2] - p[q[j], 2]
+            d = dx * dx + dy * dy + dz * dz
+            if d > best:
+                best = d
+    return best
+
+
+@njit(cache=True)
+def _tri_normal(p, a, b, c, out):
+    ux = p[b, 0] - p[a, 0]
+    uy = p[b, 1] - p[a, 1]
+    uz = p[b, 2] - p[a, 2]
+    vx = p[c, 0] - p[a, 0]
+    vy = p[c, 1] - p[a, 1]
+    vz = p[c, 2] - p[a, 2]
+    out[0] = uy * vz - uz * vy
+    out[1] = uz * vx - ux * vz
+    out[2] = ux * vy - uy * vx
+
+
+@njit(cache=True)
+def _star(v, head, nxt, T, alive):
+    """Slots (4*t + corner) of the live tets around v; unlinks dead slots on the way."""
+    cnt = 0
+    prev = -1
+    s = head[v]
+    while s >= 0:
+        ns = nxt[s]
+        t = s >> 2
+        if alive[t] and T[t, s & 3] == v:
+            cnt += 1
+            prev = s
+        elif prev < 0:
+            head[v] = ns
+        else:
+            nxt[prev] = ns
+        s = ns
+    out = np.empty(cnt, np.int64)
+    s = head[v]
+    i = 0
+    while s >= 0:
+        out[i] = s
+        i += 1
+        s = nxt[s]
+    return out
+
+
+@njit(cache=True)
+def _contains(T, t, v):
+    return T[t, 0] == v or T[t, 1] == v or T[t, 2] == v or T[t, 3] == v
+
+
+@njit(cache=True)
+def _next_stamp(counters):
+    counters[C_STAMP] += 1
+    return counters[C_STAMP]
+
+
+@njit(cache=True)
+def _boundary_faces_of(st, T, nbr):
+    """(count, faces (k, 3)) boundary faces (outward) incident to the star's centre vertex."""
+    k = 0
+    for i in range(st.shape[0]):
+        t = st[i] >> 2
+        c = st[i] & 3
+        for f in range(4):
+            if f != c and nbr[t, f] < 0:
+                k += 1
+    out = np.empty((k, 3), np.int64)
+    k = 0
+    for i in range(st.shape[0]):
+        t = st[i] >> 2
+        c = st[i] & 3
+        for f in range(4):
+            if f != c and nbr[t, f] < 0:
+                for j in range(3):
+                    out[k, j] = T[t, _TET_FACES[f, j]]
+                k += 1
+    return out
+
+
+@njit(cache=True)
+def _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
+    """The link condition Lk(a) ∩ Lk(b) = Lk(ab) for collapsing edge ab (with a virtual vertex ω)."""
+    st_b = _star(b, head, nxt, T, alive)
+    s_b = _next_stamp(counters)
+    for i in range(st_b.shape[0]):
+        t = st_b[i] >> 2
+        for j in range(4):
+            mark_b[T[t, j]] = s_b
+    s_ab = _next_stamp(counters)
+    n_shared = 0
+    for i in range(st_a.shape[0]):
+        t = st_a[i] >> 2
+        if _contains(T, t, b):
+            n_shared += 1
+            for j in range(4):
+                mark_ab[T[t, j]] = s_ab
+    if n_shared == 0:
+        return False  # not an edge of the current mesh
+    # Lk(ab) edges: the opposite edge of every tet around ab.
+    ab_edges = np.empty((n_shared, 2), np.int64)
+    k = 0
+    for i in range(st_a.shape[0]):
+        t = st_a[i] >> 2
+        if _contains(T, t, b):
+            q = 0
+            for j in range(4):
+                w = T[t, j]
+                if w != a and w != b:
+                    ab_edges[k, q] = w
+                    q += 1
+            k += 1
+    # vertices: every common neighbour must be in Lk(ab)
+    for i in range(st_a.shape[0]):
+        t = st_a[i] >> 2
+        for j in range(4):
+            w = T[t, j]
+            if w != a and w != b and mark_b[w] == s_b and mark_ab[w] != s_ab:
+                return False
+    # edges and triangles of the link of a (tets of a without b) also in the link of b
+    for i in range(st_a.shape[0]):
+        t = st_a[i] >> 2
+        c = st_a[i] & 3
+        if _contains(T, t, b):
+            continue
+        o0 = T[t, (c + 1) & 3]
+        o1 = T[t, (c + 2) & 3]
+        o2 = T[t, (c + 3) & 3]
+        in0 = mark_b[o0] == s_b
+        in1 = mark_b[o1] == s_b
+        in2 = mark_b[o2] == s_b
+        n_in_ab = 0
+        for e in range(3):
+            if e == 0:
+                p, q, ok = o0, o1, in0 and in1
+            elif e == 1:
+                p, q, ok = o1, o2, in1 and in2
+            else:
+                p, q, ok = o0, o2, in0 and in2
+            if not ok:
+                continue
+            in_lk_ab = False
+            for r in range(n_shared):
+                if (ab_edges[r, 0] == p and ab_edges[r, 1] == q) or (ab_edges[r, 0] == q and ab_edges[r, 1] == p):
+                    in_lk_ab = True
+                    break
+            if in_lk_ab:
+                n_in_ab += 1
+                continue
+            # pq is not in Lk(ab): it must not be in Lk(b) either
+            for r in range(st_b.shape[0]):
+                tb = st_b[r] >> 2
+                if _contains(T, tb, p) and _contains(T, tb, q):
+                    return False
+        if n_in_ab == 3:
+            # a triangle pqr with all edges in Lk(ab): it must not be in Lk(b) (two tets apqr, bpqr)
+            for r in range(st_b.shape[0]):
+                tb = st_b[r] >> 2
+                if _contains(T, tb, o0) and _contains(T, tb, o1) and _contains(T, tb, o2):
+                    return False
+    # the virtual vertex ω (joined to the boundary): only matters when both ends are on it
+    if isb[a] and isb[b]:
+        bf_a = _boundary_faces_of(st_a, T, nbr)
+        bf_b = _boundary_faces_of(st_b, T, nbr)
+        # ω in both links -> ab must be a boundary edge
+        ab_faces = 0
+        for i in range(bf_a.shape[0]):
+            if bf_a[i, 0] == b or bf_a[i, 1] == b or bf_a[i, 2] == b:
+                ab_faces += 1
+        if ab_faces == 0:
+            return False
+        # edge wω in both links (aw and bw boundary edges) -> abw must be a boundary face
+        for i in range(bf_a.shape[0]):
+            for j in range(3):
+                w = bf_a[i, j]
+                if w == a or w == b:
+                    continue
+                in_b = False
+                for r in range(bf_b.shape[0]):
+                    if bf_b[r, 0] == w or bf_b[r, 1] == w or bf_b[r, 2] == w:
+                        in_b = True
+                        break
+                if not in_b:
+                    continue
+                found = False
+                for r in range(bf_a.shape[0]):
+                    has_b = bf_a[r, 0] == b or bf_a[r, 1] == b or bf_a[r, 2] == b
+                    has_w = bf_a[r, 0] == w or bf_a[r, 1] == w or bf_a[r, 2] == w
+                    if has_b and has_w:
+                        found = True
+                        break
+                if not found:
+                    return False
+        # triangle wxω in both links: boundary faces awx and bwx both exist
+        for i in range(bf_a.shape[0]):
+            if bf_a[i, 0] == b or bf_a[i, 1] == b or bf_a[i, 2] == b:
+                continue
+            w = -1
+            x = -1
+            for j in range(3):
+                if bf_a[i, j] != a:
+                    if w < 0:
+                        w = bf_a[i, j]
+                    else:
+                        x = bf_a[i, j]
+            for r in range(bf_b.shape[0]):
+                hw = bf_b[r, 0] == w or bf_b[r, 1] == w or bf_b[r, 2] == w
+                hx = bf_b[r, 0] == x or bf_b[r, 1] == x or bf_b[r, 2] == x
+                if hw and hx:
+                    return False
+    return True
+
+
+@njit(cache=True)
+def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, mark, counters, cand_out, err_out):
+    """Error of every geometrically legal merge a -> b (b a neighbour of a): fills the outputs.
+
+    Returns the number of candidates. Legality here covers volumes, boundary orientation and the
+    boundary-into-interior rule; the link condition is checked by the caller, best first.
+    """
+    wd = params[P_WD]
+    wg = params[P_WG]
+    ns = st.shape[0]
+    # per star tet: old volume and mass, and the plane of the face opposite a, so that the volume
+    # with a moved onto b is one dot product: 6 vol = off - nrm . p_b (linear in the moved corner)
+    vol_old = np.empty(ns)
+    mass_old = np.empty(ns)
+    dsum = np.empty(ns)
+    nrm = np.empty((ns, 3))
+    off = np.empty(ns)
+    fn = np.empty(3)
+    reach2 = 0.0
+    for i in range(ns):
+        t = st[i] >> 2
+        c = st[i] & 3
+        v6 = _orient6(pts, T[t, 0], T[t, 1], T[t, 2], T[t, 3])
+        vol_old[i] = v6
+        ds = dens[T[t, 0]] + dens[T[t, 1]] + dens[T[t, 2]] + dens[T[t, 3]]
+        mass_old[i] = v6 / 6.0 * ds * 0.25
+        dsum[i] = ds - dens[a]
+        f0 = T[t, _TET_FACES[c, 0]]
+        _tri_normal(pts, f0, T[t, _TET_FACES[c, 1]], T[t, _TET_FACES[c, 2]], fn)
+        nrm[i, 0] = fn[0]
+        nrm[i, 1] = fn[1]
+        nrm[i, 2] = fn[2]
+        off[i] = fn[0] * pts[f0, 0] + fn[1] * pts[f0, 1] + fn[2] * pts[f0, 2]
+        for j in range(4):
+            w = T[t, j]
+            d2 = (pts[w, 0] - pts[a, 0]) ** 2 + (pts[w, 1] - pts[a, 1]) ** 2 + (pts[w, 2] - pts[a, 2]) ** 2
+            if d2 > reach2:
+                reach2 = d2
+    # every new tet's vertices lie within sqrt(reach2) of a, so its edges are <= 2 sqrt(reach2):
+    # a value above twice this bound is safely positive whatever the rounding
+    fast_ok = 2.0 * VOLUME_EPS * (4.0 * reach2) ** 1.5
+    a_bnd = isb[a]
+    bf = _boundary_faces_of(st, T, nbr) if a_bnd else np.empty((0, 3), np.int64)
+    nf = bf.shape[0]
+    n_old = np.empty((nf, 3))
+    area_old = np.empty(nf)
+    area_sum = 0.0
+    for f in range(nf):
+        _tri_normal(pts, bf[f, 0], bf[f, 1], bf[f, 2], n_old[f])
+        area_old[f] = 0.5 * np.sqrt(n_old[f, 0] ** 2 + n_old[f, 1] ** 2 + n_old[f, 2] ** 2)
+        area_sum += area_old[f]
+    n_new = np.empty(3)
+    area_new = np.empty(nf)
+    q = np.empty(4, np.int64)
+    stamp = _next_stamp(counters)
+    mark[a] = stamp
+    nc = 0
+    for i in range(ns):
+        t0 = st[i] >> 2
+        for j0 in range(4):
+            b = T[t0, j0]
+            if mark[b] == stamp:
+                continue
+            mark[b] = stamp
+            if pinned[b] or (a_bnd and not isb[b]):
+                continue
+            counters[C_EVALS] += 1
+            ok = True
+            dm = 0.0
+            pbx = pts[b, 0]
+            pby = pts[b, 1]
+            pbz = pts[b, 2]
+            db = dens[b]
+            for k in range(ns):
+                t = st[k] >> 2
+                if _contains(T, t, b):
+                    dm += abs(mass_old[k])
+                    continue
+                v6 = off[k] - (nrm[k, 0] * pbx + nrm[k, 1] * pby + nrm[k, 2] * pbz)
+                if not v6 > fast_ok:
+                    # near the limit: decide with the exact evaluation order of signed_volumes
+                    c = st[k] & 3
+                    for j in range(4):
+                        q[j] = T[t, j]
+                    q[c] = b
+                    v6 = _orient6(pts, q[0], q[1], q[2], q[3])
+                    old = vol_old[k]
+                    if old == 0.0:
+                        good = v6 == 0.0 or v6 > VOLUME_EPS * _max_edge2(pts, q) ** 1.5
+                    else:
+                        good = v6 > VOLUME_EPS * _max_edge2(pts, q) ** 1.5 or (v6 >= old and v6 > 0.0)
+                    if not good:
+                        ok = False
+                        break
+                dm += abs(v6 / 6.0 * (dsum[k] + db) * 0.25 - mass_old[k])
+            if not ok:
+                continue
+            ge = 0.0
+            if nf > 0:
+                for f in range(nf):
+                    if bf[f, 0] == b or bf[f, 1] == b or bf[f, 2] == b:
+                        area_new[f] = -1.0  # collapses
+                        continue
+                    x0 = b if bf[f, 0] == a else bf[f, 0]
+                    x1 = b if bf[f, 1] == a else bf[f, 1]
+                    x2 = b if bf[f, 2] == a else bf[f, 2]
+                    _tri_normal(pts, x0, x1, x2, n_new)
+                    ln = np.sqrt(n_new[0] ** 2 + n_new[1] ** 2 + n_new[2] ** 2)
+                    dot = n_new[0] * n_old[f, 0] + n_new[1] * n_old[f, 1] + n_new[2] * n_old[f, 2]
+                    if not (dot > NORMAL_EPS * ln * 2.0 * area_old[f]):
+                        ok = False
+                        break
+                    area_new[f] = 0.5 * ln
+                if not ok:
+                    continue
+                # each new face against every old face sharing an edge with it, weighted by the
+                # old face's share of the affected area (the paper's geometry error)
+                for f in range(nf):
+                    if area_new[f] < 0.0:
+                        continue
+                    for g in range(nf):
+                        shared = 0
+                        for j in range(3):
+                            w = b if bf[f, j] == a else bf[f, j]
+                            if w == bf[g, 0] or w == bf[g, 1] or w == bf[g, 2]:
+                                shared += 1
+                        if shared >= 2 and area_sum > 0.0:
+                            ge += abs(area_new[f] - area_old[g]) * area_old[g] / area_sum
+            cand_out[nc] = b
+            err_out[nc] = wd * dm + wg * ge
+            nc += 1
+    return nc
+
+
+@njit(cache=True)
+def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab, counters):
+    """Best legal merge of a: (target, error), or (-1, 0) when a has none."""
+    st = _star(a, head, nxt, T, alive)
+    if st.shape[0] == 0 or pinned[a]:
+        return -1, 0.0
+    cap = 3 * st.shape[0] + 1
+    cand = np.empty(cap, np.int64)
+    err = np.empty(cap)
+    nc = _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, mark, counters, cand, err)
+    if nc == 0:
+        return -1, 0.0
+    # best first, ties broken by target id, so the result does not depend on list order
+    keys = np.empty(nc)
+    for i in range(nc):
+        keys[i] = err[i]
+    done = np.zeros(nc, np.bool_)
+    for _ in range(nc):
+        best = -1
+        for i in range(nc):
+            if done[i]:
+                continue
+            if best < 0 or keys[i] < keys[best] or (keys[i] == keys[best] and cand[i] < cand[best]):
+                best = i
+        done[best] = True
+        b = cand[best]
+        if _link_ok(a, b, st, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
+            return b, keys[best]
+    return -1, 0.0
+
+
+# -- a binary min-heap over (error, vertex) with a version stamp for lazy deletion ----------------
+@njit(cache=True)
+def _heap_less(h_err, h_v, i, j):
+    return h_err[i] < h_err[j] or (h_err[i] == h_err[j] and h_v[i] < h_v[j])
+
+
+@njit(cache=True)
+def _heap_swap(h_err, h_v, h_b, h_ver, i, j):
+    h_err[i], h_err[j] = h_err[j], h_err[i]
+    h_v[i], h_v[j] = h_v[j], h_v[i]
+    h_b[i], h_b[j] = h_b[j], h_b[i]
+    h_ver[i], h_ver[j] = h_ver[j], h_ver[i]
+
+
+@njit(cache=True)
+def _heap_push(h_err, h_v, h_b, h_ver, counters, e, v, b, ver, cur_ver):
+    n = counters[C_HEAP]
+    if n >= h_err.shape[0]:
+        # full: drop stale entries and rebuild (at most one live entry per vertex)
+        k = 0
+        for i in range(n):
+            if h_ver[i] == cur_ver[h_v[i]]:
+                h_err[k] = h_err[i]
+                h_v[k] = h_v[i]
+                h_b[k] = h_b[i]
+                h_ver[k] = h_ver[i]
+                k += 1
+        n = k
+        for i in range(n // 2 - 1, -1, -1):
+            _sift_down(h_err, h_v, h_b, h_ver, i, n)
+    h_err[n] = e
+    h_v[n] = v
+    h_b[n] = b
+    h_ver[n] = ver
+    i = n
+    while i > 0:
+        p = (i - 1) >> 1
+        if _heap_less(h_err, h_v, i, p):
+            _heap_swap(h_err, h_v, h_b, h_ver, i, p)
+            i = p
+        else:
+            break
+    counters[C_HEAP] = n + 1
+
+
+@njit(cache=True)
+def _sift_down(h_err, h_v, h_b, h_ver, i, n):
+    while True:
+        l = 2 * i + 1
+        if l >= n:
+            break
+        m = l
+        if l + 1 < n and _heap_less(h_err, h_v, l + 1, l):
+            m = l + 1
+        if _heap_less(h_err, h_v, m, i):
+            _heap_swap(h_err, h_v, h_b, h_ver, i, m)
+            i = m
+        else:
+            break
+
+
+@njit(cache=True)
+def _heap_pop(h_err, h_v, h_b, h_ver, counters):
+    n = counters[C_HEAP] - 1
+    e, v, b, ver = h_err[0], h_v[0], h_b[0], h_ver[0]
+    _heap_swap(h_err, h_v, h_b, h_ver, 0, n)
+    counters[C_HEAP] = n
+    _sift_down(h_err, h_v, h_b, h_ver, 0, n)
+    return e, v, b, ver
+
+
+@njit(cache=True)
+def _push_best(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab,
+               counters, ver, h_err, h_v, h_b, h_ver):
+    ver[v] += 1
+    b, e = _evaluate(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab, counters)
+    if b >= 0:
+        _heap_push(h_err, h_v, h_b, h_ver, counters, e, v, b, ver[v], ver)
+        return True
+    return False
+
+
+@njit(cache=True)
+def _apply_merge(a, b, st_a, T, alive, nbr, head, nxt):
+    """Merge a into b: collapse the tets of edge ab (gluing their outer neighbours), relabel the rest."""
+    for i in range(st_a.shape[0]):
+        t = st_a[i] >> 2
+        c = st_a[i] & 3
+        cb = -1
+        for j in range(4):
+            if T[t, j] == b:
+                cb = j
+        if cb < 0:
+            continue
+        n_a = nbr[t, c]  # across the face without a (contains b): survives
+        n_b = nbr[t, cb]  # across the face without b (contains a): survives, becomes that face
+        if n_a >= 0:
+            for j in range(4):
+                if nbr[n_a, j] == t:
+                    nbr[n_a, j] = n_b
+        if n_b >= 0:
+            for j in range(4):
+                if nbr[n_b, j] == t:
+                    nbr[n_b, j] = n_a
+        alive[t] = False
+    for i in range(st_a.shape[0]):
+        t = st_a[i] >> 2
+        if alive[t]:
+            T[t, st_a[i] & 3] = b
+    # splice a's incidence list in front of b's
+    s = head[a]
+    if s >= 0:
+        while nxt[s] >= 0:
+            s = nxt[s]
+        nxt[s] = head[b]
+        head[b] = head[a]
+        head[a] = -1
+
+
+@njit(cache=True)
+def _init_heap(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab, counters,
+               ver, h_err, h_v, h_b, h_ver):
+    n = head.shape[0]
+    for v in range(n):
+        _push_best(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab,
+                   counters, ver, h_err, h_v, h_b, h_ver)
+
+
+@njit(cache=True)
+def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab, counters,
+         ver, h_err, h_v, h_b, h_ver, parent, rank, max_merges):
+    """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left."""
+    n = head.shape[0]
+    while counters[C_MERGES] < max_merges:
+        if counters[C_HEAP] == 0:
+            # neighbourhoods two rings away from a merge may have become legal: look again
+            counters[C_SWEEPS] += 1
+            found = False
+            for v in range(n):
+                if parent[v] == v:
+                    if _push_best(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark,
+                                  mark_b, mark_ab, counters, ver, h_err, h_v, h_b, h_ver):
+                        found = True
+            if not found:
+                return True
+            continue
+        e, a, b, v_a = _heap_pop(h_err, h_v, h_b, h_ver, counters)
+        if v_a != ver[a] or parent[a] != a or parent[b] != b:
+            continue
+        st_a = _star(a, head, nxt, T, alive)
+        # a's star is unchanged since the entry was made (that would have bumped its version),
+        # but b's may have changed: check the link condition again
+        if not _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
+            _push_best(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab,
+                       counters, ver, h_err, h_v, h_b, h_ver)
+            continue
+        # the neighbourhood whose stars change: b and every vertex of a's star
+        stamp = _next_stamp(counters)
+        nb = np.empty(3 * st_a.shape[0] + 1, np.int64)
+        k = 0
+        for i in range(st_a.shape[0]):
+            t = st_a[i] >> 2
+            for j in range(4):
+                w = T[t, j]
+                if w != a and mark[w] != stamp:
+                    mark[w] = stamp
+                    nb[k] = w
+                    k += 1
+        _apply_merge(a, b, st_a, T, alive, nbr, head, nxt)
+        parent[a] = b
+        rank[a] = counters[C_MERGES]
+        counters[C_MERGES] += 1
+        ver[a] += 1
+        for i in range(k):
+            _push_best(nb[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b,
+                       mark_ab, counters, ver, h_err, h_v, h_b, h_ver)
+    return False
+
+
+@njit(cache=True)
+def _ancestors(parent, rank, order, n_merges):
+    """Ancestor of every vertex after the first ``n_merges`` merges.
+
+    ``order`` lists the vertices by decreasing rank (roots first), so every parent is visited before
+    its children: one top-down pass, as in the paper's section 4.2.
+    """
+    n = parent.shape[0]
+    anc = np.empty(n, np.int32)
+    for i in range(n):
+        v = order[i]
+        if rank[v] < n_merges:
+            anc[v] = anc[parent[v]]
+        else:
+            anc[v] = v
+    return anc

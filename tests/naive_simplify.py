@@ -1,0 +1,198 @@
+"""Slow, obviously correct references for the decimation kernels and a mesh validity checker.
+
+Everything here recomputes from scratch with Python sets and loops: the boundary from face counts,
+links as sets of simplices (with a virtual vertex OMEGA joined to the boundary), volumes with the
+same determinant as ``TetMesh.signed_volumes``.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from itertools import combinations
+
+import numpy as np
+
+from gatun_py.mesh.model import TET_FACES
+
+OMEGA = -1
+VOLUME_EPS = 1e-10
+NORMAL_EPS = 1e-6
+
+
+def orient6(p, q):
+    a = p[q[0]]
+    u = p[q[1]] - a
+    v = p[q[2]] - a
+    w = p[q[3]] - a
+    c = (v[1] * w[2] - v[2] * w[1], v[2] * w[0] - v[0] * w[2], v[0] * w[1] - v[1] * w[0])
+    return (u[0] * c[0] + u[1] * c[1]) + u[2] * c[2]
+
+
+def boundary_faces(tets):
+    """Outward boundary faces of a list of tets (faces used once)."""
+    cnt = Counter(frozenset(t[k] for k in f) for t in tets for f in TET_FACES)
+    return [tuple(t[k] for k in f) for t in tets for f in TET_FACES if cnt[frozenset(t[k] for k in f)] == 1]
+
+
+def boundary_vertices(tets):
+    return {v for f in boundary_faces(tets) for v in f}
+
+
+def pinned_vertices(tets, n):
+    """Vertices with a non-manifold neighbourhood (link Euler characteristic, non-manifold edges)."""
+    bf = boundary_faces(tets)
+    bnd = {v for f in bf for v in f}
+    pinned = set()
+    ecount = Counter(frozenset(e) for f in bf for e in combinations(f, 2))
+    for e, c in ecount.items():
+        if c != 2:
+            pinned |= set(e)
+    for v in range(n):
+        star = [t for t in tets if v in t]
+        if not star:
+            continue
+        edges = {w for t in star for w in t if w != v}
+        faces = {frozenset(set(t) - {v, w}) for t in star for w in t if w != v}
+        chi = len(edges) - len(faces) + len(star)
+        if chi != (1 if v in bnd else 2):
+            pinned.add(v)
+    return pinned
+
+
+def link(v, tets, bfaces):
+    out = set()
+    for t in tets:
+        if v in t:
+            rest = [w for w in t if w != v]
+            for k in (1, 2, 3):
+                out |= {frozenset(c) for c in combinations(rest, k)}
+    for f in bfaces:
+        if v in f:
+            rest = [w for w in f if w != v] + [OMEGA]
+            for k in (1, 2, 3):
+                out |= {frozenset(c) for c in combinations(rest, k) if OMEGA in c}
+    return out
+
+
+def edge_link(a, b, tets, bfaces):
+    out = set()
+    for t in tets:
+        if a in t and b in t:
+            rest = [w for w in t if w not in (a, b)]
+            for k in (1, 2):
+                out |= {frozenset(c) for c in combinations(rest, k)}
+    for f in bfaces:
+        if a in f and b in f:
+            rest = [w for w in f if w not in (a, b)] + [OMEGA]
+            for k in (1, 2):
+                out |= {frozenset(c) for c in combinations(rest, k) if OMEGA in c}
+    return out
+
+
+def tri_area_normal(p, f):
+    n = np.cross(p[f[1]] - p[f[0]], p[f[2]] - p[f[0]])
+    return n
+
+
+def evaluate_merge(tets, pts, dens, a, b, *, is_boundary, pinned, wd, wg):
+    """(legal, error) of merging a into b in the mesh ``tets`` (list of 4-tuples).
+
+    ``wd``, ``wg`` are the weights already divided by the normalisation scales; ``is_boundary`` is
+    the input's boundary vertex set and ``pinned`` the non-manifold vertices.
+    """
+    p = np.asarray(pts, np.float64)
+    d = np.asarray(dens, np.float64)
+    star = [t for t in tets if a in t]
+    if not any(b in t for t in star) or a in pinned or b in pinned:
+        return False, None
+    if a in is_boundary and b not in is_boundary:
+        return False, None
+    dm = 0.0
+    for t in star:
+        old6 = orient6(p, t)
+        m_old = old6 / 6.0 * sum(d[w] for w in t) / 4
+        if b in t:
+            dm += abs(m_old)
+            continue
+        q = tuple(b if w == a else w for w in t)
+        new6 = orient6(p, q)
+        lmax = max(np.sum((p[x] - p[y]) ** 2) for x, y in combinations(q, 2)) ** 1.5
+        if old6 == 0.0:
+            ok = new6 == 0.0 or new6 > VOLUME_EPS * lmax
+        else:
+            ok = new6 > VOLUME_EPS * lmax or (new6 >= old6 and new6 > 0.0)
+        if not ok:
+            return False, None
+        dm += abs(new6 / 6.0 * sum(d[w] for w in q) / 4 - m_old)
+    bfaces = boundary_faces(tets)
+    ge = 0.0
+    if a in is_boundary:
+        old = [f for f in bfaces if a in f]
+        area = {f: 0.5 * np.linalg.norm(tri_area_normal(p, f)) for f in old}
+        total = sum(area.values())
+        for f in old:
+            if b in f:
+                continue
+            g = tuple(b if w == a else w for w in f)
+            n_old = tri_area_normal(p, f)
+            n_new = tri_area_normal(p, g)
+            if not np.dot(n_old, n_new) > NORMAL_EPS * np.linalg.norm(n_new) * np.linalg.norm(n_old):
+                return False, None
+            a_new = 0.5 * np.linalg.norm(n_new)
+            for h in old:
+                if len(set(g) & set(h)) >= 2 and total > 0:
+                    ge += abs(a_new - area[h]) * area[h] / total
+    if not link(a, tets, bfaces) & link(b, tets, bfaces) <= edge_link(a, b, tets, bfaces):
+        return False, None
+    return True, wd * dm + wg * ge
+
+
+def collapse(tets, a, b):
+    """The tets after merging a into b (tets of edge ab vanish)."""
+    return [tuple(b if w == a else w for w in t) for t in tets if not (a in t and b in t)]
+
+
+def legal_merges(tets, pts, dens, **kw):
+    """Every legal (a, b, error) of the mesh: the full candidate set, for small meshes only."""
+    out = []
+    edges = {(x, y) for t in tets for x in t for y in t if x != y}
+    for a, b in sorted(edges):
+        ok, e = evaluate_merge(tets, pts, dens, a, b, **kw)
+        if ok:
+            out.append((a, b, e))
+    return out
+
+
+def ancestors_naive(parent, rank, n_merges):
+    """Follow parents while the current vertex's merge is among the first n_merges."""
+    out = []
+    for v in range(len(parent)):
+        while rank[v] < n_merges:
+            v = parent[v]
+        out.append(v)
+    return np.array(out, np.int64)
+
+
+def check_valid(mesh, n_flat_input: int, label: str = "", *, manifold: bool = True) -> None:
+    """Assert the mesh is a valid simplification state.
+
+    No tet with signed volume <= 0 beyond ``n_flat_input`` exactly-flat ones (and none negative),
+    no face in more than two tets, no duplicate tets, every boundary edge in exactly two
+    boundary faces (closed boundary; an even number when the input itself is not a manifold).
+    """
+    vol = mesh.signed_volumes()
+    assert not np.any(vol < 0), f"{label}: {int((vol < 0).sum())} inverted tets"
+    assert int((vol == 0).sum()) <= n_flat_input, f"{label}: {int((vol == 0).sum())} flat tets > {n_flat_input}"
+    t = np.sort(mesh.tets.astype(np.int64), axis=1)
+    assert np.unique(t, axis=0).shape[0] == t.shape[0], f"{label}: duplicate tets"
+    assert np.all(t[:, 1:] != t[:, :-1]), f"{label}: repeated vertex in a tet"
+    f = np.sort(mesh.tets[:, TET_FACES].reshape(-1, 3).astype(np.int64), axis=1)
+    _, fc = np.unique(f, axis=0, return_counts=True)
+    assert fc.max(initial=0) <= 2, f"{label}: a face shared by {fc.max()} tets"
+    bf = mesh.boundary_faces().astype(np.int64)
+    if bf.shape[0]:
+        e = np.sort(bf[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        _, ec = np.unique(e, axis=0, return_counts=True)
+        assert np.all(ec % 2 == 0), f"{label}: boundary not closed ({int((ec % 2 == 1).sum())} open edges)"
+        if manifold:
+            assert np.all(ec == 2), f"{label}: {int((ec != 2).sum())} boundary edges not in exactly two faces"

@@ -1,0 +1,124 @@
+"""Decimation kernels against the slow reference, and validity of every prefix of the merge forest."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from meshgen import AWKWARD, delaunay_mesh, degenerate_grid, grid_mesh, mesh_strategy, single_tet
+from naive_simplify import (check_valid, collapse, evaluate_merge, legal_merges, pinned_vertices)
+
+from gatun_py.errors import OptionError
+from gatun_py.simplify import ROOT_RANK, check_forest, decimate, simplified_mesh
+from gatun_py.simplify.decimate import DecimationState
+
+MANIFOLD = {k for k in AWKWARD if k not in ("edge_touching", "vertex_touching")}
+
+
+def _naive_kw(state, tets):
+    return dict(is_boundary=set(np.flatnonzero(state.isb).tolist()),
+                pinned=set(np.flatnonzero(state.pinned).tolist()),
+                wd=state.params[0], wg=state.params[1])
+
+
+def _compare_all_edges(state, pts, dens):
+    tets = [tuple(int(x) for x in t) for t in state.current_tets()]
+    kw = _naive_kw(state, tets)
+    edges = sorted({(x, y) for t in tets for x in t for y in t if x != y})
+    n_legal = 0
+    for a, b in edges:
+        ok_k, e_k = state.evaluate(a, b)
+        ok_n, e_n = evaluate_merge(tets, pts, dens, a, b, **kw)
+        assert ok_k == ok_n, (a, b, ok_k, ok_n)
+        if ok_k:
+            n_legal += 1
+            assert e_k == pytest.approx(e_n, rel=1e-9, abs=1e-15), (a, b)
+    return n_legal
+
+
+@pytest.mark.parametrize("name", ["delaunay", "jittered_grid", "degenerate_grid", "cavity", "edge_touching",
+                                  "two_components", "single_tet"])
+def test_candidates_match_reference(name):
+    mesh = AWKWARD[name]()
+    state = DecimationState(mesh, 1.0, 3.0)
+    tets = [tuple(int(x) for x in t) for t in mesh.tets]
+    assert set(np.flatnonzero(state.pinned).tolist()) == pinned_vertices(tets, mesh.n_points)
+    pts, dens = mesh.points.astype(np.float64), mesh.density.astype(np.float64)
+    n0 = _compare_all_edges(state, pts, dens)
+    # isolated tets (single, edge-touching) cannot lose a vertex; everything else can
+    assert (n0 > 0) == (name not in ("single_tet", "edge_touching"))
+    # and again in a decimated state, half way through
+    forest = decimate(mesh, w_geometry=3.0)
+    order = np.argsort(forest.rank)[: forest.n_merges // 2]
+    for a in order:
+        state.apply(int(a), int(forest.parent[a]))
+    _compare_all_edges(state, pts, dens)
+
+
+@pytest.mark.parametrize("mesh", [delaunay_mesh(18, 3), grid_mesh(3, 3, 3, jitter=0.2, seed=1), degenerate_grid()],
+                         ids=["delaunay", "grid", "degenerate"])
+def test_replay_every_merge_is_legal_and_final_state_is_stuck(mesh):
+    forest = decimate(mesh)
+    state = DecimationState(mesh, 1.0, 10.0)
+    kw = _naive_kw(state, None)
+    pts, dens = mesh.points.astype(np.float64), mesh.density.astype(np.float64)
+    tets = [tuple(int(x) for x in t) for t in mesh.tets]
+    for a in np.argsort(forest.rank)[: forest.n_merges]:
+        a, b = int(a), int(forest.parent[a])
+        ok, _ = evaluate_merge(tets, pts, dens, a, b, **kw)
+        assert ok, f"merge {a}->{b} is not legal in the reference"
+        tets = collapse(tets, a, b)
+    assert legal_merges(tets, pts, dens, **kw) == []
+
+
+def _check_forest_prefixes(mesh, forest, ns, label=""):
+    n_flat = int((mesh.signed_volumes() == 0).sum())
+    check_forest(forest.parent, forest.rank)
+    isb = np.zeros(mesh.n_points, bool)
+    isb[mesh.boundary_faces().ravel()] = True
+    merged = forest.rank != ROOT_RANK
+    assert not np.any(isb[merged] & ~isb[forest.parent[merged]]), "a boundary vertex went into an interior one"
+    manifold = True
+    bf = mesh.boundary_faces().astype(np.int64)
+    if bf.shape[0]:
+        e = np.sort(bf[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        manifold = bool(np.all(np.unique(e, axis=0, return_counts=True)[1] == 2))
+    for n in ns:
+        check_valid(simplified_mesh(mesh, forest, int(n)), n_flat, f"{label} N={n}", manifold=manifold)
+
+
+@settings(max_examples=30, deadline=None)
+@given(mesh_strategy())
+def test_every_prefix_is_valid(mesh):
+    forest = decimate(mesh)
+    _check_forest_prefixes(mesh, forest, range(forest.n_merges + 1))
+
+
+def test_reaches_far_on_random_meshes():
+    mesh = delaunay_mesh(60, 11)
+    forest = decimate(mesh)
+    assert forest.max_ratio > 0.8
+
+
+def test_single_tet_is_a_forest_of_roots():
+    forest = decimate(single_tet())
+    assert forest.n_merges == 0
+    assert np.array_equal(forest.parent, np.arange(4))
+    assert np.all(forest.rank == ROOT_RANK)
+
+
+def test_bad_weights():
+    for kw in ({"w_density": -1.0}, {"w_geometry": float("nan")}):
+        with pytest.raises(OptionError):
+            decimate(single_tet(), **kw)
+
+
+def test_max_merges_and_progress_give_the_same_prefix():
+    mesh = grid_mesh(5, 4, 4, jitter=0.1, seed=2)
+    full = decimate(mesh)
+    seen = []
+    part = decimate(mesh, max_merges=20, progress=seen.append)
+    assert part.n_merges == 20 and sum(seen) == 20
+    first = full.rank < 20
+    assert np.array_equal(first, part.rank < 20)
+    assert np.array_equal(full.parent[first], part.parent[first])

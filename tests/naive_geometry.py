@@ -165,7 +165,7 @@ def _predictions(k, ref, col):
         return 0, [None], eq
     vals = [float(col[r]) for r in face]
     if len(face) == 1:
-        return 1, [col[face[0]]], eq
+        return 1, [("copy", ordered_int(col[face[0]]))], eq  # a plain copy keeps every bit, NaN too
     a, b = vals[0], vals[1]
     if len(face) == 2:
         if apex >= 0:
@@ -182,6 +182,8 @@ def _predictions(k, ref, col):
 def _candidate_int(x) -> int:
     if x is None:
         return 0
+    if isinstance(x, tuple):
+        return x[1]
     f = np.float32(x)
     if f != f:
         f = np.float32(0.0)

@@ -341,8 +341,8 @@ def encode_kernel(st, out, vf, refs, modes, tables, tab_offs, trace):
 def decode_tables_kernel(st, buf, offs, probs, modes, n_points, tables, tab_offs):
     """Start the four channel decoders and read the value tables of the table-mode channels.
 
-    ``tables`` must have room for ``n_points`` values per table-mode channel; fills ``tab_offs``
-    (5,). Returns a status (``OK`` or ``ERR_STREAM``).
+    ``tables`` receives the tables one after the other (a count beyond its room is corruption);
+    fills ``tab_offs`` (5,). Returns a status (``OK`` or ``ERR_STREAM``).
     """
     pos = 0
     for ch in range(N_CHANNELS):
@@ -353,7 +353,7 @@ def decode_tables_kernel(st, buf, offs, probs, modes, n_points, tables, tab_offs
         tab_offs[ch] = pos
         if modes[ch] == MODE_TABLE:
             count = dec_uint(stc, data, pc, TABLE_BASE)
-            if count > n_points or dec_failed(stc):
+            if count > n_points or pos + count > tables.shape[0] or dec_failed(stc):
                 return ERR_STREAM
             if count > 0:
                 v = dec_sint(stc, data, pc, TABLE_BASE + INT_MODEL_SIZE)

@@ -34,15 +34,19 @@ import numpy as np
 
 from ..errors import CorruptFileError
 from . import _geometry_kernels as K
-from .rangecoder import DEC_ERROR, DEC_OVERRUN, DEC_POS, dec_state, enc_state, new_model
+from .rangecoder import ADAPT_SHIFT, INT_BUCKET_BITS, DEC_ERROR, DEC_OVERRUN, DEC_POS, PROB_ONE, dec_state, enc_state, new_model
 
 FORMAT_VERSION = 1
 _HEADER = struct.Struct("<BBI4I")
 HEADER_SIZE = _HEADER.size
 
-# A vertex costs at least 4 channels x 3 binary decisions x 0.011 bits (the most skewed
-# probability of the range coder), so a stream of L bytes cannot hold more than ~61 L vertices.
-_MAX_VERTICES_PER_BYTE = 64
+# Absurd counts are rejected before allocating: a binary decision costs at least
+# -log2(p_max) bits, p_max being the most skewed probability the range coder's adaptation reaches;
+# a vertex takes at least one decision in each channel's stream, a table entry at least
+# INT_BUCKET_BITS decisions. So a stream of L bytes holds at most ~8 L / cost of them.
+_MIN_DECISION_BITS = -np.log2(1.0 - ((1 << ADAPT_SHIFT) - 1) / PROB_ONE)
+_MAX_VERTICES_PER_BYTE = int(8.0 / _MIN_DECISION_BITS) + 1
+_MAX_TABLE_PER_BYTE = int(8.0 / (INT_BUCKET_BITS * _MIN_DECISION_BITS)) + 1
 
 
 def _as_refs(refs, n: int) -> np.ndarray:
@@ -235,7 +239,7 @@ class GeometryDecoder:
             raise CorruptFileError(f"corrupt geometry block: {n} vertices, expected {n_points}")
         if HEADER_SIZE + sum(lengths) != len(buf):
             raise CorruptFileError("corrupt geometry block: stream lengths do not match the block size")
-        if n > _MAX_VERTICES_PER_BYTE * (len(buf) + 16):
+        if n > _MAX_VERTICES_PER_BYTE * (min(lengths) + 8):
             raise CorruptFileError(f"corrupt geometry block: {n} vertices cannot fit in {len(buf)} bytes")
         self.n_points = int(n)
         self.modes = np.array([(mode_bits >> ch) & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64)
@@ -247,7 +251,9 @@ class GeometryDecoder:
         self.probs = np.stack([new_model(K.MODEL_SIZE) for _ in range(K.N_CHANNELS)])
         self.scores = np.zeros((K.N_CHANNELS, K.N_PATTERNS, K.MAX_CANDS), dtype=np.int64)
         self.flags = np.zeros(2 * K.N_CHANNELS, dtype=np.int64)
-        table_room = int(self.modes.sum()) * self.n_points
+        stream_bytes = [int(length) for length in lengths]
+        table_room = sum(min(self.n_points, _MAX_TABLE_PER_BYTE * (stream_bytes[ch] + 8))
+                         for ch in range(K.N_CHANNELS) if self.modes[ch])
         self.tables = np.zeros(table_room, dtype=np.int64)
         self.tab_offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
         status = K.decode_tables_kernel(self.st, buf, self.offs, self.probs, self.modes, self.n_points,

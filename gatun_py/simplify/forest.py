@@ -241,7 +241,7 @@ def decode_forest(data: bytes, n: int) -> tuple[np.ndarray, np.ndarray]:
             raw = dec.decompress(data[_HEADER.size:], max_length=8 * k + 1)
         except lzma.LZMAError as e:
             raise CorruptFileError(f"merge forest: {e}") from None
-        if len(raw) != 8 * k or not dec.eof:
+        if len(raw) != 8 * k or not dec.eof or dec.unused_data:
             raise CorruptFileError("merge forest: payload has the wrong length")
         order = np.cumsum(_unzigzag(_unshuffle(raw[: 4 * k], k)))
         if order.min() < 0 or order.max() >= n:

@@ -7,6 +7,7 @@ pyramids, and their quadratic variants reduced to their corners), and single-blo
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import warnings
 from dataclasses import dataclass
@@ -15,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import atomic_path
-from ..errors import MeshError, ReadError
+from ..errors import MeshError, OutputError, ReadError
 from . import plot3d
 from .model import TetMesh
 from .split import orient_positive, split_hexes_two_colour, split_min_id_star, two_colour
@@ -91,26 +92,51 @@ def _read_plot3d(path: Path, q_file, q_var: str) -> tuple[TetMesh, MeshReport]:
             notes.append(f"{int((~keep).sum())} cells dropped by IBLANK")
         hexes = hexes[keep]
     tets = orient_positive(grid.xyz, split_hexes_two_colour(hexes, colour))
-    mesh, report = validate_tets(grid.xyz, dens, tets, scalar_name=q_var)
+    mesh, report = _validated(str(path), grid.xyz, dens, tets, q_var)
     report.notes += notes
     return mesh, report
 
 
 def _read_meshio(path: Path, scalar: str | None, cell_to_point: bool) -> tuple[TetMesh, MeshReport]:
+    m = _meshio_read(path)
+    return mesh_from_meshio(m, scalar=scalar, cell_to_point=cell_to_point, source=str(path))
+
+
+def _prefer_gmsh(formats):
+    """``.msh`` is both ANSYS and Gmsh; Gmsh is by far the more common, and what we write."""
+    return sorted(formats, key=lambda f: f != "gmsh")
+
+
+def _meshio_read(path: Path):
+    """meshio.read without its habit of printing and calling sys.exit on unreadable files."""
+    import contextlib
+    import io
+
     import meshio
+    from meshio import _helpers
 
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            m = meshio.read(str(path))
-    except meshio.ReadError as e:
-        raise ReadError(f"cannot read {path}: {e}") from None
-    except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError, EOFError, UnicodeDecodeError,
-            AssertionError, StopIteration) as e:
-        raise ReadError(f"cannot read {path}: {type(e).__name__}: {e}") from None
-    except Exception as e:  # meshio readers raise many unrelated types on malformed input
-        raise ReadError(f"cannot read {path}: {type(e).__name__}: {e}") from None
-    return mesh_from_meshio(m, scalar=scalar, cell_to_point=cell_to_point, source=str(path))
+        formats = _helpers._filetypes_from_path(path)
+    except (KeyError, ValueError, meshio.ReadError):
+        raise ReadError(f"cannot read {path}: unknown file extension {path.suffix!r} "
+                        f"(mesh formats: .vtu .vtk .msh .mesh .xdmf .exo .med .inp ...; PLOT3D: .bin .xyz)") from None
+    reasons = []
+    for fmt in _prefer_gmsh(formats):
+        reader = _helpers.reader_map.get(fmt)
+        if reader is None:
+            continue
+        try:
+            with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):
+                warnings.simplefilter("ignore")
+                return reader(str(path))
+        except MemoryError:
+            raise
+        except Exception as e:  # meshio readers raise many unrelated types on malformed input
+            reasons.append(f"{type(e).__name__}: {e}" if str(e) else "malformed file")
+        except SystemExit:
+            reasons.append("reader gave up")
+    why = reasons[0] if reasons else "no reader for this extension"
+    raise ReadError(f"cannot read {path} as {'/'.join(formats)}: {why}")
 
 
 def mesh_from_meshio(m, *, scalar: str | None = None, cell_to_point: bool = False,
@@ -149,8 +175,9 @@ def mesh_from_meshio(m, *, scalar: str | None = None, cell_to_point: bool = Fals
         bad = (data < 0) | (data >= n)
         if bad.any():
             i = int(np.flatnonzero(bad.any(axis=1))[0])
+            nbad = int(bad.any(axis=1).sum())
             raise MeshError(f"{source}: {lin} cell {i} refers to vertex {int(data[i][bad[i]][0])} but the mesh has "
-                            f"{n} points; {int(bad.any(axis=1).sum())} cells affected")
+                            f"{n} points; {nbad} cell{'s' if nbad > 1 else ''} affected")
 
     types = {b[0] for b in blocks}
     tet_chunks, cell_of_tet = [], []
@@ -178,9 +205,16 @@ def mesh_from_meshio(m, *, scalar: str | None = None, cell_to_point: bool = Fals
     tets = np.concatenate(tet_chunks)
 
     density, name = _choose_scalar(m, n, scalar, cell_to_point, p32, tet_chunks, cell_of_tet, source)
-    mesh, report = validate_tets(p32, density, tets, scalar_name=name)
+    mesh, report = _validated(source, p32, density, tets, name)
     report.notes += notes
     return mesh, report
+
+
+def _validated(source, points, density, tets, name):
+    try:
+        return validate_tets(points, density, tets, scalar_name=name)
+    except MeshError as e:
+        raise MeshError(f"{source}: {e}") from None
 
 
 def _scalar_arrays(data: dict, n: int) -> dict:
@@ -243,9 +277,11 @@ def write_mesh(mesh: TetMesh, path, *, force: bool = False) -> None:
 
     path = Path(path)
     try:
-        fmt = meshio._helpers._filetypes_from_path(path)[0]
+        fmt = _prefer_gmsh(meshio._helpers._filetypes_from_path(path))[0]
     except Exception:
         raise ReadError(f"cannot tell the output format from {path.name!r}; use an extension such as .vtu, .vtk, .msh, .xdmf") from None
+    if fmt in ("xdmf", "h5m", "med") and importlib.util.find_spec("h5py") is None:
+        raise OutputError(f"writing {fmt} files needs h5py (pip install h5py); .vtu needs nothing extra")
     m = meshio.Mesh(np.asarray(mesh.points), [("tetra", np.asarray(mesh.tets))],
                     point_data={mesh.scalar_name: np.asarray(mesh.density)})
     with atomic_path(path, force=force) as tmp:

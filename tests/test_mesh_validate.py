@@ -1,0 +1,120 @@
+"""Validation rules: each bad mesh gets one MeshError naming the first offender and the count."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gatun_py.errors import MeshError
+from gatun_py.mesh import validate_tets
+from meshgen import delaunay_mesh, grid_mesh, mesh_strategy
+
+
+def _raw(mesh):
+    return np.array(mesh.points), np.array(mesh.density), np.array(mesh.tets, dtype=np.int64)
+
+
+def _err(points, density, tets):
+    with pytest.raises(MeshError) as ei:
+        validate_tets(points, density, tets)
+    return str(ei.value)
+
+
+def test_nan_coordinate():
+    p, d, t = _raw(grid_mesh(3, 3, 3))
+    p[5, 1] = np.nan
+    p[9, 0] = np.inf
+    msg = _err(p, d, t)
+    assert "point 5" in msg and "2 points" in msg
+
+
+def test_nan_scalar():
+    p, d, t = _raw(grid_mesh(3, 3, 3))
+    d[7] = np.nan
+    msg = _err(p, d, t)
+    assert "point 7" in msg and "1 point affected" in msg
+
+
+def test_id_out_of_range():
+    p, d, t = _raw(grid_mesh(3, 3, 3))
+    t[4, 2] = len(p) + 3
+    t[6, 0] = -1
+    msg = _err(p, d, t)
+    assert "tet 4" in msg and str(len(p) + 3) in msg and "2 tets" in msg
+
+
+def test_repeated_vertex():
+    p, d, t = _raw(grid_mesh(3, 3, 3))
+    t[2, 3] = t[2, 0]
+    msg = _err(p, d, t)
+    assert "tet 2 repeats" in msg and "1 tet" in msg
+
+
+def test_duplicate_tet():
+    p, d, t = _raw(grid_mesh(3, 3, 3))
+    t = np.concatenate([t, t[[3]][:, [1, 0, 2, 3]]])
+    msg = _err(p, d, t)
+    assert f"tet {len(t) - 1}" in msg and "duplicates tet 3" in msg
+
+
+def test_non_conforming_face():
+    p, d, t = _raw(grid_mesh(3, 3, 3))
+    # A third tet on an interior face: apex at a new point.
+    shared = None
+    faces = {}
+    for i, tet in enumerate(t):
+        for f in ([0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]):
+            key = tuple(int(x) for x in sorted(tet[f]))
+            faces.setdefault(key, []).append(i)
+    shared = next(k for k, v in faces.items() if len(v) == 2)
+    p = np.concatenate([p, [[10, 10, 10]]]).astype(np.float32)
+    d = np.concatenate([d, [0]]).astype(np.float32)
+    t = np.concatenate([t, [[*shared, len(p) - 1]]])
+    msg = _err(p, d, t)
+    assert "non-conforming" in msg and str(list(shared)) in msg and "1 such triangle" in msg
+
+
+def test_no_tets():
+    msg = _err(np.zeros((3, 3)), np.zeros(3), np.zeros((0, 4), np.int64))
+    assert "no tetrahedra" in msg
+
+
+def test_wrong_shapes():
+    assert "(n, 3)" in _err(np.zeros((3, 2)), np.zeros(3), np.zeros((1, 4), np.int64))
+    assert "scalar has 2 values" in _err(np.zeros((3, 3)), np.zeros(2), np.zeros((1, 4), np.int64))
+
+
+def test_zero_volume_coincident_unreferenced_are_kept_and_counted():
+    p = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [1, 0, 0], [7, 7, 7]], np.float32)
+    d = np.arange(7, dtype=np.float32)
+    t = np.array([[0, 1, 2, 3], [0, 1, 2, 4]])  # second tet is flat (z = 0 plane)
+    mesh, rep = validate_tets(p, d, t)
+    assert rep.zero_volume_tets == 1
+    assert rep.coincident_points == 1  # point 5 repeats point 1
+    assert rep.unreferenced_points == 2  # points 5 and 6
+    assert mesh.n_points == 7 and mesh.n_tets == 2
+    assert np.array_equal(mesh.points, p)
+
+
+@settings(max_examples=80, deadline=None)
+@given(mesh_strategy(), st.integers(0, 2**32 - 1))
+def test_reorientation_keeps_the_simplices(mesh, seed):
+    """Flipping random tets: validation re-orients exactly those, the simplex set is unchanged."""
+    rng = np.random.default_rng(seed)
+    p, d, t = _raw(mesh)
+    flip = rng.random(len(t)) < 0.5
+    flip &= mesh.signed_volumes() > 0  # a flat tet has no orientation to flip
+    t2 = t.copy()
+    t2[flip] = t2[flip][:, [1, 0, 2, 3]]
+    out, rep = validate_tets(p, d, t2)
+    assert rep.reoriented_tets == int(flip.sum())
+    assert (out.signed_volumes() >= 0).all()
+    assert np.array_equal(np.sort(out.tets, axis=1), np.sort(t, axis=1))
+    assert out.points.tobytes() == p.tobytes() and out.density.tobytes() == d.tobytes()
+
+
+def test_orient_false_rejects_negative():
+    p, d, t = _raw(delaunay_mesh(10, 1))
+    t[0] = t[0][[1, 0, 2, 3]]
+    with pytest.raises(MeshError, match="negatively oriented"):
+        validate_tets(p, d, t, orient=False)

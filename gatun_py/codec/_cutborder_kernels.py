@@ -37,14 +37,16 @@ N_C1_CTX = 5 * 4 * 4 * 2
 TM_C1 = 0
 TM_KIND = TM_C1 + N_C1_CTX * 16
 TM_C2 = TM_KIND + 8 * 4
-TM_SIZE = TM_C2 + 2 * rc.INT_MODEL_SIZE
+TM_FLIP = TM_C2 + 2 * rc.INT_MODEL_SIZE
+TM_SIZE = TM_FLIP + 4
 
 # model layout of the boundary phase
 N_S1_CTX = 5 * 3 * 3 * 2
 SM_C1 = 0
 SM_NEW = SM_C1 + N_S1_CTX * 16
 SM_SEED = SM_NEW + 8
-SM_SIZE = SM_SEED + 8
+SM_FLIP = SM_SEED + 8
+SM_SIZE = SM_FLIP + 4
 
 # status codes of the resumable decoder
 ST_DONE, ST_BATCH, ST_GROW, ST_ERROR = 0, 1, 2, 3
@@ -192,14 +194,15 @@ def _find_face(B, a, b, c):
 
 @njit(cache=True)
 def _find_edge(B, p, r):
-    """Slot of a live directed edge p -> r (the oldest one when several), or -1."""
+    """Slot of a live border edge {p, r} (either direction; the oldest one), or -1."""
     ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
     node = vhead[p]
     best = -1
     best_seq = np.int64(-1)
     while node != -1:
         s = node // 3
-        if node - 3 * s == 0 and ev[s, 1] == r:
+        c = node - 3 * s
+        if c < 2 and ev[s, 1 - c] == r:
             if best == -1 or eseq[s] < best_seq:
                 best = s
                 best_seq = eseq[s]
@@ -340,29 +343,23 @@ def _c1_context(n1, cscore, prev_esc):
 
 
 @njit(cache=True)
-def _apply_tet(B, a, b, c, d):
-    """Attach apex d to the current face (a, b, c): the three other faces of the new tet either
-    close a border face (removed) or join the border. Returns False on an inconsistent state
-    (only possible with corrupt input)."""
-    # new tet is (a, c, b, d); its outward faces other than (a, b, c) are these three
-    # (c, b, d), (a, d, b), (a, c, d)
-    ok = True
+def _apply_tet(B, t0, t1, t2, t3):
+    """Attach the new tet (t0, t1, t2, t3) (as output; its face opposite t3 was the current face,
+    already removed): each other face closes a face of the border or joins it, wound as the
+    consistently oriented tet on its other side would see it from outside."""
     for k in range(3):
+        # outward faces opposite t0, t1, t2 (TET_FACES)
         if k == 0:
-            x, y, z = c, b, d
+            x, y, z = t1, t2, t3
         elif k == 1:
-            x, y, z = a, d, b
+            x, y, z = t0, t3, t2
         else:
-            x, y, z = a, c, d
+            x, y, z = t0, t1, t3
         s, same = _find_face(B, x, y, z)
         if s != -1:
-            if same != 1:
-                ok = False
             _remove(B, 3, s)
         else:
-            # stored reversed: outward from the unvisited tet on the other side
             _add(B, 3, x, z, y)
-    return ok
 
 
 @njit(cache=True)
@@ -379,40 +376,39 @@ def _bitlen(n):
 
 @njit(cache=True)
 def _gather_edge(B, s, cand, cscore, cseq):
-    """Candidates for the apex of the unvisited triangle on border edge s = (p -> r): apexes x
-    that would close border edges r -> x or x -> p. Returns n1 (sorted like the tet phase)."""
+    """Candidates for the apex of the unvisited triangle on border edge s = {p, r}: apexes x
+    that would close border edges {r, x} or {x, p}. Returns n1 (sorted like the tet phase)."""
     ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
     p = np.int64(ev[s, 0])
     r = np.int64(ev[s, 1])
     n1 = 0
-    node = vhead[r]
-    while node != -1:
-        g = node // 3
-        if node - 3 * g == 0 and g != s:  # edge r -> x
-            x = np.int64(ev[g, 1])
-            if x != p:
-                n1 = _insert_candidate(cand, cscore, cseq, n1, x, eseq[g])
-        node = lnext[node]
-    node = vhead[p]
-    while node != -1:
-        g = node // 3
-        if node - 3 * g == 1 and g != s:  # edge x -> p
-            x = np.int64(ev[g, 0])
-            if x != r:
-                n1 = _insert_candidate(cand, cscore, cseq, n1, x, eseq[g])
-        node = lnext[node]
+    for k in range(2):
+        u = r if k == 0 else p
+        other = p if k == 0 else r
+        node = vhead[u]
+        while node != -1:
+            g = node // 3
+            c = node - 3 * g
+            if c < 2 and g != s:
+                x = np.int64(ev[g, 1 - c])
+                if x != other:
+                    n1 = _insert_candidate(cand, cscore, cseq, n1, x, eseq[g])
+            node = lnext[node]
     _sort_candidates(cand, cscore, cseq, n1)
     return n1
 
 
 @njit(cache=True)
-def _apply_triangle(B, p, r, x):
-    """Visit triangle (p, r, x) across border edge p -> r (already removed)."""
-    for k in range(2):
-        # the new triangle's edges r -> x and x -> p; apex = its vertex off that edge
-        h0 = r if k == 0 else x
-        h1 = x if k == 0 else p
-        apex = p if k == 0 else r
+def _apply_triangle(B, u0, u1, u2, p, r):
+    """Visit triangle (u0, u1, u2) (as wound in the output) whose edge {p, r} was the border edge
+    just removed (p = r = -1 for a seed): each other edge closes a border edge or joins the
+    border, directed as a consistently wound neighbour would hold it."""
+    for k in range(3):
+        h0 = u0 if k == 0 else (u1 if k == 1 else u2)
+        h1 = u1 if k == 0 else (u2 if k == 1 else u0)
+        apex = u2 if k == 0 else (u0 if k == 1 else u1)
+        if (h0 == p and h1 == r) or (h0 == r and h1 == p):
+            continue
         s = _find_edge(B, h0, h1)
         if s != -1:
             _remove(B, 2, s)
@@ -466,6 +462,7 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
     done = 0
     seed_ptr = 0
     prev_new = 0
+    prev_flip = 0
     while done < nf:
         s = _pop(B)
         if s == -1:
@@ -491,22 +488,26 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
             out_faces[done, 1] = tri[1]
             out_faces[done, 2] = tri[2]
             done += 1
-            # the seed's three edges join the border (no border edge exists yet to close)
-            for k in range(3):
-                _add(B, 2, tri[(k + 1) % 3], tri[k], tri[(k + 2) % 3])
+            _apply_triangle(B, tri[0], tri[1], tri[2], -1, -1)
             continue
         ev = B[0]
         p = np.int64(ev[s, 0])
         r = np.int64(ev[s, 1])
         n1 = _gather_edge(B, s, cand, cscore, cseq)
         _remove(B, 2, s)
-        f = _lookup_halfedge(hkey, hface, fvisited, order[p], order[r])
+        po = order[p]
+        ro = order[r]
+        f = _lookup_halfedge(hkey, hface, fvisited, min(po, ro), max(po, ro))
         if f == -1:
             return -1, 1
         xo = -1
+        flip = 0
         for k in range(3):
-            if faces[f, k] == order[p] and faces[f, (k + 1) % 3] == order[r]:
+            f0 = faces[f, k]
+            f1 = faces[f, (k + 1) % 3]
+            if (f0 == po and f1 == ro) or (f0 == ro and f1 == po):
                 xo = faces[f, (k + 2) % 3]
+                flip = 1 if f0 == ro else 0
         ctx = _s1_context(n1, cscore, prev_new)
         x = dec_of[xo]
         sym = ESC
@@ -532,11 +533,15 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
                 rc.enc_bit(st, out, probs, SM_NEW + (1 if n1 > 0 else 0), 0)
                 rc.enc_raw(st, out, x, _bitlen(nv - 1))
         fvisited[f] = True
-        out_faces[done, 0] = p
-        out_faces[done, 1] = r
+        rc.enc_bit(st, out, probs, SM_FLIP + prev_flip, flip)
+        prev_flip = flip
+        u0 = r if flip else p
+        u1 = p if flip else r
+        out_faces[done, 0] = u0
+        out_faces[done, 1] = u1
         out_faces[done, 2] = x
         done += 1
-        _apply_triangle(B, p, r, x)
+        _apply_triangle(B, u0, u1, x, p, r)
         if not _room(B, 4, 4):
             return -1, 2
     if B[8][BS_LIVE] != 0:
@@ -556,6 +561,7 @@ def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
     nv = 0
     done = 0
     prev_new = 0
+    prev_flip = 0
     tri = np.empty(3, np.int64)
     while done < nf:
         if rc.dec_failed(st):
@@ -583,8 +589,7 @@ def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
             out_faces[done, 1] = tri[1]
             out_faces[done, 2] = tri[2]
             done += 1
-            for k in range(3):
-                _add(B, 2, tri[(k + 1) % 3], tri[k], tri[(k + 2) % 3])
+            _apply_triangle(B, tri[0], tri[1], tri[2], -1, -1)
             continue
         ev = B[0]
         p = np.int64(ev[s, 0])
@@ -614,11 +619,15 @@ def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
                 return nv, ST_ERROR
         if x == p or x == r:
             return nv, ST_ERROR
-        out_faces[done, 0] = p
-        out_faces[done, 1] = r
+        flip = rc.dec_bit(st, data, probs, SM_FLIP + prev_flip)
+        prev_flip = flip
+        u0 = r if flip else p
+        u1 = p if flip else r
+        out_faces[done, 0] = u0
+        out_faces[done, 1] = u1
         out_faces[done, 2] = x
         done += 1
-        _apply_triangle(B, p, r, x)
+        _apply_triangle(B, u0, u1, x, p, r)
     if B[8][BS_LIVE] != 0 or rc.dec_failed(st):
         return nv, ST_ERROR
     return nv, ST_DONE
@@ -674,6 +683,7 @@ def encode_tets(st, out, tets, fkey, ftet, B, dec_of, order, pred, nv0, out_tets
     c2seq = np.empty(MAX_C2, np.int64)
     nv = nv0
     prev_esc = 0
+    prev_flip = 0
     for done in range(m):
         s = _pop(B)
         if s == -1:
@@ -705,6 +715,20 @@ def encode_tets(st, out, tets, fkey, ftet, B, dec_of, order, pred, nv0, out_tets
                 if cand[i] == d:
                     sym = i
                     break
+        # orientation: (a, c, b, d) unless the mesh is folded here (zero-volume tets)
+        w0 = tets[t, 0]
+        w1 = tets[t, 1]
+        w2 = tets[t, 2]
+        inv = 0
+        for i in range(4):
+            wi = ao if i == 0 else (co if i == 1 else (bo if i == 2 else do))
+            pi = 0 if wi == w0 else (1 if wi == w1 else (2 if wi == w2 else 3))
+            for j in range(i + 1, 4):
+                wj = ao if j == 0 else (co if j == 1 else (bo if j == 2 else do))
+                pj = 0 if wj == w0 else (1 if wj == w1 else (2 if wj == w2 else 3))
+                if pi > pj:
+                    inv += 1
+        flip = inv & 1
         rc.enc_sym(st, out, probs, TM_C1 + ctx * 16, 4, sym)
         if sym == ESC:
             kctx = TM_KIND + 4 * ((1 if n1 > 0 else 0) + (2 if n2 > 0 else 0) + 4 * prev_esc)
@@ -732,12 +756,15 @@ def encode_tets(st, out, tets, fkey, ftet, B, dec_of, order, pred, nv0, out_tets
             prev_esc = 1
         else:
             prev_esc = 0
+        rc.enc_bit(st, out, probs, TM_FLIP + prev_flip, flip)
+        prev_flip = flip
+        t1 = b if flip else c
+        t2 = c if flip else b
         out_tets[done, 0] = a
-        out_tets[done, 1] = c
-        out_tets[done, 2] = b
+        out_tets[done, 1] = t1
+        out_tets[done, 2] = t2
         out_tets[done, 3] = d
-        if not _apply_tet(B, a, b, c, d):
-            return nv, 3
+        _apply_tet(B, a, t1, t2, d)
         if not _room(B, 4, 4):
             return nv, 4
     if B[8][BS_LIVE] != 0:
@@ -763,6 +790,7 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
     nv = tstate[0]
     done = tstate[1]
     prev_esc = tstate[2]
+    prev_flip = tstate[3]
     n_out = 0
     status = ST_DONE
     while done < m:
@@ -824,18 +852,21 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         if d == a or d == b or d == c:
             status = ST_ERROR
             break
+        flip = rc.dec_bit(st, data, probs, TM_FLIP + prev_flip)
+        prev_flip = flip
+        t1 = b if flip else c
+        t2 = c if flip else b
         out_tets[n_out, 0] = a
-        out_tets[n_out, 1] = c
-        out_tets[n_out, 2] = b
+        out_tets[n_out, 1] = t1
+        out_tets[n_out, 2] = t2
         out_tets[n_out, 3] = d
         n_out += 1
         done += 1
-        if not _apply_tet(B, a, b, c, d):
-            status = ST_ERROR
-            break
+        _apply_tet(B, a, t1, t2, d)
     if status == ST_DONE and (B[8][BS_LIVE] != 0 or rc.dec_failed(st)):
         status = ST_ERROR
     tstate[0] = nv
     tstate[1] = done
     tstate[2] = prev_esc
+    tstate[3] = prev_flip
     return n_out, status

@@ -74,7 +74,7 @@ class EncodedConnectivity:
 
 
 def _sorted_halfedges(faces: np.ndarray):
-    he = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1).reshape(-1, 2)
+    he = np.sort(np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1).reshape(-1, 2), axis=1)
     fid = np.repeat(np.arange(len(faces), dtype=np.int64), 3)
     order = np.lexsort((he[:, 1], he[:, 0]))
     return np.ascontiguousarray(he[order], dtype=np.int64), fid[order]
@@ -222,7 +222,7 @@ class ConnectivityDecoder:
         for f in self._faces:
             K._add(self._B, 3, int(f[0]), int(f[1]), int(f[2]))
         self._tst = rc.dec_state()
-        self._tstate = np.array([self._nbv, 0, 0], np.int64)
+        self._tstate = np.array([self._nbv, 0, 0, 0], np.int64)
         self._probs = np.full(K.TM_SIZE, rc.PROB_INIT, np.uint16)
         if self.n_tets:
             rc.dec_init(self._tst, self._tdata)

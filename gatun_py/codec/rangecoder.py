@@ -48,7 +48,7 @@ from numba import njit
 
 from ..errors import CorruptFileError
 
-PROB_BITS = 12
+PROB_BITS = 15
 PROB_ONE = 1 << PROB_BITS
 PROB_INIT = PROB_ONE // 2
 ADAPT_SHIFT = 5

@@ -1,0 +1,152 @@
+"""Time-critical rendering (paper 5, 6.3): map a frame-time budget to a level and a ratio.
+
+End-to-end time is close to linear in the tets handled, so a file's frame time is modelled as::
+
+    T = fixed_s + decode_s_per_tet * (tets of the stored level decoded)
+                + render_s_per_tet * (tets left after on-the-fly simplification)
+
+``fixed_s`` covers what does not scale with tets (ray set-up per pixel, boundary intersection,
+PNG output). The three coefficients are calibrated per file, image size and mode on first use
+(two probe renders of coarse stored levels) and kept in the user's cache directory.
+
+Given a budget B, :func:`plan_for_budget` walks the stored levels from the finest: the first level
+whose own ratio fits is taken as is; if it does not fit but can be simplified on the fly far
+enough before the next level starts, the finest such ratio is taken (starting from that level).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import platform
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+
+@dataclass(frozen=True)
+class LevelSize:
+    level: int
+    merges: int  # N_i: merges of the full forest applied in this stored level
+    tets: int
+
+
+@dataclass(frozen=True)
+class TimeModel:
+    fixed_s: float
+    decode_s_per_tet: float
+    render_s_per_tet: float
+
+    def predict(self, decoded_tets: float, rendered_tets: float) -> float:
+        return self.fixed_s + self.decode_s_per_tet * decoded_tets + self.render_s_per_tet * rendered_tets
+
+
+@dataclass(frozen=True)
+class BudgetPlan:
+    level: int  # stored level to start from
+    merges: int  # target number of merges N (>= that level's N_i)
+    predicted_s: float
+    feasible: bool  # False: even the coarsest level is predicted to exceed the budget
+
+
+def estimated_tets(levels: list[LevelSize], merges: int) -> float:
+    """Tets left after ``merges`` merges, interpolated linearly between stored levels."""
+    ls = sorted(levels, key=lambda x: x.merges)
+    if merges <= ls[0].merges:
+        return float(ls[0].tets)
+    for lo, hi in zip(ls[:-1], ls[1:]):
+        if merges <= hi.merges:
+            f = (merges - lo.merges) / max(hi.merges - lo.merges, 1)
+            return lo.tets + f * (hi.tets - lo.tets)
+    return float(ls[-1].tets)
+
+
+def plan_for_budget(levels: list[LevelSize], model: TimeModel, budget_s: float, max_merges: int) -> BudgetPlan:
+    """The finest simplification whose predicted frame time is within ``budget_s``.
+
+    Examples
+    --------
+    >>> lv = [LevelSize(0, 0, 1000), LevelSize(1, 50, 500), LevelSize(2, 75, 250)]
+    >>> m = TimeModel(0.01, 1e-4, 1e-4)
+    >>> plan_for_budget(lv, m, 0.2, 80)       # level 0 needs 0.21 s, level 1 0.11 s
+    BudgetPlan(level=0, merges=..., predicted_s=..., feasible=True)
+    """
+    ls = sorted(levels, key=lambda x: x.merges)
+    for i, lv in enumerate(ls):
+        t_own = model.predict(lv.tets, lv.tets)
+        if t_own <= budget_s:
+            return BudgetPlan(lv.level, lv.merges, t_own, True)
+        end = ls[i + 1].merges if i + 1 < len(ls) else max_merges
+        if end <= lv.merges:
+            continue
+        # On the fly from this level: decoding cost fixed, rendering shrinks with the merges.
+        t_end = model.predict(lv.tets, estimated_tets(ls, end))
+        if t_end > budget_s:
+            continue
+        lo, hi = lv.merges, end  # t(lo) > budget >= t(hi): bisect for the smallest fitting N
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if model.predict(lv.tets, estimated_tets(ls, mid)) <= budget_s:
+                hi = mid
+            else:
+                lo = mid
+        return BudgetPlan(lv.level, hi, model.predict(lv.tets, estimated_tets(ls, hi)), True)
+    last = ls[-1]
+    return BudgetPlan(last.level, max(last.merges, max_merges), model.predict(last.tets, estimated_tets(ls, max_merges)),
+                      False)
+
+
+def fit_time_model(probes: list[dict]) -> TimeModel:
+    """Coefficients from probe renders, each a dict with ``decoded_tets``, ``rendered_tets``,
+    ``decode_s`` (decode + filter), ``render_s`` and ``total_s``."""
+    dec = sum(p["decode_s"] for p in probes) / max(sum(p["decoded_tets"] for p in probes), 1)
+    ps = sorted(probes, key=lambda p: p["rendered_tets"])
+    a, b = ps[0], ps[-1]
+    if b["rendered_tets"] > a["rendered_tets"]:
+        ren = max((b["render_s"] - a["render_s"]) / (b["rendered_tets"] - a["rendered_tets"]), 0.0)
+    else:
+        ren = b["render_s"] / max(b["rendered_tets"], 1)
+    fixed = max(min(p["total_s"] - dec * p["decoded_tets"] - ren * p["rendered_tets"] for p in probes), 0.0)
+    return TimeModel(fixed, dec, ren)
+
+
+# -- calibration cache ------------------------------------------------------------------------
+
+def cache_dir() -> Path:
+    """Where calibrations live: $TETC_CACHE_DIR, else $XDG_CACHE_HOME/tetc, else ~/.cache/tetc."""
+    if os.environ.get("TETC_CACHE_DIR"):
+        return Path(os.environ["TETC_CACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "tetc"
+
+
+def calibration_key(file_id: str, size: tuple[int, int], mode: str, extra: str = "") -> str:
+    machine = f"{platform.node()}|{platform.machine()}|{os.cpu_count()}|{os.environ.get('NUMBA_NUM_THREADS', '')}"
+    return hashlib.sha1(f"{machine}|{file_id}|{size[0]}x{size[1]}|{mode}|{extra}".encode()).hexdigest()[:20]
+
+
+def load_model(key: str) -> TimeModel | None:
+    try:
+        data = json.loads((cache_dir() / "timing.json").read_text())
+        return TimeModel(**data[key])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def save_model(key: str, model: TimeModel) -> None:
+    d = cache_dir()
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        path = d / "timing.json"
+        try:
+            data = json.loads(path.read_text())
+            if not isinstance(data, dict):
+                data = {}
+        except (OSError, ValueError):
+            data = {}
+        data[key] = asdict(model)
+        tmp = path.with_suffix(f".tmp{os.getpid()}")
+        tmp.write_text(json.dumps(data, indent=1))
+        os.replace(tmp, path)
+    except OSError:
+        pass  # a read-only home only costs a re-calibration next time

@@ -13,7 +13,7 @@ removals); only the symbol I/O differs. Decoders check every index and count the
 with an error code instead of touching memory out of bounds.
 
 Border arrays, passed as a tuple ``B``:
-``ev (cap,3) int32`` element vertices, ``eseq (cap) int64`` sequence number (-1: free slot),
+``ev (cap,4) int32`` element vertices (+ apex data), ``eseq (cap) int64`` sequence number (-1: free slot),
 ``lnext, lprev (3*cap) int32`` incidence lists, ``vhead (nv) int32`` list heads,
 ``fstack (cap) int32`` free slots, ``q (qcap) int32`` / ``qs (qcap) int64`` FIFO ring,
 ``bs int64`` scalars (see ``BS_*``).
@@ -56,7 +56,7 @@ def new_border(n_vertices: int, cap: int, qcap: int):
     """Allocate an empty border for ``n_vertices`` vertices."""
     cap = max(int(cap), 16)
     qcap = max(int(qcap), 16)
-    ev = np.zeros((cap, 3), np.int32)
+    ev = np.full((cap, 4), -1, np.int32)
     eseq = np.full(cap, -1, np.int64)
     lnext = np.full(3 * cap, -1, np.int32)
     lprev = np.full(3 * cap, -1, np.int32)
@@ -76,7 +76,7 @@ def grow_border(B, need_slots: int, need_queue: int):
     nfree = int(bs[BS_NFREE])
     if nfree < need_slots:
         new_cap = max(2 * cap, cap + need_slots)
-        ev = np.concatenate([ev, np.zeros((new_cap - cap, 3), np.int32)])
+        ev = np.concatenate([ev, np.full((new_cap - cap, 4), -1, np.int32)])
         eseq = np.concatenate([eseq, np.full(new_cap - cap, -1, np.int64)])
         lnext = np.concatenate([lnext, np.full(3 * (new_cap - cap), -1, np.int32)])
         lprev = np.concatenate([lprev, np.full(3 * (new_cap - cap), -1, np.int32)])
@@ -110,14 +110,16 @@ def _room(B, slots, entries):
 
 
 @njit(cache=True)
-def _add(B, k, v0, v1, v2):
-    """Add an element with ``k`` listed vertices (v2 is stored even when k == 2); returns its slot."""
+def _add(B, k, v0, v1, v2, v3):
+    """Add an element with ``k`` listed vertices (the rest of v0..v3 is stored as data: the apex
+    of the triangle or tet that created it, for the geometry coder); returns its slot."""
     ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
     bs[BS_NFREE] -= 1
     s = fstack[bs[BS_NFREE]]
     ev[s, 0] = v0
     ev[s, 1] = v1
     ev[s, 2] = v2
+    ev[s, 3] = v3
     seq = bs[BS_SEQ]
     bs[BS_SEQ] = seq + 1
     eseq[s] = seq
@@ -350,16 +352,16 @@ def _apply_tet(B, t0, t1, t2, t3):
     for k in range(3):
         # outward faces opposite t0, t1, t2 (TET_FACES)
         if k == 0:
-            x, y, z = t1, t2, t3
+            x, y, z, w = t1, t2, t3, t0
         elif k == 1:
-            x, y, z = t0, t3, t2
+            x, y, z, w = t0, t3, t2, t1
         else:
-            x, y, z = t0, t1, t3
+            x, y, z, w = t0, t1, t3, t2
         s, same = _find_face(B, x, y, z)
         if s != -1:
             _remove(B, 3, s)
         else:
-            _add(B, 3, x, z, y)
+            _add(B, 3, x, z, y, w)
 
 
 @njit(cache=True)
@@ -413,7 +415,7 @@ def _apply_triangle(B, u0, u1, u2, p, r):
         if s != -1:
             _remove(B, 2, s)
         else:
-            _add(B, 2, h1, h0, apex)
+            _add(B, 2, h1, h0, apex, -1)
 
 
 @njit(cache=True)
@@ -476,7 +478,7 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
                     rc.enc_bit(st, out, probs, SM_SEED + k, 1)
                     dec_of[v] = nv
                     order[nv] = v
-                    for j in range(3):
+                    for j in range(2):
                         pred[nv, j] = tri[j] if j < k else -1
                     nv += 1
                 else:
@@ -526,7 +528,7 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
                 order[nv] = xo
                 pred[nv, 0] = p
                 pred[nv, 1] = r
-                pred[nv, 2] = ev[s, 2]
+                pred[nv, 3] = ev[s, 2]
                 nv += 1
                 prev_new = 1
             else:
@@ -574,7 +576,7 @@ def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
                 if rc.dec_bit(st, data, probs, SM_SEED + k) == 1:
                     if nv >= n_points:
                         return nv, ST_ERROR
-                    for j in range(3):
+                    for j in range(2):
                         pred[nv, j] = tri[j] if j < k else -1
                     tri[k] = nv
                     nv += 1
@@ -610,7 +612,7 @@ def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
             x = nv
             pred[nv, 0] = p
             pred[nv, 1] = r
-            pred[nv, 2] = apex
+            pred[nv, 3] = apex
             nv += 1
             prev_new = 1
         else:
@@ -692,6 +694,7 @@ def encode_tets(st, out, tets, fkey, ftet, B, dec_of, order, pred, nv0, out_tets
         a = np.int64(ev[s, 0])
         b = np.int64(ev[s, 1])
         c = np.int64(ev[s, 2])
+        behind = np.int64(ev[s, 3])
         ao = order[a]
         bo = order[b]
         co = order[c]
@@ -740,6 +743,7 @@ def encode_tets(st, out, tets, fkey, ftet, B, dec_of, order, pred, nv0, out_tets
                 pred[nv, 0] = a
                 pred[nv, 1] = b
                 pred[nv, 2] = c
+                pred[nv, 3] = behind
                 nv += 1
             else:
                 j = -1
@@ -811,6 +815,7 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         a = np.int64(ev[s, 0])
         b = np.int64(ev[s, 1])
         c = np.int64(ev[s, 2])
+        behind = np.int64(ev[s, 3])
         n1, n2 = _gather_face(B, s, cand, cscore, cseq, c2, c2seq)
         _remove(B, 3, s)
         ctx = _c1_context(n1, cscore, prev_esc)
@@ -833,6 +838,7 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
                 pred[nv, 0] = a
                 pred[nv, 1] = b
                 pred[nv, 2] = c
+                pred[nv, 3] = behind
                 nv += 1
             elif kind == 1:
                 j = rc.dec_uint(st, data, probs, TM_C2 + (rc.INT_MODEL_SIZE if n2 > 8 else 0))

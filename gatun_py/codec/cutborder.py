@@ -49,8 +49,10 @@ class EncodedConnectivity:
         Counts the decoder needs (stored in the container's section header).
     vertex_order : (n_points,) int64
         ``vertex_order[k]`` = original id of the k-th decoded vertex.
-    predictors : (n_points, 3) int32
-        Predictor vertices (decode ids, -1 for none) of every vertex, in decode order.
+    predictors : (n_points, 4) int32
+        Geometry refs of every vertex in decode order (decode ids, -1 for none): the face
+        (a, b, c) it closes and the apex behind it (interior), or (p, r, -1, apex) for a boundary
+        vertex attached across edge (p, r); see :mod:`gatun_py.codec.geometry`.
     boundary : (n_boundary_faces, 3) int32
         Boundary faces in decode order and decode ids (what the decoder will produce).
     tets : (n_tets, 4) int32
@@ -123,7 +125,7 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary: np.ndarra
 
     dec_of = np.full(max(n, 1), -1, np.int64)
     order = np.full(max(n, 1), -1, np.int64)
-    pred = np.full((max(n, 1), 3), -1, np.int32)
+    pred = np.full((max(n, 1), 4), -1, np.int32)
     out_faces = np.zeros((nf, 3), np.int32)
     hkey, hface = _sorted_halfedges(faces) if nf else (np.zeros((0, 2), np.int64), np.zeros(0, np.int64))
 
@@ -150,7 +152,7 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary: np.ndarra
         pred[:] = pred_b
         B = K.new_border(n, nf + 3 * m + 8, nf + 3 * m + 8)
         for f in out_faces:
-            K._add(B, 3, int(f[0]), int(f[1]), int(f[2]))
+            K._add(B, 3, int(f[0]), int(f[1]), int(f[2]), -1)
         res = K.encode_tets(st, out, tets, fkey, ftet, B, dec_of, order, pred, nbv, out_tets)
         run_tets.result = res
         run_tets.peak = int(B[8][K.BS_PEAK])
@@ -189,7 +191,7 @@ class ConnectivityDecoder:
             raise CorruptFileError("corrupt connectivity header: inconsistent vertex counts")
         self._bdata = np.frombuffer(boundary_code, dtype=np.uint8)
         self._tdata = np.frombuffer(tet_code, dtype=np.uint8)
-        self.predictors = np.full((max(self.n_points, 1), 3), -1, np.int32)
+        self.predictors = np.full((max(self.n_points, 1), 4), -1, np.int32)
         self.peak_border = 0
         self._tstate = None
 
@@ -220,7 +222,7 @@ class ConnectivityDecoder:
         cap = max(64, 2 * nf)
         self._B = K.new_border(self.n_points, cap, cap)
         for f in self._faces:
-            K._add(self._B, 3, int(f[0]), int(f[1]), int(f[2]))
+            K._add(self._B, 3, int(f[0]), int(f[1]), int(f[2]), -1)
         self._tst = rc.dec_state()
         self._tstate = np.array([self._nbv, 0, 0, 0], np.int64)
         self._probs = np.full(K.TM_SIZE, rc.PROB_INIT, np.uint16)

@@ -1,0 +1,53 @@
+"""``tetc info`` for ``.tetc`` files: sizes, counts and the codec's figures."""
+
+from __future__ import annotations
+
+from .tetcfile import TetcReader
+
+
+def tetc_info(path) -> dict:
+    """Describe a ``.tetc`` file without decoding it.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    dict
+        ``points``, ``tets``, ``boundary_faces``, ``bbox``, ``scalar``, ``scalar_range``,
+        ``source``, ``bytes_total``, ``bits_per_tet_connectivity`` (boundary and tet sections of
+        level 0 over its tets), ``bits_per_vertex_geometry`` (geometry section of level 0 over its
+        points), ``sections`` (name -> bytes) and ``levels`` (one dict per stored level).
+    """
+    r = TetcReader(path)
+    c = r.container
+    sizes = {name: c.section_size(name) for name in c.section_names()}
+    lv0 = r.levels[0]
+    i0 = lv0["level"]
+    conn = sizes.get(f"L{i0}/boundary", 0) + sizes.get(f"L{i0}/tets", 0)
+    geo = sizes.get(f"L{i0}/geometry", 0)
+    levels = []
+    for lv in r.levels:
+        i = lv["level"]
+        levels.append({
+            "level": i,
+            "ratio": lv.get("ratio", 0.0),
+            "points": lv["points"],
+            "tets": lv["tets"],
+            "bytes": sum(v for k, v in sizes.items() if k.startswith(f"L{i}/")),
+        })
+    return {
+        "points": r.meta.get("points"),
+        "tets": r.meta.get("tets"),
+        "boundary_faces": r.meta.get("boundary_faces"),
+        "bbox": r.meta.get("bbox"),
+        "scalar": r.meta.get("scalar"),
+        "scalar_range": r.meta.get("scalar_range"),
+        "source": r.meta.get("source"),
+        "bytes_total": c.size,
+        "bits_per_tet_connectivity": round(8.0 * conn / lv0["tets"], 4) if lv0["tets"] else 0.0,
+        "bits_per_vertex_geometry": round(8.0 * geo / lv0["points"], 4) if lv0["points"] else 0.0,
+        "sections": sizes,
+        "levels": levels,
+    }

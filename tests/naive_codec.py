@@ -1,0 +1,188 @@
+"""Slow, obviously correct references for the codec kernels.
+
+* :class:`NaiveRangeEncoder` / :class:`NaiveRangeDecoder`: the binary range coder written with
+  Python integers straight from its definition (LZMA's carry-less-cache scheme), so the numba
+  kernels' bytes can be compared one for one.
+* :func:`naive_traversal_check`: replays the cut-border traversal with Python sets and a deque
+  from the boundary faces and the decoded tets, checking the paper's invariants: every tet is
+  attached to the oldest live face of the current surface T, its other faces close faces of T or
+  join it, and T is empty at the end.
+* :func:`canonical_tets`: order-free comparison form of a tet array (sorted vertex ids + parity).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+PROB_BITS = 15
+PROB_ONE = 1 << PROB_BITS
+ADAPT = 5
+TOP = 1 << 24
+
+
+class NaiveRangeEncoder:
+    def __init__(self):
+        self.low = 0
+        self.range = 0xFFFFFFFF
+        self.cache = 0
+        self.cache_size = 1
+        self.out = bytearray()
+
+    def _shift_low(self):
+        if self.low < 0xFF000000 or self.low >= 1 << 32:
+            carry = self.low >> 32
+            temp = self.cache
+            while True:
+                self.out.append((temp + carry) & 0xFF)
+                temp = 0xFF
+                self.cache_size -= 1
+                if self.cache_size == 0:
+                    break
+            self.cache = (self.low >> 24) & 0xFF
+        self.cache_size += 1
+        self.low = (self.low & 0x00FFFFFF) << 8
+
+    def _normalize(self):
+        while self.range < TOP:
+            self.range <<= 8
+            self._shift_low()
+
+    def bit(self, probs, i, b):
+        p = probs[i]
+        bound = (self.range >> PROB_BITS) * p
+        if b == 0:
+            self.range = bound
+            probs[i] = p + ((PROB_ONE - p) >> ADAPT)
+        else:
+            self.low += bound
+            self.range -= bound
+            probs[i] = p - (p >> ADAPT)
+        self._normalize()
+
+    def raw(self, value, nbits):
+        for k in range(nbits - 1, -1, -1):
+            self.range >>= 1
+            if (value >> k) & 1:
+                self.low += self.range
+            self._normalize()
+
+    def sym(self, probs, base, nbits, s):
+        node = 1
+        for k in range(nbits - 1, -1, -1):
+            b = (s >> k) & 1
+            self.bit(probs, base + node, b)
+            node = 2 * node + b
+
+    def finish(self) -> bytes:
+        for _ in range(5):
+            self._shift_low()
+        return bytes(self.out)
+
+
+class NaiveRangeDecoder:
+    def __init__(self, data: bytes):
+        self.data = data
+        self.pos = 0
+        self.range = 0xFFFFFFFF
+        self.code = 0
+        self.overrun = False
+        if self._byte() != 0:
+            raise ValueError("bad first byte")
+        for _ in range(4):
+            self.code = (self.code << 8) | self._byte()
+
+    def _byte(self):
+        if self.pos < len(self.data):
+            b = self.data[self.pos]
+        else:
+            b = 0
+            self.overrun = True
+        self.pos += 1
+        return b
+
+    def _normalize(self):
+        while self.range < TOP:
+            self.range <<= 8
+            self.code = ((self.code << 8) | self._byte()) & 0xFFFFFFFF
+
+    def bit(self, probs, i):
+        p = probs[i]
+        bound = (self.range >> PROB_BITS) * p
+        if self.code < bound:
+            self.range = bound
+            probs[i] = p + ((PROB_ONE - p) >> ADAPT)
+            b = 0
+        else:
+            self.code -= bound
+            self.range -= bound
+            probs[i] = p - (p >> ADAPT)
+            b = 1
+        self._normalize()
+        return b
+
+    def raw(self, nbits):
+        v = 0
+        for _ in range(nbits):
+            self.range >>= 1
+            b = 1 if self.code >= self.range else 0
+            if b:
+                self.code -= self.range
+            v = 2 * v + b
+            self._normalize()
+        return v
+
+    def sym(self, probs, base, nbits):
+        node = 1
+        for _ in range(nbits):
+            node = 2 * node + self.bit(probs, base + node)
+        return node - (1 << nbits)
+
+
+def _parity(row) -> int:
+    row = list(row)
+    inv = sum(1 for i in range(4) for j in range(i + 1, 4) if row[i] > row[j])
+    return inv & 1
+
+
+def canonical_tets(tets) -> list[tuple]:
+    """Sorted list of (sorted vertex ids..., permutation parity): equal for two tet arrays that
+    hold the same oriented tets in any order and any even rotation."""
+    return sorted(tuple(sorted(int(x) for x in t)) + (_parity(t),) for t in np.asarray(tets))
+
+
+def naive_traversal_check(boundary, tets) -> None:
+    """Assert that ``tets`` (decode order) is a FIFO cut-border traversal starting at ``boundary``.
+
+    Faces are compared as vertex sets (the coder handles folded orientations with a flip bit).
+    """
+    live: dict[frozenset, int] = {}
+    queue: deque = deque()
+    seq = 0
+    for f in boundary:
+        key = frozenset(int(x) for x in f)
+        assert key not in live, "boundary face repeated"
+        live[key] = seq
+        queue.append((key, seq))
+        seq += 1
+    for t in tets:
+        t = [int(x) for x in t]
+        assert len(set(t)) == 4, "tet with a repeated vertex"
+        while True:
+            assert queue, "surface T emptied before the last tet"
+            key, s = queue.popleft()
+            if live.get(key) == s:
+                break
+        # the current face is the face opposite the tet's last vertex
+        assert key == frozenset(t[:3]), "tet not attached to the oldest live face of T"
+        del live[key]
+        for k in range(3):
+            f = frozenset(t[:k] + t[k + 1:])
+            if f in live:
+                del live[f]
+            else:
+                live[f] = seq
+                queue.append((f, seq))
+                seq += 1
+    assert not live, "faces left on T after the last tet"

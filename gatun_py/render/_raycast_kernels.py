@@ -20,10 +20,12 @@ equal to the in-memory one.
 
 Face table
 ----------
-Faces live in an open-addressing hash keyed by the sorted vertex triple (a < b < c). Side 0 of a
-face is the tet in which (a, b, c) is wound outward, side 1 the other one; ``hopp[slot, side]``
-holds that tet's fourth vertex (or -1), which is all a ray needs to step through the tet.
-``hpark[slot]`` heads a linked list of subsegments parked on the face.
+Faces live in an open-addressing hash keyed by the sorted vertex triple (a < b < c), in ``htab[slot, 0..2]``.
+``htab[slot, 3..4]`` describe the (up to) two tets on the face as ``2 * e + p``: ``e`` the tet's
+fourth vertex, ``p`` = 0 if (a, b, c) is wound outward in it. That is all a ray needs to step
+through the tet: it takes the tet whose fourth vertex is not the one of the tet it came from
+(this also works across zero-volume tets, where "which side" is not well defined).
+``htab[slot, 5]`` heads a linked list of subsegments parked on the face.
 """
 
 from __future__ import annotations
@@ -103,6 +105,13 @@ def _face_values(P, dens, dx, dy, dz, a, b, c):
     wa, _ = _side(P, dx, dy, dz, b, c)
     wb, _ = _side(P, dx, dy, dz, c, a)
     wc, _ = _side(P, dx, dy, dz, a, b)
+    return _face_values_w(P, dens, dx, dy, dz, a, b, c, wa, wb, wc)
+
+
+@njit(cache=True, inline="always")
+def _face_values_w(P, dens, dx, dy, dz, a, b, c, wa, wb, wc):
+    """:func:`_face_values` with the sides of (b, c), (c, a), (a, b) already known (up to a
+    common sign)."""
     ta = P[a, 0] * dx + P[a, 1] * dy + P[a, 2] * dz
     tb = P[b, 0] * dx + P[b, 1] * dy + P[b, 2] * dz
     tc = P[c, 0] * dx + P[c, 1] * dy + P[c, 2] * dz
@@ -173,62 +182,63 @@ def _chord_midpoint(P, dens, dx, dy, dz, a, b, c):
 # ---------------------------------------------------------------------------------------------
 # face hash
 @njit(cache=True, inline="always")
-def _hash0(a, b, c, mask):
-    h = (np.int64(a) * 73856093) ^ (np.int64(b) * 19349663) ^ (np.int64(c) * 83492791)
-    return h & mask
+def _hash0(a, b, c, mul, mask):
+    # Faces are grouped by their smallest vertex id: meshes number neighbouring vertices close
+    # together, so the faces a ray meets in a row sit in nearby slots (far fewer cache misses
+    # than a scattering hash). ``mul`` (a power of two) = slots per vertex id.
+    mix = (np.int64(b) * 73856093) ^ (np.int64(c) * 19349663)
+    return (np.int64(a) * mul + (mix & (mul - 1))) & mask
 
 
 @njit(cache=True)
-def _hash_find(hkey, a, b, c):
-    mask = hkey.shape[0] - 1
-    h = _hash0(a, b, c, mask)
+def _hash_find(htab, mul, a, b, c):
+    mask = htab.shape[0] - 1
+    h = _hash0(a, b, c, mul, mask)
     while True:
-        k0 = hkey[h, 0]
+        k0 = htab[h, 0]
         if k0 == -1:
             return -1
-        if k0 == a and hkey[h, 1] == b and hkey[h, 2] == c:
+        if k0 == a and htab[h, 1] == b and htab[h, 2] == c:
             return h
         h = (h + 1) & mask
 
 
 @njit(cache=True)
-def _hash_insert(hkey, hopp, hpark, hcount, a, b, c):
-    mask = hkey.shape[0] - 1
-    h = _hash0(a, b, c, mask)
+def _hash_insert(htab, mul, hcount, a, b, c):
+    mask = htab.shape[0] - 1
+    h = _hash0(a, b, c, mul, mask)
     while True:
-        k0 = hkey[h, 0]
+        k0 = htab[h, 0]
         if k0 == -1:
-            hkey[h, 0] = a
-            hkey[h, 1] = b
-            hkey[h, 2] = c
-            hopp[h, 0] = -1
-            hopp[h, 1] = -1
-            hpark[h] = -1
+            htab[h, 0] = a
+            htab[h, 1] = b
+            htab[h, 2] = c
+            htab[h, 3] = -1
+            htab[h, 4] = -1
+            htab[h, 5] = -1
             hcount[0] += 1
             return h
-        if k0 == a and hkey[h, 1] == b and hkey[h, 2] == c:
+        if k0 == a and htab[h, 1] == b and htab[h, 2] == c:
             return h
         h = (h + 1) & mask
 
 
 @njit(cache=True)
-def rehash(hkey, hopp, hpark, new_cap):
+def rehash(htab, new_cap, new_mul):
     """Copy the face table into one of ``new_cap`` (a power of two) slots."""
-    nkey = np.full((new_cap, 3), -1, dtype=np.int32)
-    nopp = np.full((new_cap, 2), -1, dtype=np.int32)
-    npark = np.full(new_cap, -1, dtype=np.int32)
+    ntab = np.full((new_cap, 6), -1, dtype=np.int32)
     cnt = np.zeros(1, dtype=np.int64)
-    for h in range(hkey.shape[0]):
-        if hkey[h, 0] != -1:
-            g = _hash_insert(nkey, nopp, npark, cnt, hkey[h, 0], hkey[h, 1], hkey[h, 2])
-            nopp[g, 0] = hopp[h, 0]
-            nopp[g, 1] = hopp[h, 1]
-            npark[g] = hpark[h]
-    return nkey, nopp, npark
+    for h in range(htab.shape[0]):
+        if htab[h, 0] != -1:
+            g = _hash_insert(ntab, new_mul, cnt, htab[h, 0], htab[h, 1], htab[h, 2])
+            ntab[g, 3] = htab[h, 3]
+            ntab[g, 4] = htab[h, 4]
+            ntab[g, 5] = htab[h, 5]
+    return ntab
 
 
 @njit(cache=True)
-def insert_tets(tets, hkey, hopp, hpark, hcount, nodes, park_ver, in_list, seg_mark, mark, active):
+def insert_tets(tets, htab, mul, hcount, nodes, park_ver, in_list, seg_mark, mark, active):
     """Enter a batch of tets into the face table; collect the segments parked on their faces.
 
     ``nodes`` (k, 3) = (item, version, next) is the pool of park-list nodes; a node is live
@@ -241,12 +251,15 @@ def insert_tets(tets, hkey, hopp, hpark, hcount, nodes, park_ver, in_list, seg_m
     for t in range(tets.shape[0]):
         for k in range(4):
             a, b, c, par = _sort3(tets[t, TET_FACES[k, 0]], tets[t, TET_FACES[k, 1]], tets[t, TET_FACES[k, 2]])
-            slot = _hash_insert(hkey, hopp, hpark, hcount, a, b, c)
-            if hopp[slot, par] == -1:
-                hopp[slot, par] = tets[t, k]
+            slot = _hash_insert(htab, mul, hcount, a, b, c)
+            code = 2 * tets[t, k] + par  # fourth vertex, and whether (a, b, c) is wound outward in it
+            if htab[slot, 3] == -1:
+                htab[slot, 3] = code
+            elif htab[slot, 4] == -1:
+                htab[slot, 4] = code
             else:
-                conflicts += 1
-            node = hpark[slot]
+                conflicts += 1  # a third tet on one face: not a conforming mesh
+            node = htab[slot, 5]
             while node != -1:
                 item = nodes[node, 0]
                 if nodes[node, 1] == park_ver[item] and in_list[item]:
@@ -257,12 +270,12 @@ def insert_tets(tets, hkey, hopp, hpark, hcount, nodes, park_ver, in_list, seg_m
                         active[n_active] = s
                         n_active += 1
                 node = nodes[node, 2]
-            hpark[slot] = -1
+            htab[slot, 5] = -1
     return n_active, conflicts
 
 
 @njit(cache=True)
-def park(active, n_active, seg_face, seg_state, hkey, hopp, hpark, hcount, nodes, n_nodes, park_ver, in_list,
+def park(active, n_active, seg_face, seg_state, htab, mul, hcount, nodes, n_nodes, park_ver, in_list,
          park_face):
     """Hang the unfinished subsegments of ``active`` on the faces where they stopped.
 
@@ -275,9 +288,11 @@ def park(active, n_active, seg_face, seg_state, hkey, hopp, hpark, hcount, nodes
         for sub in range(2):
             item = 2 * s + sub
             a, b, c = seg_face[s, sub, 0], seg_face[s, sub, 1], seg_face[s, sub, 2]
+            if a < 0:
+                continue
             if in_list[item] and park_face[item, 0] == a and park_face[item, 1] == b and park_face[item, 2] == c:
                 continue
-            slot = _hash_insert(hkey, hopp, hpark, hcount, a, b, c)
+            slot = _hash_insert(htab, mul, hcount, a, b, c)
             park_ver[item] += 1
             in_list[item] = 1
             park_face[item, 0] = a
@@ -285,8 +300,8 @@ def park(active, n_active, seg_face, seg_state, hkey, hopp, hpark, hcount, nodes
             park_face[item, 2] = c
             nodes[n_nodes, 0] = item
             nodes[n_nodes, 1] = park_ver[item]
-            nodes[n_nodes, 2] = hpark[slot]
-            hpark[slot] = n_nodes
+            nodes[n_nodes, 2] = htab[slot, 5]
+            htab[slot, 5] = n_nodes
             n_nodes += 1
     return n_nodes
 
@@ -380,9 +395,21 @@ def _composite(acc, t0, s0, t1, s1, forward, mode, step, tab, lo, inv, unit, buf
 
 # ---------------------------------------------------------------------------------------------
 # walking
+@njit(cache=True, inline="always")
+def _sort3w(a, b, c, wa, wb, wc):
+    """Sort three ids, carrying a weight with each."""
+    if a > b:
+        a, b, wa, wb = b, a, wb, wa
+    if b > c:
+        b, c, wb, wc = c, b, wc, wb
+    if a > b:
+        a, b, wa, wb = b, a, wb, wa
+    return a, b, c, wa, wb, wc
+
+
 @njit(cache=True)
-def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_side, seg_ts, seg_acc, seg_state, seg_steps,
-          seg_samples, hkey, hopp, mode, step, tab, lo, inv, unit, max_steps, meet_is_end):
+def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, seg_state, seg_steps,
+          seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps):
     """Advance subsegment ``sub`` (0 front, 1 back) of segment ``s`` through every present tet.
 
     Stops when the next tet is missing (the subsegment stays parked on that face), when it
@@ -395,53 +422,75 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_side, seg_ts, seg_acc, s
     want = 1.0 if forward else -1.0
     a, b, c = seg_face[s, sub, 0], seg_face[s, sub, 1], seg_face[s, sub, 2]
     oa, ob, oc = seg_face[s, 1 - sub, 0], seg_face[s, 1 - sub, 1], seg_face[s, 1 - sub, 2]
-    side = seg_side[s, sub]
+    came_from = seg_from[s, sub]
     t_here, s_here = seg_ts[s, sub, 0], seg_ts[s, sub, 1]
     acc = seg_acc[s, sub]
-    v = np.empty(4, dtype=np.int64)
     buf = np.empty(4, dtype=np.float64)
     buf2 = np.empty(4, dtype=np.float64)
     samples = 0
     steps = seg_steps[s]
     state = STATE_ACTIVE
     while True:
-        slot = _hash_find(hkey, a, b, c)
+        slot = _hash_find(htab, mul, a, b, c)
         if slot < 0:
             break
-        e = hopp[slot, side]
-        if e < 0:
+        code = -1
+        h0 = htab[slot, 3]
+        h1 = htab[slot, 4]
+        if h0 >= 0 and (h0 >> 1) != came_from:
+            code = h0
+        elif h1 >= 0 and (h1 >> 1) != came_from:
+            code = h1
+        if code < 0:
             break
         if steps >= max_steps:
             state = STATE_STUCK
             break
         steps += 1
-        # the tet behind the face, positively oriented, entered through its local face 3
-        if side == 0:
-            v[0], v[1], v[2] = a, c, b
+        # the tet behind the face, positively oriented as (v0, v1, v2, v3) with the face opposite v3
+        v3 = code >> 1
+        if (code & 1) == 0:
+            v0, v1, v2 = a, c, b
         else:
-            v[0], v[1], v[2] = a, b, c
-        v[3] = e
+            v0, v1, v2 = a, b, c
+        # the six edge sides; face 0 = (v1, v2, v3), 1 = (v0, v3, v2), 2 = (v0, v1, v3)
+        x12, g12 = _side(P, dx, dy, dz, v1, v2)
+        x20, g20 = _side(P, dx, dy, dz, v2, v0)
+        x01, g01 = _side(P, dx, dy, dz, v0, v1)
+        x03, g03 = _side(P, dx, dy, dz, v0, v3)
+        x13, g13 = _side(P, dx, dy, dz, v1, v3)
+        x23, g23 = _side(P, dx, dy, dz, v2, v3)
         best_k = -1
-        best_score = -1.0
+        best_score = -1
         best_min = -np.inf
         for k in range(3):
-            i0, i1, i2 = v[TET_FACES[k, 0]], v[TET_FACES[k, 1]], v[TET_FACES[k, 2]]
-            v01, s01 = _side(P, dx, dy, dz, i0, i1)
-            v12, s12 = _side(P, dx, dy, dz, i1, i2)
-            v20, s20 = _side(P, dx, dy, dz, i2, i0)
-            score = (s01 * want > 0) + (s12 * want > 0) + (s20 * want > 0)
-            m = min(v01 * want, v12 * want, v20 * want)
+            if k == 0:
+                e0, e1, e2, q0, q1, q2 = x12, x23, -x13, g12, g23, -g13
+            elif k == 1:
+                e0, e1, e2, q0, q1, q2 = x03, -x23, x20, g03, -g23, g20
+            else:
+                e0, e1, e2, q0, q1, q2 = x01, x13, -x03, g01, g13, -g03
+            score = (q0 * want > 0) + (q1 * want > 0) + (q2 * want > 0)
             if score == 3:
                 best_k = k
                 break
             # inconsistent rounding can leave no clean exit: take the closest one
+            m = min(e0 * want, e1 * want, e2 * want)
             if score > best_score or (score == best_score and m > best_min):
                 best_score = score
                 best_min = m
                 best_k = k
-        k = best_k
-        na, nb, nc, par = _sort3(v[TET_FACES[k, 0]], v[TET_FACES[k, 1]], v[TET_FACES[k, 2]])
-        t_next, s_next = _face_values(P, dens, dx, dy, dz, na, nb, nc)
+        # exit face (f0, f1, f2) outward, barycentric weight of f_i = side of the opposite edge
+        if best_k == 0:
+            na, nb, nc, wa, wb, wc = _sort3w(v1, v2, v3, x23, -x13, x12)
+            came_from = v0
+        elif best_k == 1:
+            na, nb, nc, wa, wb, wc = _sort3w(v0, v3, v2, -x23, x20, x03)
+            came_from = v1
+        else:
+            na, nb, nc, wa, wb, wc = _sort3w(v0, v1, v3, x13, -x03, x01)
+            came_from = v2
+        t_next, s_next = _face_values_w(P, dens, dx, dy, dz, na, nb, nc, wa, wb, wc)
         if forward:
             samples += _composite(acc, t_here, s_here, t_next, s_next, True, mode, step, tab, lo, inv, unit,
                                   buf, buf2)
@@ -449,7 +498,6 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_side, seg_ts, seg_acc, s
             samples += _composite(acc, t_next, s_next, t_here, s_here, False, mode, step, tab, lo, inv, unit,
                                   buf, buf2)
         a, b, c = na, nb, nc
-        side = 1 - par  # this tet is on side `par` of the new face; the next one on the other
         t_here, s_here = t_next, s_next
         if a == oa and b == ob and c == oc:
             state = STATE_DONE
@@ -457,35 +505,37 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_side, seg_ts, seg_acc, s
     seg_face[s, sub, 0] = a
     seg_face[s, sub, 1] = b
     seg_face[s, sub, 2] = c
-    seg_side[s, sub] = side
+    seg_from[s, sub] = came_from
     seg_ts[s, sub, 0] = t_here
     seg_ts[s, sub, 1] = s_here
     seg_steps[s] = steps
     seg_samples[s] += samples
     if state != STATE_ACTIVE:
         seg_state[s] = state
-    elif meet_is_end:
-        # in-memory walk: stopped at a face with no tet behind it before the segment's exit
-        seg_state[s] = STATE_STUCK
 
 
 @njit(cache=True, parallel=True)
-def advance(active, n_active, front_only, P, dens, dirs, seg_ray, seg_face, seg_side, seg_ts, seg_acc,
-            seg_state, seg_steps, seg_samples, hkey, hopp, mode, step, tab, lo, inv, unit, max_steps):
+def advance(active, n_active, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc,
+            seg_state, seg_steps, seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps):
     """Advance every listed segment as far as the present tets allow (one bulk-synchronous phase).
 
     Each segment is handled by one task that only writes its own state, and reads the face table,
     which nobody writes during the phase: the result cannot depend on the thread count.
     """
-    for i in prange(n_active):
-        s = active[i]
-        if seg_state[s] != STATE_ACTIVE:
-            continue
-        _walk(s, 0, P, dens, dirs, seg_ray, seg_face, seg_side, seg_ts, seg_acc, seg_state, seg_steps,
-              seg_samples, hkey, hopp, mode, step, tab, lo, inv, unit, max_steps, front_only)
-        if seg_state[s] == STATE_ACTIVE and not front_only:
-            _walk(s, 1, P, dens, dirs, seg_ray, seg_face, seg_side, seg_ts, seg_acc, seg_state, seg_steps,
-                  seg_samples, hkey, hopp, mode, step, tab, lo, inv, unit, max_steps, False)
+    # Blocks of neighbouring rays (they meet the same tets: cache reuse); the caller hands
+    # them out dynamically (numba.set_parallel_chunksize) so both threads stay busy.
+    block = 16
+    n_blocks = (n_active + block - 1) // block
+    for blk in prange(n_blocks):
+        for i in range(blk * block, min(n_active, (blk + 1) * block)):
+            s = active[i]
+            if seg_state[s] != STATE_ACTIVE:
+                continue
+            _walk(s, 0, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, seg_state, seg_steps,
+                  seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps)
+            if seg_state[s] == STATE_ACTIVE:
+                _walk(s, 1, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, seg_state, seg_steps,
+                      seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -534,9 +584,9 @@ def _pair_hits(n_rays, hit_ray, hit_t, hit_face, hit_enter):
     for i in range(m):
         order[pos[hit_ray[i]]] = i
         pos[hit_ray[i]] += 1
-    seg_ray = np.empty(m // 2 + 1, dtype=np.int64)
-    seg_in = np.empty(m // 2 + 1, dtype=np.int64)
-    seg_out = np.empty(m // 2 + 1, dtype=np.int64)
+    seg_ray = np.empty(m + 1, dtype=np.int64)
+    seg_in = np.empty(m + 1, dtype=np.int64)
+    seg_out = np.empty(m + 1, dtype=np.int64)
     nseg = 0
     anomalies = 0
     for r in range(n_rays):
@@ -558,41 +608,60 @@ def _pair_hits(n_rays, hit_ray, hit_t, hit_face, hit_enter):
             x, y = order[i], order[i + 1]
             if hit_enter[x] and not hit_enter[y] and hit_t[y] - hit_t[x] <= 1e-9 * (abs(hit_t[x]) + 1e-30):
                 order[i], order[i + 1] = y, x
+        # Pair each entry with the next exit. A mesh whose boundary overlaps itself (folded
+        # curvilinear grids) can give two entries or two exits in a row: the odd one gets a
+        # segment with one end only (-1), whose single subsegment walks until the boundary.
         open_ = -1
         for i in range(lo, hi):
             x = order[i]
             if hit_enter[x]:
-                if open_ == -1:
-                    open_ = x
-                else:
+                if open_ != -1:
+                    seg_ray[nseg] = r
+                    seg_in[nseg] = open_
+                    seg_out[nseg] = -1
+                    nseg += 1
                     anomalies += 1
-            elif open_ != -1:
+                open_ = x
+            else:
                 seg_ray[nseg] = r
                 seg_in[nseg] = open_
                 seg_out[nseg] = x
                 nseg += 1
+                if open_ == -1:
+                    anomalies += 1
                 open_ = -1
-            else:
-                anomalies += 1
         if open_ != -1:
+            seg_ray[nseg] = r
+            seg_in[nseg] = open_
+            seg_out[nseg] = -1
+            nseg += 1
             anomalies += 1
     return seg_ray[:nseg], seg_in[:nseg], seg_out[:nseg], anomalies
 
 
 @njit(cache=True)
-def _init_segments(P, dens, dirs, faces, seg_ray_, hit_face, hit_in, hit_out, seg_ray, seg_face, seg_side,
+def _init_segments(P, dens, dirs, faces, seg_ray_, hit_face, hit_in, hit_out, seg_ray, seg_face, seg_from,
                    seg_ts):
     for s in range(seg_ray_.shape[0]):
         r = seg_ray_[s]
         seg_ray[s] = r
         dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
         for sub in range(2):
-            f = hit_face[hit_in[s]] if sub == 0 else hit_face[hit_out[s]]
+            hit = hit_in[s] if sub == 0 else hit_out[s]
+            if hit < 0:  # no such end: a sentinel face that never matches or moves
+                seg_face[s, sub, 0] = -1
+                seg_face[s, sub, 1] = -1
+                seg_face[s, sub, 2] = -1
+                seg_from[s, sub] = -1
+                seg_ts[s, sub, 0] = 0.0
+                seg_ts[s, sub, 1] = 0.0
+                continue
+            f = hit_face[hit]
             a, b, c, par = _sort3(faces[f, 0], faces[f, 1], faces[f, 2])
             seg_face[s, sub, 0] = a
             seg_face[s, sub, 1] = b
             seg_face[s, sub, 2] = c
-            seg_side[s, sub] = par  # the boundary face's own tet: (a, b, c) outward iff even
+            seg_from[s, sub] = -1  # from outside the mesh
             t, sv = _face_values(P, dens, dx, dy, dz, a, b, c)
             seg_ts[s, sub, 0] = t
             seg_ts[s, sub, 1] = sv
@@ -618,10 +687,43 @@ def find_segments(P, dens, dirs, width, faces, bbox):
     nseg = seg_ray_.shape[0]
     seg_ray = np.empty(nseg, dtype=np.int32)
     seg_face = np.empty((nseg, 2, 3), dtype=np.int32)
-    seg_side = np.empty((nseg, 2), dtype=np.int32)
+    seg_from = np.empty((nseg, 2), dtype=np.int32)
     seg_ts = np.empty((nseg, 2, 2), dtype=np.float64)
-    _init_segments(P, dens, dirs, faces, seg_ray_, hit_face, hit_in, hit_out, seg_ray, seg_face, seg_side, seg_ts)
-    return seg_ray, seg_face, seg_side, seg_ts, int(anomalies), m
+    _init_segments(P, dens, dirs, faces, seg_ray_, hit_face, hit_in, hit_out, seg_ray, seg_face, seg_from, seg_ts)
+    return seg_ray, seg_face, seg_from, seg_ts, int(anomalies), m
+
+
+@njit(cache=True)
+def _in_sorted(keys, a, b, c):
+    lo, hi = 0, keys.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        k0, k1, k2 = keys[mid, 0], keys[mid, 1], keys[mid, 2]
+        if k0 < a or (k0 == a and (k1 < b or (k1 == b and k2 < c))):
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo < keys.shape[0] and keys[lo, 0] == a and keys[lo, 1] == b and keys[lo, 2] == c
+
+
+@njit(cache=True)
+def settle(seg_face, seg_from, seg_state, boundary_keys):
+    """At the end of the stream: a segment whose marks never met is still complete when both its
+    subsegments stopped on boundary faces after moving (or have no end): the mesh's own
+    boundary disagreed with the pairing of its crossings (overlapping, folded grids), and
+    nothing on the ray was skipped. Everything else that is not done is unfinished."""
+    for s in range(seg_state.shape[0]):
+        if seg_state[s] != STATE_ACTIVE:
+            continue
+        ok = True
+        for sub in range(2):
+            a = seg_face[s, sub, 0]
+            if a < 0:
+                continue
+            if seg_from[s, sub] < 0 or not _in_sorted(boundary_keys, a, seg_face[s, sub, 1], seg_face[s, sub, 2]):
+                ok = False
+        if ok:
+            seg_state[s] = STATE_DONE
 
 
 @njit(cache=True)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from gatun_py.errors import MeshError, OptionError
@@ -156,11 +157,11 @@ class StreamingRaycaster:
         if self._nseg:
             self._ensure_capacity(4 * len(tets))
             self._mark += 1
-            n_active, conflicts = K.insert_tets(tets, self._hkey, self._hopp, self._hpark, self._hcount,
+            n_active, conflicts = K.insert_tets(tets, self._htab, self._hmul, self._hcount,
                                                 self._nodes, self._park_ver, self._in_list, self._seg_mark,
                                                 self._mark, self._active)
             self._conflicts += conflicts
-            self._advance(n_active, front_only=False)
+            self._advance(n_active)
             self._park(n_active)
         self._t_render += time.perf_counter() - t0
 
@@ -170,6 +171,7 @@ class StreamingRaycaster:
         if not self._started:
             self._start()
         image = np.zeros((self._n_rays, 4), dtype=np.float64)
+        K.settle(self._seg_face, self._seg_from, self._seg_state, self._boundary_keys)
         unfinished = K.compose(self._n_rays, self._seg_ray, self._seg_acc, self._seg_state, image)
         self._t_render += time.perf_counter() - t0
         return self._result(image, unfinished)
@@ -212,7 +214,9 @@ class StreamingRaycaster:
         P = self._points[: self._nv]
         faces = self._faces_in_front(P, faces, cam)
         bbox = _pixel_boxes(P, faces, cam)
-        (self._seg_ray, self._seg_face, self._seg_side, self._seg_ts, self._anomalies,
+        keys = np.sort(faces, axis=1).astype(np.int32)
+        self._boundary_keys = np.ascontiguousarray(keys[np.lexsort((keys[:, 2], keys[:, 1], keys[:, 0]))])
+        (self._seg_ray, self._seg_face, self._seg_from, self._seg_ts, self._anomalies,
          self._boundary_hits) = K.find_segments(P, self._dens, self._dirs, cam.width, faces, bbox)
         nseg = self._nseg = len(self._seg_ray)
         self._seg_acc = np.zeros((nseg, 2, 4), dtype=np.float64)
@@ -228,9 +232,8 @@ class StreamingRaycaster:
         self._n_nodes = 0
         expected = self.expected_tets or max(len(faces), 1024)
         cap = 1 << int(np.ceil(np.log2(max(16, 2.5 * (2 * expected + len(faces) // 2)))))
-        self._hkey = np.full((cap, 3), -1, dtype=np.int32)
-        self._hopp = np.full((cap, 2), -1, dtype=np.int32)
-        self._hpark = np.full(cap, -1, dtype=np.int32)
+        self._htab = np.full((cap, 6), -1, dtype=np.int32)
+        self._hmul = self._slots_per_vertex(cap)
         self._hcount = np.zeros(1, dtype=np.int64)
         self._park(nseg)
 
@@ -242,19 +245,19 @@ class StreamingRaycaster:
                 grown = np.empty((2 * (live + 2 * n_active) + 16, 3), dtype=np.int32)
                 grown[:live] = self._nodes[:live]
                 self._nodes = grown
-        self._n_nodes = K.park(self._active, n_active, self._seg_face, self._seg_state, self._hkey, self._hopp,
-                               self._hpark, self._hcount, self._nodes, self._n_nodes, self._park_ver,
+        self._n_nodes = K.park(self._active, n_active, self._seg_face, self._seg_state, self._htab, self._hmul,
+                               self._hcount, self._nodes, self._n_nodes, self._park_ver,
                                self._in_list, self._park_face)
 
     def _compact_nodes(self):
         """Drop stale park-list nodes (rebuild the lists from the live items); return the count."""
-        self._hpark[:] = -1
+        self._htab[:, 5] = -1
         self._in_list[:] = 0
         self._n_nodes = 0
         live = np.flatnonzero(self._seg_state == K.STATE_ACTIVE).astype(np.int64)
         # re-park every live subsegment where it waits
-        self._n_nodes = K.park(live, len(live), self._seg_face, self._seg_state, self._hkey, self._hopp,
-                               self._hpark, self._hcount, self._nodes, 0, self._park_ver, self._in_list,
+        self._n_nodes = K.park(live, len(live), self._seg_face, self._seg_state, self._htab, self._hmul,
+                               self._hcount, self._nodes, 0, self._park_ver, self._in_list,
                                self._park_face)
         return self._n_nodes
 
@@ -273,18 +276,34 @@ class StreamingRaycaster:
         return faces
 
     def _ensure_capacity(self, extra):
-        cap = len(self._hkey)
+        cap = len(self._htab)
         need = int(self._hcount[0]) + int(extra)
         if need > 0.6 * cap:
             new = cap
             while need > 0.6 * new:
                 new *= 2
-            self._hkey, self._hopp, self._hpark = K.rehash(self._hkey, self._hopp, self._hpark, new)
+            self._hmul = self._slots_per_vertex(new)
+            self._htab = K.rehash(self._htab, new, self._hmul)
 
-    def _advance(self, n_active, front_only):
-        K.advance(self._active, n_active, front_only, self._points[: self._nv], self._dens[: self._nv], self._dirs,
-                  self._seg_ray, self._seg_face, self._seg_side, self._seg_ts, self._seg_acc, self._seg_state,
-                  self._seg_steps, self._seg_samples, self._hkey, self._hopp, 0 if self.mode == "volume" else 1,
+    def _slots_per_vertex(self, cap):
+        """Power of two close to table slots per vertex (faces are grouped by smallest vertex)."""
+        nv = max(self._nv, 1)
+        mul = 1
+        while mul * 2 * nv <= cap:
+            mul *= 2
+        return mul
+
+    def _advance(self, n_active):
+        old = numba.set_parallel_chunksize(4)
+        try:
+            self._advance_kernel(n_active)
+        finally:
+            numba.set_parallel_chunksize(old)
+
+    def _advance_kernel(self, n_active):
+        K.advance(self._active, n_active, self._points[: self._nv], self._dens[: self._nv], self._dirs,
+                  self._seg_ray, self._seg_face, self._seg_from, self._seg_ts, self._seg_acc, self._seg_state,
+                  self._seg_steps, self._seg_samples, self._htab, self._hmul, 0 if self.mode == "volume" else 1,
                   float(self.step), self._tab, self._lo, self._inv, self._unit, self._n_tets + 8)
 
     def _result(self, image, unfinished):
@@ -363,11 +382,12 @@ def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = 
     rc._n_tets = len(tets)
     if rc._nseg and len(tets):
         rc._ensure_capacity(4 * len(tets))
-        _, rc._conflicts = K.insert_tets(tets, rc._hkey, rc._hopp, rc._hpark, rc._hcount, rc._nodes,
+        _, rc._conflicts = K.insert_tets(tets, rc._htab, rc._hmul, rc._hcount, rc._nodes,
                                          rc._park_ver, rc._in_list, rc._seg_mark, 1, rc._active)
         rc._active = np.arange(rc._nseg, dtype=np.int64)
-        rc._advance(rc._nseg, front_only=True)
+        rc._advance(rc._nseg)
     image = np.zeros((rc._n_rays, 4), dtype=np.float64)
+    K.settle(rc._seg_face, rc._seg_from, rc._seg_state, rc._boundary_keys)
     unfinished = K.compose(rc._n_rays, rc._seg_ray, rc._seg_acc, rc._seg_state, image)
     rc._t_render = time.perf_counter() - t0
     return rc._result(image, unfinished)

@@ -523,12 +523,14 @@ def _heap_pop(h_err, h_v, h_b, h_ver, counters):
 
 @njit(cache=True)
 def _push_best(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab,
-               counters, ver, h_err, h_v, h_b, h_ver):
+               counters, ver, h_err, h_v, h_b, h_ver, last_err):
     ver[v] += 1
     b, e = _evaluate(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab, counters)
     if b >= 0:
+        last_err[v] = e
         _heap_push(h_err, h_v, h_b, h_ver, counters, e, v, b, ver[v], ver)
         return True
+    last_err[v] = -1.0
     return False
 
 
@@ -571,16 +573,16 @@ def _apply_merge(a, b, st_a, T, alive, nbr, head, nxt):
 
 @njit(cache=True)
 def _init_heap(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab, counters,
-               ver, h_err, h_v, h_b, h_ver):
+               ver, h_err, h_v, h_b, h_ver, last_err):
     n = head.shape[0]
     for v in range(n):
         _push_best(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab,
-                   counters, ver, h_err, h_v, h_b, h_ver)
+                   counters, ver, h_err, h_v, h_b, h_ver, last_err)
 
 
 @njit(cache=True)
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab, counters,
-         ver, h_err, h_v, h_b, h_ver, parent, rank, max_merges):
+         ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left."""
     n = head.shape[0]
     while counters[C_MERGES] < max_merges:
@@ -591,20 +593,28 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b,
             for v in range(n):
                 if parent[v] == v:
                     if _push_best(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark,
-                                  mark_b, mark_ab, counters, ver, h_err, h_v, h_b, h_ver):
+                                  mark_b, mark_ab, counters, ver, h_err, h_v, h_b, h_ver, last_err):
                         found = True
             if not found:
                 return True
             continue
         e, a, b, v_a = _heap_pop(h_err, h_v, h_b, h_ver, counters)
-        if v_a != ver[a] or parent[a] != a or parent[b] != b:
+        if v_a != ver[a] or parent[a] != a:
+            continue
+        if b < 0:
+            # a's neighbourhood changed since its last evaluation: evaluate now (lazily, so a vertex
+            # touched by several merges before its turn is evaluated once)
+            _push_best(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab,
+                       counters, ver, h_err, h_v, h_b, h_ver, last_err)
+            continue
+        if parent[b] != b:
             continue
         st_a = _star(a, head, nxt, T, alive)
         # a's star is unchanged since the entry was made (that would have bumped its version),
         # but b's may have changed: check the link condition again
         if not _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
             _push_best(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab,
-                       counters, ver, h_err, h_v, h_b, h_ver)
+                       counters, ver, h_err, h_v, h_b, h_ver, last_err)
             continue
         # the neighbourhood whose stars change: b and every vertex of a's star
         stamp = _next_stamp(counters)
@@ -624,8 +634,10 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b,
         counters[C_MERGES] += 1
         ver[a] += 1
         for i in range(k):
-            _push_best(nb[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b,
-                       mark_ab, counters, ver, h_err, h_v, h_b, h_ver)
+            w = nb[i]
+            if parent[w] == w and not pinned[w]:
+                ver[w] += 1
+                _heap_push(h_err, h_v, h_b, h_ver, counters, max(e, last_err[w]), w, -1, ver[w], ver)
     return False
 
 

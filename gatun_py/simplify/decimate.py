@@ -75,11 +75,11 @@ def _pinned_vertices(tets: np.ndarray, nbr: np.ndarray, n: int):
     pairs = np.sort(t[:, ei].reshape(-1, 2), axis=1)
     ue = np.unique(pairs[:, 0] * n + pairs[:, 1])
     chi = np.bincount(ue // n, minlength=n) + np.bincount(ue % n, minlength=n)
-    f = np.sort(t[:, TET_FACES].reshape(-1, 3), axis=1)
-    uf = np.unique(np.ascontiguousarray(f).view([("a", np.int64), ("b", np.int64), ("c", np.int64)]))
-    uf = uf.view(np.int64).reshape(-1, 3)
-    chi -= np.bincount(uf.ravel(), minlength=n)
-    chi += np.bincount(t.ravel(), minlength=n)
+    # every face at v is in two of v's tets, or in one when it is a boundary face
+    n_tets_at = np.bincount(t.ravel(), minlength=n)
+    n_bfaces_at = np.bincount(bfaces.ravel(), minlength=n)
+    chi -= (3 * n_tets_at + n_bfaces_at) // 2
+    chi += n_tets_at
     used = np.zeros(n, bool)
     used[t.ravel()] = True
     pinned |= used & np.where(isb, chi != 1, chi != 2)
@@ -128,6 +128,7 @@ class DecimationState:
         self.mark_ab = np.zeros(n, np.int64)
         self.counters = np.zeros(8, np.int64)
         self.ver = np.zeros(n, np.int32)
+        self.last_err = np.full(n, -1.0)
         cap = 4 * n + 1024
         self.h_err = np.zeros(cap)
         self.h_v = np.zeros(cap, np.int32)
@@ -141,7 +142,7 @@ class DecimationState:
                 self.params, self.mark, self.mark_b, self.mark_ab, self.counters)
 
     def _heap_args(self):
-        return (self.ver, self.h_err, self.h_v, self.h_b, self.h_ver)
+        return (self.ver, self.h_err, self.h_v, self.h_b, self.h_ver, self.last_err)
 
     def start(self) -> None:
         K._init_heap(*self._mesh_args(), *self._heap_args())

@@ -162,6 +162,8 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary: np.ndarra
     if code:
         raise MeshError(f"tet connectivity cannot be coded: {_ENCODER_ERRORS.get(code, code)}; is the mesh valid?")
     # unreferenced vertices: last, in their original order
+    if m == 0:  # nothing coded: empty streams (the decoder insists on it)
+        boundary_code, tet_code = b"", b""
     rest = np.flatnonzero(dec_of[:n] == -1)
     order[nref:n] = rest
     return EncodedConnectivity(

@@ -18,8 +18,10 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import platform
+import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -150,3 +152,66 @@ def save_model(key: str, model: TimeModel) -> None:
         os.replace(tmp, path)
     except OSError:
         pass  # a read-only home only costs a re-calibration next time
+
+
+# -- planning a file's render ---------------------------------------------------------------------
+
+def _file_id(path) -> str:
+    st = os.stat(path)
+    return f"{os.path.abspath(path)}|{st.st_size}|{st.st_mtime_ns}"
+
+
+def _probe_levels(levels: list[LevelSize]) -> list[LevelSize]:
+    """The coarsest stored level and one with about an eighth of the full mesh's tets."""
+    ls = sorted(levels, key=lambda x: x.merges)
+    coarse = ls[-1]
+    goal = max(ls[0].tets / 8.0, 4.0 * coarse.tets)
+    mid = min(ls, key=lambda x: abs(math.log(max(x.tets, 1) / goal)))
+    return [coarse] if mid.level == coarse.level else [coarse, mid]
+
+
+def calibrate(path, view, levels: list[LevelSize], *, repeats: int = 2) -> TimeModel:
+    """Time probe renders of coarse stored levels (warm: the best of ``repeats``) and fit the model."""
+    from .output import encode_png
+    from .stream import Target, render_tetc
+
+    probes = []
+    for lv in _probe_levels(levels):
+        best = None
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            res = render_tetc(path, view, target=Target(lv.level, lv.merges, 0.0, lv.merges))
+            encode_png(res.image)
+            total = time.perf_counter() - t0
+            if best is None or total < best["total_s"]:
+                best = dict(decoded_tets=lv.tets, rendered_tets=res.stats["tets_rendered"],
+                            decode_s=res.stats["decode_s"] + res.stats["filter_s"], render_s=res.stats["render_s"],
+                            total_s=total)
+        probes.append(best)
+    return fit_time_model(probes)
+
+
+def plan_file_budget(path, view, budget_s: float, *, recalibrate: bool = False):
+    """(Target, BudgetPlan, TimeModel, calibrated_now) for rendering ``path`` within ``budget_s``."""
+    from ..codec import TetcReader
+    from .stream import Target, forest_reach, stored_levels
+
+    reader = TetcReader(path)
+    pts = int(reader.meta["points"])
+    levels = [LevelSize(int(lv["level"]), int(lv.get("merges_before", 0)), int(lv["tets"]))
+              for lv in stored_levels(reader)]
+    tf_key = view.tf if isinstance(view.tf, str) else json.dumps(view.tf, sort_keys=True, default=str)
+    key = calibration_key(_file_id(path), (view.width, view.height), view.mode,
+                          f"{tf_key}|{view.step}|{view.azimuth}|{view.elevation}|{view.zoom}")
+    model = None if recalibrate else load_model(key)
+    calibrated = model is None
+    if model is None:
+        model = calibrate(path, view, levels)
+        save_model(key, model)
+    reach = forest_reach(reader)
+    # Only stored levels with a forest can be simplified further on the fly.
+    plan = plan_for_budget(levels, model, float(budget_s), reach)
+    start = next(lv for lv in reader.levels if int(lv["level"]) == plan.level)
+    merges = plan.merges if start.get("has_forest") else int(start.get("merges_before", 0))
+    target = Target(plan.level, merges, merges / max(pts, 1), int(start.get("merges_before", 0)))
+    return target, plan, model, calibrated

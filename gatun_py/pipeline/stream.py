@@ -1,0 +1,290 @@
+"""Decompress → simplify → render in one streaming pass (paper 3-5), and the generic baseline.
+
+* **streaming**: the decoder's batches go through the run-time filter (only when the target
+  ratio lies beyond the stored level it starts from) into the streaming ray caster; every tet is
+  rendered as soon as it and its ancestors have arrived, and nothing is held beyond that.
+* **generic** (the paper's baseline): decode the whole level into memory, simplify it, then
+  render the whole mesh.
+
+Both give the same image: the camera is fitted to the full mesh's bounding box, the transfer
+function maps the full mesh's scalar range, and the volume-mode sample step is the full mesh's,
+whatever level or ratio is drawn.
+"""
+
+from __future__ import annotations
+
+import math
+import resource
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Iterator
+
+import numpy as np
+
+from ..errors import OptionError
+
+PIPELINES = ("streaming", "generic")
+
+
+@dataclass(frozen=True)
+class View:
+    """How to draw: transfer function, sampling, camera."""
+
+    tf: object = "default"
+    mode: str = "volume"
+    step: float | None = None
+    width: int = 256
+    height: int = 256
+    azimuth: float = 0.0
+    elevation: float = 0.0
+    zoom: float = 1.0
+
+    def camera(self):
+        from ..render.camera import Camera
+
+        return Camera(self.width, self.height, self.azimuth, self.elevation, self.zoom)
+
+
+@dataclass(frozen=True)
+class Target:
+    """Where to start and how far to simplify: stored ``level`` and absolute merges ``merges``."""
+
+    level: int
+    merges: int
+    ratio: float  # merges / points of the full mesh
+    level_merges: int  # N_i of the stored level
+
+
+@dataclass
+class PipelineResult:
+    image: np.ndarray  # (H, W, 4) float32 premultiplied RGBA
+    stats: dict = field(default_factory=dict)
+
+
+# -- choosing what to decode ------------------------------------------------------------------
+
+def forest_reach(reader) -> int:
+    """Total merges the file's forest reaches (0 for a mesh-only file)."""
+    f = reader.meta.get("forest")
+    if isinstance(f, dict) and isinstance(f.get("merges"), int):
+        return int(f["merges"])
+    best = 0
+    for lv in reader.levels:
+        best = max(best, int(lv.get("merges_before", 0)))
+    return best
+
+
+def stored_levels(reader) -> list[dict]:
+    return sorted(reader.levels, key=lambda lv: int(lv.get("merges_before", 0)))
+
+
+def describe_levels(reader) -> str:
+    pts = int(reader.meta["points"])
+    parts = [f"level {lv['level']} (ratio {lv.get('ratio', 0):.4f}, {lv['tets']} tets)" for lv in stored_levels(reader)]
+    reach = forest_reach(reader)
+    tail = f"; the merge forest reaches ratio {reach / max(pts, 1):.4f}" if reach else "; no merge forest"
+    return ", ".join(parts) + tail
+
+
+def resolve_target(reader, *, ratio: float | None = None, level: int | None = None) -> Target:
+    """The stored level to start from and the merges to reach, for ``--ratio`` or ``--level``.
+
+    Ratio R means N = floor(R * points) merges, started from the most simplified stored level
+    that is still finer than (or exactly at) R.
+    """
+    if ratio is not None and level is not None:
+        raise OptionError("give either a ratio or a level, not both")
+    levels = stored_levels(reader)
+    pts = int(reader.meta["points"])
+    if level is not None:
+        for lv in levels:
+            if lv["level"] == level:
+                n = int(lv.get("merges_before", 0))
+                return Target(level, n, n / max(pts, 1), n)
+        raise OptionError(f"level {level} is not stored in this file; it holds {describe_levels(reader)}")
+    if ratio is None:
+        ratio = 0.0
+    if not (isinstance(ratio, (int, float)) and math.isfinite(ratio) and 0.0 <= ratio <= 1.0):
+        raise OptionError(f"ratio must lie in [0, 1], got {ratio}; the file holds {describe_levels(reader)}")
+    n = int(math.floor(ratio * pts + 1e-9))
+    reach = forest_reach(reader)
+    if n > reach:
+        raise OptionError(f"ratio {ratio} needs {n} merges but this file reaches {reach} "
+                          f"(ratio {reach / max(pts, 1):.4f}); it holds {describe_levels(reader)}")
+    start = max((lv for lv in levels if int(lv.get("merges_before", 0)) <= n),
+                key=lambda lv: int(lv.get("merges_before", 0)))
+    if n > int(start.get("merges_before", 0)) and not start.get("has_forest"):
+        raise OptionError(f"level {start['level']} has no merge forest stored, cannot simplify past it; "
+                          f"the file holds {describe_levels(reader)}")
+    return Target(int(start["level"]), n, n / max(pts, 1), int(start.get("merges_before", 0)))
+
+
+def target_ancestors(reader, target: Target) -> np.ndarray | None:
+    """Ancestor of every vertex of the stored level (decode order), or None if nothing to merge."""
+    if target.merges == target.level_merges:
+        return None
+    from ..simplify.forest import ancestors
+
+    parent, rank = reader.read_forest(target.level)
+    return ancestors(parent, rank, target.merges - target.level_merges)
+
+
+def file_render_defaults(reader) -> tuple[np.ndarray, np.ndarray, tuple[float, float], float | None]:
+    """bbox lo, hi, scalar range and volume step of the full mesh, as recorded at compression."""
+    lo, hi = (np.asarray(x, np.float64) for x in reader.meta["bbox"])
+    rng = tuple(float(x) for x in reader.meta["scalar_range"])
+    step = reader.meta.get("render_step")
+    return lo, hi, rng, (float(step) if isinstance(step, (int, float)) and step > 0 else None)
+
+
+# -- running ------------------------------------------------------------------------------------
+
+def _timed(batches: Iterable, acc: dict, key: str) -> Iterator:
+    """Pass batches through, adding the time spent producing them to ``acc[key]``."""
+    it = iter(batches)
+    while True:
+        t0 = time.perf_counter()
+        try:
+            b = next(it)
+        except StopIteration:
+            acc[key] += time.perf_counter() - t0
+            return
+        acc[key] += time.perf_counter() - t0
+        yield b
+
+
+def render_tetc(path, view: View, *, ratio: float | None = None, level: int | None = None,
+                pipeline: str = "streaming", target: Target | None = None, progress=None) -> PipelineResult:
+    """Render a ``.tetc`` file at a ratio or stored level.
+
+    Parameters
+    ----------
+    path : path-like
+    view : View
+    ratio, level : optional
+        Simplification target (see :func:`resolve_target`); default the full mesh.
+    pipeline : {"streaming", "generic"}
+    target : Target, optional
+        A target already resolved (e.g. by the time-budget planner).
+    progress : callable, optional
+        Called with the number of tets decoded so far.
+
+    Returns
+    -------
+    PipelineResult
+        ``stats`` has ``decode_s``, ``filter_s``, ``render_s``, ``level``, ``ratio``, ``merges``,
+        ``tets_decoded``, ``tets_rendered``, ``rays``, ``rays_unfinished``, ``samples``, ``peak_rss_mb``.
+    """
+    from ..codec import TetcReader
+
+    if pipeline not in PIPELINES:
+        raise OptionError(f"unknown pipeline {pipeline!r} (choose from {', '.join(PIPELINES)})")
+    reader = TetcReader(path)
+    if target is None:
+        target = resolve_target(reader, ratio=ratio, level=level)
+    lo, hi, rng, step = file_render_defaults(reader)
+    camera = view.camera().fit(lo, hi)
+    step = view.step if view.step is not None else step
+    times = {"decode_s": 0.0, "filter_s": 0.0}
+    anc = target_ancestors(reader, target)
+    lv = reader.level_meta(target.level)
+    if pipeline == "streaming":
+        res, fstats = _run_streaming(reader, target, anc, camera, view, rng, step, times, progress)
+    else:
+        res, fstats = _run_generic(reader, target, anc, camera, view, rng, step, times)
+    stats = dict(res.stats)
+    stats.update(times)
+    stats.update(
+        pipeline=pipeline, level=target.level, ratio=target.ratio, merges=target.merges,
+        tets_decoded=int(lv["tets"]), filter=fstats,
+        peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+    )
+    return PipelineResult(res.image, stats)
+
+
+def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress):
+    from ..render.raycast import StreamingRaycaster
+    from ..simplify.filter import SimplifyFilter
+
+    lv = reader.level_meta(target.level)
+    rc = StreamingRaycaster(camera, view.tf, mode=view.mode, step=step, scalar_range=rng,
+                            expected_tets=int(lv["tets"]))
+    batches = _timed(reader.iter_decode(target.level), times, "decode_s")
+    filt = None
+    if anc is not None:
+        filt = SimplifyFilter(anc)
+        batches = filt.filter(batches)
+    decoded = 0
+    for b in batches:
+        rc.add_vertices(b.points, b.density)
+        if len(b.boundary):
+            rc.set_boundary(b.boundary)
+        if len(b.tets):
+            rc.add_tets(b.tets)
+        if progress is not None:
+            decoded = filt.stats["tets_in"] if filt is not None else decoded + len(b.tets)
+            progress(decoded)
+    res = rc.finish()
+    if filt is not None:
+        times["filter_s"] = filt.stats["filter_s"]
+    return res, (filt.stats if filt is not None else None)
+
+
+def simplify_decoded(mesh, anc):
+    """The decoded level mesh simplified with ``anc`` (generic pipeline): tets with four distinct
+    ancestors, rewritten; vertices kept as they are (merged-away ones are left unreferenced)."""
+    from ..mesh import TetMesh
+
+    t = anc[mesh.tets]
+    s = np.sort(t, axis=1)
+    keep = np.all(s[:, 1:] != s[:, :-1], axis=1)
+    return TetMesh(mesh.points, mesh.density, t[keep], mesh.scalar_name)
+
+
+def _run_generic(reader, target, anc, camera, view, rng, step, times):
+    from ..render.raycast import render_mesh
+
+    t0 = time.perf_counter()
+    mesh = reader.decode_mesh(target.level)
+    times["decode_s"] = time.perf_counter() - t0
+    fstats = None
+    if anc is not None:
+        t0 = time.perf_counter()
+        mesh = simplify_decoded(mesh, anc)
+        times["filter_s"] = time.perf_counter() - t0
+        fstats = {"tets_out": mesh.n_tets}
+    res = render_mesh(mesh, camera, view.tf, mode=view.mode, step=step, scalar_range=rng)
+    return res, fstats
+
+
+def render_mesh_file(path, view: View, *, read_kwargs: dict | None = None) -> PipelineResult:
+    """Render any mesh file (not ``.tetc``) whole, fed batch-wise like a decoded stream."""
+    from ..mesh import read_mesh
+    from ..render.raycast import StreamingRaycaster
+
+    t0 = time.perf_counter()
+    mesh, _ = read_mesh(path, **(read_kwargs or {}))
+    read_s = time.perf_counter() - t0
+    lo, hi = mesh.bbox
+    rc = StreamingRaycaster(view.camera().fit(lo, hi), view.tf, mode=view.mode, step=view.step,
+                            scalar_range=mesh.scalar_range, expected_tets=mesh.n_tets)
+    rc.add_vertices(mesh.points, mesh.density)
+    rc.set_boundary(mesh.boundary_faces())
+    rc.add_tets(mesh.tets)
+    res = rc.finish()
+    stats = dict(res.stats)
+    stats.update(decode_s=read_s, filter_s=0.0, pipeline="streaming", level=0, ratio=0.0, merges=0,
+                 tets_decoded=mesh.n_tets,
+                 peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
+    return PipelineResult(res.image, stats)
+
+
+def is_tetc(path) -> bool:
+    from ..codec.container import MAGIC
+
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(len(MAGIC)) == MAGIC
+    except OSError:
+        return Path(path).suffix.lower() == ".tetc"

@@ -65,14 +65,18 @@ class PipelineResult:
 # -- choosing what to decode ------------------------------------------------------------------
 
 def forest_reach(reader) -> int:
-    """Total merges the file's forest reaches (0 for a mesh-only file)."""
+    """Total merges the file's forest reaches (the last stored level's N_i for a file without one)."""
     f = reader.meta.get("forest")
-    if isinstance(f, dict) and isinstance(f.get("merges"), int):
+    if isinstance(f, dict) and isinstance(f.get("merges"), int) and not isinstance(f.get("merges"), bool):
         return int(f["merges"])
-    best = 0
-    for lv in reader.levels:
-        best = max(best, int(lv.get("merges_before", 0)))
-    return best
+    last = stored_levels(reader)[-1]
+    reach = int(last.get("merges_before", 0))
+    forest = reader.read_forest(int(last["level"])) if last.get("has_forest") else None
+    if forest is not None:
+        from ..simplify.forest import ROOT_RANK
+
+        reach += int(np.count_nonzero(np.asarray(forest[1]) != ROOT_RANK))
+    return reach
 
 
 def stored_levels(reader) -> list[dict]:
@@ -187,16 +191,19 @@ def render_tetc(path, view: View, *, ratio: float | None = None, level: int | No
     camera = view.camera().fit(lo, hi)
     step = view.step if view.step is not None else step
     times = {"decode_s": 0.0, "filter_s": 0.0}
-    anc = target_ancestors(reader, target)
+    t0 = time.perf_counter()
+    anc = target_ancestors(reader, target)  # the top-down forest pass is part of the filter's cost
+    ancestors_s = time.perf_counter() - t0
     lv = reader.level_meta(target.level)
     if pipeline == "streaming":
         res, fstats = _run_streaming(reader, target, anc, camera, view, rng, step, times, progress)
     else:
         res, fstats = _run_generic(reader, target, anc, camera, view, rng, step, times)
+    times["filter_s"] += ancestors_s
     stats = dict(res.stats)
     stats.update(times)
     stats.update(
-        pipeline=pipeline, level=target.level, ratio=target.ratio, merges=target.merges,
+        ancestors_s=ancestors_s, pipeline=pipeline, level=target.level, ratio=target.ratio, merges=target.merges,
         tets_decoded=int(lv["tets"]), filter=fstats,
         peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
     )

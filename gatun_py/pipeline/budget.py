@@ -172,7 +172,7 @@ def _probe_levels(levels: list[LevelSize]) -> list[LevelSize]:
 
 def calibrate(path, view, levels: list[LevelSize], *, repeats: int = 2) -> TimeModel:
     """Time probe renders of coarse stored levels (warm: the best of ``repeats``) and fit the model."""
-    from .output import encode_png
+    from ..render.image import png_bytes, to_rgb8
     from .stream import Target, render_tetc
 
     probes = []
@@ -181,7 +181,7 @@ def calibrate(path, view, levels: list[LevelSize], *, repeats: int = 2) -> TimeM
         for _ in range(repeats):
             t0 = time.perf_counter()
             res = render_tetc(path, view, target=Target(lv.level, lv.merges, 0.0, lv.merges))
-            encode_png(res.image)
+            png_bytes(to_rgb8(res.image))  # the PNG encoding is part of every frame
             total = time.perf_counter() - t0
             if best is None or total < best["total_s"]:
                 best = dict(decoded_tets=lv.tets, rendered_tets=res.stats["tets_rendered"],

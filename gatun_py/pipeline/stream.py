@@ -18,7 +18,6 @@ import resource
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Iterator
 
 import numpy as np
 
@@ -144,20 +143,6 @@ def file_render_defaults(reader) -> tuple[np.ndarray, np.ndarray, tuple[float, f
 
 # -- running ------------------------------------------------------------------------------------
 
-def _timed(batches: Iterable, acc: dict, key: str) -> Iterator:
-    """Pass batches through, adding the time spent producing them to ``acc[key]``."""
-    it = iter(batches)
-    while True:
-        t0 = time.perf_counter()
-        try:
-            b = next(it)
-        except StopIteration:
-            acc[key] += time.perf_counter() - t0
-            return
-        acc[key] += time.perf_counter() - t0
-        yield b
-
-
 def render_tetc(path, view: View, *, ratio: float | None = None, level: int | None = None,
                 pipeline: str = "streaming", target: Target | None = None, progress=None) -> PipelineResult:
     """Render a ``.tetc`` file at a ratio or stored level.
@@ -211,30 +196,22 @@ def render_tetc(path, view: View, *, ratio: float | None = None, level: int | No
 
 
 def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress):
-    from ..render.raycast import StreamingRaycaster
+    from ..render.stream import render_batches
     from ..simplify.filter import SimplifyFilter
 
     lv = reader.level_meta(target.level)
-    rc = StreamingRaycaster(camera, view.tf, mode=view.mode, step=step, scalar_range=rng,
-                            expected_tets=int(lv["tets"]))
-    batches = _timed(reader.iter_decode(target.level), times, "decode_s")
+    batches = reader.iter_decode(target.level)
     filt = None
     if anc is not None:
         filt = SimplifyFilter(anc)
         batches = filt.filter(batches)
-    decoded = 0
-    for b in batches:
-        rc.add_vertices(b.points, b.density)
-        if len(b.boundary):
-            rc.set_boundary(b.boundary)
-        if len(b.tets):
-            rc.add_tets(b.tets)
-        if progress is not None:
-            decoded = filt.stats["tets_in"] if filt is not None else decoded + len(b.tets)
-            progress(decoded)
-    res = rc.finish()
+    res = render_batches(batches, camera, view.tf, mode=view.mode, step=step, scalar_range=rng,
+                         expected_tets=int(lv["tets"]), progress=progress)
+    # render_batches times the wait for each batch: the decoder, plus the filter when there is one.
+    times["decode_s"] = res.stats["decode_s"]
     if filt is not None:
         times["filter_s"] = filt.stats["filter_s"]
+        times["decode_s"] -= filt.stats["filter_s"]
     return res, (filt.stats if filt is not None else None)
 
 
@@ -265,24 +242,20 @@ def _run_generic(reader, target, anc, camera, view, rng, step, times):
     return res, fstats
 
 
-def render_mesh_file(path, view: View, *, read_kwargs: dict | None = None) -> PipelineResult:
+def render_mesh_file(path, view: View, *, read_kwargs: dict | None = None, progress=None) -> PipelineResult:
     """Render any mesh file (not ``.tetc``) whole, fed batch-wise like a decoded stream."""
     from ..mesh import read_mesh
-    from ..render.raycast import StreamingRaycaster
+    from ..render.stream import mesh_batches, render_batches
 
     t0 = time.perf_counter()
-    mesh, _ = read_mesh(path, **(read_kwargs or {}))
+    mesh, report = read_mesh(path, **(read_kwargs or {}))
     read_s = time.perf_counter() - t0
     lo, hi = mesh.bbox
-    rc = StreamingRaycaster(view.camera().fit(lo, hi), view.tf, mode=view.mode, step=view.step,
-                            scalar_range=mesh.scalar_range, expected_tets=mesh.n_tets)
-    rc.add_vertices(mesh.points, mesh.density)
-    rc.set_boundary(mesh.boundary_faces())
-    rc.add_tets(mesh.tets)
-    res = rc.finish()
+    res = render_batches(mesh_batches(mesh), view.camera().fit(lo, hi), view.tf, mode=view.mode, step=view.step,
+                         scalar_range=mesh.scalar_range, expected_tets=mesh.n_tets, progress=progress)
     stats = dict(res.stats)
-    stats.update(decode_s=read_s, filter_s=0.0, pipeline="streaming", level=0, ratio=0.0, merges=0,
-                 tets_decoded=mesh.n_tets,
+    stats.update(decode_s=read_s + stats.get("decode_s", 0.0), filter_s=0.0, pipeline="streaming", level=0,
+                 ratio=0.0, merges=0, tets_decoded=mesh.n_tets, notes=list(report.notes),
                  peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
     return PipelineResult(res.image, stats)
 

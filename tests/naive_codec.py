@@ -148,8 +148,15 @@ def _parity(row) -> int:
 
 def canonical_tets(tets) -> list[tuple]:
     """Sorted list of (sorted vertex ids..., permutation parity): equal for two tet arrays that
-    hold the same oriented tets in any order and any even rotation."""
-    return sorted(tuple(sorted(int(x) for x in t)) + (_parity(t),) for t in np.asarray(tets))
+    hold the same oriented tets in any order and any even permutation of each tet."""
+    t = np.asarray(tets, dtype=np.int64).reshape(-1, 4)
+    inv = np.zeros(len(t), np.int64)
+    for i in range(4):
+        for j in range(i + 1, 4):
+            inv += t[:, i] > t[:, j]
+    rows = np.concatenate([np.sort(t, axis=1), (inv & 1)[:, None]], axis=1)
+    rows = rows[np.lexsort(rows.T[::-1])]
+    return [tuple(r) for r in rows.tolist()]
 
 
 def naive_traversal_check(boundary, tets) -> None:

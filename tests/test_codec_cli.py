@@ -1,0 +1,98 @@
+"""`tetc compress`, `tetc decompress`, `tetc info` on .tetc files: exit codes and messages."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+from click.testing import CliRunner
+
+from conftest import SAMPLES
+from gatun_py.cli.main import tetc
+from gatun_py.codec.cutborder import encode_connectivity
+from gatun_py.mesh import read_mesh
+from naive_codec import canonical_tets
+
+POST = str(SAMPLES / "lox_post_tets" / "post.vtk")
+FIRE = str(SAMPLES / "room_fire" / "fire_ug.vtu")
+
+
+def run(*args):
+    return CliRunner().invoke(tetc, [str(a) for a in args], catch_exceptions=False)
+
+
+def assert_error(res, *fragments):
+    assert res.exit_code == 1, res.output
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("tetc: error: "), res.output
+    for f in fragments:
+        assert f in lines[0], (f, lines[0])
+
+
+def _same_mesh(a, b):
+    """b equals a up to the codec's vertex permutation, every float bit-identical."""
+    vo = encode_connectivity(a.n_points, a.tets, a.boundary_faces()).vertex_order
+    assert np.array_equal(b.points.view(np.uint32), a.points[vo].view(np.uint32))
+    assert np.array_equal(b.density.view(np.uint32), a.density[vo].view(np.uint32))
+    assert canonical_tets(vo[b.tets]) == canonical_tets(a.tets)
+
+
+def test_compress_info_decompress_round_trip(tmp_path):
+    out = tmp_path / "post.tetc"
+    res = run("compress", POST, "-o", out)
+    assert res.exit_code == 0, res.output
+    assert "wrote" in res.output and "bits/tet" in res.output
+    res = run("info", out, "--json")
+    assert res.exit_code == 0
+    info = json.loads(res.output)
+    mesh = read_mesh(POST)[0]
+    assert info["points"] == mesh.n_points and info["tets"] == mesh.n_tets
+    assert info["bytes_total"] == os.path.getsize(out)
+    assert 0 < info["bits_per_tet_connectivity"] < 2.3
+    assert 0 < info["bits_per_vertex_geometry"] < 96
+    assert set(info["sections"]) == {"L0/boundary", "L0/tets", "L0/geometry"}
+    assert info["levels"][0]["tets"] == mesh.n_tets
+    assert info["boundary_faces"] == len(mesh.boundary_faces())
+    vtu = tmp_path / "back.vtu"
+    res = run("decompress", out, "-o", vtu, "--quiet")
+    assert res.exit_code == 0 and res.output == ""
+    _same_mesh(mesh, read_mesh(vtu)[0])
+
+
+def test_refuses_to_overwrite_without_force(tmp_path):
+    out = tmp_path / "f.tetc"
+    out.write_bytes(b"keep")
+    assert_error(run("compress", POST, "-o", out, "-q"), "already exists", "--force")
+    assert out.read_bytes() == b"keep"
+    assert run("compress", POST, "-o", out, "-q", "--force").exit_code == 0
+    vtu = tmp_path / "x.vtu"
+    vtu.write_bytes(b"keep")
+    assert_error(run("decompress", out, "-o", vtu), "already exists")
+
+
+def test_bad_inputs(tmp_path):
+    assert_error(run("decompress", tmp_path / "missing.tetc", "-o", tmp_path / "a.vtu"), "no such file")
+    notetc = tmp_path / "x.tetc"
+    notetc.write_bytes(b"hello world, not a mesh" * 3)
+    assert_error(run("decompress", notetc, "-o", tmp_path / "a.vtu"), "not a .tetc file")
+    assert_error(run("info", notetc), "not a .tetc file")
+    good = tmp_path / "g.tetc"
+    run("compress", POST, "-o", good, "-q")
+    data = good.read_bytes()
+    cut = tmp_path / "cut.tetc"
+    cut.write_bytes(data[: len(data) // 2])
+    assert_error(run("decompress", cut, "-o", tmp_path / "a.vtu"), "corrupt")
+    newer = bytearray(data)
+    newer[8] = 7
+    (tmp_path / "new.tetc").write_bytes(bytes(newer))
+    assert_error(run("decompress", tmp_path / "new.tetc", "-o", tmp_path / "a.vtu"), "newer")
+    assert not (tmp_path / "a.vtu").exists()
+    assert_error(run("decompress", good, "-o", tmp_path / "a.vtu", "--level", "3"), "level 3")
+    assert_error(run("compress", POST, "-o", tmp_path / "nodir" / "x.tetc"), "does not exist")
+
+
+def test_usage_errors_exit_2(tmp_path):
+    assert run("compress", POST).exit_code == 2  # missing -o
+    assert run("decompress").exit_code == 2
+    assert run("decompress", "a.tetc", "-o", "b.vtu", "--level", "-1").exit_code == 2

@@ -26,7 +26,7 @@ def post_levels(tmp_path_factory):
     return mesh, forest, levels, path
 
 
-VIEW = View(tf="post", width=48, height=40, azimuth=30, elevation=20)
+VIEW = View(Camera(48, 40, 30, 20), tf="post")
 
 
 @pytest.mark.parametrize("ratio", [0.0, 0.3, 0.5, 0.8, 0.9])

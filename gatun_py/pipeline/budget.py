@@ -201,8 +201,9 @@ def plan_file_budget(path, view, budget_s: float, *, recalibrate: bool = False):
     levels = [LevelSize(int(lv["level"]), int(lv.get("merges_before", 0)), int(lv["tets"]))
               for lv in stored_levels(reader)]
     tf_key = view.tf if isinstance(view.tf, str) else json.dumps(view.tf, sort_keys=True, default=str)
-    key = calibration_key(_file_id(path), (view.width, view.height), view.mode,
-                          f"{tf_key}|{view.step}|{view.azimuth}|{view.elevation}|{view.zoom}")
+    cam = view.camera
+    key = calibration_key(_file_id(path), (cam.width, cam.height), view.mode,
+                          f"{tf_key}|{view.step}|{cam.azimuth}|{cam.elevation}|{cam.zoom}")
     model = None if recalibrate else load_model(key)
     calibrated = model is None
     if model is None:

@@ -28,21 +28,18 @@ PIPELINES = ("streaming", "generic")
 
 @dataclass(frozen=True)
 class View:
-    """How to draw: transfer function, sampling, camera."""
+    """How to draw: the camera (image size and angles), transfer function and sampling."""
 
+    camera: object = None  # gatun_py.render.camera.Camera; default 256x256, VTK's default view
     tf: object = "default"
     mode: str = "volume"
     step: float | None = None
-    width: int = 256
-    height: int = 256
-    azimuth: float = 0.0
-    elevation: float = 0.0
-    zoom: float = 1.0
 
-    def camera(self):
-        from ..render.camera import Camera
+    def __post_init__(self):
+        if self.camera is None:
+            from ..render.camera import Camera
 
-        return Camera(self.width, self.height, self.azimuth, self.elevation, self.zoom)
+            object.__setattr__(self, "camera", Camera())
 
 
 @dataclass(frozen=True)
@@ -173,7 +170,7 @@ def render_tetc(path, view: View, *, ratio: float | None = None, level: int | No
     if target is None:
         target = resolve_target(reader, ratio=ratio, level=level)
     lo, hi, rng, step = file_render_defaults(reader)
-    camera = view.camera().fit(lo, hi)
+    camera = view.camera.fit(lo, hi)
     step = view.step if view.step is not None else step
     times = {"decode_s": 0.0, "filter_s": 0.0}
     t0 = time.perf_counter()
@@ -251,7 +248,7 @@ def render_mesh_file(path, view: View, *, read_kwargs: dict | None = None, progr
     mesh, report = read_mesh(path, **(read_kwargs or {}))
     read_s = time.perf_counter() - t0
     lo, hi = mesh.bbox
-    res = render_batches(mesh_batches(mesh), view.camera().fit(lo, hi), view.tf, mode=view.mode, step=view.step,
+    res = render_batches(mesh_batches(mesh), view.camera.fit(lo, hi), view.tf, mode=view.mode, step=view.step,
                          scalar_range=mesh.scalar_range, expected_tets=mesh.n_tets, progress=progress)
     stats = dict(res.stats)
     stats.update(decode_s=read_s + stats.get("decode_s", 0.0), filter_s=0.0, pipeline="streaming", level=0,

@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
@@ -81,7 +82,100 @@ def sample_points(mesh, k, seed=0):
     return p, val
 
 
-def probe_error(ug, pts, truth, drange):
+@njit(cache=True)
+def _locate(points, tets, dens, q, lo, cell, nx, ny, nz, cstart, citems, out_val, out_found):
+    """Scalar at every query point by barycentric interpolation in the tet containing it.
+
+    Tets are bucketed by bounding box on a uniform grid; a point takes the candidate tet whose
+    smallest barycentric coordinate is largest (>= -1e-9: inside up to rounding).
+    """
+    for i in range(q.shape[0]):
+        gx = min(max(int((q[i, 0] - lo[0]) / cell), 0), nx - 1)
+        gy = min(max(int((q[i, 1] - lo[1]) / cell), 0), ny - 1)
+        gz = min(max(int((q[i, 2] - lo[2]) / cell), 0), nz - 1)
+        g = (gz * ny + gy) * nx + gx
+        best = -1e300
+        val = 0.0
+        for k in range(cstart[g], cstart[g + 1]):
+            t = citems[k]
+            a, b, c, d = tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3]
+            w = np.empty(4)
+            for j in range(4):
+                v = np.empty((4, 3))
+                for r in range(4):
+                    for s in range(3):
+                        v[r, s] = points[tets[t, r], s]
+                for s in range(3):
+                    v[j, s] = q[i, s]
+                ux, uy, uz = v[1, 0] - v[0, 0], v[1, 1] - v[0, 1], v[1, 2] - v[0, 2]
+                vx, vy, vz = v[2, 0] - v[0, 0], v[2, 1] - v[0, 1], v[2, 2] - v[0, 2]
+                wx, wy, wz = v[3, 0] - v[0, 0], v[3, 1] - v[0, 1], v[3, 2] - v[0, 2]
+                w[j] = ux * (vy * wz - vz * wy) + uy * (vz * wx - vx * wz) + uz * (vx * wy - vy * wx)
+            tot = w[0] + w[1] + w[2] + w[3]
+            if tot <= 0:
+                continue
+            mn = min(min(w[0], w[1]), min(w[2], w[3])) / tot
+            if mn > best:
+                best = mn
+                val = (w[0] * dens[a] + w[1] * dens[b] + w[2] * dens[c] + w[3] * dens[d]) / tot
+        out_found[i] = best >= -1e-9
+        out_val[i] = val
+
+
+def probe(points, tets, dens, q):
+    """(values, found) of a linear tet mesh at query points (exact point location)."""
+    points = np.asarray(points, np.float64)
+    tets = np.asarray(tets, np.int64)
+    lo = points.min(axis=0)
+    hi = points.max(axis=0)
+    n_cells = max(1, tets.shape[0] // 4)
+    cell = max(float(np.prod(hi - lo + 1e-12) / n_cells) ** (1 / 3), 1e-12)
+    nx, ny, nz = (np.floor((hi - lo) / cell).astype(int) + 1)
+    tp = points[tets]
+    a = np.clip(np.floor((tp.min(axis=1) - lo) / cell).astype(np.int64), 0, [nx - 1, ny - 1, nz - 1])
+    b = np.clip(np.floor((tp.max(axis=1) - lo) / cell).astype(np.int64), 0, [nx - 1, ny - 1, nz - 1])
+    ids, cells = [], []
+    span = b - a + 1
+    # enumerate the bucket range of every tet (vectorised by span size)
+    for sx in range(1, span[:, 0].max() + 1):
+        for sy in range(1, span[:, 1].max() + 1):
+            for sz in range(1, span[:, 2].max() + 1):
+                sel = np.flatnonzero((span[:, 0] == sx) & (span[:, 1] == sy) & (span[:, 2] == sz))
+                if sel.size == 0:
+                    continue
+                for dx in range(sx):
+                    for dy in range(sy):
+                        for dz in range(sz):
+                            g = ((a[sel, 2] + dz) * ny + a[sel, 1] + dy) * nx + a[sel, 0] + dx
+                            ids.append(sel)
+                            cells.append(g)
+    ids = np.concatenate(ids)
+    cells = np.concatenate(cells)
+    order = np.argsort(cells, kind="stable")
+    cstart = np.searchsorted(cells[order], np.arange(nx * ny * nz + 1))
+    val = np.zeros(len(q))
+    found = np.zeros(len(q), np.bool_)
+    _locate(points, tets, np.asarray(dens, np.float64), np.asarray(q, np.float64), lo, cell, nx, ny, nz,
+            cstart, ids[order], val, found)
+    return val, found
+
+
+def mesh_error(points, tets, dens, pts, truth, drange):
+    """(rms %, max %, outside %) of the scalar of a tet mesh at ``pts`` against ``truth`` (% of range)."""
+    val, mask = probe(points, tets, dens, pts)
+    err = np.abs(val[mask] - truth[mask]) / drange * 100
+    rms = float(np.sqrt(np.mean(err**2))) if err.size else float("nan")
+    return rms, float(err.max(initial=0)), float(100 * (1 - mask.mean()))
+
+
+def vtk_arrays(ug):
+    pts = vtk_to_numpy(ug.GetPoints().GetData()).astype(np.float64)
+    conn = vtk_to_numpy(ug.GetCells().GetConnectivityArray()).reshape(-1, 4)
+    arr = ug.GetPointData().GetScalars() or ug.GetPointData().GetArray(0)
+    return pts, conn, vtk_to_numpy(arr).astype(np.float64)
+
+
+def probe_error_vtk(ug, pts, truth, drange):
     """(rms %, max %, outside %) of the scalar probed in ``ug`` against ``truth`` (% of the range)."""
     arr = ug.GetPointData().GetScalars() or ug.GetPointData().GetArray(0)
     arr.SetName("density")
@@ -92,6 +186,8 @@ def probe_error(ug, pts, truth, drange):
     pr = vtk.vtkProbeFilter()
     pr.SetInputData(poly)
     pr.SetSourceData(ug)
+    # a cell locator: the default point-locator walk misses cells in sliver-rich simplified meshes
+    pr.SetCellLocatorPrototype(vtk.vtkStaticCellLocator())
     pr.Update()
     out = pr.GetOutput().GetPointData()
     val = vtk_to_numpy(out.GetArray("density")).astype(np.float64)
@@ -172,9 +268,9 @@ def main(argv=None):
             lo, hi = mesh.scalar_range
             for r in (0.5, 0.9, 0.99):
                 s = simplified_mesh(mesh, forest, int(r * mesh.n_points))
-                ours = probe_error(to_vtk(s), pts, truth, hi - lo)
+                ours = mesh_error(s.points, s.tets, s.density, pts, truth, hi - lo)
                 vq, _ = vtk_quadric(ug, 1 - s.n_tets / mesh.n_tets)
-                theirs = probe_error(vq, pts, truth, hi - lo)
+                theirs = mesh_error(*vtk_arrays(vq), pts, truth, hi - lo)
                 fid_rows.append(dict(name=name, ratio=r, tets=s.n_tets, ours=ours, vtk_tets=vq.GetNumberOfCells(),
                                      theirs=theirs))
                 print(f"  ratio {r}: ours {s.n_tets} tets rms {ours[0]:.3f}% out {ours[2]:.2f}% | "
@@ -231,7 +327,8 @@ def main(argv=None):
     if fid_rows:
         L += ["", "### Fidelity: sampled scalar error against the original", "",
               f"{n_probe} points drawn uniformly in the original mesh (volume-weighted tets, uniform barycentric "
-              "coordinates), exact linear interpolant as truth, probed in the simplified mesh with `vtkProbeFilter`. "
+              "coordinates), exact linear interpolant as truth, located exactly in the simplified mesh (bucketed "
+              "tets, barycentric coordinates from sub-volumes; `vtkProbeFilter` mislocates points in sliver tets). "
               "Errors in % of the scalar range over the points inside the simplified mesh; \"outside\" = % of points "
               "the simplified mesh no longer covers. VTK = `vtkUnstructuredGridQuadricDecimation` asked for the same "
               "tet count.", "",

@@ -94,10 +94,11 @@ def tri_area_normal(p, f):
     return n
 
 
-def evaluate_merge(tets, pts, dens, a, b, *, is_boundary, pinned, wd, wg):
+def evaluate_merge(tets, pts, dens, a, b, *, is_boundary, pinned, wd, wg, wv):
     """(legal, error) of merging a into b in the mesh ``tets`` (list of 4-tuples).
 
-    ``wd``, ``wg`` are the weights already divided by the normalisation scales; ``is_boundary`` is
+    ``wd``, ``wg``, ``wv`` (density, boundary area, swept boundary volume) are the weights already
+    divided by the normalisation scales; ``is_boundary`` is
     the input's boundary vertex set and ``pinned`` the non-manifold vertices.
     """
     p = np.asarray(pts, np.float64)
@@ -126,6 +127,7 @@ def evaluate_merge(tets, pts, dens, a, b, *, is_boundary, pinned, wd, wg):
         dm += abs(new6 / 6.0 * sum(d[w] for w in q) / 4 - m_old)
     bfaces = boundary_faces(tets)
     ge = 0.0
+    swept = 0.0
     if a in is_boundary:
         old = [f for f in bfaces if a in f]
         area = {f: 0.5 * np.linalg.norm(tri_area_normal(p, f)) for f in old}
@@ -139,12 +141,13 @@ def evaluate_merge(tets, pts, dens, a, b, *, is_boundary, pinned, wd, wg):
             if not np.dot(n_old, n_new) > NORMAL_EPS * np.linalg.norm(n_new) * np.linalg.norm(n_old):
                 return False, None
             a_new = 0.5 * np.linalg.norm(n_new)
+            swept += abs(orient6(p, (f[0], f[1], f[2], b))) / 6.0
             for h in old:
                 if len(set(g) & set(h)) >= 2 and total > 0:
                     ge += abs(a_new - area[h]) * area[h] / total
     if not link(a, tets, bfaces) & link(b, tets, bfaces) <= edge_link(a, b, tets, bfaces):
         return False, None
-    return True, wd * dm + wg * ge
+    return True, wd * dm + wg * ge + wv * swept
 
 
 def collapse(tets, a, b):

@@ -18,7 +18,7 @@ MANIFOLD = {k for k in AWKWARD if k not in ("edge_touching", "vertex_touching")}
 def _naive_kw(state, tets):
     return dict(is_boundary=set(np.flatnonzero(state.isb).tolist()),
                 pinned=set(np.flatnonzero(state.pinned).tolist()),
-                wd=state.params[0], wg=state.params[1])
+                wd=state.params[0], wg=state.params[1], wv=state.params[2])
 
 
 def _compare_all_edges(state, pts, dens):
@@ -59,7 +59,7 @@ def test_candidates_match_reference(name):
                          ids=["delaunay", "grid", "degenerate"])
 def test_replay_every_merge_is_legal_and_final_state_is_stuck(mesh):
     forest = decimate(mesh)
-    state = DecimationState(mesh, 1.0, 10.0)
+    state = DecimationState(mesh, 1.0, 1.0)
     kw = _naive_kw(state, None)
     pts, dens = mesh.points.astype(np.float64), mesh.density.astype(np.float64)
     tets = [tuple(int(x) for x in t) for t in mesh.tets]

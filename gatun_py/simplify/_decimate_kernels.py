@@ -38,7 +38,7 @@ VOLUME_EPS = 1e-10
 NORMAL_EPS = 1e-6
 
 # Indices into the float parameter array.
-P_WD, P_WG = 0, 1
+P_WD, P_WG, P_WV = 0, 1, 2
 # Indices into the int64 counter array.
 C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS = 0, 1, 2, 3, 4
 
@@ -294,6 +294,7 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, mark, count
     """
     wd = params[P_WD]
     wg = params[P_WG]
+    wv = params[P_WV]
     ns = st.shape[0]
     # per star tet: old volume and mass, and the plane of the face opposite a, so that the volume
     # with a moved onto b is one dot product: 6 vol = off - nrm . p_b (linear in the moved corner)
@@ -383,11 +384,15 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, mark, count
             if not ok:
                 continue
             ge = 0.0
+            swept = 0.0
             if nf > 0:
                 for f in range(nf):
                     if bf[f, 0] == b or bf[f, 1] == b or bf[f, 2] == b:
                         area_new[f] = -1.0  # collapses
                         continue
+                    # the volume between the old and the new face (the tet of the face and b)
+                    swept += abs(n_old[f, 0] * (pbx - pts[bf[f, 0], 0]) + n_old[f, 1] * (pby - pts[bf[f, 0], 1])
+                                 + n_old[f, 2] * (pbz - pts[bf[f, 0], 2])) / 6.0
                     x0 = b if bf[f, 0] == a else bf[f, 0]
                     x1 = b if bf[f, 1] == a else bf[f, 1]
                     x2 = b if bf[f, 2] == a else bf[f, 2]
@@ -414,7 +419,7 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, mark, count
                         if shared >= 2 and area_sum > 0.0:
                             ge += abs(area_new[f] - area_old[g]) * area_old[g] / area_sum
             cand_out[nc] = b
-            err_out[nc] = wd * dm + wg * ge
+            err_out[nc] = wd * dm + wg * ge + wv * swept
             nc += 1
     return nc
 

@@ -136,6 +136,8 @@ def emulate_decode_order(tets: np.ndarray, n_points: int):
 # --------------------------------------------------------------------------------------------
 # plain-Python model of the geometry coder
 
+ADJ_CAP = 16  # neighbours remembered per vertex (gatun_py.codec._geometry_kernels.ADJ_CAP)
+
 
 def ordered_int(value: np.float32) -> int:
     """Order-preserving integer of a float32's bit pattern (negative floats flipped)."""
@@ -143,14 +145,65 @@ def ordered_int(value: np.float32) -> int:
     return bits ^ 0x7FFFFFFF if bits < 0 else bits
 
 
-def _bit_length(v: int) -> int:
-    return abs(v).bit_length()
-
-
-def _predictions(k, ref, col):
-    """(pattern, candidate predictions as floats, repetition candidates) of vertex k on one channel."""
+def _face_and_apex(k, ref):
     face = [r for r in ref[:3] if r >= 0]
     apex = ref[3]
+    return face, apex
+
+
+def naive_extra_refs(values: np.ndarray, refs: np.ndarray):
+    """For every vertex, the parallelogram partners and extrapolation partners the coder picks.
+
+    Returns a list of ``(par, ext)``: ``par[p]`` for the face pairs (0, 1), (0, 2), (1, 2) is the
+    common neighbour w of the pair (not the third face vertex nor the apex) whose x + y - w is
+    nearest (3-D) to the first estimate of the new vertex; ``ext[q]`` the neighbour w of face
+    vertex q whose 2 f_q - w is nearest. Neighbours: the edges new vertex - face refs seen so far,
+    in insertion order, at most ADJ_CAP per vertex.
+    """
+    xyz = np.asarray(values, dtype=np.float32)[:, :3].astype(np.float64)
+    n = len(xyz)
+    adj: list[list[int]] = [[] for _ in range(n)]
+    out = []
+    for k in range(n):
+        face, apex = _face_and_apex(k, [int(r) for r in refs[k]])
+        par = [-1, -1, -1]
+        ext = [-1, -1, -1]
+        if len(face) >= 2:
+            f = [xyz[v] for v in face]
+            if len(face) == 3:
+                est = (f[0] + f[1] + f[2] - xyz[apex]) * 0.5 if apex >= 0 else (f[0] + f[1] + f[2]) / 3.0
+            else:
+                est = f[0] + f[1] - xyz[apex] if apex >= 0 else (f[0] + f[1]) * 0.5
+            pairs = [(0, 1, 2), (0, 2, 1), (1, 2, 0)] if len(face) == 3 else [(0, 1, None)]
+            for p, (i, j, other) in enumerate(pairs):
+                x, y = face[i], face[j]
+                excluded = {face[other] if other is not None else -1, apex}
+                best, best_d = -1, np.inf
+                for w in adj[x]:
+                    if w in excluded or w not in adj[y]:
+                        continue
+                    d = float(np.sum((xyz[x] + xyz[y] - xyz[w] - est) ** 2))
+                    if d < best_d:
+                        best, best_d = w, d
+                par[p] = best
+            for q, x in enumerate(face):
+                best, best_d = -1, np.inf
+                for w in adj[x]:
+                    d = float(np.sum((2.0 * xyz[x] - xyz[w] - est) ** 2))
+                    if d < best_d:
+                        best, best_d = w, d
+                ext[q] = best
+        for v in face:
+            for a, b in ((k, v), (v, k)):
+                if b not in adj[a] and len(adj[a]) < ADJ_CAP:
+                    adj[a].append(b)
+        out.append((par, ext))
+    return out
+
+
+def _predictions(k, ref, col, extra):
+    """(pattern, candidate predictions, repetition candidates) of vertex k on one channel."""
+    face, apex = _face_and_apex(k, ref)
     if not face:
         if apex >= 0:
             face, apex = [apex], -1
@@ -163,20 +216,41 @@ def _predictions(k, ref, col):
             eq.append(o)
     if not face:
         return 0, [None], eq
-    vals = [float(col[r]) for r in face]
     if len(face) == 1:
         return 1, [("copy", ordered_int(col[face[0]]))], eq  # a plain copy keeps every bit, NaN too
-    a, b = vals[0], vals[1]
+    par, ext = extra
+    v = [float(col[r]) for r in face]
+
+    def parallelogram(i, j, p, fallback):
+        return fallback if par[p] < 0 else v[i] + v[j] - float(col[par[p]])
+
+    def extrapolation(q, fallback):
+        return fallback if ext[q] < 0 else 2.0 * v[q] - float(col[ext[q]])
+
+    a, b = v[0], v[1]
     if len(face) == 2:
         if apex >= 0:
             d = float(col[apex])
-            return 3, [a + b - d, (a + b) * 0.5, a], eq
-        return 2, [(a + b) * 0.5, a, b], eq
-    c = vals[2]
+            first = a + b - d
+            cands = [first, (a + b) * 0.5, a]
+            pat = 3
+        else:
+            first = (a + b) * 0.5
+            cands = [first, a, b]
+            pat = 2
+        return pat, cands + [parallelogram(0, 1, 0, first), extrapolation(0, first), extrapolation(1, first)], eq
+    c = v[2]
     if apex >= 0:
         d = float(col[apex])
-        return 5, [(a + b + c - d) * 0.5, (a + b + c) / 3.0, a + b - d, a + c - d, b + c - d, a], eq
-    return 4, [(a + b + c) / 3.0, a, b, c], eq
+        cands = [(a + b + c - d) * 0.5, (a + b + c) / 3.0, a + b - d, a + c - d, b + c - d, a]
+        pat = 5
+    else:
+        cands = [(a + b + c) / 3.0, a, b, c]
+        pat = 4
+    h = float(np.float32(cands[0]))  # the kernel reads the first candidate back as float32
+    cands += [parallelogram(0, 1, 0, h), parallelogram(0, 2, 1, h), parallelogram(1, 2, 2, h),
+              extrapolation(0, h), extrapolation(1, h), extrapolation(2, h)]
+    return pat, cands, eq
 
 
 def _candidate_int(x) -> int:
@@ -185,7 +259,7 @@ def _candidate_int(x) -> int:
     if isinstance(x, tuple):
         return x[1]
     f = np.float32(x)
-    if f != f:
+    if f != f:  # NaN payloads are not portable: predict 0
         f = np.float32(0.0)
     return ordered_int(f)
 
@@ -211,13 +285,13 @@ def naive_symbols(values: np.ndarray, refs: np.ndarray, modes) -> np.ndarray:
     values = np.asarray(values, dtype=np.float32)
     n = values.shape[0]
     out = np.zeros((n, 4, 3), dtype=np.int64)
+    extra = naive_extra_refs(values, refs)
     for ch in range(4):
         col = values[:, ch]
         table = sorted({ordered_int(v) for v in col})
-        scores = {}
+        scores: dict = {}
         for k in range(n):
-            pat, cands, eq = _predictions(k, [int(r) for r in refs[k]], col)
-            cand_o = [_candidate_int(x) for x in cands]
+            pat, cands, eq = _predictions(k, [int(r) for r in refs[k]], col, extra[k])
             o = ordered_int(col[k])
             sym = -1
             res = 0
@@ -225,6 +299,7 @@ def naive_symbols(values: np.ndarray, refs: np.ndarray, modes) -> np.ndarray:
             if eq:
                 sym = eq.index(o) if o in eq else len(eq)
             if not eq or sym == len(eq):
+                cand_o = [_candidate_int(x) for x in cands]
                 sc = scores.setdefault(pat, [0] * len(cand_o))
                 best = min(range(len(cand_o)), key=lambda q: (sc[q], q))
                 if modes[ch] == 1:
@@ -232,9 +307,9 @@ def naive_symbols(values: np.ndarray, refs: np.ndarray, modes) -> np.ndarray:
                     res = table.index(o) - rank_pred
                 else:
                     res = o - cand_o[best]
-            sc = scores.setdefault(pat, [0] * len(cand_o))
-            for q in range(len(cand_o)):
-                sc[q] = sc[q] - (sc[q] >> 4) + (_bit_length(o - cand_o[q]) << 4)
+                # scores: exponentially decayed bit lengths of each candidate's residual
+                for q in range(len(cand_o)):
+                    sc[q] = sc[q] - (sc[q] >> 4) + (abs(o - cand_o[q]).bit_length() << 4)
             out[k, ch] = (sym, res, best)
     return out
 

@@ -51,14 +51,20 @@ MODE_TABLE = 1
 # ref patterns (which of the face refs and the apex are present) and their predictor candidates
 PAT_NONE, PAT_ONE, PAT_EDGE, PAT_EDGE_APEX, PAT_FACE, PAT_FACE_APEX = 0, 1, 2, 3, 4, 5
 N_PATTERNS = 6
-MAX_CANDS = 6
-N_CANDS = np.array([1, 1, 3, 3, 4, 6], dtype=np.int64)
+MAX_CANDS = 12
+N_CANDS = np.array([1, 1, 6, 6, 10, 12], dtype=np.int64)
+
+# the coder's own view of the mesh: the edges from every vertex to its face refs (at most
+# ADJ_CAP per vertex, the rest ignored alike by encoder and decoder)
+ADJ_CAP = 16
+NW = 2  # extra predictor vertices per face pair / face ref
 
 # model layout of one channel (uint16 probabilities)
 EQ_CONTEXTS = 8  # (number of distinct ref values - 1) x (neighbouring channel was a repeat)
 EQ_BASE = 0
 RES_BASE = EQ_BASE + EQ_CONTEXTS * 8
-N_RES_CONTEXTS = N_PATTERNS * 2
+N_ACTIVITY = 10
+N_RES_CONTEXTS = N_PATTERNS * 2 * N_ACTIVITY
 RANK_BASE = RES_BASE + N_RES_CONTEXTS * INT_MODEL_SIZE
 TABLE_BASE = RANK_BASE + N_RES_CONTEXTS * INT_MODEL_SIZE
 MODEL_SIZE = TABLE_BASE + 2 * INT_MODEL_SIZE
@@ -116,13 +122,157 @@ def _bit_length(v):
     return n + v
 
 
+@njit(cache=True, inline="always")
+def _add_edge(adj, deg, x, y):
+    for i in range(deg[x]):
+        if adj[x, i] == y:
+            return
+    if deg[x] < ADJ_CAP:
+        adj[x, deg[x]] = y
+        deg[x] += 1
+
+
+@njit(cache=True, inline="always")
+def _link(adj, deg, x, y):
+    if x >= 0 and y >= 0:
+        _add_edge(adj, deg, x, y)
+        _add_edge(adj, deg, y, x)
+
+
+@njit(cache=True, inline="always")
+def _dist2(vf, e0, e1, e2, x0, x1, x2):
+    return (x0 - e0) ** 2 + (x1 - e1) ** 2 + (x2 - e2) ** 2
+
+
 @njit(cache=True)
-def _gather(k, r0, r1, r2, r3, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i):
+def _pick_par(adj, deg, mark, tag, vf, x, y, ex0, ex1, e0, e1, e2):
+    """The common neighbour w of x and y (not ex0/ex1) whose parallelogram x + y - w lands
+    closest to the estimate e (3-D coordinates); -1 if none. ``mark`` (n,) is scratch: the
+    neighbours of y are tagged with ``tag`` (unique per call) so the intersection costs O(degree)."""
+    for q in range(deg[y]):
+        mark[adj[y, q]] = tag
+    best = -1
+    bd = np.inf
+    for i in range(deg[x]):
+        w = adj[x, i]
+        if w == ex0 or w == ex1 or mark[w] != tag:
+            continue
+        d = _dist2(vf, e0, e1, e2,
+                   np.float64(vf[x, 0]) + np.float64(vf[y, 0]) - np.float64(vf[w, 0]),
+                   np.float64(vf[x, 1]) + np.float64(vf[y, 1]) - np.float64(vf[w, 1]),
+                   np.float64(vf[x, 2]) + np.float64(vf[y, 2]) - np.float64(vf[w, 2]))
+        if d < bd:
+            bd = d
+            best = w
+    return best
+
+
+@njit(cache=True)
+def _pick_ext(adj, deg, vf, x, e0, e1, e2):
+    """The neighbour w of x whose extrapolation 2 x - w lands closest to the estimate e."""
+    best = -1
+    bd = np.inf
+    for i in range(deg[x]):
+        w = adj[x, i]
+        d = _dist2(vf, e0, e1, e2,
+                   2.0 * np.float64(vf[x, 0]) - np.float64(vf[w, 0]),
+                   2.0 * np.float64(vf[x, 1]) - np.float64(vf[w, 1]),
+                   2.0 * np.float64(vf[x, 2]) - np.float64(vf[w, 2]))
+        if d < bd:
+            bd = d
+            best = w
+    return best
+
+
+@njit(cache=True)
+def link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf):
+    """Choose the extra predictor vertices of vertex ``k`` (refs checked) and record its edges.
+
+    ``w[p, 0]``: for the pairs p = (f0, f1), (f0, f2), (f1, f2) of face refs, a common neighbour
+    completing a parallelogram; ``w[q, 1]``: for face ref q, a neighbour to extrapolate from
+    (2 f_q - w). Both are picked by 3-D closeness to a first estimate of the new vertex (the
+    parallelepiped corner through the apex, or the face centroid), using only vertices < k, so
+    the decoder can do the same before decoding vertex k. ``mark`` (n,) int64 scratch, zero
+    at the start.
+    """
+    f0 = -1
+    f1 = -1
+    f2 = -1
+    nf = 0
+    for q in range(3):
+        r = r0 if q == 0 else (r1 if q == 1 else r2)
+        if r >= 0:
+            if nf == 0:
+                f0 = r
+            elif nf == 1:
+                f1 = r
+            else:
+                f2 = r
+            nf += 1
+    apex = r3
+    for p in range(3):
+        w[p, 0] = -1
+        w[p, 1] = -1
+    if nf >= 2:
+        e0 = 0.0
+        e1 = 0.0
+        e2 = 0.0
+        for c in range(3):
+            a = np.float64(vf[f0, c])
+            b = np.float64(vf[f1, c])
+            if nf == 3:
+                cc = np.float64(vf[f2, c])
+                if apex >= 0:
+                    est = (a + b + cc - np.float64(vf[apex, c])) * 0.5
+                else:
+                    est = (a + b + cc) / 3.0
+            elif apex >= 0:
+                est = a + b - np.float64(vf[apex, c])
+            else:
+                est = (a + b) * 0.5
+            if c == 0:
+                e0 = est
+            elif c == 1:
+                e1 = est
+            else:
+                e2 = est
+        w[0, 0] = _pick_par(adj, deg, mark, 3 * k + 1, vf, f0, f1, f2, apex, e0, e1, e2)
+        w[0, 1] = _pick_ext(adj, deg, vf, f0, e0, e1, e2)
+        w[1, 1] = _pick_ext(adj, deg, vf, f1, e0, e1, e2)
+        if nf == 3:
+            w[1, 0] = _pick_par(adj, deg, mark, 3 * k + 2, vf, f0, f2, f1, apex, e0, e1, e2)
+            w[2, 0] = _pick_par(adj, deg, mark, 3 * k + 3, vf, f1, f2, f0, apex, e0, e1, e2)
+            w[2, 1] = _pick_ext(adj, deg, vf, f2, e0, e1, e2)
+    # every pair among the new vertex, its face and the apex is a mesh edge, except
+    # new vertex - apex (they sit on either side of the face)
+    _link(adj, deg, k, f0)
+    _link(adj, deg, k, f1)
+    _link(adj, deg, k, f2)
+
+
+
+@njit(cache=True, inline="always")
+def _par(vf, ch, x, y, w, fallback):
+    if w < 0:
+        return fallback
+    return np.float64(vf[x, ch]) + np.float64(vf[y, ch]) - np.float64(vf[w, ch])
+
+
+@njit(cache=True, inline="always")
+def _ext(vf, ch, x, w, fallback):
+    if w < 0:
+        return fallback
+    return 2.0 * np.float64(vf[x, ch]) - np.float64(vf[w, ch])
+
+
+@njit(cache=True, inline="always")
+def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, need_cands):
     """Predictor candidates and distinct repetition candidates of vertex ``k`` on channel ``ch``.
 
     ``r0, r1, r2`` are the face refs and ``r3`` the apex (each ``-1`` or a checked id ``< k``).
     Fills ``cand_o[:N_CANDS[pattern]]`` (ordered ints of the predictions) and ``eq_o[:m]`` (the
-    distinct ordered ints of the refs' values, in ref order); returns ``(pattern, m)``.
+    distinct ordered ints of the refs' values, in ref order); returns ``(pattern, m)``. Without
+    ``need_cands`` only the repetition candidates are filled (a repeated value needs no prediction).
     """
     face0 = -1
     face1 = -1
@@ -167,20 +317,30 @@ def _gather(k, r0, r1, r2, r3, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i):
     if nf == 1:
         cand_o[0] = ordered_int(vi[face0, ch])
         return PAT_ONE, m
+    if not need_cands:
+        if nf == 2:
+            return (PAT_EDGE_APEX if apex >= 0 else PAT_EDGE), m
+        return (PAT_FACE_APEX if apex >= 0 else PAT_FACE), m
     a = np.float64(vf[face0, ch])
     b = np.float64(vf[face1, ch])
     if nf == 2:
-        nc = 3
+        nc = 6
         if apex >= 0:
             d = np.float64(vf[apex, ch])
             scratch_f[0] = a + b - d  # parallelogram across the edge
             scratch_f[1] = (a + b) * 0.5
             scratch_f[2] = a
+            scratch_f[3] = _par(vf, ch, face0, face1, ws[0, 0], a + b - d)
+            scratch_f[4] = _ext(vf, ch, face0, ws[0, 1], a + b - d)
+            scratch_f[5] = _ext(vf, ch, face1, ws[1, 1], a + b - d)
             pat = PAT_EDGE_APEX
         else:
             scratch_f[0] = (a + b) * 0.5
             scratch_f[1] = a
             scratch_f[2] = b
+            scratch_f[3] = _par(vf, ch, face0, face1, ws[0, 0], (a + b) * 0.5)
+            scratch_f[4] = _ext(vf, ch, face0, ws[0, 1], (a + b) * 0.5)
+            scratch_f[5] = _ext(vf, ch, face1, ws[1, 1], (a + b) * 0.5)
             pat = PAT_EDGE
     else:
         c = np.float64(vf[face2, ch])
@@ -194,15 +354,29 @@ def _gather(k, r0, r1, r2, r3, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i):
             scratch_f[3] = a + c - d
             scratch_f[4] = b + c - d
             scratch_f[5] = a
+            h = scratch_f[0]
+            scratch_f[6] = _par(vf, ch, face0, face1, ws[0, 0], h)
+            scratch_f[7] = _par(vf, ch, face0, face2, ws[1, 0], h)
+            scratch_f[8] = _par(vf, ch, face1, face2, ws[2, 0], h)
+            scratch_f[9] = _ext(vf, ch, face0, ws[0, 1], h)
+            scratch_f[10] = _ext(vf, ch, face1, ws[1, 1], h)
+            scratch_f[11] = _ext(vf, ch, face2, ws[2, 1], h)
             pat = PAT_FACE_APEX
-            nc = 6
+            nc = 12
         else:
             scratch_f[0] = (a + b + c) / 3.0
             scratch_f[1] = a
             scratch_f[2] = b
             scratch_f[3] = c
+            h = scratch_f[0]
+            scratch_f[4] = _par(vf, ch, face0, face1, ws[0, 0], h)
+            scratch_f[5] = _par(vf, ch, face0, face2, ws[1, 0], h)
+            scratch_f[6] = _par(vf, ch, face1, face2, ws[2, 0], h)
+            scratch_f[7] = _ext(vf, ch, face0, ws[0, 1], h)
+            scratch_f[8] = _ext(vf, ch, face1, ws[1, 1], h)
+            scratch_f[9] = _ext(vf, ch, face2, ws[2, 1], h)
             pat = PAT_FACE
-            nc = 4
+            nc = 10
     for q in range(nc):
         if scratch_f[q] != scratch_f[q]:  # NaN: payload bits are not portable, predict 0
             scratch_f[q] = 0.0
@@ -239,6 +413,26 @@ def _search(table, lo, hi, o):
 
 
 @njit(cache=True, inline="always")
+def _res_context(pat, big, eq_o, m):
+    """Residual context: ref pattern, size of the previous residual, and the local activity
+    (bit length of the spread of the refs' distinct values, in 10 classes): where the refs differ
+    a lot, the residual tends to be large too."""
+    lo = eq_o[0]
+    hi = eq_o[0]
+    for q in range(1, m):
+        if eq_o[q] < lo:
+            lo = eq_o[q]
+        if eq_o[q] > hi:
+            hi = eq_o[q]
+    act = 0
+    if m > 1:
+        act = (_bit_length(hi - lo) + 3) // 4
+        if act > N_ACTIVITY - 1:
+            act = N_ACTIVITY - 1
+    return (pat * 2 + big) * N_ACTIVITY + act
+
+
+@njit(cache=True, inline="always")
 def _eq_bits(m):
     """Bits of the repetition symbol, which takes the m + 1 values 0 .. m (m = "none")."""
     return 1 if m == 1 else (2 if m <= 3 else 3)
@@ -255,11 +449,24 @@ def _is_big(mode, res):
 
 
 @njit(cache=True)
-def encode_kernel(st, out, vf, refs, modes, tables, tab_offs, trace):
+def link_all(refs, vf):
+    """:func:`link_vertex` for every vertex in turn (the encoder knows all values up front)."""
+    n = vf.shape[0]
+    adj = np.zeros((n, ADJ_CAP), dtype=np.int32)
+    deg = np.zeros(n, dtype=np.int32)
+    mark = np.zeros(n, dtype=np.int64)
+    wpar = np.zeros((n, 3, NW), dtype=np.int32)
+    for k in range(n):
+        link_vertex(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], adj, deg, mark, wpar[k], vf)
+    return wpar
+
+
+@njit(cache=True)
+def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, trace):
     """Encode every vertex into four channel streams.
 
     ``st`` (4, 8) encoder states, ``out`` (4, cap) uint8 buffers, ``vf`` (n, 4) float32 values,
-    ``refs`` (n, 4) checked refs, ``modes`` (4,) per-channel mode, ``tables`` the sorted distinct
+    ``refs`` (n, 4) checked refs, ``wpar`` (n, 3, NW) from :func:`link_all`, ``modes`` (4,) per-channel mode, ``tables`` the sorted distinct
     ordered ints of the table-mode channels (channel ch at ``tables[tab_offs[ch]:tab_offs[ch+1]]``).
     Returns the byte count of each stream (larger than ``out.shape[1]`` on overflow). If
     ``trace`` has n rows, ``trace[k, ch]`` records the coded (repetition symbol or -1, residual,
@@ -277,6 +484,7 @@ def encode_kernel(st, out, vf, refs, modes, tables, tab_offs, trace):
     scratch_i = scratch_f.view(np.int32)
     was_eq = np.zeros(n, dtype=np.int8)
     nbytes = np.zeros(N_CHANNELS, dtype=np.int64)
+
     tracing = trace.shape[0] == n
     for ch in range(N_CHANNELS):
         stc = st[ch]
@@ -294,8 +502,8 @@ def encode_kernel(st, out, vf, refs, modes, tables, tab_offs, trace):
         last_eq = 0
         big = 0
         for k in range(n):
-            pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], vf, vi, ch, cand_o, eq_o,
-                             scratch_f, scratch_i)
+            pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
+                             vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, False)
             o = ordered_int(vi[k, ch])
             is_eq = 0
             sym = -1
@@ -311,8 +519,10 @@ def encode_kernel(st, out, vf, refs, modes, tables, tab_offs, trace):
                 enc_sym(stc, outc, probs, EQ_BASE + ((m - 1) * 2 + flag) * 8, _eq_bits(m), sym)
                 is_eq = 1 if sym < m else 0
             if is_eq == 0:
+                pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
+                                 vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, True)
                 best = _best_cand(scores, ch, pat)
-                ctx = pat * 2 + big
+                ctx = _res_context(pat, big, eq_o, m)
                 if mode == MODE_TABLE:
                     rp = _search(tables, lo, hi, cand_o[best])
                     if rp >= hi:
@@ -323,11 +533,12 @@ def encode_kernel(st, out, vf, refs, modes, tables, tab_offs, trace):
                     res = o - cand_o[best]
                     enc_sint(stc, outc, probs, RES_BASE + ctx * INT_MODEL_SIZE, res)
                 big = _is_big(mode, res)
+                # only predicted values train the predictor choice: repeats need no prediction
+                _update_scores(scores, ch, pat, cand_o, o)
             if tracing:
                 trace[k, ch, 0] = sym
                 trace[k, ch, 1] = res
                 trace[k, ch, 2] = best
-            _update_scores(scores, ch, pat, cand_o, o)
             last_eq = is_eq
             was_eq[k] = is_eq
         nbytes[ch] = enc_finish(stc, outc)
@@ -374,46 +585,72 @@ def decode_tables_kernel(st, buf, offs, probs, modes, n_points, tables, tab_offs
 
 
 @njit(cache=True)
-def decode_vertices(st, buf, offs, probs, scores, flags, modes, tables, tab_offs, refs, vf, start, count):
+def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, modes, tables, tab_offs, refs, vf, start,
+                    count):
     """Decode vertices ``start .. start+count-1`` into ``vf`` (n, 4) float32.
 
     ``refs`` (count, 4) int32 are the refs of those vertices. ``st`` (4, 8) decoder states,
-    ``probs`` (4, MODEL_SIZE) models, ``scores`` (4, N_PATTERNS, MAX_CANDS) predictor scores and
-    ``flags`` (8,) context flags carry the decoder's state from one call to the next. Every index
-    is checked: returns ``OK``, ``ERR_REF`` (a ref not in ``[-1, k)``), ``ERR_RANK`` (a table index
-    out of range) or ``ERR_STREAM`` (the range decoder failed).
+    ``probs`` (4, MODEL_SIZE) models, ``scores`` (4, N_PATTERNS, MAX_CANDS) predictor scores,
+    ``flags`` (8,) context flags, ``adj`` (n, ADJ_CAP) int32 and ``deg`` (n,) int32 (the edges seen
+    so far) and ``mark`` (n,) int64 scratch carry the decoder's state from one call to the next. Every index is checked: returns
+    ``OK``, ``ERR_REF`` (a ref not in ``[-1, k)``), ``ERR_RANK`` (a table index out of range) or
+    ``ERR_STREAM`` (the range decoder failed).
     """
     vi = vf.view(np.int32)
     n = vf.shape[0]
     if start < 0 or count < 0 or start + count > n or refs.shape[0] < count or refs.shape[1] != 4:
         return ERR_REF
-    for j in range(count):
-        k = start + j
-        for q in range(4):
-            if refs[j, q] < -1 or refs[j, q] >= k:
-                return ERR_REF
+    if adj.shape[0] < n or deg.shape[0] < n or mark.shape[0] < n or adj.shape[1] != ADJ_CAP:
+        return ERR_REF
     cand_o = np.zeros(MAX_CANDS, dtype=np.int64)
     eq_o = np.zeros(4, dtype=np.int64)
     scratch_f = np.zeros(MAX_CANDS, dtype=np.float32)
     scratch_i = scratch_f.view(np.int32)
-    was_eq = np.zeros(count, dtype=np.int8)
-    for ch in range(N_CHANNELS):
-        data = buf[offs[ch]:offs[ch + 1]]
-        stc = st[ch]
-        pc = probs[ch]
-        mode = modes[ch]
-        lo = tab_offs[ch]
-        hi = tab_offs[ch + 1]
-        last_eq = flags[ch]
-        big = flags[N_CHANNELS + ch]
-        for j in range(count):
-            k = start + j
-            pat, m = _gather(k, refs[j, 0], refs[j, 1], refs[j, 2], refs[j, 3], vf, vi, ch, cand_o, eq_o,
-                             scratch_f, scratch_i)
+    w = np.zeros((3, NW), dtype=np.int32)
+    # the four channel streams, hoisted out of the loop
+    d0 = buf[offs[0]:offs[1]]
+    d1 = buf[offs[1]:offs[2]]
+    d2 = buf[offs[2]:offs[3]]
+    d3 = buf[offs[3]:offs[4]]
+    s0 = st[0]
+    s1 = st[1]
+    s2 = st[2]
+    s3 = st[3]
+    p0 = probs[0]
+    p1 = probs[1]
+    p2 = probs[2]
+    p3 = probs[3]
+    for j in range(count):
+        k = start + j
+        r0 = refs[j, 0]
+        r1 = refs[j, 1]
+        r2 = refs[j, 2]
+        r3 = refs[j, 3]
+        if (r0 < -1 or r0 >= k or r1 < -1 or r1 >= k or r2 < -1 or r2 >= k or r3 < -1 or r3 >= k):
+            return ERR_REF
+        link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf)
+        flag = flags[0]
+        for ch in range(N_CHANNELS):
+            if ch == 0:
+                stc = s0
+                data = d0
+                pc = p0
+            elif ch == 1:
+                stc = s1
+                data = d1
+                pc = p1
+            elif ch == 2:
+                stc = s2
+                data = d2
+                pc = p2
+            else:
+                stc = s3
+                data = d3
+                pc = p3
+            pat, m = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, False)
             is_eq = 0
             o = np.int64(0)
             if m > 0:
-                flag = was_eq[j] if ch > 0 else last_eq
                 sym = dec_sym(stc, data, pc, EQ_BASE + ((m - 1) * 2 + flag) * 8, _eq_bits(m))
                 if sym < m:
                     o = eq_o[sym]
@@ -421,9 +658,13 @@ def decode_vertices(st, buf, offs, probs, scores, flags, modes, tables, tab_offs
                 elif sym > m:
                     return ERR_STREAM
             if is_eq == 0:
+                pat, m = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, True)
+                mode = modes[ch]
                 best = _best_cand(scores, ch, pat)
-                ctx = pat * 2 + big
+                ctx = _res_context(pat, flags[N_CHANNELS + ch], eq_o, m)
                 if mode == MODE_TABLE:
+                    lo = tab_offs[ch]
+                    hi = tab_offs[ch + 1]
                     if hi <= lo:
                         return ERR_RANK
                     rp = _search(tables, lo, hi, cand_o[best])
@@ -439,13 +680,11 @@ def decode_vertices(st, buf, offs, probs, scores, flags, modes, tables, tab_offs
                     o = cand_o[best] + res
                     if o < -(1 << 31) or o >= (1 << 31):
                         return ERR_STREAM
-                big = _is_big(mode, res)
+                flags[N_CHANNELS + ch] = _is_big(mode, res)
+                _update_scores(scores, ch, pat, cand_o, o)
             if dec_failed(stc):
                 return ERR_STREAM
             vi[k, ch] = ordered_to_bits(o)
-            _update_scores(scores, ch, pat, cand_o, o)
-            last_eq = is_eq
-            was_eq[j] = is_eq
-        flags[ch] = last_eq
-        flags[N_CHANNELS + ch] = big
+            flags[ch] = is_eq
+            flag = is_eq
     return OK

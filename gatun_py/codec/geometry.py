@@ -82,13 +82,15 @@ def _ordered(vf: np.ndarray) -> np.ndarray:
 _NO_TRACE = np.zeros((0, 4, 3), dtype=np.int64)
 
 
-def _run_encode(vf, refs, modes, tables, tab_offs, trace=_NO_TRACE):
+def _run_encode(vf, refs, modes, tables, tab_offs, trace=_NO_TRACE, wpar=None):
     n = vf.shape[0]
+    if wpar is None:
+        wpar = K.link_all(refs, vf)
     cap = 256 + 8 * n
     while True:
         st = np.stack([enc_state() for _ in range(K.N_CHANNELS)])
         out = np.empty((K.N_CHANNELS, cap), dtype=np.uint8)
-        nbytes = K.encode_kernel(st, out, vf, refs, modes, tables, tab_offs, trace)
+        nbytes = K.encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, trace)
         if int(nbytes.max()) <= cap:
             return [out[ch, : nbytes[ch]].tobytes() for ch in range(K.N_CHANNELS)]
         cap = int(nbytes.max()) + 64
@@ -99,8 +101,8 @@ def refs_from_predictors(predictors, n_boundary_vertices: int, interior_apex=Non
 
     Parameters
     ----------
-    predictors : (n, 3) int array
-        ``(p, r, apex)`` for boundary vertices (the border edge and the third vertex of the
+    predictors : (n, 3) or (n, 4) int array
+        Four columns are taken as refs already. Three: ``(p, r, apex)`` for boundary vertices (the border edge and the third vertex of the
         triangle it came from), the current face ``(a, b, c)`` for interior ones; ``-1`` for none.
     n_boundary_vertices : int
         The first ``n_boundary_vertices`` vertices come from the boundary-surface phase.
@@ -114,6 +116,8 @@ def refs_from_predictors(predictors, n_boundary_vertices: int, interior_apex=Non
     """
     predictors = np.asarray(predictors)
     n = predictors.shape[0]
+    if predictors.ndim == 2 and predictors.shape[1] == 4:  # already (face, apex)
+        return np.ascontiguousarray(predictors, dtype=np.int32)
     nb = min(max(int(n_boundary_vertices), 0), n)
     refs = np.full((n, 4), -1, dtype=np.int32)
     refs[:, :3] = predictors
@@ -170,11 +174,12 @@ def encode_geometry(points, density, refs, *, modes=None) -> bytes:
             raise ValueError("modes must be 4 values, each 0 (prediction) or 1 (table)")
         streams = _run_encode(vf, refs, modes, tables, tab_offs)
     else:
-        pred = _run_encode(vf, refs, np.zeros(4, np.int64), tables, tab_offs)
+        wpar = K.link_all(refs, vf)
+        pred = _run_encode(vf, refs, np.zeros(4, np.int64), tables, tab_offs, wpar=wpar)
         # a table pays off only when values repeat: skip the trial when most values are distinct
         use_table = np.array([len(t) <= n // 2 for t in tables_list], dtype=np.int64)
         if use_table.any():
-            tab = _run_encode(vf, refs, use_table, tables, tab_offs)
+            tab = _run_encode(vf, refs, use_table, tables, tab_offs, wpar=wpar)
             modes = np.zeros(K.N_CHANNELS, dtype=np.int64)
             streams = []
             for ch in range(K.N_CHANNELS):
@@ -251,6 +256,9 @@ class GeometryDecoder:
         self.probs = np.stack([new_model(K.MODEL_SIZE) for _ in range(K.N_CHANNELS)])
         self.scores = np.zeros((K.N_CHANNELS, K.N_PATTERNS, K.MAX_CANDS), dtype=np.int64)
         self.flags = np.zeros(2 * K.N_CHANNELS, dtype=np.int64)
+        self.adj = np.zeros((self.n_points, K.ADJ_CAP), dtype=np.int32)
+        self.deg = np.zeros(self.n_points, dtype=np.int32)
+        self.mark = np.zeros(self.n_points, dtype=np.int64)
         stream_bytes = [int(length) for length in lengths]
         table_room = sum(min(self.n_points, _MAX_TABLE_PER_BYTE * (stream_bytes[ch] + 8))
                          for ch in range(K.N_CHANNELS) if self.modes[ch])
@@ -275,9 +283,10 @@ class GeometryDecoder:
 
     @property
     def kernel_args(self) -> tuple:
-        """``(st, buf, offs, probs, scores, flags, modes, tables, tab_offs)`` for ``decode_vertices``."""
-        return (self.st, self.buf, self.offs, self.probs, self.scores, self.flags, self.modes,
-                self.tables, self.tab_offs)
+        """``(st, buf, offs, probs, scores, flags, adj, deg, mark, modes, tables, tab_offs)`` for
+        ``decode_vertices``."""
+        return (self.st, self.buf, self.offs, self.probs, self.scores, self.flags, self.adj, self.deg,
+                self.mark, self.modes, self.tables, self.tab_offs)
 
     def decode(self, refs) -> tuple[np.ndarray, np.ndarray]:
         """Decode the next ``len(refs)`` vertices.

@@ -32,7 +32,7 @@ def _decode_all(d, batch=37):
 
 
 def check_round_trip(mesh: TetMesh, batch=37):
-    e = encode_connectivity(mesh.n_points, mesh.tets, mesh.boundary_faces())
+    e = encode_connectivity(mesh.n_points, mesh.tets)
     d = _decoder(e)
     faces, nbv, tets = _decode_all(d, batch)
     # the decoder reproduces the encoder's view exactly, including the geometry refs

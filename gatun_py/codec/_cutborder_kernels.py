@@ -246,81 +246,90 @@ def _sort_candidates(cand, cscore, cseq, n):
 
 
 @njit(cache=True)
-def _gather_face(B, s, cand, cscore, cseq, c2, c2seq):
-    """Candidates for the fourth vertex of the tet behind border face ``s``.
-
-    ``cand`` (sorted, scores = number of the face's edges whose adjacent faces hold the vertex)
-    are the apexes of edge-adjacent faces; ``c2`` (in traversal order) the other vertices of
-    faces that share only a vertex with ``s``. Returns (n1, n2).
-    """
+def _gather_face(B, s, cand, cscore, cseq):
+    """Candidates for the fourth vertex of the tet behind border face ``s`` = (a, b, c): the
+    apexes of faces of T adjacent to an edge of ``s``, sorted by score (how many of the face's
+    edges they are adjacent across) and then by traversal order. Returns their number."""
     ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
     a = np.int64(ev[s, 0])
     b = np.int64(ev[s, 1])
     c = np.int64(ev[s, 2])
     n1 = 0
-    n2 = 0
-    for ci in range(3):
-        u = np.int64(ev[s, ci])
+    # faces on edges (a, b) and (a, c) are all in a's list; those on (b, c) in b's list
+    for k in range(2):
+        u = a if k == 0 else b
         node = vhead[u]
         while node != -1:
             g = node // 3
             node = lnext[node]
             if g == s:
                 continue
+            g0 = np.int64(ev[g, 0])
+            g1 = np.int64(ev[g, 1])
+            g2 = np.int64(ev[g, 2])
+            has_a = g0 == a or g1 == a or g2 == a
+            has_b = g0 == b or g1 == b or g2 == b
+            has_c = g0 == c or g1 == c or g2 == c
+            if k == 0:
+                if has_b == has_c:  # neither: vertex-adjacent only; both: corrupt duplicate
+                    continue
+            elif has_a or not has_c:
+                continue
+            if g0 != a and g0 != b and g0 != c:
+                x = g0
+            elif g1 != a and g1 != b and g1 != c:
+                x = g1
+            else:
+                x = g2
+            n1 = _insert_candidate(cand, cscore, cseq, n1, x, eseq[g])
+    _sort_candidates(cand, cscore, cseq, n1)
+    return n1
+
+
+@njit(cache=True)
+def _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq):
+    """The paper's case (c) list: vertices of faces of T sharing exactly one vertex with the
+    current face (a, b, c) (already removed from T), except the edge candidates, in traversal
+    order (oldest face first). Only needed after an escape, so computed lazily."""
+    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
+    n2 = 0
+    for k in range(3):
+        u = a if k == 0 else (b if k == 1 else c)
+        node = vhead[u]
+        while node != -1:
+            g = node // 3
+            node = lnext[node]
             shared = 0
-            first_shared = 3
-            other0 = -1
-            other1 = -1
+            for cj in range(3):
+                w = ev[g, cj]
+                if w == a or w == b or w == c:
+                    shared += 1
+            if shared != 1:
+                continue
             for cj in range(3):
                 w = np.int64(ev[g, cj])
                 if w == a or w == b or w == c:
-                    shared += 1
-                    if w == a:
-                        pos = 0
-                    elif w == b:
-                        pos = 1
-                    else:
-                        pos = 2
-                    if pos < first_shared:
-                        first_shared = pos
-                elif other0 == -1:
-                    other0 = w
-                else:
-                    other1 = w
-            if shared == 2:
-                if first_shared == ci:  # count each edge-adjacent face once
-                    n1 = _insert_candidate(cand, cscore, cseq, n1, other0, eseq[g])
-            elif shared == 1:
-                for kk in range(2):
-                    w = other0 if kk == 0 else other1
-                    # ordered by traversal: insertion keeps the first (oldest) sighting's position
-                    dup = False
-                    for i in range(n2):
-                        if c2[i] == w:
-                            dup = True
-                            if eseq[g] < c2seq[i]:
-                                c2seq[i] = eseq[g]
-                            break
-                    if not dup and n2 < c2.shape[0]:
-                        c2[n2] = w
-                        c2seq[n2] = eseq[g]
-                        n2 += 1
-    _sort_candidates(cand, cscore, cseq, n1)
-    # vertex-adjacent list: traversal order, without the edge candidates
-    m = 0
-    for i in range(n2):
-        w = c2[i]
-        inc1 = False
-        for j in range(n1):
-            if cand[j] == w:
-                inc1 = True
-                break
-        if not inc1:
-            c2[m] = w
-            c2seq[m] = c2seq[i]
-            m += 1
+                    continue
+                skip = False
+                for i in range(n1):
+                    if cand[i] == w:
+                        skip = True
+                        break
+                if skip:
+                    continue
+                dup = False
+                for i in range(n2):
+                    if c2[i] == w:
+                        dup = True
+                        if eseq[g] < c2seq[i]:
+                            c2seq[i] = eseq[g]
+                        break
+                if not dup and n2 < c2.shape[0]:
+                    c2[n2] = w
+                    c2seq[n2] = eseq[g]
+                    n2 += 1
     # stable insertion sort by sequence
-    for i in range(1, m):
+    for i in range(1, n2):
         x, sq = c2[i], c2seq[i]
         j = i - 1
         while j >= 0 and c2seq[j] > sq:
@@ -329,7 +338,7 @@ def _gather_face(B, s, cand, cscore, cseq, c2, c2seq):
             j -= 1
         c2[j + 1] = x
         c2seq[j + 1] = sq
-    return n1, m
+    return n2
 
 
 @njit(cache=True)
@@ -348,20 +357,44 @@ def _c1_context(n1, cscore, prev_esc):
 def _apply_tet(B, t0, t1, t2, t3):
     """Attach the new tet (t0, t1, t2, t3) (as output; its face opposite t3 was the current face,
     already removed): each other face closes a face of the border or joins it, wound as the
-    consistently oriented tet on its other side would see it from outside."""
-    for k in range(3):
-        # outward faces opposite t0, t1, t2 (TET_FACES)
-        if k == 0:
-            x, y, z, w = t1, t2, t3, t0
-        elif k == 1:
-            x, y, z, w = t0, t3, t2, t1
-        else:
-            x, y, z, w = t0, t1, t3, t2
-        s, same = _find_face(B, x, y, z)
-        if s != -1:
-            _remove(B, 3, s)
-        else:
-            _add(B, 3, x, z, y, w)
+    consistently oriented tet on its other side would see it from outside. Returns the slots of
+    the faces opposite t0, t1, t2 that joined the border (-1 where a face was closed)."""
+    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
+    # all three faces hold t3 (the apex just attached, often new with an empty list): one walk
+    # of its list finds those already on the border
+    f0 = -1
+    f1 = -1
+    f2 = -1
+    node = vhead[t3]
+    while node != -1:
+        g = node // 3
+        c0 = node - 3 * g
+        node = lnext[node]
+        x = ev[g, 0 if c0 == 2 else c0 + 1]
+        y = ev[g, 2 if c0 == 0 else c0 - 1]
+        if (x == t1 and y == t2) or (x == t2 and y == t1):
+            f0 = g
+        elif (x == t2 and y == t0) or (x == t0 and y == t2):
+            f1 = g
+        elif (x == t0 and y == t1) or (x == t1 and y == t0):
+            f2 = g
+    # outward faces opposite t0, t1, t2 (TET_FACES), stored reversed when they join the border
+    if f0 != -1:
+        _remove(B, 3, f0)
+        added0 = -1
+    else:
+        added0 = _add(B, 3, t1, t3, t2, t0)
+    if f1 != -1:
+        _remove(B, 3, f1)
+        added1 = -1
+    else:
+        added1 = _add(B, 3, t0, t2, t3, t1)
+    if f2 != -1:
+        _remove(B, 3, f2)
+        added2 = -1
+    else:
+        added2 = _add(B, 3, t0, t3, t1, t2)
+    return added0, added1, added2
 
 
 @njit(cache=True)
@@ -450,10 +483,10 @@ def _lookup_halfedge(hkey, hface, fvisited, p, r):
 
 
 @njit(cache=True)
-def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pred, out_faces):
+def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pred, out_faces, face_src):
     """Code the boundary surface ``faces`` (original ids). Fills ``dec_of`` (original -> decode id),
     ``order`` (decode -> original), ``pred`` (geometry predictors, decode ids) and ``out_faces``
-    (faces in decode order and decode ids). Returns (number of vertices, 0) or (-1, code) on error."""
+    (faces in decode order and decode ids; ``face_src`` their rows in ``faces``). Returns (number of vertices, 0) or (-1, code) on error."""
     nf = faces.shape[0]
     probs = np.full(SM_SIZE, rc.PROB_INIT, np.uint16)
     fvisited = np.zeros(nf, np.bool_)
@@ -486,6 +519,7 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
                     rc.enc_raw(st, out, dec_of[v], _bitlen(nv - 1))
                 tri[k] = dec_of[v]
             fvisited[f] = True
+            face_src[done] = f
             out_faces[done, 0] = tri[0]
             out_faces[done, 1] = tri[1]
             out_faces[done, 2] = tri[2]
@@ -535,6 +569,7 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
                 rc.enc_bit(st, out, probs, SM_NEW + (1 if n1 > 0 else 0), 0)
                 rc.enc_raw(st, out, x, _bitlen(nv - 1))
         fvisited[f] = True
+        face_src[done] = f
         rc.enc_bit(st, out, probs, SM_FLIP + prev_flip, flip)
         prev_flip = flip
         u0 = r if flip else p
@@ -639,40 +674,94 @@ def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
 
 
 @njit(cache=True)
-def _lookup_tet(fkey, ftet, tvisited, a, b, c):
-    """An unvisited tet with face {a, b, c} (fkey: sorted triples, sorted lexicographically)."""
-    x, y, z = a, b, c
-    if x > y:
-        x, y = y, x
-    if y > z:
-        y, z = z, y
-    if x > y:
-        x, y = y, x
-    lo = 0
-    hi = fkey.shape[0]
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        k0 = fkey[mid, 0]
-        k1 = fkey[mid, 1]
-        k2 = fkey[mid, 2]
-        if k0 < x or (k0 == x and (k1 < y or (k1 == y and k2 < z))):
-            lo = mid + 1
-        else:
-            hi = mid
-    i = lo
-    while i < fkey.shape[0] and fkey[i, 0] == x and fkey[i, 1] == y and fkey[i, 2] == z:
-        if not tvisited[ftet[i]]:
-            return ftet[i]
-        i += 1
-    return -1
+def tet_neighbours(tets, nbr):
+    """Fill ``nbr[t, k]`` with the tet across face k (opposite vertex k) of tet t, -1 on the
+    boundary, with an open-addressing hash of sorted face triples. Returns the number of faces
+    shared by more than two tets (0 for a valid mesh)."""
+    m = tets.shape[0]
+    size = 1
+    while size < 8 * m + 16:
+        size <<= 1
+    mask = size - 1
+    keys = np.full((size, 3), -1, np.int64)
+    vals = np.full(size, -1, np.int64)
+    bad = 0
+    for t in range(m):
+        for k in range(4):
+            nbr[t, k] = -1
+    for t in range(m):
+        for k in range(4):
+            i0 = 1 if k == 0 else 0
+            i1 = 2 if k <= 1 else 1
+            i2 = 3 if k <= 2 else 2
+            x = np.int64(tets[t, i0])
+            y = np.int64(tets[t, i1])
+            z = np.int64(tets[t, i2])
+            if x > y:
+                x, y = y, x
+            if y > z:
+                y, z = z, y
+            if x > y:
+                x, y = y, x
+            h = ((x * 0x9E3779B97F4A7C15) ^ (y * 0xC2B2AE3D27D4EB4F) ^ (z * 0x165667B19E3779F9)) & 0x7FFFFFFFFFFFFFFF
+            h = (h ^ (h >> 29)) & mask
+            while True:
+                if keys[h, 0] == -1:
+                    keys[h, 0] = x
+                    keys[h, 1] = y
+                    keys[h, 2] = z
+                    vals[h] = 4 * t + k
+                    break
+                if keys[h, 0] == x and keys[h, 1] == y and keys[h, 2] == z:
+                    other = vals[h]
+                    if other < 0:
+                        bad += 1
+                    else:
+                        ot = other // 4
+                        nbr[ot, other - 4 * ot] = t
+                        nbr[t, k] = ot
+                        vals[h] = -2  # paired: a third tet on this face is an error
+                    break
+                h = (h + 1) & mask
+    return bad
 
 
 @njit(cache=True)
-def encode_tets(st, out, tets, fkey, ftet, B, dec_of, order, pred, nv0, out_tets):
+def boundary_from_neighbours(tets, nbr, faces, owner):
+    """Boundary faces (outward, in tet order: the order of ``TetMesh.boundary_faces``) and the
+    tet owning each; returns their number."""
+    n = 0
+    for t in range(tets.shape[0]):
+        for k in range(4):
+            if nbr[t, k] == -1:
+                if k == 0:
+                    faces[n, 0], faces[n, 1], faces[n, 2] = tets[t, 1], tets[t, 2], tets[t, 3]
+                elif k == 1:
+                    faces[n, 0], faces[n, 1], faces[n, 2] = tets[t, 0], tets[t, 3], tets[t, 2]
+                elif k == 2:
+                    faces[n, 0], faces[n, 1], faces[n, 2] = tets[t, 0], tets[t, 1], tets[t, 3]
+                else:
+                    faces[n, 0], faces[n, 1], faces[n, 2] = tets[t, 0], tets[t, 2], tets[t, 1]
+                owner[n] = t
+                n += 1
+    return n
+
+
+@njit(cache=True)
+def add_faces(B, faces, apex):
+    """Put faces on the border in order (apex -1: the original boundary); returns the slots."""
+    slots = np.empty(faces.shape[0], np.int64)
+    for i in range(faces.shape[0]):
+        slots[i] = _add(B, 3, faces[i, 0], faces[i, 1], faces[i, 2], apex)
+    return slots
+
+
+@njit(cache=True)
+def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets):
     """Code the tets growing inward from the border ``B`` (the boundary, in decode ids).
 
-    ``tets`` and ``fkey``/``ftet`` (sorted face triples -> tet, sorted lexicographically) use
-    original ids; ``dec_of``/``order`` map between original and decode ids and are extended for
+    ``tets`` and ``nbr`` (:func:`tet_neighbours`) use original ids, ``tgt[slot]`` is the
+    unvisited tet behind each border face; ``dec_of``/``order`` map between original and decode ids and are extended for
     the new (interior) vertices, numbered from ``nv0`` on, with their predictors in ``pred``.
     ``out_tets`` receives the tets in decode order and decode ids. Returns (vertices, status)."""
     m = tets.shape[0]
@@ -698,8 +787,8 @@ def encode_tets(st, out, tets, fkey, ftet, B, dec_of, order, pred, nv0, out_tets
         ao = order[a]
         bo = order[b]
         co = order[c]
-        t = _lookup_tet(fkey, ftet, tvisited, ao, bo, co)
-        if t == -1:
+        t = tgt[s]
+        if t < 0 or tvisited[t]:
             return nv, 2
         tvisited[t] = True
         do = -1
@@ -708,7 +797,7 @@ def encode_tets(st, out, tets, fkey, ftet, B, dec_of, order, pred, nv0, out_tets
             if w != ao and w != bo and w != co:
                 do = w
         d = dec_of[do]
-        n1, n2 = _gather_face(B, s, cand, cscore, cseq, c2, c2seq)
+        n1 = _gather_face(B, s, cand, cscore, cseq)
         _remove(B, 3, s)
         ctx = _c1_context(n1, cscore, prev_esc)
         sym = ESC
@@ -734,7 +823,7 @@ def encode_tets(st, out, tets, fkey, ftet, B, dec_of, order, pred, nv0, out_tets
         flip = inv & 1
         rc.enc_sym(st, out, probs, TM_C1 + ctx * 16, 4, sym)
         if sym == ESC:
-            kctx = TM_KIND + 4 * ((1 if n1 > 0 else 0) + (2 if n2 > 0 else 0) + 4 * prev_esc)
+            kctx = TM_KIND + 4 * ((1 if n1 > 0 else 0) + 2 * prev_esc)
             if d == -1:
                 rc.enc_sym(st, out, probs, kctx, 2, 0)
                 d = nv
@@ -746,6 +835,7 @@ def encode_tets(st, out, tets, fkey, ftet, B, dec_of, order, pred, nv0, out_tets
                 pred[nv, 3] = behind
                 nv += 1
             else:
+                n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq)
                 j = -1
                 for i in range(n2):
                     if c2[i] == d:
@@ -768,7 +858,14 @@ def encode_tets(st, out, tets, fkey, ftet, B, dec_of, order, pred, nv0, out_tets
         out_tets[done, 1] = t1
         out_tets[done, 2] = t2
         out_tets[done, 3] = d
-        _apply_tet(B, a, t1, t2, d)
+        s0, s1, s2 = _apply_tet(B, a, t1, t2, d)
+        # the tets behind the new border faces: neighbours of t across them
+        for k in range(3):
+            slot = s0 if k == 0 else (s1 if k == 1 else s2)
+            if slot >= 0:
+                wo = order[a] if k == 0 else (order[t1] if k == 1 else order[t2])
+                kk = 0 if tets[t, 0] == wo else (1 if tets[t, 1] == wo else (2 if tets[t, 2] == wo else 3))
+                tgt[slot] = nbr[t, kk]
         if not _room(B, 4, 4):
             return nv, 4
     if B[8][BS_LIVE] != 0:
@@ -816,7 +913,7 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         b = np.int64(ev[s, 1])
         c = np.int64(ev[s, 2])
         behind = np.int64(ev[s, 3])
-        n1, n2 = _gather_face(B, s, cand, cscore, cseq, c2, c2seq)
+        n1 = _gather_face(B, s, cand, cscore, cseq)
         _remove(B, 3, s)
         ctx = _c1_context(n1, cscore, prev_esc)
         sym = rc.dec_sym(st, data, probs, TM_C1 + ctx * 16, 4)
@@ -828,7 +925,7 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
             d = cand[sym]
             prev_esc = 0
         else:
-            kctx = TM_KIND + 4 * ((1 if n1 > 0 else 0) + (2 if n2 > 0 else 0) + 4 * prev_esc)
+            kctx = TM_KIND + 4 * ((1 if n1 > 0 else 0) + 2 * prev_esc)
             kind = rc.dec_sym(st, data, probs, kctx, 2)
             if kind == 0:
                 if nv >= n_limit:
@@ -841,6 +938,7 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
                 pred[nv, 3] = behind
                 nv += 1
             elif kind == 1:
+                n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq)
                 j = rc.dec_uint(st, data, probs, TM_C2 + (rc.INT_MODEL_SIZE if n2 > 8 else 0))
                 if j >= n2:
                     status = ST_ERROR

@@ -82,13 +82,6 @@ def _sorted_halfedges(faces: np.ndarray):
     return np.ascontiguousarray(he[order], dtype=np.int64), fid[order]
 
 
-def _sorted_faces(tets: np.ndarray):
-    faces = np.sort(tets[:, [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]]].reshape(-1, 3), axis=1)
-    tid = np.repeat(np.arange(len(tets), dtype=np.int64), 4)
-    order = np.lexsort((faces[:, 2], faces[:, 1], faces[:, 0]))
-    return np.ascontiguousarray(faces[order], dtype=np.int64), tid[order]
-
-
 _ENCODER_ERRORS = {
     1: "the cut border emptied before every tet was visited",
     2: "a border face has no unvisited tet behind it",
@@ -98,7 +91,7 @@ _ENCODER_ERRORS = {
 }
 
 
-def encode_connectivity(points_count: int, tets: np.ndarray, boundary: np.ndarray | None = None) -> EncodedConnectivity:
+def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> EncodedConnectivity:
     """Code the connectivity of a valid tet mesh.
 
     Parameters
@@ -106,27 +99,35 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary: np.ndarra
     points_count : int
         Number of vertices (ids in ``tets`` are below it; unreferenced ones are allowed).
     tets : (m, 4) int array
-        Positively oriented tets (as in :class:`~gatun_py.mesh.TetMesh`).
-    boundary : (k, 3) int array, optional
-        The outward boundary faces; computed from ``tets`` when omitted.
+        Positively oriented tets (as in :class:`~gatun_py.mesh.TetMesh`); the boundary surface
+        is the set of faces used by one tet, as ``TetMesh.boundary_faces``.
+    boundary : ignored
+        Accepted for compatibility; the boundary is always derived from ``tets``.
 
     Returns
     -------
     EncodedConnectivity
-    """
-    from ..mesh.model import boundary_faces
 
+    Raises
+    ------
+    MeshError
+        If a face is shared by more than two tets (validation rejects such meshes earlier).
+    """
     n = int(points_count)
-    tets = np.ascontiguousarray(tets, dtype=np.int64)
-    if boundary is None:
-        boundary = boundary_faces(tets) if len(tets) else np.zeros((0, 3), np.int32)
-    faces = np.ascontiguousarray(boundary, dtype=np.int64)
-    nf, m = len(faces), len(tets)
+    tets = np.ascontiguousarray(tets, dtype=np.int64).reshape(-1, 4)
+    m = len(tets)
+    nbr = np.empty((m, 4), np.int64)
+    if K.tet_neighbours(tets, nbr):
+        raise MeshError("a face is shared by more than two tets: the mesh is not conforming")
+    faces = np.empty((int(np.count_nonzero(nbr == -1)), 3), np.int64)
+    owner = np.empty(len(faces), np.int64)
+    nf = K.boundary_from_neighbours(tets, nbr, faces, owner)
 
     dec_of = np.full(max(n, 1), -1, np.int64)
     order = np.full(max(n, 1), -1, np.int64)
     pred = np.full((max(n, 1), 4), -1, np.int32)
     out_faces = np.zeros((nf, 3), np.int32)
+    face_src = np.zeros(nf, np.int64)
     hkey, hface = _sorted_halfedges(faces) if nf else (np.zeros((0, 2), np.int64), np.zeros(0, np.int64))
 
     def run_boundary(st, out):
@@ -134,7 +135,7 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary: np.ndarra
         order[:] = -1
         pred[:] = -1
         B = K.new_border(n, 3 * nf + 8, 3 * nf + 8)
-        res = K.encode_boundary(st, out, faces, hkey, hface, n, B, dec_of, order, pred, out_faces)
+        res = K.encode_boundary(st, out, faces, hkey, hface, n, B, dec_of, order, pred, out_faces, face_src)
         run_boundary.result = res
 
     boundary_code = rc.run_encoder(run_boundary, capacity=rc.capacity_hint(nf * 4))
@@ -143,7 +144,8 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary: np.ndarra
         raise MeshError(f"boundary surface cannot be coded (code {code}): is the mesh valid?")
 
     out_tets = np.zeros((m, 4), np.int32)
-    fkey, ftet = _sorted_faces(tets) if m else (np.zeros((0, 3), np.int64), np.zeros(0, np.int64))
+    # boundary face i (original order) is out_faces[j] for the j-th decoded face: map owners over
+    bowner = owner[face_src]
     dec_b, order_b, pred_b = dec_of.copy(), order.copy(), pred.copy()
 
     def run_tets(st, out):
@@ -151,9 +153,9 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary: np.ndarra
         order[:] = order_b
         pred[:] = pred_b
         B = K.new_border(n, nf + 3 * m + 8, nf + 3 * m + 8)
-        for f in out_faces:
-            K._add(B, 3, int(f[0]), int(f[1]), int(f[2]), -1)
-        res = K.encode_tets(st, out, tets, fkey, ftet, B, dec_of, order, pred, nbv, out_tets)
+        tgt = np.full(nf + 3 * m + 8, -1, np.int64)
+        tgt[K.add_faces(B, out_faces, -1)] = bowner
+        res = K.encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nbv, out_tets)
         run_tets.result = res
         run_tets.peak = int(B[8][K.BS_PEAK])
 
@@ -223,8 +225,7 @@ class ConnectivityDecoder:
         nf = self.n_boundary_faces
         cap = max(64, 2 * nf)
         self._B = K.new_border(self.n_points, cap, cap)
-        for f in self._faces:
-            K._add(self._B, 3, int(f[0]), int(f[1]), int(f[2]), -1)
+        K.add_faces(self._B, self._faces, -1)
         self._tst = rc.dec_state()
         self._tstate = np.array([self._nbv, 0, 0, 0], np.int64)
         self._probs = np.full(K.TM_SIZE, rc.PROB_INIT, np.uint16)

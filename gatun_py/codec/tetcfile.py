@@ -92,7 +92,7 @@ def encode_level(payload: LevelPayload) -> EncodedLevel:
     from .geometry import encode_geometry
 
     mesh = payload.mesh
-    conn = encode_connectivity(mesh.n_points, mesh.tets, mesh.boundary_faces())
+    conn = encode_connectivity(mesh.n_points, mesh.tets)
     vo = conn.vertex_order
     geometry = encode_geometry(np.asarray(mesh.points)[vo], np.asarray(mesh.density)[vo], conn.predictors)
     i = int(payload.level)

@@ -18,7 +18,8 @@ def tetc_info(path) -> dict:
         ``points``, ``tets``, ``boundary_faces``, ``bbox``, ``scalar``, ``scalar_range``,
         ``source``, ``bytes_total``, ``bits_per_tet_connectivity`` (boundary and tet sections of
         level 0 over its tets), ``bits_per_vertex_geometry`` (geometry section of level 0 over its
-        points), ``sections`` (name -> bytes) and ``levels`` (one dict per stored level).
+        points), ``sections`` (name -> bytes), ``levels`` (one dict per stored level) and
+        ``forest`` (``merges``, ``max_ratio``, ``bytes`` of all stored forests).
     """
     r = TetcReader(path)
     c = r.container
@@ -50,4 +51,15 @@ def tetc_info(path) -> dict:
         "bits_per_vertex_geometry": round(8.0 * geo / lv0["points"], 4) if lv0["points"] else 0.0,
         "sections": sizes,
         "levels": levels,
+        "forest": _forest_info(r, sizes),
     }
+
+
+def _forest_info(reader, sizes) -> dict:
+    """``merges``, ``max_ratio`` and ``bytes`` of the stored merge forest (all zero without one)."""
+    from ..simplify.levels import forest_merges
+
+    merges = forest_merges(reader)
+    n0 = reader.levels[0]["points"]
+    return {"merges": merges, "max_ratio": merges / n0 if n0 else 0.0,
+            "bytes": sum(v for k, v in sizes.items() if k.endswith("/forest"))}

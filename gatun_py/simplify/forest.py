@@ -19,7 +19,7 @@ from ..mesh import TetMesh
 from ._decimate_kernels import ROOT_RANK, _ancestors
 
 __all__ = ["ROOT_RANK", "MergeForest", "ancestors", "simplified_mesh", "encode_forest", "decode_forest",
-           "check_forest"]
+           "check_forest", "forest_header"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -203,6 +203,17 @@ def encode_forest(parent: np.ndarray, rank: np.ndarray) -> bytes:
     raw = _shuffle(_zigzag(d_order)) + _shuffle(_zigzag(d_parent))
     body = lzma.compress(raw, preset=9 | lzma.PRESET_EXTREME) if k else b""
     return _HEADER.pack(_MAGIC, n, k) + body
+
+
+def forest_header(data: bytes) -> tuple[int, int]:
+    """(vertices, merges) of a coded forest, read from its header only."""
+    data = bytes(data[: _HEADER.size])
+    if len(data) < _HEADER.size:
+        raise CorruptFileError("merge forest: truncated header")
+    magic, n, k = _HEADER.unpack(data)
+    if magic != _MAGIC or k > n:
+        raise CorruptFileError("merge forest: bad header")
+    return int(n), int(k)
 
 
 def decode_forest(data: bytes, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -10,7 +10,8 @@ from ..errors import OptionError
 from ..mesh import TetMesh
 from .forest import ROOT_RANK, MergeForest, simplified_mesh
 
-__all__ = ["MAX_LEVEL", "LevelMesh", "level_merges", "available_levels", "build_levels", "level_forest"]
+__all__ = ["MAX_LEVEL", "LevelMesh", "level_merges", "available_levels", "build_levels", "level_forest",
+           "read_simplified", "forest_merges"]
 
 MAX_LEVEL = 13
 
@@ -115,3 +116,89 @@ def build_levels(mesh: TetMesh, forest: MergeForest, levels=None) -> list[LevelM
         out.append(LevelMesh(i, n, n / mesh.n_points if mesh.n_points else 0.0, m,
                              level_forest(forest, n, ids), ids))
     return out
+
+
+# -- reading levels back from a .tetc file ------------------------------------------------------
+def _describe_levels(levels_meta) -> str:
+    return ", ".join(f"{lv['level']} (ratio {float(lv.get('ratio', 0.0)):.6f})" for lv in levels_meta)
+
+
+def forest_merges(reader) -> int:
+    """Merges the file's full forest holds (0 when it stores no forest)."""
+    from .forest import forest_header
+
+    lv0 = min(reader.levels, key=lambda lv: lv["level"])
+    name = f"L{lv0['level']}/forest"
+    if not reader.container.has_section(name):
+        return 0
+    n, k = forest_header(reader.read_section(name))
+    if n != lv0["points"]:
+        from ..errors import CorruptFileError
+
+        raise CorruptFileError(f"{name}: covers {n} vertices, the level has {lv0['points']}")
+    return k
+
+
+def read_simplified(source, *, ratio: float | None = None, level: int | None = None):
+    """The mesh at a simplification ratio (or a stored level) of a ``.tetc`` file.
+
+    With ``ratio``: N = floor(ratio * points); the most simplified stored level with N_i <= N is
+    decoded and its forest applied for the remaining N - N_i merges (paper section 5), which
+    gives exactly the mesh after N merges of the full forest.
+
+    Parameters
+    ----------
+    source : path, bytes or TetcReader
+    ratio : float, optional
+        0 <= ratio <= the file's maximum ratio.
+    level : int, optional
+        A stored level (exclusive with ``ratio``).
+
+    Returns
+    -------
+    TetMesh
+        Vertices in the decode order of the level it came from (merged ones dropped).
+
+    Raises
+    ------
+    OptionError
+        Impossible ratio or level; the message lists what the file holds.
+    """
+    from ..codec import TetcReader
+
+    reader = source if isinstance(source, TetcReader) else TetcReader(source)
+    if ratio is not None and level is not None:
+        raise OptionError("give either a ratio or a level, not both")
+    stored = sorted(reader.levels, key=lambda lv: lv["level"])
+    if ratio is None:
+        level = 0 if level is None else int(level)
+        if level not in [lv["level"] for lv in stored]:
+            raise OptionError(f"level {level} is not stored in this file; stored levels: {_describe_levels(stored)}")
+        return reader.decode_mesh(level)
+    n0 = stored[0]["points"]
+    total = forest_merges(reader)
+    max_ratio = total / n0 if n0 else 0.0
+    if not (0.0 <= ratio <= 1.0):
+        raise OptionError(f"ratio {ratio} is outside [0, 1]; this file reaches ratios up to {max_ratio:.6f} "
+                          f"(stored levels: {_describe_levels(stored)})")
+    n = int(np.floor(ratio * n0))
+    if n > total:
+        why = ("it stores no merge forest (compressed with --mesh-only)" if not stored[0].get("has_forest")
+               else f"its forest holds {total} merges (maximum ratio {max_ratio:.6f})")
+        raise OptionError(f"ratio {ratio} needs {n} merges but {why}; stored levels: {_describe_levels(stored)}")
+    usable = [lv for lv in stored if int(lv.get("merges_before", 0)) <= n
+              and (lv.get("has_forest") or int(lv.get("merges_before", 0)) == n)]
+    if not usable:
+        raise OptionError(f"no stored level can reach ratio {ratio}; stored levels: {_describe_levels(stored)}")
+    lv = max(usable, key=lambda x: int(x.get("merges_before", 0)))
+    mesh = reader.decode_mesh(lv["level"])
+    rest = n - int(lv.get("merges_before", 0))
+    if rest == 0:
+        return mesh
+    parent, rank = reader.read_forest(lv["level"])
+    forest = MergeForest(parent, rank, int((rank != ROOT_RANK).sum()))
+    if rest > forest.n_merges:
+        from ..errors import CorruptFileError
+
+        raise CorruptFileError(f"level {lv['level']}: its forest holds fewer merges than the metadata says")
+    return simplified_mesh(mesh, forest, rest)

@@ -1,0 +1,128 @@
+"""`tetc compress` with levels and forest, `tetc decompress --ratio/--level`, `tetc info` levels/forest."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from conftest import SAMPLES, load_sample
+from meshgen import single_tet
+
+from gatun_py.cli.main import tetc
+from gatun_py.mesh import read_mesh, write_mesh
+from gatun_py.simplify import build_levels, decimate, level_merges, simplified_mesh
+
+POST = str(SAMPLES / "lox_post_tets" / "post.vtk")
+
+
+def run(*args):
+    return CliRunner().invoke(tetc, [str(a) for a in args], catch_exceptions=False)
+
+
+def assert_error(res, *fragments):
+    assert res.exit_code == 1, res.output
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("tetc: error: "), res.output
+    for f in fragments:
+        assert f in lines[0], (f, lines[0])
+
+
+def _canonical(mesh):
+    """A vertex-order-free description of a mesh: tets as sorted tuples of float bit patterns."""
+    key = np.concatenate([mesh.points.view(np.uint32), mesh.density.view(np.uint32)[:, None]], axis=1)
+    return sorted(tuple(sorted(map(tuple, key[t]))) for t in mesh.tets)
+
+
+@pytest.fixture(scope="module")
+def post_tetc(tmp_path_factory):
+    out = tmp_path_factory.mktemp("simp") / "post.tetc"
+    res = run("compress", POST, "-o", out, "--quiet")
+    assert res.exit_code == 0, res.output
+    return out
+
+
+def test_info_lists_levels_and_forest(post_tetc):
+    res = run("info", post_tetc, "--json")
+    assert res.exit_code == 0, res.output
+    d = json.loads(res.output)
+    mesh = load_sample("post")[0]
+    forest = decimate(mesh)
+    levels = build_levels(mesh, forest)
+    assert [lv["level"] for lv in d["levels"]] == [lv.level for lv in levels]
+    for got, lv in zip(d["levels"], levels):
+        assert got["points"] == lv.mesh.n_points and got["tets"] == lv.mesh.n_tets
+        assert got["ratio"] == pytest.approx(lv.ratio) and got["bytes"] > 0
+    assert d["forest"]["merges"] == forest.n_merges
+    assert d["forest"]["max_ratio"] == pytest.approx(forest.max_ratio)
+    assert d["forest"]["bytes"] > 0
+
+
+@pytest.mark.parametrize("ratio", [0.0, 0.3, 0.5, 0.9, 0.97])
+def test_decompress_ratio_equals_simplified_mesh(post_tetc, tmp_path, ratio):
+    mesh = load_sample("post")[0]
+    forest = decimate(mesh)
+    want = simplified_mesh(mesh, forest, int(np.floor(ratio * mesh.n_points)))
+    out = tmp_path / "s.vtu"
+    res = run("decompress", post_tetc, "-o", out, "--ratio", ratio, "--quiet")
+    assert res.exit_code == 0, res.output
+    got, _ = read_mesh(out, scalar="Pressure")
+    assert got.n_points == want.n_points and got.n_tets == want.n_tets
+    assert _canonical(got) == _canonical(want)
+
+
+def test_decompress_level(post_tetc, tmp_path):
+    mesh = load_sample("post")[0]
+    want = simplified_mesh(mesh, decimate(mesh), level_merges(mesh.n_points, 3))
+    out = tmp_path / "l3.vtu"
+    assert run("decompress", post_tetc, "-o", out, "--level", 3, "--quiet").exit_code == 0
+    got, _ = read_mesh(out, scalar="Pressure")
+    assert _canonical(got) == _canonical(want)
+
+
+def test_impossible_requests(post_tetc, tmp_path):
+    out = tmp_path / "x.vtu"
+    assert_error(run("decompress", post_tetc, "-o", out, "--ratio", 1.5), "outside [0, 1]", "stored levels: 0")
+    assert_error(run("decompress", post_tetc, "-o", out, "--ratio", -0.1), "outside [0, 1]")
+    assert_error(run("decompress", post_tetc, "-o", out, "--level", 40), "level 40 is not stored", "9 (ratio")
+    assert_error(run("decompress", post_tetc, "-o", out, "--ratio", 0.9999), "maximum ratio", "stored levels")
+    assert_error(run("decompress", post_tetc, "-o", out, "--ratio", 0.5, "--level", 1), "exclusive")
+    assert not out.exists()
+
+
+def test_levels_option_and_mesh_only(tmp_path):
+    two = tmp_path / "two.tetc"
+    assert run("compress", POST, "-o", two, "--levels", 2, "--quiet").exit_code == 0
+    d = json.loads(run("info", two, "--json").output)
+    assert [lv["level"] for lv in d["levels"]] == [0, 1, 2]
+    # beyond the stored levels the forest still reaches further
+    out = tmp_path / "s.vtu"
+    assert run("decompress", two, "-o", out, "--ratio", 0.95, "--quiet").exit_code == 0
+
+    bare = tmp_path / "bare.tetc"
+    assert run("compress", POST, "-o", bare, "--mesh-only", "--quiet").exit_code == 0
+    d = json.loads(run("info", bare, "--json").output)
+    assert [lv["level"] for lv in d["levels"]] == [0]
+    assert d["forest"] == {"merges": 0, "max_ratio": 0.0, "bytes": 0}
+    assert_error(run("decompress", bare, "-o", out, "--ratio", 0.5, "--force"), "no merge forest")
+    assert run("decompress", bare, "-o", out, "--ratio", 0.0, "--force", "--quiet").exit_code == 0
+
+
+def test_weights_are_options(tmp_path):
+    out = tmp_path / "w.tetc"
+    assert run("compress", POST, "-o", out, "--w-density", 2, "--w-geometry", 0, "--levels", 1,
+               "--quiet").exit_code == 0
+    assert run("compress", POST, "-o", out, "--w-density", -1, "--force").exit_code == 2  # click range
+
+
+def test_single_tet_compresses_with_a_forest_of_roots(tmp_path):
+    src = tmp_path / "one.vtu"
+    write_mesh(single_tet(), src)
+    out = tmp_path / "one.tetc"
+    res = run("compress", src, "-o", out, "--quiet")
+    assert res.exit_code == 0, res.output
+    d = json.loads(run("info", out, "--json").output)
+    assert [lv["level"] for lv in d["levels"]] == [0]
+    assert d["forest"]["merges"] == 0
+    assert_error(run("decompress", out, "-o", tmp_path / "x.vtu", "--ratio", 0.5), "maximum ratio 0.000000")

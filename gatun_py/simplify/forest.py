@@ -180,9 +180,10 @@ def _unshuffle(b: bytes, k: int) -> np.ndarray:
 def encode_forest(parent: np.ndarray, rank: np.ndarray) -> bytes:
     """Code a merge forest compactly.
 
-    The merged vertices are listed in rank order (the rank permutation) as deltas from the
-    previous one, with each one's parent as a delta from the vertex; both zigzagged, byte-planed
-    and LZMA-coded. Roots are implied (not listed).
+    In vertex order: every vertex's rank (roots as k = the number of merges) and its parent as
+    a delta from the vertex (0 for roots), both zigzagged/byte-planed and LZMA-coded. Ranks cost
+    close to the log2(n!)/n bits of an arbitrary permutation; parents are mesh neighbours, so in a
+    locality-preserving vertex order (the codec's decode order) their deltas are small.
 
     Parameters
     ----------
@@ -197,11 +198,9 @@ def encode_forest(parent: np.ndarray, rank: np.ndarray) -> bytes:
     rank = np.asarray(rank, np.int64)
     k = check_forest(parent, rank)
     n = parent.shape[0]
-    order = np.argsort(rank, kind="stable")[:k]  # vertex merged at rank 0, 1, ...
-    d_order = np.diff(order, prepend=0)
-    d_parent = parent[order] - order
-    raw = _shuffle(_zigzag(d_order)) + _shuffle(_zigzag(d_parent))
-    body = lzma.compress(raw, preset=9 | lzma.PRESET_EXTREME) if k else b""
+    ranks = np.where(rank == ROOT_RANK, k, rank).astype(np.uint32)
+    d_parent = _zigzag(parent - np.arange(n))
+    body = lzma.compress(_shuffle(ranks) + _shuffle(d_parent), preset=9 | lzma.PRESET_EXTREME) if k else b""
     return _HEADER.pack(_MAGIC, n, k) + body
 
 
@@ -249,21 +248,18 @@ def decode_forest(data: bytes, n: int) -> tuple[np.ndarray, np.ndarray]:
     if k:
         try:
             dec = lzma.LZMADecompressor()
-            raw = dec.decompress(data[_HEADER.size:], max_length=8 * k + 1)
+            raw = dec.decompress(data[_HEADER.size:], max_length=8 * n + 1)
         except lzma.LZMAError as e:
             raise CorruptFileError(f"merge forest: {e}") from None
-        if len(raw) != 8 * k or not dec.eof or dec.unused_data:
+        if len(raw) != 8 * n or not dec.eof or dec.unused_data:
             raise CorruptFileError("merge forest: payload has the wrong length")
-        order = np.cumsum(_unzigzag(_unshuffle(raw[: 4 * k], k)))
-        if order.min() < 0 or order.max() >= n:
-            raise CorruptFileError("merge forest: a vertex id is out of range")
-        par = order + _unzigzag(_unshuffle(raw[4 * k:], k))
-        if par.min() < 0 or par.max() >= n:
+        ranks = _unshuffle(raw[: 4 * n], n).astype(np.int64)
+        if ranks.max() > k:
+            raise CorruptFileError("merge forest: a rank is out of range")
+        parent = np.arange(n) + _unzigzag(_unshuffle(raw[4 * n:], n))
+        if parent.min() < 0 or parent.max() >= n:
             raise CorruptFileError("merge forest: a parent id is out of range")
-        if np.unique(order).size != k:
-            raise CorruptFileError("merge forest: a vertex is merged twice")
-        parent[order] = par
-        rank[order] = np.arange(k)
+        rank = np.where(ranks == k, ROOT_RANK, ranks)
     elif len(data) != _HEADER.size:
         raise CorruptFileError("merge forest: trailing bytes")
     parent = parent.astype(np.int32)

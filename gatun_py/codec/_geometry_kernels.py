@@ -60,7 +60,11 @@ ADJ_CAP = 16
 NW = 2  # extra predictor vertices per face pair / face ref
 
 # model layout of one channel (uint16 probabilities)
-EQ_CONTEXTS = 8  # (number of distinct ref values - 1) x (neighbouring channel was a repeat)
+# repetition contexts: (number of distinct ref values - 1) x what the previous channel of this
+# vertex did (repeat of distinct candidate 0..3, or 4 = predicted); channel 0 uses 4 + whether the
+# previous vertex's channel 0 was a repeat
+EQ_FLAGS = 6
+EQ_CONTEXTS = 4 * EQ_FLAGS
 EQ_BASE = 0
 RES_BASE = EQ_BASE + EQ_CONTEXTS * 8
 N_ACTIVITY = 10
@@ -510,13 +514,13 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, trace):
             res = np.int64(0)
             best = -1
             if m > 0:
-                flag = was_eq[k] if ch > 0 else last_eq
+                flag = was_eq[k] if ch > 0 else 4 + last_eq
                 sym = m
                 for q in range(m):
                     if eq_o[q] == o:
                         sym = q
                         break
-                enc_sym(stc, outc, probs, EQ_BASE + ((m - 1) * 2 + flag) * 8, _eq_bits(m), sym)
+                enc_sym(stc, outc, probs, EQ_BASE + ((m - 1) * EQ_FLAGS + flag) * 8, _eq_bits(m), sym)
                 is_eq = 1 if sym < m else 0
             if is_eq == 0:
                 pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
@@ -540,7 +544,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, trace):
                 trace[k, ch, 1] = res
                 trace[k, ch, 2] = best
             last_eq = is_eq
-            was_eq[k] = is_eq
+            was_eq[k] = sym if is_eq else 4
         nbytes[ch] = enc_finish(stc, outc)
     return nbytes
 
@@ -629,7 +633,7 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, modes, 
         if (r0 < -1 or r0 >= k or r1 < -1 or r1 >= k or r2 < -1 or r2 >= k or r3 < -1 or r3 >= k):
             return ERR_REF
         link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf)
-        flag = flags[0]
+        flag = 4 + flags[0]
         for ch in range(N_CHANNELS):
             if ch == 0:
                 stc = s0
@@ -650,8 +654,9 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, modes, 
             pat, m = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, False)
             is_eq = 0
             o = np.int64(0)
+            sym = 0
             if m > 0:
-                sym = dec_sym(stc, data, pc, EQ_BASE + ((m - 1) * 2 + flag) * 8, _eq_bits(m))
+                sym = dec_sym(stc, data, pc, EQ_BASE + ((m - 1) * EQ_FLAGS + flag) * 8, _eq_bits(m))
                 if sym < m:
                     o = eq_o[sym]
                     is_eq = 1
@@ -686,5 +691,5 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, modes, 
                 return ERR_STREAM
             vi[k, ch] = ordered_to_bits(o)
             flags[ch] = is_eq
-            flag = is_eq
+            flag = sym if is_eq else 4
     return OK

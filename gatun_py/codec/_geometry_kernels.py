@@ -47,6 +47,7 @@ from .rangecoder import (
 N_CHANNELS = 4
 MODE_PREDICT = 0
 MODE_TABLE = 1
+MODE_SKIP = -1  # encoder only: leave the channel out of this pass
 
 # ref patterns (which of the face refs and the apex are present) and their predictor candidates
 PAT_NONE, PAT_ONE, PAT_EDGE, PAT_EDGE_APEX, PAT_FACE, PAT_FACE_APEX = 0, 1, 2, 3, 4, 5
@@ -269,7 +270,7 @@ def _ext(vf, ch, x, w, fallback):
     return 2.0 * np.float64(vf[x, ch]) - np.float64(vf[w, ch])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, need_cands):
     """Predictor candidates and distinct repetition candidates of vertex ``k`` on channel ``ch``.
 
@@ -497,6 +498,19 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, trace):
         mode = modes[ch]
         lo = tab_offs[ch]
         hi = tab_offs[ch + 1]
+        if mode == MODE_SKIP:
+            # not coded in this pass, but the next channel's contexts need its repeat symbols
+            for k in range(n):
+                pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
+                                 vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, False)
+                o = ordered_int(vi[k, ch])
+                sym = 4
+                for q in range(m):
+                    if eq_o[q] == o:
+                        sym = q
+                        break
+                was_eq[k] = sym
+            continue
         if mode == MODE_TABLE:
             enc_uint(stc, outc, probs, TABLE_BASE, hi - lo)
             if hi > lo:

@@ -179,7 +179,9 @@ def encode_geometry(points, density, refs, *, modes=None) -> bytes:
         # a table pays off only when values repeat: skip the trial when most values are distinct
         use_table = np.array([len(t) <= n // 2 for t in tables_list], dtype=np.int64)
         if use_table.any():
-            tab = _run_encode(vf, refs, use_table, tables, tab_offs, wpar=wpar)
+            # second pass: only the channels worth a table (channels are independent streams)
+            trial = np.where(use_table == 1, K.MODE_TABLE, K.MODE_SKIP).astype(np.int64)
+            tab = _run_encode(vf, refs, trial, tables, tab_offs, wpar=wpar)
             modes = np.zeros(K.N_CHANNELS, dtype=np.int64)
             streams = []
             for ch in range(K.N_CHANNELS):

@@ -152,10 +152,18 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None) 
         "scalar": str(mesh0.scalar_name),
         "scalar_range": [float(x) for x in mesh0.scalar_range],
         "source": os.path.basename(str(source)),
+        # The full mesh's volume-mode sample step, so that every level and ratio samples alike.
+        "render_step": _render_step(mesh0),
         "levels": [e.meta for e in encoded],
     }
     sections = [(name, data) for e in encoded for name, data in e.sections.items()]
     return build_container(meta, sections)
+
+
+def _render_step(mesh) -> float:
+    from ..render.raycast import default_step
+
+    return float(default_step(mesh.points, mesh.boundary_faces()))
 
 
 def write_tetc(path, mesh_or_levels, *, source: str = "", force: bool = False, progress=None) -> int:

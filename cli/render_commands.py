@@ -56,12 +56,22 @@ def _kernels_cached() -> bool:
 @click.option("--azimuth", type=float, default=0.0, show_default=True, help="Degrees about the view-up axis.")
 @click.option("--elevation", type=float, default=0.0, show_default=True, help="Degrees up about the focal point.")
 @click.option("--zoom", type=float, default=1.0, show_default=True, help="Zoom factor (VTK's Camera.Zoom).")
+@click.option("--ratio", type=float, default=None,
+              help="Simplify to this ratio (merged / all vertices, 0..1): starts from the most simplified "
+                   "stored level still finer, then simplifies on the fly. .tetc input only.")
+@click.option("--level", type=click.IntRange(min=0), default=None, help="Render stored level i as it is.")
+@click.option("--budget", type=float, default=None, metavar="SECONDS",
+              help="Frame-time budget: pick the finest level and ratio predicted to fit (a time model of this "
+                   "file on this machine, calibrated on first use and cached).")
+@click.option("--pipeline", type=click.Choice(["streaming", "generic"]), default="streaming", show_default=True,
+              help="streaming: decode, simplify and render in one pass; generic: decode all, simplify, render "
+                   "(the paper's baseline).")
 @click.option("--stats", "show_stats", is_flag=True, help="Print one JSON object with timings and counts on stdout.")
 @mesh_input_options
 @force_option
 @quiet_option
-def render(input, output, tf_spec, mode, step, size, azimuth, elevation, zoom, show_stats, scalar, q_file, q_var,
-           cell_to_point, force, quiet):
+def render(input, output, tf_spec, mode, step, size, azimuth, elevation, zoom, ratio, level, budget, pipeline,
+           show_stats, scalar, q_file, q_var, cell_to_point, force, quiet):
     """Volume-render INPUT (a .tetc file or any mesh file) into a PNG.
 
     Tets are rendered as they are decoded: rays start on the boundary surface and walk inward
@@ -70,7 +80,7 @@ def render(input, output, tf_spec, mode, step, size, azimuth, elevation, zoom, s
     """
     t_start = time.perf_counter()
     from gatun_py._atomic import check_output_path
-    from gatun_py.render import Camera, load_transfer_function, render_batches, write_png
+    from gatun_py.render import Camera, load_transfer_function, write_png
 
     width, height = parse_size(size)
     if step is not None and not step > 0:
@@ -81,34 +91,43 @@ def render(input, output, tf_spec, mode, step, size, azimuth, elevation, zoom, s
     if not _kernels_cached():
         status("compiling the renderer (first run only, up to a minute)...", quiet)
 
-    if Path(input).suffix.lower() == ".tetc":
-        from gatun_py.codec.tetcfile import TetcReader
+    if sum(x is not None for x in (ratio, level, budget)) > 1:
+        raise click.UsageError("give at most one of --ratio, --level and --budget")
+    from gatun_py.pipeline.stream import View, is_tetc, render_mesh_file, render_tetc, resolve_target
+
+    view = View(camera, tf, mode, step)
+    planned = {}
+    if is_tetc(input):
+        from gatun_py.codec import TetcReader
 
         reader = TetcReader(input)
-        lv = reader.level_meta(0)
-        batches = reader.iter_decode(0)
-        n_tets = int(lv["tets"])
-        scalar_range = lv.get("scalar_range") or reader.meta.get("scalar_range")
+        target = resolve_target(reader, ratio=ratio, level=level)
+        if budget is not None:
+            from gatun_py.pipeline.budget import plan_file_budget
+
+            from gatun_py.pipeline import budget as budget_model
+
+            if budget_model.load_model(budget_model.model_key(input, view)) is None:
+                status("calibrating the time model for this file, size and view (first use only)...", quiet)
+            target, plan, model, _ = plan_file_budget(input, view, budget)
+            planned = {"predicted_s": plan.predicted_s, "budget_s": budget}
+            if not plan.feasible:
+                status(f"note: the budget of {budget:g} s cannot be met: rendering the coarsest level "
+                       f"(predicted {plan.predicted_s:.3f} s)", quiet)
+        n_tets = int(reader.level_meta(target.level)["tets"])
+        with progress_bar("rendering", n_tets if n_tets >= 100_000 else 0, quiet) as update:
+            result = render_tetc(input, view, pipeline=pipeline, target=target, progress=update)
     else:
-        from gatun_py.mesh import read_mesh
-        from gatun_py.render import mesh_batches
-
-        t0 = time.perf_counter()
-        mesh, report = read_mesh(input, **read_kwargs(scalar, q_file, q_var, cell_to_point))
-        read_s = time.perf_counter() - t0
-        for note in report.notes:
+        if ratio is not None or level is not None or budget is not None:
+            raise OptionError("--ratio, --level and --budget need a .tetc file with a merge forest "
+                              "(make one with: tetc compress INPUT -o FILE.tetc)")
+        result = render_mesh_file(input, view, read_kwargs=read_kwargs(scalar, q_file, q_var, cell_to_point))
+        for note in result.stats.pop("notes", []):
             status(f"note: {note}", quiet)
-        batches = mesh_batches(mesh)
-        n_tets = mesh.n_tets
-        scalar_range = mesh.scalar_range
-
-    with progress_bar("rendering", n_tets if n_tets >= 100_000 else 0, quiet) as update:
-        result = render_batches(batches, camera, tf, mode=mode, step=step, scalar_range=scalar_range,
-                                expected_tets=n_tets, progress=update)
     write_png(output, result.image, force=force)
     st = result.stats
-    if Path(input).suffix.lower() != ".tetc":
-        st["decode_s"] += read_s
+    st.pop("filter", None)
+    st.update(planned)
     st["total_s"] = time.perf_counter() - t_start
     st["peak_rss_mb"] = _peak_rss_mb()
     st["output"] = str(output)

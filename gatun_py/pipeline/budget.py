@@ -191,8 +191,21 @@ def calibrate(path, view, levels: list[LevelSize], *, repeats: int = 2) -> TimeM
     return fit_time_model(probes)
 
 
+def model_key(path, view) -> str:
+    """Calibration key of a file rendered with a view (camera, transfer function, sampling)."""
+    tf = view.tf
+    tf_key = tf if isinstance(tf, str) else json.dumps(getattr(tf, "__dict__", tf), sort_keys=True, default=str)
+    cam = view.camera
+    return calibration_key(_file_id(path), (cam.width, cam.height), view.mode,
+                           f"{tf_key}|{view.step}|{cam.azimuth}|{cam.elevation}|{cam.zoom}")
+
+
 def plan_file_budget(path, view, budget_s: float, *, recalibrate: bool = False):
     """(Target, BudgetPlan, TimeModel, calibrated_now) for rendering ``path`` within ``budget_s``."""
+    if not math.isfinite(float(budget_s)):
+        from ..errors import OptionError
+
+        raise OptionError(f"--budget must be a number of seconds, got {budget_s}")
     from ..codec import TetcReader
     from .stream import Target, forest_reach, stored_levels
 
@@ -200,10 +213,7 @@ def plan_file_budget(path, view, budget_s: float, *, recalibrate: bool = False):
     pts = int(reader.meta["points"])
     levels = [LevelSize(int(lv["level"]), int(lv.get("merges_before", 0)), int(lv["tets"]))
               for lv in stored_levels(reader)]
-    tf_key = view.tf if isinstance(view.tf, str) else json.dumps(view.tf, sort_keys=True, default=str)
-    cam = view.camera
-    key = calibration_key(_file_id(path), (cam.width, cam.height), view.mode,
-                          f"{tf_key}|{view.step}|{cam.azimuth}|{cam.elevation}|{cam.zoom}")
+    key = model_key(path, view)
     model = None if recalibrate else load_model(key)
     calibrated = model is None
     if model is None:

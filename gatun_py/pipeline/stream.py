@@ -130,12 +130,24 @@ def target_ancestors(reader, target: Target) -> np.ndarray | None:
     return ancestors(parent, rank, target.merges - target.level_merges)
 
 
-def file_render_defaults(reader) -> tuple[np.ndarray, np.ndarray, tuple[float, float], float | None]:
-    """bbox lo, hi, scalar range and volume step of the full mesh, as recorded at compression."""
+def file_render_defaults(reader) -> tuple[np.ndarray, np.ndarray, tuple[float, float], float]:
+    """bbox lo, hi, scalar range and volume-mode step of the full mesh (level 0).
+
+    The step is the one the full mesh renders with (half its median boundary edge): recorded at
+    compression as ``render_step``, else computed from level 0's boundary, which is the first
+    thing its stream holds. Every level and ratio then samples the same positions.
+    """
     lo, hi = (np.asarray(x, np.float64) for x in reader.meta["bbox"])
     rng = tuple(float(x) for x in reader.meta["scalar_range"])
     step = reader.meta.get("render_step")
-    return lo, hi, rng, (float(step) if isinstance(step, (int, float)) and step > 0 else None)
+    if not (isinstance(step, (int, float)) and math.isfinite(step) and step > 0):
+        from ..render.raycast import default_step
+
+        stream = reader.iter_decode(0)
+        first = next(stream)
+        stream.close()
+        step = default_step(first.points, first.boundary)
+    return lo, hi, rng, float(step)
 
 
 # -- running ------------------------------------------------------------------------------------

@@ -12,11 +12,12 @@ Encoder and decoder share every rule that shapes the state (candidate lists, add
 removals); only the symbol I/O differs. Decoders check every index and count they read and stop
 with an error code instead of touching memory out of bounds.
 
-Border arrays, passed as a tuple ``B``:
-``ev (cap,4) int32`` element vertices (+ apex data), ``eseq (cap) int64`` sequence number (-1: free slot),
-``lnext, lprev (3*cap) int32`` incidence lists, ``vhead (nv) int32`` list heads,
-``fstack (cap) int32`` free slots, ``q (qcap) int32`` / ``qs (qcap) int64`` FIFO ring,
-``bs int64`` scalars (see ``BS_*``).
+Border arrays, passed as a tuple ``B = (E, vhead, Q, bs)`` (few arrays: every array passed to a
+kernel costs reference-count updates on each call, which dominated the per-tet cost before):
+``E (cap, 12) int64`` one row per slot: vertices (+ apex data) in columns 0-3, sequence number
+(``E_SEQ``, -1: free slot), incidence-list links per corner (``E_NEXT``, ``E_PREV``; node id =
+3 * slot + corner), free-list link (``E_FREE``); ``vhead (nv) int64`` list heads;
+``Q (qcap, 2) int64`` FIFO ring of (slot, sequence); ``bs int64`` scalars (see ``BS_*``).
 """
 
 from __future__ import annotations
@@ -26,7 +27,9 @@ from numba import njit
 
 from . import rangecoder as rc
 
-BS_NFREE, BS_QHEAD, BS_QTAIL, BS_SEQ, BS_LIVE, BS_PEAK = 0, 1, 2, 3, 4, 5
+BS_NFREE, BS_QHEAD, BS_QTAIL, BS_SEQ, BS_LIVE, BS_PEAK, BS_FREE_HEAD = 0, 1, 2, 3, 4, 5, 6
+# columns of the element table E: vertices/apex 0-3, sequence, list links per corner, free list
+E_SEQ, E_NEXT, E_PREV, E_FREE, E_COLS = 4, 5, 8, 11, 12
 
 MAX_C1 = 15  # coded edge-adjacent candidates (symbol 15 = escape)
 MAX_C2 = 64  # vertex-adjacent candidates
@@ -56,85 +59,77 @@ def new_border(n_vertices: int, cap: int, qcap: int):
     """Allocate an empty border for ``n_vertices`` vertices."""
     cap = max(int(cap), 16)
     qcap = max(int(qcap), 16)
-    ev = np.full((cap, 4), -1, np.int32)
-    eseq = np.full(cap, -1, np.int64)
-    lnext = np.full(3 * cap, -1, np.int32)
-    lprev = np.full(3 * cap, -1, np.int32)
-    vhead = np.full(max(int(n_vertices), 1), -1, np.int32)
-    fstack = np.arange(cap - 1, -1, -1, dtype=np.int32)
-    q = np.zeros(qcap, np.int32)
-    qs = np.zeros(qcap, np.int64)
+    E = np.full((cap, E_COLS), -1, np.int64)
+    E[:, E_FREE] = np.arange(1, cap + 1)  # free list through the slots
+    E[cap - 1, E_FREE] = -1
+    vhead = np.full(max(int(n_vertices), 1), -1, np.int64)
+    Q = np.zeros((qcap, 2), np.int64)
     bs = np.zeros(8, np.int64)
     bs[BS_NFREE] = cap
-    return (ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs)
+    bs[BS_FREE_HEAD] = 0
+    return (E, vhead, Q, bs)
 
 
 def grow_border(B, need_slots: int, need_queue: int):
     """A copy of border ``B`` with room for at least ``need_slots`` more elements and queue entries."""
-    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
-    cap = ev.shape[0]
+    E, vhead, Q, bs = B
+    bs = bs.copy()
+    cap = E.shape[0]
     nfree = int(bs[BS_NFREE])
     if nfree < need_slots:
         new_cap = max(2 * cap, cap + need_slots)
-        ev = np.concatenate([ev, np.full((new_cap - cap, 4), -1, np.int32)])
-        eseq = np.concatenate([eseq, np.full(new_cap - cap, -1, np.int64)])
-        lnext = np.concatenate([lnext, np.full(3 * (new_cap - cap), -1, np.int32)])
-        lprev = np.concatenate([lprev, np.full(3 * (new_cap - cap), -1, np.int32)])
-        extra = np.arange(new_cap - 1, cap - 1, -1, dtype=np.int32)
-        fs = np.empty(new_cap, np.int32)
-        fs[: new_cap - cap] = extra
-        fs[new_cap - cap : new_cap - cap + nfree] = fstack[:nfree]
-        fstack = fs
-        bs = bs.copy()
+        extra = np.full((new_cap - cap, E_COLS), -1, np.int64)
+        extra[:, E_FREE] = np.arange(cap + 1, new_cap + 1)
+        extra[-1, E_FREE] = bs[BS_FREE_HEAD]  # new slots first, then the old free list
+        E = np.concatenate([E, extra])
+        bs[BS_FREE_HEAD] = cap
         bs[BS_NFREE] = nfree + new_cap - cap
-    qcap = q.shape[0]
+    qcap = Q.shape[0]
     used = int(bs[BS_QTAIL] - bs[BS_QHEAD])
     if qcap - used < need_queue:
         new_qcap = max(2 * qcap, used + need_queue)
         idx = (int(bs[BS_QHEAD]) + np.arange(used)) % qcap
-        nq = np.zeros(new_qcap, np.int32)
-        nqs = np.zeros(new_qcap, np.int64)
-        nq[:used] = q[idx]
-        nqs[:used] = qs[idx]
-        q, qs = nq, nqs
-        bs = bs.copy()
+        nq = np.zeros((new_qcap, 2), np.int64)
+        nq[:used] = Q[idx]
+        Q = nq
         bs[BS_QHEAD] = 0
         bs[BS_QTAIL] = used
-    return (ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs)
+    return (E, vhead, Q, bs)
 
 
 @njit(cache=True)
 def _room(B, slots, entries):
-    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
-    return bs[BS_NFREE] >= slots and q.shape[0] - (bs[BS_QTAIL] - bs[BS_QHEAD]) >= entries
+    E, vhead, Q, bs = B
+    return bs[BS_NFREE] >= slots and Q.shape[0] - (bs[BS_QTAIL] - bs[BS_QHEAD]) >= entries
 
 
 @njit(cache=True)
 def _add(B, k, v0, v1, v2, v3):
     """Add an element with ``k`` listed vertices (the rest of v0..v3 is stored as data: the apex
     of the triangle or tet that created it, for the geometry coder); returns its slot."""
-    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
+    E, vhead, Q, bs = B
+    s = bs[BS_FREE_HEAD]
+    bs[BS_FREE_HEAD] = E[s, E_FREE]
     bs[BS_NFREE] -= 1
-    s = fstack[bs[BS_NFREE]]
-    ev[s, 0] = v0
-    ev[s, 1] = v1
-    ev[s, 2] = v2
-    ev[s, 3] = v3
+    E[s, 0] = v0
+    E[s, 1] = v1
+    E[s, 2] = v2
+    E[s, 3] = v3
     seq = bs[BS_SEQ]
     bs[BS_SEQ] = seq + 1
-    eseq[s] = seq
+    E[s, E_SEQ] = seq
     for c in range(k):
-        v = ev[s, c]
+        v = E[s, c]
         node = 3 * s + c
         h = vhead[v]
-        lnext[node] = h
-        lprev[node] = -1
+        E[s, E_NEXT + c] = h
+        E[s, E_PREV + c] = -1
         if h != -1:
-            lprev[h] = node
+            E[h // 3, E_PREV + h % 3] = node
         vhead[v] = node
-    t = bs[BS_QTAIL] % q.shape[0]
-    q[t] = s
-    qs[t] = seq
+    t = bs[BS_QTAIL] % Q.shape[0]
+    Q[t, 0] = s
+    Q[t, 1] = seq
     bs[BS_QTAIL] += 1
     bs[BS_LIVE] += 1
     if bs[BS_LIVE] > bs[BS_PEAK]:
@@ -144,19 +139,19 @@ def _add(B, k, v0, v1, v2, v3):
 
 @njit(cache=True)
 def _remove(B, k, s):
-    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
+    E, vhead, Q, bs = B
     for c in range(k):
-        node = 3 * s + c
-        p = lprev[node]
-        n = lnext[node]
+        p = E[s, E_PREV + c]
+        n = E[s, E_NEXT + c]
         if p != -1:
-            lnext[p] = n
+            E[p // 3, E_NEXT + p % 3] = n
         else:
-            vhead[ev[s, c]] = n
+            vhead[E[s, c]] = n
         if n != -1:
-            lprev[n] = p
-    eseq[s] = -1
-    fstack[bs[BS_NFREE]] = s
+            E[n // 3, E_PREV + n % 3] = p
+    E[s, E_SEQ] = -1
+    E[s, E_FREE] = bs[BS_FREE_HEAD]
+    bs[BS_FREE_HEAD] = s
     bs[BS_NFREE] += 1
     bs[BS_LIVE] -= 1
 
@@ -164,13 +159,13 @@ def _remove(B, k, s):
 @njit(cache=True)
 def _pop(B):
     """The oldest live element's slot (it stays live), or -1 when the border is empty."""
-    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
-    qcap = q.shape[0]
+    E, vhead, Q, bs = B
+    qcap = Q.shape[0]
     while bs[BS_QHEAD] < bs[BS_QTAIL]:
         h = bs[BS_QHEAD] % qcap
         bs[BS_QHEAD] += 1
-        s = q[h]
-        if eseq[s] == qs[h]:
+        s = Q[h, 0]
+        if E[s, E_SEQ] == Q[h, 1]:
             return s
     return -1
 
@@ -179,36 +174,36 @@ def _pop(B):
 def _find_face(B, a, b, c):
     """Slot of the live triangle with vertex set {a, b, c}; second value: 1 same cyclic orientation
     as (a, b, c), 0 opposite; (-1, 0) if absent."""
-    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
+    E, vhead, Q, bs = B
     node = vhead[a]
     while node != -1:
         s = node // 3
         c0 = node - 3 * s
-        x = ev[s, (c0 + 1) % 3]
-        y = ev[s, (c0 + 2) % 3]
+        x = E[s, (c0 + 1) % 3]
+        y = E[s, (c0 + 2) % 3]
         if x == b and y == c:
             return s, 1
         if x == c and y == b:
             return s, 0
-        node = lnext[node]
+        node = E[node // 3, E_NEXT + node % 3]
     return -1, 0
 
 
 @njit(cache=True)
 def _find_edge(B, p, r):
     """Slot of a live border edge {p, r} (either direction; the oldest one), or -1."""
-    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
+    E, vhead, Q, bs = B
     node = vhead[p]
     best = -1
     best_seq = np.int64(-1)
     while node != -1:
         s = node // 3
         c = node - 3 * s
-        if c < 2 and ev[s, 1 - c] == r:
-            if best == -1 or eseq[s] < best_seq:
+        if c < 2 and E[s, 1 - c] == r:
+            if best == -1 or E[s, E_SEQ] < best_seq:
                 best = s
-                best_seq = eseq[s]
-        node = lnext[node]
+                best_seq = E[s, E_SEQ]
+        node = E[node // 3, E_NEXT + node % 3]
     return best
 
 
@@ -250,10 +245,10 @@ def _gather_face(B, s, cand, cscore, cseq):
     """Candidates for the fourth vertex of the tet behind border face ``s`` = (a, b, c): the
     apexes of faces of T adjacent to an edge of ``s``, sorted by score (how many of the face's
     edges they are adjacent across) and then by traversal order. Returns their number."""
-    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
-    a = np.int64(ev[s, 0])
-    b = np.int64(ev[s, 1])
-    c = np.int64(ev[s, 2])
+    E, vhead, Q, bs = B
+    a = np.int64(E[s, 0])
+    b = np.int64(E[s, 1])
+    c = np.int64(E[s, 2])
     n1 = 0
     # faces on edges (a, b) and (a, c) are all in a's list; those on (b, c) in b's list
     for k in range(2):
@@ -261,12 +256,12 @@ def _gather_face(B, s, cand, cscore, cseq):
         node = vhead[u]
         while node != -1:
             g = node // 3
-            node = lnext[node]
+            node = E[node // 3, E_NEXT + node % 3]
             if g == s:
                 continue
-            g0 = np.int64(ev[g, 0])
-            g1 = np.int64(ev[g, 1])
-            g2 = np.int64(ev[g, 2])
+            g0 = np.int64(E[g, 0])
+            g1 = np.int64(E[g, 1])
+            g2 = np.int64(E[g, 2])
             has_a = g0 == a or g1 == a or g2 == a
             has_b = g0 == b or g1 == b or g2 == b
             has_c = g0 == c or g1 == c or g2 == c
@@ -281,8 +276,32 @@ def _gather_face(B, s, cand, cscore, cseq):
                 x = g1
             else:
                 x = g2
-            n1 = _insert_candidate(cand, cscore, cseq, n1, x, eseq[g])
-    _sort_candidates(cand, cscore, cseq, n1)
+            # _insert_candidate and _sort_candidates written out (hot: once per tet)
+            sq = E[g, E_SEQ]
+            found = False
+            for i in range(n1):
+                if cand[i] == x:
+                    cscore[i] += 1
+                    if sq < cseq[i]:
+                        cseq[i] = sq
+                    found = True
+                    break
+            if not found and n1 < cand.shape[0]:
+                cand[n1] = x
+                cscore[n1] = 1
+                cseq[n1] = sq
+                n1 += 1
+    for i in range(1, n1):
+        x, sc, sq = cand[i], cscore[i], cseq[i]
+        j = i - 1
+        while j >= 0 and (cscore[j] < sc or (cscore[j] == sc and cseq[j] > sq)):
+            cand[j + 1] = cand[j]
+            cscore[j + 1] = cscore[j]
+            cseq[j + 1] = cseq[j]
+            j -= 1
+        cand[j + 1] = x
+        cscore[j + 1] = sc
+        cseq[j + 1] = sq
     return n1
 
 
@@ -291,23 +310,23 @@ def _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq):
     """The paper's case (c) list: vertices of faces of T sharing exactly one vertex with the
     current face (a, b, c) (already removed from T), except the edge candidates, in traversal
     order (oldest face first). Only needed after an escape, so computed lazily."""
-    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
+    E, vhead, Q, bs = B
     n2 = 0
     for k in range(3):
         u = a if k == 0 else (b if k == 1 else c)
         node = vhead[u]
         while node != -1:
             g = node // 3
-            node = lnext[node]
+            node = E[node // 3, E_NEXT + node % 3]
             shared = 0
             for cj in range(3):
-                w = ev[g, cj]
+                w = E[g, cj]
                 if w == a or w == b or w == c:
                     shared += 1
             if shared != 1:
                 continue
             for cj in range(3):
-                w = np.int64(ev[g, cj])
+                w = np.int64(E[g, cj])
                 if w == a or w == b or w == c:
                     continue
                 skip = False
@@ -321,12 +340,12 @@ def _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq):
                 for i in range(n2):
                     if c2[i] == w:
                         dup = True
-                        if eseq[g] < c2seq[i]:
-                            c2seq[i] = eseq[g]
+                        if E[g, E_SEQ] < c2seq[i]:
+                            c2seq[i] = E[g, E_SEQ]
                         break
                 if not dup and n2 < c2.shape[0]:
                     c2[n2] = w
-                    c2seq[n2] = eseq[g]
+                    c2seq[n2] = E[g, E_SEQ]
                     n2 += 1
     # stable insertion sort by sequence
     for i in range(1, n2):
@@ -359,7 +378,7 @@ def _apply_tet(B, t0, t1, t2, t3):
     already removed): each other face closes a face of the border or joins it, wound as the
     consistently oriented tet on its other side would see it from outside. Returns the slots of
     the faces opposite t0, t1, t2 that joined the border (-1 where a face was closed)."""
-    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
+    E, vhead, Q, bs = B
     # all three faces hold t3 (the apex just attached, often new with an empty list): one walk
     # of its list finds those already on the border
     f0 = -1
@@ -369,9 +388,9 @@ def _apply_tet(B, t0, t1, t2, t3):
     while node != -1:
         g = node // 3
         c0 = node - 3 * g
-        node = lnext[node]
-        x = ev[g, 0 if c0 == 2 else c0 + 1]
-        y = ev[g, 2 if c0 == 0 else c0 - 1]
+        node = E[node // 3, E_NEXT + node % 3]
+        x = E[g, 0 if c0 == 2 else c0 + 1]
+        y = E[g, 2 if c0 == 0 else c0 - 1]
         if (x == t1 and y == t2) or (x == t2 and y == t1):
             f0 = g
         elif (x == t2 and y == t0) or (x == t0 and y == t2):
@@ -413,9 +432,9 @@ def _bitlen(n):
 def _gather_edge(B, s, cand, cscore, cseq):
     """Candidates for the apex of the unvisited triangle on border edge s = {p, r}: apexes x
     that would close border edges {r, x} or {x, p}. Returns n1 (sorted like the tet phase)."""
-    ev, eseq, lnext, lprev, vhead, fstack, q, qs, bs = B
-    p = np.int64(ev[s, 0])
-    r = np.int64(ev[s, 1])
+    E, vhead, Q, bs = B
+    p = np.int64(E[s, 0])
+    r = np.int64(E[s, 1])
     n1 = 0
     for k in range(2):
         u = r if k == 0 else p
@@ -425,10 +444,10 @@ def _gather_edge(B, s, cand, cscore, cseq):
             g = node // 3
             c = node - 3 * g
             if c < 2 and g != s:
-                x = np.int64(ev[g, 1 - c])
+                x = np.int64(E[g, 1 - c])
                 if x != other:
-                    n1 = _insert_candidate(cand, cscore, cseq, n1, x, eseq[g])
-            node = lnext[node]
+                    n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g, E_SEQ])
+            node = E[node // 3, E_NEXT + node % 3]
     _sort_candidates(cand, cscore, cseq, n1)
     return n1
 
@@ -526,9 +545,9 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
             done += 1
             _apply_triangle(B, tri[0], tri[1], tri[2], -1, -1)
             continue
-        ev = B[0]
-        p = np.int64(ev[s, 0])
-        r = np.int64(ev[s, 1])
+        E = B[0]
+        p = np.int64(E[s, 0])
+        r = np.int64(E[s, 1])
         n1 = _gather_edge(B, s, cand, cscore, cseq)
         _remove(B, 2, s)
         po = order[p]
@@ -562,7 +581,7 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
                 order[nv] = xo
                 pred[nv, 0] = p
                 pred[nv, 1] = r
-                pred[nv, 3] = ev[s, 2]
+                pred[nv, 3] = E[s, 2]
                 nv += 1
                 prev_new = 1
             else:
@@ -581,7 +600,7 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
         _apply_triangle(B, u0, u1, x, p, r)
         if not _room(B, 4, 4):
             return -1, 2
-    if B[8][BS_LIVE] != 0:
+    if B[3][BS_LIVE] != 0:
         return -1, 3
     rc.enc_finish(st, out)
     return nv, 0
@@ -628,10 +647,10 @@ def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
             done += 1
             _apply_triangle(B, tri[0], tri[1], tri[2], -1, -1)
             continue
-        ev = B[0]
-        p = np.int64(ev[s, 0])
-        r = np.int64(ev[s, 1])
-        apex = np.int64(ev[s, 2])
+        E = B[0]
+        p = np.int64(E[s, 0])
+        r = np.int64(E[s, 1])
+        apex = np.int64(E[s, 2])
         n1 = _gather_edge(B, s, cand, cscore, cseq)
         _remove(B, 2, s)
         ctx = _s1_context(n1, cscore, prev_new)
@@ -665,7 +684,7 @@ def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
         out_faces[done, 2] = x
         done += 1
         _apply_triangle(B, u0, u1, x, p, r)
-    if B[8][BS_LIVE] != 0 or rc.dec_failed(st):
+    if B[3][BS_LIVE] != 0 or rc.dec_failed(st):
         return nv, ST_ERROR
     return nv, ST_DONE
 
@@ -779,11 +798,11 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets):
         s = _pop(B)
         if s == -1:
             return nv, 1
-        ev = B[0]
-        a = np.int64(ev[s, 0])
-        b = np.int64(ev[s, 1])
-        c = np.int64(ev[s, 2])
-        behind = np.int64(ev[s, 3])
+        E = B[0]
+        a = np.int64(E[s, 0])
+        b = np.int64(E[s, 1])
+        c = np.int64(E[s, 2])
+        behind = np.int64(E[s, 3])
         ao = order[a]
         bo = order[b]
         co = order[c]
@@ -868,7 +887,7 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets):
                 tgt[slot] = nbr[t, kk]
         if not _room(B, 4, 4):
             return nv, 4
-    if B[8][BS_LIVE] != 0:
+    if B[3][BS_LIVE] != 0:
         return nv, 5
     rc.enc_finish(st, out)
     return nv, 0
@@ -894,25 +913,33 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
     prev_flip = tstate[3]
     n_out = 0
     status = ST_DONE
+    E, vhead, Q, bs = B
+    qcap = Q.shape[0]
     while done < m:
-        if rc.dec_failed(st):
+        # the checks and the pop of _room / _pop / dec_failed, written out (once per tet)
+        if st[rc.DEC_ERROR] != 0 or st[rc.DEC_OVERRUN] != 0:
             status = ST_ERROR
             break
         if n_out >= out_tets.shape[0]:
             status = ST_BATCH
             break
-        if not _room(B, 4, 4):
+        if bs[BS_NFREE] < 4 or qcap - (bs[BS_QTAIL] - bs[BS_QHEAD]) < 4:
             status = ST_GROW
             break
-        s = _pop(B)
+        s = -1
+        while bs[BS_QHEAD] < bs[BS_QTAIL]:
+            h = bs[BS_QHEAD] % qcap
+            bs[BS_QHEAD] += 1
+            if E[Q[h, 0], E_SEQ] == Q[h, 1]:
+                s = Q[h, 0]
+                break
         if s == -1:
             status = ST_ERROR
             break
-        ev = B[0]
-        a = np.int64(ev[s, 0])
-        b = np.int64(ev[s, 1])
-        c = np.int64(ev[s, 2])
-        behind = np.int64(ev[s, 3])
+        a = np.int64(E[s, 0])
+        b = np.int64(E[s, 1])
+        c = np.int64(E[s, 2])
+        behind = np.int64(E[s, 3])
         n1 = _gather_face(B, s, cand, cscore, cseq)
         _remove(B, 3, s)
         ctx = _c1_context(n1, cscore, prev_esc)
@@ -967,7 +994,7 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         n_out += 1
         done += 1
         _apply_tet(B, a, t1, t2, d)
-    if status == ST_DONE and (B[8][BS_LIVE] != 0 or rc.dec_failed(st)):
+    if status == ST_DONE and (B[3][BS_LIVE] != 0 or rc.dec_failed(st)):
         status = ST_ERROR
     tstate[0] = nv
     tstate[1] = done

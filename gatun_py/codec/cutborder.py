@@ -157,7 +157,7 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> E
         tgt[K.add_faces(B, out_faces, -1)] = bowner
         res = K.encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nbv, out_tets)
         run_tets.result = res
-        run_tets.peak = int(B[8][K.BS_PEAK])
+        run_tets.peak = int(B[3][K.BS_PEAK])
 
     tet_code = rc.run_encoder(run_tets, capacity=rc.capacity_hint(m * 2))
     nref, code = run_tets.result
@@ -258,7 +258,7 @@ class ConnectivityDecoder:
                 raise CorruptFileError("corrupt tet section: the connectivity code is inconsistent")
             elif status == K.ST_DONE:
                 break
-        self.peak_border = max(self.peak_border, int(self._B[8][K.BS_PEAK]))
+        self.peak_border = max(self.peak_border, int(self._B[3][K.BS_PEAK]))
         if self.tets_done == self.n_tets:
             rc.check_decoder(self._tst, self._tdata, "tet section")
             if self.vertices_known != self.n_referenced:

@@ -286,9 +286,28 @@ def dec_raw(st, data, nbits):
 @njit(cache=True)
 def dec_sym(st, data, probs, base, nbits):
     """Decode a symbol in ``[0, 2**nbits)`` coded by :func:`enc_sym`."""
+    # dec_bit written out: this is the hottest call of the connectivity decoder
+    rng = st[DEC_RANGE]
+    code = st[DEC_CODE]
     node = 1
     for _ in range(nbits):
-        node = (node << 1) | dec_bit(st, data, probs, base + node)
+        i = base + node
+        p = np.int64(probs[i])
+        bound = (rng >> PROB_BITS) * p
+        if code < bound:
+            rng = bound
+            probs[i] = p + ((PROB_ONE - p) >> ADAPT_SHIFT)
+            node = node << 1
+        else:
+            code -= bound
+            rng -= bound
+            probs[i] = p - (p >> ADAPT_SHIFT)
+            node = (node << 1) | 1
+        while rng < TOP:
+            rng <<= 8
+            code = ((code << 8) | _get_byte(st, data)) & MASK32
+    st[DEC_RANGE] = rng
+    st[DEC_CODE] = code
     return node - (1 << nbits)
 
 

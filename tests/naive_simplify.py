@@ -94,11 +94,23 @@ def tri_area_normal(p, f):
     return n
 
 
-def evaluate_merge(tets, pts, dens, a, b, *, is_boundary, pinned, wd, wg, wv):
+def interpolate(p, d, q, x):
+    """(smallest barycentric coordinate, interpolated density) of point x in tet q."""
+    v6 = orient6(p, q)
+    lam = []
+    for j in range(4):
+        pp = [p[w] for w in q]
+        pp[j] = x
+        lam.append(orient6(np.array(pp), (0, 1, 2, 3)) / v6)
+    return min(lam), sum(lam[j] * d[q[j]] for j in range(4))
+
+
+def evaluate_merge(tets, pts, dens, a, b, *, is_boundary, pinned, wd, wg, wv, wi):
     """(legal, error) of merging a into b in the mesh ``tets`` (list of 4-tuples).
 
     ``wd``, ``wg``, ``wv`` (density, boundary area, swept boundary volume) are the weights already
-    divided by the normalisation scales; ``is_boundary`` is
+    divided by the normalisation scales, ``wi`` the interpolation error's weight inside the density
+    error; ``is_boundary`` is
     the input's boundary vertex set and ``pinned`` the non-manifold vertices.
     """
     p = np.asarray(pts, np.float64)
@@ -109,6 +121,7 @@ def evaluate_merge(tets, pts, dens, a, b, *, is_boundary, pinned, wd, wg, wv):
     if a in is_boundary and b not in is_boundary:
         return False, None
     dm = 0.0
+    new_tets = []
     for t in star:
         old6 = orient6(p, t)
         m_old = old6 / 6.0 * sum(d[w] for w in t) / 4
@@ -124,7 +137,19 @@ def evaluate_merge(tets, pts, dens, a, b, *, is_boundary, pinned, wd, wg, wv):
             ok = new6 > VOLUME_EPS * lmax or (new6 >= old6 and new6 > 0.0)
         if not ok:
             return False, None
+        if new6 > 0:
+            new_tets.append(q)
         dm += abs(new6 / 6.0 * sum(d[w] for w in q) / 4 - m_old)
+    if wi > 0:
+        # the new mesh's value at a's position: from the new tet containing it (or nearest to)
+        vals = [interpolate(p, d, q, p[a]) for q in new_tets]
+        inside = [abs(d[a] - v) for lo, v in vals if lo >= 0]
+        if inside:
+            dev = min(inside)
+        else:
+            # nearest outside: the largest smallest coordinate, ties by the smaller deviation
+            dev = min(((-lo, abs(d[a] - v)) for lo, v in vals), default=(0.0, abs(d[a] - d[b])))[1]
+        dm += wi * dev * sum(abs(orient6(p, t)) / 6.0 for t in star)
     bfaces = boundary_faces(tets)
     ge = 0.0
     swept = 0.0
@@ -186,16 +211,19 @@ def check_valid(mesh, n_flat_input: int, label: str = "", *, manifold: bool = Tr
     vol = mesh.signed_volumes()
     assert not np.any(vol < 0), f"{label}: {int((vol < 0).sum())} inverted tets"
     assert int((vol == 0).sum()) <= n_flat_input, f"{label}: {int((vol == 0).sum())} flat tets > {n_flat_input}"
+    n = max(mesh.n_points, 1)
     t = np.sort(mesh.tets.astype(np.int64), axis=1)
-    assert np.unique(t, axis=0).shape[0] == t.shape[0], f"{label}: duplicate tets"
     assert np.all(t[:, 1:] != t[:, :-1]), f"{label}: repeated vertex in a tet"
+    # rows as exact integer keys (Python ints when n**4 would overflow int64)
+    tk = ((t[:, 0] * n + t[:, 1]) * n + t[:, 2]) * n + t[:, 3] if n < 2**15 else [tuple(r) for r in t.tolist()]
+    assert len(set(tk.tolist() if isinstance(tk, np.ndarray) else tk)) == t.shape[0], f"{label}: duplicate tets"
     f = np.sort(mesh.tets[:, TET_FACES].reshape(-1, 3).astype(np.int64), axis=1)
-    _, fc = np.unique(f, axis=0, return_counts=True)
+    _, fc = np.unique((f[:, 0] * n + f[:, 1]) * n + f[:, 2], return_counts=True)
     assert fc.max(initial=0) <= 2, f"{label}: a face shared by {fc.max()} tets"
     bf = mesh.boundary_faces().astype(np.int64)
     if bf.shape[0]:
         e = np.sort(bf[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-        _, ec = np.unique(e, axis=0, return_counts=True)
+        _, ec = np.unique(e[:, 0] * n + e[:, 1], return_counts=True)
         assert np.all(ec % 2 == 0), f"{label}: boundary not closed ({int((ec % 2 == 1).sum())} open edges)"
         if manifold:
             assert np.all(ec == 2), f"{label}: {int((ec != 2).sum())} boundary edges not in exactly two faces"

@@ -18,7 +18,7 @@ MANIFOLD = {k for k in AWKWARD if k not in ("edge_touching", "vertex_touching")}
 def _naive_kw(state, tets):
     return dict(is_boundary=set(np.flatnonzero(state.isb).tolist()),
                 pinned=set(np.flatnonzero(state.pinned).tolist()),
-                wd=state.params[0], wg=state.params[1], wv=state.params[2])
+                wd=state.params[0], wg=state.params[1], wv=state.params[2], wi=state.params[3])
 
 
 def _compare_all_edges(state, pts, dens):

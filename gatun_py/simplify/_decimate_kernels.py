@@ -38,7 +38,7 @@ VOLUME_EPS = 1e-10
 NORMAL_EPS = 1e-6
 
 # Indices into the float parameter array.
-P_WD, P_WG, P_WV = 0, 1, 2
+P_WD, P_WG, P_WV, P_WI = 0, 1, 2, 3
 # Indices into the int64 counter array.
 C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS = 0, 1, 2, 3, 4
 
@@ -62,6 +62,50 @@ def _orient6(p, a, b, c, d):
     cy = vz * wx - vx * wz
     cz = vx * wy - vy * wx
     return (ux * cx + uy * cy) + uz * cz
+
+
+@njit(cache=True)
+def _det6(ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz):
+    """6 x signed volume of four explicit points (same formula as :func:`_orient6`)."""
+    ux = bx - ax
+    uy = by - ay
+    uz = bz - az
+    vx = cx - ax
+    vy = cy - ay
+    vz = cz - az
+    wx = dx - ax
+    wy = dy - ay
+    wz = dz - az
+    return (ux * (vy * wz - vz * wy) + uy * (vz * wx - vx * wz)) + uz * (vx * wy - vy * wx)
+
+
+@njit(cache=True)
+def _value_at(pts, dens, q, v6, x, y, z, out):
+    """Barycentric interpolation of the density at (x, y, z) in tet q (6 vol v6 > 0).
+
+    Writes (smallest barycentric coordinate, interpolated value) into ``out``.
+    """
+    lo = 1e300
+    val = 0.0
+    ax, ay, az = pts[q[0], 0], pts[q[0], 1], pts[q[0], 2]
+    bx, by, bz = pts[q[1], 0], pts[q[1], 1], pts[q[1], 2]
+    cx, cy, cz = pts[q[2], 0], pts[q[2], 1], pts[q[2], 2]
+    dx, dy, dz = pts[q[3], 0], pts[q[3], 1], pts[q[3], 2]
+    for j in range(4):
+        if j == 0:
+            d = _det6(x, y, z, bx, by, bz, cx, cy, cz, dx, dy, dz)
+        elif j == 1:
+            d = _det6(ax, ay, az, x, y, z, cx, cy, cz, dx, dy, dz)
+        elif j == 2:
+            d = _det6(ax, ay, az, bx, by, bz, x, y, z, dx, dy, dz)
+        else:
+            d = _det6(ax, ay, az, bx, by, bz, cx, cy, cz, x, y, z)
+        lam = d / v6
+        if lam < lo:
+            lo = lam
+        val += lam * dens[q[j]]
+    out[0] = lo
+    out[1] = val
 
 
 @njit(cache=True)
@@ -295,7 +339,11 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, mark, count
     wd = params[P_WD]
     wg = params[P_WG]
     wv = params[P_WV]
+    wi = params[P_WI]
     ns = st.shape[0]
+    v6n = np.empty(ns)
+    vout = np.empty(2)
+    vol_star = 0.0
     # per star tet: old volume and mass, and the plane of the face opposite a, so that the volume
     # with a moved onto b is one dot product: 6 vol = off - nrm . p_b (linear in the moved corner)
     vol_old = np.empty(ns)
@@ -313,6 +361,7 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, mark, count
         ds = dens[T[t, 0]] + dens[T[t, 1]] + dens[T[t, 2]] + dens[T[t, 3]]
         mass_old[i] = v6 / 6.0 * ds * 0.25
         dsum[i] = ds - dens[a]
+        vol_star += abs(v6) / 6.0
         f0 = T[t, _TET_FACES[c, 0]]
         _tri_normal(pts, f0, T[t, _TET_FACES[c, 1]], T[t, _TET_FACES[c, 2]], fn)
         nrm[i, 0] = fn[0]
@@ -380,9 +429,36 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, mark, count
                     if not good:
                         ok = False
                         break
+                v6n[k] = v6
                 dm += abs(v6 / 6.0 * (dsum[k] + db) * 0.25 - mass_old[k])
             if not ok:
                 continue
+            if wi > 0.0:
+                # how far the new mesh's interpolant at a's position is from a's own value: in the
+                # new tet containing it (the smallest deviation if several do, which only happens on
+                # shared faces or at coincident points), else in the one it is nearest outside of
+                best_lo = -1e300
+                dev_out = abs(dens[a] - db)
+                dev_in = -1.0
+                for k in range(ns):
+                    t = st[k] >> 2
+                    if _contains(T, t, b) or v6n[k] <= 0.0:
+                        continue
+                    for j in range(4):
+                        q[j] = T[t, j]
+                    q[st[k] & 3] = b
+                    _value_at(pts, dens, q, v6n[k], pts[a, 0], pts[a, 1], pts[a, 2], vout)
+                    if vout[0] >= 0.0:
+                        dev = abs(dens[a] - vout[1])
+                        if dev_in < 0.0 or dev < dev_in:
+                            dev_in = dev
+                    else:
+                        dev = abs(dens[a] - vout[1])
+                        if vout[0] > best_lo or (vout[0] == best_lo and dev < dev_out):
+                            best_lo = vout[0]
+                            dev_out = dev
+                f_dev = dev_in if dev_in >= 0.0 else dev_out
+                dm += wi * f_dev * vol_star
             ge = 0.0
             swept = 0.0
             if nf > 0:

@@ -2,14 +2,17 @@
 
 The error of merging a into b (a neighbour along an edge) is::
 
-    W_density  * sum over a's tets of |mass after - mass before| / (density range * mesh volume)
+    W_density  * (sum over a's tets of |mass after - mass before|
+                  + INTERP_WEIGHT * |density(a) - new interpolant at a| * volume of a's tets)
+               / (density range * mesh volume)
   + W_geometry * (the paper's weighted boundary area difference / boundary area
                   + SWEPT_WEIGHT * volume swept by a's boundary faces / mesh volume)
 
 (mass = volume x mean vertex density; a tet containing both a and b collapses and loses all its
 mass). Both terms are fractions of a whole-mesh quantity, so the default weights balance them
-without knowing the data's units. The swept volume (sum over a's boundary faces of the tet between
-the face and b) is our addition to the paper's geometry error: it keeps the boundary in place. The
+without knowing the data's units. The interpolation term and the swept volume (sum over a's boundary faces of the tet between
+the face and b) are our additions to the paper's errors: the first keeps the scalar field, the
+second the boundary in place (see the constants for the measured effect). The
 legality rules are listed in
 :mod:`gatun_py.simplify._decimate_kernels`.
 """
@@ -24,7 +27,7 @@ from ..mesh.model import TET_FACES
 from . import _decimate_kernels as K
 from .forest import MergeForest
 
-__all__ = ["decimate", "DEFAULT_W_DENSITY", "DEFAULT_W_GEOMETRY", "SWEPT_WEIGHT", "DecimationState"]
+__all__ = ["decimate", "DEFAULT_W_DENSITY", "DEFAULT_W_GEOMETRY", "SWEPT_WEIGHT", "INTERP_WEIGHT", "DecimationState"]
 
 DEFAULT_W_DENSITY = 1.0
 DEFAULT_W_GEOMETRY = 1.0
@@ -32,6 +35,11 @@ DEFAULT_W_GEOMETRY = 1.0
 # The area term alone lets the boundary drift (equal-area faces in a different place): on Blunt-fin
 # the sampled scalar RMS error at ratio 0.9 drops from 1.1 % to 0.8 % of the range with it.
 SWEPT_WEIGHT = 100.0
+# Weight of the interpolation error at the merged vertex inside the density error, relative to the
+# paper's mass term: |density(a) - new mesh's interpolant at a's position| x volume around a. Mass
+# alone is blind to where the scalar changes; with it the sampled RMS error at ratio 0.9 drops from
+# 0.82 % to 0.18 % of the range on Blunt-fin (4.8 % to 1.3 % on Combustion).
+INTERP_WEIGHT = 100.0
 
 
 def _face_adjacency(tets: np.ndarray) -> np.ndarray:
@@ -129,7 +137,7 @@ class DecimationState:
             area = 0.0
         area_scale = area if area > 0 else 1.0
         self.params = np.array([w_density / mass_scale, w_geometry / area_scale,
-                                w_geometry * SWEPT_WEIGHT / (vol if vol > 0 else 1.0)])
+                                w_geometry * SWEPT_WEIGHT / (vol if vol > 0 else 1.0), INTERP_WEIGHT])
         self.dens = mesh.density.astype(np.float64)
         self.mark = np.zeros(n, np.int64)
         self.mark_b = np.zeros(n, np.int64)

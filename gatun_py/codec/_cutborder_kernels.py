@@ -794,11 +794,18 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets):
     nv = nv0
     prev_esc = 0
     prev_flip = 0
+    E, vhead, Q, bs = B
+    qcap = Q.shape[0]
     for done in range(m):
-        s = _pop(B)
+        s = -1  # _pop written out
+        while bs[BS_QHEAD] < bs[BS_QTAIL]:
+            h = bs[BS_QHEAD] % qcap
+            bs[BS_QHEAD] += 1
+            if E[Q[h, 0], E_SEQ] == Q[h, 1]:
+                s = Q[h, 0]
+                break
         if s == -1:
             return nv, 1
-        E = B[0]
         a = np.int64(E[s, 0])
         b = np.int64(E[s, 1])
         c = np.int64(E[s, 2])
@@ -885,7 +892,7 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets):
                 wo = order[a] if k == 0 else (order[t1] if k == 1 else order[t2])
                 kk = 0 if tets[t, 0] == wo else (1 if tets[t, 1] == wo else (2 if tets[t, 2] == wo else 3))
                 tgt[slot] = nbr[t, kk]
-        if not _room(B, 4, 4):
+        if bs[BS_NFREE] < 4 or qcap - (bs[BS_QTAIL] - bs[BS_QHEAD]) < 4:
             return nv, 4
     if B[3][BS_LIVE] != 0:
         return nv, 5

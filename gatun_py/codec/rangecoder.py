@@ -161,10 +161,24 @@ def enc_raw(st, out, value, nbits):
 @njit(cache=True)
 def enc_sym(st, out, probs, base, nbits, sym):
     """Code ``sym`` in ``[0, 2**nbits)`` with the bit tree ``probs[base : base + 2**nbits]``."""
+    # enc_bit written out: the hottest call of the connectivity encoder
     node = 1
     for k in range(nbits - 1, -1, -1):
         b = (sym >> k) & 1
-        enc_bit(st, out, probs, base + node, b)
+        i = base + node
+        p = np.int64(probs[i])
+        rng = st[ENC_RANGE]
+        bound = (rng >> PROB_BITS) * p
+        if b == 0:
+            st[ENC_RANGE] = bound
+            probs[i] = p + ((PROB_ONE - p) >> ADAPT_SHIFT)
+        else:
+            st[ENC_LOW] += bound
+            st[ENC_RANGE] = rng - bound
+            probs[i] = p - (p >> ADAPT_SHIFT)
+        while st[ENC_RANGE] < TOP:
+            st[ENC_RANGE] <<= 8
+            _shift_low(st, out)
         node = (node << 1) | b
 
 

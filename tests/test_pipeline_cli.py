@@ -1,0 +1,72 @@
+"""`tetc render` with --ratio / --level / --budget / --pipeline: exit codes, messages, stats."""
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from conftest import SAMPLES
+from gatun_py.cli.main import tetc
+from gatun_py.codec import TetcReader
+from gatun_py.pipeline.quality import read_rgb
+
+POST = str(SAMPLES / "lox_post_tets" / "post.vtk")
+
+
+def run(*args):
+    return CliRunner().invoke(tetc, [str(a) for a in args], catch_exceptions=False)
+
+
+@pytest.fixture(scope="module")
+def post_tetc(tmp_path_factory):
+    path = tmp_path_factory.mktemp("cli") / "post.tetc"
+    res = run("compress", POST, "-o", path, "-q")
+    assert res.exit_code == 0, res.output
+    return path
+
+
+def _render(post_tetc, out, *extra):
+    res = run("render", post_tetc, "-o", out, "--tf", "post", "--size", "40x32", "--stats", "-q", *extra)
+    assert res.exit_code == 0, res.output
+    return json.loads(res.output)
+
+
+def test_ratio_streaming_equals_generic(post_tetc, tmp_path):
+    s = _render(post_tetc, tmp_path / "s.png", "--ratio", "0.8")
+    g = _render(post_tetc, tmp_path / "g.png", "--ratio", "0.8", "--pipeline", "generic")
+    assert np.array_equal(read_rgb(tmp_path / "s.png"), read_rgb(tmp_path / "g.png"))
+    for key in ("decode_s", "filter_s", "render_s", "total_s", "level", "ratio", "tets_rendered", "rays",
+                "rays_unfinished", "samples", "peak_rss_mb"):
+        assert key in s
+    assert s["ratio"] == pytest.approx(0.8, abs=1e-3) and s["level"] >= 2
+    assert s["tets_rendered"] == g["tets_rendered"] < 8750
+    assert s["rays_unfinished"] == 0
+
+
+def test_level_and_budget(post_tetc, tmp_path, monkeypatch):
+    monkeypatch.setenv("TETC_CACHE_DIR", str(tmp_path / "cache"))
+    lv = _render(post_tetc, tmp_path / "l.png", "--level", "2")
+    assert lv["level"] == 2
+    b = _render(post_tetc, tmp_path / "b.png", "--budget", "5")
+    assert b["budget_s"] == 5 and "predicted_s" in b
+    assert (tmp_path / "cache" / "timing.json").exists()  # calibration kept for next time
+    assert b["level"] == 0  # a generous budget renders the full mesh
+    res = run("render", post_tetc, "-o", tmp_path / "z.png", "--tf", "post", "--size", "40x32", "--budget", "0",
+              "--stats")
+    assert res.exit_code == 0
+    assert "cannot be met" in res.stderr
+    coarsest = max(int(lv["level"]) for lv in TetcReader(post_tetc).levels)
+    assert json.loads(res.stdout)["level"] == coarsest
+
+
+def test_bad_combinations(post_tetc, tmp_path):
+    res = run("render", post_tetc, "-o", tmp_path / "x.png", "--ratio", "0.5", "--budget", "0.1")
+    assert res.exit_code == 2
+    res = run("render", post_tetc, "-o", tmp_path / "x.png", "--ratio", "1.5")
+    assert res.exit_code == 1 and "ratio" in res.output and "level 0" in res.output
+    res = run("render", post_tetc, "-o", tmp_path / "x.png", "--level", "40")
+    assert res.exit_code == 1 and "level 40 is not stored" in res.output
+    res = run("render", POST, "-o", tmp_path / "x.png", "--ratio", "0.5")
+    assert res.exit_code == 1 and "need a .tetc file" in res.output
+    assert not (tmp_path / "x.png").exists()

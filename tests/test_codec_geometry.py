@@ -67,25 +67,24 @@ def _random_refs(rng, n, apex=True):
 
 
 def test_round_trip_real_samples(sample):
+    """In the cut-border coder's own vertex order, with its refs."""
+    from gatun_py.codec.cutborder import encode_connectivity
+
     name, mesh = sample
-    points, density, refs = _in_decode_order(mesh)
-    blob = _round_trip(points, density, refs)
+    ec = encode_connectivity(mesh.n_points, mesh.tets)
+    points = np.ascontiguousarray(mesh.points[ec.vertex_order])
+    density = np.ascontiguousarray(mesh.density[ec.vertex_order])
+    blob = _round_trip(points, density, ec.predictors)
     bits_per_vertex = 8 * len(blob) / mesh.n_points
     # raw float32 is 128 bits per vertex; every sample has structure the coder must find
     assert bits_per_vertex < 80, (name, bits_per_vertex)
 
 
-def test_round_trip_real_connectivity_order(small_sample):
-    """With the cut-border coder's own vertex order and predictors."""
-    from gatun_py.codec.cutborder import encode_connectivity
-
-    mesh = small_sample
-    ec = encode_connectivity(mesh.n_points, mesh.tets)
-    refs = refs_from_predictors(ec.predictors, ec.n_boundary_vertices)
-    points = np.ascontiguousarray(mesh.points[ec.vertex_order])
-    density = np.ascontiguousarray(mesh.density[ec.vertex_order])
+def test_round_trip_emulated_order(small_sample):
+    """In the emulated decode order of naive_geometry (independent of the connectivity coder)."""
+    points, density, refs = _in_decode_order(small_sample)
     blob = _round_trip(points, density, refs)
-    assert 8 * len(blob) / mesh.n_points < 40
+    assert 8 * len(blob) / small_sample.n_points < 40
 
 
 def test_repetition_makes_grid_coordinates_cheap():
@@ -316,3 +315,32 @@ def test_refs_from_predictors():
     np.testing.assert_array_equal(refs, [[-1, -1, -1, -1], [0, -1, -1, -1], [0, 1, -1, -1], [1, 2, -1, 0],
                                          [0, 1, 2, 3], [3, 4, 1, 2]])
     assert K.MODE_TABLE == 1
+
+
+def test_kernel_callable_from_another_numba_kernel():
+    """The codec may interleave geometry with connectivity inside its own njit decode loop."""
+    from numba import njit
+
+    @njit
+    def decode_in_batches(st, buf, offs, probs, scores, flags, adj, deg, mark, modes, tables, tab_offs, refs,
+                          values, batch):
+        n = values.shape[0]
+        start = 0
+        while start < n:
+            count = min(batch, n - start)
+            status = K.decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, modes, tables,
+                                       tab_offs, refs[start:start + count], values, start, count)
+            if status != K.OK:
+                return status
+            start += count
+        return K.OK
+
+    mesh = grid_mesh(5, 4, 3)
+    points, density, refs = _in_decode_order(mesh)
+    blob = encode_geometry(points, density, refs)
+    dec = GeometryDecoder(blob, n_points=len(density))
+    assert decode_in_batches(*dec.kernel_args, refs, dec.values, 7) == K.OK
+    dec.n_decoded = dec.n_points
+    dec.finish()
+    _assert_bit_identical(dec.points, points)
+    _assert_bit_identical(dec.density, density)

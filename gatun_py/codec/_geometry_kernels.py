@@ -5,22 +5,36 @@ Every vertex carries four channels, x, y, z and density, each a float32 coded ex
 :func:`ordered_int`). Each channel has its own range-coded stream so that the encoder can pick, per
 channel, between two residual modes and keep whichever stream is smaller.
 
-Per vertex k and channel, with the refs ``(a, b, c, d)`` (face, apex) handed over by the
-connectivity coder:
+Per vertex k, with the refs ``(a, b, c, d)`` (face, apex) handed over by the connectivity coder:
+
+0. **Partners** (:func:`link_vertex`, once per vertex, before any of its channels): the coder
+   keeps its own graph of the edges new vertex - face refs. For each pair of face vertices it picks
+   a common neighbour w whose parallelogram ``x + y - w`` lands nearest (in 3-D) to a first
+   estimate of the new vertex, and for each face vertex a neighbour w whose extrapolation
+   ``2 x - w`` lands nearest. On a curvilinear grid these find the grid lines through the face,
+   which the face alone cannot give (Combustion: 64.6 -> 59.2 bits per vertex).
+
+Then per channel:
 
 1. **Repetition**: the distinct values of the valid refs on this channel form a list of at most
-   four candidates; a symbol says "equal to candidate i" or "none of them". Real grids reuse a few
-   values per axis, so this alone codes most coordinates in well under a bit.
-2. Otherwise the value is predicted (the predictor is chosen backward-adaptively among a few
-   linear combinations of the refs, per ref pattern, by their recent residual sizes, so encoder and
-   decoder pick the same one without side information) and coded as
+   four candidates; a symbol says "equal to candidate i" or "none of them", in a context of what
+   the previous channel of the same vertex did. Real grids reuse a few values per axis, so this
+   codes most of their coordinates in well under a bit.
+2. Otherwise the value is predicted (the predictor is chosen backward-adaptively among linear
+   combinations of the refs and partners, per ref pattern, by their recent residual sizes, so
+   encoder and decoder pick the same one without side information) and coded as
 
    * ``MODE_PREDICT``: the integer difference of the ordered integers, or
    * ``MODE_TABLE``: the difference of ranks in the channel's sorted table of distinct values, which
-     is sent once up front (worth it when a channel has few distinct values).
+     is sent once up front (worth it when a channel has few distinct values),
+
+   in a context of ref pattern, size of the previous residual and local activity (spread of the
+   refs' values).
 
 All prediction arithmetic is float64 on float32 inputs, rounded to float32 once, without
-``fastmath``: encoder and decoder run the same kernels on the same bits, so they agree exactly.
+``fastmath``; partners are chosen from vertices < k only. Encoder and decoder run the same
+kernels on the same bits, so they agree exactly. The decoder checks every ref, table index and
+decoded value and returns a status instead of touching memory out of bounds.
 """
 
 from __future__ import annotations

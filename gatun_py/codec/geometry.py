@@ -319,6 +319,7 @@ class GeometryDecoder:
             full = np.full((count, 4), -1, dtype=np.int32)
             full[:, : refs.shape[1]] = np.clip(refs, -2, np.iinfo(np.int32).max)
             refs = full
+        refs = np.ascontiguousarray(refs)
         start = self.n_decoded
         if start + count > self.n_points:
             raise CorruptFileError(

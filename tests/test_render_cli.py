@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 from meshgen import delaunay_mesh, grid_mesh
 
-from cli.main import tetc
+from gatun_py.cli.main import tetc
 from gatun_py.mesh import write_mesh
 from gatun_py.render import Camera, render_mesh, to_rgb8
 from gatun_py.render.image import read_png_rgb

@@ -290,9 +290,15 @@ def naive_symbols(values: np.ndarray, refs: np.ndarray, modes) -> np.ndarray:
         col = values[:, ch]
         table = sorted({ordered_int(v) for v in col})
         scores: dict = {}
+        y_of_x: dict = {}  # channel 1 only: the y last seen with each x
         for k in range(n):
             pat, cands, eq = _predictions(k, [int(r) for r in refs[k]], col, extra[k])
             o = ordered_int(col[k])
+            if ch == 1:
+                x = ordered_int(values[k, 0])
+                if x in y_of_x and y_of_x[x] not in eq:
+                    eq.append(y_of_x[x])
+                y_of_x[x] = o
             sym = -1
             res = 0
             best = -1

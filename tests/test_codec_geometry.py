@@ -322,14 +322,14 @@ def test_kernel_callable_from_another_numba_kernel():
     from numba import njit
 
     @njit
-    def decode_in_batches(st, buf, offs, probs, scores, flags, adj, deg, mark, modes, tables, tab_offs, refs,
-                          values, batch):
+    def decode_in_batches(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, hvals, modes, tables,
+                          tab_offs, refs, values, batch):
         n = values.shape[0]
         start = 0
         while start < n:
             count = min(batch, n - start)
-            status = K.decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, modes, tables,
-                                       tab_offs, refs[start:start + count], values, start, count)
+            status = K.decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, hvals, modes,
+                                       tables, tab_offs, refs[start:start + count], values, start, count)
             if status != K.OK:
                 return status
             start += count

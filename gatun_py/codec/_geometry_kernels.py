@@ -75,11 +75,12 @@ ADJ_CAP = 16
 NW = 2  # extra predictor vertices per face pair / face ref
 
 # model layout of one channel (uint16 probabilities)
-# repetition contexts: (number of distinct ref values - 1) x what the previous channel of this
-# vertex did (repeat of distinct candidate 0..3, or 4 = predicted); channel 0 uses 4 + whether the
+# repetition contexts: (number of distinct candidates - 1) x what the previous channel of this
+# vertex did (repeat of candidate 0..4, or FLAG_PREDICTED); channel 0 uses 6 + whether the
 # previous vertex's channel 0 was a repeat
-EQ_FLAGS = 6
-EQ_CONTEXTS = 4 * EQ_FLAGS
+EQ_FLAGS = 8
+EQ_CONTEXTS = 5 * EQ_FLAGS
+FLAG_PREDICTED = 5  # flag of a channel that was predicted, not repeated
 EQ_BASE = 0
 RES_BASE = EQ_BASE + EQ_CONTEXTS * 8
 N_ACTIVITY = 10
@@ -282,6 +283,53 @@ def _ext(vf, ch, x, w, fallback):
     if w < 0:
         return fallback
     return 2.0 * np.float64(vf[x, ch]) - np.float64(vf[w, ch])
+
+
+HASH_EMPTY = 1 << 40  # no ordered int reaches it
+
+
+@njit(cache=True)
+def hash_capacity(n):
+    """Slots of the x -> y table for n vertices (a power of two, at most half full)."""
+    cap = 16
+    while cap < 2 * n + 2:
+        cap *= 2
+    return cap
+
+
+@njit(cache=True, inline="always")
+def _hash_slot(keys, key):
+    mask = keys.shape[0] - 1
+    h = ((key * 2654435761) ^ (key >> 13)) & mask
+    while keys[h] != key and keys[h] != HASH_EMPTY:
+        h = (h + 1) & mask
+    return h
+
+
+@njit(cache=True, inline="always")
+def _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m):
+    """Channel 1 (y) gets one more repetition candidate: the y last seen with this vertex's x
+    (curvilinear grids repeat whole (x, y) columns). Returns the new candidate count."""
+    if ch != 1:
+        return m
+    h = _hash_slot(hkeys, ordered_int(vi[k, 0]))
+    if hkeys[h] == HASH_EMPTY:
+        return m
+    v = hvals[h]
+    for q in range(m):
+        if eq_o[q] == v:
+            return m
+    eq_o[m] = v
+    return m + 1
+
+
+@njit(cache=True, inline="always")
+def _remember_conditional(ch, k, vi, hkeys, hvals):
+    if ch == 1:
+        key = ordered_int(vi[k, 0])
+        h = _hash_slot(hkeys, key)
+        hkeys[h] = key
+        hvals[h] = ordered_int(vi[k, 1])
 
 
 @njit(cache=True)
@@ -491,21 +539,25 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, trace):
     ``trace`` has n rows, ``trace[k, ch]`` records the coded (repetition symbol or -1, residual,
     predictor index) for the tests.
 
-    The channels are coded one after the other (a channel only predicts from its own values), the
-    context of channel ch > 0 being whether channel ch - 1 of the same vertex was a repeat.
+    The channels are coded one after the other (a channel predicts from its own values; the
+    context of channel ch > 0 is what channel ch - 1 of the same vertex did, and channel 1 also
+    looks channel 0 up in an x -> y table), which the decoder reproduces vertex by vertex.
     """
     n = vf.shape[0]
     vi = vf.view(np.int32)
     scores = np.zeros((N_CHANNELS, N_PATTERNS, MAX_CANDS), dtype=np.int64)
     cand_o = np.zeros(MAX_CANDS, dtype=np.int64)
-    eq_o = np.zeros(4, dtype=np.int64)
+    eq_o = np.zeros(5, dtype=np.int64)
     scratch_f = np.zeros(MAX_CANDS, dtype=np.float32)
     scratch_i = scratch_f.view(np.int32)
     was_eq = np.zeros(n, dtype=np.int8)
     nbytes = np.zeros(N_CHANNELS, dtype=np.int64)
 
     tracing = trace.shape[0] == n
+    hcap = hash_capacity(n)
     for ch in range(N_CHANNELS):
+        hkeys = np.full(hcap if ch == 1 else 1, HASH_EMPTY, dtype=np.int64)
+        hvals = np.zeros(hcap if ch == 1 else 1, dtype=np.int64)
         stc = st[ch]
         outc = out[ch]
         probs = np.full(MODEL_SIZE, PROB_INIT, dtype=np.uint16)
@@ -517,13 +569,15 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, trace):
             for k in range(n):
                 pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
                                  vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, False)
+                m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m)
                 o = ordered_int(vi[k, ch])
-                sym = 4
+                sym = FLAG_PREDICTED
                 for q in range(m):
                     if eq_o[q] == o:
                         sym = q
                         break
                 was_eq[k] = sym
+                _remember_conditional(ch, k, vi, hkeys, hvals)
             continue
         if mode == MODE_TABLE:
             enc_uint(stc, outc, probs, TABLE_BASE, hi - lo)
@@ -536,13 +590,14 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, trace):
         for k in range(n):
             pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
                              vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, False)
+            m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m)
             o = ordered_int(vi[k, ch])
             is_eq = 0
             sym = -1
             res = np.int64(0)
             best = -1
             if m > 0:
-                flag = was_eq[k] if ch > 0 else 4 + last_eq
+                flag = was_eq[k] if ch > 0 else 6 + last_eq
                 sym = m
                 for q in range(m):
                     if eq_o[q] == o:
@@ -572,7 +627,8 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, trace):
                 trace[k, ch, 1] = res
                 trace[k, ch, 2] = best
             last_eq = is_eq
-            was_eq[k] = sym if is_eq else 4
+            was_eq[k] = sym if is_eq else FLAG_PREDICTED
+            _remember_conditional(ch, k, vi, hkeys, hvals)
         nbytes[ch] = enc_finish(stc, outc)
     return nbytes
 
@@ -617,14 +673,15 @@ def decode_tables_kernel(st, buf, offs, probs, modes, n_points, tables, tab_offs
 
 
 @njit(cache=True)
-def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, modes, tables, tab_offs, refs, vf, start,
-                    count):
+def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, hvals, modes, tables, tab_offs, refs,
+                    vf, start, count):
     """Decode vertices ``start .. start+count-1`` into ``vf`` (n, 4) float32.
 
     ``refs`` (count, 4) int32 are the refs of those vertices. ``st`` (4, 8) decoder states,
     ``probs`` (4, MODEL_SIZE) models, ``scores`` (4, N_PATTERNS, MAX_CANDS) predictor scores,
     ``flags`` (8,) context flags, ``adj`` (n, ADJ_CAP) int32 and ``deg`` (n,) int32 (the edges seen
-    so far) and ``mark`` (n,) int64 scratch carry the decoder's state from one call to the next. Every index is checked: returns
+    so far), ``mark`` (n,) int64 scratch and ``hkeys``/``hvals`` (``hash_capacity(n)``,) int64 (the
+    x -> y table) carry the decoder's state from one call to the next. Every index is checked: returns
     ``OK``, ``ERR_REF`` (a ref not in ``[-1, k)``), ``ERR_RANK`` (a table index out of range) or
     ``ERR_STREAM`` (the range decoder failed).
     """
@@ -632,10 +689,11 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, modes, 
     n = vf.shape[0]
     if start < 0 or count < 0 or start + count > n or refs.shape[0] < count or refs.shape[1] != 4:
         return ERR_REF
-    if adj.shape[0] < n or deg.shape[0] < n or mark.shape[0] < n or adj.shape[1] != ADJ_CAP:
+    if (adj.shape[0] < n or deg.shape[0] < n or mark.shape[0] < n or adj.shape[1] != ADJ_CAP
+            or hkeys.shape[0] != hash_capacity(n) or hvals.shape[0] != hkeys.shape[0]):
         return ERR_REF
     cand_o = np.zeros(MAX_CANDS, dtype=np.int64)
-    eq_o = np.zeros(4, dtype=np.int64)
+    eq_o = np.zeros(5, dtype=np.int64)
     scratch_f = np.zeros(MAX_CANDS, dtype=np.float32)
     scratch_i = scratch_f.view(np.int32)
     w = np.zeros((3, NW), dtype=np.int32)
@@ -661,7 +719,7 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, modes, 
         if (r0 < -1 or r0 >= k or r1 < -1 or r1 >= k or r2 < -1 or r2 >= k or r3 < -1 or r3 >= k):
             return ERR_REF
         link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf)
-        flag = 4 + flags[0]
+        flag = 6 + flags[0]
         for ch in range(N_CHANNELS):
             if ch == 0:
                 stc = s0
@@ -680,6 +738,7 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, modes, 
                 data = d3
                 pc = p3
             pat, m = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, False)
+            m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m)
             is_eq = 0
             o = np.int64(0)
             sym = 0
@@ -718,6 +777,7 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, modes, 
             if dec_failed(stc):
                 return ERR_STREAM
             vi[k, ch] = ordered_to_bits(o)
+            _remember_conditional(ch, k, vi, hkeys, hvals)
             flags[ch] = is_eq
-            flag = sym if is_eq else 4
+            flag = sym if is_eq else FLAG_PREDICTED
     return OK

@@ -261,6 +261,8 @@ class GeometryDecoder:
         self.adj = np.zeros((self.n_points, K.ADJ_CAP), dtype=np.int32)
         self.deg = np.zeros(self.n_points, dtype=np.int32)
         self.mark = np.zeros(self.n_points, dtype=np.int64)
+        self.hkeys = np.full(K.hash_capacity(self.n_points), K.HASH_EMPTY, dtype=np.int64)
+        self.hvals = np.zeros_like(self.hkeys)
         stream_bytes = [int(length) for length in lengths]
         table_room = sum(min(self.n_points, _MAX_TABLE_PER_BYTE * (stream_bytes[ch] + 8))
                          for ch in range(K.N_CHANNELS) if self.modes[ch])
@@ -285,10 +287,10 @@ class GeometryDecoder:
 
     @property
     def kernel_args(self) -> tuple:
-        """``(st, buf, offs, probs, scores, flags, adj, deg, mark, modes, tables, tab_offs)`` for
-        ``decode_vertices``."""
+        """``(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, hvals, modes, tables,
+        tab_offs)``, the leading arguments of ``decode_vertices``."""
         return (self.st, self.buf, self.offs, self.probs, self.scores, self.flags, self.adj, self.deg,
-                self.mark, self.modes, self.tables, self.tab_offs)
+                self.mark, self.hkeys, self.hvals, self.modes, self.tables, self.tab_offs)
 
     def decode(self, refs) -> tuple[np.ndarray, np.ndarray]:
         """Decode the next ``len(refs)`` vertices.

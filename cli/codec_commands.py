@@ -51,15 +51,15 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, scalar, 
         payload = mesh
     else:
         from gatun_py.codec import LevelPayload
-        from gatun_py.simplify import build_levels, decimate
+        from gatun_py.simplify import build_levels, decimate, storage_forests
 
         with progress_bar("decimating", mesh.n_points, quiet) as update:
             forest = decimate(mesh, w_density=w_density, w_geometry=w_geometry, progress=update)
         levels = build_levels(mesh, forest, n_levels)
         status(f"merge forest: {forest.n_merges} merges (max ratio {forest.max_ratio:.5f}); "
                f"levels {', '.join(str(lv.level) for lv in levels)}", quiet)
-        payload = [LevelPayload(lv.level, lv.ratio, lv.n_merges, lv.mesh, (lv.forest.parent, lv.forest.rank))
-                   for lv in levels]
+        payload = [LevelPayload(lv.level, lv.ratio, lv.n_merges, lv.mesh, (f.parent, f.rank))
+                   for lv, f in zip(levels, storage_forests(levels))]
     status("compressing...", quiet)
     n = write_tetc(output, payload, source=Path(input).name, force=force)
     dt = time.perf_counter() - t0

@@ -55,6 +55,17 @@ def test_info_lists_levels_and_forest(post_tetc):
         assert got["points"] == lv.mesh.n_points and got["tets"] == lv.mesh.n_tets
         assert got["ratio"] == pytest.approx(lv.ratio) and got["bytes"] > 0
     assert d["forest"]["merges"] == forest.n_merges
+    # levels in between store only the merges up to the next level
+    from gatun_py.codec import TetcReader
+    from gatun_py.simplify import ROOT_RANK
+
+    reader = TetcReader(post_tetc)
+    for j, lv in enumerate(levels):
+        _, rank = reader.read_forest(lv.level)
+        stored = int((rank != ROOT_RANK).sum())
+        want = (forest.n_merges - lv.n_merges if j in (0, len(levels) - 1)
+                else levels[j + 1].n_merges - lv.n_merges)
+        assert stored == want
     assert d["forest"]["max_ratio"] == pytest.approx(forest.max_ratio)
     assert d["forest"]["bytes"] > 0
 

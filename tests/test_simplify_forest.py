@@ -165,3 +165,24 @@ def test_sample_level_continuation_is_exact():
     for lv in levels:
         for n in rng.integers(lv.n_merges, f.n_merges + 1, 2):
             _same_state(mesh, f, lv, int(n))
+
+
+@settings(max_examples=20, deadline=None)
+@given(mesh_strategy(), st.data())
+def test_forest_prefix_and_storage_forests(mesh, data):
+    from gatun_py.simplify import check_forest, forest_prefix, storage_forests
+
+    f = decimate(mesh)
+    k = data.draw(st.integers(0, f.n_merges))
+    p = forest_prefix(f, k)
+    assert check_forest(p.parent, p.rank) == k
+    for n in {0, k // 2, k}:
+        assert np.array_equal(ancestors(p.parent, p.rank, n), ancestors(f.parent, f.rank, n))
+    levels = build_levels(mesh, f)
+    stored = storage_forests(levels)
+    assert stored[0] is levels[0].forest and stored[-1] is levels[-1].forest
+    for j in range(1, len(levels) - 1):
+        assert stored[j].n_merges == levels[j + 1].n_merges - levels[j].n_merges
+        n = data.draw(st.integers(levels[j].n_merges, levels[j + 1].n_merges))
+        got = simplified_mesh(levels[j].mesh, stored[j], n - levels[j].n_merges)
+        assert np.array_equal(got.tets, simplified_mesh(levels[j].mesh, levels[j].forest, n - levels[j].n_merges).tets)

@@ -2,10 +2,10 @@
 
 from .decimate import DEFAULT_W_DENSITY, DEFAULT_W_GEOMETRY, decimate
 from .forest import (ROOT_RANK, MergeForest, ancestors, check_forest, decode_forest, encode_forest,
-                     simplified_mesh)
+                     forest_prefix, simplified_mesh)
 from .levels import (MAX_LEVEL, LevelMesh, available_levels, build_levels, forest_merges, level_forest,
-                     level_merges, read_simplified)
+                     level_merges, read_simplified, storage_forests)
 
 __all__ = ["decimate", "DEFAULT_W_DENSITY", "DEFAULT_W_GEOMETRY", "ROOT_RANK", "MergeForest", "ancestors",
            "check_forest", "encode_forest", "decode_forest", "simplified_mesh", "MAX_LEVEL", "LevelMesh",
-           "available_levels", "build_levels", "level_forest", "level_merges", "read_simplified", "forest_merges"]
+           "available_levels", "build_levels", "level_forest", "level_merges", "read_simplified", "forest_merges", "storage_forests", "forest_prefix"]

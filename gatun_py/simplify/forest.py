@@ -19,7 +19,7 @@ from ..mesh import TetMesh
 from ._decimate_kernels import ROOT_RANK, _ancestors
 
 __all__ = ["ROOT_RANK", "MergeForest", "ancestors", "simplified_mesh", "encode_forest", "decode_forest",
-           "check_forest", "forest_header"]
+           "check_forest", "forest_header", "forest_prefix"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,6 +59,18 @@ class MergeForest:
             raise OptionError(f"ratio {ratio} needs {n} merges but the forest holds {self.n_merges} "
                               f"(maximum ratio {self.max_ratio:.6f})")
         return n
+
+
+def forest_prefix(forest: MergeForest, n_merges: int) -> MergeForest:
+    """The forest of only the first ``n_merges`` merges (later-merged vertices become roots).
+
+    Any N <= ``n_merges`` gives the same ancestors as with the whole forest.
+    """
+    n_merges = max(0, min(int(n_merges), forest.n_merges))
+    later = forest.rank >= n_merges
+    parent = np.where(later, np.arange(forest.n_points), forest.parent).astype(np.int32)
+    rank = np.where(later, ROOT_RANK, forest.rank).astype(np.int32)
+    return MergeForest(parent, rank, n_merges)
 
 
 def check_forest(parent: np.ndarray, rank: np.ndarray) -> int:

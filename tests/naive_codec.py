@@ -140,12 +140,6 @@ class NaiveRangeDecoder:
         return node - (1 << nbits)
 
 
-def _parity(row) -> int:
-    row = list(row)
-    inv = sum(1 for i in range(4) for j in range(i + 1, 4) if row[i] > row[j])
-    return inv & 1
-
-
 def canonical_tets(tets) -> list[tuple]:
     """Sorted list of (sorted vertex ids..., permutation parity): equal for two tet arrays that
     hold the same oriented tets in any order and any even permutation of each tet."""

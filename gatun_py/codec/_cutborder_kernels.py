@@ -14,9 +14,9 @@ with an error code instead of touching memory out of bounds.
 
 Border arrays, passed as a tuple ``B = (E, vhead, Q, bs)`` (few arrays: every array passed to a
 kernel costs reference-count updates on each call, which dominated the per-tet cost before):
-``E (cap, 12) int64`` one row per slot: vertices (+ apex data) in columns 0-3, sequence number
+``E (cap, 12) int32`` one row per slot: vertices (+ apex data) in columns 0-3, sequence number
 (``E_SEQ``, -1: free slot), incidence-list links per corner (``E_NEXT``, ``E_PREV``; node id =
-3 * slot + corner), free-list link (``E_FREE``); ``vhead (nv) int64`` list heads;
+3 * slot + corner), free-list link (``E_FREE``); ``vhead (nv) int32`` list heads;
 ``Q (qcap, 2) int64`` FIFO ring of (slot, sequence); ``bs int64`` scalars (see ``BS_*``).
 """
 
@@ -59,10 +59,10 @@ def new_border(n_vertices: int, cap: int, qcap: int):
     """Allocate an empty border for ``n_vertices`` vertices."""
     cap = max(int(cap), 16)
     qcap = max(int(qcap), 16)
-    E = np.full((cap, E_COLS), -1, np.int64)
+    E = np.full((cap, E_COLS), -1, np.int32)
     E[:, E_FREE] = np.arange(1, cap + 1)  # free list through the slots
     E[cap - 1, E_FREE] = -1
-    vhead = np.full(max(int(n_vertices), 1), -1, np.int64)
+    vhead = np.full(max(int(n_vertices), 1), -1, np.int32)
     Q = np.zeros((qcap, 2), np.int64)
     bs = np.zeros(8, np.int64)
     bs[BS_NFREE] = cap
@@ -78,7 +78,7 @@ def grow_border(B, need_slots: int, need_queue: int):
     nfree = int(bs[BS_NFREE])
     if nfree < need_slots:
         new_cap = max(2 * cap, cap + need_slots)
-        extra = np.full((new_cap - cap, E_COLS), -1, np.int64)
+        extra = np.full((new_cap - cap, E_COLS), -1, np.int32)
         extra[:, E_FREE] = np.arange(cap + 1, new_cap + 1)
         extra[-1, E_FREE] = bs[BS_FREE_HEAD]  # new slots first, then the old free list
         E = np.concatenate([E, extra])
@@ -168,25 +168,6 @@ def _pop(B):
         if E[s, E_SEQ] == Q[h, 1]:
             return s
     return -1
-
-
-@njit(cache=True)
-def _find_face(B, a, b, c):
-    """Slot of the live triangle with vertex set {a, b, c}; second value: 1 same cyclic orientation
-    as (a, b, c), 0 opposite; (-1, 0) if absent."""
-    E, vhead, Q, bs = B
-    node = vhead[a]
-    while node != -1:
-        s = node // 3
-        c0 = node - 3 * s
-        x = E[s, (c0 + 1) % 3]
-        y = E[s, (c0 + 2) % 3]
-        if x == b and y == c:
-            return s, 1
-        if x == c and y == b:
-            return s, 0
-        node = E[node // 3, E_NEXT + node % 3]
-    return -1, 0
 
 
 @njit(cache=True)

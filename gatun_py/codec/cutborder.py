@@ -82,6 +82,9 @@ def _sorted_halfedges(faces: np.ndarray):
     return np.ascontiguousarray(he[order], dtype=np.int64), fid[order]
 
 
+# border slots, list nodes (3 per slot) and sequence numbers are int32 in the kernels
+MAX_TETS = 1 << 29
+
 _ENCODER_ERRORS = {
     1: "the cut border emptied before every tet was visited",
     2: "a border face has no unvisited tet behind it",
@@ -116,6 +119,8 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> E
     n = int(points_count)
     tets = np.ascontiguousarray(tets, dtype=np.int64).reshape(-1, 4)
     m = len(tets)
+    if m >= MAX_TETS or n >= MAX_TETS:
+        raise MeshError(f"mesh too large for the .tetc format ({m} tets, {n} points; limit {MAX_TETS - 1})")
     nbr = np.empty((m, 4), np.int64)
     if K.tet_neighbours(tets, nbr):
         raise MeshError("a face is shared by more than two tets: the mesh is not conforming")
@@ -191,6 +196,8 @@ class ConnectivityDecoder:
         self.n_tets = int(n_tets)
         self.n_boundary_faces = int(n_boundary_faces)
         self.n_referenced = int(n_referenced)
+        if self.n_tets >= MAX_TETS or self.n_points >= MAX_TETS:
+            raise CorruptFileError("corrupt connectivity header: counts beyond the format's limits")
         if not (0 <= self.n_referenced <= self.n_points):
             raise CorruptFileError("corrupt connectivity header: inconsistent vertex counts")
         self._bdata = np.frombuffer(boundary_code, dtype=np.uint8)

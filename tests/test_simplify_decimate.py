@@ -122,3 +122,12 @@ def test_max_merges_and_progress_give_the_same_prefix():
     first = full.rank < 20
     assert np.array_equal(first, part.rank < 20)
     assert np.array_equal(full.parent[first], part.parent[first])
+
+
+def test_meshes_without_tets():
+    from gatun_py.mesh import TetMesh
+
+    for n in (0, 3):
+        mesh = TetMesh(np.zeros((n, 3), np.float32), np.zeros(n, np.float32), np.zeros((0, 4), np.int32))
+        forest = decimate(mesh)
+        assert forest.n_merges == 0 and np.array_equal(forest.parent, np.arange(n))

@@ -38,6 +38,7 @@ def check_round_trip(mesh: TetMesh, batch=37):
     # the decoder reproduces the encoder's view exactly, including the geometry refs
     assert np.array_equal(faces, e.boundary) and np.array_equal(tets, e.tets)
     assert nbv == e.n_boundary_vertices
+    assert d.peak_border == e.peak_border  # same border operations on both sides
     assert np.array_equal(d.predictors[: e.n_points], e.predictors)
     # and that view is the input up to a vertex permutation, with orientations kept
     vo = e.vertex_order

@@ -216,6 +216,12 @@ def test_absurd_lengths_rejected_before_allocation():
         Container(struct.pack("<8sHHII", MAGIC, 1, 0, len(blob), zlib.crc32(blob)) + blob + bytes(300))
 
 
+def test_deeply_nested_metadata_is_rejected():
+    blob = b"[" * 100_000 + b"]" * 100_000
+    with pytest.raises(CorruptFileError, match="JSON"):
+        Container(struct.pack("<8sHHII", MAGIC, 1, 0, len(blob), zlib.crc32(blob)) + blob)
+
+
 def test_missing_file_is_a_read_error(tmp_path):
     with pytest.raises(TetcError, match="no such file"):
         TetcReader(tmp_path / "nope.tetc")

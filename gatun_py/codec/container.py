@@ -127,7 +127,7 @@ class Container:
             raise CorruptFileError(f"{self.name}: metadata checksum mismatch (corrupt file)")
         try:
             meta = json.loads(blob.decode("utf-8"))
-        except (UnicodeDecodeError, ValueError):
+        except (UnicodeDecodeError, ValueError, RecursionError):
             raise CorruptFileError(f"{self.name}: metadata is not valid JSON") from None
         if not isinstance(meta, dict) or not isinstance(meta.get("sections"), list):
             raise CorruptFileError(f"{self.name}: metadata lacks the section index")

@@ -187,3 +187,71 @@ def naive_traversal_check(boundary, tets) -> None:
                 queue.append((f, seq))
                 seq += 1
     assert not live, "faces left on T after the last tet"
+
+
+def naive_tet_symbols(boundary, tets, n_boundary_vertices) -> list:
+    """The case of every tet (decode order, decode ids), recomputed from the paper's rules.
+
+    Returns per tet: the rank of its fourth vertex among the apexes of faces of T adjacent to an
+    edge of the current face (ranked by how many of those faces contain it, then by the age of
+    the oldest), or 15 for a new vertex, 16 for a vertex of a face sharing only a vertex with the
+    current face, 17 for any other vertex; None where the kernel's list caps (15 / 64 entries)
+    make the case depend on list order.
+    """
+    live: dict[frozenset, int] = {}
+    by_vertex: dict[int, set] = {}
+    queue: deque = deque()
+    seq = 0
+
+    def add(key):
+        nonlocal seq
+        live[key] = seq
+        queue.append((key, seq))
+        seq += 1
+        for v in key:
+            by_vertex.setdefault(v, set()).add(key)
+
+    def remove(key):
+        del live[key]
+        for v in key:
+            by_vertex[v].discard(key)
+
+    for f in boundary:
+        add(frozenset(int(x) for x in f))
+    known = int(n_boundary_vertices)
+    out = []
+    for t in tets:
+        t = [int(x) for x in t]
+        while True:
+            key, s = queue.popleft()
+            if live.get(key) == s:
+                break
+        cur, d = key, t[3]
+        near = set().union(*(by_vertex.get(v, set()) for v in cur)) - {cur}
+        score: dict[int, int] = {}
+        age: dict[int, int] = {}
+        for g in near:
+            if len(g & cur) == 2:
+                (x,) = g - cur
+                score[x] = score.get(x, 0) + 1
+                age[x] = min(age.get(x, live[g]), live[g])
+        ranked = sorted(score, key=lambda x: (-score[x], age[x]))
+        remove(cur)
+        if len(ranked) > 15:
+            out.append(None)
+        elif d in ranked:
+            out.append(ranked.index(d))
+        elif d == known:
+            out.append(15)
+        else:
+            ring = {x for g in near if len(g & cur) == 1 for x in g} - cur - set(ranked)
+            out.append(None if len(ring) > 64 else (16 if d in ring else 17))
+        if d == known:
+            known += 1
+        for k in range(3):
+            f = frozenset(t[:k] + t[k + 1:])
+            if f in live:
+                remove(f)
+            else:
+                add(f)
+    return out

@@ -12,7 +12,7 @@ from gatun_py.codec.cutborder import ConnectivityDecoder, encode_connectivity
 from gatun_py.errors import CorruptFileError
 from gatun_py.mesh import TetMesh
 from meshgen import AWKWARD, degenerate_grid, grid_mesh, mesh_strategy
-from naive_codec import canonical_tets, naive_traversal_check
+from naive_codec import canonical_tets, naive_tet_symbols, naive_traversal_check
 
 
 def _decoder(e, boundary_code=None, tet_code=None):
@@ -54,6 +54,10 @@ def check_round_trip(mesh: TetMesh, batch=37):
     used = first_use < np.iinfo(np.int64).max
     assert np.all(np.diff(first_use[nbv:][used[nbv:]]) >= 0)  # interior ids in order of first use
     naive_traversal_check(faces, tets)
+    expected = naive_tet_symbols(faces, tets, nbv)
+    checked = [i for i, x in enumerate(expected) if x is not None]
+    assert len(checked) >= 0.9 * len(expected)
+    assert [int(e.symbols[i]) for i in checked] == [expected[i] for i in checked]
     return e
 
 

@@ -757,13 +757,14 @@ def add_faces(B, faces, apex):
 
 
 @njit(cache=True)
-def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets):
+def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, syms):
     """Code the tets growing inward from the border ``B`` (the boundary, in decode ids).
 
     ``tets`` and ``nbr`` (:func:`tet_neighbours`) use original ids, ``tgt[slot]`` is the
     unvisited tet behind each border face; ``dec_of``/``order`` map between original and decode ids and are extended for
     the new (interior) vertices, numbered from ``nv0`` on, with their predictors in ``pred``.
-    ``out_tets`` receives the tets in decode order and decode ids. Returns (vertices, status)."""
+    ``out_tets`` receives the tets in decode order and decode ids, ``syms`` each tet's case: the
+    candidate index (paper case a), or ESC + 0 / 1 / 2 for cases b / c / d. Returns (vertices, status)."""
     m = tets.shape[0]
     probs = np.full(TM_SIZE, rc.PROB_INIT, np.uint16)
     tvisited = np.zeros(m, np.bool_)
@@ -829,6 +830,7 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets):
                     inv += 1
         flip = inv & 1
         rc.enc_sym(st, out, probs, TM_C1 + ctx * 16, 4, sym)
+        syms[done] = sym
         if sym == ESC:
             kctx = TM_KIND + 4 * ((1 if n1 > 0 else 0) + 2 * prev_esc)
             if d == -1:
@@ -850,9 +852,11 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets):
                         break
                 if j >= 0:
                     rc.enc_sym(st, out, probs, kctx, 2, 1)
+                    syms[done] = ESC + 1
                     rc.enc_uint(st, out, probs, TM_C2 + (rc.INT_MODEL_SIZE if n2 > 8 else 0), j)
                 else:
                     rc.enc_sym(st, out, probs, kctx, 2, 2)
+                    syms[done] = ESC + 2
                     rc.enc_raw(st, out, d, _bitlen(nv - 1))
             prev_esc = 1
         else:

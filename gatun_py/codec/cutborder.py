@@ -59,6 +59,10 @@ class EncodedConnectivity:
         Tets in decode order and decode ids.
     peak_border : int
         Largest number of faces on the cut border during the tet phase.
+    symbols : (n_tets,) int16
+        Each tet's case, for statistics and tests: the index of its fourth vertex among the
+        edge-adjacent candidates (paper case a), or 15 + 0 / 1 / 2 for a new vertex (b), an index
+        into the vertex-adjacent list (c), a vertex-table index (d).
     """
 
     boundary_code: bytes
@@ -73,6 +77,7 @@ class EncodedConnectivity:
     boundary: np.ndarray
     tets: np.ndarray
     peak_border: int
+    symbols: np.ndarray
 
 
 def _sorted_halfedges(faces: np.ndarray):
@@ -149,6 +154,7 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> E
         raise MeshError(f"boundary surface cannot be coded (code {code}): is the mesh valid?")
 
     out_tets = np.zeros((m, 4), np.int32)
+    symbols = np.zeros(m, np.int16)
     # boundary face i (original order) is out_faces[j] for the j-th decoded face: map owners over
     bowner = owner[face_src]
     dec_b, order_b, pred_b = dec_of.copy(), order.copy(), pred.copy()
@@ -160,7 +166,7 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> E
         B = K.new_border(n, nf + 3 * m + 8, nf + 3 * m + 8)
         tgt = np.full(nf + 3 * m + 8, -1, np.int64)
         tgt[K.add_faces(B, out_faces, -1)] = bowner
-        res = K.encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nbv, out_tets)
+        res = K.encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nbv, out_tets, symbols)
         run_tets.result = res
         run_tets.peak = int(B[3][K.BS_PEAK])
 
@@ -177,6 +183,7 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> E
         boundary_code=boundary_code, tet_code=tet_code, n_points=n, n_tets=m, n_boundary_faces=nf,
         n_boundary_vertices=int(nbv), n_referenced=int(nref), vertex_order=order[:n].copy(),
         predictors=pred[:n].copy(), boundary=out_faces, tets=out_tets, peak_border=run_tets.peak,
+        symbols=symbols,
     )
 
 

@@ -232,19 +232,25 @@ def main(argv=None):
     rows, level_rows, fid_rows, vtk_rows = [], [], [], []
     for name in names:
         mesh = load_sample(name)[0]
-        t0, c0 = time.perf_counter(), time.process_time()
-        forest = decimate(mesh)
-        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        # the machine is shared: Blunt-fin (the target) is timed 3 times, interleaved with VTK, best of each
+        reps = 3 if (name == "bluntfin" and not args.quick) else 1
+        wall = cpu = vtk_best = float("inf")
+        ug = to_vtk(mesh) if vtk is not None else None
+        for _ in range(reps):
+            t0, c0 = time.perf_counter(), time.process_time()
+            forest = decimate(mesh)
+            wall, cpu = min(wall, time.perf_counter() - t0), min(cpu, time.process_time() - c0)
+            if ug is not None:
+                out, dt = vtk_quadric(ug, 0.99)
+                vtk_best = min(vtk_best, dt)
         vol0 = mesh.signed_volumes().sum()
         vol9 = simplified_mesh(mesh, forest, int(0.9 * mesh.n_points)).signed_volumes().sum()
         fb = len(encode_forest(forest.parent, forest.rank))
         row = dict(name=name, points=mesh.n_points, tets=mesh.n_tets, wall=wall, cpu=cpu,
                    ratio=forest.max_ratio, vol9=vol9 / vol0, forest_bpv=8 * fb / mesh.n_points,
                    levels=len(available_levels(forest)) - 1)
-        if vtk is not None:
-            ug = to_vtk(mesh)
-            out, dt = vtk_quadric(ug, 0.99)
-            row["vtk"] = dt
+        if ug is not None:
+            row["vtk"] = vtk_best
             row["vtk_reached"] = 1 - out.GetNumberOfCells() / mesh.n_tets
         rows.append(row)
         print(f"{name}: forest {wall:.2f} s (cpu {cpu:.2f}), ratio {forest.max_ratio:.5f}, "
@@ -305,7 +311,8 @@ def main(argv=None):
     # -- markdown -------------------------------------------------------------------------
     L = ["## Offline decimation, merge forest and pre-simplified levels (issue 4)", "",
          f"All figures from `{cmd}` in one run (2-core machine shared with other jobs: wall times are noisy; "
-         f"CPU time of the decimation is given beside). Kernel load from the numba cache before timing: "
+         f"CPU time of the decimation is given beside; Blunt-fin and its VTK peer are the best of 3 "
+         f"interleaved runs). Kernel load from the numba cache before timing: "
          f"{warm:.2f} s" + (f"; cold compile of the kernels (empty cache): {cold:.1f} s CPU." if cold else "."), "",
          "Method: greedy vertex merges a→b along edges with a lazily updated heap (one best merge per vertex, "
          "re-evaluated when its star changes). Error = W_density × (Σ|Δmass| of a's tets + 100 × |ρ(a) − new "

@@ -13,6 +13,7 @@ decode order for reference. ``--quick`` does one timing repetition instead of th
 from __future__ import annotations
 
 import lzma
+import os
 import sys
 import time
 
@@ -38,6 +39,11 @@ def _fpzip_bytes(points: np.ndarray, density: np.ndarray):
     return min(inter, planar), len(fpzip.compress(np.array(density), precision=0))
 
 
+# CPU time of this (single-threaded) process: the benchmark machine is shared by other jobs, and
+# wall time under load mostly measures the neighbours.
+_clock = time.process_time
+
+
 def _fpzip_decode_seconds(points, density, repeat):
     try:
         import fpzip
@@ -46,20 +52,21 @@ def _fpzip_decode_seconds(points, density, repeat):
     a = fpzip.compress(np.array(points.T, order="C"), precision=0)
     b = fpzip.compress(np.array(density), precision=0)
     best = np.inf
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fpzip.decompress(a)
-        fpzip.decompress(b)
-        best = min(best, time.perf_counter() - t0)
+    for _ in range(max(repeat, 3)):
+        t0 = _clock()
+        for _ in range(10):  # one run is too short for the process clock
+            fpzip.decompress(a)
+            fpzip.decompress(b)
+        best = min(best, (_clock() - t0) / 10)
     return best
 
 
 def _best(fn, repeat):
     best, out = np.inf, None
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0 = _clock()
         out = fn()
-        best = min(best, time.perf_counter() - t0)
+        best = min(best, _clock() - t0)
     return best, out
 
 
@@ -153,7 +160,8 @@ def main(argv: list[str]) -> None:
     text += table(["data set", "connectivity KB", "b/tet", "geometry KB", "total KB", "xz sum KB",
                    "total / xz", "≤ 0.5"], file_rows)
     text += "\n\n### Speed (one thread, warm JIT cache)\n\n"
-    text += (f"Command: `{COMMAND}`. Best of {repeat}. Encode = `encode_geometry` (it tries both modes on "
+    text += (f"Command: `{COMMAND}`. Best of {repeat}, process CPU time (the machine is shared; load "
+             f"average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores when this ran). Encode = `encode_geometry` (it tries both modes on "
              "channels with repeated values); decode = `GeometryDecoder` in batches of 4096 vertices, as "
              "the streaming container does. fpzip decompression of the same arrays (C library) for "
              "reference. The last column converts decode speed to the tets of that mesh per second "

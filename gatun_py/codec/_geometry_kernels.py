@@ -300,7 +300,8 @@ def hash_capacity(n):
 @njit(cache=True, inline="always")
 def _hash_slot(keys, key):
     mask = keys.shape[0] - 1
-    h = ((key * 2654435761) ^ (key >> 13)) & mask
+    # multiplicative hashing, high bits: float bit patterns often end in runs of zero bits
+    h = ((key * -7046029254386353131) >> 32) & mask
     while keys[h] != key and keys[h] != HASH_EMPTY:
         h = (h + 1) & mask
     return h

@@ -185,6 +185,12 @@ def _kernel_trace(points, density, refs, modes):
     return vf, full, trace
 
 
+def test_naive_reference_uses_the_kernel_constants():
+    import naive_geometry
+
+    assert naive_geometry.ADJ_CAP == K.ADJ_CAP
+
+
 @pytest.mark.parametrize("modes", [(0, 0, 0, 0), (1, 1, 1, 1)])
 def test_kernel_model_matches_naive_reference_on_post(modes):
     mesh = load_sample("post")[0]
@@ -194,12 +200,15 @@ def test_kernel_model_matches_naive_reference_on_post(modes):
 
 
 @settings(max_examples=25, deadline=None)
-@given(n=st.integers(1, 60), seed=st.integers(0, 2**32 - 1), modes=st.tuples(*[st.integers(0, 1)] * 4))
-def test_kernel_model_matches_naive_reference_random(n, seed, modes):
+@given(n=st.integers(1, 60), seed=st.integers(0, 2**32 - 1), modes=st.tuples(*[st.integers(0, 1)] * 4),
+       hub=st.booleans())
+def test_kernel_model_matches_naive_reference_random(n, seed, modes, hub):
     rng = np.random.default_rng(seed)
     few = rng.choice(np.array([0.0, -0.0, 1.0, 2.0, -3.5, 1e-42, 7e20, np.nan], np.float32), size=(n, 4))
     vals = np.where(rng.random((n, 4)) < 0.3, rng.normal(size=(n, 4)), few).astype(np.float32)
     refs = _random_refs(rng, n)
+    if hub and n > 2:  # one vertex in every face: its neighbour list overflows ADJ_CAP
+        refs[2:, 0] = 0
     vf, full, trace = _kernel_trace(vals[:, :3], vals[:, 3], refs, modes)
     np.testing.assert_array_equal(trace, naive_symbols(vf, full, modes))
 

@@ -71,7 +71,7 @@ N_CANDS = np.array([1, 1, 6, 6, 10, 12], dtype=np.int64)
 
 # the coder's own view of the mesh: the edges from every vertex to its face refs (at most
 # ADJ_CAP per vertex, the rest ignored alike by encoder and decoder)
-ADJ_CAP = 16
+ADJ_CAP = 12
 NW = 2  # extra predictor vertices per face pair / face ref
 
 # model layout of one channel (uint16 probabilities)

@@ -210,7 +210,8 @@ def test_absurd_lengths_rejected_before_allocation():
     pre = struct.pack("<8sHHII", MAGIC, 1, 0, 2**31, 0)
     with pytest.raises(CorruptFileError):
         Container(pre + b"{}")
-    meta = {"format": "tetc", "sections": [{"name": "L0/tets", "offset": PREAMBLE_SIZE + 200, "length": 2**60, "crc32": 0}]}
+    entry = {"name": "L0/tets", "offset": PREAMBLE_SIZE + 200, "length": 2**60, "crc32": 0}
+    meta = {"format": "tetc", "sections": [entry]}
     blob = json.dumps(meta).encode()
     with pytest.raises(CorruptFileError, match="outside the file"):
         Container(struct.pack("<8sHHII", MAGIC, 1, 0, len(blob), zlib.crc32(blob)) + blob + bytes(300))

@@ -486,7 +486,8 @@ def _lookup_halfedge(hkey, hface, fvisited, p, r):
 def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pred, out_faces, face_src):
     """Code the boundary surface ``faces`` (original ids). Fills ``dec_of`` (original -> decode id),
     ``order`` (decode -> original), ``pred`` (geometry predictors, decode ids) and ``out_faces``
-    (faces in decode order and decode ids; ``face_src`` their rows in ``faces``). Returns (number of vertices, 0) or (-1, code) on error."""
+    (faces in decode order and decode ids; ``face_src`` their rows in ``faces``). Returns
+    (number of vertices, 0), or (-1, code) on error."""
     nf = faces.shape[0]
     probs = np.full(SM_SIZE, rc.PROB_INIT, np.uint16)
     fvisited = np.zeros(nf, np.bool_)

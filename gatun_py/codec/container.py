@@ -140,7 +140,8 @@ class Container:
                 name, off, length, crc = e["name"], e["offset"], e["length"], e["crc32"]
             except (TypeError, KeyError):
                 raise CorruptFileError(f"{self.name}: malformed section index") from None
-            if not (isinstance(name, str) and all(isinstance(x, int) and not isinstance(x, bool) for x in (off, length, crc))):
+            ints = all(isinstance(x, int) and not isinstance(x, bool) for x in (off, length, crc))
+            if not (isinstance(name, str) and ints):
                 raise CorruptFileError(f"{self.name}: malformed section index")
             if name in index or off < data_start or length < 0 or off + length > self.size or not 0 <= crc < 2**32:
                 raise CorruptFileError(f"{self.name}: section {name!r} lies outside the file (truncated or corrupt)")

@@ -161,11 +161,12 @@ def main(argv: list[str]) -> None:
                    "total / xz", "≤ 0.5"], file_rows)
     text += "\n\n### Speed (one thread, warm JIT cache)\n\n"
     text += (f"Command: `{COMMAND}`. Best of {repeat}, process CPU time (the machine is shared; load "
-             f"average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores when this ran). Encode = `encode_geometry` (it tries both modes on "
-             "channels with repeated values); decode = `GeometryDecoder` in batches of 4096 vertices, as "
-             "the streaming container does. fpzip decompression of the same arrays (C library) for "
-             "reference. The last column converts decode speed to the tets of that mesh per second "
-             "(the decoder budget is 2 M tets/s for everything).\n\n")
+             f"average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores when this ran). Encode = "
+             "`encode_geometry` (it tries both modes on channels with repeated values); decode = "
+             "`GeometryDecoder` in batches of 4096 vertices, as the streaming container does. fpzip "
+             "decompression of the same arrays (C library) for reference. The last column converts the "
+             "decode speed to tets of that mesh per second (the decoder's budget is 2 M tets/s for "
+             "everything).\n\n")
     text += table(["data set", "points", "encode M vertices/s", "decode M vertices/s", "fpzip decode M vertices/s",
                    "decode ≙ M tets/s"], speed_rows)
     text += "\n\n### What each part of the model buys (b/v)\n\n"

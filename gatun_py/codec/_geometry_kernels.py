@@ -45,13 +45,11 @@ from numba import njit
 from .rangecoder import (
     PROB_INIT,
     INT_MODEL_SIZE,
-    dec_bit,
     dec_failed,
     dec_init,
     dec_sint,
     dec_sym,
     dec_uint,
-    enc_bit,
     enc_finish,
     enc_sint,
     enc_sym,
@@ -534,8 +532,9 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, trace):
     """Encode every vertex into four channel streams.
 
     ``st`` (4, 8) encoder states, ``out`` (4, cap) uint8 buffers, ``vf`` (n, 4) float32 values,
-    ``refs`` (n, 4) checked refs, ``wpar`` (n, 3, NW) from :func:`link_all`, ``modes`` (4,) per-channel mode, ``tables`` the sorted distinct
-    ordered ints of the table-mode channels (channel ch at ``tables[tab_offs[ch]:tab_offs[ch+1]]``).
+    ``refs`` (n, 4) checked refs, ``wpar`` (n, 3, NW) from :func:`link_all`, ``modes`` (4,)
+    per-channel mode (``MODE_SKIP``: only the repeat flags), ``tables`` the sorted distinct ordered
+    ints of the table-mode channels (channel ch at ``tables[tab_offs[ch]:tab_offs[ch+1]]``).
     Returns the byte count of each stream (larger than ``out.shape[1]`` on overflow). If
     ``trace`` has n rows, ``trace[k, ch]`` records the coded (repetition symbol or -1, residual,
     predictor index) for the tests.

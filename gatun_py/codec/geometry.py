@@ -13,9 +13,13 @@ Refs of shape ``(n, 3)`` are accepted too (no apex), at some cost in compression
 Every float comes back bit for bit (``-0.0``, denormals, any magnitude; even NaN/inf bit patterns,
 although validation keeps those out of meshes). The model, per vertex and per channel (x, y, z,
 density), is described in :mod:`gatun_py.codec._geometry_kernels`: a cheap symbol for "equal to a
-ref's value", otherwise a backward-adaptively chosen linear prediction from the refs with an exact
-integer residual, either on the order-preserving integer of the float bits or on the rank in a
-table of the channel's distinct values (chosen per channel, whichever is smaller).
+ref's value" (y also "equal to the y last seen with this x"), otherwise a backward-adaptively
+chosen linear prediction from the refs and from grid-line partners the coder finds in its own edge
+graph, with an exact integer residual, either on the order-preserving integer of the float bits or
+on the rank in a table of the channel's distinct values (chosen per channel, whichever is smaller).
+
+The decoder keeps, besides the vertex table (16 bytes per vertex), its edge graph and the x -> y
+table: about 100 bytes per vertex in all.
 
 Byte layout of the geometry block (little endian)::
 
@@ -34,7 +38,8 @@ import numpy as np
 
 from ..errors import CorruptFileError
 from . import _geometry_kernels as K
-from .rangecoder import ADAPT_SHIFT, INT_BUCKET_BITS, DEC_ERROR, DEC_OVERRUN, DEC_POS, PROB_ONE, dec_state, enc_state, new_model
+from .rangecoder import (ADAPT_SHIFT, DEC_ERROR, DEC_OVERRUN, DEC_POS, INT_BUCKET_BITS, PROB_ONE, dec_state,
+                         enc_state, new_model)
 
 FORMAT_VERSION = 1
 _HEADER = struct.Struct("<BBI4I")
@@ -102,8 +107,9 @@ def refs_from_predictors(predictors, n_boundary_vertices: int, interior_apex=Non
     Parameters
     ----------
     predictors : (n, 3) or (n, 4) int array
-        Four columns are taken as refs already. Three: ``(p, r, apex)`` for boundary vertices (the border edge and the third vertex of the
-        triangle it came from), the current face ``(a, b, c)`` for interior ones; ``-1`` for none.
+        Four columns are taken as refs already. Three: ``(p, r, apex)`` for boundary vertices
+        (the border edge and the third vertex of the triangle it came from), the current face
+        ``(a, b, c)`` for interior ones; ``-1`` for none.
     n_boundary_vertices : int
         The first ``n_boundary_vertices`` vertices come from the boundary-surface phase.
     interior_apex : (n,) int array, optional
@@ -200,6 +206,8 @@ def encode_geometry(points, density, refs, *, modes=None) -> bytes:
 
 def geometry_stream_sizes(data: bytes) -> dict:
     """Byte sizes of the parts of a geometry block (header and the x, y, z, density streams)."""
+    if len(data) < HEADER_SIZE:
+        raise CorruptFileError("corrupt geometry block: truncated header")
     version, mode_bits, n, *lengths = _HEADER.unpack_from(data)
     sizes = {"header": HEADER_SIZE}
     for name, ch_len, ch in zip(("x", "y", "z", "density"), lengths, range(4)):

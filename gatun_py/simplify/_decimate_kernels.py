@@ -40,7 +40,7 @@ NORMAL_EPS = 1e-6
 # Indices into the float parameter array.
 P_WD, P_WG, P_WV, P_WI = 0, 1, 2, 3
 # Indices into the int64 counter array.
-C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS = 0, 1, 2, 3, 4
+C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS, C_STARTED = 0, 1, 2, 3, 4, 5
 
 
 @njit(cache=True)
@@ -653,31 +653,40 @@ def _apply_merge(a, b, st_a, T, alive, nbr, head, nxt):
 
 
 @njit(cache=True)
-def _init_heap(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab, counters,
-               ver, h_err, h_v, h_b, h_ver, last_err):
-    n = head.shape[0]
-    for v in range(n):
-        _push_best(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab,
-                   counters, ver, h_err, h_v, h_b, h_ver, last_err)
-
-
-@njit(cache=True)
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab, counters,
          ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left."""
     n = head.shape[0]
-    while counters[C_MERGES] < max_merges:
+    # vertices to (re-)evaluate now; evaluated at a single call site below, because every call
+    # site of _push_best inlines the whole candidate evaluation (compile time)
+    todo = np.empty(n, np.int64)
+    n_todo = 0
+    sweeping = False
+    if counters[C_STARTED] == 0:
+        counters[C_STARTED] = 1
+        for v in range(n):
+            todo[v] = v
+        n_todo = n
+    while True:
+        found = False
+        for i in range(n_todo):
+            if _push_best(todo[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b,
+                          mark_ab, counters, ver, h_err, h_v, h_b, h_ver, last_err):
+                found = True
+        n_todo = 0
+        if sweeping and not found:
+            return True
+        sweeping = False
+        if counters[C_MERGES] >= max_merges:
+            return False
         if counters[C_HEAP] == 0:
             # neighbourhoods two rings away from a merge may have become legal: look again
             counters[C_SWEEPS] += 1
-            found = False
             for v in range(n):
                 if parent[v] == v:
-                    if _push_best(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark,
-                                  mark_b, mark_ab, counters, ver, h_err, h_v, h_b, h_ver, last_err):
-                        found = True
-            if not found:
-                return True
+                    todo[n_todo] = v
+                    n_todo += 1
+            sweeping = True
             continue
         e, a, b, v_a = _heap_pop(h_err, h_v, h_b, h_ver, counters)
         if v_a != ver[a] or parent[a] != a:
@@ -685,8 +694,8 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b,
         if b < 0:
             # a's neighbourhood changed since its last evaluation: evaluate now (lazily, so a vertex
             # touched by several merges before its turn is evaluated once)
-            _push_best(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab,
-                       counters, ver, h_err, h_v, h_b, h_ver, last_err)
+            todo[0] = a
+            n_todo = 1
             continue
         if parent[b] != b:
             continue
@@ -694,8 +703,8 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b,
         # a's star is unchanged since the entry was made (that would have bumped its version),
         # but b's may have changed: check the link condition again
         if not _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
-            _push_best(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab,
-                       counters, ver, h_err, h_v, h_b, h_ver, last_err)
+            todo[0] = a
+            n_todo = 1
             continue
         # the neighbourhood whose stars change: b and every vertex of a's star
         stamp = _next_stamp(counters)
@@ -719,7 +728,6 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b,
             if parent[w] == w and not pinned[w]:
                 ver[w] += 1
                 _heap_push(h_err, h_v, h_b, h_ver, counters, max(e, last_err[w]), w, -1, ver[w], ver)
-    return False
 
 
 @njit(cache=True)

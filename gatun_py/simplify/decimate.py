@@ -161,7 +161,8 @@ class DecimationState:
         return (self.ver, self.h_err, self.h_v, self.h_b, self.h_ver, self.last_err)
 
     def start(self) -> None:
-        K._init_heap(*self._mesh_args(), *self._heap_args())
+        """Evaluate every vertex's best merge (the first :meth:`run` does it too)."""
+        self.run(0)
 
     def run(self, max_merges: int) -> bool:
         """Merge until ``max_merges`` in total; True when no legal merge is left."""

@@ -430,6 +430,11 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, s
     samples = 0
     steps = seg_steps[s]
     state = STATE_ACTIVE
+    # Brent's cycle detection: on a mesh that folds over itself a walk can come back to a face it
+    # crossed in the same direction; stop there instead of burning ``max_steps``.
+    ma, mb, mc, mfrom = a, b, c, came_from
+    power = 1
+    lam = 0
     while True:
         slot = _hash_find(htab, mul, a, b, c)
         if slot < 0:
@@ -502,6 +507,14 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, s
         if a == oa and b == ob and c == oc:
             state = STATE_DONE
             break
+        if a == ma and b == mb and c == mc and came_from == mfrom:
+            state = STATE_STUCK
+            break
+        lam += 1
+        if lam == power:
+            ma, mb, mc, mfrom = a, b, c, came_from
+            power *= 2
+            lam = 0
     seg_face[s, sub, 0] = a
     seg_face[s, sub, 1] = b
     seg_face[s, sub, 2] = c

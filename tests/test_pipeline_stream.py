@@ -37,7 +37,7 @@ def test_streaming_equals_generic_and_simplified_mesh(post_levels, ratio):
     assert np.abs(s.image - g.image).max() <= TOL
     assert s.stats["rays_unfinished"] == 0 and s.stats["nan_pixels"] == 0
     # Oracle: the simplified mesh (tetc decompress --ratio R) rendered whole, same camera/step/range.
-    n = int(np.floor(ratio * mesh.n_points + 1e-9))
+    n = int(np.floor(ratio * mesh.n_points))
     simple = simplified_mesh(mesh, forest, n)
     reader = TetcReader(path)
     lo, hi = (np.asarray(x) for x in reader.meta["bbox"])

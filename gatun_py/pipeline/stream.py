@@ -107,7 +107,7 @@ def resolve_target(reader, *, ratio: float | None = None, level: int | None = No
         ratio = 0.0
     if not (isinstance(ratio, (int, float)) and math.isfinite(ratio) and 0.0 <= ratio <= 1.0):
         raise OptionError(f"ratio must lie in [0, 1], got {ratio}; the file holds {describe_levels(reader)}")
-    n = int(math.floor(ratio * pts + 1e-9))
+    n = int(math.floor(ratio * pts))
     reach = forest_reach(reader)
     if n > reach:
         raise OptionError(f"ratio {ratio} needs {n} merges but this file reaches {reach} "

@@ -136,7 +136,7 @@ def emulate_decode_order(tets: np.ndarray, n_points: int):
 # --------------------------------------------------------------------------------------------
 # plain-Python model of the geometry coder
 
-ADJ_CAP = 12  # neighbours remembered per vertex (gatun_py.codec._geometry_kernels.ADJ_CAP)
+ADJ_CAP = 8  # neighbours remembered per vertex (gatun_py.codec._geometry_kernels.ADJ_CAP)
 
 
 def ordered_int(value: np.float32) -> int:

@@ -69,7 +69,7 @@ N_CANDS = np.array([1, 1, 6, 6, 10, 12], dtype=np.int64)
 
 # the coder's own view of the mesh: the edges from every vertex to its face refs (at most
 # ADJ_CAP per vertex, the rest ignored alike by encoder and decoder)
-ADJ_CAP = 12
+ADJ_CAP = 8
 NW = 2  # extra predictor vertices per face pair / face ref
 
 # model layout of one channel (uint16 probabilities)
@@ -210,7 +210,7 @@ def link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf):
     completing a parallelogram; ``w[q, 1]``: for face ref q, a neighbour to extrapolate from
     (2 f_q - w). Both are picked by 3-D closeness to a first estimate of the new vertex (the
     parallelepiped corner through the apex, or the face centroid), using only vertices < k, so
-    the decoder can do the same before decoding vertex k. ``mark`` (n,) int64 scratch, zero
+    the decoder can do the same before decoding vertex k. ``mark`` (n,) int32 scratch, zero
     at the start.
     """
     f0 = -1
@@ -283,9 +283,6 @@ def _ext(vf, ch, x, w, fallback):
     return 2.0 * np.float64(vf[x, ch]) - np.float64(vf[w, ch])
 
 
-HASH_EMPTY = 1 << 40  # no ordered int reaches it
-
-
 @njit(cache=True)
 def hash_capacity(n):
     """Slots of the x -> y table for n vertices (a power of two, at most half full)."""
@@ -296,25 +293,26 @@ def hash_capacity(n):
 
 
 @njit(cache=True, inline="always")
-def _hash_slot(keys, key):
-    mask = keys.shape[0] - 1
+def _hash_slot(slots, used, x):
+    """Slot of key x (an ordered int) in the open-addressing table: its slot or a free one."""
+    mask = slots.shape[0] - 1
     # multiplicative hashing, high bits: float bit patterns often end in runs of zero bits
-    h = ((key * -7046029254386353131) >> 32) & mask
-    while keys[h] != key and keys[h] != HASH_EMPTY:
+    h = ((x * -7046029254386353131) >> 32) & mask
+    while used[h] != 0 and (slots[h] >> 32) != x:
         h = (h + 1) & mask
     return h
 
 
 @njit(cache=True, inline="always")
-def _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m):
+def _add_conditional(ch, k, vi, slots, used, eq_o, m):
     """Channel 1 (y) gets one more repetition candidate: the y last seen with this vertex's x
     (curvilinear grids repeat whole (x, y) columns). Returns the new candidate count."""
     if ch != 1:
         return m
-    h = _hash_slot(hkeys, ordered_int(vi[k, 0]))
-    if hkeys[h] == HASH_EMPTY:
+    h = _hash_slot(slots, used, ordered_int(vi[k, 0]))
+    if used[h] == 0:
         return m
-    v = hvals[h]
+    v = ((slots[h] & 0xFFFFFFFF) ^ 0x80000000) - 0x80000000  # low half, sign-extended
     for q in range(m):
         if eq_o[q] == v:
             return m
@@ -323,12 +321,12 @@ def _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m):
 
 
 @njit(cache=True, inline="always")
-def _remember_conditional(ch, k, vi, hkeys, hvals):
+def _remember_conditional(ch, k, vi, slots, used):
     if ch == 1:
-        key = ordered_int(vi[k, 0])
-        h = _hash_slot(hkeys, key)
-        hkeys[h] = key
-        hvals[h] = ordered_int(vi[k, 1])
+        x = ordered_int(vi[k, 0])
+        h = _hash_slot(slots, used, x)
+        slots[h] = (x << 32) | (ordered_int(vi[k, 1]) & 0xFFFFFFFF)  # key and value in one word
+        used[h] = 1
 
 
 @njit(cache=True)
@@ -520,7 +518,7 @@ def link_all(refs, vf):
     n = vf.shape[0]
     adj = np.zeros((n, ADJ_CAP), dtype=np.int32)
     deg = np.zeros(n, dtype=np.int32)
-    mark = np.zeros(n, dtype=np.int64)
+    mark = np.zeros(n, dtype=np.int32)
     wpar = np.zeros((n, 3, NW), dtype=np.int32)
     for k in range(n):
         link_vertex(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], adj, deg, mark, wpar[k], vf)
@@ -556,8 +554,8 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, trace):
     tracing = trace.shape[0] == n
     hcap = hash_capacity(n)
     for ch in range(N_CHANNELS):
-        hkeys = np.full(hcap if ch == 1 else 1, HASH_EMPTY, dtype=np.int64)
-        hvals = np.zeros(hcap if ch == 1 else 1, dtype=np.int64)
+        hkeys = np.zeros(hcap if ch == 1 else 1, dtype=np.int64)
+        hvals = np.zeros(hcap if ch == 1 else 1, dtype=np.uint8)
         stc = st[ch]
         outc = out[ch]
         probs = np.full(MODEL_SIZE, PROB_INIT, dtype=np.uint16)
@@ -680,8 +678,8 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, 
     ``refs`` (count, 4) int32 are the refs of those vertices. ``st`` (4, 8) decoder states,
     ``probs`` (4, MODEL_SIZE) models, ``scores`` (4, N_PATTERNS, MAX_CANDS) predictor scores,
     ``flags`` (8,) context flags, ``adj`` (n, ADJ_CAP) int32 and ``deg`` (n,) int32 (the edges seen
-    so far), ``mark`` (n,) int64 scratch and ``hkeys``/``hvals`` (``hash_capacity(n)``,) int64 (the
-    x -> y table) carry the decoder's state from one call to the next. Every index is checked: returns
+    so far), ``mark`` (n,) int32 scratch and ``hkeys`` int64 / ``hvals`` uint8 (``hash_capacity(n)``,)
+    (the x -> y table: packed key and value, slot used) carry the decoder's state from one call to the next. Every index is checked: returns
     ``OK``, ``ERR_REF`` (a ref not in ``[-1, k)``), ``ERR_RANK`` (a table index out of range) or
     ``ERR_STREAM`` (the range decoder failed).
     """

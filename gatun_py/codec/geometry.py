@@ -18,8 +18,8 @@ chosen linear prediction from the refs and from grid-line partners the coder fin
 graph, with an exact integer residual, either on the order-preserving integer of the float bits or
 on the rank in a table of the channel's distinct values (chosen per channel, whichever is smaller).
 
-The decoder keeps, besides the vertex table (16 bytes per vertex), its edge graph and the x -> y
-table: about 100 bytes per vertex in all.
+The decoder keeps, besides the vertex table (16 bytes per vertex), its edge graph (36 bytes per
+vertex) and the x -> y table (18 to 36 bytes per vertex).
 
 Byte layout of the geometry block (little endian)::
 
@@ -42,6 +42,7 @@ from .rangecoder import (ADAPT_SHIFT, DEC_ERROR, DEC_OVERRUN, DEC_POS, INT_BUCKE
                          enc_state, new_model)
 
 FORMAT_VERSION = 1
+MAX_POINTS = 1 << 29  # the decoder's scratch tags (3 per vertex) are int32
 _HEADER = struct.Struct("<BBI4I")
 HEADER_SIZE = _HEADER.size
 
@@ -166,6 +167,8 @@ def encode_geometry(points, density, refs, *, modes=None) -> bytes:
     """
     vf = _channels(points, density)
     n = vf.shape[0]
+    if n >= MAX_POINTS:
+        raise ValueError(f"at most {MAX_POINTS - 1} vertices per geometry block, got {n}")
     refs = _as_refs(refs, n)
     if n and (refs.min() < -1 or (refs >= np.arange(n, dtype=np.int64)[:, None]).any()):
         raise ValueError("refs[k] must hold decode ids in [-1, k)")
@@ -254,7 +257,7 @@ class GeometryDecoder:
             raise CorruptFileError(f"corrupt geometry block: {n} vertices, expected {n_points}")
         if HEADER_SIZE + sum(lengths) != len(buf):
             raise CorruptFileError("corrupt geometry block: stream lengths do not match the block size")
-        if n > _MAX_VERTICES_PER_BYTE * (min(lengths) + 8):
+        if n > _MAX_VERTICES_PER_BYTE * (min(lengths) + 8) or n >= MAX_POINTS:
             raise CorruptFileError(f"corrupt geometry block: {n} vertices cannot fit in {len(buf)} bytes")
         self.n_points = int(n)
         self.modes = np.array([(mode_bits >> ch) & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64)
@@ -268,9 +271,9 @@ class GeometryDecoder:
         self.flags = np.zeros(2 * K.N_CHANNELS, dtype=np.int64)
         self.adj = np.zeros((self.n_points, K.ADJ_CAP), dtype=np.int32)
         self.deg = np.zeros(self.n_points, dtype=np.int32)
-        self.mark = np.zeros(self.n_points, dtype=np.int64)
-        self.hkeys = np.full(K.hash_capacity(self.n_points), K.HASH_EMPTY, dtype=np.int64)
-        self.hvals = np.zeros_like(self.hkeys)
+        self.mark = np.zeros(self.n_points, dtype=np.int32)
+        self.hkeys = np.zeros(K.hash_capacity(self.n_points), dtype=np.int64)
+        self.hvals = np.zeros(len(self.hkeys), dtype=np.uint8)
         stream_bytes = [int(length) for length in lengths]
         table_room = sum(min(self.n_points, _MAX_TABLE_PER_BYTE * (stream_bytes[ch] + 8))
                          for ch in range(K.N_CHANNELS) if self.modes[ch])

@@ -314,6 +314,10 @@ def test_encoder_rejects_bad_arguments():
     bad[2, 0] = 2  # not an earlier vertex
     with pytest.raises(ValueError):
         encode_geometry(pts, den, bad)
+    wraps = refs.astype(np.int64)
+    wraps[3, 0] = 2**32  # would wrap to 0 in int32
+    with pytest.raises(ValueError):
+        encode_geometry(pts, den, wraps)
     with pytest.raises(ValueError):
         encode_geometry(pts, den, refs, modes=(0, 2, 0, 0))
 

@@ -61,6 +61,8 @@ def _as_refs(refs, n: int) -> np.ndarray:
         raise ValueError(f"refs must have shape ({n}, 3) or ({n}, 4), got {refs.shape}")
     if refs.dtype.kind not in "iu":
         raise ValueError(f"refs must be integers, got {refs.dtype}")
+    if n and (refs.min() < -1 or (refs >= np.arange(n, dtype=np.int64)[:, None]).any()):
+        raise ValueError("refs[k] must hold decode ids in [-1, k)")
     out = np.full((n, 4), -1, dtype=np.int32)
     out[:, : refs.shape[1]] = refs
     return out
@@ -170,8 +172,6 @@ def encode_geometry(points, density, refs, *, modes=None) -> bytes:
     if n >= MAX_POINTS:
         raise ValueError(f"at most {MAX_POINTS - 1} vertices per geometry block, got {n}")
     refs = _as_refs(refs, n)
-    if n and (refs.min() < -1 or (refs >= np.arange(n, dtype=np.int64)[:, None]).any()):
-        raise ValueError("refs[k] must hold decode ids in [-1, k)")
     ordered = _ordered(vf)
     tables_list = [np.unique(ordered[:, ch]) for ch in range(K.N_CHANNELS)]
     tables = np.concatenate(tables_list) if n else np.zeros(0, dtype=np.int64)

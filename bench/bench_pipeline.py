@@ -86,7 +86,7 @@ def main():
     from gatun_py.codec import TetcReader
     from gatun_py.pipeline.budget import plan_file_budget
     from gatun_py.pipeline.quality import compare_images
-    from gatun_py.pipeline.stream import Target, stored_levels
+    from gatun_py.simplify.levels import Target, stored_levels
 
     FIGURES.mkdir(parents=True, exist_ok=True)
     files = {n: build_files(n) for n in DATASETS}

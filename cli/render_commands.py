@@ -105,7 +105,8 @@ def render(input, output, tf_spec, mode, step, size, azimuth, elevation, zoom, r
 
     if sum(x is not None for x in (ratio, level, budget)) > 1:
         raise click.UsageError("give at most one of --ratio, --level and --budget")
-    from gatun_py.pipeline.stream import View, is_tetc, render_mesh_file, render_tetc, resolve_target
+    from gatun_py.pipeline.stream import View, is_tetc, render_mesh_file, render_tetc
+    from gatun_py.simplify.levels import resolve_target
 
     view = View(camera, tf, mode, step)
     planned = {}

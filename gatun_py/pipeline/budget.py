@@ -207,7 +207,7 @@ def plan_file_budget(path, view, budget_s: float, *, recalibrate: bool = False):
 
         raise OptionError(f"--budget must be a number of seconds, got {budget_s}")
     from ..codec import TetcReader
-    from .stream import Target, forest_reach, stored_levels
+    from ..simplify.levels import Target, forest_merges, stored_levels
 
     reader = TetcReader(path)
     pts = int(reader.meta["points"])
@@ -219,7 +219,7 @@ def plan_file_budget(path, view, budget_s: float, *, recalibrate: bool = False):
     if model is None:
         model = calibrate(path, view, levels)
         save_model(key, model)
-    reach = forest_reach(reader)
+    reach = forest_merges(reader)
     # Only stored levels with a forest can be simplified further on the fly.
     plan = plan_for_budget(levels, model, float(budget_s), reach)
     start = next(lv for lv in reader.levels if int(lv["level"]) == plan.level)

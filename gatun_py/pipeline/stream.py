@@ -22,6 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OptionError
+from ..simplify.forest import mesh_from_ancestors
+from ..simplify.levels import Target, resolve_target, stored_levels, target_ancestors  # noqa: F401 (re-exported)
 
 PIPELINES = ("streaming", "generic")
 
@@ -42,92 +44,10 @@ class View:
             object.__setattr__(self, "camera", Camera())
 
 
-@dataclass(frozen=True)
-class Target:
-    """Where to start and how far to simplify: stored ``level`` and absolute merges ``merges``."""
-
-    level: int
-    merges: int
-    ratio: float  # merges / points of the full mesh
-    level_merges: int  # N_i of the stored level
-
-
 @dataclass
 class PipelineResult:
     image: np.ndarray  # (H, W, 4) float32 premultiplied RGBA
     stats: dict = field(default_factory=dict)
-
-
-# -- choosing what to decode ------------------------------------------------------------------
-
-def forest_reach(reader) -> int:
-    """Total merges the file's forest reaches (the last stored level's N_i for a file without one)."""
-    f = reader.meta.get("forest")
-    if isinstance(f, dict) and isinstance(f.get("merges"), int) and not isinstance(f.get("merges"), bool):
-        return int(f["merges"])
-    last = stored_levels(reader)[-1]
-    reach = int(last.get("merges_before", 0))
-    forest = reader.read_forest(int(last["level"])) if last.get("has_forest") else None
-    if forest is not None:
-        from ..simplify.forest import ROOT_RANK
-
-        reach += int(np.count_nonzero(np.asarray(forest[1]) != ROOT_RANK))
-    return reach
-
-
-def stored_levels(reader) -> list[dict]:
-    return sorted(reader.levels, key=lambda lv: int(lv.get("merges_before", 0)))
-
-
-def describe_levels(reader) -> str:
-    pts = int(reader.meta["points"])
-    parts = [f"level {lv['level']} (ratio {lv.get('ratio', 0):.4f}, {lv['tets']} tets)" for lv in stored_levels(reader)]
-    reach = forest_reach(reader)
-    tail = f"; the merge forest reaches ratio {reach / max(pts, 1):.4f}" if reach else "; no merge forest"
-    return ", ".join(parts) + tail
-
-
-def resolve_target(reader, *, ratio: float | None = None, level: int | None = None) -> Target:
-    """The stored level to start from and the merges to reach, for ``--ratio`` or ``--level``.
-
-    Ratio R means N = floor(R * points) merges, started from the most simplified stored level
-    that is still finer than (or exactly at) R.
-    """
-    if ratio is not None and level is not None:
-        raise OptionError("give either a ratio or a level, not both")
-    levels = stored_levels(reader)
-    pts = int(reader.meta["points"])
-    if level is not None:
-        for lv in levels:
-            if lv["level"] == level:
-                n = int(lv.get("merges_before", 0))
-                return Target(level, n, n / max(pts, 1), n)
-        raise OptionError(f"level {level} is not stored in this file; it holds {describe_levels(reader)}")
-    if ratio is None:
-        ratio = 0.0
-    if not (isinstance(ratio, (int, float)) and math.isfinite(ratio) and 0.0 <= ratio <= 1.0):
-        raise OptionError(f"ratio must lie in [0, 1], got {ratio}; the file holds {describe_levels(reader)}")
-    n = int(math.floor(ratio * pts))
-    reach = forest_reach(reader)
-    if n > reach:
-        raise OptionError(f"ratio {ratio} needs {n} merges but this file reaches {reach} "
-                          f"(ratio {reach / max(pts, 1):.4f}); it holds {describe_levels(reader)}")
-    start = max((lv for lv in levels if int(lv.get("merges_before", 0)) <= n),
-                key=lambda lv: int(lv.get("merges_before", 0)))
-    if n > int(start.get("merges_before", 0)) and not start.get("has_forest"):
-        raise OptionError(f"level {start['level']} has no merge forest stored, cannot simplify past it; "
-                          f"the file holds {describe_levels(reader)}")
-    return Target(int(start["level"]), n, n / max(pts, 1), int(start.get("merges_before", 0)))
-
-
-def target_ancestors(reader, target: Target) -> np.ndarray | None:
-    """Ancestor of every vertex of the stored level (decode order), or None if nothing to merge."""
-    if target.merges == target.level_merges:
-        return None
-    from ..simplify.forest import ancestors
-
-    parent, rank = reader.read_forest(target.level)
-    return ancestors(parent, rank, target.merges - target.level_merges)
 
 
 def file_render_defaults(reader) -> tuple[np.ndarray, np.ndarray, tuple[float, float], float]:
@@ -161,7 +81,7 @@ def render_tetc(path, view: View, *, ratio: float | None = None, level: int | No
     path : path-like
     view : View
     ratio, level : optional
-        Simplification target (see :func:`resolve_target`); default the full mesh.
+        Simplification target (see :func:`gatun_py.simplify.levels.resolve_target`); default the full mesh.
     pipeline : {"streaming", "generic"}
     target : Target, optional
         A target already resolved (e.g. by the time-budget planner).
@@ -224,17 +144,6 @@ def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress
     return res, (filt.stats if filt is not None else None)
 
 
-def simplify_decoded(mesh, anc):
-    """The decoded level mesh simplified with ``anc`` (generic pipeline): tets with four distinct
-    ancestors, rewritten; vertices kept as they are (merged-away ones are left unreferenced)."""
-    from ..mesh import TetMesh
-
-    t = anc[mesh.tets]
-    s = np.sort(t, axis=1)
-    keep = np.all(s[:, 1:] != s[:, :-1], axis=1)
-    return TetMesh(mesh.points, mesh.density, t[keep], mesh.scalar_name)
-
-
 def _run_generic(reader, target, anc, camera, view, rng, step, times):
     from ..render.raycast import render_mesh
 
@@ -244,7 +153,7 @@ def _run_generic(reader, target, anc, camera, view, rng, step, times):
     fstats = None
     if anc is not None:
         t0 = time.perf_counter()
-        mesh = simplify_decoded(mesh, anc)
+        mesh = mesh_from_ancestors(mesh, anc)[0]
         times["filter_s"] = time.perf_counter() - t0
         fstats = {"tets_out": mesh.n_tets}
     res = render_mesh(mesh, camera, view.tf, mode=view.mode, step=step, scalar_range=rng)

@@ -18,7 +18,7 @@ from ..errors import CorruptFileError, OptionError
 from ..mesh import TetMesh
 from ._decimate_kernels import ROOT_RANK, _ancestors
 
-__all__ = ["ROOT_RANK", "MergeForest", "ancestors", "simplified_mesh", "encode_forest", "decode_forest",
+__all__ = ["ROOT_RANK", "MergeForest", "ancestors", "simplified_mesh", "mesh_from_ancestors", "encode_forest", "decode_forest",
            "check_forest", "forest_header", "forest_prefix"]
 
 
@@ -155,6 +155,16 @@ def simplified_mesh(mesh: TetMesh, forest: MergeForest, n_merges: int, *, return
     if not 0 <= n_merges <= forest.n_merges:
         raise OptionError(f"n_merges {n_merges} is outside 0..{forest.n_merges}")
     anc = ancestors(forest.parent, forest.rank, n_merges)
+    out, ids = mesh_from_ancestors(mesh, anc)
+    return (out, ids) if return_ids else out
+
+
+def mesh_from_ancestors(mesh: TetMesh, anc: np.ndarray):
+    """(simplified TetMesh, input id of each of its vertices) for an ancestor table.
+
+    Tets whose four ancestors are distinct, rewritten to the ancestors; the surviving vertices
+    (``anc[v] == v``) compacted in their input order.
+    """
     t = anc[mesh.tets]
     s = np.sort(t, axis=1)
     keep = np.all(s[:, 1:] != s[:, :-1], axis=1)
@@ -162,7 +172,7 @@ def simplified_mesh(mesh: TetMesh, forest: MergeForest, n_merges: int, *, return
     new_id = np.full(mesh.n_points, -1, np.int64)
     new_id[ids] = np.arange(ids.size)
     out = TetMesh(mesh.points[ids], mesh.density[ids], new_id[t[keep]].astype(np.int32), mesh.scalar_name)
-    return (out, ids) if return_ids else out
+    return out, ids
 
 
 # -- coding -----------------------------------------------------------------------------------

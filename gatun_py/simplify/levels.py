@@ -8,10 +8,11 @@ import numpy as np
 
 from ..errors import OptionError
 from ..mesh import TetMesh
-from .forest import ROOT_RANK, MergeForest, forest_prefix, simplified_mesh
+from .forest import ROOT_RANK, MergeForest, ancestors, forest_prefix, mesh_from_ancestors, simplified_mesh
 
 __all__ = ["MAX_LEVEL", "LevelMesh", "level_merges", "available_levels", "build_levels", "level_forest",
-           "read_simplified", "forest_merges", "storage_forests"]
+           "read_simplified", "forest_merges", "storage_forests", "Target", "resolve_target", "stored_levels",
+           "target_ancestors"]
 
 MAX_LEVEL = 13
 
@@ -157,12 +158,81 @@ def forest_merges(reader) -> int:
     return k
 
 
+@dataclass(frozen=True)
+class Target:
+    """Where to start and how far to go: stored ``level`` (its N_i is ``level_merges``) and the
+    number of merges of the full forest to reach, ``merges`` (ratio = merges / points)."""
+
+    level: int
+    merges: int
+    ratio: float
+    level_merges: int
+
+
+def stored_levels(reader) -> list[dict]:
+    """The file's level metadata, finest first."""
+    return sorted(reader.levels, key=lambda lv: int(lv.get("merges_before", 0)))
+
+
+def resolve_target(reader, *, ratio: float | None = None, level: int | None = None) -> Target:
+    """The stored level to start from for ``--ratio R`` or ``--level i`` (paper section 5).
+
+    Ratio R means N = floor(R * points) merges, started from the most simplified stored level
+    whose N_i <= N (the levels between the first and the last store only the merges up to the
+    next level, so that is also the only level that can get there). Neither: the full mesh.
+
+    Raises
+    ------
+    OptionError
+        Impossible ratio or level; the message lists what the file holds.
+    """
+    if ratio is not None and level is not None:
+        raise OptionError("give either a ratio or a level, not both")
+    stored = stored_levels(reader)
+    n0 = int(stored[0]["points"])
+    if ratio is None:
+        level = 0 if level is None else int(level)
+        for lv in stored:
+            if lv["level"] == level:
+                n = int(lv.get("merges_before", 0))
+                return Target(level, n, n / n0 if n0 else 0.0, n)
+        raise OptionError(f"level {level} is not stored in this file; stored levels: {_describe_levels(stored)}")
+    total = forest_merges(reader)
+    max_ratio = total / n0 if n0 else 0.0
+    if not (isinstance(ratio, (int, float)) and 0.0 <= ratio <= 1.0):
+        raise OptionError(f"ratio {ratio} is outside [0, 1]; this file reaches ratios up to {max_ratio:.6f} "
+                          f"(stored levels: {_describe_levels(stored)})")
+    n = int(np.floor(ratio * n0))
+    if n > total:
+        why = ("it stores no merge forest (compressed with --mesh-only)" if not stored[0].get("has_forest")
+               else f"its forest holds {total} merges (maximum ratio {max_ratio:.6f})")
+        raise OptionError(f"ratio {ratio} needs {n} merges but {why}; stored levels: {_describe_levels(stored)}")
+    usable = [lv for lv in stored if int(lv.get("merges_before", 0)) <= n
+              and (lv.get("has_forest") or int(lv.get("merges_before", 0)) == n)]
+    if not usable:
+        raise OptionError(f"no stored level can reach ratio {ratio}; stored levels: {_describe_levels(stored)}")
+    lv = max(usable, key=lambda x: int(x.get("merges_before", 0)))
+    return Target(int(lv["level"]), n, n / n0 if n0 else 0.0, int(lv.get("merges_before", 0)))
+
+
+def target_ancestors(reader, target: Target) -> np.ndarray | None:
+    """Ancestor of every vertex of the target's stored level (decode order), None if no merge is left."""
+    rest = target.merges - target.level_merges
+    if rest == 0:
+        return None
+    parent, rank = reader.read_forest(target.level)
+    if rest > int((rank != ROOT_RANK).sum()):
+        from ..errors import CorruptFileError
+
+        raise CorruptFileError(f"level {target.level}: its forest holds fewer merges than the metadata says")
+    return ancestors(parent, rank, rest)
+
+
 def read_simplified(source, *, ratio: float | None = None, level: int | None = None):
     """The mesh at a simplification ratio (or a stored level) of a ``.tetc`` file.
 
-    With ``ratio``: N = floor(ratio * points); the most simplified stored level with N_i <= N is
-    decoded and its forest applied for the remaining N - N_i merges (paper section 5), which
-    gives exactly the mesh after N merges of the full forest.
+    The level chosen by :func:`resolve_target` is decoded and its forest applied for the
+    remaining N - N_i merges, which gives exactly the mesh after N merges of the full forest.
 
     Parameters
     ----------
@@ -185,38 +255,7 @@ def read_simplified(source, *, ratio: float | None = None, level: int | None = N
     from ..codec import TetcReader
 
     reader = source if isinstance(source, TetcReader) else TetcReader(source)
-    if ratio is not None and level is not None:
-        raise OptionError("give either a ratio or a level, not both")
-    stored = sorted(reader.levels, key=lambda lv: lv["level"])
-    if ratio is None:
-        level = 0 if level is None else int(level)
-        if level not in [lv["level"] for lv in stored]:
-            raise OptionError(f"level {level} is not stored in this file; stored levels: {_describe_levels(stored)}")
-        return reader.decode_mesh(level)
-    n0 = stored[0]["points"]
-    total = forest_merges(reader)
-    max_ratio = total / n0 if n0 else 0.0
-    if not (0.0 <= ratio <= 1.0):
-        raise OptionError(f"ratio {ratio} is outside [0, 1]; this file reaches ratios up to {max_ratio:.6f} "
-                          f"(stored levels: {_describe_levels(stored)})")
-    n = int(np.floor(ratio * n0))
-    if n > total:
-        why = ("it stores no merge forest (compressed with --mesh-only)" if not stored[0].get("has_forest")
-               else f"its forest holds {total} merges (maximum ratio {max_ratio:.6f})")
-        raise OptionError(f"ratio {ratio} needs {n} merges but {why}; stored levels: {_describe_levels(stored)}")
-    usable = [lv for lv in stored if int(lv.get("merges_before", 0)) <= n
-              and (lv.get("has_forest") or int(lv.get("merges_before", 0)) == n)]
-    if not usable:
-        raise OptionError(f"no stored level can reach ratio {ratio}; stored levels: {_describe_levels(stored)}")
-    lv = max(usable, key=lambda x: int(x.get("merges_before", 0)))
-    mesh = reader.decode_mesh(lv["level"])
-    rest = n - int(lv.get("merges_before", 0))
-    if rest == 0:
-        return mesh
-    parent, rank = reader.read_forest(lv["level"])
-    forest = MergeForest(parent, rank, int((rank != ROOT_RANK).sum()))
-    if rest > forest.n_merges:
-        from ..errors import CorruptFileError
-
-        raise CorruptFileError(f"level {lv['level']}: its forest holds fewer merges than the metadata says")
-    return simplified_mesh(mesh, forest, rest)
+    target = resolve_target(reader, ratio=ratio, level=level)
+    mesh = reader.decode_mesh(target.level)
+    anc = target_ancestors(reader, target)
+    return mesh if anc is None else mesh_from_ancestors(mesh, anc)[0]

@@ -731,18 +731,23 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b,
 
 
 @njit(cache=True)
-def _ancestors(parent, rank, order, n_merges):
+def _ancestors(parent, rank, n_merges):
     """Ancestor of every vertex after the first ``n_merges`` merges.
 
-    ``order`` lists the vertices by decreasing rank (roots first), so every parent is visited before
-    its children: one top-down pass, as in the paper's section 4.2.
+    One top-down pass, as in the paper's section 4.2: merges are visited from the latest to the
+    earliest (a parent always outranks its children), so a parent's ancestor is final before any
+    child copies it. Ranks below ``n_merges`` are distinct, so the order is a counting sort, O(n).
     """
     n = parent.shape[0]
     anc = np.empty(n, np.int32)
-    for i in range(n):
-        v = order[i]
-        if rank[v] < n_merges:
+    by_rank = np.full(n, -1, np.int64)
+    for v in range(n):
+        anc[v] = v
+        r = rank[v]
+        if 0 <= r < n_merges and r < n:
+            by_rank[r] = v
+    for r in range(min(n_merges, n) - 1, -1, -1):
+        v = by_rank[r]
+        if v >= 0:
             anc[v] = anc[parent[v]]
-        else:
-            anc[v] = v
     return anc

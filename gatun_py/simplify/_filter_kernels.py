@@ -36,21 +36,22 @@ def release(first, count, head, nxt, item_of, parked, wait, counts, out, n_out):
 
 
 @njit(cache=True)
-def filter_items(items, anc, arrived, head, nxt, item_of, parked, wait, counts, out, n_out):
-    """Rewrite items (tets or faces) to ancestors; drop degenerate ones, forward or park the rest.
+def filter_items(items, start, anc, arrived, head, nxt, item_of, parked, wait, counts, out, n_out):
+    """Rewrite items[start:] (tets or faces) to ancestors; drop degenerate ones, forward or park the rest.
 
-    Returns the new ``n_out``, or -1 if a vertex id is out of range (corrupt input).
+    Returns (n_out, next item): stops early when the parking arrays are full, so that the caller
+    grows them and resumes. n_out is -1 if a vertex id is out of range (corrupt input).
     """
     n = anc.shape[0]
     k = items.shape[1]
     mapped = np.empty(4, np.int64)
-    for i in range(items.shape[0]):
-        bad = False
+    for i in range(start, items.shape[0]):
         for c in range(k):
             v = items[i, c]
             if v < 0 or v >= n:
-                return -1
+                return -1, i
             mapped[c] = anc[v]
+        bad = False
         for c in range(k):
             for d in range(c + 1, k):
                 if mapped[c] == mapped[d]:
@@ -66,6 +67,8 @@ def filter_items(items, anc, arrived, head, nxt, item_of, parked, wait, counts, 
                 out[n_out, c] = mapped[c]
             n_out += 1
             continue
+        if counts[0] >= parked.shape[0] or counts[1] + missing > nxt.shape[0]:
+            return n_out, i  # full: the caller grows the arrays and calls again from item i
         p = counts[0]
         counts[0] += 1
         counts[2] += 1
@@ -80,4 +83,4 @@ def filter_items(items, anc, arrived, head, nxt, item_of, parked, wait, counts, 
                 item_of[e] = p
                 nxt[e] = head[a]
                 head[a] = e
-    return n_out
+    return n_out, items.shape[0]

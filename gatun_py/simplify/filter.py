@@ -35,18 +35,13 @@ class _WaitQueues:
         self.nxt = np.empty(0, np.int64)
         self.item_of = np.empty(0, np.int64)
 
-    def reserve(self, n_items: int) -> None:
-        """Room for n_items more parked items (each on at most ``arity`` lists)."""
-        need_p = int(self.counts[0]) + n_items  # slots are not reused: bounded by the tets decoded
-        if need_p > len(self.wait):
-            cap = max(need_p, 2 * len(self.wait), 1024)
-            self.parked = _grow(self.parked, cap)
-            self.wait = _grow(self.wait, cap)
-        need_e = int(self.counts[1]) + self.arity * n_items
-        if need_e > len(self.nxt):
-            cap = max(need_e, 2 * len(self.nxt), 4096)
-            self.nxt = _grow(self.nxt, cap)
-            self.item_of = _grow(self.item_of, cap)
+    def grow(self) -> None:
+        """Double the room for parked items and wait-list entries (slots are not reused)."""
+        cap = max(2 * len(self.wait), 1024)
+        self.parked = _grow(self.parked, cap)
+        self.wait = _grow(self.wait, cap)
+        self.nxt = _grow(self.nxt, self.arity * cap)
+        self.item_of = _grow(self.item_of, self.arity * cap)
 
     @property
     def waiting(self) -> int:
@@ -123,11 +118,15 @@ class SimplifyFilter:
     def _run(self, q: _WaitQueues, first: int, k: int, items: np.ndarray) -> np.ndarray:
         """Release what the batch's new vertices complete, then filter the batch's own items."""
         items = np.ascontiguousarray(items, dtype=np.int32).reshape(-1, q.arity)
-        q.reserve(len(items))
         out = np.empty((len(items) + q.waiting, q.arity), np.int32)
         n_out = K.release(first, k, q.head, q.nxt, q.item_of, q.parked, q.wait, q.counts, out, 0) if k else 0
-        n_out = K.filter_items(items, self.anc, self.arrived, q.head, q.nxt, q.item_of, q.parked, q.wait, q.counts,
-                               out, n_out)
+        i = 0
+        while True:
+            n_out, i = K.filter_items(items, i, self.anc, self.arrived, q.head, q.nxt, q.item_of, q.parked, q.wait,
+                                      q.counts, out, n_out)
+            if n_out < 0 or i >= len(items):
+                break
+            q.grow()
         if n_out < 0:
             raise CorruptFileError("a decoded tet or face refers to a vertex outside the mesh")
         return out[:n_out]

@@ -102,10 +102,6 @@ def check_forest(parent: np.ndarray, rank: np.ndarray) -> int:
     return k
 
 
-def _order_by_rank_desc(rank: np.ndarray) -> np.ndarray:
-    return np.argsort(-rank.astype(np.int64), kind="stable").astype(np.int64)
-
-
 def ancestors(parent: np.ndarray, rank: np.ndarray, n_merges: int) -> np.ndarray:
     """Every vertex's ancestor after the first ``n_merges`` merges (paper section 4.2).
 
@@ -127,7 +123,7 @@ def ancestors(parent: np.ndarray, rank: np.ndarray, n_merges: int) -> np.ndarray
         raise OptionError(f"n_merges must be >= 0, got {n_merges}")
     if parent.shape[0] == 0:
         return np.zeros(0, np.int32)
-    return _ancestors(parent, rank, _order_by_rank_desc(rank), np.int64(n_merges))
+    return _ancestors(parent, rank, np.int64(n_merges))
 
 
 def simplified_mesh(mesh: TetMesh, forest: MergeForest, n_merges: int, *, return_ids: bool = False):

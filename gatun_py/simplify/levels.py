@@ -215,17 +215,29 @@ def resolve_target(reader, *, ratio: float | None = None, level: int | None = No
     return Target(int(lv["level"]), n, n / n0 if n0 else 0.0, int(lv.get("merges_before", 0)))
 
 
-def target_ancestors(reader, target: Target) -> np.ndarray | None:
-    """Ancestor of every vertex of the target's stored level (decode order), None if no merge is left."""
+def target_ancestors(reader, target: Target, *, times: dict | None = None) -> np.ndarray | None:
+    """Ancestor of every vertex of the target's stored level (decode order), None if no merge is left.
+
+    ``times``, if given, receives ``forest_decode_s`` (reading and decoding the forest section)
+    and ``ancestors_s`` (the top-down pass).
+    """
+    import time
+
     rest = target.merges - target.level_merges
     if rest == 0:
         return None
+    t0 = time.perf_counter()
     parent, rank = reader.read_forest(target.level)
+    t1 = time.perf_counter()
     if rest > int((rank != ROOT_RANK).sum()):
         from ..errors import CorruptFileError
 
         raise CorruptFileError(f"level {target.level}: its forest holds fewer merges than the metadata says")
-    return ancestors(parent, rank, rest)
+    anc = ancestors(parent, rank, rest)
+    if times is not None:
+        times["forest_decode_s"] = t1 - t0
+        times["ancestors_s"] = time.perf_counter() - t1
+    return anc
 
 
 def read_simplified(source, *, ratio: float | None = None, level: int | None = None):

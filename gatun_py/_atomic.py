@@ -10,6 +10,12 @@ from pathlib import Path
 from .errors import OutputError
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def check_output_path(path: str | os.PathLike, *, force: bool = False) -> Path:
     """Refuse to clobber an existing file unless ``force``; check the directory is writable."""
     path = Path(path)
@@ -36,6 +42,7 @@ def atomic_path(path: str | os.PathLike, *, force: bool = False):
     path = check_output_path(path, force=force)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent or ".")
     os.close(fd)
+    os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual permissions
     try:
         yield Path(tmp)
         os.replace(tmp, path)

@@ -120,3 +120,15 @@ def test_usage_errors_exit_2():
     assert run("info").exit_code == 2
     assert run("info", POST, "--q-var", "nonsense").exit_code == 2
     assert run("frobnicate").exit_code == 2
+
+
+def test_outputs_get_normal_permissions(tmp_path):
+    import os
+    import stat
+
+    out = tmp_path / "p.vtu"
+    assert run("convert", POST, "-o", out, "-q").exit_code == 0
+    mask = os.umask(0)
+    os.umask(mask)
+    assert stat.S_IMODE(out.stat().st_mode) == 0o666 & ~mask
+    assert [p.name for p in tmp_path.iterdir()] == ["p.vtu"]  # no temporary left behind

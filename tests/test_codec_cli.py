@@ -6,10 +6,9 @@ import json
 import os
 
 import numpy as np
-from click.testing import CliRunner
 
+from cli_util import assert_error, run
 from conftest import SAMPLES
-from gatun_py.cli.main import tetc
 from gatun_py.codec.cutborder import encode_connectivity
 from gatun_py.mesh import read_mesh
 from naive_codec import canonical_tets
@@ -18,16 +17,6 @@ POST = str(SAMPLES / "lox_post_tets" / "post.vtk")
 FIRE = str(SAMPLES / "room_fire" / "fire_ug.vtu")
 
 
-def run(*args):
-    return CliRunner().invoke(tetc, [str(a) for a in args], catch_exceptions=False)
-
-
-def assert_error(res, *fragments):
-    assert res.exit_code == 1, res.output
-    lines = [ln for ln in res.output.splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith("tetc: error: "), res.output
-    for f in fragments:
-        assert f in lines[0], (f, lines[0])
 
 
 def _same_mesh(a, b):

@@ -4,18 +4,14 @@ import json
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
+from cli_util import run
 from conftest import SAMPLES
-from gatun_py.cli.main import tetc
 from gatun_py.codec import TetcReader
 from gatun_py.pipeline.quality import read_rgb
 
 POST = str(SAMPLES / "lox_post_tets" / "post.vtk")
 
-
-def run(*args):
-    return CliRunner().invoke(tetc, [str(a) for a in args], catch_exceptions=False)
 
 
 @pytest.fixture(scope="module")

@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from cli_util import run
 from meshgen import delaunay_mesh, grid_mesh
 
 from gatun_py.cli.main import tetc
@@ -22,9 +23,6 @@ def mesh_file(tmp_path):
     write_mesh(mesh, path)
     return mesh, path
 
-
-def run(*args):
-    return CliRunner().invoke(tetc, [str(a) for a in args], catch_exceptions=False)
 
 
 def test_render_mesh_file_with_stats(mesh_file, tmp_path):

@@ -6,27 +6,16 @@ import json
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
+from cli_util import assert_error, run
 from conftest import SAMPLES, load_sample
 from meshgen import single_tet
 
-from gatun_py.cli.main import tetc
 from gatun_py.mesh import read_mesh, write_mesh
 from gatun_py.simplify import build_levels, decimate, level_merges, simplified_mesh
 
 POST = str(SAMPLES / "lox_post_tets" / "post.vtk")
 
 
-def run(*args):
-    return CliRunner().invoke(tetc, [str(a) for a in args], catch_exceptions=False)
-
-
-def assert_error(res, *fragments):
-    assert res.exit_code == 1, res.output
-    lines = [ln for ln in res.output.splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith("tetc: error: "), res.output
-    for f in fragments:
-        assert f in lines[0], (f, lines[0])
 
 
 def _canonical(mesh):

@@ -44,3 +44,14 @@ def sample(request):
 def small_sample():
     """The smallest real sample (post.vtk), for tests that must stay quick."""
     return load_sample("post")[0]
+
+
+@pytest.fixture(scope="session")
+def post_tetc(tmp_path_factory):
+    """post.vtk compressed once per session by `tetc compress` (all levels, merge forest)."""
+    from cli_util import run
+
+    out = tmp_path_factory.mktemp("post") / "post.tetc"
+    res = run("compress", SAMPLE_FILES["post"][0], "-o", out, "--quiet")
+    assert res.exit_code == 0, res.output
+    return out

@@ -14,12 +14,6 @@ POST = str(SAMPLES / "lox_post_tets" / "post.vtk")
 
 
 
-@pytest.fixture(scope="module")
-def post_tetc(tmp_path_factory):
-    path = tmp_path_factory.mktemp("cli") / "post.tetc"
-    res = run("compress", POST, "-o", path, "-q")
-    assert res.exit_code == 0, res.output
-    return path
 
 
 def _render(post_tetc, out, *extra):

@@ -24,12 +24,6 @@ def _canonical(mesh):
     return sorted(tuple(sorted(map(tuple, key[t]))) for t in mesh.tets)
 
 
-@pytest.fixture(scope="module")
-def post_tetc(tmp_path_factory):
-    out = tmp_path_factory.mktemp("simp") / "post.tetc"
-    res = run("compress", POST, "-o", out, "--quiet")
-    assert res.exit_code == 0, res.output
-    return out
 
 
 def test_info_lists_levels_and_forest(post_tetc):

@@ -80,3 +80,14 @@ def test_targets_and_bad_options(post_levels):
             resolve_target(reader, ratio=1.0)
     with pytest.raises(OptionError, match="either"):
         resolve_target(reader, ratio=0.5, level=1)
+
+
+def test_corrupt_render_metadata_is_a_typed_error(post_levels, monkeypatch):
+    from gatun_py.errors import CorruptFileError
+    from gatun_py.pipeline.stream import file_render_defaults
+
+    reader = TetcReader(post_levels[3])
+    for bad in ({"bbox": [[0, 0], [1, 1, 1]]}, {"bbox": "x"}, {"scalar_range": [0, float("nan")]}, {"bbox": None}):
+        monkeypatch.setattr(reader, "meta", {**reader.meta, **bad})
+        with pytest.raises(CorruptFileError, match="corrupt metadata"):
+            file_render_defaults(reader)

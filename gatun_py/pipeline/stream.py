@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import OptionError
+from ..errors import CorruptFileError, OptionError
 from ..simplify.forest import mesh_from_ancestors
 from ..simplify.levels import Target, resolve_target, stored_levels, target_ancestors  # noqa: F401 (re-exported)
 
@@ -57,8 +57,13 @@ def file_render_defaults(reader) -> tuple[np.ndarray, np.ndarray, tuple[float, f
     compression as ``render_step``, else computed from level 0's boundary, which is the first
     thing its stream holds. Every level and ratio then samples the same positions.
     """
-    lo, hi = (np.asarray(x, np.float64) for x in reader.meta["bbox"])
-    rng = tuple(float(x) for x in reader.meta["scalar_range"])
+    try:
+        lo, hi = (np.asarray(x, np.float64).reshape(3) for x in reader.meta["bbox"])
+        rng = tuple(float(x) for x in reader.meta["scalar_range"])
+        if len(rng) != 2 or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and all(map(math.isfinite, rng))):
+            raise ValueError
+    except (KeyError, TypeError, ValueError):
+        raise CorruptFileError("corrupt metadata: bad bounding box or scalar range") from None
     step = reader.meta.get("render_step")
     if not (isinstance(step, (int, float)) and math.isfinite(step) and step > 0):
         from ..render.raycast import default_step

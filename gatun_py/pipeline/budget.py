@@ -25,6 +25,8 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import numpy as np
+
 
 @dataclass(frozen=True)
 class LevelSize:
@@ -100,15 +102,21 @@ def plan_for_budget(levels: list[LevelSize], model: TimeModel, budget_s: float, 
 
 def fit_time_model(probes: list[dict]) -> TimeModel:
     """Coefficients from probe renders, each a dict with ``decoded_tets``, ``rendered_tets``,
-    ``decode_s`` (decode + filter), ``render_s`` and ``total_s``."""
+    ``decode_s`` (decode + filter), ``render_s`` and ``total_s``.
+
+    Decoding is proportional to the tets decoded; rendering is a least-squares line over the tets
+    rendered (its intercept is per-pixel work: ray set-up, boundary, samples); what the two do not
+    explain (file opening, PNG output) goes into the fixed cost, averaged over the probes.
+    """
     dec = sum(p["decode_s"] for p in probes) / max(sum(p["decoded_tets"] for p in probes), 1)
-    ps = sorted(probes, key=lambda p: p["rendered_tets"])
-    a, b = ps[0], ps[-1]
-    if b["rendered_tets"] > a["rendered_tets"]:
-        ren = max((b["render_s"] - a["render_s"]) / (b["rendered_tets"] - a["rendered_tets"]), 0.0)
+    r = np.array([p["rendered_tets"] for p in probes], float)
+    y = np.array([p["render_s"] for p in probes], float)
+    if len(probes) > 1 and np.ptp(r) > 0:
+        ren = max(float(np.polyfit(r, y, 1)[0]), 0.0)
     else:
-        ren = b["render_s"] / max(b["rendered_tets"], 1)
-    fixed = max(min(p["total_s"] - dec * p["decoded_tets"] - ren * p["rendered_tets"] for p in probes), 0.0)
+        ren = float(y.max() / max(r.max(), 1.0))
+    fixed = max(float(np.mean([p["total_s"] - dec * p["decoded_tets"] - ren * p["rendered_tets"] for p in probes])),
+                0.0)
     return TimeModel(fixed, dec, ren)
 
 
@@ -162,32 +170,43 @@ def _file_id(path) -> str:
 
 
 def _probe_levels(levels: list[LevelSize]) -> list[LevelSize]:
-    """The coarsest stored level and one with about an eighth of the full mesh's tets."""
+    """The coarsest stored level and those closest to 1/16 and 1/4 of the full mesh's tets."""
     ls = sorted(levels, key=lambda x: x.merges)
-    coarse = ls[-1]
-    goal = max(ls[0].tets / 8.0, 4.0 * coarse.tets)
-    mid = min(ls, key=lambda x: abs(math.log(max(x.tets, 1) / goal)))
-    return [coarse] if mid.level == coarse.level else [coarse, mid]
+    picks = {ls[-1].level: ls[-1]}
+    for frac in (1 / 16, 1 / 4):
+        goal = max(ls[0].tets * frac, 1.0)
+        lv = min(ls, key=lambda x: abs(math.log(max(x.tets, 1) / goal)))
+        picks.setdefault(lv.level, lv)
+    return list(picks.values())
 
 
-def calibrate(path, view, levels: list[LevelSize], *, repeats: int = 2) -> TimeModel:
-    """Time probe renders of coarse stored levels (warm: the best of ``repeats``) and fit the model."""
-    from ..render.image import png_bytes, to_rgb8
+def calibrate(path, view, levels: list[LevelSize], *, repeats: int = 3) -> TimeModel:
+    """Time whole frames (open, decode, render, PNG written) of a few stored levels and fit the model.
+
+    Each probe is the median of ``repeats`` warm frames, so the model predicts a typical frame,
+    not the luckiest one.
+    """
+    import statistics
+    import tempfile
+
+    from ..render.image import write_png
     from .stream import Target, render_tetc
 
     probes = []
-    for lv in _probe_levels(levels):
-        best = None
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            res = render_tetc(path, view, target=Target(lv.level, lv.merges, 0.0, lv.merges))
-            png_bytes(to_rgb8(res.image))  # the PNG encoding is part of every frame
-            total = time.perf_counter() - t0
-            if best is None or total < best["total_s"]:
-                best = dict(decoded_tets=lv.tets, rendered_tets=res.stats["tets_rendered"],
-                            decode_s=res.stats["decode_s"] + res.stats["filter_s"], render_s=res.stats["render_s"],
-                            total_s=total)
-        probes.append(best)
+    with tempfile.TemporaryDirectory(prefix="tetc-calib-") as tmp:
+        png = Path(tmp) / "probe.png"
+        render_tetc(path, view, target=Target(levels[-1].level, levels[-1].merges, 0.0, levels[-1].merges))
+        for lv in _probe_levels(levels):
+            runs = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                res = render_tetc(path, view, target=Target(lv.level, lv.merges, 0.0, lv.merges))
+                write_png(png, res.image, force=True)  # a frame ends with its PNG on disk
+                runs.append((time.perf_counter() - t0, res.stats))
+            total = statistics.median(t for t, _ in runs)
+            st = min(runs, key=lambda r: abs(r[0] - total))[1]
+            probes.append(dict(decoded_tets=lv.tets, rendered_tets=st["tets_rendered"],
+                               decode_s=st["decode_s"] + st["filter_s"], render_s=st["render_s"], total_s=total))
     return fit_time_model(probes)
 
 

@@ -214,14 +214,14 @@ def main():
     for n in DATASETS:
         res = {}
         for p in ("streaming", "generic"):
-            code = ("import json,resource;from gatun_py.pipeline.stream import render_tetc,View;"
+            code = ("from gatun_py._resources import peak_rss_mb;from gatun_py.pipeline.stream import render_tetc,View;"
                     f"r=render_tetc({str(files[n][1])!r},View(tf={TF[n]!r}),pipeline={p!r});"
-                    "print(json.dumps(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss/1024))")
+                    "print(peak_rss_mb())")
             out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
             res[p] = float(out.stdout.strip().splitlines()[-1]) if out.returncode == 0 else float("nan")
-        base = subprocess.run([sys.executable, "-c", "import json,resource,gatun_py.pipeline.stream,"
-                               "gatun_py.render.raycast,gatun_py.codec;print(resource.getrusage(resource.RUSAGE_SELF)"
-                               ".ru_maxrss/1024)"], capture_output=True, text=True, cwd=ROOT)
+        base = subprocess.run([sys.executable, "-c", "import gatun_py.pipeline.stream,gatun_py.render.raycast,"
+                               "gatun_py.codec;from gatun_py._resources import peak_rss_mb;print(peak_rss_mb())"],
+                              capture_output=True, text=True, cwd=ROOT)
         b = float(base.stdout.strip() or "nan")
         mem_rows.append([n, f"{res['streaming']:.0f}", f"{res['generic']:.0f}", f"{res['streaming'] / res['generic']:.2f}",
                          f"{b:.0f}", f"{(res['streaming'] - b) / max(res['generic'] - b, 1e-9):.2f}"])

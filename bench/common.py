@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import resource
 import subprocess
 import sys
 import time
@@ -42,7 +41,9 @@ def timed(fn, *args, repeat: int = 1, **kwargs):
 
 
 def peak_rss_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    from gatun_py._resources import peak_rss_mb as peak
+
+    return peak()
 
 
 def run_cli(args: list[str], env: dict | None = None) -> tuple[float, subprocess.CompletedProcess]:

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from gatun_py._resources import peak_rss_mb
 from gatun_py.errors import OptionError
 
 from .main import tetc
@@ -24,26 +25,6 @@ def parse_size(text: str) -> tuple[int, int]:
     if w <= 0 or h <= 0:
         raise OptionError(f"--size must be positive, got {text!r}")
     return w, h
-
-
-def _peak_rss_mb() -> float:
-    """Peak resident memory of this process in MB.
-
-    Linux's VmHWM belongs to the current program image; ``ru_maxrss`` survives ``exec`` and so
-    reports the parent's peak for a process started from a big one (a benchmark driver).
-    """
-    import resource
-    import sys
-
-    try:
-        with open("/proc/self/status") as f:
-            for line in f:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return rss / (1024.0 * 1024.0) if sys.platform == "darwin" else rss / 1024.0
 
 
 def _kernels_cached() -> bool:
@@ -142,7 +123,7 @@ def render(input, output, tf_spec, mode, step, size, azimuth, elevation, zoom, r
     st.pop("filter", None)
     st.update(planned)
     st["total_s"] = time.perf_counter() - t_start
-    st["peak_rss_mb"] = _peak_rss_mb()
+    st["peak_rss_mb"] = peak_rss_mb()
     st["output"] = str(output)
     st["size"] = [width, height]
     if st["rays_hit"] == 0:

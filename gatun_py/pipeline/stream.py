@@ -14,13 +14,13 @@ whatever level or ratio is drawn.
 from __future__ import annotations
 
 import math
-import resource
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from .._resources import peak_rss_mb
 from ..errors import CorruptFileError, OptionError
 from ..simplify.forest import mesh_from_ancestors
 from ..simplify.levels import Target, resolve_target, stored_levels, target_ancestors  # noqa: F401 (re-exported)
@@ -126,7 +126,7 @@ def render_tetc(path, view: View, *, ratio: float | None = None, level: int | No
     stats.update(
         pipeline=pipeline, level=target.level, ratio=target.ratio, merges=target.merges,
         tets_decoded=int(lv["tets"]), filter=fstats,
-        peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        peak_rss_mb=peak_rss_mb(),
     )
     return PipelineResult(res.image, stats)
 
@@ -181,7 +181,7 @@ def render_mesh_file(path, view: View, *, read_kwargs: dict | None = None, progr
     stats = dict(res.stats)
     stats.update(decode_s=read_s + stats.get("decode_s", 0.0), filter_s=0.0, pipeline="streaming", level=0,
                  ratio=0.0, merges=0, tets_decoded=mesh.n_tets, notes=list(report.notes),
-                 peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
+                 peak_rss_mb=peak_rss_mb())
     return PipelineResult(res.image, stats)
 
 

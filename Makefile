@@ -15,6 +15,7 @@ $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 	$(BIN)/pip install -q -e '.[test]'
+	$(BIN)/python -m gatun_py.warmup
 	touch $(STAMP)
 
 test: $(STAMP)

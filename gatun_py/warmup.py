@@ -1,0 +1,85 @@
+"""Compile (and cache) every numba kernel ahead of the first real run: ``python -m gatun_py.warmup``.
+
+``make install`` runs this, so a user's first ``tetc compress`` / ``tetc render`` starts in seconds
+instead of sitting in JIT compilation. The kernels are exercised through the public API on a tiny
+mesh, which gives them the same argument types as real data; the work is split over two processes
+(numba compiles one function at a time per process) so both cores are used.
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+
+def tiny_mesh():
+    """A 4×4×3 jittered grid split into tets, with a smooth scalar."""
+    from .mesh.plot3d import grid_hexes
+    from .mesh.split import orient_positive, split_hexes_two_colour
+    from .mesh.validate import validate_tets
+
+    dims = (4, 4, 3)
+    k, j, i = np.meshgrid(*(np.arange(d) for d in dims[::-1]), indexing="ij")
+    pts = np.stack([i, j, k], -1).reshape(-1, 3).astype(np.float64)
+    pts += np.random.default_rng(0).uniform(-0.15, 0.15, pts.shape)
+    pts = pts.astype(np.float32)
+    hexes, colour = grid_hexes(dims)
+    tets = orient_positive(pts, split_hexes_two_colour(hexes, colour))
+    dens = (np.sin(pts[:, 0]) + 0.3 * pts[:, 1]).astype(np.float32)
+    return validate_tets(pts, dens, tets)[0]
+
+
+def _simplify_and_render() -> str:
+    from .render.camera import Camera
+    from .render.raycast import render_mesh
+    from .render.stream import mesh_batches, render_batches
+    from .simplify import build_levels, decimate
+
+    mesh = tiny_mesh()
+    levels = build_levels(mesh, decimate(mesh))
+    cam = Camera(16, 16, 30, 20)
+    for mode in ("volume", "face"):
+        render_mesh(mesh, cam, "default", mode=mode)
+        render_batches(mesh_batches(mesh, batch_tets=7), cam, "default", mode=mode, scalar_range=mesh.scalar_range)
+    return f"decimation and rendering ({len(levels)} levels)"
+
+
+def _codec_and_filter() -> str:
+    from .codec import LevelPayload, TetcReader, write_tetc
+    from .simplify import ROOT_RANK, ancestors
+    from .simplify.filter import SimplifyFilter
+
+    mesh = tiny_mesh()
+    n = mesh.n_points
+    parent = np.arange(n, dtype=np.int32)
+    rank = np.full(n, ROOT_RANK, np.int32)
+    parent[1], rank[1] = 0, 0  # one merge, so the forest coder and the filter do real work
+    with tempfile.TemporaryDirectory(prefix="tetc-warmup-") as tmp:
+        path = Path(tmp) / "w.tetc"
+        write_tetc(path, [LevelPayload(0, 0.0, 0, mesh, (parent, rank))])
+        reader = TetcReader(path)
+        reader.decode_mesh(0)
+        p, r = reader.read_forest(0)
+        anc = ancestors(p, r, 1)
+        list(SimplifyFilter(anc).filter(reader.iter_decode(0, batch_tets=5)))
+    return "compression, decompression and the run-time filter"
+
+
+def main() -> int:
+    t0 = time.perf_counter()
+    print("compiling tetc's kernels (once per install; about a minute)...", file=sys.stderr, flush=True)
+    with ProcessPoolExecutor(max_workers=2) as pool:
+        jobs = [pool.submit(_simplify_and_render), pool.submit(_codec_and_filter)]
+        for job in jobs:
+            print(f"  ready: {job.result()}", file=sys.stderr, flush=True)
+    print(f"kernels compiled and cached in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -407,6 +407,27 @@ def _sort3w(a, b, c, wa, wb, wc):
     return a, b, c, wa, wb, wc
 
 
+@njit(cache=True, inline="always")
+def _canon(i, j, x, g):
+    """An edge side known for the directed edge i -> j, as (lo, hi, value, sign) of lo -> hi.
+
+    ``_side`` evaluates every edge lo -> hi and negates for hi -> lo, so negating back gives the
+    canonical value bit for bit."""
+    if i < j:
+        return i, j, x, g
+    return j, i, -x, -g
+
+
+@njit(cache=True, inline="always")
+def _by_edge(na, nb, e, vab, sab, vbc, sbc, vac, sac):
+    """File the canonical edge side ``e`` under its edge of the face (na, nb, nc)."""
+    if e[0] == na:
+        if e[1] == nb:
+            return e[2], e[3], vbc, sbc, vac, sac
+        return vab, sab, vbc, sbc, e[2], e[3]
+    return vab, sab, e[2], e[3], vac, sac
+
+
 @njit(cache=True)
 def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, seg_state, seg_steps,
           seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps):
@@ -435,6 +456,8 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, s
     ma, mb, mc, mfrom = a, b, c, came_from
     power = 1
     lam = 0
+    have_face_sides = False
+    vab = sab = vbc = sbc = vac = sac = 0.0
     while True:
         slot = _hash_find(htab, mul, a, b, c)
         if slot < 0:
@@ -458,10 +481,21 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, s
             v0, v1, v2 = a, c, b
         else:
             v0, v1, v2 = a, b, c
-        # the six edge sides; face 0 = (v1, v2, v3), 1 = (v0, v3, v2), 2 = (v0, v1, v3)
-        x12, g12 = _side(P, dx, dy, dz, v1, v2)
-        x20, g20 = _side(P, dx, dy, dz, v2, v0)
-        x01, g01 = _side(P, dx, dy, dz, v0, v1)
+        # the six edge sides; face 0 = (v1, v2, v3), 1 = (v0, v3, v2), 2 = (v0, v1, v3).
+        # The entry face's three were computed at the previous step (as its exit face).
+        if have_face_sides:
+            if (code & 1) == 0:  # (v0, v1, v2) = (a, c, b)
+                x12, g12 = -vbc, -sbc
+                x20, g20 = -vab, -sab
+                x01, g01 = vac, sac
+            else:  # (a, b, c)
+                x12, g12 = vbc, sbc
+                x20, g20 = -vac, -sac
+                x01, g01 = vab, sab
+        else:
+            x12, g12 = _side(P, dx, dy, dz, v1, v2)
+            x20, g20 = _side(P, dx, dy, dz, v2, v0)
+            x01, g01 = _side(P, dx, dy, dz, v0, v1)
         x03, g03 = _side(P, dx, dy, dz, v0, v3)
         x13, g13 = _side(P, dx, dy, dz, v1, v3)
         x23, g23 = _side(P, dx, dy, dz, v2, v3)
@@ -489,12 +523,26 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, s
         if best_k == 0:
             na, nb, nc, wa, wb, wc = _sort3w(v1, v2, v3, x23, -x13, x12)
             came_from = v0
+            e0 = _canon(v1, v2, x12, g12)
+            e1 = _canon(v2, v3, x23, g23)
+            e2 = _canon(v1, v3, x13, g13)
         elif best_k == 1:
             na, nb, nc, wa, wb, wc = _sort3w(v0, v3, v2, -x23, x20, x03)
             came_from = v1
+            e0 = _canon(v0, v3, x03, g03)
+            e1 = _canon(v2, v3, x23, g23)
+            e2 = _canon(v2, v0, x20, g20)
         else:
             na, nb, nc, wa, wb, wc = _sort3w(v0, v1, v3, x13, -x03, x01)
             came_from = v2
+            e0 = _canon(v0, v1, x01, g01)
+            e1 = _canon(v1, v3, x13, g13)
+            e2 = _canon(v0, v3, x03, g03)
+        # keep the exit face's sides for the next step, by edge (na, nb), (nb, nc), (na, nc)
+        have_face_sides = na < nb and nb < nc
+        vab, sab, vbc, sbc, vac, sac = _by_edge(na, nb, e0, vab, sab, vbc, sbc, vac, sac)
+        vab, sab, vbc, sbc, vac, sac = _by_edge(na, nb, e1, vab, sab, vbc, sbc, vac, sac)
+        vab, sab, vbc, sbc, vac, sac = _by_edge(na, nb, e2, vab, sab, vbc, sbc, vac, sac)
         t_next, s_next = _face_values_w(P, dens, dx, dy, dz, na, nb, nc, wa, wb, wc)
         if forward:
             samples += _composite(acc, t_here, s_here, t_next, s_next, True, mode, step, tab, lo, inv, unit,

@@ -185,9 +185,11 @@ def _chord_midpoint(P, dens, dx, dy, dz, a, b, c):
 def _hash0(a, b, c, mul, mask):
     # Faces are grouped by their smallest vertex id: meshes number neighbouring vertices close
     # together, so the faces a ray meets in a row sit in nearby slots (far fewer cache misses
-    # than a scattering hash). ``mul`` (a power of two) = slots per vertex id.
+    # than a scattering hash). ``mul`` = slots per vertex id in 16-bit fixed point, so the ids
+    # spread over the whole table whatever the ratio of slots to vertices; the other two ids
+    # pick a slot inside the id's stretch.
     mix = (np.int64(b) * 73856093) ^ (np.int64(c) * 19349663)
-    return (np.int64(a) * mul + (mix & (mul - 1))) & mask
+    return (((np.int64(a) * mul) >> 16) + (((mix & 0xFFFF) * mul) >> 32)) & mask
 
 
 @njit(cache=True)

@@ -135,6 +135,14 @@ class StreamingRaycaster:
         self._points[self._nv: n] = pts
         self._dens[self._nv: n] = den
         self._nv = n
+        if self._started:
+            # The face table groups faces by their smallest vertex id, ``mul`` slots per id; sized
+            # for fewer vertices, the new ids would wrap around onto the old ones' slots and pile
+            # up into long probe chains.
+            mul = self._slots_per_vertex(len(self._htab))
+            if mul < self._hmul:
+                self._hmul = mul
+                self._htab = K.rehash(self._htab, len(self._htab), mul)
 
     def set_boundary(self, faces) -> None:
         """Add boundary faces (outward wound); all of them must come before the first tet."""
@@ -286,12 +294,13 @@ class StreamingRaycaster:
             self._htab = K.rehash(self._htab, new, self._hmul)
 
     def _slots_per_vertex(self, cap):
-        """Power of two close to table slots per vertex (faces are grouped by smallest vertex)."""
-        nv = max(self._nv, 1)
-        mul = 1
-        while mul * 2 * nv <= cap:
-            mul *= 2
-        return mul
+        """Table slots per vertex id in 16-bit fixed point (faces are grouped by smallest vertex).
+
+        A stream's vertices keep arriving after the table is made; sizing for a typical vertex
+        count of the expected tets (meshes have about 5 tets per vertex) spares rehashing the
+        table at every vertex batch.
+        """
+        return (int(cap) << 16) // max(self._nv, (self.expected_tets or 0) // 4, 1)
 
     def _advance(self, n_active):
         old = numba.set_parallel_chunksize(4)

@@ -336,38 +336,54 @@ def _first_sample(t0, step):
     return k
 
 
-@njit(cache=True)
-def _composite(acc, t0, s0, t1, s1, forward, mode, step, tab, lo, inv, unit, buf, buf2):
+@njit(cache=True, inline="always")
+def _composite(acc, t0, s0, t1, s1, k0, k1, forward, mode, step, tab, lo, inv, unit, buf, buf2):
     """Composite the tet interval [t0, t1) (scalar s0 -> s1) into ``acc``; return samples taken.
 
     forward: ``acc`` is a front subsegment (new samples go behind it); otherwise a back
-    subsegment walking toward the eye (new samples go in front of it).
+    subsegment walking toward the eye (new samples go in front of it). Volume mode: ``k0``,
+    ``k1`` are ``_first_sample(t0)``, ``_first_sample(t1)`` (the walk computes each face's once).
     """
     if not t1 > t0:
         return 0
     if mode == MODE_VOLUME:
-        k0 = _first_sample(t0, step)
-        k1 = _first_sample(t1, step)  # first sample index not in [t0, t1)
         if k1 <= k0:
             return 0
         scale = (s1 - s0) / (t1 - t0)
+        # the running colour in locals: ``acc`` may alias ``tab`` as far as the compiler knows
+        a0, a1, a2, a3 = acc[0], acc[1], acc[2], acc[3]
+        n = tab.shape[0]
         for q in range(k1 - k0):
             k = k0 + q if forward else k1 - 1 - q
             s = s0 + (k * step - t0) * scale
-            _lookup(tab, lo, inv, s, buf)
-            al = buf[3]
+            # _lookup, by hand: the four channels straight into locals
+            x = (s - lo) * inv
+            if not x > 0.0:  # also NaN
+                x = 0.0
+            if x > n - 1:
+                x = float(n - 1)
+            i = int(x)
+            if i >= n - 1:
+                i = n - 2
+            f = x - i
+            g = 1.0 - f
+            c0 = tab[i, 0] * g + tab[i + 1, 0] * f
+            c1 = tab[i, 1] * g + tab[i + 1, 1] * f
+            c2 = tab[i, 2] * g + tab[i + 1, 2] * f
+            al = tab[i, 3] * g + tab[i + 1, 3] * f
             if forward:
-                w = (1.0 - acc[3]) * al
-                acc[0] += w * buf[0]
-                acc[1] += w * buf[1]
-                acc[2] += w * buf[2]
-                acc[3] += w
+                w = (1.0 - a3) * al
+                a0 += w * c0
+                a1 += w * c1
+                a2 += w * c2
+                a3 += w
             else:
                 r = 1.0 - al
-                acc[0] = al * buf[0] + r * acc[0]
-                acc[1] = al * buf[1] + r * acc[1]
-                acc[2] = al * buf[2] + r * acc[2]
-                acc[3] = al + r * acc[3]
+                a0 = al * c0 + r * a0
+                a1 = al * c1 + r * a1
+                a2 = al * c2 + r * a2
+                a3 = al + r * a3
+        acc[0], acc[1], acc[2], acc[3] = a0, a1, a2, a3
         return k1 - k0
     # face mode: the interval takes the average of the samples at its two faces
     _lookup(tab, lo, inv, s0, buf)
@@ -393,6 +409,14 @@ def _composite(acc, t0, s0, t1, s1, forward, mode, step, tab, lo, inv, unit, buf
         acc[2] = al * cb + r * acc[2]
         acc[3] = al + r * acc[3]
     return 1
+
+
+@njit(cache=True, inline="always")
+def _first_sample_at(t, step, mode):
+    """``_first_sample(t)`` in volume mode for a finite ``t``; 0 where it is not needed."""
+    if mode == MODE_VOLUME and math.isfinite(t):
+        return _first_sample(t, step)
+    return 0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -459,6 +483,7 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, s
     power = 1
     lam = 0
     have_face_sides = False
+    k_here = _first_sample_at(t_here, step, mode)
     vab = sab = vbc = sbc = vac = sac = 0.0
     while True:
         slot = _hash_find(htab, mul, a, b, c)
@@ -546,14 +571,15 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, s
         vab, sab, vbc, sbc, vac, sac = _by_edge(na, nb, e1, vab, sab, vbc, sbc, vac, sac)
         vab, sab, vbc, sbc, vac, sac = _by_edge(na, nb, e2, vab, sab, vbc, sbc, vac, sac)
         t_next, s_next = _face_values_w(P, dens, dx, dy, dz, na, nb, nc, wa, wb, wc)
+        k_next = _first_sample_at(t_next, step, mode)
         if forward:
-            samples += _composite(acc, t_here, s_here, t_next, s_next, True, mode, step, tab, lo, inv, unit,
-                                  buf, buf2)
+            samples += _composite(acc, t_here, s_here, t_next, s_next, k_here, k_next, True, mode, step, tab, lo,
+                                  inv, unit, buf, buf2)
         else:
-            samples += _composite(acc, t_next, s_next, t_here, s_here, False, mode, step, tab, lo, inv, unit,
-                                  buf, buf2)
+            samples += _composite(acc, t_next, s_next, t_here, s_here, k_next, k_here, False, mode, step, tab, lo,
+                                  inv, unit, buf, buf2)
         a, b, c = na, nb, nc
-        t_here, s_here = t_next, s_next
+        t_here, s_here, k_here = t_next, s_next, k_next
         if a == oa and b == ob and c == oc:
             state = STATE_DONE
             break

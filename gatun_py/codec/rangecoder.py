@@ -224,6 +224,9 @@ def enc_finish(st, out):
 
 
 # ---------------------------------------------------------------- decoder
+# The decoding primitives are compiled with ``_nrt=False``: they never allocate, and without the
+# runtime's reference counting a call no longer does an atomic increment and decrement of every
+# array argument, which cost about a quarter of the decoders' time (measured with perf).
 
 
 @njit(cache=True, inline="always")
@@ -252,7 +255,7 @@ def dec_init(st, data):
     st[DEC_CODE] = code
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def dec_bit(st, data, probs, i):
     """Decode one bit with the adaptive probability ``probs[i]``."""
     p = np.int64(probs[i])
@@ -276,7 +279,7 @@ def dec_bit(st, data, probs, i):
     return bit
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def dec_raw(st, data, nbits):
     """Decode ``nbits`` raw bits (most significant first)."""
     value = 0
@@ -297,7 +300,7 @@ def dec_raw(st, data, nbits):
     return value
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def dec_sym(st, data, probs, base, nbits):
     """Decode a symbol in ``[0, 2**nbits)`` coded by :func:`enc_sym`."""
     # dec_bit written out: this is the hottest call of the connectivity decoder
@@ -325,7 +328,7 @@ def dec_sym(st, data, probs, base, nbits):
     return node - (1 << nbits)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def dec_uint(st, data, probs, base):
     """Decode an integer coded by :func:`enc_uint` (a corrupt bucket sets the error flag, returns 0)."""
     nb = dec_sym(st, data, probs, base, INT_BUCKET_BITS)
@@ -349,7 +352,7 @@ def dec_uint(st, data, probs, base):
     return value
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def dec_sint(st, data, probs, base):
     """Decode a signed integer coded by :func:`enc_sint`."""
     mag = dec_uint(st, data, probs, base)

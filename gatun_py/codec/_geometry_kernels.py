@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from numba.cpython.unsafe.numbers import leading_zeros
 
 from .rangecoder import (
     PROB_INIT,
@@ -115,29 +116,10 @@ def ordered_to_bits(o):
 
 @njit(cache=True, inline="always")
 def _bit_length(v):
-    """Number of bits of ``|v|`` (``|v| < 2**63``), by halving steps rather than a bit loop."""
+    """Number of bits of ``|v|`` (``|v| < 2**63``): one count-leading-zeros instruction."""
     if v < 0:
         v = -v
-    n = 0
-    if v >> 32:
-        n += 32
-        v >>= 32
-    if v >> 16:
-        n += 16
-        v >>= 16
-    if v >> 8:
-        n += 8
-        v >>= 8
-    if v >> 4:
-        n += 4
-        v >>= 4
-    if v >> 2:
-        n += 2
-        v >>= 2
-    if v >> 1:
-        n += 1
-        v >>= 1
-    return n + v
+    return 64 - leading_zeros(np.int64(v))
 
 
 @njit(cache=True, inline="always")
@@ -162,7 +144,10 @@ def _dist2(vf, e0, e1, e2, x0, x1, x2):
     return (x0 - e0) ** 2 + (x1 - e1) ** 2 + (x2 - e2) ** 2
 
 
-@njit(cache=True)
+# Helpers called per vertex are compiled with ``_nrt=False`` (they never allocate): without the
+# runtime's reference counting a call does not atomically increment and decrement every array
+# argument, which was about a quarter of the decoder's time.
+@njit(cache=True, _nrt=False)
 def _pick_par(adj, deg, mark, tag, vf, x, y, ex0, ex1, e0, e1, e2):
     """The common neighbour w of x and y (not ex0/ex1) whose parallelogram x + y - w lands
     closest to the estimate e (3-D coordinates); -1 if none. ``mark`` (n,) is scratch: the
@@ -185,7 +170,7 @@ def _pick_par(adj, deg, mark, tag, vf, x, y, ex0, ex1, e0, e1, e2):
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _pick_ext(adj, deg, vf, x, e0, e1, e2):
     """The neighbour w of x whose extrapolation 2 x - w lands closest to the estimate e."""
     best = -1
@@ -202,7 +187,7 @@ def _pick_ext(adj, deg, vf, x, e0, e1, e2):
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf):
     """Choose the extra predictor vertices of vertex ``k`` (refs checked) and record its edges.
 
@@ -329,7 +314,7 @@ def _remember_conditional(ch, k, vi, slots, used):
         used[h] = 1
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, need_cands):
     """Predictor candidates and distinct repetition candidates of vertex ``k`` on channel ``ch``.
 
@@ -670,6 +655,57 @@ def decode_tables_kernel(st, buf, offs, probs, modes, n_points, tables, tab_offs
     return OK
 
 
+@njit(cache=True, _nrt=False)
+def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag, hkeys, hvals, modes, tables,
+                    tab_offs, vf, vi, cand_o, eq_o, scratch_f, scratch_i):
+    """Decode channel ``ch`` of vertex ``k`` (see :func:`decode_vertices`); ``flag`` is the
+    repetition context left by the previous channel. Returns the context for the next channel,
+    or minus an error status."""
+    pat, m = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, False)
+    m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m)
+    is_eq = 0
+    o = np.int64(0)
+    sym = 0
+    if m > 0:
+        sym = dec_sym(stc, data, pc, EQ_BASE + ((m - 1) * EQ_FLAGS + flag) * 8, _eq_bits(m))
+        if sym < m:
+            o = eq_o[sym]
+            is_eq = 1
+        elif sym > m:
+            return -ERR_STREAM
+    if is_eq == 0:
+        pat, m = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, True)
+        mode = modes[ch]
+        best = _best_cand(scores, ch, pat)
+        ctx = _res_context(pat, flags[N_CHANNELS + ch], eq_o, m)
+        if mode == MODE_TABLE:
+            lo = tab_offs[ch]
+            hi = tab_offs[ch + 1]
+            if hi <= lo:
+                return -ERR_RANK
+            rp = _search(tables, lo, hi, cand_o[best])
+            if rp >= hi:
+                rp = hi - 1
+            res = dec_sint(stc, data, pc, RANK_BASE + ctx * INT_MODEL_SIZE)
+            r = rp + res
+            if r < lo or r >= hi:
+                return -ERR_RANK
+            o = tables[r]
+        else:
+            res = dec_sint(stc, data, pc, RES_BASE + ctx * INT_MODEL_SIZE)
+            o = cand_o[best] + res
+            if o < -(1 << 31) or o >= (1 << 31):
+                return -ERR_STREAM
+        flags[N_CHANNELS + ch] = _is_big(mode, res)
+        _update_scores(scores, ch, pat, cand_o, o)
+    if dec_failed(stc):
+        return -ERR_STREAM
+    vi[k, ch] = ordered_to_bits(o)
+    _remember_conditional(ch, k, vi, hkeys, hvals)
+    flags[ch] = is_eq
+    return sym if is_eq else FLAG_PREDICTED
+
+
 @njit(cache=True)
 def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, hvals, modes, tables, tab_offs, refs,
                     vf, start, count):
@@ -717,65 +753,23 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, 
         if (r0 < -1 or r0 >= k or r1 < -1 or r1 >= k or r2 < -1 or r2 >= k or r3 < -1 or r3 >= k):
             return ERR_REF
         link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf)
+        # one call per channel with that channel's decoder, stream and model as arguments: picking
+        # them in a loop would reassign array variables, which costs a reference count update each
         flag = 6 + flags[0]
-        for ch in range(N_CHANNELS):
-            if ch == 0:
-                stc = s0
-                data = d0
-                pc = p0
-            elif ch == 1:
-                stc = s1
-                data = d1
-                pc = p1
-            elif ch == 2:
-                stc = s2
-                data = d2
-                pc = p2
-            else:
-                stc = s3
-                data = d3
-                pc = p3
-            pat, m = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, False)
-            m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m)
-            is_eq = 0
-            o = np.int64(0)
-            sym = 0
-            if m > 0:
-                sym = dec_sym(stc, data, pc, EQ_BASE + ((m - 1) * EQ_FLAGS + flag) * 8, _eq_bits(m))
-                if sym < m:
-                    o = eq_o[sym]
-                    is_eq = 1
-                elif sym > m:
-                    return ERR_STREAM
-            if is_eq == 0:
-                pat, m = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, True)
-                mode = modes[ch]
-                best = _best_cand(scores, ch, pat)
-                ctx = _res_context(pat, flags[N_CHANNELS + ch], eq_o, m)
-                if mode == MODE_TABLE:
-                    lo = tab_offs[ch]
-                    hi = tab_offs[ch + 1]
-                    if hi <= lo:
-                        return ERR_RANK
-                    rp = _search(tables, lo, hi, cand_o[best])
-                    if rp >= hi:
-                        rp = hi - 1
-                    res = dec_sint(stc, data, pc, RANK_BASE + ctx * INT_MODEL_SIZE)
-                    r = rp + res
-                    if r < lo or r >= hi:
-                        return ERR_RANK
-                    o = tables[r]
-                else:
-                    res = dec_sint(stc, data, pc, RES_BASE + ctx * INT_MODEL_SIZE)
-                    o = cand_o[best] + res
-                    if o < -(1 << 31) or o >= (1 << 31):
-                        return ERR_STREAM
-                flags[N_CHANNELS + ch] = _is_big(mode, res)
-                _update_scores(scores, ch, pat, cand_o, o)
-            if dec_failed(stc):
-                return ERR_STREAM
-            vi[k, ch] = ordered_to_bits(o)
-            _remember_conditional(ch, k, vi, hkeys, hvals)
-            flags[ch] = is_eq
-            flag = sym if is_eq else FLAG_PREDICTED
+        flag = _decode_channel(0, k, r0, r1, r2, r3, w, s0, d0, p0, scores, flags, flag, hkeys, hvals, modes,
+                               tables, tab_offs, vf, vi, cand_o, eq_o, scratch_f, scratch_i)
+        if flag < 0:
+            return -flag
+        flag = _decode_channel(1, k, r0, r1, r2, r3, w, s1, d1, p1, scores, flags, flag, hkeys, hvals, modes,
+                               tables, tab_offs, vf, vi, cand_o, eq_o, scratch_f, scratch_i)
+        if flag < 0:
+            return -flag
+        flag = _decode_channel(2, k, r0, r1, r2, r3, w, s2, d2, p2, scores, flags, flag, hkeys, hvals, modes,
+                               tables, tab_offs, vf, vi, cand_o, eq_o, scratch_f, scratch_i)
+        if flag < 0:
+            return -flag
+        flag = _decode_channel(3, k, r0, r1, r2, r3, w, s3, d3, p3, scores, flags, flag, hkeys, hvals, modes,
+                               tables, tab_offs, vf, vi, cand_o, eq_o, scratch_f, scratch_i)
+        if flag < 0:
+            return -flag
     return OK

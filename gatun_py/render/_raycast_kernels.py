@@ -48,17 +48,20 @@ STATE_STUCK = 2
 # ---------------------------------------------------------------------------------------------
 # geometry helpers
 @njit(cache=True, inline="always")
-def _side(P, dx, dy, dz, i, j):
-    """Pluecker side of the directed edge i -> j: (value, sign), sign never 0."""
+def _edge_cross(P, i, j):
+    """The ray-independent part of the side of i -> j: P_lo x P_hi and the sign of the order."""
     if i < j:
         lo, hi, flip = i, j, 1.0
     else:
         lo, hi, flip = j, i, -1.0
     ax, ay, az = P[lo, 0], P[lo, 1], P[lo, 2]
     bx, by, bz = P[hi, 0], P[hi, 1], P[hi, 2]
-    cx = ay * bz - az * by
-    cy = az * bx - ax * bz
-    cz = ax * by - ay * bx
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx, flip
+
+
+@njit(cache=True, inline="always")
+def _side_cross(cx, cy, cz, flip, dx, dy, dz):
+    """:func:`_side` from the edge's :func:`_edge_cross`."""
     v = dx * cx + dy * cy + dz * cz
     if v > 0.0:
         s = 1.0
@@ -74,6 +77,13 @@ def _side(P, dx, dy, dz, i, j):
     else:  # edge collinear with the eye or of zero length: ids decide
         s = 1.0
     return v * flip, s * flip
+
+
+@njit(cache=True, inline="always")
+def _side(P, dx, dy, dz, i, j):
+    """Pluecker side of the directed edge i -> j: (value, sign), sign never 0."""
+    cx, cy, cz, flip = _edge_cross(P, i, j)
+    return _side_cross(cx, cy, cz, flip, dx, dy, dz)
 
 
 @njit(cache=True, inline="always")
@@ -636,15 +646,19 @@ def _boundary_hits(P, dens, dirs, width, faces, bbox, counts, offsets, out_ray, 
         i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
         n = 0
         base = offsets[f] if fill else 0
+        # the edges' cross products do not depend on the ray: once per face, not per pixel
+        ax, ay, az, af = _edge_cross(P, i0, i1)
+        bx, by, bz, bf = _edge_cross(P, i1, i2)
+        cx, cy, cz, cf = _edge_cross(P, i2, i0)
         for row in range(bbox[f, 2], bbox[f, 3]):
             for col in range(bbox[f, 0], bbox[f, 1]):
                 r = row * width + col
                 dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
-                _, s01 = _side(P, dx, dy, dz, i0, i1)
-                _, s12 = _side(P, dx, dy, dz, i1, i2)
+                _, s01 = _side_cross(ax, ay, az, af, dx, dy, dz)
+                _, s12 = _side_cross(bx, by, bz, bf, dx, dy, dz)
                 if s01 != s12:
                     continue
-                _, s20 = _side(P, dx, dy, dz, i2, i0)
+                _, s20 = _side_cross(cx, cy, cz, cf, dx, dy, dz)
                 if s20 != s01:
                     continue
                 if fill:

@@ -582,12 +582,13 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, s
         vab, sab, vbc, sbc, vac, sac = _by_edge(na, nb, e2, vab, sab, vbc, sbc, vac, sac)
         t_next, s_next = _face_values_w(P, dens, dx, dy, dz, na, nb, nc, wa, wb, wc)
         k_next = _first_sample_at(t_next, step, mode)
+        # one call site: the compositing is inlined, once
         if forward:
-            samples += _composite(acc, t_here, s_here, t_next, s_next, k_here, k_next, True, mode, step, tab, lo,
-                                  inv, unit, buf, buf2)
+            i_t0, i_s0, i_k0, i_t1, i_s1, i_k1 = t_here, s_here, k_here, t_next, s_next, k_next
         else:
-            samples += _composite(acc, t_next, s_next, t_here, s_here, k_next, k_here, False, mode, step, tab, lo,
-                                  inv, unit, buf, buf2)
+            i_t0, i_s0, i_k0, i_t1, i_s1, i_k1 = t_next, s_next, k_next, t_here, s_here, k_here
+        samples += _composite(acc, i_t0, i_s0, i_t1, i_s1, i_k0, i_k1, forward, mode, step, tab, lo, inv, unit,
+                              buf, buf2)
         a, b, c = na, nb, nc
         t_here, s_here, k_here = t_next, s_next, k_next
         if a == oa and b == ob and c == oc:

@@ -26,7 +26,7 @@ def test_ratio_streaming_equals_generic(post_tetc, tmp_path):
     s = _render(post_tetc, tmp_path / "s.png", "--ratio", "0.8")
     g = _render(post_tetc, tmp_path / "g.png", "--ratio", "0.8", "--pipeline", "generic")
     assert np.array_equal(read_rgb(tmp_path / "s.png"), read_rgb(tmp_path / "g.png"))
-    for key in ("decode_s", "filter_s", "render_s", "total_s", "level", "ratio", "tets_rendered", "rays",
+    for key in ("startup_s", "decode_s", "filter_s", "render_s", "total_s", "level", "ratio", "tets_rendered", "rays",
                 "rays_unfinished", "samples", "peak_rss_mb"):
         assert key in s
     assert s["ratio"] == pytest.approx(0.8, abs=1e-3) and s["level"] >= 2

@@ -5,8 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gatun_py.pipeline.budget import (LevelSize, TimeModel, estimated_tets, fit_time_model, load_model,
-                                      plan_for_budget, save_model)
+from gatun_py.pipeline.budget import LevelSize, LevelTimes, estimated_tets, load_model, plan_for_budget, save_model
 
 
 def _levels(n_points=4096, tets0=20000, k=8):
@@ -17,45 +16,52 @@ def _levels(n_points=4096, tets0=20000, k=8):
     return out
 
 
+def _times(levels, fixed, dec, ren):
+    """Frame times that grow with the tets, as measured ones do."""
+    return LevelTimes(tuple(fixed + (dec + ren) * lv.tets for lv in levels), tuple(dec * lv.tets for lv in levels))
+
+
+def _start_index(levels, n):
+    return max(i for i, lv in enumerate(levels) if lv.merges <= n)
+
+
 @settings(max_examples=200, deadline=None)
 @given(st.floats(1e-4, 1.0), st.floats(0, 0.05), st.floats(1e-8, 1e-5), st.floats(1e-8, 1e-5))
 def test_plan_is_the_finest_that_fits(budget, fixed, dec, ren):
     levels = _levels()
-    model = TimeModel(fixed, dec, ren)
-    max_merges = levels[-1].merges + 10
+    model = _times(levels, fixed, dec, ren)
+    max_merges = levels[-1].merges
     plan = plan_for_budget(levels, model, budget, max_merges)
-    start = next(lv for lv in levels if lv.level == plan.level)
-    assert plan.merges >= start.merges
-    assert plan.predicted_s == pytest.approx(model.predict(start.tets, estimated_tets(levels, plan.merges)))
+    i = next(k for k, lv in enumerate(levels) if lv.level == plan.level)
+    assert plan.merges >= levels[i].merges
+    assert plan.predicted_s == pytest.approx(model.predict(levels, i, plan.merges))
     if plan.feasible:
         assert plan.predicted_s <= budget * (1 + 1e-12)
-        # One merge fewer (finer) would not fit, from whichever level it would start.
-        n = plan.merges - 1
+        n = plan.merges - 1  # one merge fewer (finer) would not fit, from whichever level it starts
         if n >= 0:
-            lv = max((x for x in levels if x.merges <= n), key=lambda x: x.merges)
-            assert model.predict(lv.tets, estimated_tets(levels, n)) > budget
+            assert model.predict(levels, _start_index(levels, n), n) > budget
     else:
-        assert plan.level == levels[-1].level
+        assert plan.level == levels[-1].level and model.total_s[-1] > budget
 
 
-def test_fit_recovers_a_linear_model():
-    truth = TimeModel(0.02, 3e-7, 2e-6)
-    probes = []
-    for d, r in ((1000, 1000), (20000, 20000), (20000, 8000)):
-        dec = truth.decode_s_per_tet * d
-        ren = truth.render_s_per_tet * r
-        probes.append(dict(decoded_tets=d, rendered_tets=r, decode_s=dec, render_s=ren + 0.015,
-                           total_s=dec + ren + truth.fixed_s))
-    m = fit_time_model(probes)
-    assert m.decode_s_per_tet == pytest.approx(truth.decode_s_per_tet)
-    assert m.render_s_per_tet == pytest.approx(truth.render_s_per_tet)
-    assert m.fixed_s == pytest.approx(truth.fixed_s)
+def test_prediction_matches_the_measurements_at_stored_levels():
+    levels = _levels()
+    model = _times(levels, 0.01, 1e-6, 3e-6)
+    for i, lv in enumerate(levels):
+        assert model.predict(levels, i, lv.merges) == model.total_s[i]
+    # Half way to the next level from level 2: decoding level 2, rendering in between.
+    n = (levels[2].merges + levels[3].merges) // 2
+    t = model.predict(levels, 2, n)
+    assert model.decode_s[2] + (model.total_s[3] - model.decode_s[3]) < t < model.total_s[2]
+    assert estimated_tets(levels, n) == pytest.approx((levels[2].tets + levels[3].tets) / 2, rel=0.01)
 
 
 def test_model_cache_round_trip(tmp_path, monkeypatch):
     monkeypatch.setenv("TETC_CACHE_DIR", str(tmp_path))
     assert load_model("k") is None
-    save_model("k", TimeModel(1.0, 2.0, 3.0))
-    assert load_model("k") == TimeModel(1.0, 2.0, 3.0)
+    m = LevelTimes((0.3, 0.2), (0.1, 0.05))
+    save_model("k", m)
+    assert load_model("k") == m and load_model("k", 2) == m
+    assert load_model("k", 3) is None  # calibrated for another set of levels
     (tmp_path / "timing.json").write_text("garbage")
     assert load_model("k") is None

@@ -1,17 +1,15 @@
 """Time-critical rendering (paper 5, 6.3): map a frame-time budget to a level and a ratio.
 
-End-to-end time is close to linear in the tets handled, so a file's frame time is modelled as::
-
-    T = fixed_s + decode_s_per_tet * (tets of the stored level decoded)
-                + render_s_per_tet * (tets left after on-the-fly simplification)
-
-``fixed_s`` covers what does not scale with tets (ray set-up per pixel, boundary intersection,
-PNG output). The three coefficients are calibrated per file, image size and mode on first use
-(two probe renders of coarse stored levels) and kept in the user's cache directory.
+End-to-end time is close to linear in the tets handled (paper Figure 10), but not exactly: per-pixel
+work (ray set-up, boundary, samples) does not shrink with the mesh. So instead of one straight line
+the model is the measured frame time of every stored level at its own ratio (total, and the part
+spent decoding), taken on first use for this file, image size and view (a few seconds) and kept in
+the user's cache directory. Between two stored levels, starting from the finer one, decoding costs
+what that level costs and rendering is interpolated in the tets left.
 
 Given a budget B, :func:`plan_for_budget` walks the stored levels from the finest: the first level
-whose own ratio fits is taken as is; if it does not fit but can be simplified on the fly far
-enough before the next level starts, the finest such ratio is taken (starting from that level).
+whose own time fits is taken as is; if it does not fit but can be simplified on the fly far enough
+before the next level starts, the finest such ratio is taken (starting from that level).
 """
 
 from __future__ import annotations
@@ -25,8 +23,6 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import numpy as np
-
 
 @dataclass(frozen=True)
 class LevelSize:
@@ -36,13 +32,22 @@ class LevelSize:
 
 
 @dataclass(frozen=True)
-class TimeModel:
-    fixed_s: float
-    decode_s_per_tet: float
-    render_s_per_tet: float
+class LevelTimes:
+    """Measured frame time of every stored level at its own ratio, finest level first."""
 
-    def predict(self, decoded_tets: float, rendered_tets: float) -> float:
-        return self.fixed_s + self.decode_s_per_tet * decoded_tets + self.render_s_per_tet * rendered_tets
+    total_s: tuple
+    decode_s: tuple  # the part spent decoding (and filtering)
+
+    def predict(self, levels: list[LevelSize], i: int, merges: int) -> float:
+        """Frame time starting from stored level ``i`` (finest first) and going to ``merges``."""
+        t_i, d_i = self.total_s[i], self.decode_s[i]
+        if i + 1 >= len(levels) or merges <= levels[i].merges:
+            return t_i
+        r_i = t_i - d_i
+        r_next = self.total_s[i + 1] - self.decode_s[i + 1]
+        span = max(levels[i].tets - levels[i + 1].tets, 1)
+        frac = (estimated_tets(levels, merges) - levels[i + 1].tets) / span
+        return d_i + r_next + (r_i - r_next) * min(max(frac, 0.0), 1.0)
 
 
 @dataclass(frozen=True)
@@ -65,59 +70,36 @@ def estimated_tets(levels: list[LevelSize], merges: int) -> float:
     return float(ls[-1].tets)
 
 
-def plan_for_budget(levels: list[LevelSize], model: TimeModel, budget_s: float, max_merges: int) -> BudgetPlan:
+def plan_for_budget(levels: list[LevelSize], model: LevelTimes, budget_s: float, max_merges: int) -> BudgetPlan:
     """The finest simplification whose predicted frame time is within ``budget_s``.
 
     Examples
     --------
     >>> lv = [LevelSize(0, 0, 1000), LevelSize(1, 50, 500), LevelSize(2, 75, 250)]
-    >>> m = TimeModel(0.01, 1e-4, 1e-4)
-    >>> plan_for_budget(lv, m, 0.2, 80)       # level 0 needs 0.21 s, level 1 0.11 s
-    BudgetPlan(level=0, merges=..., predicted_s=..., feasible=True)
+    >>> m = LevelTimes((0.21, 0.11, 0.06), (0.05, 0.03, 0.02))
+    >>> plan_for_budget(lv, m, 0.2, 80).level          # level 0 needs 0.21 s: simplify it on the fly
+    0
+    >>> plan_for_budget(lv, m, 0.1, 80).level          # level 1 (0.11 s) too slow at its own ratio
+    1
     """
     ls = sorted(levels, key=lambda x: x.merges)
     for i, lv in enumerate(ls):
-        t_own = model.predict(lv.tets, lv.tets)
+        t_own = model.predict(ls, i, lv.merges)
         if t_own <= budget_s:
             return BudgetPlan(lv.level, lv.merges, t_own, True)
         end = ls[i + 1].merges if i + 1 < len(ls) else max_merges
-        if end <= lv.merges:
-            continue
-        # On the fly from this level: decoding cost fixed, rendering shrinks with the merges.
-        t_end = model.predict(lv.tets, estimated_tets(ls, end))
-        if t_end > budget_s:
+        if end <= lv.merges or model.predict(ls, i, end) > budget_s:
             continue
         lo, hi = lv.merges, end  # t(lo) > budget >= t(hi): bisect for the smallest fitting N
         while hi - lo > 1:
             mid = (lo + hi) // 2
-            if model.predict(lv.tets, estimated_tets(ls, mid)) <= budget_s:
+            if model.predict(ls, i, mid) <= budget_s:
                 hi = mid
             else:
                 lo = mid
-        return BudgetPlan(lv.level, hi, model.predict(lv.tets, estimated_tets(ls, hi)), True)
-    last = ls[-1]
-    return BudgetPlan(last.level, max(last.merges, max_merges), model.predict(last.tets, estimated_tets(ls, max_merges)),
-                      False)
-
-
-def fit_time_model(probes: list[dict]) -> TimeModel:
-    """Coefficients from probe renders, each a dict with ``decoded_tets``, ``rendered_tets``,
-    ``decode_s`` (decode + filter), ``render_s`` and ``total_s``.
-
-    Decoding is proportional to the tets decoded; rendering is a least-squares line over the tets
-    rendered (its intercept is per-pixel work: ray set-up, boundary, samples); what the two do not
-    explain (file opening, PNG output) goes into the fixed cost, averaged over the probes.
-    """
-    dec = sum(p["decode_s"] for p in probes) / max(sum(p["decoded_tets"] for p in probes), 1)
-    r = np.array([p["rendered_tets"] for p in probes], float)
-    y = np.array([p["render_s"] for p in probes], float)
-    if len(probes) > 1 and np.ptp(r) > 0:
-        ren = max(float(np.polyfit(r, y, 1)[0]), 0.0)
-    else:
-        ren = float(y.max() / max(r.max(), 1.0))
-    fixed = max(float(np.mean([p["total_s"] - dec * p["decoded_tets"] - ren * p["rendered_tets"] for p in probes])),
-                0.0)
-    return TimeModel(fixed, dec, ren)
+        return BudgetPlan(lv.level, hi, model.predict(ls, i, hi), True)
+    last = len(ls) - 1
+    return BudgetPlan(ls[last].level, ls[last].merges, model.predict(ls, last, ls[last].merges), False)
 
 
 # -- calibration cache ------------------------------------------------------------------------
@@ -135,15 +117,20 @@ def calibration_key(file_id: str, size: tuple[int, int], mode: str, extra: str =
     return hashlib.sha1(f"{machine}|{file_id}|{size[0]}x{size[1]}|{mode}|{extra}".encode()).hexdigest()[:20]
 
 
-def load_model(key: str) -> TimeModel | None:
+def load_model(key: str, n_levels: int | None = None) -> LevelTimes | None:
+    """The cached calibration under ``key`` (None if absent, damaged, or for another level count)."""
     try:
         data = json.loads((cache_dir() / "timing.json").read_text())
-        return TimeModel(**data[key])
+        model = LevelTimes(tuple(float(x) for x in data[key]["total_s"]),
+                           tuple(float(x) for x in data[key]["decode_s"]))
     except (OSError, ValueError, KeyError, TypeError):
         return None
+    if len(model.total_s) != len(model.decode_s) or (n_levels is not None and len(model.total_s) != n_levels):
+        return None
+    return model
 
 
-def save_model(key: str, model: TimeModel) -> None:
+def save_model(key: str, model: LevelTimes) -> None:
     d = cache_dir()
     try:
         d.mkdir(parents=True, exist_ok=True)
@@ -169,22 +156,11 @@ def _file_id(path) -> str:
     return f"{os.path.abspath(path)}|{st.st_size}|{st.st_mtime_ns}"
 
 
-def _probe_levels(levels: list[LevelSize]) -> list[LevelSize]:
-    """The coarsest stored level and those closest to 1/16 and 1/4 of the full mesh's tets."""
-    ls = sorted(levels, key=lambda x: x.merges)
-    picks = {ls[-1].level: ls[-1]}
-    for frac in (1 / 16, 1 / 4):
-        goal = max(ls[0].tets * frac, 1.0)
-        lv = min(ls, key=lambda x: abs(math.log(max(x.tets, 1) / goal)))
-        picks.setdefault(lv.level, lv)
-    return list(picks.values())
+def calibrate(path, view, levels: list[LevelSize], *, repeats: int = 3) -> LevelTimes:
+    """Time whole frames (open, decode, render, PNG written) of every stored level, finest first.
 
-
-def calibrate(path, view, levels: list[LevelSize], *, repeats: int = 3) -> TimeModel:
-    """Time whole frames (open, decode, render, PNG written) of a few stored levels and fit the model.
-
-    Each probe is the median of ``repeats`` warm frames, so the model predicts a typical frame,
-    not the luckiest one.
+    Each level's figure is the median of ``repeats`` warm frames, so the model predicts a typical
+    frame, not the luckiest one.
     """
     import statistics
     import tempfile
@@ -192,22 +168,22 @@ def calibrate(path, view, levels: list[LevelSize], *, repeats: int = 3) -> TimeM
     from ..render.image import write_png
     from .stream import Target, render_tetc
 
-    probes = []
+    ls = sorted(levels, key=lambda x: x.merges)
+    totals, decodes = [], []
     with tempfile.TemporaryDirectory(prefix="tetc-calib-") as tmp:
         png = Path(tmp) / "probe.png"
-        render_tetc(path, view, target=Target(levels[-1].level, levels[-1].merges, 0.0, levels[-1].merges))
-        for lv in _probe_levels(levels):
+        for lv in ls:
+            target = Target(lv.level, lv.merges, 0.0, lv.merges)
             runs = []
             for _ in range(repeats):
                 t0 = time.perf_counter()
-                res = render_tetc(path, view, target=Target(lv.level, lv.merges, 0.0, lv.merges))
+                res = render_tetc(path, view, target=target)
                 write_png(png, res.image, force=True)  # a frame ends with its PNG on disk
-                runs.append((time.perf_counter() - t0, res.stats))
+                runs.append((time.perf_counter() - t0, res.stats["decode_s"] + res.stats["filter_s"]))
             total = statistics.median(t for t, _ in runs)
-            st = min(runs, key=lambda r: abs(r[0] - total))[1]
-            probes.append(dict(decoded_tets=lv.tets, rendered_tets=st["tets_rendered"],
-                               decode_s=st["decode_s"] + st["filter_s"], render_s=st["render_s"], total_s=total))
-    return fit_time_model(probes)
+            totals.append(total)
+            decodes.append(min(runs, key=lambda r: abs(r[0] - total))[1])
+    return LevelTimes(tuple(totals), tuple(decodes))
 
 
 def model_key(path, view) -> str:
@@ -220,7 +196,7 @@ def model_key(path, view) -> str:
 
 
 def plan_file_budget(path, view, budget_s: float, *, recalibrate: bool = False):
-    """(Target, BudgetPlan, TimeModel, calibrated_now) for rendering ``path`` within ``budget_s``."""
+    """(Target, BudgetPlan, LevelTimes, calibrated_now) for rendering ``path`` within ``budget_s``."""
     if not math.isfinite(float(budget_s)):
         from ..errors import OptionError
 
@@ -233,7 +209,7 @@ def plan_file_budget(path, view, budget_s: float, *, recalibrate: bool = False):
     levels = [LevelSize(int(lv["level"]), int(lv.get("merges_before", 0)), int(lv["tets"]))
               for lv in stored_levels(reader)]
     key = model_key(path, view)
-    model = None if recalibrate else load_model(key)
+    model = None if recalibrate else load_model(key, len(levels))
     calibrated = model is None
     if model is None:
         model = calibrate(path, view, levels)

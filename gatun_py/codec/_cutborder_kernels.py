@@ -345,15 +345,17 @@ def _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq):
 
 
 @njit(cache=True, _nrt=False)
-def _c1_context(n1, cscore, prev_esc):
+def _score_context(n1, cscore, prev, cap):
+    """Context of a candidate-index symbol: how many candidates (capped at 4), the scores of the
+    best two (capped at ``cap``) and whether the previous symbol escaped."""
     s1 = cscore[0] if n1 > 0 else 0
     s2 = cscore[1] if n1 > 1 else 0
-    if s1 > 3:
-        s1 = 3
-    if s2 > 3:
-        s2 = 3
+    if s1 > cap:
+        s1 = cap
+    if s2 > cap:
+        s2 = cap
     nn = n1 if n1 < 4 else 4
-    return ((nn * 4 + s1) * 4 + s2) * 2 + prev_esc
+    return ((nn * (cap + 1) + s1) * (cap + 1) + s2) * 2 + prev
 
 
 @njit(cache=True, _nrt=False)
@@ -454,16 +456,6 @@ def _apply_triangle(B, u0, u1, u2, p, r):
             _add(B, 2, h1, h0, apex, -1)
 
 
-@njit(cache=True, _nrt=False)
-def _s1_context(n1, cscore, prev_new):
-    s1 = cscore[0] if n1 > 0 else 0
-    s2 = cscore[1] if n1 > 1 else 0
-    if s1 > 2:
-        s1 = 2
-    if s2 > 2:
-        s2 = 2
-    nn = n1 if n1 < 4 else 4
-    return ((nn * 3 + s1) * 3 + s2) * 2 + prev_new
 
 
 @njit(cache=True, _nrt=False)
@@ -548,7 +540,7 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
             if (f0 == po and f1 == ro) or (f0 == ro and f1 == po):
                 xo = faces[f, (k + 2) % 3]
                 flip = 1 if f0 == ro else 0
-        ctx = _s1_context(n1, cscore, prev_new)
+        ctx = _score_context(n1, cscore, prev_new, 2)
         x = dec_of[xo]
         sym = ESC
         if x != -1:
@@ -638,7 +630,7 @@ def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
         apex = np.int64(E[s, 2])
         n1 = _gather_edge(B, s, cand, cscore, cseq)
         _remove(B, 2, s)
-        ctx = _s1_context(n1, cscore, prev_new)
+        ctx = _score_context(n1, cscore, prev_new, 2)
         sym = rc.dec_sym(st, data, probs, SM_C1 + ctx * 16, 4)
         prev_new = 0
         if sym < ESC:
@@ -811,7 +803,7 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
         d = dec_of[do]
         n1 = _gather_face(B, s, cand, cscore, cseq)
         _remove(B, 3, s)
-        ctx = _c1_context(n1, cscore, prev_esc)
+        ctx = _score_context(n1, cscore, prev_esc, 3)
         sym = ESC
         if d != -1:
             lim = n1 if n1 < MAX_C1 else MAX_C1
@@ -938,7 +930,7 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         behind = np.int64(E[s, 3])
         n1 = _gather_face(B, s, cand, cscore, cseq)
         _remove(B, 3, s)
-        ctx = _c1_context(n1, cscore, prev_esc)
+        ctx = _score_context(n1, cscore, prev_esc, 3)
         sym = rc.dec_sym(st, data, probs, TM_C1 + ctx * 16, 4)
         d = -1
         if sym < ESC:

@@ -260,32 +260,8 @@ def _gather_face(B, s, cand, cscore, cseq):
                 x = g1
             else:
                 x = g2
-            # _insert_candidate and _sort_candidates written out (hot: once per tet)
-            sq = E[g, E_SEQ]
-            found = False
-            for i in range(n1):
-                if cand[i] == x:
-                    cscore[i] += 1
-                    if sq < cseq[i]:
-                        cseq[i] = sq
-                    found = True
-                    break
-            if not found and n1 < cand.shape[0]:
-                cand[n1] = x
-                cscore[n1] = 1
-                cseq[n1] = sq
-                n1 += 1
-    for i in range(1, n1):
-        x, sc, sq = cand[i], cscore[i], cseq[i]
-        j = i - 1
-        while j >= 0 and (cscore[j] < sc or (cscore[j] == sc and cseq[j] > sq)):
-            cand[j + 1] = cand[j]
-            cscore[j + 1] = cscore[j]
-            cseq[j + 1] = cseq[j]
-            j -= 1
-        cand[j + 1] = x
-        cscore[j + 1] = sc
-        cseq[j + 1] = sq
+            n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g, E_SEQ])
+    _sort_candidates(cand, cscore, cseq, n1)
     return n1
 
 

@@ -41,6 +41,10 @@ def _kernels_cached() -> bool:
 @click.option("--tf", "tf_spec", default="default", show_default=True, metavar="NAME|FILE",
               help="Transfer function: a preset (default, bluntfin, combustion, post, fire), a JSON file "
                    "(project or ParaView format) or a matplotlib colormap name.")
+@click.option("--opacity-model", type=click.Choice(["gatun", "vtk"]), default=None,
+              help="gatun: opacity a holds for a path of unit_distance, 1-(1-a)^(d/u) [the default, unless the "
+                   "TF file says otherwise]; vtk: as VTK's unstructured-grid ray caster, attenuation a/u "
+                   "(1-exp(-a d/u)) with the opacity read only at the colour points (to compare with VTK).")
 @click.option("--mode", type=click.Choice(["volume", "face"]), default="volume", show_default=True,
               help="volume: uniform samples every --step; face: one sample per tet (at its faces).")
 @click.option("--step", type=float, default=None,
@@ -63,7 +67,7 @@ def _kernels_cached() -> bool:
 @mesh_input_options
 @force_option
 @quiet_option
-def render(input, output, tf_spec, mode, step, size, azimuth, elevation, zoom, ratio, level, budget, pipeline,
+def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, elevation, zoom, ratio, level, budget, pipeline,
            show_stats, scalar, q_file, q_var, cell_to_point, force, quiet):
     """Volume-render INPUT (a .tetc file or any mesh file) into a PNG.
 
@@ -80,6 +84,8 @@ def render(input, output, tf_spec, mode, step, size, azimuth, elevation, zoom, r
         raise OptionError(f"--step must be positive, got {step:g}")
     camera = Camera(width, height, azimuth, elevation, zoom)
     tf = load_transfer_function(tf_spec)
+    if opacity_model is not None:
+        tf = tf.with_opacity_model(opacity_model)
     check_output_path(output, force=force)  # fail before the work, not after
     if sum(x is not None for x in (ratio, level, budget)) > 1:
         raise click.UsageError("give at most one of --ratio, --level and --budget")

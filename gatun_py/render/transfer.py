@@ -5,16 +5,30 @@ Accepted sources (``load_transfer_function``):
 * the project's JSON format (BRIEF.md, "Conventions"): ``color`` points ``{"x", "rgb"}``,
   ``opacity`` points ``{"x", "a"}``, ``x`` normalised to the scalar range unless
   ``"absolute": true``, and ``unit_distance`` (opacity ``a`` is for a path of that length);
+  optionally ``"opacity_model": "vtk"`` (below);
 * ParaView's exported colormap JSON (``RGBPoints`` = x, r, g, b, ...; optionally ``Points`` =
   x, a, 0.5, 0.0, ...), possibly a list holding one such object;
 * a preset name: one of the files in ``sample_meshes/tf/`` (``bluntfin``, ``default``, ...);
 * a matplotlib colormap name (matplotlib is optional), with the default opacity ramp.
+
+Two opacity models (``TransferFunction.opacity_model``) say what the opacity ``a`` of a point means:
+
+* ``"gatun"`` (the default, BRIEF.md "Conventions"): ``a`` is the opacity of a path of length
+  ``unit_distance``; a path of length d has opacity ``1 - (1 - a) ** (d / unit_distance)``.
+* ``"vtk"``: what VTK's ``vtkUnstructuredGridVolumeRayCastMapper`` computes with its default
+  integrator (``vtkUnstructuredGridPartialPreIntegration``; the linear and pre-integration ones
+  share it). ``a / unit_distance`` is an attenuation coefficient, so a path of length d has opacity
+  ``1 - exp(-a d / unit_distance)``; and the opacity function is only read at VTK's control points
+  (the colour function's points, the first opacity point and the two ends of the data range) and
+  interpolated linearly between them, so opacity points that are not colour points are lost.
+  Both are expressed through the opacity of a path of ``unit_distance`` (``evaluate``, ``table``),
+  so the renderer needs no other change.
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +40,8 @@ PRESET_DIR = Path(__file__).resolve().parents[2] / "sample_meshes" / "tf"
 # Number of entries of the lookup tables the kernels interpolate in (per table, over the scalar
 # range); fine enough that the piecewise-linear re-interpolation error is far below 8-bit output.
 TABLE_SIZE = 4096
+
+OPACITY_MODELS = ("gatun", "vtk")
 
 
 @dataclass(frozen=True)
@@ -44,6 +60,9 @@ class TransferFunction:
         Path length for which the opacity values hold (VTK's ScalarOpacityUnitDistance).
     name : str
         Where it came from, for messages.
+    opacity_model : {"gatun", "vtk"}
+        How ``a`` turns into opacity along a path (module docstring); ``resolve`` applies VTK's
+        resampling of the opacity function for ``"vtk"``.
     """
 
     color_x: np.ndarray
@@ -53,23 +72,50 @@ class TransferFunction:
     absolute: bool = False
     unit_distance: float = 1.0
     name: str = "transfer function"
+    opacity_model: str = "gatun"
+
+    def __post_init__(self):
+        if self.opacity_model not in OPACITY_MODELS:
+            raise OptionError(f"opacity model must be one of {', '.join(OPACITY_MODELS)}, "
+                              f"got {self.opacity_model!r}")
+
+    def with_opacity_model(self, model: str) -> "TransferFunction":
+        """The same function read with another opacity model (``"gatun"`` or ``"vtk"``)."""
+        return replace(self, opacity_model=model)
 
     def resolve(self, scalar_range) -> "TransferFunction":
-        """Return the same function with ``x`` in scalar units (``absolute=True``)."""
-        if self.absolute:
-            return self
-        lo, hi = (float(v) for v in scalar_range)
-        span = hi - lo if hi > lo else 1.0
-        return TransferFunction(lo + self.color_x * span, self.color_rgb, lo + self.opacity_x * span,
-                                self.opacity_a, True, self.unit_distance, self.name)
+        """Return the same function with ``x`` in scalar units (``absolute=True``).
+
+        With the ``"vtk"`` opacity model the opacity points are also replaced by VTK's control
+        points over this scalar range (idempotent for the same range).
+        """
+        tf = self
+        if not self.absolute:
+            lo, hi = (float(v) for v in scalar_range)
+            span = hi - lo if hi > lo else 1.0
+            tf = replace(self, color_x=lo + self.color_x * span, opacity_x=lo + self.opacity_x * span,
+                         absolute=True)
+        if tf.opacity_model == "vtk":
+            x, a = vtk_opacity_points(tf.color_x, tf.opacity_x, tf.opacity_a, scalar_range)
+            tf = replace(tf, opacity_x=x, opacity_a=a)
+        return tf
 
     def evaluate(self, s) -> tuple[np.ndarray, np.ndarray]:
-        """Colour (..., 3) and opacity (...) at scalar values ``s`` (absolute functions only)."""
+        """Colour (..., 3) and opacity (...) at scalar values ``s`` (absolute functions only).
+
+        The opacity is that of a path of length ``unit_distance`` under ``opacity_model``: the
+        interpolated ``a`` for ``"gatun"``, ``1 - exp(-a)`` for ``"vtk"`` (``a / unit_distance`` being
+        VTK's attenuation coefficient). Either way a path of length d then has opacity
+        ``1 - (1 - opacity) ** (d / unit_distance)``.
+        """
         if not self.absolute:
             raise ValueError("resolve() the transfer function against a scalar range first")
         s = np.asarray(s, dtype=np.float64)
         rgb = np.stack([np.interp(s, self.color_x, self.color_rgb[:, c]) for c in range(3)], axis=-1)
-        return rgb, np.interp(s, self.opacity_x, self.opacity_a)
+        a = np.interp(s, self.opacity_x, self.opacity_a)
+        if self.opacity_model == "vtk":
+            a = -np.expm1(-a)
+        return rgb, a
 
     def table(self, scalar_range, size: int = TABLE_SIZE):
         """Lookup table (size, 4) of (r, g, b, a) sampled uniformly over ``scalar_range``.
@@ -87,6 +133,34 @@ class TransferFunction:
         tab[:, :3] = rgb
         tab[:, 3] = np.clip(a, 0.0, 1.0)
         return tab, lo, (size - 1) / (hi - lo)
+
+
+def vtk_opacity_points(color_x, opacity_x, opacity_a, scalar_range):
+    """The opacity function as VTK's piecewise-linear ray integrators see it.
+
+    ``vtkUnstructuredGridPartialPreIntegration`` (and ``...LinearRayIntegrator``) cache the transfer
+    function at a set of control points and interpolate linearly between them. The set is meant to
+    hold every colour and opacity point, but the loop over the opacity points stops after the first
+    one (it tests for the *lower* end of the function's range), so it holds the colour points, the
+    first opacity point and the two ends of the data range only; the opacity between them is the
+    straight line between its values there.
+
+    Parameters
+    ----------
+    color_x, opacity_x, opacity_a : array_like
+        Control points in scalar units (ascending ``x``).
+    scalar_range : (lo, hi)
+        The data range (VTK adds both ends as control points).
+
+    Returns
+    -------
+    x, a : (k,) float64
+        Opacity control points equivalent to VTK's cache.
+    """
+    opacity_x = np.asarray(opacity_x, dtype=np.float64)
+    x = np.unique(np.concatenate([np.asarray(color_x, dtype=np.float64), opacity_x[:1],
+                                  np.asarray(scalar_range, dtype=np.float64).reshape(2)]))
+    return x, np.interp(x, opacity_x, np.asarray(opacity_a, dtype=np.float64))
 
 
 def _fail(src: str, msg: str):
@@ -147,7 +221,10 @@ def from_dict(obj, src: str = "transfer function") -> TransferFunction:
         _fail(src, "'unit_distance' must be a number")
     if not (np.isfinite(ud) and ud > 0):
         _fail(src, "'unit_distance' must be a positive number")
-    return TransferFunction(cx, crgb, ox, oa.reshape(-1), absolute, ud, src)
+    model = obj.get("opacity_model", "gatun")
+    if model not in OPACITY_MODELS:
+        _fail(src, f"'opacity_model' must be one of {', '.join(map(repr, OPACITY_MODELS))}")
+    return TransferFunction(cx, crgb, ox, oa.reshape(-1), absolute, ud, src, model)
 
 
 def _from_paraview(obj, src):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -50,7 +51,10 @@ def run_cli(args: list[str], env: dict | None = None) -> tuple[float, subprocess
     """Run ``tetc`` in a fresh interpreter; wall seconds including interpreter start-up."""
     e = dict(os.environ, **(env or {}))
     t0 = time.perf_counter()
-    p = subprocess.run([sys.executable, "-m", "gatun_py.cli.main", *args], capture_output=True, text=True, env=e)
+    # Not `-m gatun_py.cli.main`: run as __main__, the group would be a second copy of the module
+    # that the stage modules (compress, render, ...) do not register their commands on.
+    launcher = "import sys; from gatun_py.cli.main import main; sys.exit(main())"
+    p = subprocess.run([sys.executable, "-c", launcher, *args], capture_output=True, text=True, env=e)
     return time.perf_counter() - t0, p
 
 
@@ -73,3 +77,69 @@ def write_section(area: str, text: str) -> Path:
     p.write_text(text.strip() + "\n")
     print(f"wrote {p}")
     return p
+
+
+# -- larger meshes for scale tests ---------------------------------------------------------------
+
+REFINABLE = ("bluntfin", "combustion")  # the PLOT3D samples
+
+
+def refined_paths(name: str, factor: int) -> tuple[Path, Path]:
+    """(mesh .vtu, mesh-only .tetc) of a sample refined ``factor``x per axis, under ``bench/out``."""
+    stem = WORK / f"{name}_refine{factor}"
+    return stem.with_suffix(".vtu"), stem.with_suffix(".tetc")
+
+
+def refined_tetc(name: str, factor: int, *, force: bool = False, log=print) -> dict:
+    """Build (or reuse) a larger scale-test file from a PLOT3D sample; returns its record.
+
+    ``tetc convert GRID --refine K`` (trilinear refinement, interpolated scalar: for timing and
+    memory tests, not new data) writes ``bench/out/<name>_refine<K>.vtu``; ``tetc compress
+    --mesh-only`` turns that into ``<name>_refine<K>.tetc``. Both run as fresh ``tetc`` processes,
+    so the recorded seconds include interpreter start-up. The record (paths, sizes, seconds) is
+    kept beside the files in ``<name>_refine<K>.json`` and returned as is while the .tetc exists.
+    """
+    if name not in REFINABLE:
+        raise ValueError(f"{name!r} is not a PLOT3D sample; choose one of {REFINABLE}")
+    vtu, tetc = refined_paths(name, factor)
+    record_path = tetc.with_suffix(".json")
+    if not force and tetc.exists() and record_path.exists():
+        return json.loads(record_path.read_text())
+    WORK.mkdir(parents=True, exist_ok=True)
+    grid = SAMPLE_FILES[name][0]
+    rec = {"name": name, "factor": factor, "vtu": str(vtu.relative_to(ROOT)), "tetc": str(tetc.relative_to(ROOT))}
+    steps = [("convert", ["convert", str(grid), "-o", str(vtu), "--refine", str(factor), "--force", "--quiet"]),
+             ("compress", ["compress", str(vtu), "-o", str(tetc), "--mesh-only", "--force", "--quiet"])]
+    for key, args in steps:
+        log(f"{name} x{factor}: tetc {' '.join(args[:1] + [Path(a).name if '/' in a else a for a in args[1:]])}")
+        sec, p = run_cli(args)
+        if p.returncode != 0:
+            raise RuntimeError(f"tetc {key} failed: {p.stderr.strip()}")
+        rec[f"{key}_s"] = round(sec, 2)
+    from gatun_py.codec import TetcReader
+
+    meta = TetcReader(tetc).meta
+    rec.update(points=int(meta["points"]), tets=int(meta["tets"]), vtu_mb=round(vtu.stat().st_size / 2**20, 1), tetc_mb=round(tetc.stat().st_size / 2**20, 2))
+    record_path.write_text(json.dumps(rec, indent=1) + "\n")
+    return rec
+
+
+def _main(argv=None):
+    import argparse
+
+    ap = argparse.ArgumentParser(description="Build the cached scale-test files under bench/out/.")
+    ap.add_argument("--factors", type=int, nargs="+", default=[2, 3], help="refinement factors (default 2 3)")
+    ap.add_argument("--samples", nargs="+", default=list(REFINABLE), choices=REFINABLE)
+    ap.add_argument("--force", action="store_true", help="rebuild even if cached")
+    a = ap.parse_args(argv)
+    rows = []
+    for factor in a.factors:
+        for name in a.samples:
+            r = refined_tetc(name, factor, force=a.force)
+            rows.append([name, factor, r["points"], r["tets"], r["tetc"], r["convert_s"], r["compress_s"], r["vtu_mb"], r["tetc_mb"]])
+    print(table(["data set", "K", "points", "tets", "file", "convert s", "compress --mesh-only s", ".vtu MB", ".tetc MB"], rows))
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(ROOT))
+    _main()

@@ -52,17 +52,26 @@ def tetc():
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="Output mesh; format from the extension (.vtu, .vtk, .msh, .xdmf, ...).")
 @mesh_input_options
+@click.option("--refine", type=click.IntRange(min=1, max=16), default=1, show_default=True, metavar="K",
+              help="PLOT3D only: cut every grid cell into K×K×K cells on its trilinear map before the "
+                   "tet split; the scalar is trilinearly interpolated, so this makes larger meshes "
+                   "for scale tests, not new data.")
 @force_option
 @quiet_option
-def convert(input, output, scalar, q_file, q_var, cell_to_point, force, quiet):
+def convert(input, output, scalar, q_file, q_var, cell_to_point, refine, force, quiet):
     """Convert INPUT (any readable mesh or PLOT3D grid) into a linear tet mesh file.
 
     Hexahedra, wedges and pyramids are split into tets conformingly; the scalar is written as
-    point data. Floats are kept bit for bit.
+    point data. Floats are kept bit for bit (with --refine, the original grid points are).
     """
-    from gatun_py.mesh import read_mesh, write_mesh
+    import os
 
-    mesh, report = read_mesh(input, **read_kwargs(scalar, q_file, q_var, cell_to_point))
+    from gatun_py.mesh import read_mesh, write_mesh
+    from gatun_py.mesh.plot3d import is_plot3d_input
+
+    if refine != 1 and os.path.isfile(input) and not is_plot3d_input(input, q_file):
+        raise click.UsageError("--refine needs a PLOT3D grid input (structured XYZ + Q files)")
+    mesh, report = read_mesh(input, refine=refine, **read_kwargs(scalar, q_file, q_var, cell_to_point))
     for note in report.notes:
         status(f"note: {note}", quiet)
     write_mesh(mesh, output, force=force)

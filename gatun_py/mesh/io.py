@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import atomic_path
-from ..errors import MeshError, OutputError, ReadError
+from ..errors import MeshError, OptionError, OutputError, ReadError
 from . import plot3d
 from .model import TetMesh
 from .split import orient_positive, split_hexes_two_colour, split_min_id_star, two_colour
@@ -43,7 +43,7 @@ class ReadOptions:
 
 
 def read_mesh(path, *, scalar: str | None = None, q_file=None, q_var: str = "density",
-              cell_to_point: bool = False) -> tuple[TetMesh, MeshReport]:
+              cell_to_point: bool = False, refine: int = 1) -> tuple[TetMesh, MeshReport]:
     """Read, split into tets, validate.
 
     Parameters
@@ -59,24 +59,29 @@ def read_mesh(path, *, scalar: str | None = None, q_file=None, q_var: str = "den
         Which PLOT3D quantity to use (see :data:`plot3d.Q_VARIABLES`).
     cell_to_point : bool
         Allow a cell-data scalar, averaged to the points weighted by cell volume.
+    refine : int
+        PLOT3D only: refine the grid trilinearly by this factor per axis before splitting
+        (:func:`plot3d.refine_grid`; interpolated scalar, for scale tests). Default 1: as stored.
 
     Raises
     ------
-    ReadError, MeshError
+    ReadError, MeshError, OptionError
     """
     path = Path(path)
     if not path.exists():
         raise ReadError(f"no such file: {path}")
     if path.is_dir():
         raise ReadError(f"{path} is a directory, not a mesh file")
-    if q_file is not None or (path.suffix.lower() in plot3d.PLOT3D_SUFFIXES and plot3d.looks_like_plot3d_xyz(path)):
-        return _read_plot3d(path, q_file, q_var)
+    if plot3d.is_plot3d_input(path, q_file):
+        return _read_plot3d(path, q_file, q_var, refine)
+    if refine != 1:
+        raise OptionError(f"{path}: refinement needs a PLOT3D grid input (structured), not a {path.suffix or 'mesh'} file")
     if path.suffix.lower() in plot3d.PLOT3D_SUFFIXES:
         raise ReadError(f"{path}: not a PLOT3D grid nor a mesh format known by extension")
     return _read_meshio(path, scalar, cell_to_point)
 
 
-def _read_plot3d(path: Path, q_file, q_var: str) -> tuple[TetMesh, MeshReport]:
+def _read_plot3d(path: Path, q_file, q_var: str, refine: int = 1) -> tuple[TetMesh, MeshReport]:
     grid = plot3d.read_xyz(path)
     notes = []
     if q_file is None:
@@ -85,14 +90,24 @@ def _read_plot3d(path: Path, q_file, q_var: str) -> tuple[TetMesh, MeshReport]:
             raise ReadError(f"{path} is a PLOT3D grid: give its solution file with --q FILE")
         notes.append(f"scalar from {Path(q_file).name}")
     dens = plot3d.read_q(q_file, grid.dims, q_var)
-    hexes, colour = plot3d.grid_hexes(grid.dims)
+    xyz, dims = grid.xyz, grid.dims
+    keep = None
     if grid.iblank is not None:
-        keep = (grid.iblank[hexes] != 0).all(axis=1)
+        keep = (grid.iblank[plot3d.grid_hexes(dims)[0]] != 0).all(axis=1)
         if not keep.all():
             notes.append(f"{int((~keep).sum())} cells dropped by IBLANK")
+    if refine != 1:
+        xyz, dens, fine = plot3d.refine_grid(xyz, dens, dims, refine)
+        if keep is not None:
+            keep = plot3d.refine_cell_mask(keep, dims, refine)
+        notes.append(f"grid refined {refine}x per axis ({'x'.join(map(str, dims))} -> "
+                     f"{'x'.join(map(str, fine))}), scalar trilinearly interpolated")
+        dims = fine
+    hexes, colour = plot3d.grid_hexes(dims)
+    if keep is not None:
         hexes = hexes[keep]
-    tets = orient_positive(grid.xyz, split_hexes_two_colour(hexes, colour))
-    mesh, report = _validated(str(path), grid.xyz, dens, tets, q_var)
+    tets = orient_positive(xyz, split_hexes_two_colour(hexes, colour))
+    mesh, report = _validated(str(path), xyz, dens, tets, q_var)
     report.notes += notes
     return mesh, report
 

@@ -8,6 +8,9 @@ Layout (no Fortran record markers, no block count, either byte order):
   ``float32 Q[5][nk][nj][ni]`` = density, x/y/z momentum, stagnation energy.
 
 Trailing bytes after the data (padding) are ignored.
+
+:func:`refine_grid` makes larger meshes from these grids for scale tests: every cell's trilinear
+map is sampled K times finer per axis and the scalar is trilinearly interpolated (no new data).
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ReadError
+from ..errors import OptionError, ReadError
 
 GAMMA = 1.4
 
@@ -155,3 +158,107 @@ def find_q_file(xyz_path) -> Path | None:
     q = "Q" if p.name[i:i + 3].isupper() else "q"
     cand = p.with_name(p.name[:i] + q + p.name[i + 3:])
     return cand if cand.exists() else None
+
+
+def is_plot3d_input(path, q_file=None) -> bool:
+    """Whether :func:`gatun_py.mesh.read_mesh` reads ``path`` as a PLOT3D grid (same test it uses)."""
+    p = Path(path)
+    return q_file is not None or (p.suffix.lower() in PLOT3D_SUFFIXES and looks_like_plot3d_xyz(p))
+
+
+def _refine_axis(values: np.ndarray, axis: int, factor: int) -> np.ndarray:
+    """Linear interpolation along one axis of a float64 array, ``factor`` sub-intervals per interval.
+
+    Point ``m`` of the refined axis lies at ``m / factor`` in the old index space; it is computed
+    as ``a * (1 - t) + b * t`` with ``t = r / factor``, so ``t = 0`` returns ``a`` exactly and the
+    old points survive bit for bit.
+    """
+    n = values.shape[axis]
+    if n < 2 or factor == 1:
+        return values
+    m = np.arange((n - 1) * factor + 1)
+    lo = np.minimum(m // factor, n - 2)
+    t = (m - lo * factor) / factor  # in [0, 1]; 1 only at the last point
+    shape = [1] * values.ndim
+    shape[axis] = len(m)
+    t = t.reshape(shape)
+    a = np.take(values, lo, axis=axis)
+    b = np.take(values, lo + 1, axis=axis)
+    return a * (1.0 - t) + b * t
+
+
+def refine_grid(xyz: np.ndarray, scalar: np.ndarray, dims: tuple[int, int, int], factor: int
+                ) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int]]:
+    """Trilinear refinement of a structured grid and its point scalar, for scale tests.
+
+    Every cell of the ``ni × nj × nk`` grid is cut into ``factor³`` cells: the new points lie on
+    the cell's trilinear map (the same map a trilinear hex element uses), and the scalar is
+    trilinearly interpolated there. The result is again a structured grid, so the usual
+    conforming 5-tet split applies unchanged. The interpolated scalar adds no information: use
+    this to make larger meshes for timing and memory tests, not as data.
+
+    Parameters
+    ----------
+    xyz : (N, 3) array
+        Grid points, ``i`` fastest (PLOT3D order), ``N = ni * nj * nk``.
+    scalar : (N,) array
+        One value per grid point.
+    dims : (int, int, int)
+        ``(ni, nj, nk)``.
+    factor : int
+        Sub-cells per cell along each axis, >= 1; 1 returns copies of the input.
+
+    Returns
+    -------
+    xyz : (N', 3) float32
+        Refined points, ``N' = ni' * nj' * nk'`` with ``ni' = (ni - 1) * factor + 1`` (an axis
+        of one point stays one point). The old point ``(i, j, k)`` is new point
+        ``(i * factor, j * factor, k * factor)``, bit for bit.
+    scalar : (N',) float32
+    dims : (int, int, int)
+        ``(ni', nj', nk')``.
+
+    Raises
+    ------
+    OptionError
+        If ``factor`` is not a positive integer or the refined grid would be too large.
+    ReadError
+        If the array sizes do not match ``dims``.
+    """
+    if isinstance(factor, bool) or not isinstance(factor, (int, np.integer)) or factor < 1:
+        raise OptionError(f"refinement factor must be a positive integer, got {factor!r}")
+    factor = int(factor)
+    ni, nj, nk = (int(d) for d in dims)
+    n = ni * nj * nk
+    xyz = np.asarray(xyz)
+    scalar = np.asarray(scalar)
+    if xyz.shape != (n, 3) or scalar.shape != (n,):
+        raise ReadError(f"grid {ni}x{nj}x{nk} needs ({n}, 3) points and ({n},) values, "
+                        f"got {xyz.shape} and {scalar.shape}")
+    new_dims = tuple((d - 1) * factor + 1 if d > 1 else 1 for d in (ni, nj, nk))
+    n_new = new_dims[0] * new_dims[1] * new_dims[2]
+    if n_new >= 1 << 31:
+        raise OptionError(f"refining {ni}x{nj}x{nk} by {factor} gives {n_new:,} points; "
+                          "tet vertex ids are 32-bit")
+    # Points and scalar refined together as four float64 channels, axis by axis (k, j, i):
+    # successive linear interpolation along the three axes is exactly trilinear per cell.
+    grid = np.empty((nk, nj, ni, 4), dtype=np.float64)
+    grid[..., :3] = xyz.reshape(nk, nj, ni, 3)
+    grid[..., 3] = scalar.reshape(nk, nj, ni)
+    for axis in (0, 1, 2):
+        grid = _refine_axis(grid, axis, factor)
+    flat = grid.reshape(-1, 4)
+    return (np.ascontiguousarray(flat[:, :3], dtype=np.float32),
+            np.ascontiguousarray(flat[:, 3], dtype=np.float32), new_dims)
+
+
+def refine_cell_mask(keep: np.ndarray, dims: tuple[int, int, int], factor: int) -> np.ndarray:
+    """Per-cell flags of a grid (``grid_hexes`` order) carried to its refinement by ``factor``.
+
+    Each sub-cell inherits its parent cell's flag, so IBLANK keeps blanking the same region.
+    """
+    ni, nj, nk = dims
+    k = np.asarray(keep).reshape(max(nk - 1, 0), max(nj - 1, 0), max(ni - 1, 0))
+    for axis in (0, 1, 2):
+        k = np.repeat(k, factor, axis=axis)
+    return k.reshape(-1)

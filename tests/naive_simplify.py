@@ -105,13 +105,47 @@ def interpolate(p, d, q, x):
     return min(lam), sum(lam[j] * d[q[j]] for j in range(4))
 
 
-def evaluate_merge(tets, pts, dens, a, b, *, is_boundary, pinned, wd, wg, wv, wi):
+def quadric_matrix(q):
+    """(A 4x4, b 4, c) of a quadric stored as A's upper triangle row by row, b, c."""
+    A = np.zeros((4, 4))
+    A[np.triu_indices(4)] = q[:10]
+    A = A + A.T - np.diag(np.diag(A))
+    return A, np.asarray(q[10:14], np.float64), float(q[14])
+
+
+def quadric_value(q, u):
+    A, b, c = quadric_matrix(q)
+    u = np.asarray(u, np.float64)
+    return max(0.0, float(u @ A @ u + 2 * b @ u + c))
+
+
+def tet_quadrics(u4, tets, weight):
+    """Per-vertex sum over its tets of weight x (squared distance to the tet's 4D hyperplane), as a
+    quadric; the hyperplane's normal is the null vector of the three edge vectors (SVD)."""
+    u4 = np.asarray(u4, np.float64)
+    out = np.zeros((u4.shape[0], 15))
+    iu = np.triu_indices(4)
+    for t, w in zip(tets, weight):
+        if w <= 0:
+            continue
+        P = u4[list(t)]
+        e = P[1:] - P[0]
+        nrm = np.linalg.svd(e)[2][-1]  # unit vector orthogonal to the tet's three edges
+        d = -nrm @ P[0]
+        q = np.concatenate([np.outer(nrm, nrm)[iu], nrm * d, [d * d]]) * w
+        for v in t:
+            out[v] += q
+    return out
+
+
+def evaluate_merge(tets, pts, dens, a, b, *, is_boundary, pinned, wd, wg, wv, wi, wq=0.0, quad=None, u4=None):
     """(legal, error) of merging a into b in the mesh ``tets`` (list of 4-tuples).
 
-    ``wd``, ``wg``, ``wv`` (density, boundary area, swept boundary volume) are the weights already
-    divided by the normalisation scales, ``wi`` the interpolation error's weight inside the density
-    error; ``is_boundary`` is
-    the input's boundary vertex set and ``pinned`` the non-manifold vertices.
+    ``wd``, ``wg``, ``wv``, ``wi`` (mass, boundary area, swept boundary volume, squared
+    interpolation error) are the weights already divided by the normalisation scales, ``wq`` the
+    weight of a's quadric ``quad[a]`` evaluated at b's point ``u4[b]``; the sum is divided by the
+    number of tets the merge collapses. ``is_boundary`` is the input's boundary vertex set and
+    ``pinned`` the non-manifold vertices.
     """
     p = np.asarray(pts, np.float64)
     d = np.asarray(dens, np.float64)
@@ -149,7 +183,9 @@ def evaluate_merge(tets, pts, dens, a, b, *, is_boundary, pinned, wd, wg, wv, wi
         else:
             # nearest outside: the largest smallest coordinate, ties by the smaller deviation
             dev = min(((-lo, abs(d[a] - v)) for lo, v in vals), default=(0.0, abs(d[a] - d[b])))[1]
-        dm += wi * dev * sum(abs(orient6(p, t)) / 6.0 for t in star)
+        di = wi * dev**2 * sum(abs(orient6(p, t)) / 6.0 for t in star)
+    else:
+        di = 0.0
     bfaces = boundary_faces(tets)
     ge = 0.0
     swept = 0.0
@@ -172,7 +208,9 @@ def evaluate_merge(tets, pts, dens, a, b, *, is_boundary, pinned, wd, wg, wv, wi
                     ge += abs(a_new - area[h]) * area[h] / total
     if not link(a, tets, bfaces) & link(b, tets, bfaces) <= edge_link(a, b, tets, bfaces):
         return False, None
-    return True, wd * dm + wg * ge + wv * swept
+    qe = quadric_value(quad[a], u4[b]) if wq > 0 else 0.0
+    n_collapsed = sum(1 for t in star if b in t)
+    return True, (wd * dm + di + wg * ge + wv * swept + wq * qe) / n_collapsed
 
 
 def collapse(tets, a, b):

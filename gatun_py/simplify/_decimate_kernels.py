@@ -12,6 +12,9 @@ validates the input and drives the loop. The mesh state during decimation:
 ``head`` (n,), ``nxt`` (4m,) int32
     per-vertex singly linked lists of "slots" 4*t + c (tet t has this vertex at corner c).
     Merging a into b splices a's list onto b's; slots of dead tets are unlinked lazily.
+``quad`` (n, 15) float64, ``u4`` (n, 4) float64
+    every vertex's error quadric (A's upper triangle, b, c; see :func:`_quadric_at`) and its
+    (x, y, z, s) point; merging a into b adds a's quadric to b's.
 
 A merge a -> b is legal when every surviving tet of a's star stays positive, every boundary face
 around a keeps its orientation, a boundary vertex only goes into a boundary vertex, and the link
@@ -38,7 +41,7 @@ VOLUME_EPS = 1e-10
 NORMAL_EPS = 1e-6
 
 # Indices into the float parameter array.
-P_WD, P_WG, P_WV, P_WI = 0, 1, 2, 3
+P_WD, P_WG, P_WV, P_WI, P_WQ = 0, 1, 2, 3, 4
 # Indices into the int64 counter array.
 C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS, C_STARTED = 0, 1, 2, 3, 4, 5
 
@@ -330,7 +333,26 @@ def _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counter
 
 
 @njit(cache=True)
-def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, mark, counters, cand_out, err_out):
+def _quadric_at(quad, u4, v, w):
+    """Quadric of vertex v at vertex w's point u = u4[w] = (x, y, z, s): u^T A u + 2 b.u + c.
+
+    ``quad[v]`` holds A's upper triangle row by row (00 01 02 03 11 12 13 22 23 33), then b, then c.
+    A sum of squares, so negative values are rounding and read as 0.
+    """
+    x0 = u4[w, 0]
+    x1 = u4[w, 1]
+    x2 = u4[w, 2]
+    x3 = u4[w, 3]
+    q = quad[v]
+    e = (q[0] * x0 * x0 + q[4] * x1 * x1 + q[7] * x2 * x2 + q[9] * x3 * x3
+         + 2.0 * (q[1] * x0 * x1 + q[2] * x0 * x2 + q[3] * x0 * x3 + q[5] * x1 * x2 + q[6] * x1 * x3
+                  + q[8] * x2 * x3)
+         + 2.0 * (q[10] * x0 + q[11] * x1 + q[12] * x2 + q[13] * x3) + q[14])
+    return e if e > 0.0 else 0.0
+
+
+@njit(cache=True)
+def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, mark, counters, cand_out, err_out):
     """Error of every geometrically legal merge a -> b (b a neighbour of a): fills the outputs.
 
     Returns the number of candidates. Legality here covers volumes, boundary orientation and the
@@ -340,6 +362,7 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, mark, count
     wg = params[P_WG]
     wv = params[P_WV]
     wi = params[P_WI]
+    wq = params[P_WQ]
     ns = st.shape[0]
     v6n = np.empty(ns)
     vout = np.empty(2)
@@ -404,14 +427,17 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, mark, count
             counters[C_EVALS] += 1
             ok = True
             dm = 0.0
+            di = 0.0
             pbx = pts[b, 0]
             pby = pts[b, 1]
             pbz = pts[b, 2]
             db = dens[b]
+            n_col = 0
             for k in range(ns):
                 t = st[k] >> 2
                 if _contains(T, t, b):
                     dm += abs(mass_old[k])
+                    n_col += 1
                     continue
                 v6 = off[k] - (nrm[k, 0] * pbx + nrm[k, 1] * pby + nrm[k, 2] * pbz)
                 if not v6 > fast_ok:
@@ -458,7 +484,7 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, mark, count
                             best_lo = vout[0]
                             dev_out = dev
                 f_dev = dev_in if dev_in >= 0.0 else dev_out
-                dm += wi * f_dev * vol_star
+                di = wi * f_dev * f_dev * vol_star
             ge = 0.0
             swept = 0.0
             if nf > 0:
@@ -495,13 +521,15 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, mark, count
                         if shared >= 2 and area_sum > 0.0:
                             ge += abs(area_new[f] - area_old[g]) * area_old[g] / area_sum
             cand_out[nc] = b
-            err_out[nc] = wd * dm + wg * ge + wv * swept
+            qe = _quadric_at(quad, u4, a, b) if wq > 0.0 else 0.0
+            # per collapsed tet: the comparison that matters is at equal tet counts
+            err_out[nc] = (wd * dm + di + wg * ge + wv * swept + wq * qe) / n_col
             nc += 1
     return nc
 
 
 @njit(cache=True)
-def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab, counters):
+def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab, counters):
     """Best legal merge of a: (target, error), or (-1, 0) when a has none."""
     st = _star(a, head, nxt, T, alive)
     if st.shape[0] == 0 or pinned[a]:
@@ -509,7 +537,7 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark,
     cap = 3 * st.shape[0] + 1
     cand = np.empty(cap, np.int64)
     err = np.empty(cap)
-    nc = _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, mark, counters, cand, err)
+    nc = _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, mark, counters, cand, err)
     if nc == 0:
         return -1, 0.0
     # best first, ties broken by target id, so the result does not depend on list order
@@ -603,10 +631,10 @@ def _heap_pop(h_err, h_v, h_b, h_ver, counters):
 
 
 @njit(cache=True)
-def _push_best(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab,
+def _push_best(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab,
                counters, ver, h_err, h_v, h_b, h_ver, last_err):
     ver[v] += 1
-    b, e = _evaluate(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab, counters)
+    b, e = _evaluate(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab, counters)
     if b >= 0:
         last_err[v] = e
         _heap_push(h_err, h_v, h_b, h_ver, counters, e, v, b, ver[v], ver)
@@ -653,7 +681,7 @@ def _apply_merge(a, b, st_a, T, alive, nbr, head, nxt):
 
 
 @njit(cache=True)
-def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b, mark_ab, counters,
+def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab, counters,
          ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left."""
     n = head.shape[0]
@@ -670,7 +698,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b,
     while True:
         found = False
         for i in range(n_todo):
-            if _push_best(todo[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b,
+            if _push_best(todo[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b,
                           mark_ab, counters, ver, h_err, h_v, h_b, h_ver, last_err):
                 found = True
         n_todo = 0
@@ -719,6 +747,8 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, mark, mark_b,
                     nb[k] = w
                     k += 1
         _apply_merge(a, b, st_a, T, alive, nbr, head, nxt)
+        for j in range(quad.shape[1]):
+            quad[b, j] += quad[a, j]
         parent[a] = b
         rank[a] = counters[C_MERGES]
         counters[C_MERGES] += 1

@@ -111,8 +111,13 @@ def load_kernels() -> float:
     from .render.camera import Camera
     from .simplify.levels import Target
 
+    from .render import _raycast_kernels as K
+
     t0 = time.perf_counter()
-    render_tetc(_tiny_tetc(), View(Camera(4, 4), tf="default"), target=Target(0, 1, 0.0, 0))
+    # lean: the face counting kernels too (the walk and the rest are the same either way)
+    render_tetc(_tiny_tetc(), View(Camera(4, 4), tf="default", lean=True), target=Target(0, 1, 0.0, 0))
+    table = np.full((8, 7), -1, dtype=np.int32)  # a lean table fills up only on real meshes
+    K.rehash(table, 8, 0, K.count_live(table, True) >= 0)
     return time.perf_counter() - t0
 
 

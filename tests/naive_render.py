@@ -102,3 +102,28 @@ def naive_render(mesh, fitted, tf, *, mode="volume", step=None, scalar_range=Non
         image[r, :3] = C
         image[r, 3] = O
     return image.reshape(fitted.height, fitted.width, 4)
+
+
+def naive_face_crossings(mesh, fitted):
+    """(n_tets, 4): for each tet face (``TET_FACES`` order), the pixel rays that pass through the
+    triangle, found the plain way: every pixel against every face, Moeller-Trumbore style
+    (barycentric coordinates of the ray's hit in the face's plane all non-negative)."""
+    eye = np.asarray(fitted.position, dtype=np.float64)
+    dirs = fitted.ray_directions()
+    pts = mesh.points.astype(np.float64) - eye
+    out = np.zeros((mesh.n_tets, 4), dtype=np.int64)
+    for t, tet in enumerate(mesh.tets):
+        for k in range(4):
+            a, b, c = (pts[tet[i]] for i in TET_FACES[k])
+            e1, e2 = b - a, c - a
+            p = np.cross(dirs, e2)
+            det = p @ e1
+            ok = np.abs(det) > 1e-300
+            inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+            s = -a  # ray origin (the eye, 0) minus a
+            u = (p @ s) * inv
+            q = np.cross(s, e1)
+            v = (dirs @ q) * inv
+            hit_t = (q @ e2) * inv
+            out[t, k] = int(np.count_nonzero(ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (hit_t > 0)))
+    return out

@@ -26,6 +26,7 @@ from ..simplify.forest import mesh_from_ancestors
 from ..simplify.levels import Target, resolve_target, stored_levels, target_ancestors  # noqa: F401 (re-exported)
 
 PIPELINES = ("streaming", "generic")
+LEAN_BATCH_TETS = 16384  # decode batch of a lean streaming render
 
 
 @dataclass(frozen=True)
@@ -36,6 +37,7 @@ class View:
     tf: object = "default"
     mode: str = "volume"
     step: float | None = None
+    lean: bool | None = None  # StreamingRaycaster's: free faces no ray needs (default by mesh size)
 
     def __post_init__(self):
         if self.camera is None:
@@ -135,14 +137,18 @@ def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress
     from ..render.stream import render_batches
     from ..simplify.filter import SimplifyFilter
 
+    from ..render.raycast import LEAN_MIN_TETS
+
     lv = reader.level_meta(target.level)
-    batches = reader.iter_decode(target.level)
+    lean = view.lean if view.lean is not None else int(lv["tets"]) >= LEAN_MIN_TETS
+    # A lean render holds about one batch of tets in flight: smaller batches, less memory.
+    batches = reader.iter_decode(target.level, **({"batch_tets": LEAN_BATCH_TETS} if lean else {}))
     filt = None
     if anc is not None:
         filt = SimplifyFilter(anc)
         batches = filt.filter(batches)
     res = render_batches(batches, camera, view.tf, mode=view.mode, step=step, scalar_range=rng,
-                         expected_tets=int(lv["tets"]), progress=progress)
+                         expected_tets=int(lv["tets"]), lean=lean, progress=progress)
     # render_batches times the wait for each batch: the decoder, plus the filter when there is one.
     times["decode_s"] = res.stats["decode_s"]
     if filt is not None:
@@ -177,7 +183,7 @@ def render_mesh_file(path, view: View, *, read_kwargs: dict | None = None, progr
     read_s = time.perf_counter() - t0
     lo, hi = mesh.bbox
     res = render_batches(mesh_batches(mesh), view.camera.fit(lo, hi), view.tf, mode=view.mode, step=view.step,
-                         scalar_range=mesh.scalar_range, expected_tets=mesh.n_tets, progress=progress)
+                         scalar_range=mesh.scalar_range, expected_tets=mesh.n_tets, lean=False, progress=progress)
     stats = dict(res.stats)
     stats.update(decode_s=read_s + stats.get("decode_s", 0.0), filter_s=0.0, pipeline="streaming", level=0,
                  ratio=0.0, merges=0, tets_decoded=mesh.n_tets, notes=list(report.notes),

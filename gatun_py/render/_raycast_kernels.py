@@ -26,6 +26,17 @@ fourth vertex, ``p`` = 0 if (a, b, c) is wound outward in it. That is all a ray 
 through the tet: it takes the tet whose fourth vertex is not the one of the tet it came from
 (this also works across zero-volume tets, where "which side" is not well defined).
 ``htab[slot, 5]`` heads a linked list of subsegments parked on the face.
+
+Freeing faces (streaming)
+-------------------------
+The streaming renderer keeps a seventh column, ``htab[slot, 6]``: the number of tet steps rays
+still have to take next to the face. When a tet arrives, each of its faces gains the number of
+pixel rays crossing that face (:func:`count_crossings`, the same edge-side signs the walk uses,
+so the count is exact); a ray stepping through a tet takes one off its entry and one off its exit
+face. A face at zero with nobody parked on it will never be looked up again and is dropped when
+the table is next rebuilt (:func:`rehash` with ``purge``), so the table holds the tets in flight,
+not the whole mesh. Crossings the walk could only resolve by its rounding fallback are neither
+counted nor taken off (they keep a face alive, never free it early).
 """
 
 from __future__ import annotations
@@ -33,16 +44,40 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit, prange, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int64)
 
 MODE_VOLUME = 0
 MODE_FACE = 1
 
+NEVER_COUNTS = 2  # seg_clean: this segment's walk does not touch the face counters
+
 STATE_ACTIVE = 0
 STATE_DONE = 1
 STATE_STUCK = 2
+
+
+@intrinsic
+def _atomic_sub_i32(typingctx, arr, i, j, v):
+    """``arr[i, j] -= v`` as one atomic instruction (2-D int32 array); the parallel walks share
+    the face table's counters. Numba has no CPU atomics, so this emits LLVM's ``atomicrmw``."""
+    if not (isinstance(arr, types.Array) and arr.ndim == 2 and arr.dtype == types.int32):
+        return None
+    sig = types.int32(arr, i, j, v)
+
+    def codegen(context, builder, signature, args):
+        aryty = signature.args[0]
+        ary = context.make_array(aryty)(context, builder, args[0])
+        ii = context.cast(builder, args[1], signature.args[1], types.intp)
+        jj = context.cast(builder, args[2], signature.args[2], types.intp)
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [ii, jj], wraparound=False)
+        val = context.cast(builder, args[3], signature.args[3], types.int32)
+        return builder.atomic_rmw("sub", ptr, val, "monotonic")
+
+    return sig, codegen
 
 
 # ---------------------------------------------------------------------------------------------
@@ -198,7 +233,13 @@ def _hash0(a, b, c, mul, mask):
     # than a scattering hash). ``mul`` = slots per vertex id in 16-bit fixed point, so the ids
     # spread over the whole table whatever the ratio of slots to vertices; the other two ids
     # pick a slot inside the id's stretch.
+    # ``mul`` = 0: a table of the faces in flight (streaming, counting), whose ids cluster in the
+    # recently decoded range: grouping would pile them into one stretch, so scatter them (the
+    # table is small enough to stay in cache anyway).
     mix = (np.int64(b) * 73856093) ^ (np.int64(c) * 19349663)
+    if mul == 0:
+        x = (mix ^ (np.int64(a) * 83492791)) * np.int64(-7046029254386353131)  # 0x9E3779B97F4A7C15
+        return (x >> 29) & mask
     return (((np.int64(a) * mul) >> 16) + (((mix & 0xFFFF) * mul) >> 32)) & mask
 
 
@@ -228,6 +269,8 @@ def _hash_insert(htab, mul, hcount, a, b, c):
             htab[h, 3] = -1
             htab[h, 4] = -1
             htab[h, 5] = -1
+            if htab.shape[1] > 6:
+                htab[h, 6] = 0
             hcount[0] += 1
             return h
         if k0 == a and htab[h, 1] == b and htab[h, 2] == c:
@@ -236,22 +279,45 @@ def _hash_insert(htab, mul, hcount, a, b, c):
 
 
 @njit(cache=True)
-def rehash(htab, new_cap, new_mul):
-    """Copy the face table into one of ``new_cap`` (a power of two) slots."""
-    ntab = np.full((new_cap, 6), -1, dtype=np.int32)
-    cnt = np.zeros(1, dtype=np.int64)
-    for h in range(htab.shape[0]):
-        if htab[h, 0] != -1:
-            g = _hash_insert(ntab, new_mul, cnt, htab[h, 0], htab[h, 1], htab[h, 2])
-            ntab[g, 3] = htab[h, 3]
-            ntab[g, 4] = htab[h, 4]
-            ntab[g, 5] = htab[h, 5]
-    return ntab
+def _live(htab, h, purge):
+    """Whether slot ``h`` holds a face worth keeping (with ``purge``: still needed)."""
+    if htab[h, 0] == -1:
+        return False
+    if not purge or htab.shape[1] <= 6:
+        return True
+    return htab[h, 6] > 0 or htab[h, 5] != -1
 
 
 @njit(cache=True)
-def insert_tets(tets, htab, mul, hcount, nodes, park_ver, in_list, seg_mark, mark, active):
+def count_live(htab, purge):
+    """The faces :func:`rehash` would keep."""
+    n = 0
+    for h in range(htab.shape[0]):
+        if _live(htab, h, purge):
+            n += 1
+    return n
+
+
+@njit(cache=True)
+def rehash(htab, new_cap, new_mul, purge):
+    """Copy the face table into one of ``new_cap`` (a power of two) slots; with ``purge``, drop
+    the faces no ray will look up again (count zero, nobody parked). Returns (table, faces)."""
+    ntab = np.full((new_cap, htab.shape[1]), -1, dtype=np.int32)
+    cnt = np.zeros(1, dtype=np.int64)
+    for h in range(htab.shape[0]):
+        if _live(htab, h, purge):
+            g = _hash_insert(ntab, new_mul, cnt, htab[h, 0], htab[h, 1], htab[h, 2])
+            for col in range(3, htab.shape[1]):
+                ntab[g, col] = htab[h, col]
+    return ntab, cnt[0]
+
+
+@njit(cache=True)
+def insert_tets(tets, crossings, htab, mul, hcount, nodes, park_ver, in_list, seg_mark, mark, active):
     """Enter a batch of tets into the face table; collect the segments parked on their faces.
+
+    ``crossings`` (n, 4): rays crossing each tet's faces (:func:`count_crossings`), added to the
+    faces' counters; an empty array when the table does not count (in-memory rendering).
 
     ``nodes`` (k, 3) = (item, version, next) is the pool of park-list nodes; a node is live
     while its version is the item's current one (an item that moves on is simply re-parked with a
@@ -271,6 +337,8 @@ def insert_tets(tets, htab, mul, hcount, nodes, park_ver, in_list, seg_mark, mar
                 htab[slot, 4] = code
             else:
                 conflicts += 1  # a third tet on one face: not a conforming mesh
+            if crossings.shape[0] > 0:
+                htab[slot, 6] += crossings[t, k]
             node = htab[slot, 5]
             while node != -1:
                 item = nodes[node, 0]
@@ -284,6 +352,133 @@ def insert_tets(tets, htab, mul, hcount, nodes, park_ver, in_list, seg_mark, mar
                 node = nodes[node, 2]
             htab[slot, 5] = -1
     return n_active, conflicts
+
+
+@njit(cache=True, inline="always")
+def _pixel_span(u0, u1, u2, u3, n):
+    """Pixels k (centres at k + 0.5) within [min u, max u], a thousandth of a pixel to spare:
+    the span must hold every pixel whose ray can cross the tet, or a face would be freed early."""
+    lo = min(min(u0, u1), min(u2, u3)) - 0.5 - 1e-3
+    hi = max(max(u0, u1), max(u2, u3)) - 0.5 + 1e-3
+    if not (lo < n and hi >= 0.0):  # also NaN
+        return 0, 0
+    return max(int(math.ceil(lo)), 0), min(int(math.floor(hi)), n - 1) + 1
+
+
+@njit(cache=True, inline="always")
+def _project(P, v, fwd, right, up, tan_half, aspect, width, height):
+    """Depth and continuous pixel (column, row from the top) of vertex v, as Camera.project."""
+    z = P[v, 0] * fwd[0] + P[v, 1] * fwd[1] + P[v, 2] * fwd[2]
+    x = (P[v, 0] * right[0] + P[v, 1] * right[1] + P[v, 2] * right[2]) / (z * tan_half * aspect)
+    y = (P[v, 0] * up[0] + P[v, 1] * up[1] + P[v, 2] * up[2]) / (z * tan_half)
+    return z, (x + 1.0) * (width / 2.0), (1.0 - y) * (height / 2.0)
+
+
+NEAR = 1e-12  # relative rounding bound of an edge side (float64 error is ~1e-16 of |P_lo| |P_hi|)
+
+
+@njit(cache=True, inline="always")
+def _edge_terms(P, i, j, fwd, right, up):
+    """The directed edge i -> j's side as fwd . c + x right . c + y up . c, c its canonical cross."""
+    cx, cy, cz, flip = _edge_cross(P, i, j)
+    return ((fwd[0] * cx + fwd[1] * cy + fwd[2] * cz) * flip, (right[0] * cx + right[1] * cy + right[2] * cz) * flip,
+            (up[0] * cx + up[1] * cy + up[2] * cz) * flip)
+
+
+@njit(cache=True, inline="always")
+def _norm(P, v):
+    return math.sqrt(P[v, 0] * P[v, 0] + P[v, 1] * P[v, 1] + P[v, 2] * P[v, 2])
+
+
+@njit(cache=True, inline="always")
+def _flat(P, a, b, c, d):
+    """Whether tet (a, b, c, d) has (nearly) zero volume: |6 V| <= 1e-9 of its longest edge cubed."""
+    ux, uy, uz = P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2]
+    vx, vy, vz = P[c, 0] - P[a, 0], P[c, 1] - P[a, 1], P[c, 2] - P[a, 2]
+    wx, wy, wz = P[d, 0] - P[a, 0], P[d, 1] - P[a, 1], P[d, 2] - P[a, 2]
+    vol6 = ux * (vy * wz - vz * wy) + uy * (vz * wx - vx * wz) + uz * (vx * wy - vy * wx)
+    e = max(ux * ux + uy * uy + uz * uz, max(vx * vx + vy * vy + vz * vz, wx * wx + wy * wy + wz * wz))
+    return abs(vol6) <= 1e-9 * e * math.sqrt(e)
+
+
+@njit(cache=True, inline="always")
+def _near_crossing(x0, t0, x1, t1, x2, t2):
+    """1 if the ray crosses the face with directed edge sides x0, x1, x2, or misses it by no more
+    than rounding (each side within its bound t of agreeing with the others), else 0."""
+    if x0 >= -t0 and x1 >= -t1 and x2 >= -t2:
+        return 1
+    if x0 <= t0 and x1 <= t1 and x2 <= t2:
+        return 1
+    return 0
+
+
+@njit(cache=True, parallel=True)
+def count_crossings(tets, P, xs, ys, width, height, fwd, right, up, tan_half, out):
+    """``out[t, k]`` = pixel rays that may cross face k of tet t: an upper bound on the walk's uses.
+
+    ``xs``, ``ys``: the pixel rays' offsets along ``right`` and ``up`` (``Camera.ray_offsets``).
+    A ray crosses face (i, j, k) cleanly when the signs of its three directed edge sides agree,
+    the same :func:`_side_cross` values of the same canonical edges as in :func:`_walk` and
+    :func:`_boundary_hits`; the walk takes one off for each such crossing. Rays that miss the face
+    by no more than rounding are counted too: where rounding leaves a tet without a clean exit,
+    the walk's fallback goes through such a face, never takes it off, and so the face is kept
+    (a few faces along rays grazing edges; never one freed early). Each tet is one task writing
+    its own row: the result cannot depend on the thread count.
+    """
+    aspect = width / height
+    for t in prange(tets.shape[0]):
+        v0, v1, v2, v3 = tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3]
+        for k in range(4):
+            out[t, k] = 0
+        z0, c0, r0 = _project(P, v0, fwd, right, up, tan_half, aspect, width, height)
+        z1, c1, r1 = _project(P, v1, fwd, right, up, tan_half, aspect, width, height)
+        z2, c2, r2 = _project(P, v2, fwd, right, up, tan_half, aspect, width, height)
+        z3, c3, r3 = _project(P, v3, fwd, right, up, tan_half, aspect, width, height)
+        if _flat(P, v0, v1, v2, v3):
+            # a (nearly) zero-volume tet: the walk passes it through whichever faces its
+            # fallback picks, not the ones the ray crosses; one extra on each face keeps them
+            for k in range(4):
+                out[t, k] = 1
+        if not (z0 > 0.0 and z1 > 0.0 and z2 > 0.0 and z3 > 0.0):
+            continue  # behind the eye: rays cannot be cast at it
+        col0, col1 = _pixel_span(c0, c1, c2, c3, width)
+        row0, row1 = _pixel_span(r0, r1, r2, r3, height)
+        if col0 >= col1 or row0 >= row1:
+            continue
+        # An edge's side for the pixel ray d = fwd + xs[col] right + ys[row] up (unnormalised,
+        # |d| <= 1.1) is linear in xs and ys: 6 multiply-adds per pixel.
+        f01, r01, u01 = _edge_terms(P, v0, v1, fwd, right, up)
+        f02, r02, u02 = _edge_terms(P, v0, v2, fwd, right, up)
+        f03, r03, u03 = _edge_terms(P, v0, v3, fwd, right, up)
+        f12, r12, u12 = _edge_terms(P, v1, v2, fwd, right, up)
+        f13, r13, u13 = _edge_terms(P, v1, v3, fwd, right, up)
+        f23, r23, u23 = _edge_terms(P, v2, v3, fwd, right, up)
+        # rounding bound on a side value: far above the error of d . (P_lo x P_hi)
+        m0, m1, m2, m3 = _norm(P, v0), _norm(P, v1), _norm(P, v2), _norm(P, v3)
+        t01, t02, t03 = NEAR * m0 * m1, NEAR * m0 * m2, NEAR * m0 * m3
+        t12, t13, t23 = NEAR * m1 * m2, NEAR * m1 * m3, NEAR * m2 * m3
+        n0 = n1 = n2 = n3 = 0
+        for row in range(row0, row1):
+            y = ys[row]
+            b01, b02, b03 = f01 + y * u01, f02 + y * u02, f03 + y * u03
+            b12, b13, b23 = f12 + y * u12, f13 + y * u13, f23 + y * u23
+            for col in range(col0, col1):
+                x = xs[col]
+                x01 = b01 + x * r01
+                x02 = b02 + x * r02
+                x03 = b03 + x * r03
+                x12 = b12 + x * r12
+                x13 = b13 + x * r13
+                x23 = b23 + x * r23
+                # outward faces (TET_FACES): (1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1)
+                n0 += _near_crossing(x12, t12, x23, t23, -x13, t13)
+                n1 += _near_crossing(x03, t03, -x23, t23, -x02, t02)
+                n2 += _near_crossing(x01, t01, x13, t13, -x03, t03)
+                n3 += _near_crossing(x02, t02, -x12, t12, -x01, t01)
+        out[t, 0] += n0
+        out[t, 1] += n1
+        out[t, 2] += n2
+        out[t, 3] += n3
 
 
 @njit(cache=True)
@@ -465,14 +660,21 @@ def _by_edge(na, nb, e, vab, sab, vbc, sbc, vac, sac):
 
 
 @njit(cache=True)
-def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, seg_state, seg_steps,
+def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state, seg_steps,
           seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps):
     """Advance subsegment ``sub`` (0 front, 1 back) of segment ``s`` through every present tet.
 
     Stops when the next tet is missing (the subsegment stays parked on that face), when it
     reaches the other subsegment's face (segment done), or after ``max_steps`` steps in total
     for the segment (stuck: it can only be looping on inconsistent geometry).
+
+    A counting table (7 columns) loses one from the entry and the exit face of every tet stepped
+    through, where the crossing was a clean one (``seg_clean`` 1: all three edge sides agreed;
+    ``NEVER_COUNTS`` for the segments of rays whose boundary crossings did not pair up: on a grid
+    that overlaps itself such a ray can walk the same tets in two segments).
     """
+    counting = htab.shape[1] > 6 and seg_clean[s, sub] != NEVER_COUNTS
+    clean = seg_clean[s, sub] == 1
     r = seg_ray[s]
     dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
     forward = sub == 0
@@ -495,8 +697,8 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, s
     have_face_sides = False
     k_here = _first_sample_at(t_here, step, mode)
     vab = sab = vbc = sbc = vac = sac = 0.0
+    slot = _hash_find(htab, mul, a, b, c)
     while True:
-        slot = _hash_find(htab, mul, a, b, c)
         if slot < 0:
             break
         code = -1
@@ -512,6 +714,8 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, s
             state = STATE_STUCK
             break
         steps += 1
+        if counting and clean:
+            _atomic_sub_i32(htab, slot, 6, 1)
         # the tet behind the face, positively oriented as (v0, v1, v2, v3) with the face opposite v3
         v3 = code >> 1
         if (code & 1) == 0:
@@ -539,6 +743,7 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, s
         best_k = -1
         best_score = -1
         best_min = -np.inf
+        clean = False
         for k in range(3):
             if k == 0:
                 e0, e1, e2, q0, q1, q2 = x12, x23, -x13, g12, g23, -g13
@@ -549,6 +754,7 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, s
             score = (q0 * want > 0) + (q1 * want > 0) + (q2 * want > 0)
             if score == 3:
                 best_k = k
+                clean = True
                 break
             # inconsistent rounding can leave no clean exit: take the closest one
             m = min(e0 * want, e1 * want, e2 * want)
@@ -580,6 +786,9 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, s
         vab, sab, vbc, sbc, vac, sac = _by_edge(na, nb, e0, vab, sab, vbc, sbc, vac, sac)
         vab, sab, vbc, sbc, vac, sac = _by_edge(na, nb, e1, vab, sab, vbc, sbc, vac, sac)
         vab, sab, vbc, sbc, vac, sac = _by_edge(na, nb, e2, vab, sab, vbc, sbc, vac, sac)
+        slot = _hash_find(htab, mul, na, nb, nc)
+        if counting and clean and slot >= 0:
+            _atomic_sub_i32(htab, slot, 6, 1)
         t_next, s_next = _face_values_w(P, dens, dx, dy, dz, na, nb, nc, wa, wb, wc)
         k_next = _first_sample_at(t_next, step, mode)
         # one call site: the compositing is inlined, once
@@ -606,6 +815,8 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, s
     seg_face[s, sub, 1] = b
     seg_face[s, sub, 2] = c
     seg_from[s, sub] = came_from
+    if counting:
+        seg_clean[s, sub] = 1 if clean else 0
     seg_ts[s, sub, 0] = t_here
     seg_ts[s, sub, 1] = s_here
     seg_steps[s] = steps
@@ -615,12 +826,13 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, s
 
 
 @njit(cache=True, parallel=True)
-def advance(active, n_active, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc,
+def advance(active, n_active, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc,
             seg_state, seg_steps, seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps):
     """Advance every listed segment as far as the present tets allow (one bulk-synchronous phase).
 
     Each segment is handled by one task that only writes its own state, and reads the face table,
-    which nobody writes during the phase: the result cannot depend on the thread count.
+    whose keys and tets nobody writes during the phase: the result cannot depend on the thread
+    count. (The counters of a counting table are taken off atomically; only their totals matter.)
     """
     # Blocks of neighbouring rays (they meet the same tets: cache reuse); the caller hands
     # them out dynamically (numba.set_parallel_chunksize) so both threads stay busy.
@@ -631,10 +843,10 @@ def advance(active, n_active, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts
             s = active[i]
             if seg_state[s] != STATE_ACTIVE:
                 continue
-            _walk(s, 0, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, seg_state, seg_steps,
+            _walk(s, 0, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state, seg_steps,
                   seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps)
             if seg_state[s] == STATE_ACTIVE:
-                _walk(s, 1, P, dens, dirs, seg_ray, seg_face, seg_from, seg_ts, seg_acc, seg_state, seg_steps,
+                _walk(s, 1, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state, seg_steps,
                       seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps)
 
 

@@ -97,13 +97,18 @@ class FittedCamera:
         up = np.cross(right, fwd)
         return fwd, right, up
 
-    def ray_directions(self) -> np.ndarray:
-        """Unit direction (H * W, 3) float64 of every pixel ray, row-major from the top row."""
-        fwd, right, up = self.basis()
+    def ray_offsets(self):
+        """(xs (W,), ys (H,)): pixel ray (col, row) points along fwd + xs[col] right + ys[row] up."""
         t = math.tan(math.radians(self.view_angle) / 2.0)
         w, h = self.width, self.height
         xs = (2.0 * (np.arange(w) + 0.5) / w - 1.0) * t * (w / h)
         ys = (1.0 - 2.0 * (np.arange(h) + 0.5) / h) * t
+        return xs, ys
+
+    def ray_directions(self) -> np.ndarray:
+        """Unit direction (H * W, 3) float64 of every pixel ray, row-major from the top row."""
+        fwd, right, up = self.basis()
+        xs, ys = self.ray_offsets()
         d = fwd[None, None, :] + xs[None, :, None] * right[None, None, :] + ys[:, None, None] * up[None, None, :]
         d = d.reshape(-1, 3)
         return d / np.linalg.norm(d, axis=1)[:, None]

@@ -26,6 +26,10 @@ from .transfer import TransferFunction, load_transfer_function
 
 MODES = ("volume", "face")
 
+# From this many tets on, a streaming render frees the faces no ray needs any more (``lean``):
+# below it the whole face table is small next to the interpreter, and counting costs ~30 % time.
+LEAN_MIN_TETS = 500_000
+
 
 @dataclass
 class RenderResult:
@@ -80,6 +84,11 @@ class StreamingRaycaster:
         vertices received before the first tet.
     expected_tets : int, optional
         Sizes the face table up front (it grows as needed otherwise).
+    lean : bool, optional
+        Count, for every face, the rays still to cross it and drop the faces nobody needs any
+        more, so the table holds the tets in flight rather than the whole mesh (the paper's
+        memory saving; about 30 % more render time). Default: on from ``LEAN_MIN_TETS``
+        expected tets, and when the count is not known.
 
     Notes
     -----
@@ -89,7 +98,7 @@ class StreamingRaycaster:
     """
 
     def __init__(self, camera, tf, *, mode: str = "volume", step: float | None = None, scalar_range=None,
-                 expected_tets: int | None = None):
+                 expected_tets: int | None = None, lean: bool | None = None):
         if mode not in MODES:
             raise OptionError(f"unknown render mode {mode!r} (choose from {', '.join(MODES)})")
         if step is not None and not (np.isfinite(step) and step > 0):
@@ -112,6 +121,11 @@ class StreamingRaycaster:
         self._mark = 0
         self._t_render = 0.0
         self.fitted: FittedCamera | None = None
+        # Count the rays still to cross each face and drop the faces no ray needs any more (the
+        # streaming case: the table then holds the tets in flight); render_mesh turns it off.
+        self._counting = bool(lean) if lean is not None else (expected_tets is None or expected_tets >= LEAN_MIN_TETS)
+        self._table_peak = 0
+        self._faces_peak = 0
 
     # -- input ----------------------------------------------------------------------------------
     def add_vertices(self, points, density) -> None:
@@ -142,7 +156,7 @@ class StreamingRaycaster:
             mul = self._slots_per_vertex(len(self._htab))
             if mul < self._hmul:
                 self._hmul = mul
-                self._htab = K.rehash(self._htab, len(self._htab), mul)
+                self._htab, _ = K.rehash(self._htab, len(self._htab), mul, False)
 
     def set_boundary(self, faces) -> None:
         """Add boundary faces (outward wound); all of them must come before the first tet."""
@@ -165,7 +179,8 @@ class StreamingRaycaster:
         if self._nseg:
             self._ensure_capacity(4 * len(tets))
             self._mark += 1
-            n_active, conflicts = K.insert_tets(tets, self._htab, self._hmul, self._hcount,
+            crossings = self._crossings(tets)
+            n_active, conflicts = K.insert_tets(tets, crossings, self._htab, self._hmul, self._hcount,
                                                 self._nodes, self._park_ver, self._in_list, self._seg_mark,
                                                 self._mark, self._active)
             self._conflicts += conflicts
@@ -232,15 +247,25 @@ class StreamingRaycaster:
         self._seg_steps = np.zeros(nseg, dtype=np.int64)
         self._seg_samples = np.zeros(nseg, dtype=np.int64)
         self._seg_mark = np.zeros(nseg, dtype=np.int64)
+        self._seg_clean = (self._seg_face[:, :, 0] >= 0).astype(np.uint8)  # boundary crossings are clean
+        one_ended = self._seg_face[:, :, 0].min(axis=1) < 0
+        if np.any(one_ended):  # rays whose crossings did not pair up may walk some tets twice
+            odd_rays = np.zeros(self._n_rays, dtype=bool)
+            odd_rays[self._seg_ray[one_ended]] = True
+            self._seg_clean[odd_rays[self._seg_ray]] = K.NEVER_COUNTS
         self._active = np.arange(nseg, dtype=np.int64)
         self._park_ver = np.zeros(2 * nseg, dtype=np.int32)
         self._in_list = np.zeros(2 * nseg, dtype=np.uint8)
         self._park_face = np.full((2 * nseg, 3), -1, dtype=np.int32)
         self._nodes = np.empty((2 * nseg + 16, 3), dtype=np.int32)
         self._n_nodes = 0
-        expected = self.expected_tets or max(len(faces), 1024)
-        cap = 1 << int(np.ceil(np.log2(max(16, 2.5 * (2 * expected + len(faces) // 2)))))
-        self._htab = np.full((cap, 6), -1, dtype=np.int32)
+        if self._counting:  # grows with the tets in flight
+            cap = 1 << int(np.ceil(np.log2(max(1024, 4 * len(faces)))))
+        else:
+            expected = self.expected_tets or max(len(faces), 1024)
+            cap = 1 << int(np.ceil(np.log2(max(16, 2.5 * (2 * expected + len(faces) // 2)))))
+        self._htab = np.full((cap, 7 if self._counting else 6), -1, dtype=np.int32)
+        self._table_peak = self._htab.nbytes
         self._hmul = self._slots_per_vertex(cap)
         self._hcount = np.zeros(1, dtype=np.int64)
         self._park(nseg)
@@ -283,15 +308,37 @@ class StreamingRaycaster:
                               "the eye); use a smaller --zoom or move the camera out")
         return faces
 
+    def _crossings(self, tets):
+        """Rays crossing each face of each tet (the counting table's increments)."""
+        if not self._counting:
+            return np.zeros((0, 4), dtype=np.int32)
+        cam = self.fitted
+        fwd, right, up = cam.basis()
+        out = np.empty((len(tets), 4), dtype=np.int32)
+        xs, ys = cam.ray_offsets()
+        K.count_crossings(tets, self._points[: self._nv], xs, ys, cam.width, cam.height,
+                          np.asarray(fwd, np.float64), np.asarray(right, np.float64), np.asarray(up, np.float64),
+                          float(np.tan(np.radians(cam.view_angle) / 2.0)), out)
+        return out
+
     def _ensure_capacity(self, extra):
         cap = len(self._htab)
         need = int(self._hcount[0]) + int(extra)
-        if need > 0.6 * cap:
-            new = cap
-            while need > 0.6 * new:
-                new *= 2
-            self._hmul = self._slots_per_vertex(new)
-            self._htab = K.rehash(self._htab, new, self._hmul)
+        if need <= 0.6 * cap:
+            return
+        # A counting table first drops the faces no ray needs, then fits the rest. Not after a
+        # walk looped on folded geometry (it may have counted one face twice): keep everything.
+        purge = self._counting and not np.any(self._seg_state == K.STATE_STUCK)
+        live = K.count_live(self._htab, purge) if purge else int(self._hcount[0])
+        need = live + int(extra)
+        new = 1024 if purge else cap
+        while need > (0.4 if purge else 0.6) * new:
+            new *= 2
+        self._faces_peak = max(self._faces_peak, int(self._hcount[0]))
+        self._hmul = self._slots_per_vertex(new)
+        self._htab, n = K.rehash(self._htab, new, self._hmul, purge)
+        self._hcount[0] = n
+        self._table_peak = max(self._table_peak, self._htab.nbytes)
 
     def _slots_per_vertex(self, cap):
         """Table slots per vertex id in 16-bit fixed point (faces are grouped by smallest vertex).
@@ -300,6 +347,8 @@ class StreamingRaycaster:
         count of the expected tets (meshes have about 5 tets per vertex) spares rehashing the
         table at every vertex batch.
         """
+        if self._counting:  # scattered, see _raycast_kernels._hash0
+            return 0
         return (int(cap) << 16) // max(self._nv, (self.expected_tets or 0) // 4, 1)
 
     def _advance(self, n_active):
@@ -311,7 +360,7 @@ class StreamingRaycaster:
 
     def _advance_kernel(self, n_active):
         K.advance(self._active, n_active, self._points[: self._nv], self._dens[: self._nv], self._dirs,
-                  self._seg_ray, self._seg_face, self._seg_from, self._seg_ts, self._seg_acc, self._seg_state,
+                  self._seg_ray, self._seg_face, self._seg_from, self._seg_clean, self._seg_ts, self._seg_acc, self._seg_state,
                   self._seg_steps, self._seg_samples, self._htab, self._hmul, 0 if self.mode == "volume" else 1,
                   float(self.step), self._tab, self._lo, self._inv, self._unit, self._n_tets + 8)
 
@@ -328,7 +377,10 @@ class StreamingRaycaster:
             "boundary_anomalies": int(self._anomalies),
             "face_conflicts": int(self._conflicts),
             "samples": int(self._seg_samples.sum()),
+            "steps": int(self._seg_steps.sum()),
             "tets_rendered": int(self._n_tets),
+            "face_table_peak_mb": round(self._table_peak / 2**20, 2),
+            "lean": self._counting,
             "step": float(self.step),
             "mode": self.mode,
             "render_s": self._t_render,
@@ -383,7 +435,7 @@ def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = 
     t0 = time.perf_counter()
     rc = StreamingRaycaster(camera, tf, mode=mode, step=step,
                             scalar_range=mesh.scalar_range if scalar_range is None else scalar_range,
-                            expected_tets=mesh.n_tets)
+                            expected_tets=mesh.n_tets, lean=False)  # the whole mesh is in the table anyway
     rc.add_vertices(mesh.points, mesh.density)
     rc.set_boundary(mesh.boundary_faces())
     rc._start()
@@ -391,7 +443,7 @@ def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = 
     rc._n_tets = len(tets)
     if rc._nseg and len(tets):
         rc._ensure_capacity(4 * len(tets))
-        _, rc._conflicts = K.insert_tets(tets, rc._htab, rc._hmul, rc._hcount, rc._nodes,
+        _, rc._conflicts = K.insert_tets(tets, rc._crossings(tets), rc._htab, rc._hmul, rc._hcount, rc._nodes,
                                          rc._park_ver, rc._in_list, rc._seg_mark, 1, rc._active)
         rc._active = np.arange(rc._nseg, dtype=np.int64)
         rc._advance(rc._nseg)
@@ -402,4 +454,4 @@ def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = 
     return rc._result(image, unfinished)
 
 
-__all__ = ["RenderResult", "StreamingRaycaster", "render_mesh", "default_step", "MODES", "TransferFunction"]
+__all__ = ["LEAN_MIN_TETS", "RenderResult", "StreamingRaycaster", "render_mesh", "default_step", "MODES", "TransferFunction"]

@@ -97,7 +97,7 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
         status("compiling the renderer (first run only, up to a minute)...", quiet)
     from gatun_py.warmup import load_kernels
 
-    startup_s = load_kernels() + (time.perf_counter() - t_start)
+    startup_s = load_kernels(lean=bool(lean)) + (time.perf_counter() - t_start)
     t_start = time.perf_counter()  # total_s: from opening the input to the PNG written
     from gatun_py.pipeline.stream import View, is_tetc, render_mesh_file, render_tetc
     from gatun_py.simplify.levels import resolve_target

@@ -38,8 +38,13 @@ def seam_mesh() -> TetMesh:
 MESHES = dict(AWKWARD, seam=seam_mesh)
 
 
-def stream(mesh, camera, mode, order_seed=0, n_batches=5, tf=TF):
-    rc = StreamingRaycaster(camera, tf, mode=mode, scalar_range=mesh.scalar_range)
+def stream(mesh, camera, mode, order_seed=0, n_batches=5, tf=TF, lean=None):
+    return stream_rc(mesh, camera, mode, order_seed, n_batches, tf, lean)[1]
+
+
+def stream_rc(mesh, camera, mode, order_seed=0, n_batches=5, tf=TF, lean=None):
+    """(the StreamingRaycaster, its result) for ``mesh`` fed in pieces, tets in a random order."""
+    rc = StreamingRaycaster(camera, tf, mode=mode, scalar_range=mesh.scalar_range, lean=lean)
     rng = np.random.default_rng(order_seed)
     # vertices arrive in pieces too; the whole boundary comes before the first tet
     cut = mesh.n_points // 2
@@ -51,7 +56,7 @@ def stream(mesh, camera, mode, order_seed=0, n_batches=5, tf=TF):
     tets = mesh.tets[rng.permutation(mesh.n_tets)]
     for chunk in np.array_split(tets, min(n_batches, max(1, len(tets)))):
         rc.add_tets(chunk)
-    return rc.finish()
+    return rc, rc.finish()
 
 
 @pytest.mark.parametrize("mode", ["volume", "face"])
@@ -208,13 +213,7 @@ def test_lean_streaming_equals_in_memory(lean):
     mesh = delaunay_mesh(300, 7)
     cam = Camera(48, 40, azimuth=25.0, elevation=15.0)
     whole = render_mesh(mesh, cam, TF)
-    rc = StreamingRaycaster(cam, TF, scalar_range=mesh.scalar_range, lean=lean)
-    rc.add_vertices(mesh.points, mesh.density)
-    rc.set_boundary(mesh.boundary_faces())
-    order = np.random.default_rng(3).permutation(mesh.n_tets)
-    for chunk in np.array_split(mesh.tets[order], 40):
-        rc.add_tets(chunk)
-    res = rc.finish()
+    res = stream(mesh, cam, "volume", order_seed=3, n_batches=40, lean=lean)
     assert res.stats["lean"] is lean and res.stats["rays_unfinished"] == 0
     assert np.array_equal(res.image, whole.image)
 
@@ -225,12 +224,7 @@ def test_lean_frees_every_face_of_a_clean_mesh():
     mesh = delaunay_mesh(400, 11)
     assert np.all(np.abs(mesh.signed_volumes()) > 1e-9)
     cam = Camera(40, 40, azimuth=33.0, elevation=21.0)
-    rc = StreamingRaycaster(cam, TF, scalar_range=mesh.scalar_range, lean=True)
-    rc.add_vertices(mesh.points, mesh.density)
-    rc.set_boundary(mesh.boundary_faces())
-    for chunk in np.array_split(mesh.tets, 25):
-        rc.add_tets(chunk)
-    res = rc.finish()
+    rc, res = stream_rc(mesh, cam, "volume", order_seed=5, n_batches=25, lean=True)
     assert res.stats["rays_unfinished"] == 0 and res.stats["rays_hit"] > 500
     counters = rc._htab[rc._htab[:, 0] >= 0, 6]
     assert np.all(counters == 0)

@@ -51,7 +51,8 @@ def _simplify_and_render() -> str:
     from .render import _raycast_kernels as K
 
     table = np.full((8, 7), -1, dtype=np.int32)  # a lean table is purged only on real meshes
-    K.rehash(table, 8, 0, K.count_live(table, True) >= 0)
+    mark = np.zeros(1, dtype=np.uint8)
+    K.rehash(table, 8, 0, K.count_live(table, True, mark) >= 0, mark)
     return f"decimation and rendering ({len(levels)} levels)"
 
 
@@ -115,15 +116,15 @@ def load_kernels(*, lean: bool = False) -> float:
     """
     from .pipeline.stream import View, render_tetc
     from .render.camera import Camera
-    from .simplify.levels import Target
-
     from .render import _raycast_kernels as K
+    from .simplify.levels import Target
 
     t0 = time.perf_counter()
     render_tetc(_tiny_tetc(), View(Camera(4, 4), tf="default", lean=lean), target=Target(0, 1, 0.0, 0))
     if lean:  # a lean table fills up (and is purged) only on real meshes
         table = np.full((8, 7), -1, dtype=np.int32)
-        K.rehash(table, 8, 0, K.count_live(table, True) >= 0)
+        mark = np.zeros(1, dtype=np.uint8)
+        K.rehash(table, 8, 0, K.count_live(table, True, mark) >= 0, mark)
     return time.perf_counter() - t0
 
 

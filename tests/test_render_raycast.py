@@ -183,9 +183,11 @@ def _crossings(mesh, cam):
     P = mesh.points.astype(np.float64) - fitted_cam.position
     fwd, right, up = fitted_cam.basis()
     out = np.empty((mesh.n_tets, 4), dtype=np.int32)
+    fold_mark = np.zeros(mesh.n_points, dtype=np.uint8)
     K.count_crossings(np.ascontiguousarray(mesh.tets), P, *fitted_cam.ray_offsets(), fitted_cam.width,
-                      fitted_cam.height, fwd, right, up, float(np.tan(np.radians(fitted_cam.view_angle) / 2)), out)
-    return out, fitted_cam
+                      fitted_cam.height, fwd, right, up, float(np.tan(np.radians(fitted_cam.view_angle) / 2)),
+                      fold_mark, out)
+    return out, fitted_cam, fold_mark
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -194,18 +196,20 @@ def test_count_crossings_matches_reference(seed):
 
     mesh = delaunay_mesh(60, seed)
     cam = Camera(23, 17, azimuth=37.0 * seed + 11.0, elevation=-25.0 + 20 * seed)
-    got, fitted_cam = _crossings(mesh, cam)
+    got, fitted_cam, fold_mark = _crossings(mesh, cam)
     want = naive_face_crossings(mesh, fitted_cam)
     assert want.sum() > 100  # the rays do cross faces
     np.testing.assert_array_equal(got, want)
+    assert not fold_mark.any()  # no flat tets
 
 
 def test_count_crossings_keeps_flat_tets():
     mesh = AWKWARD["degenerate_grid"]()
-    got, _ = _crossings(mesh, Camera(16, 16, azimuth=20.0))
+    got, _, fold_mark = _crossings(mesh, Camera(16, 16, azimuth=20.0))
     flat = np.abs(mesh.signed_volumes()) == 0
     assert flat.any()
     assert np.all(got[flat] >= 1)  # never freed: the walk crosses flat tets by its fallback
+    assert np.array_equal(np.flatnonzero(fold_mark), np.unique(mesh.tets[flat]))  # nor their surroundings
 
 
 @pytest.mark.parametrize("lean", [True, False])

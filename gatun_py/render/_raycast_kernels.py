@@ -279,33 +279,37 @@ def _hash_insert(htab, mul, hcount, a, b, c):
 
 
 @njit(cache=True)
-def _live(htab, h, purge):
-    """Whether slot ``h`` holds a face worth keeping (with ``purge``: still needed)."""
+def _live(htab, h, purge, fold_mark):
+    """Whether slot ``h`` holds a face worth keeping (with ``purge``: still needed, or next to a
+    fold, see :func:`count_crossings`)."""
     if htab[h, 0] == -1:
         return False
     if not purge or htab.shape[1] <= 6:
         return True
-    return htab[h, 6] > 0 or htab[h, 5] != -1
+    if htab[h, 6] > 0 or htab[h, 5] != -1:
+        return True
+    return fold_mark[htab[h, 0]] != 0 or fold_mark[htab[h, 1]] != 0 or fold_mark[htab[h, 2]] != 0
 
 
 @njit(cache=True)
-def count_live(htab, purge):
+def count_live(htab, purge, fold_mark):
     """The faces :func:`rehash` would keep."""
     n = 0
     for h in range(htab.shape[0]):
-        if _live(htab, h, purge):
+        if _live(htab, h, purge, fold_mark):
             n += 1
     return n
 
 
 @njit(cache=True)
-def rehash(htab, new_cap, new_mul, purge):
+def rehash(htab, new_cap, new_mul, purge, fold_mark):
     """Copy the face table into one of ``new_cap`` (a power of two) slots; with ``purge``, drop
-    the faces no ray will look up again (count zero, nobody parked). Returns (table, faces)."""
+    the faces no ray will look up again (count zero, nobody parked, no vertex by a fold).
+    Returns (table, faces)."""
     ntab = np.full((new_cap, htab.shape[1]), -1, dtype=np.int32)
     cnt = np.zeros(1, dtype=np.int64)
     for h in range(htab.shape[0]):
-        if _live(htab, h, purge):
+        if _live(htab, h, purge, fold_mark):
             g = _hash_insert(ntab, new_mul, cnt, htab[h, 0], htab[h, 1], htab[h, 2])
             for col in range(3, htab.shape[1]):
                 ntab[g, col] = htab[h, col]
@@ -313,11 +317,13 @@ def rehash(htab, new_cap, new_mul, purge):
 
 
 @njit(cache=True)
-def insert_tets(tets, crossings, htab, mul, hcount, nodes, park_ver, in_list, seg_mark, mark, active):
+def insert_tets(tets, crossings, fold_mark, htab, mul, hcount, nodes, park_ver, in_list, seg_mark, mark, active):
     """Enter a batch of tets into the face table; collect the segments parked on their faces.
 
     ``crossings`` (n, 4): rays crossing each tet's faces (:func:`count_crossings`), added to the
-    faces' counters; an empty array when the table does not count (in-memory rendering).
+    faces' counters; an empty array when the table does not count (in-memory rendering). A face
+    whose two tets lie on the same side of it (a grid folded over itself) marks its five vertices
+    in ``fold_mark``.
 
     ``nodes`` (k, 3) = (item, version, next) is the pool of park-list nodes; a node is live
     while its version is the item's current one (an item that moves on is simply re-parked with a
@@ -335,6 +341,12 @@ def insert_tets(tets, crossings, htab, mul, hcount, nodes, park_ver, in_list, se
                 htab[slot, 3] = code
             elif htab[slot, 4] == -1:
                 htab[slot, 4] = code
+                if crossings.shape[0] > 0 and (htab[slot, 3] & 1) == par:  # both wind it outward
+                    fold_mark[a] = 1
+                    fold_mark[b] = 1
+                    fold_mark[c] = 1
+                    fold_mark[htab[slot, 3] >> 1] = 1
+                    fold_mark[tets[t, k]] = 1
             else:
                 conflicts += 1  # a third tet on one face: not a conforming mesh
             if crossings.shape[0] > 0:
@@ -413,7 +425,7 @@ def _near_crossing(x0, t0, x1, t1, x2, t2):
 
 
 @njit(cache=True, parallel=True)
-def count_crossings(tets, P, xs, ys, width, height, fwd, right, up, tan_half, out):
+def count_crossings(tets, P, xs, ys, width, height, fwd, right, up, tan_half, fold_mark, out):
     """``out[t, k]`` = pixel rays that may cross face k of tet t: an upper bound on the walk's uses.
 
     ``xs``, ``ys``: the pixel rays' offsets along ``right`` and ``up`` (``Camera.ray_offsets``).
@@ -436,9 +448,12 @@ def count_crossings(tets, P, xs, ys, width, height, fwd, right, up, tan_half, ou
         z3, c3, r3 = _project(P, v3, fwd, right, up, tan_half, aspect, width, height)
         if _flat(P, v0, v1, v2, v3):
             # a (nearly) zero-volume tet: the walk passes it through whichever faces its
-            # fallback picks, not the ones the ray crosses; one extra on each face keeps them
+            # fallback picks, not the ones the ray crosses; one extra on each face keeps them,
+            # and its vertices keep every face around them (a walk that left the ray's path here
+            # can wander a few tets off it). Threads may mark the same vertex: all write 1.
             for k in range(4):
                 out[t, k] = 1
+                fold_mark[tets[t, k]] = 1
         if not (z0 > 0.0 and z1 > 0.0 and z2 > 0.0 and z3 > 0.0):
             continue  # behind the eye: rays cannot be cast at it
         col0, col1 = _pixel_span(c0, c1, c2, c3, width)

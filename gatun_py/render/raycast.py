@@ -113,6 +113,7 @@ class StreamingRaycaster:
         self.expected_tets = expected_tets
         self._points = np.empty((1024, 3), dtype=np.float64)
         self._dens = np.empty(1024, dtype=np.float64)
+        self._fold_mark = np.zeros(1024, dtype=np.uint8)  # vertices by a fold or a flat tet (lean)
         self._nv = 0
         self._faces: list[np.ndarray] = []
         self._started = False
@@ -125,7 +126,6 @@ class StreamingRaycaster:
         # streaming case: the table then holds the tets in flight); render_mesh turns it off.
         self._counting = bool(lean) if lean is not None else (expected_tets is None or expected_tets >= LEAN_MIN_TETS)
         self._table_peak = 0
-        self._faces_peak = 0
 
     # -- input ----------------------------------------------------------------------------------
     def add_vertices(self, points, density) -> None:
@@ -144,6 +144,9 @@ class StreamingRaycaster:
             p2[: self._nv] = self._points[: self._nv]
             d2[: self._nv] = self._dens[: self._nv]
             self._points, self._dens = p2, d2
+            m2 = np.zeros(cap, dtype=np.uint8)
+            m2[: self._nv] = self._fold_mark[: self._nv]
+            self._fold_mark = m2
         if self._started:
             pts = pts - self._eye  # stored relative to the eye once it is known
         self._points[self._nv: n] = pts
@@ -156,7 +159,7 @@ class StreamingRaycaster:
             mul = self._slots_per_vertex(len(self._htab))
             if mul < self._hmul:
                 self._hmul = mul
-                self._htab, _ = K.rehash(self._htab, len(self._htab), mul, False)
+                self._htab, _ = K.rehash(self._htab, len(self._htab), mul, False, self._fold_mark)
 
     def set_boundary(self, faces) -> None:
         """Add boundary faces (outward wound); all of them must come before the first tet."""
@@ -180,7 +183,7 @@ class StreamingRaycaster:
             self._ensure_capacity(4 * len(tets))
             self._mark += 1
             crossings = self._crossings(tets)
-            n_active, conflicts = K.insert_tets(tets, crossings, self._htab, self._hmul, self._hcount,
+            n_active, conflicts = K.insert_tets(tets, crossings, self._fold_mark, self._htab, self._hmul, self._hcount,
                                                 self._nodes, self._park_ver, self._in_list, self._seg_mark,
                                                 self._mark, self._active)
             self._conflicts += conflicts
@@ -249,10 +252,12 @@ class StreamingRaycaster:
         self._seg_mark = np.zeros(nseg, dtype=np.int64)
         self._seg_clean = (self._seg_face[:, :, 0] >= 0).astype(np.uint8)  # boundary crossings are clean
         one_ended = self._seg_face[:, :, 0].min(axis=1) < 0
+        self._odd_segments = np.zeros(0, dtype=np.int64)
         if np.any(one_ended):  # rays whose crossings did not pair up may walk some tets twice
             odd_rays = np.zeros(self._n_rays, dtype=bool)
             odd_rays[self._seg_ray[one_ended]] = True
-            self._seg_clean[odd_rays[self._seg_ray]] = K.NEVER_COUNTS
+            self._odd_segments = np.flatnonzero(odd_rays[self._seg_ray])
+            self._seg_clean[self._odd_segments] = K.NEVER_COUNTS
         self._active = np.arange(nseg, dtype=np.int64)
         self._park_ver = np.zeros(2 * nseg, dtype=np.int32)
         self._in_list = np.zeros(2 * nseg, dtype=np.uint8)
@@ -318,7 +323,7 @@ class StreamingRaycaster:
         xs, ys = cam.ray_offsets()
         K.count_crossings(tets, self._points[: self._nv], xs, ys, cam.width, cam.height,
                           np.asarray(fwd, np.float64), np.asarray(right, np.float64), np.asarray(up, np.float64),
-                          float(np.tan(np.radians(cam.view_angle) / 2.0)), out)
+                          float(np.tan(np.radians(cam.view_angle) / 2.0)), self._fold_mark, out)
         return out
 
     def _ensure_capacity(self, extra):
@@ -327,16 +332,18 @@ class StreamingRaycaster:
         if need <= 0.6 * cap:
             return
         # A counting table first drops the faces no ray needs, then fits the rest. Not after a
-        # walk looped on folded geometry (it may have counted one face twice): keep everything.
-        purge = self._counting and not np.any(self._seg_state == K.STATE_STUCK)
-        live = K.count_live(self._htab, purge) if purge else int(self._hcount[0])
+        # walk looped on folded geometry (it may have counted one face twice), and not while the
+        # rays whose boundary crossings did not pair up are under way: they cross a grid folded
+        # over itself, off any path the counts foresee.
+        purge = (self._counting and not np.any(self._seg_state == K.STATE_STUCK)
+                 and not np.any(self._seg_state[self._odd_segments] == K.STATE_ACTIVE))
+        live = K.count_live(self._htab, purge, self._fold_mark) if purge else int(self._hcount[0])
         need = live + int(extra)
         new = 1024 if purge else cap
         while need > (0.4 if purge else 0.6) * new:
             new *= 2
-        self._faces_peak = max(self._faces_peak, int(self._hcount[0]))
         self._hmul = self._slots_per_vertex(new)
-        self._htab, n = K.rehash(self._htab, new, self._hmul, purge)
+        self._htab, n = K.rehash(self._htab, new, self._hmul, purge, self._fold_mark)
         self._hcount[0] = n
         self._table_peak = max(self._table_peak, self._htab.nbytes)
 
@@ -443,7 +450,7 @@ def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = 
     rc._n_tets = len(tets)
     if rc._nseg and len(tets):
         rc._ensure_capacity(4 * len(tets))
-        _, rc._conflicts = K.insert_tets(tets, rc._crossings(tets), rc._htab, rc._hmul, rc._hcount, rc._nodes,
+        _, rc._conflicts = K.insert_tets(tets, rc._crossings(tets), rc._fold_mark, rc._htab, rc._hmul, rc._hcount, rc._nodes,
                                          rc._park_ver, rc._in_list, rc._seg_mark, 1, rc._active)
         rc._active = np.arange(rc._nseg, dtype=np.int64)
         rc._advance(rc._nseg)

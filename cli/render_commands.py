@@ -31,8 +31,14 @@ def _kernels_cached() -> bool:
     """Whether numba has compiled the render kernels into its cache already."""
     from gatun_py.render import _raycast_kernels
 
-    cache_dir = Path(_raycast_kernels.__file__).parent / "__pycache__"
-    return any(cache_dir.glob("_raycast_kernels.*.nbc"))
+    import numba
+
+    src = Path(_raycast_kernels.__file__)
+    if numba.config.CACHE_DIR:  # NUMBA_CACHE_DIR: one folder per source folder, "<name>_<hash>"
+        dirs = list(Path(numba.config.CACHE_DIR).glob(f"{src.parent.name}_*"))
+    else:
+        dirs = [src.parent / "__pycache__"]
+    return any(any(d.glob("_raycast_kernels.*.nbc")) for d in dirs)
 
 
 @tetc.command()
@@ -93,9 +99,12 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     check_output_path(output, force=force)  # fail before the work, not after
     if sum(x is not None for x in (ratio, level, budget)) > 1:
         raise click.UsageError("give at most one of --ratio, --level and --budget")
+    from gatun_py.warmup import compile_for_render, load_kernels
+
     if not _kernels_cached():
-        status("compiling the renderer (first run only, up to a minute)...", quiet)
-    from gatun_py.warmup import load_kernels
+        status("compiling the decoder and the renderer on two cores (first run only, under a minute; "
+               "`make install` does it ahead)...", quiet)
+        compile_for_render()
 
     startup_s = load_kernels(lean=bool(lean)) + (time.perf_counter() - t_start)
     t_start = time.perf_counter()  # total_s: from opening the input to the PNG written

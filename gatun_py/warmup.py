@@ -8,7 +8,6 @@ mesh, which gives them the same argument types as real data; the work is split o
 
 from __future__ import annotations
 
-import os
 import sys
 import tempfile
 import time
@@ -77,33 +76,69 @@ def _codec_and_filter() -> str:
     return "compression, decompression and the run-time filter"
 
 
-def _tiny_tetc() -> bytes:
-    """A small .tetc file (one merge in its forest), cached in the user's cache directory."""
-    from .codec import LevelPayload, TetcReader, encode_tetc
-    from .errors import TetcError
-    from .pipeline.budget import cache_dir
+SHIPPED_TETC = Path(__file__).with_name("warmup.tetc")
+
+
+def tiny_tetc_bytes() -> bytes:
+    """:func:`tiny_mesh` as a .tetc file with one merge in its forest (needs the encoder)."""
+    from .codec import LevelPayload, encode_tetc
     from .simplify import ROOT_RANK
 
-    path = cache_dir() / "warmup.tetc"
-    try:
-        data = path.read_bytes()
-        TetcReader(data)
-        return data
-    except (OSError, TetcError):
-        pass
     mesh = tiny_mesh()
     parent = np.arange(mesh.n_points, dtype=np.int32)
     rank = np.full(mesh.n_points, ROOT_RANK, np.int32)
-    parent[1], rank[1] = 0, 0
-    data = encode_tetc([LevelPayload(0, 0.0, 0, mesh, (parent, rank))])
+    parent[1], rank[1] = 0, 0  # one merge, so the forest coder and the filter do real work
+    return encode_tetc([LevelPayload(0, 0.0, 0, mesh, (parent, rank))])
+
+
+def _tiny_tetc() -> bytes:
+    """The small .tetc that exercises the decoder: shipped beside this module (a test keeps it
+    equal to :func:`tiny_tetc_bytes`), so a first render does not have to compile the encoder."""
+    from .codec import TetcReader
+    from .errors import TetcError
+
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".tmp{os.getpid()}")
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
-    except OSError:
-        pass
-    return data
+        data = SHIPPED_TETC.read_bytes()
+        TetcReader(data)
+        return data
+    except (OSError, TetcError):
+        return tiny_tetc_bytes()
+
+
+def _decode_and_filter() -> str:
+    from .codec import TetcReader
+    from .simplify import ancestors
+    from .simplify.filter import SimplifyFilter
+
+    reader = TetcReader(_tiny_tetc())
+    reader.decode_mesh(0)
+    p, r = reader.read_forest(0)
+    list(SimplifyFilter(ancestors(p, r, 1)).filter(reader.iter_decode(0, batch_tets=5)))
+    return "decompression and the run-time filter"
+
+
+def _render_only() -> str:
+    from .render.camera import Camera
+    from .render.raycast import render_mesh
+    from .render.stream import mesh_batches, render_batches
+
+    mesh = tiny_mesh()
+    cam = Camera(16, 16, 30, 20)
+    for mode in ("volume", "face"):
+        render_mesh(mesh, cam, "default", mode=mode)
+        render_batches(mesh_batches(mesh, batch_tets=7), cam, "default", mode=mode, scalar_range=mesh.scalar_range,
+                       lean=False)
+    return "rendering"
+
+
+def compile_for_render() -> float:
+    """Compile what ``tetc render`` needs into numba's cache, decoder and renderer side by side
+    in two processes (the first run on a fresh install); returns the seconds it took."""
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=2) as pool:
+        for job in [pool.submit(_render_only), pool.submit(_decode_and_filter)]:
+            job.result()
+    return time.perf_counter() - t0
 
 
 def load_kernels(*, lean: bool = False) -> float:

@@ -340,7 +340,7 @@ class StreamingRaycaster:
         live = K.count_live(self._htab, purge, self._fold_mark) if purge else int(self._hcount[0])
         need = live + int(extra)
         new = 1024 if purge else cap
-        while need > (0.4 if purge else 0.6) * new:
+        while need > (0.25 if purge else 0.6) * new:  # room for many batches before the next purge
             new *= 2
         self._hmul = self._slots_per_vertex(new)
         self._htab, n = K.rehash(self._htab, new, self._hmul, purge, self._fold_mark)

@@ -2,7 +2,7 @@
 generic vs streaming over ratio (Figure 9), stored levels (Table 3 / Figure 10), image quality over
 ratio (Figure 11), peak memory, and the time-budget flag.
 
-Run: ``python bench/bench_pipeline.py [--quick] [--only table3]`` → ``bench/sections/pipeline.md`` + ``bench/figures/``.
+Run: ``python bench/bench_pipeline.py [--quick] [--only table3|memory]`` → ``bench/sections/pipeline.md`` + ``bench/figures/``.
 All timings in-process with a warm JIT cache (interpreter start-up excluded, as ``--stats``'s
 ``total_s``): from opening the .tetc file to the PNG written.
 """
@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from common import FIGURES, ROOT, WORK, load, table, write_section
+from common import FIGURES, ROOT, WORK, code_state, load, table, write_section
 
 QUICK = "--quick" in sys.argv
 DATASETS = ["bluntfin", "combustion"]
@@ -178,26 +178,9 @@ def main():
     # -- our forest vs VTK's quadric decimation at equal tet counts, rendered the same way -----------
     text.append(vtk_quality_section(files))
 
-    # -- peak memory: streaming vs generic, separate processes --------------------------------------
-    text.append("### Peak memory: streaming vs generic (separate processes, 256², full mesh)\n")
-    mem_rows = []
-    for n in DATASETS:
-        res = {}
-        for p in ("streaming", "generic"):
-            code = ("from gatun_py._resources import peak_rss_mb;from gatun_py.pipeline.stream import render_tetc,View;"
-                    f"r=render_tetc({str(files[n][1])!r},View(tf={TF[n]!r}),pipeline={p!r});"
-                    "print(peak_rss_mb())")
-            out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
-            res[p] = float(out.stdout.strip().splitlines()[-1]) if out.returncode == 0 else float("nan")
-        base = subprocess.run([sys.executable, "-c", "import gatun_py.pipeline.stream,gatun_py.render.raycast,"
-                               "gatun_py.codec;from gatun_py._resources import peak_rss_mb;print(peak_rss_mb())"],
-                              capture_output=True, text=True, cwd=ROOT)
-        b = float(base.stdout.strip() or "nan")
-        mem_rows.append([n, f"{res['streaming']:.0f}", f"{res['generic']:.0f}", f"{res['streaming'] / res['generic']:.2f}",
-                         f"{b:.0f}", f"{(res['streaming'] - b) / max(res['generic'] - b, 1e-9):.2f}"])
-    text.append(table(["data set", "streaming MB", "generic MB", "ratio", "imports alone MB",
-                       "ratio above imports"], mem_rows) + "\n")
-    text.append("Target ≤ 0.6 × the generic pipeline on the largest sample.\n")
+    # -- peak memory: streaming (no-lean, lean) vs generic, whole processes ------------------------
+    text.append(memory_section(files))
+    mem_rows = MEM_ROWS
 
     # -- the time budget ----------------------------------------------------------------------------
     text.append("### Time budget (`tetc render --budget`)\n")
@@ -305,25 +288,6 @@ def _lstsq(columns, y):
     pred = x @ coef
     ss_tot = np.sum((y - y.mean()) ** 2)
     return coef, (1.0 - np.sum((y - pred) ** 2) / ss_tot) if ss_tot > 0 else float("nan")
-
-
-def code_state() -> str:
-    """Which code the timings ran: the commit, and whether gatun_py/ had uncommitted changes
-    (several people work in one tree), or where gatun_py was imported from if not this checkout."""
-    from pathlib import Path
-
-    import gatun_py
-
-    def git(*args):
-        p = subprocess.run(["git", "-C", str(ROOT), *args], capture_output=True, text=True)
-        return p.stdout if p.returncode == 0 else ""
-
-    pkg = Path(gatun_py.__file__).resolve().parent
-    if pkg != (ROOT / "gatun_py").resolve():  # e.g. PYTHONPATH=<git archive of a commit>
-        return f"gatun_py imported from `{pkg}` ({os.environ.get('TETC_CODE_COMMIT', 'commit not given')})"
-    dirty = [ln for ln in git("status", "--porcelain", "--", "gatun_py", "cli").splitlines() if ln.strip()]
-    state = f"commit {git('rev-parse', '--short', 'HEAD').strip() or '?'}"
-    return state + (f" with uncommitted changes in {', '.join(ln[3:] for ln in dirty)}" if dirty else "")
 
 
 def table3_section(files):
@@ -446,6 +410,148 @@ def only_table3():
     write_section("pipeline", new)
 
 
+
+# -- peak memory: streaming vs generic (issue 6 "Lean"), whole processes ------------------------------
+
+MEM_SIZES = (256, 512)
+MEM_REFINED = [("bluntfin", 2), ("combustion", 2), ("bluntfin", 3), ("combustion", 3)]
+MEM_REPEATS = 1 if QUICK else 3
+MEM_BIG_TETS = 3_000_000  # one process per point above this (the K=3 meshes)
+MEMORY_HEAD = "### Peak memory: streaming vs generic"
+MEM_ROWS: list = []  # the memory table's rows, kept for pipeline.json
+VARIANTS = (("streaming --no-lean", "streaming", False), ("streaming --lean", "streaming", True),
+            ("generic", "generic", None))
+
+
+def mem_worker(spec: str) -> None:
+    """One render in this fresh process (``--mem-worker JSON``); prints peak RSS and times as JSON."""
+    t0 = time.perf_counter()
+    from gatun_py._resources import peak_rss_mb
+    from gatun_py.pipeline.stream import View, render_tetc
+    from gatun_py.render.camera import Camera
+    from gatun_py.render.image import write_png
+
+    a = json.loads(spec)
+    if a["path"] is None:  # the floor: everything imported and the kernels run once on one tet
+        sys.path.insert(0, str(ROOT / "tests"))
+        from meshgen import single_tet
+
+        from gatun_py.codec import TetcReader  # noqa: F401
+        from gatun_py.render.raycast import render_mesh
+
+        render_mesh(single_tet(), Camera(4, 4), "default")
+        print(json.dumps({"peak_rss_mb": peak_rss_mb()}))
+        return
+    t1 = time.perf_counter()
+    res = render_tetc(a["path"], View(Camera(a["size"], a["size"], *a["angles"]), tf=a["tf"], lean=a["lean"]),
+                      pipeline=a["pipeline"])
+    write_png(a["out"], res.image, force=True)
+    st = res.stats
+    print(json.dumps({"peak_rss_mb": peak_rss_mb(), "total_s": time.perf_counter() - t1,
+                      "process_s": time.perf_counter() - t0, "lean": st.get("lean"),
+                      "face_table_peak_mb": st.get("face_table_peak_mb"), "rays_unfinished": st["rays_unfinished"],
+                      "tets_rendered": st["tets_rendered"]}))
+
+
+def run_mem_worker(**spec) -> dict:
+    out = subprocess.run([sys.executable, str(ROOT / "bench" / "bench_pipeline.py"), "--mem-worker", json.dumps(spec)],
+                         capture_output=True, text=True, cwd=ROOT, timeout=1800)
+    if out.returncode != 0:
+        raise RuntimeError(f"memory worker failed: {out.stderr[-2000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def memory_datasets(files) -> list[tuple[str, str, str, int]]:
+    """(label, .tetc path, transfer function, tets): the samples' one-version files, then the refined."""
+    from common import refined_tetc
+
+    from gatun_py.codec import TetcReader
+
+    ds = [(n, str(files[n][1]), TF[n], int(TetcReader(files[n][1]).meta["tets"])) for n in DATASETS]
+    for n, k in (MEM_REFINED[:1] if QUICK else MEM_REFINED):
+        rec = refined_tetc(n, k)
+        ds.append((f"{n} K={k}", str(ROOT / rec["tetc"]), TF[n], int(rec["tets"])))
+    return ds
+
+
+def memory_section(files) -> str:
+    """Peak memory and time of the streaming pipeline (no-lean and lean) against the generic one."""
+    from gatun_py.pipeline.stream import LEAN_BATCH_TETS
+    from gatun_py.render.raycast import LEAN_MIN_TETS
+
+    code_before = code_state()
+    floor = statistics.median(run_mem_worker(path=None)["peak_rss_mb"] for _ in range(3))
+    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    rows, time_rows, largest = [], [], None
+    for label, path, tf, tets in memory_datasets(files):
+        n = label.split()[0]
+        for size in MEM_SIZES:
+            res = {}
+            for key, pipeline, lean in VARIANTS:
+                reps = MEM_REPEATS if tets <= MEM_BIG_TETS else 1
+                runs = [run_mem_worker(path=path, size=size, angles=list(ANGLES[n]), tf=tf, lean=lean,
+                                       pipeline=pipeline, out=str(WORK / "mem.png")) for _ in range(reps)]
+                res[key] = {"rss": statistics.median(r["peak_rss_mb"] for r in runs),
+                            "s": statistics.median(r["total_s"] for r in runs), "reps": reps,
+                            "table": runs[0]["face_table_peak_mb"], "unfinished": runs[0]["rays_unfinished"]}
+                print(f"memory {label} {size}² {key}: {res[key]['rss']:.0f} MB {res[key]['s']:.2f} s", flush=True)
+            default = "streaming --lean" if tets >= LEAN_MIN_TETS else "streaming --no-lean"
+            g, lo, nl = res["generic"], res["streaming --lean"], res["streaming --no-lean"]
+            rows.append([label, f"{tets:,}", f"{size}²", f"{nl['rss']:.0f}", f"{lo['rss']:.0f}", f"{g['rss']:.0f}",
+                         f"**{res[default]['rss'] / g['rss']:.2f}** ({default.split()[-1]})",
+                         f"{lo['rss'] / g['rss']:.2f}", f"{(lo['rss'] - floor) / max(g['rss'] - floor, 1e-9):.2f}",
+                         f"{nl['table']:g} / {lo['table']:g} / {f"{g['table']:g}" if g['table'] is not None else 'n/a'}",
+                         f"{nl['unfinished']} / {lo['unfinished']} / {g['unfinished']}"])
+            time_rows.append([label, f"{size}²", f"{nl['s']:.2f}", f"{lo['s']:.2f}", f"{lo['s'] / nl['s']:.2f}",
+                              f"{g['s']:.2f}", f"{res[default]['s'] / g['s']:.2f}", str(lo["reps"])])
+            if largest is None or tets > largest[1]:
+                largest = (label, tets)
+    MEM_ROWS[:] = rows
+    code = code_state()
+    code = code if code == code_before else f"{code_before} at the start, {code} at the end (changed during the run)"
+    out = [f"{MEMORY_HEAD} (whole processes, issue 6 target ≤ 0.6 × generic on the largest data set)\n",
+           f"Command: `python bench/bench_pipeline.py --only memory` (also part of the full run), "
+           f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load average {load} (1 / 5 / 15 min, 2 cores, "
+           f"shared). Every point is a fresh interpreter (`bench_pipeline.py --mem-worker`) that renders the "
+           f"full mesh once with `render_tetc(path, View(Camera(S, S, 30, 20), tf, lean=...), pipeline=...)` and "
+           f"writes the PNG, then reports its VmHWM (peak resident set of the whole process); median of "
+           f"{MEM_REPEATS} processes (one above {MEM_BIG_TETS:,} tets). *generic* = decode the whole level, then "
+           f"render it in memory (the paper's baseline); *streaming --lean* frees every face once no pixel ray "
+           f"still has to cross it and decodes in batches of {LEAN_BATCH_TETS} tets; the default (**bold** "
+           f"ratio) is lean from {LEAN_MIN_TETS:,} tets. *floor* = the same interpreter with everything imported "
+           f"and the kernels run on one tet: **{floor:.0f} MB**; *above floor* = (lean − floor) / (generic − "
+           f"floor). Samples: `*_one.tetc` (level 0 + forest). `K=2` / `K=3`: Blunt-fin and Combustion refined "
+           f"K× per grid axis by trilinear interpolation of the PLOT3D grid and its scalar (`bench/common.py` "
+           f"`refined_tetc`: `tetc convert --refine K`, `tetc compress --mesh-only`, as the data notes "
+           f"`SOURCES.md` suggest for scale tests), 8× / 27× the tets: the largest data sets here, not new data. Code: {code}.\n",
+           table(["data set", "tets", "size", "streaming --no-lean MB", "streaming --lean MB", "generic MB",
+                  "default / generic", "lean / generic", "lean above floor",
+                  "face table MB no-lean / lean / generic", "rays unfinished no-lean / lean / generic"], rows) + "\n",
+           f"Largest data set: {largest[0]} ({largest[1]:,} tets). Time of the same processes (s, open to PNG "
+           f"written, interpreter start-up excluded; median of the runs):\n",
+           table(["data set", "size", "streaming --no-lean s", "streaming --lean s", "lean / no-lean", "generic s",
+                  "default / generic", "runs"], time_rows) + "\n"]
+    return "\n".join(out)
+
+
+def only_memory():
+    """Re-measure the memory block and replace it in the existing section (the other tables stay)."""
+    from common import SECTIONS
+
+    files = {n: build_files(n) for n in DATASETS}
+    for n in DATASETS:  # warm the JIT caches
+        frame(files[n][1], view(n, 64))
+    block = memory_section(files)
+    sec = SECTIONS / "pipeline.md"
+    old = sec.read_text() if sec.exists() else ""
+    if MEMORY_HEAD not in old:
+        raise SystemExit(f"{sec} has no memory block: run the whole benchmark")
+    i = old.index(MEMORY_HEAD)
+    j = old.find("\n### ", i + len(MEMORY_HEAD))
+    new = old[:i] + block.strip() + "\n" + (old[j:] if j >= 0 else "")
+    write_section("pipeline", new)
+
+
 def vtk_quality_section(files) -> str:
     """RMSE against the full render: our simplified mesh vs VTK's quadric decimation at the same tet count."""
     try:
@@ -489,7 +595,11 @@ def vtk_quality_section(files) -> str:
 
 
 if __name__ == "__main__":
-    if "--only" in sys.argv and sys.argv[sys.argv.index("--only") + 1:][:1] == ["table3"]:
+    if "--mem-worker" in sys.argv:
+        mem_worker(sys.argv[sys.argv.index("--mem-worker") + 1])
+    elif "--only" in sys.argv and sys.argv[sys.argv.index("--only") + 1:][:1] == ["table3"]:
         only_table3()
+    elif "--only" in sys.argv and sys.argv[sys.argv.index("--only") + 1:][:1] == ["memory"]:
+        only_memory()
     else:
         main()

@@ -25,6 +25,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))  # common.py
+from common import code_state  # noqa: E402
 
 SAMPLES = {
     "bluntfin": (ROOT / "sample_meshes/bluntfin/bluntfinxyz.bin", {}, "bluntfin"),
@@ -240,7 +242,9 @@ def worker_inmemory(args) -> dict:
                       scalar_range=reader.level_meta(0).get("scalar_range"))
     write_png(args.out, res.image, force=True)
     return {"decode_s": t_dec, "render_s": res.stats["render_s"], "total_s": time.perf_counter() - t0,
-            "peak_rss_mb": _rss_mb(), "import_rss_mb": rss_import}
+            "peak_rss_mb": _rss_mb(), "import_rss_mb": rss_import,
+            "face_table_peak_mb": res.stats.get("face_table_peak_mb", float("nan")),
+            "rays_unfinished": res.stats["rays_unfinished"]}
 
 
 def worker_baseline(args) -> dict:
@@ -366,10 +370,324 @@ def absdiff(a, b):
     return np.abs(a.astype(np.int16) - b.astype(np.int16)).max(axis=2)
 
 
+
+# ------------------------------------------------------------------------------------------------
+# memory (issue 5 "Lean") and lean streaming == in-memory
+MEM_SIZE = 512
+MEM_REFINED = [("bluntfin", 2), ("combustion", 2), ("bluntfin", 3), ("combustion", 3)]
+VTK_MAX_TETS = 2_000_000  # VTK on the K=3 meshes: one run only (minutes and GBs each)
+LEAN_VIEWS = VIEWS[:3]
+LEAN_SIZE = 256
+MEMORY_HEAD = "### Peak memory, 512²"
+LEAN_HEAD = "### Lean streaming equals in-memory"
+
+
+CODE_BEFORE = None
+
+
+def code_note() -> str:
+    """The commit the figures ran (and whether gatun_py changed while they were measured)."""
+    now = code_state()
+    if CODE_BEFORE is None or CODE_BEFORE == now:
+        return f"Code: {now}."
+    return f"Code: {CODE_BEFORE} at the start, {now} at the end (changed during the run)."
+
+
+def sample_tetc(name, work) -> dict:
+    """A sample as .vtu + mesh-only .tetc in ``work`` (what the speed table renders), as a record."""
+    from gatun_py.codec.tetcfile import write_tetc
+    from gatun_py.mesh import read_mesh, write_mesh
+
+    path, kw, tfname = SAMPLES[name]
+    vtu, tetc = Path(work) / f"{name}.vtu", Path(work) / f"{name}.tetc"
+    mesh = None
+    if not tetc.exists():
+        mesh, _ = read_mesh(path, **kw)
+        write_tetc(tetc, mesh, source=str(path), force=True)
+    if name in ("bluntfin", "combustion") and not vtu.exists():
+        if mesh is None:
+            mesh, _ = read_mesh(path, **kw)
+        write_mesh(mesh, vtu, force=True)
+    return {"label": name, "tetc": tetc, "vtu": vtu if vtu.exists() else None, "tf": tfname, "built": "sample"}
+
+
+def refined_record(name, factor, log=print) -> dict:
+    """A refined PLOT3D sample (bench/common.py ``refined_tetc``: trilinear refinement, cached)."""
+    from common import refined_tetc
+
+    t0 = time.perf_counter()
+    rec = refined_tetc(name, factor, log=log)
+    return {"label": f"{name} K={factor}", "tetc": ROOT / rec["tetc"], "vtu": ROOT / rec["vtu"], "tf": name,
+            "built": "refined", "build_s": rec.get("convert_s", 0) + rec.get("compress_s", 0),
+            "cached": time.perf_counter() - t0 < 5.0}
+
+
+def memory_rows(datasets, work, have_vtk, repeats, log=print) -> tuple[list, float]:
+    """Whole-process peak memory (VmHWM) and time of every way to render each data set at 512².
+
+    Ours: ``tetc render --no-lean`` and ``--lean`` (the default is --lean from LEAN_MIN_TETS tets);
+    in-memory: ``--worker inmemory`` (decode the whole level, then ``render_mesh``); VTK:
+    ``--worker vtk`` on the .vtu. Medians of ``repeats`` fresh processes (one for VTK above
+    VTK_MAX_TETS tets). Returns (rows, baseline MB).
+    """
+    from gatun_py.codec import TetcReader
+    from gatun_py.render.image import read_png_rgb
+
+    global CODE_BEFORE
+    CODE_BEFORE = code_state()
+    base = statistics.median(run_worker("baseline")["peak_rss_mb"] for _ in range(3))
+    rows = []
+    for d in datasets:
+        reader = TetcReader(d["tetc"])
+        meta = reader.meta
+        tets = int(meta["tets"])
+        tag = d["label"].replace(" ", "").replace("=", "")
+        row = {"d": d, "tets": tets}
+        for key, extra in (("nolean", ("--no-lean",)), ("lean", ("--lean",))):
+            runs = [run_ours(d["tetc"], work / f"mem_{tag}_{key}.png", d["tf"], (MEM_SIZE, MEM_SIZE), extra=extra)
+                    for _ in range(repeats)]
+            row[key] = {"rss": statistics.median(r["peak_rss_mb"] for r in runs),
+                        "s": statistics.median(r["total_s"] for r in runs),
+                        "render_s": statistics.median(r["render_s"] for r in runs),
+                        "table": runs[0]["face_table_peak_mb"], "unfinished": runs[0]["rays_unfinished"],
+                        "lean": runs[0]["lean"], "steps": runs[0]["steps"]}
+            log(f"  {d['label']} {key}: {row[key]['rss']:.0f} MB {row[key]['s']:.2f} s")
+        runs = [run_worker("inmemory", input=d["tetc"], tf=d["tf"], out=work / f"mem_{tag}_inmem.png",
+                           width=MEM_SIZE, height=MEM_SIZE) for _ in range(repeats)]
+        row["inmem"] = {"rss": statistics.median(r["peak_rss_mb"] for r in runs),
+                        "s": statistics.median(r["total_s"] for r in runs),
+                        "table": runs[0]["face_table_peak_mb"], "unfinished": runs[0]["rays_unfinished"]}
+        log(f"  {d['label']} in-memory: {row['inmem']['rss']:.0f} MB {row['inmem']['s']:.2f} s")
+        imgs = {k: read_png_rgb(work / f"mem_{tag}_{k}.png").astype(int) for k in ("nolean", "lean", "inmem")}
+        row["pdiff"] = max(int(np.abs(imgs["lean"] - imgs["inmem"]).max()),
+                           int(np.abs(imgs["nolean"] - imgs["inmem"]).max()))
+        if have_vtk and d["vtu"] is not None:
+            n_vtk = repeats if tets <= VTK_MAX_TETS else 1
+            runs = [run_worker("vtk", input=d["vtu"], tf=d["tf"], out=work / f"mem_{tag}_vtk.npy",
+                               scalar=meta["scalar"], range=json.dumps(list(meta["scalar_range"])), width=MEM_SIZE,
+                               height=MEM_SIZE) for _ in range(n_vtk)]
+            row["vtk"] = {"rss": statistics.median(r["peak_rss_mb"] for r in runs),
+                          "s": statistics.median(r["read_render_s"] for r in runs), "n": n_vtk}
+            log(f"  {d['label']} VTK: {row['vtk']['rss']:.0f} MB {row['vtk']['s']:.2f} s")
+        rows.append(row)
+    return rows, base
+
+
+def memory_section(rows, base, repeats, load) -> list[str]:
+    """Markdown for the memory table (and the time each way took)."""
+    from gatun_py.pipeline.stream import LEAN_BATCH_TETS
+    from gatun_py.render.raycast import LEAN_MIN_TETS
+
+    me = "python bench/bench_render.py --only memory"
+    out = [f"{MEMORY_HEAD} (target: streaming ≤ 0.6 × decompress-then-render, and below VTK)", "",
+           f"Made by `{me}` (also part of the full run) on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; "
+           f"load while measuring: {load}. Every figure is the peak resident set (VmHWM) of a whole, fresh process "
+           f"rendering the data set at {MEM_SIZE}² from the front (az 0, el 0), median of {repeats} processes: "
+           f"*no-lean* = `tetc render X.tetc -o X.png --tf NAME --size {MEM_SIZE}x{MEM_SIZE} --stats --no-lean`, "
+           f"*lean* = the same with `--lean` (every face counts the pixel rays still to cross it and is dropped "
+           f"when none is left, decode batches of {LEAN_BATCH_TETS} tets; **the default from "
+           f"{LEAN_MIN_TETS:,} tets**, so the samples render no-lean and the refined meshes lean unless told), "
+           f"*in-memory* = decompress-then-render (`--worker inmemory`: `TetcReader.decode_mesh` then "
+           f"`render_mesh`), *VTK* = `--worker vtk` on the same mesh as `.vtu` (reader + one render). The "
+           f"*floor* is a process with the interpreter, numpy, numba, LLVM and our kernels loaded and a "
+           f"one-tet render done (`--worker baseline`, median of 3): **{base:.0f} MB**. *Above floor* = "
+           f"(lean − floor) / (in-memory − floor). Face table = `face_table_peak_mb` of `--stats` (the "
+           f"in-memory render's own table for the in-memory column). The `K=2`/`K=3` rows are Blunt-fin and "
+           f"Combustion refined K× per grid axis by trilinear interpolation of the PLOT3D grid and its scalar "
+           f"(`bench/common.py` `refined_tetc`, `tetc convert --refine K` + `tetc compress --mesh-only`, as the "
+           f"data notes `SOURCES.md` suggest for scale tests): same shapes, 8× / 27× the tets, not new data. "
+           + code_note(),
+           "",
+           "| data | tets | no-lean MB | lean MB | in-memory MB | VTK MB | lean / in-memory | above floor | "
+           "lean / VTK | face table MB no-lean / lean / in-memory | rays unfinished | max pixel diff |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        v = r.get("vtk")
+        vt = f"{v['rss']:.0f}" if v else "n/a"
+        lv = f"{r['lean']['rss'] / v['rss']:.2f}" if v else "n/a"
+        above = (r["lean"]["rss"] - base) / max(r["inmem"]["rss"] - base, 1e-9)
+        out.append(f"| {r['d']['label']} | {r['tets']:,} | {r['nolean']['rss']:.0f} | **{r['lean']['rss']:.0f}** | "
+                   f"{r['inmem']['rss']:.0f} | {vt} | **{r['lean']['rss'] / r['inmem']['rss']:.2f}** | "
+                   f"{above:.2f} | {lv} | {r['nolean']['table']:g} / {r['lean']['table']:g} / "
+                   f"{r['inmem']['table']:g} | {r['nolean']['unfinished']} / {r['lean']['unfinished']} / "
+                   f"{r['inmem']['unfinished']} | {r['pdiff']} |")
+    out += ["", "Rays unfinished: no-lean / lean / in-memory. Max pixel diff: largest difference (0–255) of the lean "
+            "and the no-lean PNG from the in-memory PNG.", "",
+            f"Time of the same runs (s, `total_s` of `--stats` for ours: open to PNG written, interpreter start-up "
+            f"excluded; the in-memory worker the same span; VTK: reader + first render; medians of {repeats}, one "
+            f"run for VTK above {VTK_MAX_TETS:,} tets). The lean walk pays for counting crossings and dropping faces:",
+            "", "| data | no-lean s | lean s | lean / no-lean | lean render s / no-lean render s | in-memory s | "
+            "VTK s |", "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        v = r.get("vtk")
+        vt = f"{v['s']:.2f}" + ("" if not v or v["n"] > 1 else " (1 run)") if v else "n/a"
+        out.append(f"| {r['d']['label']} | {r['nolean']['s']:.2f} | {r['lean']['s']:.2f} | "
+                   f"{r['lean']['s'] / r['nolean']['s']:.2f} | {r['lean']['render_s']:.2f} / "
+                   f"{r['nolean']['render_s']:.2f} | {r['inmem']['s']:.2f} | {vt} |")
+    built = [r["d"] for r in rows if r["d"]["built"] == "refined"]
+    if built:
+        out += ["", "Building the refined files (once, cached under `bench/out/`; `tetc convert --refine` + `tetc "
+                "compress --mesh-only`, fresh processes): " + ", ".join(f"{d['label']} {d['build_s']:.0f} s"
+                                                                      for d in built) + "."]
+    return out + [""]
+
+
+def lean_check_section(datasets, load) -> list[str]:
+    """Lean streaming vs in-memory, in process, on every data set from LEAN_VIEWS.
+
+    Three renders of the same level with the same fitted camera, step and scalar range: the
+    in-memory ``render_mesh`` of the decoded mesh; ``render_tetc`` with ``View(lean=True)`` (decode
+    order, lean decode batches; and the same with ``lean=False``); a ``StreamingRaycaster(lean=True)`` fed the decoded tets in a
+    random order in 20 batches (the worst case for the face counts: faces are needed long).
+    """
+    from gatun_py.codec import TetcReader
+    from gatun_py.pipeline.stream import View, file_render_defaults, render_tetc
+    from gatun_py.render import Camera, StreamingRaycaster, render_mesh
+
+    global CODE_BEFORE
+    CODE_BEFORE = code_state()
+    out = [f"{LEAN_HEAD} (lean streaming, {LEAN_SIZE}², in process)", "",
+           f"Made by `python bench/bench_render.py --only lean` (also part of the full run) on "
+           f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} ({load}). Each data set as a mesh-only `.tetc`, decoded "
+           f"level 0 rendered in memory (`render_mesh`) against lean streaming in decode order (`render_tetc(path, "
+           f"View(camera, tf, lean=True))`), the same with `lean=False` (*no-lean*) and lean streaming of the decoded tets shuffled into 20 batches "
+           f"(`StreamingRaycaster(..., lean=True)`); same fitted camera, step and scalar range. Max difference "
+           f"in float (target ≤ 1e-5), rays unfinished of each render.", "",
+           "| data | tets | view (az, el) | rays hit | rays unfinished: in-memory / no-lean / lean / lean shuffled | "
+           "max diff: no-lean / lean / lean shuffled | pixels > 1e-5: no-lean / lean / lean shuffled | "
+           "face table MB: in-memory / no-lean / lean / lean shuffled | NaN pixels |",
+           "|---|---|---|---|---|---|---|---|---|"]
+    for d in datasets:
+        reader = TetcReader(d["tetc"])
+        mesh = reader.decode_mesh(0)
+        lo, hi, rng, step = file_render_defaults(reader)
+        for az, el in LEAN_VIEWS:
+            cam = Camera(LEAN_SIZE, LEAN_SIZE, az, el)
+            fitted = cam.fit(lo, hi)
+            mem = render_mesh(mesh, fitted, d["tf"], step=step, scalar_range=rng)
+            nolean = render_tetc(d["tetc"], View(cam, d["tf"], lean=False))
+            lean = render_tetc(d["tetc"], View(cam, d["tf"], lean=True))
+            rc = StreamingRaycaster(fitted, d["tf"], step=step, scalar_range=rng, expected_tets=mesh.n_tets,
+                                    lean=True)
+            rc.add_vertices(mesh.points, mesh.density)
+            rc.set_boundary(mesh.boundary_faces())
+            perm = np.random.default_rng(0).permutation(mesh.n_tets)
+            for chunk in np.array_split(mesh.tets[perm], 20):
+                rc.add_tets(chunk)
+            shuf = rc.finish()
+            runs = (nolean, lean, shuf)
+            diffs = [np.abs(r.image - mem.image).max(axis=2) for r in runs]
+            nan = sum(int(r.stats.get("nan_pixels", 0)) for r in (mem, *runs))
+            out.append(f"| {d['label']} | {mesh.n_tets:,} | ({az:g}, {el:g}) | {mem.stats['rays_hit']} | "
+                       + " / ".join(str(r.stats["rays_unfinished"]) for r in (mem, *runs)) + " | "
+                       + " / ".join(f"{float(x.max()):.1e}" for x in diffs) + " | "
+                       + " / ".join(str(int(np.count_nonzero(x > 1e-5))) for x in diffs) + " | "
+                       + " / ".join(f"{r.stats['face_table_peak_mb']:g}" for r in (mem, *runs)) + f" | {nan} |")
+            print(out[-1], flush=True)
+    out[2] += " " + code_note()
+    return out + [""]
+
+
+
+VIEWS_HEAD = "### Lean face table over view directions"
+VIEW_SCAN = [(0.0, 0.0), (30.0, 20.0), (90.0, 20.0), (200.0, -45.0), (45.0, 70.0), (180.0, 0.0)]
+
+
+def view_scan_section(datasets, load) -> list[str]:
+    """Diagnostic: the lean face table's peak (``face_table_peak_mb``) over view directions, in process."""
+    from gatun_py.pipeline.stream import View, render_tetc
+    from gatun_py.render import Camera
+
+    global CODE_BEFORE
+    CODE_BEFORE = code_state()
+    out = [f"{VIEWS_HEAD} ({MEM_SIZE}², diagnostic)", "",
+           f"Made by `python bench/bench_render.py --only views` on "
+           f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} ({load}): `render_tetc(path, View(Camera("
+           f"{MEM_SIZE}, {MEM_SIZE}, az, el), tf, lean=True))` in one process, `face_table_peak_mb` and "
+           "`rays_unfinished` of its stats; the no-lean table of the same file for reference. The memory tables "
+           "above use the front view (0, 0) here and (30, 20) in the pipeline section.", "",
+           "| data | no-lean table MB | " + " | ".join(f"lean MB ({az:g}, {el:g})" for az, el in VIEW_SCAN) + " |",
+           "|---|---|" + "---|" * len(VIEW_SCAN)]
+    for d in datasets:
+        cells = []
+        for az, el in VIEW_SCAN:
+            st = render_tetc(d["tetc"], View(Camera(MEM_SIZE, MEM_SIZE, az, el), d["tf"], lean=True)).stats
+            cells.append(f"{st['face_table_peak_mb']:g}" + (f" ({st['rays_unfinished']} unfinished)"
+                                                            if st["rays_unfinished"] else ""))
+            print(d["label"], (az, el), cells[-1], flush=True)
+        ref = render_tetc(d["tetc"], View(Camera(MEM_SIZE, MEM_SIZE, 0.0, 0.0), d["tf"], lean=False)).stats
+        out.append(f"| {d['label']} | {ref['face_table_peak_mb']:g} | " + " | ".join(cells) + " |")
+    out[2] += " " + code_note()
+    return out + [""]
+
+
+def replace_block(text: str, head: str, block: list[str]) -> str:
+    """Replace the ``### head`` block of a section (up to the next ### heading) or append it."""
+    new = "\n".join(block).rstrip() + "\n"
+    if head not in text:
+        return text.rstrip() + "\n\n" + new
+    i = text.index(head)
+    j = text.find("\n### ", i + len(head))
+    return text[:i] + new + ("\n" + text[j + 1:] if j >= 0 else "")
+
+
+def machine_load() -> str:
+    try:
+        one, five, fifteen = os.getloadavg()
+        return f"load average {one:.2f} / {five:.2f} / {fifteen:.2f} (1 / 5 / 15 min, `uptime`) on {os.cpu_count()} cores"
+    except OSError:
+        return "load unknown"
+
+
+def memory_datasets(names, work, quick=False) -> list[dict]:
+    ds = [sample_tetc(n, work) for n in names]
+    refined = MEM_REFINED[:1] if quick else MEM_REFINED
+    return ds + [refined_record(n, k) for n, k in refined]
+
+
+def lean_datasets(work, quick=False) -> list[dict]:
+    names = ["bluntfin"] if quick else list(SAMPLES)
+    return [sample_tetc(n, work) for n in names] + [refined_record("bluntfin", 2)]
+
+
+def view_datasets(quick=False) -> list[dict]:
+    return [refined_record(n, k) for n, k in ([("bluntfin", 2)] if quick else [("bluntfin", 2), ("combustion", 3)])]
+
+
+def only(parts, quick=False):
+    """Re-measure only ``parts`` (memory, lean, views) and replace their blocks in the existing section."""
+    try:
+        import vtk  # noqa: F401
+
+        have_vtk = True
+    except ImportError:
+        have_vtk = False
+    repeats = 2 if quick else 3
+    work = Path(tempfile.mkdtemp(prefix="bench_render_"))
+    sec = ROOT / "bench/sections/render.md"
+    text = sec.read_text() if sec.exists() else "## Rendering (issue 5): streaming object-space ray caster vs VTK\n"
+    names = ["bluntfin"] if quick else ["bluntfin", "combustion"]
+    run_ours(sample_tetc(names[0], work)["tetc"], work / "warm.png", names[0], (64, 64))  # warm the JIT cache
+    if "memory" in parts:
+        rows, base = memory_rows(memory_datasets(names, work, quick), work, have_vtk, repeats)
+        text = replace_block(text, MEMORY_HEAD, memory_section(rows, base, repeats, machine_load()))
+        sec.write_text(text)
+    if "lean" in parts:
+        text = replace_block(text, LEAN_HEAD, lean_check_section(lean_datasets(work, quick), machine_load()))
+        sec.write_text(text)
+    if "views" in parts:
+        text = replace_block(text, VIEWS_HEAD, view_scan_section(view_datasets(quick), machine_load()))
+        sec.write_text(text)
+    print(text)
+    shutil.rmtree(work, ignore_errors=True)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="Blunt-fin only, fewer repeats.")
     ap.add_argument("--worker", default=None)
+    ap.add_argument("--only", default=None, help="comma-separated parts to re-measure (memory, lean, views); the rest "
+                                                  "of bench/sections/render.md stays as it is")
     for k in ("input", "tf", "out", "scalar", "range"):
         ap.add_argument(f"--{k}")
     for k in ("width", "height"):
@@ -382,6 +700,12 @@ def main():
         fn = {"vtk": worker_vtk, "vtkslab": worker_vtkslab, "inmemory": worker_inmemory,
               "baseline": worker_baseline}[args.worker]
         print(json.dumps(fn(args)))
+        return
+    if args.only:
+        parts = {p.strip() for p in args.only.split(",") if p.strip()}
+        if not parts or parts - {"memory", "lean", "views"}:
+            ap.error("--only takes a comma-separated list of memory, lean, views")
+        only(parts, args.quick)
         return
 
     from gatun_py.codec.tetcfile import write_tetc
@@ -472,15 +796,7 @@ def main():
                         pixel_rows.append((name, row_, col_, ex_pow, ex_lin, a[row_, col_], av[row_, col_],
                                            b[row_, col_]))
             time_rows.append(row)
-        # memory: streaming (tetc render) vs decompress-then-render, 512x512
-        inmem = [run_worker("inmemory", input=tetc, tf=tfname, out=work / f"{name}_inmem.png", width=512, height=512)
-                 for _ in range(1)]
-        stream_rss = [r for r in time_rows if r["name"] == name and r["size"] == 512][0]["stats"]["peak_rss_mb"]
-        a = read_png_rgb(work / f"{name}_512.png")
-        b = read_png_rgb(work / f"{name}_inmem.png")
-        mem_rows.append((name, stream_rss, inmem[0]["peak_rss_mb"], inmem[0]["total_s"],
-                         int(np.abs(a.astype(int) - b.astype(int)).max())))
-    base = run_worker("baseline")["peak_rss_mb"]
+    mem_rows, base = memory_rows(memory_datasets(names, work, args.quick), work, have_vtk, repeats)
 
     lines += ["### Time (Blunt-fin target: ours ≤ 0.8 × VTK, stretch 0.5 ×)", "",
               "| data | size | ours total s | (decode s / render s) | VTK read + first render s | VTK repeat s | ours / VTK |",
@@ -540,18 +856,10 @@ def main():
         fmt = lambda c: "(" + ", ".join(f"{float(x):.0f}" for x in c) + ")"  # noqa: E731
         lines.append(f"| {name} | ({row_}, {col_}) | {fmt(ex_pow)} | {fmt(ex_lin)} | {fmt(o)} | {fmt(ov)} | "
                      f"{fmt(v)} |")
-    lines += ["", "### Peak memory, 512² (target: streaming ≤ 0.6 × decompress-then-render)", "",
-              f"Both are whole processes; the interpreter with numpy/numba/our kernels loaded and no data already "
-              f"takes {base:.0f} MB (`--worker baseline`), shown separately as the part above it.", "",
-              "| data | streaming `tetc render` MB | decompress-then-render MB | ratio | ratio above baseline | "
-              "VTK MB | max pixel difference (0–255) |", "|---|---|---|---|---|---|---|"]
-    for name, srss, irss, _, pdiff in mem_rows:
-        vt = [r for r in time_rows if r["name"] == name and r["size"] == 512][0].get("vtk_rss", float("nan"))
-        lines.append(f"| {name} | {srss:.0f} | {irss:.0f} | {srss / irss:.2f} | "
-                     f"{(srss - base) / max(irss - base, 1e-9):.2f} | {vt:.0f} | {pdiff} |")
+    lines += [""] + memory_section(mem_rows, base, repeats, machine_load())
 
     # robustness on every sample from several views, and streaming == in-memory
-    lines += ["", "### Robustness: every sample, several views (128², in-process `render_mesh`, volume mode)", "",
+    lines += ["### Robustness: every sample, several views (128², in-process `render_mesh`, volume mode)", "",
               "| data | view (az, el) | rays hit | rays unfinished | NaN pixels | boundary anomalies | "
               "streaming vs in-memory max diff |", "|---|---|---|---|---|---|---|"]
     from gatun_py.render import StreamingRaycaster
@@ -576,6 +884,8 @@ def main():
     lines += ["", "Boundary anomalies are rays whose boundary crossings do not alternate entry/exit (the "
               "Combustion grid folds over itself in a few places); they are rendered from both ends up to the "
               "boundary and are not unfinished.", ""]
+    lines += lean_check_section(lean_datasets(work, args.quick), machine_load())
+    lines += view_scan_section(view_datasets(args.quick), machine_load())
     (secdir / "render.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     shutil.rmtree(work, ignore_errors=True)

@@ -79,6 +79,23 @@ def write_section(area: str, text: str) -> Path:
     return p
 
 
+def code_state() -> str:
+    """Which code the timings ran: the commit, and whether gatun_py/ had uncommitted changes
+    (several people work in one tree), or where gatun_py was imported from if not this checkout."""
+    import gatun_py
+
+    def git(*args):
+        p = subprocess.run(["git", "-C", str(ROOT), *args], capture_output=True, text=True)
+        return p.stdout if p.returncode == 0 else ""
+
+    pkg = Path(gatun_py.__file__).resolve().parent
+    if pkg != (ROOT / "gatun_py").resolve():  # e.g. PYTHONPATH=<git archive of a commit>
+        return f"gatun_py imported from `{pkg}` ({os.environ.get('TETC_CODE_COMMIT', 'commit not given')})"
+    dirty = [ln for ln in git("status", "--porcelain", "--", "gatun_py", "cli").splitlines() if ln.strip()]
+    state = f"commit {git('rev-parse', '--short', 'HEAD').strip() or '?'}"
+    return state + (f" with uncommitted changes in {', '.join(ln[3:] for ln in dirty)}" if dirty else "")
+
+
 # -- larger meshes for scale tests ---------------------------------------------------------------
 
 REFINABLE = ("bluntfin", "combustion")  # the PLOT3D samples

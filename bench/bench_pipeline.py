@@ -497,10 +497,11 @@ def memory_section(files) -> str:
                 print(f"memory {label} {size}² {key}: {res[key]['rss']:.0f} MB {res[key]['s']:.2f} s", flush=True)
             default = "streaming --lean" if tets >= LEAN_MIN_TETS else "streaming --no-lean"
             g, lo, nl = res["generic"], res["streaming --lean"], res["streaming --no-lean"]
+            g_table = f"{g['table']:g}" if g["table"] is not None else "n/a"
             rows.append([label, f"{tets:,}", f"{size}²", f"{nl['rss']:.0f}", f"{lo['rss']:.0f}", f"{g['rss']:.0f}",
                          f"**{res[default]['rss'] / g['rss']:.2f}** ({default.split()[-1]})",
                          f"{lo['rss'] / g['rss']:.2f}", f"{(lo['rss'] - floor) / max(g['rss'] - floor, 1e-9):.2f}",
-                         f"{nl['table']:g} / {lo['table']:g} / {f"{g['table']:g}" if g['table'] is not None else 'n/a'}",
+                         f"{nl['table']:g} / {lo['table']:g} / {g_table}",
                          f"{nl['unfinished']} / {lo['unfinished']} / {g['unfinished']}"])
             time_rows.append([label, f"{size}²", f"{nl['s']:.2f}", f"{lo['s']:.2f}", f"{lo['s'] / nl['s']:.2f}",
                               f"{g['s']:.2f}", f"{res[default]['s'] / g['s']:.2f}", str(lo["reps"])])

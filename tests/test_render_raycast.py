@@ -186,7 +186,7 @@ def _crossings(mesh, cam):
     fold_mark = np.zeros(mesh.n_points, dtype=np.uint8)
     K.count_crossings(np.ascontiguousarray(mesh.tets), P, *fitted_cam.ray_offsets(), fitted_cam.width,
                       fitted_cam.height, fwd, right, up, float(np.tan(np.radians(fitted_cam.view_angle) / 2)),
-                      fold_mark, out)
+                      np.zeros(0, dtype=np.uint8), fold_mark, out)
     return out, fitted_cam, fold_mark
 
 

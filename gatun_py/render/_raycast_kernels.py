@@ -424,8 +424,25 @@ def _near_crossing(x0, t0, x1, t1, x2, t2):
     return 0
 
 
+ODD_MARGIN = 3.0  # pixels around a ray with unpaired boundary crossings whose tets are all kept
+
+
+@njit(cache=True, inline="always")
+def _near_odd_ray(c0, c1, c2, c3, r0, r1, r2, r3, width, height, odd_pixels):
+    """Whether a pixel of ``odd_pixels`` lies within ODD_MARGIN of the tet's pixel box."""
+    lo_c = max(int(math.floor(min(min(c0, c1), min(c2, c3)) - ODD_MARGIN)), 0)
+    hi_c = min(int(math.ceil(max(max(c0, c1), max(c2, c3)) + ODD_MARGIN)), width)
+    lo_r = max(int(math.floor(min(min(r0, r1), min(r2, r3)) - ODD_MARGIN)), 0)
+    hi_r = min(int(math.ceil(max(max(r0, r1), max(r2, r3)) + ODD_MARGIN)), height)
+    for row in range(lo_r, hi_r):
+        for col in range(lo_c, hi_c):
+            if odd_pixels[row * width + col]:
+                return True
+    return False
+
+
 @njit(cache=True, parallel=True)
-def count_crossings(tets, P, xs, ys, width, height, fwd, right, up, tan_half, fold_mark, out):
+def count_crossings(tets, P, xs, ys, width, height, fwd, right, up, tan_half, odd_pixels, fold_mark, out):
     """``out[t, k]`` = pixel rays that may cross face k of tet t: an upper bound on the walk's uses.
 
     ``xs``, ``ys``: the pixel rays' offsets along ``right`` and ``up`` (``Camera.ray_offsets``).
@@ -456,6 +473,12 @@ def count_crossings(tets, P, xs, ys, width, height, fwd, right, up, tan_half, fo
                 fold_mark[tets[t, k]] = 1
         if not (z0 > 0.0 and z1 > 0.0 and z2 > 0.0 and z3 > 0.0):
             continue  # behind the eye: rays cannot be cast at it
+        if odd_pixels.shape[0] > 0 and _near_odd_ray(c0, c1, c2, c3, r0, r1, r2, r3, width, height, odd_pixels):
+            # rays whose boundary crossings did not pair up walk a grid folded over itself, off
+            # the path the counts foresee: keep everything around them
+            for k in range(4):
+                out[t, k] += 1
+                fold_mark[tets[t, k]] = 1
         col0, col1 = _pixel_span(c0, c1, c2, c3, width)
         row0, row1 = _pixel_span(r0, r1, r2, r3, height)
         if col0 >= col1 or row0 >= row1:

@@ -477,8 +477,6 @@ def memory_datasets(files) -> list[tuple[str, str, str, int]]:
 def memory_section(files) -> str:
     """Peak memory and time of the streaming pipeline (no-lean and lean) against the generic one."""
     from gatun_py.pipeline.stream import LEAN_BATCH_TETS
-    from gatun_py.render.raycast import LEAN_MIN_TETS
-
     code_before = code_state()
     floor = statistics.median(run_mem_worker(path=None)["peak_rss_mb"] for _ in range(3))
     load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
@@ -495,7 +493,7 @@ def memory_section(files) -> str:
                             "s": statistics.median(r["total_s"] for r in runs), "reps": reps,
                             "table": runs[0]["face_table_peak_mb"], "unfinished": runs[0]["rays_unfinished"]}
                 print(f"memory {label} {size}² {key}: {res[key]['rss']:.0f} MB {res[key]['s']:.2f} s", flush=True)
-            default = "streaming --lean" if tets >= LEAN_MIN_TETS else "streaming --no-lean"
+            default = "streaming --no-lean"  # lean is opt-in
             g, lo, nl = res["generic"], res["streaming --lean"], res["streaming --no-lean"]
             g_table = f"{g['table']:g}" if g["table"] is not None else "n/a"
             rows.append([label, f"{tets:,}", f"{size}²", f"{nl['rss']:.0f}", f"{lo['rss']:.0f}", f"{g['rss']:.0f}",
@@ -519,7 +517,7 @@ def memory_section(files) -> str:
            f"{MEM_REPEATS} processes (one above {MEM_BIG_TETS:,} tets). *generic* = decode the whole level, then "
            f"render it in memory (the paper's baseline); *streaming --lean* frees every face once no pixel ray "
            f"still has to cross it and decodes in batches of {LEAN_BATCH_TETS} tets; the default (**bold** "
-           f"ratio) is lean from {LEAN_MIN_TETS:,} tets. *floor* = the same interpreter with everything imported "
+           f"ratio) is no-lean (`--lean` is opt-in). *floor* = the same interpreter with everything imported "
            f"and the kernels run on one tet: **{floor:.0f} MB**; *above floor* = (lean − floor) / (generic − "
            f"floor). Samples: `*_one.tetc` (level 0 + forest). `K=2` / `K=3`: Blunt-fin and Combustion refined "
            f"K× per grid axis by trilinear interpolation of the PLOT3D grid and its scalar (`bench/common.py` "

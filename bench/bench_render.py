@@ -425,7 +425,7 @@ def refined_record(name, factor, log=print) -> dict:
 def memory_rows(datasets, work, have_vtk, repeats, log=print) -> tuple[list, float]:
     """Whole-process peak memory (VmHWM) and time of every way to render each data set at 512².
 
-    Ours: ``tetc render --no-lean`` and ``--lean`` (the default is --lean from LEAN_MIN_TETS tets);
+    Ours: ``tetc render --no-lean`` and ``--lean`` (--lean is opt-in);
     in-memory: ``--worker inmemory`` (decode the whole level, then ``render_mesh``); VTK:
     ``--worker vtk`` on the .vtu. Medians of ``repeats`` fresh processes (one for VTK above
     VTK_MAX_TETS tets). Returns (rows, baseline MB).
@@ -476,8 +476,6 @@ def memory_rows(datasets, work, have_vtk, repeats, log=print) -> tuple[list, flo
 def memory_section(rows, base, repeats, load) -> list[str]:
     """Markdown for the memory table (and the time each way took)."""
     from gatun_py.pipeline.stream import LEAN_BATCH_TETS
-    from gatun_py.render.raycast import LEAN_MIN_TETS
-
     me = "python bench/bench_render.py --only memory"
     out = [f"{MEMORY_HEAD} (target: streaming ≤ 0.6 × decompress-then-render, and below VTK)", "",
            f"Made by `{me}` (also part of the full run) on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; "
@@ -485,8 +483,7 @@ def memory_section(rows, base, repeats, load) -> list[str]:
            f"rendering the data set at {MEM_SIZE}² from the front (az 0, el 0), median of {repeats} processes: "
            f"*no-lean* = `tetc render X.tetc -o X.png --tf NAME --size {MEM_SIZE}x{MEM_SIZE} --stats --no-lean`, "
            f"*lean* = the same with `--lean` (every face counts the pixel rays still to cross it and is dropped "
-           f"when none is left, decode batches of {LEAN_BATCH_TETS} tets; **the default from "
-           f"{LEAN_MIN_TETS:,} tets**, so the samples render no-lean and the refined meshes lean unless told), "
+           f"when none is left, decode batches of {LEAN_BATCH_TETS} tets; opt-in), "
            f"*in-memory* = decompress-then-render (`--worker inmemory`: `TetcReader.decode_mesh` then "
            f"`render_mesh`), *VTK* = `--worker vtk` on the same mesh as `.vtu` (reader + one render). The "
            f"*floor* is a process with the interpreter, numpy, numba, LLVM and our kernels loaded and a "

@@ -37,7 +37,7 @@ def test_ratio_streaming_equals_generic(post_tetc, tmp_path):
 def test_lean_render_is_the_same_image(post_tetc, tmp_path):
     lean = _render(post_tetc, tmp_path / "lean.png", "--ratio", "0.5", "--lean", "--size", "96x80")
     full = _render(post_tetc, tmp_path / "full.png", "--ratio", "0.5", "--no-lean", "--size", "96x80")
-    assert lean["lean"] is True and full["lean"] is False  # post.vtk is below the automatic threshold
+    assert lean["lean"] is True and full["lean"] is False
     assert lean["rays_unfinished"] == full["rays_unfinished"] == 0
     assert np.array_equal(read_rgb(tmp_path / "lean.png"), read_rgb(tmp_path / "full.png"))
 

@@ -37,7 +37,7 @@ class View:
     tf: object = "default"
     mode: str = "volume"
     step: float | None = None
-    lean: bool | None = None  # StreamingRaycaster's: free faces no ray needs (default by mesh size)
+    lean: bool | None = None  # StreamingRaycaster's: free faces no ray needs (off by default)
 
     def __post_init__(self):
         if self.camera is None:
@@ -137,10 +137,8 @@ def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress
     from ..render.stream import render_batches
     from ..simplify.filter import SimplifyFilter
 
-    from ..render.raycast import LEAN_MIN_TETS
-
     lv = reader.level_meta(target.level)
-    lean = view.lean if view.lean is not None else int(lv["tets"]) >= LEAN_MIN_TETS
+    lean = bool(view.lean)
     # A lean render holds about one batch of tets in flight: smaller batches, less memory.
     batches = reader.iter_decode(target.level, **({"batch_tets": LEAN_BATCH_TETS} if lean else {}))
     filt = None

@@ -47,6 +47,41 @@ def _rss_mb() -> float:
 
 # ------------------------------------------------------------------------------------------------
 # workers (run in a fresh process)
+def _shuffled_stream(mesh, camera, tf, **kw):
+    """Stream-render ``mesh`` with its tets in a random order, in 20 batches."""
+    from gatun_py.render.stream import mesh_batches, render_batches
+
+    perm = np.random.default_rng(0).permutation(mesh.n_tets)
+    batches = mesh_batches(mesh, batch_tets=-(-mesh.n_tets // 20), order=perm)
+    return render_batches(batches, camera, tf, expected_tets=mesh.n_tets, **kw)
+
+
+def _vtk_scene(vtk, ug, ctf, otf, unit, width, height):
+    """(volume, renderer, offscreen window) of VTK's unstructured-grid ray caster as the peer runs it:
+    linear interpolation, no shading, AutoAdjustSampleDistances off, ImageSampleDistance 1, black."""
+    prop = vtk.vtkVolumeProperty()
+    prop.SetColor(ctf)
+    prop.SetScalarOpacity(otf)
+    prop.SetScalarOpacityUnitDistance(unit)
+    prop.SetInterpolationTypeToLinear()
+    prop.ShadeOff()
+    mapper = vtk.vtkUnstructuredGridVolumeRayCastMapper()
+    mapper.SetInputData(ug)
+    mapper.SetAutoAdjustSampleDistances(0)
+    mapper.SetImageSampleDistance(1.0)
+    volume = vtk.vtkVolume()
+    volume.SetMapper(mapper)
+    volume.SetProperty(prop)
+    ren = vtk.vtkRenderer()
+    ren.SetBackground(0, 0, 0)
+    ren.AddVolume(volume)
+    win = vtk.vtkRenderWindow()
+    win.SetOffScreenRendering(1)
+    win.AddRenderer(ren)
+    win.SetSize(width, height)
+    return volume, ren, win
+
+
 def worker_vtk(args) -> dict:
     """Read a .vtu with VTK and render it once (and again), like a user of VTK would."""
     t_start = time.perf_counter()
@@ -69,26 +104,7 @@ def worker_vtk(args) -> dict:
     otf = vtk.vtkPiecewiseFunction()
     for x, a in zip(tf.opacity_x, tf.opacity_a):
         otf.AddPoint(float(x), float(a))
-    prop = vtk.vtkVolumeProperty()
-    prop.SetColor(ctf)
-    prop.SetScalarOpacity(otf)
-    prop.SetScalarOpacityUnitDistance(float(tf.unit_distance))
-    prop.SetInterpolationTypeToLinear()
-    prop.ShadeOff()
-    mapper = vtk.vtkUnstructuredGridVolumeRayCastMapper()
-    mapper.SetInputData(ug)
-    mapper.SetAutoAdjustSampleDistances(0)
-    mapper.SetImageSampleDistance(1.0)
-    volume = vtk.vtkVolume()
-    volume.SetMapper(mapper)
-    volume.SetProperty(prop)
-    ren = vtk.vtkRenderer()
-    ren.SetBackground(0, 0, 0)
-    ren.AddVolume(volume)
-    win = vtk.vtkRenderWindow()
-    win.SetOffScreenRendering(1)
-    win.AddRenderer(ren)
-    win.SetSize(args.width, args.height)
+    volume, ren, win = _vtk_scene(vtk, ug, ctf, otf, float(tf.unit_distance), args.width, args.height)
     ren.ResetCamera()
     cam = ren.GetActiveCamera()
     cam.Azimuth(args.azimuth)
@@ -179,26 +195,7 @@ def worker_vtkslab(args) -> dict:
             otf = vtk.vtkPiecewiseFunction()
             for x, a in opacity:
                 otf.AddPoint(x, a)
-            prop = vtk.vtkVolumeProperty()
-            prop.SetColor(ctf)
-            prop.SetScalarOpacity(otf)
-            prop.SetScalarOpacityUnitDistance(unit)
-            prop.SetInterpolationTypeToLinear()
-            prop.ShadeOff()
-            mapper = vtk.vtkUnstructuredGridVolumeRayCastMapper()
-            mapper.SetInputData(ug)
-            mapper.SetAutoAdjustSampleDistances(0)
-            mapper.SetImageSampleDistance(1.0)
-            volume = vtk.vtkVolume()
-            volume.SetMapper(mapper)
-            volume.SetProperty(prop)
-            ren = vtk.vtkRenderer()
-            ren.SetBackground(0, 0, 0)
-            ren.AddVolume(volume)
-            win = vtk.vtkRenderWindow()
-            win.SetOffScreenRendering(1)
-            win.AddRenderer(ren)
-            win.SetSize(SLAB_SIZE, SLAB_SIZE)
+            _, ren, win = _vtk_scene(vtk, ug, ctf, otf, unit, SLAB_SIZE, SLAB_SIZE)
             cam = ren.GetActiveCamera()
             cam.SetFocalPoint(1.5, 1.5, 1.0)
             cam.SetPosition(*SLAB_EYE)
@@ -539,7 +536,7 @@ def lean_check_section(datasets, load) -> list[str]:
     """
     from gatun_py.codec import TetcReader
     from gatun_py.pipeline.stream import View, file_render_defaults, render_tetc
-    from gatun_py.render import Camera, StreamingRaycaster, render_mesh
+    from gatun_py.render import Camera, render_mesh
 
     global CODE_BEFORE
     CODE_BEFORE = code_state()
@@ -564,14 +561,7 @@ def lean_check_section(datasets, load) -> list[str]:
             mem = render_mesh(mesh, fitted, d["tf"], step=step, scalar_range=rng)
             nolean = render_tetc(d["tetc"], View(cam, d["tf"], lean=False))
             lean = render_tetc(d["tetc"], View(cam, d["tf"], lean=True))
-            rc = StreamingRaycaster(fitted, d["tf"], step=step, scalar_range=rng, expected_tets=mesh.n_tets,
-                                    lean=True)
-            rc.add_vertices(mesh.points, mesh.density)
-            rc.set_boundary(mesh.boundary_faces())
-            perm = np.random.default_rng(0).permutation(mesh.n_tets)
-            for chunk in np.array_split(mesh.tets[perm], 20):
-                rc.add_tets(chunk)
-            shuf = rc.finish()
+            shuf = _shuffled_stream(mesh, fitted, d["tf"], step=step, scalar_range=rng, lean=True)
             runs = (nolean, lean, shuf)
             diffs = [np.abs(r.image - mem.image).max(axis=2) for r in runs]
             nan = sum(int(r.stats.get("nan_pixels", 0)) for r in (mem, *runs))
@@ -859,20 +849,13 @@ def main():
     lines += ["### Robustness: every sample, several views (128², in-process `render_mesh`, volume mode)", "",
               "| data | view (az, el) | rays hit | rays unfinished | NaN pixels | boundary anomalies | "
               "streaming vs in-memory max diff |", "|---|---|---|---|---|---|---|"]
-    from gatun_py.render import StreamingRaycaster
 
     for name, (path, kw, tfname) in SAMPLES.items():
         mesh, _ = read_mesh(path, **kw)
         for az, el in VIEWS:
             cam = Camera(128, 128, az, el)
             res = render_mesh(mesh, cam, tfname)
-            rc = StreamingRaycaster(cam, tfname, scalar_range=mesh.scalar_range, expected_tets=mesh.n_tets)
-            rc.add_vertices(mesh.points, mesh.density)
-            rc.set_boundary(mesh.boundary_faces())
-            perm = np.random.default_rng(0).permutation(mesh.n_tets)
-            for chunk in np.array_split(mesh.tets[perm], 20):
-                rc.add_tets(chunk)
-            st = rc.finish()
+            st = _shuffled_stream(mesh, cam, tfname, scalar_range=mesh.scalar_range)
             d = float(np.abs(st.image - res.image).max())
             s = res.stats
             lines.append(f"| {name} | ({az:g}, {el:g}) | {s['rays_hit']} | {s['rays_unfinished']} + "

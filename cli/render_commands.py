@@ -69,7 +69,7 @@ def _kernels_cached() -> bool:
 @click.option("--pipeline", type=click.Choice(["streaming", "generic"]), default="streaming", show_default=True,
               help="streaming: decode, simplify and render in one pass; generic: decode all, simplify, render "
                    "(the paper's baseline).")
-@click.option("--lean/--no-lean", default=None,
+@click.option("--lean/--no-lean", default=False,
               help="Free each face of the mesh once no ray needs it, so memory holds the tets in flight, not the "
                    "whole mesh (5 M tets at 512²: 450 MB instead of 1.2 GB; renders 1.5-2x slower). "
                    "Off by default: on grids folded over themselves a ray may rarely be left unfinished "
@@ -108,7 +108,7 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
                "`make install` does it ahead)...", quiet)
         compile_for_render()
 
-    startup_s = load_kernels(lean=bool(lean)) + (time.perf_counter() - t_start)
+    startup_s = load_kernels(lean=lean) + (time.perf_counter() - t_start)
     t_start = time.perf_counter()  # total_s: from opening the input to the PNG written
     from gatun_py.pipeline.stream import View, is_tetc, render_mesh_file, render_tetc
     from gatun_py.simplify.levels import resolve_target

@@ -9,7 +9,6 @@ mesh, which gives them the same argument types as real data; the work is split o
 from __future__ import annotations
 
 import sys
-import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -35,44 +34,16 @@ def tiny_mesh():
 
 
 def _simplify_and_render() -> str:
-    from .render.camera import Camera
-    from .render.raycast import render_mesh
-    from .render.stream import mesh_batches, render_batches
     from .simplify import build_levels, decimate
 
     mesh = tiny_mesh()
     levels = build_levels(mesh, decimate(mesh))
-    cam = Camera(16, 16, 30, 20)
-    for mode in ("volume", "face"):
-        render_mesh(mesh, cam, "default", mode=mode)
-        render_batches(mesh_batches(mesh, batch_tets=7), cam, "default", mode=mode, scalar_range=mesh.scalar_range,
-                       lean=True)
-    from .render import _raycast_kernels as K
-
-    table = np.full((8, 7), -1, dtype=np.int32)  # a lean table is purged only on real meshes
-    mark = np.zeros(1, dtype=np.uint8)
-    K.rehash(table, 8, 0, K.count_live(table, True, mark) >= 0, mark)
+    _render_kernels(lean=True)
     return f"decimation and rendering ({len(levels)} levels)"
 
 
 def _codec_and_filter() -> str:
-    from .codec import LevelPayload, TetcReader, write_tetc
-    from .simplify import ROOT_RANK, ancestors
-    from .simplify.filter import SimplifyFilter
-
-    mesh = tiny_mesh()
-    n = mesh.n_points
-    parent = np.arange(n, dtype=np.int32)
-    rank = np.full(n, ROOT_RANK, np.int32)
-    parent[1], rank[1] = 0, 0  # one merge, so the forest coder and the filter do real work
-    with tempfile.TemporaryDirectory(prefix="tetc-warmup-") as tmp:
-        path = Path(tmp) / "w.tetc"
-        write_tetc(path, [LevelPayload(0, 0.0, 0, mesh, (parent, rank))])
-        reader = TetcReader(path)
-        reader.decode_mesh(0)
-        p, r = reader.read_forest(0)
-        anc = ancestors(p, r, 1)
-        list(SimplifyFilter(anc).filter(reader.iter_decode(0, batch_tets=5)))
+    _decode_and_filter(tiny_tetc_bytes())  # encodes first: the encoder's kernels too
     return "compression, decompression and the run-time filter"
 
 
@@ -105,19 +76,20 @@ def _tiny_tetc() -> bytes:
         return tiny_tetc_bytes()
 
 
-def _decode_and_filter() -> str:
+def _decode_and_filter(data: bytes | None = None) -> str:
     from .codec import TetcReader
     from .simplify import ancestors
     from .simplify.filter import SimplifyFilter
 
-    reader = TetcReader(_tiny_tetc())
+    reader = TetcReader(_tiny_tetc() if data is None else data)
     reader.decode_mesh(0)
     p, r = reader.read_forest(0)
     list(SimplifyFilter(ancestors(p, r, 1)).filter(reader.iter_decode(0, batch_tets=5)))
     return "decompression and the run-time filter"
 
 
-def _render_only() -> str:
+def _render_kernels(*, lean: bool) -> None:
+    """Render the tiny mesh in memory and streamed, in both modes (``lean``: counting faces)."""
     from .render.camera import Camera
     from .render.raycast import render_mesh
     from .render.stream import mesh_batches, render_batches
@@ -127,7 +99,22 @@ def _render_only() -> str:
     for mode in ("volume", "face"):
         render_mesh(mesh, cam, "default", mode=mode)
         render_batches(mesh_batches(mesh, batch_tets=7), cam, "default", mode=mode, scalar_range=mesh.scalar_range,
-                       lean=False)
+                       lean=lean)
+    if lean:
+        _purge_kernels()
+
+
+def _purge_kernels() -> None:
+    """A lean face table fills up (and is purged) only on real meshes: call those kernels here."""
+    from .render import _raycast_kernels as K
+
+    table = np.full((8, 7), -1, dtype=np.int32)
+    mark = np.zeros(1, dtype=np.uint8)
+    K.rehash(table, 8, 0, K.count_live(table, True, mark) >= 0, mark)
+
+
+def _render_only() -> str:
+    _render_kernels(lean=False)
     return "rendering"
 
 
@@ -151,15 +138,12 @@ def load_kernels(*, lean: bool = False) -> float:
     """
     from .pipeline.stream import View, render_tetc
     from .render.camera import Camera
-    from .render import _raycast_kernels as K
     from .simplify.levels import Target
 
     t0 = time.perf_counter()
     render_tetc(_tiny_tetc(), View(Camera(4, 4), tf="default", lean=lean), target=Target(0, 1, 0.0, 0))
-    if lean:  # a lean table fills up (and is purged) only on real meshes
-        table = np.full((8, 7), -1, dtype=np.int32)
-        mark = np.zeros(1, dtype=np.uint8)
-        K.rehash(table, 8, 0, K.count_live(table, True, mark) >= 0, mark)
+    if lean:
+        _purge_kernels()
     return time.perf_counter() - t0
 
 

@@ -37,7 +37,7 @@ class View:
     tf: object = "default"
     mode: str = "volume"
     step: float | None = None
-    lean: bool | None = None  # StreamingRaycaster's: free faces no ray needs (off by default)
+    lean: bool = False  # StreamingRaycaster's: free the faces no ray needs any more
 
     def __post_init__(self):
         if self.camera is None:
@@ -138,15 +138,14 @@ def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress
     from ..simplify.filter import SimplifyFilter
 
     lv = reader.level_meta(target.level)
-    lean = bool(view.lean)
     # A lean render holds about one batch of tets in flight: smaller batches, less memory.
-    batches = reader.iter_decode(target.level, **({"batch_tets": LEAN_BATCH_TETS} if lean else {}))
+    batches = reader.iter_decode(target.level, **({"batch_tets": LEAN_BATCH_TETS} if view.lean else {}))
     filt = None
     if anc is not None:
         filt = SimplifyFilter(anc)
         batches = filt.filter(batches)
     res = render_batches(batches, camera, view.tf, mode=view.mode, step=step, scalar_range=rng,
-                         expected_tets=int(lv["tets"]), lean=lean, progress=progress)
+                         expected_tets=int(lv["tets"]), lean=view.lean, progress=progress)
     # render_batches times the wait for each batch: the decoder, plus the filter when there is one.
     times["decode_s"] = res.stats["decode_s"]
     if filt is not None:

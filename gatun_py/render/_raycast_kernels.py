@@ -29,7 +29,7 @@ through the tet: it takes the tet whose fourth vertex is not the one of the tet 
 
 Freeing faces (streaming)
 -------------------------
-The streaming renderer keeps a seventh column, ``htab[slot, 6]``: the number of tet steps rays
+A lean streaming renderer keeps a seventh column, ``htab[slot, 6]``: the number of tet steps rays
 still have to take next to the face. When a tet arrives, each of its faces gains the number of
 pixel rays crossing that face (:func:`count_crossings`, the same edge-side signs the walk uses,
 so the count is exact); a ray stepping through a tet takes one off its entry and one off its exit
@@ -881,11 +881,11 @@ def advance(active, n_active, P, dens, dirs, seg_ray, seg_face, seg_from, seg_cl
             s = active[i]
             if seg_state[s] != STATE_ACTIVE:
                 continue
-            _walk(s, 0, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state, seg_steps,
-                  seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps)
+            _walk(s, 0, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state,
+                  seg_steps, seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps)
             if seg_state[s] == STATE_ACTIVE:
-                _walk(s, 1, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state, seg_steps,
-                      seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps)
+                _walk(s, 1, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state,
+                      seg_steps, seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps)
 
 
 # ---------------------------------------------------------------------------------------------

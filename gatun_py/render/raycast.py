@@ -27,7 +27,6 @@ from .transfer import TransferFunction, load_transfer_function
 MODES = ("volume", "face")
 
 
-
 @dataclass
 class RenderResult:
     """A rendered image and what it took.
@@ -81,7 +80,7 @@ class StreamingRaycaster:
         vertices received before the first tet.
     expected_tets : int, optional
         Sizes the face table up front (it grows as needed otherwise).
-    lean : bool, optional
+    lean : bool
         Count, for every face, the rays still to cross it and drop the faces nobody needs any
         more, so the table holds the tets in flight rather than the whole mesh (the paper's
         memory saving; the render takes 1.5-2x as long). Off by default: on grids that fold over
@@ -96,7 +95,7 @@ class StreamingRaycaster:
     """
 
     def __init__(self, camera, tf, *, mode: str = "volume", step: float | None = None, scalar_range=None,
-                 expected_tets: int | None = None, lean: bool | None = None):
+                 expected_tets: int | None = None, lean: bool = False):
         if mode not in MODES:
             raise OptionError(f"unknown render mode {mode!r} (choose from {', '.join(MODES)})")
         if step is not None and not (np.isfinite(step) and step > 0):
@@ -120,8 +119,7 @@ class StreamingRaycaster:
         self._mark = 0
         self._t_render = 0.0
         self.fitted: FittedCamera | None = None
-        # Count the rays still to cross each face and drop the faces no ray needs any more (the
-        # streaming case: the table then holds the tets in flight); render_mesh turns it off.
+        # lean: count the rays still to cross each face and drop the faces no ray needs any more
         self._counting = bool(lean)
         self._table_peak = 0
 
@@ -181,9 +179,9 @@ class StreamingRaycaster:
             self._ensure_capacity(4 * len(tets))
             self._mark += 1
             crossings = self._crossings(tets)
-            n_active, conflicts = K.insert_tets(tets, crossings, self._fold_mark, self._htab, self._hmul, self._hcount,
-                                                self._nodes, self._park_ver, self._in_list, self._seg_mark,
-                                                self._mark, self._active)
+            n_active, conflicts = K.insert_tets(tets, crossings, self._fold_mark, self._htab, self._hmul,
+                                                self._hcount, self._nodes, self._park_ver, self._in_list,
+                                                self._seg_mark, self._mark, self._active)
             self._conflicts += conflicts
             self._advance(n_active)
             self._park(n_active)
@@ -368,9 +366,10 @@ class StreamingRaycaster:
 
     def _advance_kernel(self, n_active):
         K.advance(self._active, n_active, self._points[: self._nv], self._dens[: self._nv], self._dirs,
-                  self._seg_ray, self._seg_face, self._seg_from, self._seg_clean, self._seg_ts, self._seg_acc, self._seg_state,
-                  self._seg_steps, self._seg_samples, self._htab, self._hmul, 0 if self.mode == "volume" else 1,
-                  float(self.step), self._tab, self._lo, self._inv, self._unit, self._n_tets + 8)
+                  self._seg_ray, self._seg_face, self._seg_from, self._seg_clean, self._seg_ts, self._seg_acc,
+                  self._seg_state, self._seg_steps, self._seg_samples, self._htab, self._hmul,
+                  0 if self.mode == "volume" else 1, float(self.step), self._tab, self._lo, self._inv, self._unit,
+                  self._n_tets + 8)
 
     def _result(self, image, unfinished):
         cam = self.fitted
@@ -451,8 +450,8 @@ def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = 
     rc._n_tets = len(tets)
     if rc._nseg and len(tets):
         rc._ensure_capacity(4 * len(tets))
-        _, rc._conflicts = K.insert_tets(tets, rc._crossings(tets), rc._fold_mark, rc._htab, rc._hmul, rc._hcount, rc._nodes,
-                                         rc._park_ver, rc._in_list, rc._seg_mark, 1, rc._active)
+        _, rc._conflicts = K.insert_tets(tets, rc._crossings(tets), rc._fold_mark, rc._htab, rc._hmul, rc._hcount,
+                                         rc._nodes, rc._park_ver, rc._in_list, rc._seg_mark, 1, rc._active)
         rc._active = np.arange(rc._nseg, dtype=np.int64)
         rc._advance(rc._nseg)
     image = np.zeros((rc._n_rays, 4), dtype=np.float64)

@@ -41,7 +41,7 @@ def mesh_batches(mesh, *, batch_tets: int = 65536, order=None):
 
 
 def render_batches(batches, camera, tf, *, mode: str = "volume", step: float | None = None, scalar_range=None,
-                   expected_tets: int | None = None, lean: bool | None = None, progress=None) -> RenderResult:
+                   expected_tets: int | None = None, lean: bool = False, progress=None) -> RenderResult:
     """Stream-render ``batches`` (objects with ``points``, ``density``, ``boundary``, ``tets``).
 
     Parameters

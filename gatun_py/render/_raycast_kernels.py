@@ -54,10 +54,14 @@ MODE_VOLUME = 0
 MODE_FACE = 1
 
 NEVER_COUNTS = 2  # seg_clean: this segment's walk does not touch the face counters
+FOLD_END = -2  # seg_from: the subsegment left the mesh through a fold face (see _walk) and is over
 
 STATE_ACTIVE = 0
 STATE_DONE = 1
 STATE_STUCK = 2
+# A ray this opaque is finished (the issue's and VTK's early-termination threshold): segments
+# behind it can change its colour by at most 1 - OPAQUE.
+OPAQUE = 0.99
 
 
 @intrinsic
@@ -711,6 +715,8 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
     ``NEVER_COUNTS`` for the segments of rays whose boundary crossings did not pair up: on a grid
     that overlaps itself such a ray can walk the same tets in two segments).
     """
+    if seg_from[s, sub] == FOLD_END:
+        return
     counting = htab.shape[1] > 6 and seg_clean[s, sub] != NEVER_COUNTS
     clean = seg_clean[s, sub] == 1
     r = seg_ray[s]
@@ -751,9 +757,6 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
         if steps >= max_steps:
             state = STATE_STUCK
             break
-        steps += 1
-        if counting and clean:
-            _atomic_sub_i32(htab, slot, 6, 1)
         # the tet behind the face, positively oriented as (v0, v1, v2, v3) with the face opposite v3
         v3 = code >> 1
         if (code & 1) == 0:
@@ -775,6 +778,18 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
             x12, g12 = _side(P, dx, dy, dz, v1, v2)
             x20, g20 = _side(P, dx, dy, dz, v2, v0)
             x01, g01 = _side(P, dx, dy, dz, v0, v1)
+        if g01 * want < 0 and g12 * want < 0 and g20 * want < 0 and not _flat(P, v0, v1, v2, v3):
+            # The tet lies on the side of the face the ray comes from: the grid folds over itself
+            # here, and the ray leaves this sheet of the mesh as if through its boundary (walking
+            # on would enter the tet backwards and can circle an edge for ever). A flat tet has no
+            # side: the walk passes it as usual.
+            came_from = FOLD_END
+            if oa < 0 or seg_from[s, 1 - sub] == FOLD_END:
+                state = STATE_DONE
+            break
+        steps += 1
+        if counting and clean:
+            _atomic_sub_i32(htab, slot, 6, 1)
         x03, g03 = _side(P, dx, dy, dz, v0, v3)
         x13, g13 = _side(P, dx, dy, dz, v1, v3)
         x23, g23 = _side(P, dx, dy, dz, v2, v3)
@@ -1063,9 +1078,10 @@ def _in_sorted(keys, a, b, c):
 @njit(cache=True)
 def settle(seg_face, seg_from, seg_state, boundary_keys):
     """At the end of the stream: a segment whose marks never met is still complete when both its
-    subsegments stopped on boundary faces after moving (or have no end): the mesh's own
-    boundary disagreed with the pairing of its crossings (overlapping, folded grids), and
-    nothing on the ray was skipped. Everything else that is not done is unfinished."""
+    subsegments stopped on boundary faces after moving, or on a fold face (``FOLD_END``), or
+    have no end: the mesh's own boundary disagreed with the pairing of its crossings
+    (overlapping, folded grids), and nothing on the ray was skipped. Everything else that is
+    not done is unfinished."""
     for s in range(seg_state.shape[0]):
         if seg_state[s] != STATE_ACTIVE:
             continue
@@ -1073,6 +1089,8 @@ def settle(seg_face, seg_from, seg_state, boundary_keys):
         for sub in range(2):
             a = seg_face[s, sub, 0]
             if a < 0:
+                continue
+            if seg_from[s, sub] == FOLD_END:
                 continue
             if seg_from[s, sub] < 0 or not _in_sorted(boundary_keys, a, seg_face[s, sub, 1], seg_face[s, sub, 2]):
                 ok = False
@@ -1084,10 +1102,18 @@ def settle(seg_face, seg_from, seg_state, boundary_keys):
 def compose(n_rays, seg_ray, seg_acc, seg_state, image):
     """Combine subsegments (eq. 3/4) and segments (in ray order) into premultiplied RGBA.
 
-    Segments are stored ray by ray, nearest first. Returns the number of rays with an
-    unfinished segment.
+    Segments are stored ray by ray, nearest first. Returns ``(unfinished, hidden)``: the number
+    of rays with an unfinished segment whose gap (the part between its front and back marks that
+    was never walked) lies in front of opacity ``OPAQUE``, and the number of unfinished segments
+    whose gap lies behind it. A ray that is already opaque there has the spec's (and VTK's) early
+    termination: what lies behind weighs at most 1 - ``OPAQUE`` and may be skipped, so such a
+    segment does not leave its ray unfinished (its partial colour is still added). The ray's
+    opacity in front of the gap is that of the segments before it plus this segment's front
+    subsegment. On Combustion every unfinished segment was of this kind: one-ended segments of a
+    folded grid behind a segment of opacity 0.99999.
     """
     unfinished = 0
+    hidden = 0
     last_bad = -1
     for s in range(seg_ray.shape[0]):
         r = seg_ray[s]
@@ -1098,11 +1124,15 @@ def compose(n_rays, seg_ray, seg_acc, seg_state, image):
         seg_c2 = seg_acc[s, 0, 2] + wb * seg_acc[s, 1, 2]
         seg_o = of + wb * seg_acc[s, 1, 3]
         w = 1.0 - image[r, 3]
+        alpha_at_gap = image[r, 3] + w * of
         image[r, 0] += w * seg_c0
         image[r, 1] += w * seg_c1
         image[r, 2] += w * seg_c2
         image[r, 3] += w * seg_o
-        if seg_state[s] != STATE_DONE and r != last_bad:
-            unfinished += 1
-            last_bad = r
-    return unfinished
+        if seg_state[s] != STATE_DONE:
+            if alpha_at_gap >= OPAQUE:
+                hidden += 1
+            elif r != last_bad:
+                unfinished += 1
+                last_bad = r
+    return unfinished, hidden

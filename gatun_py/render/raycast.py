@@ -37,7 +37,11 @@ class RenderResult:
         Premultiplied RGBA (colour already multiplied by opacity), black background.
     stats : dict
         ``rays``, ``rays_hit``, ``segments``, ``rays_unfinished``, ``samples``, ``tets_rendered``,
-        ``step``, ``render_s`` and diagnostics.
+        ``step``, ``render_s`` and diagnostics. ``rays_unfinished`` counts the rays with a segment
+        whose walk could not be completed in front of opacity 0.99 (the early-termination
+        threshold); ``segments_behind_opaque`` the incomplete segments behind it, which change
+        their pixel by at most 0.01; ``subsegments_folded`` the subsegments that ended where a
+        grid folds over itself (the tet behind a face lies on the ray's side of it).
     """
 
     image: np.ndarray
@@ -194,9 +198,9 @@ class StreamingRaycaster:
             self._start()
         image = np.zeros((self._n_rays, 4), dtype=np.float64)
         K.settle(self._seg_face, self._seg_from, self._seg_state, self._boundary_keys)
-        unfinished = K.compose(self._n_rays, self._seg_ray, self._seg_acc, self._seg_state, image)
+        unfinished, hidden = K.compose(self._n_rays, self._seg_ray, self._seg_acc, self._seg_state, image)
         self._t_render += time.perf_counter() - t0
-        return self._result(image, unfinished)
+        return self._result(image, unfinished, hidden)
 
     # -- internals ------------------------------------------------------------------------------
     def _check_ids(self, ids, what):
@@ -371,7 +375,7 @@ class StreamingRaycaster:
                   0 if self.mode == "volume" else 1, float(self.step), self._tab, self._lo, self._inv, self._unit,
                   self._n_tets + 8)
 
-    def _result(self, image, unfinished):
+    def _result(self, image, unfinished, hidden):
         cam = self.fitted
         img = image.reshape(cam.height, cam.width, 4).astype(np.float32)
         hit_rays = int(len(np.unique(self._seg_ray))) if self._nseg else 0
@@ -381,6 +385,8 @@ class StreamingRaycaster:
             "segments": int(self._nseg),
             "rays_unfinished": int(unfinished),
             "segments_stuck": int(np.count_nonzero(self._seg_state == K.STATE_STUCK)),
+            "segments_behind_opaque": int(hidden),
+            "subsegments_folded": int(np.count_nonzero(self._seg_from == K.FOLD_END)),
             "boundary_anomalies": int(self._anomalies),
             "face_conflicts": int(self._conflicts),
             "samples": int(self._seg_samples.sum()),
@@ -456,9 +462,9 @@ def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = 
         rc._advance(rc._nseg)
     image = np.zeros((rc._n_rays, 4), dtype=np.float64)
     K.settle(rc._seg_face, rc._seg_from, rc._seg_state, rc._boundary_keys)
-    unfinished = K.compose(rc._n_rays, rc._seg_ray, rc._seg_acc, rc._seg_state, image)
+    unfinished, hidden = K.compose(rc._n_rays, rc._seg_ray, rc._seg_acc, rc._seg_state, image)
     rc._t_render = time.perf_counter() - t0
-    return rc._result(image, unfinished)
+    return rc._result(image, unfinished, hidden)
 
 
 __all__ = ["RenderResult", "StreamingRaycaster", "render_mesh", "default_step", "MODES", "TransferFunction"]

@@ -72,8 +72,7 @@ def _kernels_cached() -> bool:
 @click.option("--lean/--no-lean", default=False,
               help="Free each face of the mesh once no ray needs it, so memory holds the tets in flight, not the "
                    "whole mesh (5 M tets at 512²: 450 MB instead of 1.2 GB; renders 1.5-2x slower). "
-                   "Off by default: on grids folded over themselves a ray may rarely be left unfinished "
-                   "(counted in --stats). .tetc, "
+                   "Off by default for the time it costs; pays off above ~1 M tets. .tetc, "
                    "--pipeline streaming only.")
 @click.option("--stats", "show_stats", is_flag=True, help="Print one JSON object with timings and counts on stdout.")
 @mesh_input_options

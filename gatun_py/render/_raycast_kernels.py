@@ -815,6 +815,22 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
                 best_score = score
                 best_min = m
                 best_k = k
+        if not clean and best_score < 3 and _flat(P, v0, v1, v2, v3):
+            # A flat tet has no inside: its four faces lie in one plane and the ray crosses that
+            # plane in one point, inside the entry face and one other face, whose three sides then
+            # agree with each other but, that face's winding being reversed, against ``want``.
+            # Leave through that one: any other choice leaves the ray's path (Blunt-fin's
+            # collapsed grid line, 512²: walks that wandered off and looped).
+            for k in range(3):
+                if k == 0:
+                    q0, q1, q2 = g12, g23, -g13
+                elif k == 1:
+                    q0, q1, q2 = g03, -g23, g20
+                else:
+                    q0, q1, q2 = g01, g13, -g03
+                if q0 * want < 0 and q1 * want < 0 and q2 * want < 0:
+                    best_k = k
+                    break
         # exit face (f0, f1, f2) outward, barycentric weight of f_i = side of the opposite edge
         if best_k == 0:
             na, nb, nc, wa, wb, wc = _sort3w(v1, v2, v3, x23, -x13, x12)

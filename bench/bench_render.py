@@ -608,6 +608,53 @@ def view_scan_section(datasets, load) -> list[str]:
     return out + [""]
 
 
+ROBUST_HEAD = "### Robustness: every sample, several views"
+ROBUST_SIZES = (128, 256, 512)
+
+
+def robustness_section(quick, load) -> list[str]:
+    """Every sample from every view in ``VIEWS`` at ``ROBUST_SIZES``: unfinished rays, NaN pixels,
+    stuck walks, and the streamed (shuffled batches) image against the in-memory one."""
+    from gatun_py.mesh import read_mesh
+    from gatun_py.render import Camera, render_mesh
+
+    sizes = ROBUST_SIZES[:1] if quick else ROBUST_SIZES
+    out = [f"{ROBUST_HEAD} ({'/'.join(f'{n}²' for n in sizes)}, in-process, volume mode)", "",
+           f"Made by `python bench/bench_render.py --only robust` (also part of the full run) on "
+           f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} ({load}). Each sample read from its source "
+           "file and rendered in memory (`render_mesh`) and streamed in 20 shuffled batches "
+           "(`StreamingRaycaster`), the sample's transfer function, camera fitted to the mesh. *Unfinished* = "
+           "`rays_unfinished` (rays with a segment whose walk could not be completed in front of opacity 0.99, "
+           "the early-termination threshold), in-memory + streamed; *stuck* = walks stopped by the loop "
+           "check; *behind opaque* = incomplete segments behind opacity 0.99 (`segments_behind_opaque`); "
+           "*folded* = subsegments that ended at a fold face (`subsegments_folded`: the tet behind the face "
+           "lies on the ray's side, the grid overlaps itself). " + code_note(), "",
+           "| data | size | view (az, el) | rays hit | unfinished | stuck | behind opaque | folded | NaN pixels | "
+           "boundary anomalies | streaming vs in-memory max diff |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    totals = {}
+    for name, (path, kw, tfname) in SAMPLES.items():
+        mesh, _ = read_mesh(path, **kw)
+        for size in sizes:
+            for az, el in VIEWS:
+                cam = Camera(size, size, az, el)
+                res = render_mesh(mesh, cam, tfname)
+                st = _shuffled_stream(mesh, cam, tfname, scalar_range=mesh.scalar_range)
+                d = float(np.abs(st.image - res.image).max())
+                s = res.stats
+                bad = s["rays_unfinished"] + st.stats["rays_unfinished"]
+                totals[name] = totals.get(name, 0) + bad
+                out.append(f"| {name} | {size}² | ({az:g}, {el:g}) | {s['rays_hit']} | {s['rays_unfinished']} + "
+                           f"{st.stats['rays_unfinished']} | {s['segments_stuck']} | {s['segments_behind_opaque']} | "
+                           f"{s['subsegments_folded']} | {s['nan_pixels']} + {st.stats['nan_pixels']} | "
+                           f"{s['boundary_anomalies']} | {d:.1e} |")
+                print(out[-1], flush=True)
+    out += ["", "Unfinished rays over all sizes and views: " + ", ".join(f"{k} {v}" for k, v in totals.items())
+            + " (target 0). Boundary anomalies are rays whose boundary crossings do not alternate entry/exit (the "
+            "Combustion grid folds over itself in a few places); they are rendered from both ends up to the "
+            "boundary or a fold face and are not unfinished.", ""]
+    return out
+
+
 def replace_block(text: str, head: str, block: list[str]) -> str:
     """Replace the ``### head`` block of a section (up to the next ### heading) or append it."""
     new = "\n".join(block).rstrip() + "\n"
@@ -642,7 +689,7 @@ def view_datasets(quick=False) -> list[dict]:
 
 
 def only(parts, quick=False):
-    """Re-measure only ``parts`` (memory, lean, views) and replace their blocks in the existing section."""
+    """Re-measure only ``parts`` (memory, lean, views, robust) and replace their blocks in the existing section."""
     try:
         import vtk  # noqa: F401
 
@@ -665,6 +712,9 @@ def only(parts, quick=False):
     if "views" in parts:
         text = replace_block(text, VIEWS_HEAD, view_scan_section(view_datasets(quick), machine_load()))
         sec.write_text(text)
+    if "robust" in parts:
+        text = replace_block(text, ROBUST_HEAD, robustness_section(quick, machine_load()))
+        sec.write_text(text)
     print(text)
     shutil.rmtree(work, ignore_errors=True)
 
@@ -673,7 +723,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="Blunt-fin only, fewer repeats.")
     ap.add_argument("--worker", default=None)
-    ap.add_argument("--only", default=None, help="comma-separated parts to re-measure (memory, lean, views); the rest "
+    ap.add_argument("--only", default=None, help="comma-separated parts to re-measure (memory, lean, views, robust); the rest "
                                                   "of bench/sections/render.md stays as it is")
     for k in ("input", "tf", "out", "scalar", "range"):
         ap.add_argument(f"--{k}")
@@ -690,8 +740,8 @@ def main():
         return
     if args.only:
         parts = {p.strip() for p in args.only.split(",") if p.strip()}
-        if not parts or parts - {"memory", "lean", "views"}:
-            ap.error("--only takes a comma-separated list of memory, lean, views")
+        if not parts or parts - {"memory", "lean", "views", "robust"}:
+            ap.error("--only takes a comma-separated list of memory, lean, views, robust")
         only(parts, args.quick)
         return
 
@@ -845,25 +895,7 @@ def main():
                      f"{fmt(v)} |")
     lines += [""] + memory_section(mem_rows, base, repeats, machine_load())
 
-    # robustness on every sample from several views, and streaming == in-memory
-    lines += ["### Robustness: every sample, several views (128², in-process `render_mesh`, volume mode)", "",
-              "| data | view (az, el) | rays hit | rays unfinished | NaN pixels | boundary anomalies | "
-              "streaming vs in-memory max diff |", "|---|---|---|---|---|---|---|"]
-
-    for name, (path, kw, tfname) in SAMPLES.items():
-        mesh, _ = read_mesh(path, **kw)
-        for az, el in VIEWS:
-            cam = Camera(128, 128, az, el)
-            res = render_mesh(mesh, cam, tfname)
-            st = _shuffled_stream(mesh, cam, tfname, scalar_range=mesh.scalar_range)
-            d = float(np.abs(st.image - res.image).max())
-            s = res.stats
-            lines.append(f"| {name} | ({az:g}, {el:g}) | {s['rays_hit']} | {s['rays_unfinished']} + "
-                         f"{st.stats['rays_unfinished']} (streamed, shuffled) | {s['nan_pixels']} | "
-                         f"{s['boundary_anomalies']} | {d:.1e} |")
-    lines += ["", "Boundary anomalies are rays whose boundary crossings do not alternate entry/exit (the "
-              "Combustion grid folds over itself in a few places); they are rendered from both ends up to the "
-              "boundary and are not unfinished.", ""]
+    lines += robustness_section(args.quick, machine_load())
     lines += lean_check_section(lean_datasets(work, args.quick), machine_load())
     lines += view_scan_section(view_datasets(args.quick), machine_load())
     (secdir / "render.md").write_text("\n".join(lines) + "\n")

@@ -138,14 +138,33 @@ def tet_quadrics(u4, tets, weight):
     return out
 
 
-def evaluate_merge(tets, pts, dens, a, b, *, is_boundary, pinned, wd, wg, wv, wi, wq=0.0, quad=None, u4=None):
+def sample_value(p, d, new_tets, x, fallback):
+    """The new mesh's value at point x: from the first of ``new_tets`` containing it, else from the
+    one it is nearest to (largest smallest barycentric coordinate, the first of equals)."""
+    best = None
+    for q in new_tets:
+        lo, v = interpolate(p, d, q, x)
+        if lo >= 0:
+            return v
+        if best is None or lo > best[0]:
+            best = (lo, v)
+    return fallback if best is None else best[1]
+
+
+def evaluate_merge(tets, pts, dens, a, b, *, is_boundary, pinned, wd, wg, wv, wi, wq=0.0, quad=None, u4=None,
+                   ws=0.0, samples=None, pw=None, n_power=1.0, max_samples=None):
     """(legal, error) of merging a into b in the mesh ``tets`` (list of 4-tuples).
 
     ``wd``, ``wg``, ``wv``, ``wi`` (mass, boundary area, swept boundary volume, squared
     interpolation error) are the weights already divided by the normalisation scales, ``wq`` the
-    weight of a's quadric ``quad[a]`` evaluated at b's point ``u4[b]``; the sum is divided by the
-    number of tets the merge collapses. ``is_boundary`` is the input's boundary vertex set and
-    ``pinned`` the non-manifold vertices.
+    weight of a's quadric ``quad[a]`` evaluated at b's point ``u4[b]``, ``ws`` the weight of the
+    sampled error: ``samples`` maps every sample point (an index into ``pts`` and ``dens``, beyond
+    the vertices for the tet centroids) to the tet (4-tuple) holding it, ``pw`` its weight; the
+    term is the change of sum pw (value - interpolant)^2 over the points in a's tets (if there are
+    more than ``max_samples``, every k-th in ``samples`` order, times k, with the smallest such k
+    that leaves at most ``max_samples``). The sum is divided by (number of tets the merge
+    collapses) ** ``n_power``. ``is_boundary`` is the input's
+    boundary vertex set and ``pinned`` the non-manifold vertices.
     """
     p = np.asarray(pts, np.float64)
     d = np.asarray(dens, np.float64)
@@ -209,13 +228,49 @@ def evaluate_merge(tets, pts, dens, a, b, *, is_boundary, pinned, wd, wg, wv, wi
     if not link(a, tets, bfaces) & link(b, tets, bfaces) <= edge_link(a, b, tets, bfaces):
         return False, None
     qe = quadric_value(quad[a], u4[b]) if wq > 0 else 0.0
+    se = 0.0
+    if ws > 0 and samples:
+        mine = [(x, t) for x, t in samples.items() if t in star]
+        k = 1
+        if max_samples is not None and len(mine) > max_samples:
+            k = -(-len(mine) // int(max_samples))
+        for x, t in mine[::k]:
+            if orient6(p, t) > 0:
+                se -= pw[x] * (d[x] - interpolate(p, d, t, p[x])[1]) ** 2
+            own = tuple(b if w == a else w for w in t)
+            # the point's own tet first (ties between containing tets only differ by rounding)
+            order = ([own] if own in new_tets else []) + [q for q in new_tets if q != own]
+            se += pw[x] * (d[x] - sample_value(p, d, order, p[x], d[b])) ** 2
+        se *= ws * k
     n_collapsed = sum(1 for t in star if b in t)
-    return True, (wd * dm + di + wg * ge + wv * swept + wq * qe) / n_collapsed
+    return True, (wd * dm + di + wg * ge + wv * swept + wq * qe + se) / n_collapsed**n_power
 
 
 def collapse(tets, a, b):
     """The tets after merging a into b (tets of edge ab vanish)."""
     return [tuple(b if w == a else w for w in t) for t in tets if not (a in t and b in t)]
+
+
+def reassign_samples(tets, pts, dens, samples, a, b):
+    """The sample assignment after merging a into b (``samples``: point -> tet 4-tuple, as in
+    :func:`evaluate_merge`): a and the points of a's tets go to the first new tet of a's star that
+    contains them, else to the one they are nearest to (dropped if the new star is all flat)."""
+    p = np.asarray(pts, np.float64)
+    star = [t for t in tets if a in t]
+    new_star = [tuple(b if w == a else w for w in t) for t in star if b not in t]
+    new_star = [q for q in new_star if orient6(p, q) > 0]
+    out = {x: t for x, t in samples.items() if a not in t}
+    for x in [a] + [x for x, t in samples.items() if a in t]:
+        best = None
+        for q in new_star:
+            lo, _ = interpolate(p, dens, q, p[x])
+            if best is None or lo > best[0]:
+                best = (lo, q)
+            if lo >= 0:
+                break
+        if best is not None:
+            out[x] = best[1]
+    return out
 
 
 def legal_merges(tets, pts, dens, **kw):

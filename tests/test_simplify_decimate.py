@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from meshgen import AWKWARD, delaunay_mesh, degenerate_grid, grid_mesh, mesh_strategy, single_tet
-from naive_simplify import (check_valid, collapse, evaluate_merge, legal_merges, pinned_vertices, quadric_value,
-                            tet_quadrics)
+from naive_simplify import (check_valid, collapse, evaluate_merge, interpolate, legal_merges, pinned_vertices,
+                            quadric_value, reassign_samples, tet_quadrics)
 
 from gatun_py.errors import OptionError
 from gatun_py.simplify import ROOT_RANK, check_forest, decimate, simplified_mesh
-from gatun_py.simplify.decimate import QUADRIC_WEIGHT, SCALAR_SCALE, DecimationState
+from gatun_py.simplify import _decimate_kernels as K
+from gatun_py.simplify.decimate import CENTROID_WEIGHT, QUADRIC_WEIGHT, SCALAR_SCALE, DecimationState
 
 MANIFOLD = {k for k in AWKWARD if k not in ("edge_touching", "vertex_touching")}
 
@@ -20,17 +21,61 @@ def _naive_kw(state, tets):
     return dict(is_boundary=set(np.flatnonzero(state.isb).tolist()),
                 pinned=set(np.flatnonzero(state.pinned).tolist()),
                 wd=state.params[0], wg=state.params[1], wv=state.params[2], wi=state.params[3],
-                wq=state.params[4], quad=state.quad, u4=state.u4)
+                wq=state.params[4], quad=state.quad, u4=state.u4, ws=state.params[5], n_power=state.params[6],
+                max_samples=state.params[7])
 
 
-def _compare_all_edges(state, pts, dens):
+def _sample_weights(mesh):
+    """A vertex's share of the volume (a quarter of the volume of its tets, over the total), then
+    every tet's centroid: its volume over the total, times CENTROID_WEIGHT."""
+    vol = np.abs(mesh.signed_volumes())
+    pw = np.zeros(mesh.n_points)
+    for t, v in zip(mesh.tets, vol):
+        pw[t] += v / 4.0
+    return np.concatenate([pw, vol * CENTROID_WEIGHT]) / vol.sum()
+
+
+def _sample_points(mesh):
+    """Positions and values of the vertices, then of the tet centroids (the sample point ids)."""
+    p = mesh.points.astype(np.float64)
+    d = mesh.density.astype(np.float64)
+    cen = np.array([p[list(t)].sum(axis=0) / 4 for t in mesh.tets]).reshape(-1, 3)
+    val = np.array([d[list(t)].sum() / 4 for t in mesh.tets])
+    return np.concatenate([p, cen]), np.concatenate([d, val])
+
+
+def _kernel_samples(state):
+    """point -> tet (4-tuple) from the kernel's per-tet lists."""
+    out = {}
+    for t in np.flatnonzero(state.alive):
+        p = state.tp_head[t]
+        while p >= 0:
+            assert p not in out, "a sample point listed twice"
+            out[int(p)] = tuple(int(x) for x in state.T[t])
+            p = state.p_next[p]
+    return out
+
+
+def _star_samples(state, a):
+    """The sample points of a's tets in the kernel's order (star order, then list order)."""
+    out = {}
+    for s in K._star(a, state.head, state.nxt, state.T, state.alive):
+        p = state.tp_head[s >> 2]
+        while p >= 0:
+            out[int(p)] = tuple(int(x) for x in state.T[s >> 2])
+            p = state.p_next[p]
+    return out
+
+
+def _compare_all_edges(state, pts, dens, pw=None):
     tets = [tuple(int(x) for x in t) for t in state.current_tets()]
     kw = _naive_kw(state, tets)
+    kw.update(pw=pw)
     edges = sorted({(x, y) for t in tets for x in t for y in t if x != y})
     n_legal = 0
     for a, b in edges:
         ok_k, e_k = state.evaluate(a, b)
-        ok_n, e_n = evaluate_merge(tets, pts, dens, a, b, **kw)
+        ok_n, e_n = evaluate_merge(tets, pts, dens, a, b, samples=_star_samples(state, a), **kw)
         assert ok_k == ok_n, (a, b, ok_k, ok_n)
         if ok_k:
             n_legal += 1
@@ -48,7 +93,7 @@ def test_candidates_match_reference(name):
     tets = [tuple(int(x) for x in t) for t in mesh.tets]
     assert set(np.flatnonzero(state.pinned).tolist()) == pinned_vertices(tets, mesh.n_points)
     pts, dens = mesh.points.astype(np.float64), mesh.density.astype(np.float64)
-    n0 = _compare_all_edges(state, pts, dens)
+    n0 = _compare_all_edges(state, *_sample_points(mesh), _sample_weights(mesh))
     # isolated tets (single, edge-touching) cannot lose a vertex; everything else can
     assert (n0 > 0) == (name not in ("single_tet", "edge_touching"))
     # and again in a decimated state, half way through
@@ -56,7 +101,13 @@ def test_candidates_match_reference(name):
     order = np.argsort(forest.rank)[: forest.n_merges // 2]
     for a in order:
         state.apply(int(a), int(forest.parent[a]))
-    _compare_all_edges(state, pts, dens)
+    # (points of a region that left the mesh with a boundary merge are dropped)
+    assert len(_kernel_samples(state)) > 0.9 * mesh.n_tets
+    spts, sdens = _sample_points(mesh)
+    _compare_all_edges(state, spts, sdens, _sample_weights(mesh))
+    # with a sample budget small enough to thin out the points of most stars
+    state.params[K.P_MAXS] = 2
+    _compare_all_edges(state, spts, sdens, _sample_weights(mesh))
 
 
 @pytest.mark.parametrize("name", ["delaunay", "jittered_grid", "degenerate_grid"])
@@ -81,6 +132,36 @@ def test_quadrics_match_reference_and_accumulate(name):
     np.add.at(expect, anc, ref)
     roots = anc == np.arange(mesh.n_points)
     assert np.allclose(state.quad[roots], expect[roots], rtol=1e-9, atol=1e-12 * np.abs(ref).max())
+
+
+@pytest.mark.parametrize("name", ["delaunay", "jittered_grid", "degenerate_grid", "cavity", "two_components"])
+def test_sample_points_follow_the_merges(name):
+    """Every tet centroid and merged-away vertex is listed once, in the tet the reference assigns it
+    to (or, on a face shared by two tets, in another tet that also contains it)."""
+    mesh = AWKWARD[name]()
+    pts, dens = _sample_points(mesh)
+    state = DecimationState(mesh, 1.0, 1.0)
+    assert np.allclose(state.pw, _sample_weights(mesh), rtol=1e-12, atol=0)
+    assert np.allclose(state.pts, pts, rtol=1e-12, atol=1e-12) and np.allclose(state.dens, dens, rtol=1e-12)
+    forest = decimate(mesh)
+    tets = [tuple(int(x) for x in t) for t in mesh.tets]
+    ref = {mesh.n_points + i: t for i, t in enumerate(tets)}
+    assert _kernel_samples(state) == ref
+    order = np.argsort(forest.rank)[: forest.n_merges * 2 // 3]
+    assert len(order) > 3
+    for i, a in enumerate(order):
+        a, b = int(a), int(forest.parent[a])
+        ref = reassign_samples(tets, pts, dens, ref, a, b)
+        state.apply(a, b)
+        tets = collapse(tets, a, b)
+        if i % 5 and i != len(order) - 1:
+            continue
+        got = _kernel_samples(state)
+        assert set(got) == set(ref)
+        assert set(got.values()) <= set(tets)
+        for x, t in got.items():
+            if t != ref[x]:
+                assert min(interpolate(pts, dens, t, pts[x])[0], interpolate(pts, dens, ref[x], pts[x])[0]) >= -1e-9
 
 
 @pytest.mark.parametrize("mesh", [delaunay_mesh(18, 3), grid_mesh(3, 3, 3, jitter=0.2, seed=1), degenerate_grid()],

@@ -15,6 +15,12 @@ validates the input and drives the loop. The mesh state during decimation:
 ``quad`` (n, 15) float64, ``u4`` (n, 4) float64
     every vertex's error quadric (A's upper triangle, b, c; see :func:`_quadric_at`) and its
     (x, y, z, s) point; merging a into b adds a's quadric to b's.
+``pw`` (n + m,) float64, ``tp_head`` (m,) int32, ``p_next`` (n + m,) int32
+    sample points of the original field (ids 0..n-1: the vertices, once merged away; n + t: the
+    centroid of input tet t; positions and values in rows n.. of ``pts`` and ``dens``, which
+    tets never index): every one is listed in the live tet that holds it (``tp_head[t]`` ->
+    ``p_next`` chain), with weight ``pw`` (its share of the original volume); a merge a -> b hands
+    a and the points of a's star to the tets of the new star.
 
 A merge a -> b is legal when every surviving tet of a's star stays positive, every boundary face
 around a keeps its orientation, a boundary vertex only goes into a boundary vertex, and the link
@@ -41,7 +47,7 @@ VOLUME_EPS = 1e-10
 NORMAL_EPS = 1e-6
 
 # Indices into the float parameter array.
-P_WD, P_WG, P_WV, P_WI, P_WQ = 0, 1, 2, 3, 4
+P_WD, P_WG, P_WV, P_WI, P_WQ, P_WS, P_NCP, P_MAXS = 0, 1, 2, 3, 4, 5, 6, 7
 # Indices into the int64 counter array.
 C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS, C_STARTED = 0, 1, 2, 3, 4, 5
 
@@ -352,7 +358,77 @@ def _quadric_at(quad, u4, v, w):
 
 
 @njit(cache=True)
-def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, mark, counters, cand_out, err_out):
+def _tet_planes(pts, dens, q, lam, val):
+    """Tet q's barycentric coordinates and interpolant as affine functions of the point.
+
+    ``lam[j, :3] . x + lam[j, 3]`` is coordinate j at x, ``val[:3] . x + val[3]`` the value (the
+    rows of the inverse of the edge matrix: four dot products per point instead of four
+    determinants). Returns False for a tet that is not positive (``_orient6`` <= 0).
+    """
+    det = _orient6(pts, q[0], q[1], q[2], q[3])
+    if not det > 0.0:
+        return False
+    x0 = pts[q[0], 0]
+    y0 = pts[q[0], 1]
+    z0 = pts[q[0], 2]
+    e1x, e1y, e1z = pts[q[1], 0] - x0, pts[q[1], 1] - y0, pts[q[1], 2] - z0
+    e2x, e2y, e2z = pts[q[2], 0] - x0, pts[q[2], 1] - y0, pts[q[2], 2] - z0
+    e3x, e3y, e3z = pts[q[3], 0] - x0, pts[q[3], 1] - y0, pts[q[3], 2] - z0
+    inv = 1.0 / det
+    lam[1, 0] = (e2y * e3z - e2z * e3y) * inv
+    lam[1, 1] = (e2z * e3x - e2x * e3z) * inv
+    lam[1, 2] = (e2x * e3y - e2y * e3x) * inv
+    lam[2, 0] = (e3y * e1z - e3z * e1y) * inv
+    lam[2, 1] = (e3z * e1x - e3x * e1z) * inv
+    lam[2, 2] = (e3x * e1y - e3y * e1x) * inv
+    lam[3, 0] = (e1y * e2z - e1z * e2y) * inv
+    lam[3, 1] = (e1z * e2x - e1x * e2z) * inv
+    lam[3, 2] = (e1x * e2y - e1y * e2x) * inv
+    for r in range(1, 4):
+        lam[r, 3] = -(lam[r, 0] * x0 + lam[r, 1] * y0 + lam[r, 2] * z0)
+    for c in range(4):
+        lam[0, c] = -(lam[1, c] + lam[2, c] + lam[3, c])
+    lam[0, 3] += 1.0
+    for c in range(4):
+        val[c] = dens[q[0]] * lam[0, c] + dens[q[1]] * lam[1, c] + dens[q[2]] * lam[2, c] + dens[q[3]] * lam[3, c]
+    return True
+
+
+@njit(cache=True)
+def _new_value(p, k0, pts, ok, lam, val, fallback):
+    """Value at sample point p after the merge, from the new star's tet planes (``ok[k]``: tet k of
+    the star survives positive; ``lam``, ``val`` from :func:`_tet_planes`).
+
+    From the new tet containing p: first the new version of p's own tet k0, then the others in
+    star order; if none does (the boundary moved), the one p is nearest to (largest smallest
+    barycentric coordinate, the first of equals).
+    """
+    x = pts[p, 0]
+    y = pts[p, 1]
+    z = pts[p, 2]
+    best_lo = -1e300
+    v = fallback
+    for kk in range(-1, ok.shape[0]):
+        k = k0 if kk < 0 else kk
+        if kk == k0 or not ok[k]:
+            continue
+        lo = 1e300
+        for j in range(4):
+            lj = lam[k, j, 0] * x + lam[k, j, 1] * y + lam[k, j, 2] * z + lam[k, j, 3]
+            if lj < lo:
+                lo = lj
+        f = val[k, 0] * x + val[k, 1] * y + val[k, 2] * z + val[k, 3]
+        if lo >= 0.0:
+            return f
+        if lo > best_lo:
+            best_lo = lo
+            v = f
+    return v
+
+
+@njit(cache=True)
+def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, mark, counters, cand_out, err_out,
+                      pw, tp_head, p_next):
     """Error of every geometrically legal merge a -> b (b a neighbour of a): fills the outputs.
 
     Returns the number of candidates. Legality here covers volumes, boundary orientation and the
@@ -412,6 +488,45 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, m
     n_new = np.empty(3)
     area_new = np.empty(nf)
     q = np.empty(4, np.int64)
+    # the sample points in a's star (only they see the interpolant change) and their squared error now
+    ws = params[P_WS]
+    npt = 0
+    if ws > 0.0:
+        for i in range(ns):
+            p = tp_head[st[i] >> 2]
+            while p >= 0:
+                npt += 1
+                p = p_next[p]
+    s_ok = np.zeros(ns, np.bool_)
+    s_lam = np.empty((ns, 4, 4))
+    s_val = np.empty((ns, 4))
+    # late on, stars hold many points: every stride-th one stands for stride points (bounded cost)
+    max_s = max(1, int(params[P_MAXS]))
+    stride = (npt + max_s - 1) // max_s if npt > max_s else 1
+    p_id = np.empty((npt + stride - 1) // stride, np.int64)
+    p_k = np.empty(p_id.shape[0], np.int64)
+    e_old = 0.0
+    if npt > 0:
+        npt = 0
+        seen = 0
+        for i in range(ns):
+            t = st[i] >> 2
+            p = tp_head[t]
+            if p < 0:
+                continue
+            for j in range(4):
+                q[j] = T[t, j]
+            flat = not _tet_planes(pts, dens, q, s_lam[0], s_val[0])
+            while p >= 0:
+                if seen % stride == 0:
+                    p_id[npt] = p
+                    p_k[npt] = i
+                    if not flat:
+                        f = s_val[0, 0] * pts[p, 0] + s_val[0, 1] * pts[p, 1] + s_val[0, 2] * pts[p, 2] + s_val[0, 3]
+                        e_old += pw[p] * (dens[p] - f) ** 2
+                    npt += 1
+                seen += 1
+                p = p_next[p]
     stamp = _next_stamp(counters)
     mark[a] = stamp
     nc = 0
@@ -520,16 +635,32 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, m
                                 shared += 1
                         if shared >= 2 and area_sum > 0.0:
                             ge += abs(area_new[f] - area_old[g]) * area_old[g] / area_sum
+            se = 0.0
+            if npt > 0:
+                for k in range(ns):
+                    t = st[k] >> 2
+                    s_ok[k] = False
+                    if not _contains(T, t, b):
+                        for j in range(4):
+                            q[j] = T[t, j]
+                        q[st[k] & 3] = b
+                        s_ok[k] = _tet_planes(pts, dens, q, s_lam[k], s_val[k])
+                for ip in range(npt):
+                    p = p_id[ip]
+                    f = _new_value(p, p_k[ip], pts, s_ok, s_lam, s_val, dens[b])
+                    se += pw[p] * (dens[p] - f) ** 2
+                se = ws * stride * (se - e_old)
             cand_out[nc] = b
             qe = _quadric_at(quad, u4, a, b) if wq > 0.0 else 0.0
-            # per collapsed tet: the comparison that matters is at equal tet counts
-            err_out[nc] = (wd * dm + di + wg * ge + wv * swept + wq * qe) / n_col
+            # per collapsed tet (to a power): the comparison that matters is at equal tet counts
+            err_out[nc] = (wd * dm + di + wg * ge + wv * swept + wq * qe + se) / float(n_col) ** params[P_NCP]
             nc += 1
     return nc
 
 
 @njit(cache=True)
-def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab, counters):
+def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab, counters,
+              pw, tp_head, p_next):
     """Best legal merge of a: (target, error), or (-1, 0) when a has none."""
     st = _star(a, head, nxt, T, alive)
     if st.shape[0] == 0 or pinned[a]:
@@ -537,7 +668,8 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
     cap = 3 * st.shape[0] + 1
     cand = np.empty(cap, np.int64)
     err = np.empty(cap)
-    nc = _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, mark, counters, cand, err)
+    nc = _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, mark, counters, cand, err,
+                           pw, tp_head, p_next)
     if nc == 0:
         return -1, 0.0
     # best first, ties broken by target id, so the result does not depend on list order
@@ -632,9 +764,10 @@ def _heap_pop(h_err, h_v, h_b, h_ver, counters):
 
 @njit(cache=True)
 def _push_best(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab,
-               counters, ver, h_err, h_v, h_b, h_ver, last_err):
+               counters, ver, h_err, h_v, h_b, h_ver, last_err, pw, tp_head, p_next):
     ver[v] += 1
-    b, e = _evaluate(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab, counters)
+    b, e = _evaluate(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab,
+                     counters, pw, tp_head, p_next)
     if b >= 0:
         last_err[v] = e
         _heap_push(h_err, h_v, h_b, h_ver, counters, e, v, b, ver[v], ver)
@@ -681,8 +814,55 @@ def _apply_merge(a, b, st_a, T, alive, nbr, head, nxt):
 
 
 @njit(cache=True)
+def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, p_next):
+    """After merging a: a and every point listed in a's former star go to the live tet of the new
+    star that contains them (else the one they are nearest to, as :func:`_new_value`)."""
+    cnt = 1
+    for i in range(st_a.shape[0]):
+        p = tp_head[st_a[i] >> 2]
+        while p >= 0:
+            cnt += 1
+            p = p_next[p]
+    plist = np.empty(cnt, np.int64)
+    plist[0] = a
+    cnt = 1
+    for i in range(st_a.shape[0]):
+        t = st_a[i] >> 2
+        p = tp_head[t]
+        while p >= 0:
+            plist[cnt] = p
+            cnt += 1
+            p = p_next[p]
+        tp_head[t] = -1
+    vout = np.empty(2)
+    q = np.empty(4, np.int64)
+    for ip in range(cnt):
+        p = plist[ip]
+        best = -1
+        best_lo = -1e300
+        for i in range(st_a.shape[0]):
+            t = st_a[i] >> 2
+            if not alive[t]:
+                continue
+            for j in range(4):
+                q[j] = T[t, j]
+            v6 = _orient6(pts, q[0], q[1], q[2], q[3])
+            if not v6 > 0.0:
+                continue
+            _value_at(pts, dens, q, v6, pts[p, 0], pts[p, 1], pts[p, 2], vout)
+            if vout[0] > best_lo:
+                best_lo = vout[0]
+                best = t
+                if best_lo >= 0.0:
+                    break
+        if best >= 0:  # else no tet of a's star is left (or all are flat): the point is dropped
+            p_next[p] = tp_head[best]
+            tp_head[best] = p
+
+
+@njit(cache=True)
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab, counters,
-         ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges):
+         ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pw, tp_head, p_next):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left."""
     n = head.shape[0]
     # vertices to (re-)evaluate now; evaluated at a single call site below, because every call
@@ -699,7 +879,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         found = False
         for i in range(n_todo):
             if _push_best(todo[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b,
-                          mark_ab, counters, ver, h_err, h_v, h_b, h_ver, last_err):
+                          mark_ab, counters, ver, h_err, h_v, h_b, h_ver, last_err, pw, tp_head, p_next):
                 found = True
         n_todo = 0
         if sweeping and not found:
@@ -747,6 +927,8 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
                     nb[k] = w
                     k += 1
         _apply_merge(a, b, st_a, T, alive, nbr, head, nxt)
+        if params[P_WS] > 0.0:
+            _reassign_points(a, st_a, T, alive, pts, dens, tp_head, p_next)
         for j in range(quad.shape[1]):
             quad[b, j] += quad[a, j]
         parent[a] = b

@@ -176,12 +176,8 @@ class StreamingRaycaster:
         self._check_ids(tets, "tet")
         self._n_tets += len(tets)
         if self._nseg:
-            self._ensure_capacity(4 * len(tets))
             self._mark += 1
-            crossings = self._crossings(tets)
-            n_active, conflicts = K.insert_tets(tets, crossings, self._fold_mark, self._htab, self._hmul,
-                                                self._hcount, self._nodes, self._park_ver, self._in_list,
-                                                self._seg_mark, self._mark, self._active)
+            n_active, conflicts = self._insert(tets, self._crossings(tets), self._mark)
             self._conflicts += conflicts
             self._advance(n_active)
             self._park(n_active)
@@ -239,7 +235,8 @@ class StreamingRaycaster:
         keys = np.sort(faces, axis=1).astype(np.int32)
         self._boundary_keys = np.ascontiguousarray(keys[np.lexsort((keys[:, 2], keys[:, 1], keys[:, 0]))])
         (self._seg_ray, self._seg_face, self._seg_from, self._seg_ts, self._anomalies,
-         self._boundary_hits) = K.find_segments(P, self._dens, self._dirs, cam.width, faces, bbox)
+         self._boundary_hits) = K.find_segments(P, self._dens, self._dirs, cam.width, faces, bbox,
+                                                *_ray_grid(cam))
         nseg = self._nseg = len(self._seg_ray)
         self._seg_acc = np.zeros((nseg, 2, 4), dtype=np.float64)
         self._seg_state = np.zeros(nseg, dtype=np.uint8)
@@ -270,6 +267,32 @@ class StreamingRaycaster:
         self._hmul = self._slots_per_vertex(cap)
         self._hcount = np.zeros(1, dtype=np.int64)
         self._park(nseg)
+
+    def _insert(self, tets, crossings, mark):
+        """Enter tets into the face table (:func:`K.insert_tets`); returns (segments to advance, conflicts).
+
+        A tet adds at most four faces, but a batch of a whole mesh adds about two per tet: rather
+        than doubling a table sized for the expected tets (a full rehash) to fit a worst case that
+        never comes, the batch goes in pieces that fit, and the table grows only when even a
+        piece does not. Pieces collect the same segments in the same order as one call.
+        """
+        n_active = conflicts = done = 0
+        while done < len(tets):
+            left = len(tets) - done
+            room = (int(0.6 * len(self._htab)) - int(self._hcount[0])) // 4
+            if self._counting or room < min(left, 4096):
+                self._ensure_capacity(4 * left)  # a counting table purges first; see there
+                take = left
+            else:
+                take = min(left, room)
+            part = crossings[done: done + take] if len(crossings) else crossings
+            k, c = K.insert_tets(tets[done: done + take], part, self._fold_mark, self._htab, self._hmul,
+                                 self._hcount, self._nodes, self._park_ver, self._in_list, self._seg_mark, mark,
+                                 self._active[n_active:])
+            n_active += k
+            conflicts += c
+            done += take
+        return n_active, conflicts
 
     def _park(self, n_active):
         self._ensure_capacity(2 * n_active)
@@ -396,6 +419,14 @@ class StreamingRaycaster:
         return RenderResult(img, stats)
 
 
+def _ray_grid(cam):
+    """Camera basis (fwd, right, up), pixel offsets (xs, ys) and xs's half-width, for find_segments."""
+    fwd, right, up = (np.ascontiguousarray(v, dtype=np.float64) for v in cam.basis())
+    xs, ys = cam.ray_offsets()
+    xscale = float(np.tan(np.radians(cam.view_angle) / 2.0)) * (cam.width / cam.height)
+    return fwd, right, up, np.ascontiguousarray(xs, np.float64), np.ascontiguousarray(ys, np.float64), xscale
+
+
 def _pixel_boxes(P, faces, cam):
     """Pixel bounding box [col0, col1) x [row0, row1) of every face, one pixel of margin."""
     if len(faces) == 0:
@@ -449,9 +480,7 @@ def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = 
     tets = np.ascontiguousarray(mesh.tets, dtype=np.int32)
     rc._n_tets = len(tets)
     if rc._nseg and len(tets):
-        rc._ensure_capacity(4 * len(tets))
-        _, rc._conflicts = K.insert_tets(tets, rc._crossings(tets), rc._fold_mark, rc._htab, rc._hmul, rc._hcount,
-                                         rc._nodes, rc._park_ver, rc._in_list, rc._seg_mark, 1, rc._active)
+        _, rc._conflicts = rc._insert(tets, rc._crossings(tets), 1)
         rc._active = np.arange(rc._nseg, dtype=np.int64)
         rc._advance(rc._nseg)
     image = np.zeros((rc._n_rays, 4), dtype=np.float64)

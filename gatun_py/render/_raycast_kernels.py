@@ -891,27 +891,38 @@ def advance(active, n_active, P, dens, dirs, seg_ray, seg_face, seg_from, seg_cl
 # ---------------------------------------------------------------------------------------------
 # boundary: rays -> segments
 @njit(cache=True, inline="always")
-def _clip_side(lo, hi, b, r, tol):
-    """Narrow [lo, hi] to the x with b + x r >= -tol (empty: lo > hi)."""
-    if r > 0.0:
-        lo = max(lo, (-tol - b) / r)
-    elif r < 0.0:
-        hi = min(hi, (-tol - b) / r)
+def _clip_side(lo, hi, b, r, inv_r, tol):
+    """Narrow [lo, hi] to (a superset of) the x with b + x r >= -tol (empty: lo > hi).
+
+    ``inv_r`` = 1 / r, or 0 where r is 0 or too small to invert (such a side changes by less than
+    1e-290 over the image: it is taken as constant). The bound -(tol + b) / r is rounded by a few
+    ulps, far less than the x by which ``tol`` exceeds the sides' own rounding error.
+    """
+    if inv_r > 0.0:
+        lo = max(lo, (-tol - b) * inv_r)
+    elif inv_r < 0.0:
+        hi = min(hi, (-tol - b) * inv_r)
     elif b < -tol:
         hi = lo - 1.0
     return lo, hi
 
 
 @njit(cache=True, inline="always")
-def _row_span(b0, r0, t0, b1, r1, t1, b2, r2, t2, xlo, xhi):
+def _inverse(r):
+    return 1.0 / r if abs(r) > 1e-300 else 0.0
+
+
+@njit(cache=True, inline="always")
+def _row_span(b0, r0, i0, t0, b1, r1, i1, t1, b2, r2, i2, t2, xlo, xhi):
     """The x in [xlo, xhi] where three sides b_k + x r_k can share a sign (within their bounds t_k):
-    the hull of the part where all are >= -t_k and the part where all are <= t_k."""
-    lo, hi = _clip_side(xlo, xhi, b0, r0, t0)
-    lo, hi = _clip_side(lo, hi, b1, r1, t1)
-    lo, hi = _clip_side(lo, hi, b2, r2, t2)
-    lo2, hi2 = _clip_side(xlo, xhi, -b0, -r0, t0)
-    lo2, hi2 = _clip_side(lo2, hi2, -b1, -r1, t1)
-    lo2, hi2 = _clip_side(lo2, hi2, -b2, -r2, t2)
+    the hull of the part where all are >= -t_k and the part where all are <= t_k. ``i_k`` = 1 / r_k
+    (see :func:`_clip_side`)."""
+    lo, hi = _clip_side(xlo, xhi, b0, r0, i0, t0)
+    lo, hi = _clip_side(lo, hi, b1, r1, i1, t1)
+    lo, hi = _clip_side(lo, hi, b2, r2, i2, t2)
+    lo2, hi2 = _clip_side(xlo, xhi, -b0, -r0, -i0, t0)
+    lo2, hi2 = _clip_side(lo2, hi2, -b1, -r1, -i1, t1)
+    lo2, hi2 = _clip_side(lo2, hi2, -b2, -r2, -i2, t2)
     if not lo <= hi:
         return lo2, hi2
     if lo2 <= hi2:
@@ -919,8 +930,32 @@ def _row_span(b0, r0, t0, b1, r1, t1, b2, r2, t2, xlo, xhi):
     return lo, hi
 
 
+@njit(cache=True, inline="always")
+def _box_edge(v, n):
+    """A pixel box bound ``v`` (a float) clamped to 0..n as an int."""
+    if not v > 0.0:  # also NaN
+        return 0
+    if v >= n:
+        return n
+    return int(v)
+
+
+@njit(cache=True, inline="always")
+def _pixel_box(P, i0, i1, i2, fwd, right, up, tan_half, width, height):
+    """Pixel box [col0, col1) x [row0, row1) of triangle (i0, i1, i2) (in front of the eye), one pixel
+    to spare on each side."""
+    aspect = width / height
+    _, c0, r0 = _project(P, i0, fwd, right, up, tan_half, aspect, width, height)
+    _, c1, r1 = _project(P, i1, fwd, right, up, tan_half, aspect, width, height)
+    _, c2, r2 = _project(P, i2, fwd, right, up, tan_half, aspect, width, height)
+    return (_box_edge(np.floor(min(c0, min(c1, c2))) - 1.0, width),
+            _box_edge(np.ceil(max(c0, max(c1, c2))) + 2.0, width),
+            _box_edge(np.floor(min(r0, min(r1, r2))) - 1.0, height),
+            _box_edge(np.ceil(max(r0, max(r1, r2))) + 2.0, height))
+
+
 @njit(cache=True, parallel=True)
-def _boundary_hits(P, dens, dirs, width, faces, bbox, fwd, right, up, xs, ys, xscale, counts, offsets, out_ray,
+def _boundary_hits(P, dens, dirs, width, height, faces, fwd, right, up, xs, ys, tan_half, counts, offsets, out_ray,
                    out_t, out_face, out_enter, fill):
     """Pixel rays crossing each boundary face (``fill`` False: count them; True: record them).
 
@@ -928,9 +963,9 @@ def _boundary_hits(P, dens, dirs, width, faces, bbox, fwd, right, up, xs, ys, xs
     the walk's own test). Only the pixels of each row's span are tested: an edge side is linear in
     the pixel's offsets ``xs``, ``ys`` along ``right`` and ``up`` (as in :func:`count_crossings`),
     so the columns where the three can share a sign, within a rounding bound far above the
-    error of the side itself (``NEAR``), form an interval, widened by a column on each side. Every
-    pixel outside it has two sides of certain, opposite signs: skipping it changes no hit, and the
-    hits come out in the same order as from testing every pixel of the face's box.
+    error of the side itself (``NEAR``), form an interval. Every pixel outside it has two sides of
+    certain, opposite signs: skipping it changes no hit, and the hits come out in the same order as
+    from testing every pixel of the face's box.
     """
     for f in prange(faces.shape[0]):
         i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
@@ -940,7 +975,7 @@ def _boundary_hits(P, dens, dirs, width, faces, bbox, fwd, right, up, xs, ys, xs
         ax, ay, az, af = _edge_cross(P, i0, i1)
         bx, by, bz, bf = _edge_cross(P, i1, i2)
         cx, cy, cz, cf = _edge_cross(P, i2, i0)
-        c0, c1 = bbox[f, 0], bbox[f, 1]
+        c0, c1, row0, row1 = _pixel_box(P, i0, i1, i2, fwd, right, up, tan_half, width, height)
         if c0 >= c1:
             continue
         # the three directed sides over the image plane: f + x r + y u
@@ -949,16 +984,19 @@ def _boundary_hits(P, dens, dirs, width, faces, bbox, fwd, right, up, xs, ys, xs
         f20, r20, u20 = _edge_terms(P, i2, i0, fwd, right, up)
         m0, m1, m2 = _norm(P, i0), _norm(P, i1), _norm(P, i2)
         t01, t12, t20 = NEAR * m0 * m1, NEAR * m1 * m2, NEAR * m2 * m0
+        i01, i12, i20 = _inverse(r01), _inverse(r12), _inverse(r20)
         half = 0.5 * width
-        for row in range(bbox[f, 2], bbox[f, 3]):
+        xscale = tan_half * (width / height)
+        for row in range(row0, row1):
             y = ys[row]
-            xlo, xhi = _row_span(f01 + y * u01, r01, t01, f12 + y * u12, r12, t12, f20 + y * u20, r20, t20,
-                                 xs[c0], xs[c1 - 1])
+            xlo, xhi = _row_span(f01 + y * u01, r01, i01, t01, f12 + y * u12, r12, i12, t12, f20 + y * u20, r20, i20,
+                                 t20, xs[c0], xs[c1 - 1])
             if not xlo <= xhi:
                 continue
-            # continuous column of x (pixel centres at col + 0.5), one column to spare each side
-            col_lo = max(c0, int(math.floor((xlo / xscale + 1.0) * half - 0.5)) - 1)
-            col_hi = min(c1, int(math.ceil((xhi / xscale + 1.0) * half - 0.5)) + 2)
+            # the columns whose xs lie in [xlo, xhi] (xs[col] = (2 (col + 0.5) / width - 1) xscale),
+            # a millionth of a column to spare for the rounding of this mapping
+            col_lo = max(c0, int(math.ceil((xlo / xscale + 1.0) * half - 0.5 - 1e-6)))
+            col_hi = min(c1, int(math.floor((xhi / xscale + 1.0) * half - 0.5 + 1e-6)) + 1)
             for col in range(col_lo, col_hi):
                 r = row * width + col
                 dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
@@ -1078,19 +1116,21 @@ def _init_segments(P, dens, dirs, faces, seg_ray_, hit_face, hit_in, hit_out, se
             seg_ts[s, sub, 1] = sv
 
 
-def find_segments(P, dens, dirs, width, faces, bbox, fwd, right, up, xs, ys, xscale):
-    """All (ray, entry face, exit face) segments of the boundary ``faces`` (outward wound).
+def find_segments(P, dens, dirs, width, height, faces, fwd, right, up, xs, ys, tan_half):
+    """All (ray, entry face, exit face) segments of the boundary ``faces`` (outward wound, every
+    vertex in front of the eye).
 
-    ``bbox``: each face's pixel box; ``fwd``, ``right``, ``up``: the camera basis; ``xs``, ``ys``:
-    the pixel rays' offsets (``Camera.ray_offsets``, ``dirs`` their normalised directions);
-    ``xscale``: ``xs``'s half-width (tan of half the view angle times the aspect ratio).
+    ``fwd``, ``right``, ``up``: the camera basis; ``xs``, ``ys``: the pixel rays' offsets along
+    ``right`` and ``up`` (``Camera.ray_offsets``; ``dirs`` are their normalised directions);
+    ``tan_half``: tan of half the vertical view angle.
     """
     nf = faces.shape[0]
     counts = np.zeros(nf, dtype=np.int64)
     dummy_i = np.zeros(0, dtype=np.int64)
     dummy_f = np.zeros(0, dtype=np.float64)
     dummy_b = np.zeros(0, dtype=np.bool_)
-    _boundary_hits(P, dens, dirs, width, faces, bbox, fwd, right, up, xs, ys, xscale, counts, counts, dummy_i, dummy_f, dummy_i, dummy_b, False)
+    _boundary_hits(P, dens, dirs, width, height, faces, fwd, right, up, xs, ys, tan_half, counts, counts, dummy_i,
+                   dummy_f, dummy_i, dummy_b, False)
     offsets = np.zeros(nf + 1, dtype=np.int64)
     np.cumsum(counts, out=offsets[1:])
     m = int(offsets[-1])
@@ -1098,7 +1138,8 @@ def find_segments(P, dens, dirs, width, faces, bbox, fwd, right, up, xs, ys, xsc
     hit_t = np.empty(m, dtype=np.float64)
     hit_face = np.empty(m, dtype=np.int64)
     hit_enter = np.empty(m, dtype=np.bool_)
-    _boundary_hits(P, dens, dirs, width, faces, bbox, fwd, right, up, xs, ys, xscale, counts, offsets, hit_ray, hit_t, hit_face, hit_enter, True)
+    _boundary_hits(P, dens, dirs, width, height, faces, fwd, right, up, xs, ys, tan_half, counts, offsets, hit_ray,
+                   hit_t, hit_face, hit_enter, True)
     seg_ray_, hit_in, hit_out, anomalies = _pair_hits(dirs.shape[0], hit_ray, hit_t, hit_face, hit_enter)
     nseg = seg_ray_.shape[0]
     seg_ray = np.empty(nseg, dtype=np.int32)

@@ -231,11 +231,9 @@ class StreamingRaycaster:
         self._dirs = cam.ray_directions()
         P = self._points[: self._nv]
         faces = self._faces_in_front(P, faces, cam)
-        bbox = _pixel_boxes(P, faces, cam)
-        keys = np.sort(faces, axis=1).astype(np.int32)
-        self._boundary_keys = np.ascontiguousarray(keys[np.lexsort((keys[:, 2], keys[:, 1], keys[:, 0]))])
+        self._bfaces, self._bkeys = faces, None
         (self._seg_ray, self._seg_face, self._seg_from, self._seg_ts, self._anomalies,
-         self._boundary_hits) = K.find_segments(P, self._dens, self._dirs, cam.width, faces, bbox,
+         self._boundary_hits) = K.find_segments(P, self._dens, self._dirs, cam.width, cam.height, faces,
                                                 *_ray_grid(cam))
         nseg = self._nseg = len(self._seg_ray)
         self._seg_acc = np.zeros((nseg, 2, 4), dtype=np.float64)
@@ -318,13 +316,27 @@ class StreamingRaycaster:
                                self._park_face)
         return self._n_nodes
 
+    @property
+    def _boundary_keys(self):
+        """The boundary faces' sorted id triples, sorted (for :func:`K.settle`).
+
+        ``settle`` looks a face up only for a segment still active at the end, which most frames
+        have none of: the sort waits until one is.
+        """
+        if self._bkeys is None:
+            if not np.any(self._seg_state == K.STATE_ACTIVE):
+                return np.zeros((0, 3), dtype=np.int32)
+            keys = np.sort(self._bfaces, axis=1).astype(np.int32)
+            self._bkeys = np.ascontiguousarray(keys[np.lexsort((keys[:, 2], keys[:, 1], keys[:, 0]))])
+        return self._bkeys
+
     @staticmethod
     def _faces_in_front(P, faces, cam):
         """The boundary, or nothing if it is all behind the eye; an error if the eye's plane cuts it."""
         if len(faces) == 0:
             return faces
         fwd, _, _ = cam.basis()
-        depth = P[np.unique(faces)] @ fwd
+        depth = (P @ fwd)[faces]  # every boundary vertex (each as often as it has faces)
         if np.all(depth <= 0):
             return faces[:0]
         if np.any(depth <= 0):
@@ -420,31 +432,11 @@ class StreamingRaycaster:
 
 
 def _ray_grid(cam):
-    """Camera basis (fwd, right, up), pixel offsets (xs, ys) and xs's half-width, for find_segments."""
+    """Camera basis (fwd, right, up), pixel ray offsets (xs, ys) and tan of half the view angle."""
     fwd, right, up = (np.ascontiguousarray(v, dtype=np.float64) for v in cam.basis())
     xs, ys = cam.ray_offsets()
-    xscale = float(np.tan(np.radians(cam.view_angle) / 2.0)) * (cam.width / cam.height)
-    return fwd, right, up, np.ascontiguousarray(xs, np.float64), np.ascontiguousarray(ys, np.float64), xscale
-
-
-def _pixel_boxes(P, faces, cam):
-    """Pixel bounding box [col0, col1) x [row0, row1) of every face, one pixel of margin."""
-    if len(faces) == 0:
-        return np.zeros((0, 4), dtype=np.int64)
-    fwd, right, up = cam.basis()
-    z = P @ fwd
-    t = np.tan(np.radians(cam.view_angle) / 2.0)
-    w, h = cam.width, cam.height
-    col = ((P @ right) / (z * t * (w / h)) + 1.0) * (w / 2.0)
-    row = (1.0 - (P @ up) / (z * t)) * (h / 2.0)
-    fc = col[faces]
-    fr = row[faces]
-    box = np.empty((len(faces), 4), dtype=np.int64)
-    box[:, 0] = np.clip(np.floor(fc.min(axis=1)) - 1, 0, w)
-    box[:, 1] = np.clip(np.ceil(fc.max(axis=1)) + 2, 0, w)
-    box[:, 2] = np.clip(np.floor(fr.min(axis=1)) - 1, 0, h)
-    box[:, 3] = np.clip(np.ceil(fr.max(axis=1)) + 2, 0, h)
-    return box
+    tan_half = float(np.tan(np.radians(cam.view_angle) / 2.0))
+    return fwd, right, up, np.ascontiguousarray(xs, np.float64), np.ascontiguousarray(ys, np.float64), tan_half
 
 
 def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = None,

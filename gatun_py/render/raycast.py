@@ -264,7 +264,7 @@ class StreamingRaycaster:
         self._table_peak = self._htab.nbytes
         self._hmul = self._slots_per_vertex(cap)
         self._hcount = np.zeros(1, dtype=np.int64)
-        self._park(nseg)
+        self._park(nseg, new_faces=min(2 * nseg, len(faces)))
 
     def _insert(self, tets, crossings, mark):
         """Enter tets into the face table (:func:`K.insert_tets`); returns (segments to advance, conflicts).
@@ -292,8 +292,15 @@ class StreamingRaycaster:
             done += take
         return n_active, conflicts
 
-    def _park(self, n_active):
-        self._ensure_capacity(2 * n_active)
+    def _park(self, n_active, new_faces=None):
+        # Parking adds a face only where a subsegment waits on one the table lacks: at the start
+        # the boundary faces (``new_faces``: at most those), later none in a table that keeps every
+        # face (a walk stops on the exit face of the last tet it crossed, which is present). The
+        # worst case of 2 per subsegment pair may then fill the table further instead of doubling it.
+        if new_faces is not None:
+            self._ensure_capacity(new_faces)
+        else:
+            self._ensure_capacity(2 * n_active, load=0.6 if self._counting else 0.9)
         if self._n_nodes + 2 * n_active > len(self._nodes):
             live = self._compact_nodes()
             if live + 2 * n_active > len(self._nodes) // 2:
@@ -357,10 +364,12 @@ class StreamingRaycaster:
                           float(np.tan(np.radians(cam.view_angle) / 2.0)), self._odd_pixels, self._fold_mark, out)
         return out
 
-    def _ensure_capacity(self, extra):
+    def _ensure_capacity(self, extra, load=0.6):
+        """Make room for ``extra`` more faces within ``load`` of the table (rehashing to a larger
+        table, a counting table purged first, to load 0.6 or 0.25)."""
         cap = len(self._htab)
         need = int(self._hcount[0]) + int(extra)
-        if need <= 0.6 * cap:
+        if need <= load * cap:
             return
         # A counting table first drops the faces no ray needs, then fits the rest. A walk that
         # looped on folded geometry may have taken a face off more than once: keep every face

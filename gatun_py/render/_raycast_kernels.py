@@ -157,9 +157,25 @@ def _face_values(P, dens, dx, dy, dz, a, b, c):
 def _face_values_w(P, dens, dx, dy, dz, a, b, c, wa, wb, wc):
     """:func:`_face_values` with the sides of (b, c), (c, a), (a, b) already known (up to a
     common sign)."""
-    ta = P[a, 0] * dx + P[a, 1] * dy + P[a, 2] * dz
-    tb = P[b, 0] * dx + P[b, 1] * dy + P[b, 2] * dz
-    tc = P[c, 0] * dx + P[c, 1] * dy + P[c, 2] * dz
+    t, sv, ok = _barycentric(_depth(P, a, dx, dy, dz), _depth(P, b, dx, dy, dz), _depth(P, c, dx, dy, dz),
+                             dens[a], dens[b], dens[c], wa, wb, wc)
+    if ok:
+        return t, sv
+    return _chord_midpoint(P, dens, dx, dy, dz, a, b, c)
+
+
+@njit(cache=True, inline="always")
+def _depth(P, v, dx, dy, dz):
+    """P_v . d: the ray parameter of vertex v's foot on the ray."""
+    return P[v, 0] * dx + P[v, 1] * dy + P[v, 2] * dz
+
+
+@njit(cache=True, inline="always")
+def _barycentric(ta, tb, tc, da, db, dc, wa, wb, wc):
+    """(t, scalar, ok) of the face point with (unnormalised) weights wa, wb, wc, from the vertices'
+    depths t and scalars d; ok False when no weight is left (the ray lies in the face's plane:
+    :func:`_chord_midpoint`). Scalars only, no arrays: the walk's hot loop calls it, and arrays
+    passed to an inlined function that calls out cost reference-count updates on every step."""
     w = wa + wb + wc
     if w < 0.0:
         wa, wb, wc = -wa, -wb, -wc
@@ -171,8 +187,8 @@ def _face_values_w(P, dens, dx, dy, dz, a, b, c, wa, wb, wc):
         wa /= w
         wb /= w
         wc /= w
-        return wa * ta + wb * tb + wc * tc, wa * dens[a] + wb * dens[b] + wc * dens[c]
-    return _chord_midpoint(P, dens, dx, dy, dz, a, b, c)
+        return wa * ta + wb * tb + wc * tc, wa * da + wb * db + wc * dc, True
+    return 0.0, 0.0, False
 
 
 @njit(cache=True)
@@ -825,7 +841,10 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
         slot = _hash_find(htab, mul, na, nb, nc)
         if counting and clean and slot >= 0:
             _atomic_sub_i32(htab, slot, 6, 1)
-        t_next, s_next = _face_values_w(P, dens, dx, dy, dz, na, nb, nc, wa, wb, wc)
+        t_next, s_next, ok = _barycentric(_depth(P, na, dx, dy, dz), _depth(P, nb, dx, dy, dz),
+                                          _depth(P, nc, dx, dy, dz), dens[na], dens[nb], dens[nc], wa, wb, wc)
+        if not ok:  # the ray lies in the exit face's plane
+            t_next, s_next = _chord_midpoint(P, dens, dx, dy, dz, na, nb, nc)
         k_next = _first_sample_at(t_next, step, mode)
         # one call site: the compositing is inlined, once
         if forward:

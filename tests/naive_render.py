@@ -127,3 +127,28 @@ def naive_face_crossings(mesh, fitted):
             hit_t = (q @ e2) * inv
             out[t, k] = int(np.count_nonzero(ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (hit_t > 0)))
     return out
+
+
+def naive_boundary_hits(mesh, fitted):
+    """Set of (face index, pixel ray, entering) for the rays crossing each of ``mesh.boundary_faces()``,
+    found the plain way: every pixel of the image against every face, with the ray caster's own
+    crossing rule (the three directed edge sides ``d . (P_lo x P_hi)`` share a sign; exact zeros
+    decided by the first non-zero component of ``P_lo x P_hi``, then as positive), evaluated with
+    the same floating-point operations, so the sets must agree exactly."""
+    eye = np.asarray(fitted.position, dtype=np.float64)
+    dirs = fitted.ray_directions()
+    pts = mesh.points.astype(np.float64) - eye
+    dx, dy, dz = dirs[:, 0], dirs[:, 1], dirs[:, 2]
+    hits = set()
+    for f, face in enumerate(mesh.boundary_faces()):
+        signs = []
+        for i, j in ((face[0], face[1]), (face[1], face[2]), (face[2], face[0])):
+            lo, hi, flip = (i, j, 1.0) if i < j else (j, i, -1.0)
+            (ax, ay, az), (bx, by, bz) = pts[lo], pts[hi]
+            cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+            v = dx * cx + dy * cy + dz * cz
+            tie = next((np.sign(x) for x in (cx, cy, cz) if x != 0.0), 1.0)
+            signs.append(np.where(v > 0.0, 1.0, np.where(v < 0.0, -1.0, tie)) * flip)
+        crossed = (signs[0] == signs[1]) & (signs[1] == signs[2])
+        hits.update((f, int(r), bool(signs[0][r] < 0)) for r in np.flatnonzero(crossed))
+    return hits

@@ -161,9 +161,25 @@ def _face_values(P, dens, dx, dy, dz, a, b, c):
 def _face_values_w(P, dens, dx, dy, dz, a, b, c, wa, wb, wc):
     """:func:`_face_values` with the sides of (b, c), (c, a), (a, b) already known (up to a
     common sign)."""
-    ta = P[a, 0] * dx + P[a, 1] * dy + P[a, 2] * dz
-    tb = P[b, 0] * dx + P[b, 1] * dy + P[b, 2] * dz
-    tc = P[c, 0] * dx + P[c, 1] * dy + P[c, 2] * dz
+    t, sv, ok = _barycentric(_depth(P, a, dx, dy, dz), _depth(P, b, dx, dy, dz), _depth(P, c, dx, dy, dz),
+                             dens[a], dens[b], dens[c], wa, wb, wc)
+    if ok:
+        return t, sv
+    return _chord_midpoint(P, dens, dx, dy, dz, a, b, c)
+
+
+@njit(cache=True, inline="always")
+def _depth(P, v, dx, dy, dz):
+    """P_v . d: the ray parameter of vertex v's foot on the ray."""
+    return P[v, 0] * dx + P[v, 1] * dy + P[v, 2] * dz
+
+
+@njit(cache=True, inline="always")
+def _barycentric(ta, tb, tc, da, db, dc, wa, wb, wc):
+    """(t, scalar, ok) of the face point with (unnormalised) weights wa, wb, wc, from the vertices'
+    depths t and scalars d; ok False when no weight is left (the ray lies in the face's plane:
+    :func:`_chord_midpoint`). Scalars only, no arrays: the walk's hot loop calls it, and arrays
+    passed to an inlined function that calls out cost reference-count updates on every step."""
     w = wa + wb + wc
     if w < 0.0:
         wa, wb, wc = -wa, -wb, -wc
@@ -175,8 +191,8 @@ def _face_values_w(P, dens, dx, dy, dz, a, b, c, wa, wb, wc):
         wa /= w
         wb /= w
         wc /= w
-        return wa * ta + wb * tb + wc * tc, wa * dens[a] + wb * dens[b] + wc * dens[c]
-    return _chord_midpoint(P, dens, dx, dy, dz, a, b, c)
+        return wa * ta + wb * tb + wc * tc, wa * da + wb * db + wc * dc, True
+    return 0.0, 0.0, False
 
 
 @njit(cache=True)
@@ -558,7 +574,8 @@ def park(active, n_active, seg_face, seg_state, htab, mul, hcount, nodes, n_node
 # ---------------------------------------------------------------------------------------------
 # sampling and compositing
 @njit(cache=True, inline="always")
-def _lookup(tab, lo, inv, s, out):
+def _lookup(tab, lo, inv, s):
+    """(r, g, b, a) of the table at scalar ``s`` (a tuple: no buffer to allocate in the walk)."""
     n = tab.shape[0]
     x = (s - lo) * inv
     if not x > 0.0:  # also NaN
@@ -569,8 +586,8 @@ def _lookup(tab, lo, inv, s, out):
     if i >= n - 1:
         i = n - 2
     f = x - i
-    for c in range(4):
-        out[c] = tab[i, c] * (1.0 - f) + tab[i + 1, c] * f
+    return (tab[i, 0] * (1.0 - f) + tab[i + 1, 0] * f, tab[i, 1] * (1.0 - f) + tab[i + 1, 1] * f,
+            tab[i, 2] * (1.0 - f) + tab[i + 1, 2] * f, tab[i, 3] * (1.0 - f) + tab[i + 1, 3] * f)
 
 
 @njit(cache=True)
@@ -584,21 +601,20 @@ def _first_sample(t0, step):
 
 
 @njit(cache=True, inline="always")
-def _composite(acc, t0, s0, t1, s1, k0, k1, forward, mode, step, tab, lo, inv, unit, buf, buf2):
-    """Composite the tet interval [t0, t1) (scalar s0 -> s1) into ``acc``; return samples taken.
+def _composite(a0, a1, a2, a3, t0, s0, t1, s1, k0, k1, forward, mode, step, tab, lo, inv, unit):
+    """Composite the tet interval [t0, t1) (scalar s0 -> s1) into the running colour (a0, a1, a2, a3);
+    return (samples taken, new colour). The colour stays in registers for the whole walk.
 
-    forward: ``acc`` is a front subsegment (new samples go behind it); otherwise a back
-    subsegment walking toward the eye (new samples go in front of it). Volume mode: ``k0``,
+    forward: the colour is a front subsegment's (new samples go behind it); otherwise a back
+    subsegment's, walking toward the eye (new samples go in front of it). Volume mode: ``k0``,
     ``k1`` are ``_first_sample(t0)``, ``_first_sample(t1)`` (the walk computes each face's once).
     """
     if not t1 > t0:
-        return 0
+        return 0, a0, a1, a2, a3
     if mode == MODE_VOLUME:
         if k1 <= k0:
-            return 0
+            return 0, a0, a1, a2, a3
         scale = (s1 - s0) / (t1 - t0)
-        # the running colour in locals: ``acc`` may alias ``tab`` as far as the compiler knows
-        a0, a1, a2, a3 = acc[0], acc[1], acc[2], acc[3]
         n = tab.shape[0]
         for q in range(k1 - k0):
             k = k0 + q if forward else k1 - 1 - q
@@ -630,32 +646,31 @@ def _composite(acc, t0, s0, t1, s1, k0, k1, forward, mode, step, tab, lo, inv, u
                 a1 = al * c1 + r * a1
                 a2 = al * c2 + r * a2
                 a3 = al + r * a3
-        acc[0], acc[1], acc[2], acc[3] = a0, a1, a2, a3
-        return k1 - k0
+        return k1 - k0, a0, a1, a2, a3
     # face mode: the interval takes the average of the samples at its two faces
-    _lookup(tab, lo, inv, s0, buf)
-    _lookup(tab, lo, inv, s1, buf2)
-    a = 0.5 * (buf[3] + buf2[3])
+    p0, p1, p2, p3 = _lookup(tab, lo, inv, s0)
+    q0, q1, q2, q3 = _lookup(tab, lo, inv, s1)
+    a = 0.5 * (p3 + q3)
     if a >= 1.0:
         al = 1.0
     else:
         al = 1.0 - math.exp((t1 - t0) / unit * math.log1p(-a))
-    cr = 0.5 * (buf[0] + buf2[0])
-    cg = 0.5 * (buf[1] + buf2[1])
-    cb = 0.5 * (buf[2] + buf2[2])
+    cr = 0.5 * (p0 + q0)
+    cg = 0.5 * (p1 + q1)
+    cb = 0.5 * (p2 + q2)
     if forward:
-        w = (1.0 - acc[3]) * al
-        acc[0] += w * cr
-        acc[1] += w * cg
-        acc[2] += w * cb
-        acc[3] += w
+        w = (1.0 - a3) * al
+        a0 += w * cr
+        a1 += w * cg
+        a2 += w * cb
+        a3 += w
     else:
         r = 1.0 - al
-        acc[0] = al * cr + r * acc[0]
-        acc[1] = al * cg + r * acc[1]
-        acc[2] = al * cb + r * acc[2]
-        acc[3] = al + r * acc[3]
-    return 1
+        a0 = al * cr + r * a0
+        a1 = al * cg + r * a1
+        a2 = al * cb + r * a2
+        a3 = al + r * a3
+    return 1, a0, a1, a2, a3
 
 
 @njit(cache=True, inline="always")
@@ -728,8 +743,7 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
     came_from = seg_from[s, sub]
     t_here, s_here = seg_ts[s, sub, 0], seg_ts[s, sub, 1]
     acc = seg_acc[s, sub]
-    buf = np.empty(4, dtype=np.float64)
-    buf2 = np.empty(4, dtype=np.float64)
+    a0, a1, a2, a3 = acc[0], acc[1], acc[2], acc[3]  # the running colour, in registers
     samples = 0
     steps = seg_steps[s]
     state = STATE_ACTIVE
@@ -858,15 +872,19 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
         slot = _hash_find(htab, mul, na, nb, nc)
         if counting and clean and slot >= 0:
             _atomic_sub_i32(htab, slot, 6, 1)
-        t_next, s_next = _face_values_w(P, dens, dx, dy, dz, na, nb, nc, wa, wb, wc)
+        t_next, s_next, ok = _barycentric(_depth(P, na, dx, dy, dz), _depth(P, nb, dx, dy, dz),
+                                          _depth(P, nc, dx, dy, dz), dens[na], dens[nb], dens[nc], wa, wb, wc)
+        if not ok:  # the ray lies in the exit face's plane
+            t_next, s_next = _chord_midpoint(P, dens, dx, dy, dz, na, nb, nc)
         k_next = _first_sample_at(t_next, step, mode)
         # one call site: the compositing is inlined, once
         if forward:
             i_t0, i_s0, i_k0, i_t1, i_s1, i_k1 = t_here, s_here, k_here, t_next, s_next, k_next
         else:
             i_t0, i_s0, i_k0, i_t1, i_s1, i_k1 = t_next, s_next, k_next, t_here, s_here, k_here
-        samples += _composite(acc, i_t0, i_s0, i_t1, i_s1, i_k0, i_k1, forward, mode, step, tab, lo, inv, unit,
-                              buf, buf2)
+        n_new, a0, a1, a2, a3 = _composite(a0, a1, a2, a3, i_t0, i_s0, i_t1, i_s1, i_k0, i_k1, forward, mode,
+                                           step, tab, lo, inv, unit)
+        samples += n_new
         a, b, c = na, nb, nc
         t_here, s_here, k_here = t_next, s_next, k_next
         if a == oa and b == ob and c == oc:
@@ -880,6 +898,7 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
             ma, mb, mc, mfrom = a, b, c, came_from
             power *= 2
             lam = 0
+    acc[0], acc[1], acc[2], acc[3] = a0, a1, a2, a3
     seg_face[s, sub, 0] = a
     seg_face[s, sub, 1] = b
     seg_face[s, sub, 2] = c
@@ -921,9 +940,83 @@ def advance(active, n_active, P, dens, dirs, seg_ray, seg_face, seg_from, seg_cl
 
 # ---------------------------------------------------------------------------------------------
 # boundary: rays -> segments
+@njit(cache=True, inline="always")
+def _clip_side(lo, hi, b, r, inv_r, tol):
+    """Narrow [lo, hi] to (a superset of) the x with b + x r >= -tol (empty: lo > hi).
+
+    ``inv_r`` = 1 / r, or 0 where r is 0 or too small to invert (such a side changes by less than
+    1e-290 over the image: it is taken as constant). The bound -(tol + b) / r is rounded by a few
+    ulps, far less than the x by which ``tol`` exceeds the sides' own rounding error.
+    """
+    if inv_r > 0.0:
+        lo = max(lo, (-tol - b) * inv_r)
+    elif inv_r < 0.0:
+        hi = min(hi, (-tol - b) * inv_r)
+    elif b < -tol:
+        hi = lo - 1.0
+    return lo, hi
+
+
+@njit(cache=True, inline="always")
+def _inverse(r):
+    return 1.0 / r if abs(r) > 1e-300 else 0.0
+
+
+@njit(cache=True, inline="always")
+def _row_span(b0, r0, i0, t0, b1, r1, i1, t1, b2, r2, i2, t2, xlo, xhi):
+    """The x in [xlo, xhi] where three sides b_k + x r_k can share a sign (within their bounds t_k):
+    the hull of the part where all are >= -t_k and the part where all are <= t_k. ``i_k`` = 1 / r_k
+    (see :func:`_clip_side`)."""
+    lo, hi = _clip_side(xlo, xhi, b0, r0, i0, t0)
+    lo, hi = _clip_side(lo, hi, b1, r1, i1, t1)
+    lo, hi = _clip_side(lo, hi, b2, r2, i2, t2)
+    lo2, hi2 = _clip_side(xlo, xhi, -b0, -r0, -i0, t0)
+    lo2, hi2 = _clip_side(lo2, hi2, -b1, -r1, -i1, t1)
+    lo2, hi2 = _clip_side(lo2, hi2, -b2, -r2, -i2, t2)
+    if not lo <= hi:
+        return lo2, hi2
+    if lo2 <= hi2:
+        return min(lo, lo2), max(hi, hi2)
+    return lo, hi
+
+
+@njit(cache=True, inline="always")
+def _box_edge(v, n):
+    """A pixel box bound ``v`` (a float) clamped to 0..n as an int."""
+    if not v > 0.0:  # also NaN
+        return 0
+    if v >= n:
+        return n
+    return int(v)
+
+
+@njit(cache=True, inline="always")
+def _pixel_box(P, i0, i1, i2, fwd, right, up, tan_half, width, height):
+    """Pixel box [col0, col1) x [row0, row1) of triangle (i0, i1, i2) (in front of the eye), one pixel
+    to spare on each side."""
+    aspect = width / height
+    _, c0, r0 = _project(P, i0, fwd, right, up, tan_half, aspect, width, height)
+    _, c1, r1 = _project(P, i1, fwd, right, up, tan_half, aspect, width, height)
+    _, c2, r2 = _project(P, i2, fwd, right, up, tan_half, aspect, width, height)
+    return (_box_edge(np.floor(min(c0, min(c1, c2))) - 1.0, width),
+            _box_edge(np.ceil(max(c0, max(c1, c2))) + 2.0, width),
+            _box_edge(np.floor(min(r0, min(r1, r2))) - 1.0, height),
+            _box_edge(np.ceil(max(r0, max(r1, r2))) + 2.0, height))
+
+
 @njit(cache=True, parallel=True)
-def _boundary_hits(P, dens, dirs, width, faces, bbox, counts, offsets, out_ray, out_t, out_face, out_enter,
-                   fill):
+def _boundary_hits(P, dens, dirs, width, height, faces, fwd, right, up, xs, ys, tan_half, counts, offsets, out_ray,
+                   out_t, out_face, out_enter, fill):
+    """Pixel rays crossing each boundary face (``fill`` False: count them; True: record them).
+
+    A ray crosses face (i0, i1, i2) when the signs of its three edge sides agree (:func:`_side_cross`,
+    the walk's own test). Only the pixels of each row's span are tested: an edge side is linear in
+    the pixel's offsets ``xs``, ``ys`` along ``right`` and ``up`` (as in :func:`count_crossings`),
+    so the columns where the three can share a sign, within a rounding bound far above the
+    error of the side itself (``NEAR``), form an interval. Every pixel outside it has two sides of
+    certain, opposite signs: skipping it changes no hit, and the hits come out in the same order as
+    from testing every pixel of the face's box.
+    """
     for f in prange(faces.shape[0]):
         i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
         n = 0
@@ -932,8 +1025,29 @@ def _boundary_hits(P, dens, dirs, width, faces, bbox, counts, offsets, out_ray, 
         ax, ay, az, af = _edge_cross(P, i0, i1)
         bx, by, bz, bf = _edge_cross(P, i1, i2)
         cx, cy, cz, cf = _edge_cross(P, i2, i0)
-        for row in range(bbox[f, 2], bbox[f, 3]):
-            for col in range(bbox[f, 0], bbox[f, 1]):
+        c0, c1, row0, row1 = _pixel_box(P, i0, i1, i2, fwd, right, up, tan_half, width, height)
+        if c0 >= c1:
+            continue
+        # the three directed sides over the image plane: f + x r + y u
+        f01, r01, u01 = _edge_terms(P, i0, i1, fwd, right, up)
+        f12, r12, u12 = _edge_terms(P, i1, i2, fwd, right, up)
+        f20, r20, u20 = _edge_terms(P, i2, i0, fwd, right, up)
+        m0, m1, m2 = _norm(P, i0), _norm(P, i1), _norm(P, i2)
+        t01, t12, t20 = NEAR * m0 * m1, NEAR * m1 * m2, NEAR * m2 * m0
+        i01, i12, i20 = _inverse(r01), _inverse(r12), _inverse(r20)
+        half = 0.5 * width
+        xscale = tan_half * (width / height)
+        for row in range(row0, row1):
+            y = ys[row]
+            xlo, xhi = _row_span(f01 + y * u01, r01, i01, t01, f12 + y * u12, r12, i12, t12, f20 + y * u20, r20, i20,
+                                 t20, xs[c0], xs[c1 - 1])
+            if not xlo <= xhi:
+                continue
+            # the columns whose xs lie in [xlo, xhi] (xs[col] = (2 (col + 0.5) / width - 1) xscale),
+            # a millionth of a column to spare for the rounding of this mapping
+            col_lo = max(c0, int(math.ceil((xlo / xscale + 1.0) * half - 0.5 - 1e-6)))
+            col_hi = min(c1, int(math.floor((xhi / xscale + 1.0) * half - 0.5 + 1e-6)) + 1)
+            for col in range(col_lo, col_hi):
                 r = row * width + col
                 dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
                 _, s01 = _side_cross(ax, ay, az, af, dx, dy, dz)
@@ -1052,14 +1166,21 @@ def _init_segments(P, dens, dirs, faces, seg_ray_, hit_face, hit_in, hit_out, se
             seg_ts[s, sub, 1] = sv
 
 
-def find_segments(P, dens, dirs, width, faces, bbox):
-    """All (ray, entry face, exit face) segments of the boundary ``faces`` (outward wound)."""
+def find_segments(P, dens, dirs, width, height, faces, fwd, right, up, xs, ys, tan_half):
+    """All (ray, entry face, exit face) segments of the boundary ``faces`` (outward wound, every
+    vertex in front of the eye).
+
+    ``fwd``, ``right``, ``up``: the camera basis; ``xs``, ``ys``: the pixel rays' offsets along
+    ``right`` and ``up`` (``Camera.ray_offsets``; ``dirs`` are their normalised directions);
+    ``tan_half``: tan of half the vertical view angle.
+    """
     nf = faces.shape[0]
     counts = np.zeros(nf, dtype=np.int64)
     dummy_i = np.zeros(0, dtype=np.int64)
     dummy_f = np.zeros(0, dtype=np.float64)
     dummy_b = np.zeros(0, dtype=np.bool_)
-    _boundary_hits(P, dens, dirs, width, faces, bbox, counts, counts, dummy_i, dummy_f, dummy_i, dummy_b, False)
+    _boundary_hits(P, dens, dirs, width, height, faces, fwd, right, up, xs, ys, tan_half, counts, counts, dummy_i,
+                   dummy_f, dummy_i, dummy_b, False)
     offsets = np.zeros(nf + 1, dtype=np.int64)
     np.cumsum(counts, out=offsets[1:])
     m = int(offsets[-1])
@@ -1067,7 +1188,8 @@ def find_segments(P, dens, dirs, width, faces, bbox):
     hit_t = np.empty(m, dtype=np.float64)
     hit_face = np.empty(m, dtype=np.int64)
     hit_enter = np.empty(m, dtype=np.bool_)
-    _boundary_hits(P, dens, dirs, width, faces, bbox, counts, offsets, hit_ray, hit_t, hit_face, hit_enter, True)
+    _boundary_hits(P, dens, dirs, width, height, faces, fwd, right, up, xs, ys, tan_half, counts, offsets, hit_ray,
+                   hit_t, hit_face, hit_enter, True)
     seg_ray_, hit_in, hit_out, anomalies = _pair_hits(dirs.shape[0], hit_ray, hit_t, hit_face, hit_enter)
     nseg = seg_ray_.shape[0]
     seg_ray = np.empty(nseg, dtype=np.int32)

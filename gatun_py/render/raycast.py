@@ -180,12 +180,8 @@ class StreamingRaycaster:
         self._check_ids(tets, "tet")
         self._n_tets += len(tets)
         if self._nseg:
-            self._ensure_capacity(4 * len(tets))
             self._mark += 1
-            crossings = self._crossings(tets)
-            n_active, conflicts = K.insert_tets(tets, crossings, self._fold_mark, self._htab, self._hmul,
-                                                self._hcount, self._nodes, self._park_ver, self._in_list,
-                                                self._seg_mark, self._mark, self._active)
+            n_active, conflicts = self._insert(tets, self._crossings(tets), self._mark)
             self._conflicts += conflicts
             self._advance(n_active)
             self._park(n_active)
@@ -239,11 +235,10 @@ class StreamingRaycaster:
         self._dirs = cam.ray_directions()
         P = self._points[: self._nv]
         faces = self._faces_in_front(P, faces, cam)
-        bbox = _pixel_boxes(P, faces, cam)
-        keys = np.sort(faces, axis=1).astype(np.int32)
-        self._boundary_keys = np.ascontiguousarray(keys[np.lexsort((keys[:, 2], keys[:, 1], keys[:, 0]))])
+        self._bfaces, self._bkeys = faces, None
         (self._seg_ray, self._seg_face, self._seg_from, self._seg_ts, self._anomalies,
-         self._boundary_hits) = K.find_segments(P, self._dens, self._dirs, cam.width, faces, bbox)
+         self._boundary_hits) = K.find_segments(P, self._dens, self._dirs, cam.width, cam.height, faces,
+                                                *_ray_grid(cam))
         nseg = self._nseg = len(self._seg_ray)
         self._seg_acc = np.zeros((nseg, 2, 4), dtype=np.float64)
         self._seg_state = np.zeros(nseg, dtype=np.uint8)
@@ -273,10 +268,43 @@ class StreamingRaycaster:
         self._table_peak = self._htab.nbytes
         self._hmul = self._slots_per_vertex(cap)
         self._hcount = np.zeros(1, dtype=np.int64)
-        self._park(nseg)
+        self._park(nseg, new_faces=min(2 * nseg, len(faces)))
 
-    def _park(self, n_active):
-        self._ensure_capacity(2 * n_active)
+    def _insert(self, tets, crossings, mark):
+        """Enter tets into the face table (:func:`K.insert_tets`); returns (segments to advance, conflicts).
+
+        A tet adds at most four faces, but a batch of a whole mesh adds about two per tet: rather
+        than doubling a table sized for the expected tets (a full rehash) to fit a worst case that
+        never comes, the batch goes in pieces that fit, and the table grows only when even a
+        piece does not. Pieces collect the same segments in the same order as one call.
+        """
+        n_active = conflicts = done = 0
+        while done < len(tets):
+            left = len(tets) - done
+            room = (int(0.6 * len(self._htab)) - int(self._hcount[0])) // 4
+            if self._counting or room < min(left, 4096):
+                self._ensure_capacity(4 * left)  # a counting table purges first; see there
+                take = left
+            else:
+                take = min(left, room)
+            part = crossings[done: done + take] if len(crossings) else crossings
+            k, c = K.insert_tets(tets[done: done + take], part, self._fold_mark, self._htab, self._hmul,
+                                 self._hcount, self._nodes, self._park_ver, self._in_list, self._seg_mark, mark,
+                                 self._active[n_active:])
+            n_active += k
+            conflicts += c
+            done += take
+        return n_active, conflicts
+
+    def _park(self, n_active, new_faces=None):
+        # Parking adds a face only where a subsegment waits on one the table lacks: at the start
+        # the boundary faces (``new_faces``: at most those), later none in a table that keeps every
+        # face (a walk stops on the exit face of the last tet it crossed, which is present). The
+        # worst case of 2 per subsegment pair may then fill the table further instead of doubling it.
+        if new_faces is not None:
+            self._ensure_capacity(new_faces)
+        else:
+            self._ensure_capacity(2 * n_active, load=0.6 if self._counting else 0.9)
         if self._n_nodes + 2 * n_active > len(self._nodes):
             live = self._compact_nodes()
             if live + 2 * n_active > len(self._nodes) // 2:
@@ -299,13 +327,27 @@ class StreamingRaycaster:
                                self._park_face)
         return self._n_nodes
 
+    @property
+    def _boundary_keys(self):
+        """The boundary faces' sorted id triples, sorted (for :func:`K.settle`).
+
+        ``settle`` looks a face up only for a segment still active at the end, which most frames
+        have none of: the sort waits until one is.
+        """
+        if self._bkeys is None:
+            if not np.any(self._seg_state == K.STATE_ACTIVE):
+                return np.zeros((0, 3), dtype=np.int32)
+            keys = np.sort(self._bfaces, axis=1).astype(np.int32)
+            self._bkeys = np.ascontiguousarray(keys[np.lexsort((keys[:, 2], keys[:, 1], keys[:, 0]))])
+        return self._bkeys
+
     @staticmethod
     def _faces_in_front(P, faces, cam):
         """The boundary, or nothing if it is all behind the eye; an error if the eye's plane cuts it."""
         if len(faces) == 0:
             return faces
         fwd, _, _ = cam.basis()
-        depth = P[np.unique(faces)] @ fwd
+        depth = (P @ fwd)[faces]  # every boundary vertex (each as often as it has faces)
         if np.all(depth <= 0):
             return faces[:0]
         if np.any(depth <= 0):
@@ -326,10 +368,12 @@ class StreamingRaycaster:
                           float(np.tan(np.radians(cam.view_angle) / 2.0)), self._odd_pixels, self._fold_mark, out)
         return out
 
-    def _ensure_capacity(self, extra):
+    def _ensure_capacity(self, extra, load=0.6):
+        """Make room for ``extra`` more faces within ``load`` of the table (rehashing to a larger
+        table, a counting table purged first, to load 0.6 or 0.25)."""
         cap = len(self._htab)
         need = int(self._hcount[0]) + int(extra)
-        if need <= 0.6 * cap:
+        if need <= load * cap:
             return
         # A counting table first drops the faces no ray needs, then fits the rest. A walk that
         # looped on folded geometry may have taken a face off more than once: keep every face
@@ -402,24 +446,12 @@ class StreamingRaycaster:
         return RenderResult(img, stats)
 
 
-def _pixel_boxes(P, faces, cam):
-    """Pixel bounding box [col0, col1) x [row0, row1) of every face, one pixel of margin."""
-    if len(faces) == 0:
-        return np.zeros((0, 4), dtype=np.int64)
-    fwd, right, up = cam.basis()
-    z = P @ fwd
-    t = np.tan(np.radians(cam.view_angle) / 2.0)
-    w, h = cam.width, cam.height
-    col = ((P @ right) / (z * t * (w / h)) + 1.0) * (w / 2.0)
-    row = (1.0 - (P @ up) / (z * t)) * (h / 2.0)
-    fc = col[faces]
-    fr = row[faces]
-    box = np.empty((len(faces), 4), dtype=np.int64)
-    box[:, 0] = np.clip(np.floor(fc.min(axis=1)) - 1, 0, w)
-    box[:, 1] = np.clip(np.ceil(fc.max(axis=1)) + 2, 0, w)
-    box[:, 2] = np.clip(np.floor(fr.min(axis=1)) - 1, 0, h)
-    box[:, 3] = np.clip(np.ceil(fr.max(axis=1)) + 2, 0, h)
-    return box
+def _ray_grid(cam):
+    """Camera basis (fwd, right, up), pixel ray offsets (xs, ys) and tan of half the view angle."""
+    fwd, right, up = (np.ascontiguousarray(v, dtype=np.float64) for v in cam.basis())
+    xs, ys = cam.ray_offsets()
+    tan_half = float(np.tan(np.radians(cam.view_angle) / 2.0))
+    return fwd, right, up, np.ascontiguousarray(xs, np.float64), np.ascontiguousarray(ys, np.float64), tan_half
 
 
 def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = None,
@@ -455,9 +487,7 @@ def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = 
     tets = np.ascontiguousarray(mesh.tets, dtype=np.int32)
     rc._n_tets = len(tets)
     if rc._nseg and len(tets):
-        rc._ensure_capacity(4 * len(tets))
-        _, rc._conflicts = K.insert_tets(tets, rc._crossings(tets), rc._fold_mark, rc._htab, rc._hmul, rc._hcount,
-                                         rc._nodes, rc._park_ver, rc._in_list, rc._seg_mark, 1, rc._active)
+        _, rc._conflicts = rc._insert(tets, rc._crossings(tets), 1)
         rc._active = np.arange(rc._nseg, dtype=np.int64)
         rc._advance(rc._nseg)
     image = np.zeros((rc._n_rays, 4), dtype=np.float64)

@@ -929,12 +929,12 @@ def advance(active, n_active, P, dens, dirs, seg_ray, seg_face, seg_from, seg_cl
     for blk in prange(n_blocks):
         for i in range(blk * block, min(n_active, (blk + 1) * block)):
             s = active[i]
-            if seg_state[s] != STATE_ACTIVE:
-                continue
-            _walk(s, 0, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state,
-                  seg_steps, seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps)
-            if seg_state[s] == STATE_ACTIVE:
-                _walk(s, 1, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state,
+            # front, then back if still needed; one call site: with the literals 0 and 1 numba
+            # would compile _walk twice (10 s each)
+            for sub in range(2):
+                if seg_state[s] != STATE_ACTIVE:
+                    break
+                _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state,
                       seg_steps, seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps)
 
 
@@ -1017,56 +1017,66 @@ def _boundary_hits(P, dens, dirs, width, height, faces, fwd, right, up, xs, ys, 
     certain, opposite signs: skipping it changes no hit, and the hits come out in the same order as
     from testing every pixel of the face's box.
     """
+    # One task per face; the face's work is a plain function, compiled once rather than inlined
+    # into the parallel loop (inlined, this kernel took 20 s to compile).
     for f in prange(faces.shape[0]):
-        i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
-        n = 0
-        base = offsets[f] if fill else 0
-        # the edges' cross products do not depend on the ray: once per face, not per pixel
-        ax, ay, az, af = _edge_cross(P, i0, i1)
-        bx, by, bz, bf = _edge_cross(P, i1, i2)
-        cx, cy, cz, cf = _edge_cross(P, i2, i0)
-        c0, c1, row0, row1 = _pixel_box(P, i0, i1, i2, fwd, right, up, tan_half, width, height)
-        if c0 >= c1:
-            continue
-        # the three directed sides over the image plane: f + x r + y u
-        f01, r01, u01 = _edge_terms(P, i0, i1, fwd, right, up)
-        f12, r12, u12 = _edge_terms(P, i1, i2, fwd, right, up)
-        f20, r20, u20 = _edge_terms(P, i2, i0, fwd, right, up)
-        m0, m1, m2 = _norm(P, i0), _norm(P, i1), _norm(P, i2)
-        t01, t12, t20 = NEAR * m0 * m1, NEAR * m1 * m2, NEAR * m2 * m0
-        i01, i12, i20 = _inverse(r01), _inverse(r12), _inverse(r20)
-        half = 0.5 * width
-        xscale = tan_half * (width / height)
-        for row in range(row0, row1):
-            y = ys[row]
-            xlo, xhi = _row_span(f01 + y * u01, r01, i01, t01, f12 + y * u12, r12, i12, t12, f20 + y * u20, r20, i20,
-                                 t20, xs[c0], xs[c1 - 1])
-            if not xlo <= xhi:
-                continue
-            # the columns whose xs lie in [xlo, xhi] (xs[col] = (2 (col + 0.5) / width - 1) xscale),
-            # a millionth of a column to spare for the rounding of this mapping
-            col_lo = max(c0, int(math.ceil((xlo / xscale + 1.0) * half - 0.5 - 1e-6)))
-            col_hi = min(c1, int(math.floor((xhi / xscale + 1.0) * half - 0.5 + 1e-6)) + 1)
-            for col in range(col_lo, col_hi):
-                r = row * width + col
-                dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
-                _, s01 = _side_cross(ax, ay, az, af, dx, dy, dz)
-                _, s12 = _side_cross(bx, by, bz, bf, dx, dy, dz)
-                if s01 != s12:
-                    continue
-                _, s20 = _side_cross(cx, cy, cz, cf, dx, dy, dz)
-                if s20 != s01:
-                    continue
-                if fill:
-                    a, b, c, par = _sort3(i0, i1, i2)
-                    t, _ = _face_values(P, dens, dx, dy, dz, a, b, c)
-                    out_ray[base + n] = r
-                    out_t[base + n] = t
-                    out_face[base + n] = f
-                    out_enter[base + n] = s01 < 0
-                n += 1
+        n = _face_hits(P, dens, dirs, width, height, faces, f, fwd, right, up, xs, ys, tan_half,
+                       offsets[f] if fill else 0, out_ray, out_t, out_face, out_enter, fill)
         if not fill:
             counts[f] = n
+
+
+@njit(cache=True)
+def _face_hits(P, dens, dirs, width, height, faces, f, fwd, right, up, xs, ys, tan_half, base, out_ray, out_t,
+               out_face, out_enter, fill):
+    """:func:`_boundary_hits` for face ``f``: records its hits from ``base`` on (if ``fill``); returns their number."""
+    i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+    n = 0
+    # the edges' cross products do not depend on the ray: once per face, not per pixel
+    ax, ay, az, af = _edge_cross(P, i0, i1)
+    bx, by, bz, bf = _edge_cross(P, i1, i2)
+    cx, cy, cz, cf = _edge_cross(P, i2, i0)
+    c0, c1, row0, row1 = _pixel_box(P, i0, i1, i2, fwd, right, up, tan_half, width, height)
+    if c0 >= c1:
+        return 0
+    # the three directed sides over the image plane: f + x r + y u
+    f01, r01, u01 = _edge_terms(P, i0, i1, fwd, right, up)
+    f12, r12, u12 = _edge_terms(P, i1, i2, fwd, right, up)
+    f20, r20, u20 = _edge_terms(P, i2, i0, fwd, right, up)
+    m0, m1, m2 = _norm(P, i0), _norm(P, i1), _norm(P, i2)
+    t01, t12, t20 = NEAR * m0 * m1, NEAR * m1 * m2, NEAR * m2 * m0
+    i01, i12, i20 = _inverse(r01), _inverse(r12), _inverse(r20)
+    half = 0.5 * width
+    xscale = tan_half * (width / height)
+    for row in range(row0, row1):
+        y = ys[row]
+        xlo, xhi = _row_span(f01 + y * u01, r01, i01, t01, f12 + y * u12, r12, i12, t12, f20 + y * u20, r20, i20,
+                             t20, xs[c0], xs[c1 - 1])
+        if not xlo <= xhi:
+            continue
+        # the columns whose xs lie in [xlo, xhi] (xs[col] = (2 (col + 0.5) / width - 1) xscale),
+        # a millionth of a column to spare for the rounding of this mapping
+        col_lo = max(c0, int(math.ceil((xlo / xscale + 1.0) * half - 0.5 - 1e-6)))
+        col_hi = min(c1, int(math.floor((xhi / xscale + 1.0) * half - 0.5 + 1e-6)) + 1)
+        for col in range(col_lo, col_hi):
+            r = row * width + col
+            dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
+            _, s01 = _side_cross(ax, ay, az, af, dx, dy, dz)
+            _, s12 = _side_cross(bx, by, bz, bf, dx, dy, dz)
+            if s01 != s12:
+                continue
+            _, s20 = _side_cross(cx, cy, cz, cf, dx, dy, dz)
+            if s20 != s01:
+                continue
+            if fill:
+                a, b, c, par = _sort3(i0, i1, i2)
+                t, _ = _face_values(P, dens, dx, dy, dz, a, b, c)
+                out_ray[base + n] = r
+                out_t[base + n] = t
+                out_face[base + n] = f
+                out_enter[base + n] = s01 < 0
+            n += 1
+    return n
 
 
 @njit(cache=True)

@@ -929,12 +929,14 @@ def advance(active, n_active, P, dens, dirs, seg_ray, seg_face, seg_from, seg_cl
     for blk in prange(n_blocks):
         for i in range(blk * block, min(n_active, (blk + 1) * block)):
             s = active[i]
-            # front, then back if still needed; one call site: with the literals 0 and 1 numba
-            # would compile _walk twice (10 s each)
-            for sub in range(2):
-                if seg_state[s] != STATE_ACTIVE:
-                    break
-                _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state,
+            if seg_state[s] != STATE_ACTIVE:
+                continue
+            # The literals 0 and 1 make numba compile _walk twice (10 s more on a fresh cache), each
+            # with its direction folded into the hot loop: 3 % faster at 512² than one compile.
+            _walk(s, 0, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state,
+                  seg_steps, seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps)
+            if seg_state[s] == STATE_ACTIVE:
+                _walk(s, 1, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state,
                       seg_steps, seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps)
 
 

@@ -387,10 +387,21 @@ def table3_section(files):
     return "\n".join(out), fit_rows
 
 
-def only_table3():
-    """Re-measure Table 3 and replace its block in the existing section (the other tables stay)."""
+def replace_block(head: str, block: str) -> None:
+    """Replace the ``head`` block of the pipeline section (up to the next ### heading) by ``block``."""
     from common import SECTIONS
 
+    sec = SECTIONS / "pipeline.md"
+    old = sec.read_text() if sec.exists() else ""
+    if head not in old:
+        raise SystemExit(f"{sec} has no '{head}' block: run the whole benchmark")
+    i = old.index(head)
+    j = old.find("\n### ", i + len(head))
+    write_section("pipeline", old[:i] + block.strip() + "\n" + (old[j:] if j >= 0 else ""))
+
+
+def only_table3():
+    """Re-measure Table 3 and replace its block in the existing section (the other tables stay)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -399,15 +410,7 @@ def only_table3():
     for n in DATASETS:  # warm the JIT caches
         frame(files[n][0], view(n, 64), level=1)
     block, _ = table3_section(files)
-    sec = SECTIONS / "pipeline.md"
-    old = sec.read_text() if sec.exists() else ""
-    head = "### Table 3 / Figure 10"
-    if head not in old:
-        raise SystemExit(f"{sec} has no Table 3 block: run the whole benchmark")
-    i = old.index(head)
-    j = old.find("\n### ", i + len(head))
-    new = old[:i] + block.strip() + "\n" + (old[j:] if j >= 0 else "")
-    write_section("pipeline", new)
+    replace_block("### Table 3 / Figure 10", block)
 
 
 
@@ -535,20 +538,10 @@ def memory_section(files) -> str:
 
 def only_memory():
     """Re-measure the memory block and replace it in the existing section (the other tables stay)."""
-    from common import SECTIONS
-
     files = {n: build_files(n) for n in DATASETS}
     for n in DATASETS:  # warm the JIT caches
         frame(files[n][1], view(n, 64))
-    block = memory_section(files)
-    sec = SECTIONS / "pipeline.md"
-    old = sec.read_text() if sec.exists() else ""
-    if MEMORY_HEAD not in old:
-        raise SystemExit(f"{sec} has no memory block: run the whole benchmark")
-    i = old.index(MEMORY_HEAD)
-    j = old.find("\n### ", i + len(MEMORY_HEAD))
-    new = old[:i] + block.strip() + "\n" + (old[j:] if j >= 0 else "")
-    write_section("pipeline", new)
+    replace_block(MEMORY_HEAD, memory_section(files))
 
 
 QUALITY_HEAD = "### Simplified images against VTK's quadric decimation"
@@ -625,18 +618,8 @@ def vtk_quality_section(files) -> str:
 
 def only_quality():
     """Re-measure the VTK quality block and replace it in the existing section (the other tables stay)."""
-    from common import SECTIONS
-
     files = {n: build_files(n) for n in DATASETS}
-    block = vtk_quality_section(files)
-    sec = SECTIONS / "pipeline.md"
-    old = sec.read_text() if sec.exists() else ""
-    if QUALITY_HEAD not in old:
-        raise SystemExit(f"{sec} has no VTK quality block: run the whole benchmark")
-    i = old.index(QUALITY_HEAD)
-    j = old.find("\n### ", i + len(QUALITY_HEAD))
-    new = old[:i] + block.strip() + "\n" + (old[j:] if j >= 0 else "")
-    write_section("pipeline", new)
+    replace_block(QUALITY_HEAD, vtk_quality_section(files))
 
 
 if __name__ == "__main__":

@@ -615,37 +615,10 @@ def _composite(a0, a1, a2, a3, t0, s0, t1, s1, k0, k1, forward, mode, step, tab,
         if k1 <= k0:
             return 0, a0, a1, a2, a3
         scale = (s1 - s0) / (t1 - t0)
-        n = tab.shape[0]
         for q in range(k1 - k0):
             k = k0 + q if forward else k1 - 1 - q
-            s = s0 + (k * step - t0) * scale
-            # _lookup, by hand: the four channels straight into locals
-            x = (s - lo) * inv
-            if not x > 0.0:  # also NaN
-                x = 0.0
-            if x > n - 1:
-                x = float(n - 1)
-            i = int(x)
-            if i >= n - 1:
-                i = n - 2
-            f = x - i
-            g = 1.0 - f
-            c0 = tab[i, 0] * g + tab[i + 1, 0] * f
-            c1 = tab[i, 1] * g + tab[i + 1, 1] * f
-            c2 = tab[i, 2] * g + tab[i + 1, 2] * f
-            al = tab[i, 3] * g + tab[i + 1, 3] * f
-            if forward:
-                w = (1.0 - a3) * al
-                a0 += w * c0
-                a1 += w * c1
-                a2 += w * c2
-                a3 += w
-            else:
-                r = 1.0 - al
-                a0 = al * c0 + r * a0
-                a1 = al * c1 + r * a1
-                a2 = al * c2 + r * a2
-                a3 = al + r * a3
+            c0, c1, c2, al = _lookup(tab, lo, inv, s0 + (k * step - t0) * scale)
+            a0, a1, a2, a3 = _blend(a0, a1, a2, a3, c0, c1, c2, al, forward)
         return k1 - k0, a0, a1, a2, a3
     # face mode: the interval takes the average of the samples at its two faces
     p0, p1, p2, p3 = _lookup(tab, lo, inv, s0)
@@ -655,22 +628,19 @@ def _composite(a0, a1, a2, a3, t0, s0, t1, s1, k0, k1, forward, mode, step, tab,
         al = 1.0
     else:
         al = 1.0 - math.exp((t1 - t0) / unit * math.log1p(-a))
-    cr = 0.5 * (p0 + q0)
-    cg = 0.5 * (p1 + q1)
-    cb = 0.5 * (p2 + q2)
+    a0, a1, a2, a3 = _blend(a0, a1, a2, a3, 0.5 * (p0 + q0), 0.5 * (p1 + q1), 0.5 * (p2 + q2), al, forward)
+    return 1, a0, a1, a2, a3
+
+
+@njit(cache=True, inline="always")
+def _blend(a0, a1, a2, a3, c0, c1, c2, al, forward):
+    """The running colour with a sample (colour c, opacity al) added behind it (``forward``: a
+    front subsegment) or in front of it (a back subsegment walking toward the eye)."""
     if forward:
         w = (1.0 - a3) * al
-        a0 += w * cr
-        a1 += w * cg
-        a2 += w * cb
-        a3 += w
-    else:
-        r = 1.0 - al
-        a0 = al * cr + r * a0
-        a1 = al * cg + r * a1
-        a2 = al * cb + r * a2
-        a3 = al + r * a3
-    return 1, a0, a1, a2, a3
+        return a0 + w * c0, a1 + w * c1, a2 + w * c2, a3 + w
+    r = 1.0 - al
+    return al * c0 + r * a0, al * c1 + r * a1, al * c2 + r * a2, al + r * a3
 
 
 @njit(cache=True, inline="always")
@@ -810,6 +780,7 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
         best_k = -1
         best_score = -1
         best_min = -np.inf
+        reversed_k = -1  # the first face whose three sides all oppose ``want`` (see below)
         clean = False
         for k in range(3):
             if k == 0:
@@ -823,28 +794,21 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
                 best_k = k
                 clean = True
                 break
+            if score == 0 and reversed_k < 0:
+                reversed_k = k
             # inconsistent rounding can leave no clean exit: take the closest one
             m = min(e0 * want, e1 * want, e2 * want)
             if score > best_score or (score == best_score and m > best_min):
                 best_score = score
                 best_min = m
                 best_k = k
-        if not clean and best_score < 3 and _flat(P, v0, v1, v2, v3):
+        if not clean and reversed_k >= 0 and _flat(P, v0, v1, v2, v3):
             # A flat tet has no inside: its four faces lie in one plane and the ray crosses that
             # plane in one point, inside the entry face and one other face, whose three sides then
             # agree with each other but, that face's winding being reversed, against ``want``.
             # Leave through that one: any other choice leaves the ray's path (Blunt-fin's
             # collapsed grid line, 512²: walks that wandered off and looped).
-            for k in range(3):
-                if k == 0:
-                    q0, q1, q2 = g12, g23, -g13
-                elif k == 1:
-                    q0, q1, q2 = g03, -g23, g20
-                else:
-                    q0, q1, q2 = g01, g13, -g03
-                if q0 * want < 0 and q1 * want < 0 and q2 * want < 0:
-                    best_k = k
-                    break
+            best_k = reversed_k
         # exit face (f0, f1, f2) outward, barycentric weight of f_i = side of the opposite edge
         if best_k == 0:
             na, nb, nc, wa, wb, wc = _sort3w(v1, v2, v3, x23, -x13, x12)
@@ -1259,8 +1223,7 @@ def compose(n_rays, seg_ray, seg_acc, seg_state, image):
     termination: what lies behind weighs at most 1 - ``OPAQUE`` and may be skipped, so such a
     segment does not leave its ray unfinished (its partial colour is still added). The ray's
     opacity in front of the gap is that of the segments before it plus this segment's front
-    subsegment. On Combustion every unfinished segment was of this kind: one-ended segments of a
-    folded grid behind a segment of opacity 0.99999.
+    subsegment.
     """
     unfinished = 0
     hidden = 0

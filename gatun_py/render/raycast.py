@@ -329,7 +329,7 @@ class StreamingRaycaster:
 
     @property
     def _boundary_keys(self):
-        """The boundary faces' sorted id triples, sorted (for :func:`K.settle`).
+        """The boundary faces' id triples, each sorted, in lexicographic order (for :func:`K.settle`).
 
         ``settle`` looks a face up only for a segment still active at the end, which most frames
         have none of: the sort waits until one is.

@@ -49,7 +49,8 @@ def _rss_mb() -> float:
 # workers (run in a fresh process)
 def _shuffled_stream(mesh, camera, tf, **kw):
     """Stream-render ``mesh`` with its tets in a random order, in 20 batches."""
-    from gatun_py.render.stream import mesh_batches, render_batches
+    from gatun_py.mesh import mesh_batches
+    from gatun_py.render.stream import render_batches
 
     perm = np.random.default_rng(0).permutation(mesh.n_tets)
     batches = mesh_batches(mesh, batch_tets=-(-mesh.n_tets // 20), order=perm)

@@ -28,8 +28,8 @@ os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
 from conftest import SAMPLE_FILES, load_sample  # noqa: E402
 
-from gatun_py.simplify import (available_levels, build_levels, decimate, encode_forest,  # noqa: E402
-                               simplified_mesh)
+from gatun_py.codec.forest import encode_forest  # noqa: E402
+from gatun_py.simplify import available_levels, build_levels, decimate, simplified_mesh  # noqa: E402
 
 NAMES = {"bluntfin": "Blunt-fin", "combustion": "Combustion", "post": "LOX post", "fire": "Room fire"}
 

@@ -15,13 +15,24 @@ from pathlib import Path
 
 import numpy as np
 
+from .codec import LevelPayload, TetcReader, encode_tetc
+from .errors import TetcError
+from .mesh import mesh_batches
+from .mesh.plot3d import grid_hexes
+from .mesh.split import orient_positive, split_hexes_two_colour
+from .mesh.validate import validate_tets
+from .pipeline.stream import View, render_tetc
+from .render import _raycast_kernels as K
+from .render.camera import Camera
+from .render.raycast import render_mesh
+from .render.stream import render_batches
+from .simplify import ROOT_RANK, ancestors, build_levels, decimate
+from .simplify.filter import SimplifyFilter
+from .simplify.levels import Target
+
 
 def tiny_mesh():
     """A 4×4×3 jittered grid split into tets, with a smooth scalar."""
-    from .mesh.plot3d import grid_hexes
-    from .mesh.split import orient_positive, split_hexes_two_colour
-    from .mesh.validate import validate_tets
-
     dims = (4, 4, 3)
     k, j, i = np.meshgrid(*(np.arange(d) for d in dims[::-1]), indexing="ij")
     pts = np.stack([i, j, k], -1).reshape(-1, 3).astype(np.float64)
@@ -34,8 +45,6 @@ def tiny_mesh():
 
 
 def _simplify_and_render() -> str:
-    from .simplify import build_levels, decimate
-
     mesh = tiny_mesh()
     levels = build_levels(mesh, decimate(mesh))
     _render_kernels(lean=True)
@@ -52,9 +61,6 @@ SHIPPED_TETC = Path(__file__).with_name("warmup.tetc")
 
 def tiny_tetc_bytes() -> bytes:
     """:func:`tiny_mesh` as a .tetc file with one merge in its forest (needs the encoder)."""
-    from .codec import LevelPayload, encode_tetc
-    from .simplify import ROOT_RANK
-
     mesh = tiny_mesh()
     parent = np.arange(mesh.n_points, dtype=np.int32)
     rank = np.full(mesh.n_points, ROOT_RANK, np.int32)
@@ -65,9 +71,6 @@ def tiny_tetc_bytes() -> bytes:
 def _tiny_tetc() -> bytes:
     """The small .tetc that exercises the decoder: shipped beside this module (a test keeps it
     equal to :func:`tiny_tetc_bytes`), so a first render does not have to compile the encoder."""
-    from .codec import TetcReader
-    from .errors import TetcError
-
     try:
         data = SHIPPED_TETC.read_bytes()
         TetcReader(data)
@@ -77,10 +80,6 @@ def _tiny_tetc() -> bytes:
 
 
 def _decode_and_filter(data: bytes | None = None) -> str:
-    from .codec import TetcReader
-    from .simplify import ancestors
-    from .simplify.filter import SimplifyFilter
-
     reader = TetcReader(_tiny_tetc() if data is None else data)
     reader.decode_mesh(0)
     p, r = reader.read_forest(0)
@@ -90,10 +89,6 @@ def _decode_and_filter(data: bytes | None = None) -> str:
 
 def _render_kernels(*, lean: bool) -> None:
     """Render the tiny mesh in memory and streamed, in both modes (``lean``: counting faces)."""
-    from .render.camera import Camera
-    from .render.raycast import render_mesh
-    from .render.stream import mesh_batches, render_batches
-
     mesh = tiny_mesh()
     cam = Camera(16, 16, 30, 20)
     for mode in ("volume", "face"):
@@ -106,8 +101,6 @@ def _render_kernels(*, lean: bool) -> None:
 
 def _purge_kernels() -> None:
     """A lean face table fills up (and is purged) only on real meshes: call those kernels here."""
-    from .render import _raycast_kernels as K
-
     table = np.full((8, 7), -1, dtype=np.int32)
     mark = np.zeros(1, dtype=np.uint8)
     K.rehash(table, 8, 0, K.count_live(table, True, mark) >= 0, mark)
@@ -136,10 +129,6 @@ def load_kernels(*, lean: bool = False) -> float:
     The CLI does this before it opens the user's file, so ``total_s`` measures the work on the
     file, not the one-off loading of compiled code (as VTK's timing excludes ``import vtk``).
     """
-    from .pipeline.stream import View, render_tetc
-    from .render.camera import Camera
-    from .simplify.levels import Target
-
     t0 = time.perf_counter()
     render_tetc(_tiny_tetc(), View(Camera(4, 4), tf="default", lean=lean), target=Target(0, 1, 0.0, 0))
     if lean:

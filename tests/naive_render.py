@@ -22,7 +22,7 @@ def _table_eval(tab, lo, inv, s):
 
 def naive_render(mesh, fitted, tf, *, mode="volume", step=None, scalar_range=None):
     """Premultiplied RGBA (H, W, 4) float64 of ``mesh`` seen by the fitted camera ``fitted``."""
-    from gatun_py.render.raycast import default_step
+    from gatun_py.mesh import default_step
     from gatun_py.render.transfer import load_transfer_function
 
     tf = load_transfer_function(tf)

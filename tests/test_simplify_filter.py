@@ -1,26 +1,16 @@
 """The run-time filter against the plain reference and against the simplified mesh."""
 
-from dataclasses import dataclass
-
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gatun_py.errors import CorruptFileError
+from gatun_py.mesh import TetBatch as Batch
 from gatun_py.simplify import ancestors, decimate
 from gatun_py.simplify.filter import SimplifyFilter
 from meshgen import AWKWARD, grid_mesh, mesh_strategy
 from naive_filter import naive_filter
-
-
-@dataclass
-class Batch:
-    first: int
-    points: np.ndarray
-    density: np.ndarray
-    boundary: np.ndarray
-    tets: np.ndarray
 
 
 def emulated_stream(mesh, seed, batch_vertices=7):

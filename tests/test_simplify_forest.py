@@ -11,9 +11,10 @@ from meshgen import delaunay_mesh, grid_mesh, mesh_strategy, single_tet
 from naive_simplify import ancestors_naive
 from test_simplify_decimate import _check_forest_prefixes
 
+from gatun_py.codec.forest import decode_forest, encode_forest
 from gatun_py.errors import CorruptFileError, OptionError
 from gatun_py.simplify import (ROOT_RANK, MergeForest, ancestors, available_levels, build_levels, decimate,
-                               decode_forest, encode_forest, level_merges, simplified_mesh)
+                               level_merges, simplified_mesh)
 
 _FORESTS: dict = {}
 

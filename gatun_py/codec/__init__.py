@@ -1,10 +1,11 @@
 """Stage 2 (storage): lossless cut-border compression, the streaming decoder, the ``.tetc`` container.
 
 Public API: :func:`write_tetc` / :func:`encode_tetc` (levels of :class:`LevelPayload`),
-:class:`TetcReader` (``.meta``, ``.levels``, ``.read_section``, ``.iter_decode``, ``.decode_mesh``),
-:func:`iter_decode`, :func:`decode_mesh` and :class:`DecodeBatch`.
+:class:`TetcReader` (``.meta``, ``.levels``, ``.read_section``, ``.read_forest``, ``.iter_decode``,
+``.decode_mesh``), :func:`iter_decode` and :func:`decode_mesh`; the forest's bytes in :mod:`.forest`.
+Streams are of :class:`gatun_py.mesh.TetBatch`.
 """
 
-from .tetcfile import DecodeBatch, LevelPayload, TetcReader, decode_mesh, encode_tetc, iter_decode, write_tetc
+from .tetcfile import LevelPayload, TetcReader, decode_mesh, encode_tetc, iter_decode, write_tetc
 
-__all__ = ["DecodeBatch", "LevelPayload", "TetcReader", "decode_mesh", "encode_tetc", "iter_decode", "write_tetc"]
+__all__ = ["LevelPayload", "TetcReader", "decode_mesh", "encode_tetc", "iter_decode", "write_tetc"]

@@ -57,9 +57,7 @@ def tetc_info(path) -> dict:
 
 def _forest_info(reader, sizes) -> dict:
     """``merges``, ``max_ratio`` and ``bytes`` of the stored merge forest (all zero without one)."""
-    from ..simplify.levels import forest_merges
-
-    merges = forest_merges(reader)
+    merges = reader.forest_merges()
     n0 = reader.levels[0]["points"]
     return {"merges": merges, "max_ratio": merges / n0 if n0 else 0.0,
             "bytes": sum(v for k, v in sizes.items() if k.endswith("/forest"))}

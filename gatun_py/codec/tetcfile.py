@@ -4,7 +4,7 @@ A file holds one or more *levels* (level 0 is the full mesh; the simplify stage 
 pre-simplified levels). Level ``i`` has the sections ``L{i}/boundary`` and ``L{i}/tets``
 (connectivity, :mod:`.cutborder`), ``L{i}/geometry`` (coordinates and density in decode order,
 :mod:`.geometry`) and optionally ``L{i}/forest`` (the remaining merge forest in decode order,
-:func:`gatun_py.simplify.forest.encode_forest`). The metadata lists the levels with the counts
+:mod:`.forest`). The metadata lists the levels with the counts
 the decoder needs, so a reader seeks straight to one level.
 """
 
@@ -16,9 +16,13 @@ from typing import Iterator
 
 import numpy as np
 
+from .._atomic import write_bytes_atomic
 from ..errors import CorruptFileError, OptionError
+from ..mesh import TetBatch, TetMesh, default_step
 from .container import Container, build_container
 from .cutborder import ConnectivityDecoder, encode_connectivity
+from .forest import decode_forest, encode_forest, forest_header
+from .geometry import GeometryDecoder, encode_geometry
 
 FORMAT_NAME = "tetc"
 DEFAULT_BATCH_TETS = 65536
@@ -26,30 +30,6 @@ DEFAULT_BATCH_TETS = 65536
 # counts beyond these bounds cannot come from a stream of the given size (rejected before allocating)
 _MAX_TETS_PER_BYTE = 2000
 _MAX_FACES_PER_BYTE = 2000
-
-
-@dataclass
-class DecodeBatch:
-    """One step of the streaming decoder (see ``docs/architecture.md``).
-
-    Attributes
-    ----------
-    first : int
-        Decode id of the first new vertex in this batch.
-    points : (k, 3) float32
-        New vertices ``first .. first + k - 1``.
-    density : (k,) float32
-    boundary : (b, 3) int32
-        Boundary faces (outward), decode ids ``< first + k``.
-    tets : (j, 4) int32
-        Positively oriented tets, decode ids ``< first + k``.
-    """
-
-    first: int
-    points: np.ndarray
-    density: np.ndarray
-    boundary: np.ndarray
-    tets: np.ndarray
 
 
 @dataclass
@@ -89,8 +69,6 @@ class EncodedLevel:
 
 def encode_level(payload: LevelPayload) -> EncodedLevel:
     """Compress one level: connectivity, geometry (in decode order) and the optional forest."""
-    from .geometry import encode_geometry
-
     mesh = payload.mesh
     conn = encode_connectivity(mesh.n_points, mesh.tets)
     vo = conn.vertex_order
@@ -98,8 +76,6 @@ def encode_level(payload: LevelPayload) -> EncodedLevel:
     i = int(payload.level)
     sections = {f"L{i}/boundary": conn.boundary_code, f"L{i}/tets": conn.tet_code, f"L{i}/geometry": geometry}
     if payload.forest is not None:
-        from ..simplify.forest import encode_forest
-
         parent, rank = (np.asarray(a) for a in payload.forest)
         if parent.shape != (mesh.n_points,) or rank.shape != (mesh.n_points,):
             raise OptionError(f"level {i}: forest does not match the mesh ({mesh.n_points} points)")
@@ -153,23 +129,15 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None) 
         "scalar_range": [float(x) for x in mesh0.scalar_range],
         "source": os.path.basename(str(source)),
         # The full mesh's volume-mode sample step, so that every level and ratio samples alike.
-        "render_step": _render_step(mesh0),
+        "render_step": float(default_step(mesh0.points, mesh0.boundary_faces())),
         "levels": [e.meta for e in encoded],
     }
     sections = [(name, data) for e in encoded for name, data in e.sections.items()]
     return build_container(meta, sections)
 
 
-def _render_step(mesh) -> float:
-    from ..render.raycast import default_step
-
-    return float(default_step(mesh.points, mesh.boundary_faces()))
-
-
 def write_tetc(path, mesh_or_levels, *, source: str = "", force: bool = False, progress=None) -> int:
     """Compress a mesh (or a list of :class:`LevelPayload`) into ``path`` atomically; returns bytes written."""
-    from .._atomic import write_bytes_atomic
-
     levels = mesh_or_levels if isinstance(mesh_or_levels, list) else [LevelPayload(0, 0.0, 0, mesh_or_levels)]
     data = encode_tetc(levels, source=source, progress=progress)
     write_bytes_atomic(path, data, force=force)
@@ -241,20 +209,27 @@ class TetcReader:
             if lv.get("has_forest"):
                 raise CorruptFileError(f"missing section {name!r}")
             return None
-        from ..simplify.forest import decode_forest
-
         return decode_forest(self.read_section(name), lv["points"])
 
-    def iter_decode(self, level: int = 0, *, batch_tets: int = DEFAULT_BATCH_TETS) -> Iterator[DecodeBatch]:
-        """Stream the mesh of ``level`` as :class:`DecodeBatch`es.
+    def forest_merges(self) -> int:
+        """Merges the file's full forest holds (0 when it stores none), from the section header only."""
+        lv0 = min(self.levels, key=lambda lv: lv["level"])
+        name = f"L{lv0['level']}/forest"
+        if not self.container.has_section(name):
+            return 0
+        n, k = forest_header(self.read_section(name))
+        if n != lv0["points"]:
+            raise CorruptFileError(f"{name}: covers {n} vertices, the level has {lv0['points']}")
+        return k
+
+    def iter_decode(self, level: int = 0, *, batch_tets: int = DEFAULT_BATCH_TETS) -> Iterator[TetBatch]:
+        """Stream the mesh of ``level`` as :class:`~gatun_py.mesh.TetBatch`es.
 
         The first batch holds the boundary surface and its vertices, then batches of up to
         ``batch_tets`` tets with the vertices they introduce, and a last batch with the
         unreferenced vertices (if any). Raises :class:`CorruptFileError` on damaged data, at the
         latest when the last batch is produced.
         """
-        from .geometry import GeometryDecoder
-
         lv = self.level_meta(level)
         n, m, nf = lv["points"], lv["tets"], lv["boundary_faces"]
         bcode = self.read_section(f"L{level}/boundary")
@@ -271,27 +246,25 @@ class TetcReader:
             raise CorruptFileError("corrupt boundary section: vertex count does not match the metadata")
         refs = conn.predictors
         pts, dens = geo.decode(refs[:nbv])
-        yield DecodeBatch(0, pts, dens, faces, np.zeros((0, 4), np.int32))
+        yield TetBatch.of_vertices(0, pts, dens, faces)
         conn.start_tets()
         known = nbv
         while conn.tets_done < m:
             tets = conn.next_tets(batch_tets)
             nv = conn.vertices_known
             pts, dens = geo.decode(refs[known:nv])
-            yield DecodeBatch(known, pts, dens, np.zeros((0, 3), np.int32), tets)
+            yield TetBatch.of_tets(known, tets, pts, dens)
             known = nv
         if known != lv["referenced_points"]:
             raise CorruptFileError("corrupt tet section: vertex count does not match the metadata")
         if known < n:
             pts, dens = geo.decode(np.full((n - known, 4), -1, np.int32))
-            yield DecodeBatch(known, pts, dens, np.zeros((0, 3), np.int32), np.zeros((0, 4), np.int32))
+            yield TetBatch.of_vertices(known, pts, dens)
         geo.finish()
         self.last_peak_border = conn.peak_border
 
     def decode_mesh(self, level: int = 0):
         """The whole mesh of ``level`` as a :class:`~gatun_py.mesh.TetMesh` (vertices in decode order)."""
-        from ..mesh import TetMesh
-
         lv = self.level_meta(level)
         n = lv["points"]
         points = np.empty((n, 3), np.float32)
@@ -313,8 +286,8 @@ class TetcReader:
             raise CorruptFileError(f"corrupt file: decoded mesh is invalid ({e})") from None
 
 
-def iter_decode(source, level: int = 0, **kw) -> Iterator[DecodeBatch]:
-    """Stream a ``.tetc`` file's level as :class:`DecodeBatch`es (see :meth:`TetcReader.iter_decode`)."""
+def iter_decode(source, level: int = 0, **kw) -> Iterator[TetBatch]:
+    """Stream a ``.tetc`` file's level as :class:`~gatun_py.mesh.TetBatch`es (see :meth:`TetcReader.iter_decode`)."""
     return TetcReader(source).iter_decode(level, **kw)
 
 

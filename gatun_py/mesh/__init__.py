@@ -1,7 +1,9 @@
-"""Stage 1 of the pipeline: the mesh model, input formats, cell splitting and validation."""
+"""Stage 1 of the pipeline: the mesh model, input formats, cell splitting, validation, the tet stream."""
 
 from .io import read_mesh, write_mesh
-from .model import TetMesh, boundary_faces, signed_volumes
+from .model import TET_FACES, TetMesh, boundary_faces, default_step, signed_volumes
+from .stream import TetBatch, mesh_batches
 from .validate import MeshReport, validate_tets
 
-__all__ = ["TetMesh", "MeshReport", "read_mesh", "write_mesh", "validate_tets", "boundary_faces", "signed_volumes"]
+__all__ = ["TetMesh", "MeshReport", "TetBatch", "TET_FACES", "read_mesh", "write_mesh", "validate_tets",
+           "boundary_faces", "signed_volumes", "default_step", "mesh_batches"]

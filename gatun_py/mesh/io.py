@@ -7,7 +7,9 @@ pyramids, and their quadratic variants reduced to their corners), and single-blo
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
+import io
 import os
 import warnings
 from dataclasses import dataclass
@@ -18,7 +20,7 @@ import numpy as np
 from .._atomic import atomic_path
 from ..errors import MeshError, OptionError, OutputError, ReadError
 from . import plot3d
-from .model import TetMesh
+from .model import TetMesh, signed_volumes
 from .split import orient_positive, split_hexes_two_colour, split_min_id_star, two_colour
 from .validate import MeshReport, validate_tets
 
@@ -124,9 +126,7 @@ def _prefer_gmsh(formats):
 
 def _meshio_read(path: Path):
     """meshio.read without its habit of printing and calling sys.exit on unreadable files."""
-    import contextlib
-    import io
-
+    # meshio costs 0.7 s to import: only the commands that read or write mesh files pay it
     import meshio
     from meshio import _helpers
 
@@ -266,8 +266,6 @@ def _choose_scalar(m, n, scalar, cell_to_point, p32, tet_chunks, cell_of_tet, so
 
 def _cell_to_point(m, name, p32, tet_chunks, cell_of_tet, n):
     """Volume-weighted average of a cell scalar onto the points (only on request)."""
-    from .model import signed_volumes
-
     acc = np.zeros(n)
     w = np.zeros(n)
     for (bi, _, per, ncell), tt in zip(cell_of_tet, tet_chunks):
@@ -288,7 +286,7 @@ def _cell_to_point(m, name, p32, tet_chunks, cell_of_tet, n):
 
 def write_mesh(mesh: TetMesh, path, *, force: bool = False) -> None:
     """Write a linear tet mesh with density as point data, format from the extension, atomically."""
-    import meshio
+    import meshio  # start-up time: see _meshio_read
 
     path = Path(path)
     try:

@@ -114,6 +114,30 @@ class TetMesh:
         return float(np.median(e))
 
 
+def default_step(points, boundary_faces) -> float:
+    """Half the median edge length of the boundary surface: the volume-mode sample spacing.
+
+    Boundary edges are used because they are known before the first tet arrives, so a streaming
+    renderer and an in-memory one agree on the step, and the codec can record it in the file.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> pts = np.array([[0, 0, 0], [2, 0, 0], [0, 2, 0], [0, 0, 2]], np.float32)
+    >>> default_step(pts, np.array([[0, 2, 1]]))
+    1.0
+    """
+    faces = np.asarray(boundary_faces)
+    if len(faces) == 0:
+        return 1.0
+    p = np.asarray(points, dtype=np.float64)
+    e = np.concatenate([p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 1]],
+                        p[faces[:, 0]] - p[faces[:, 2]]])
+    lengths = np.linalg.norm(e, axis=1)
+    lengths = lengths[lengths > 0]
+    return float(np.median(lengths)) * 0.5 if len(lengths) else 1.0
+
+
 def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     """The signed volume of each tet, computed in float64.
 

@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .model import signed_volumes
+
 # VTK local numbering. Hex: 0-3 bottom quad, 4-7 top quad above 0-3.
 HEX_EDGES = np.array(
     [[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4], [0, 4], [1, 5], [2, 6], [3, 7]]
@@ -37,6 +39,7 @@ CELL_FACES = {
 
 def two_colour(hexes: np.ndarray, n_points: int) -> np.ndarray | None:
     """Colour vertices 0/1 so every hex edge joins different colours; None if impossible."""
+    # scipy.sparse.csgraph costs 1.1 s to import; only hexahedral inputs need it
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import breadth_first_order, connected_components
 
@@ -108,8 +111,6 @@ def split_min_id_star(cells: np.ndarray, cell_type: str) -> np.ndarray:
 
 def orient_positive(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     """Swap the last two ids of every tet with negative signed volume (our own splits' winding)."""
-    from .model import signed_volumes
-
     t = np.array(tets, dtype=np.int64, copy=True)
     neg = signed_volumes(points, t) < 0
     t[neg] = t[neg][:, [0, 1, 3, 2]]

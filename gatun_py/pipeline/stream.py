@@ -21,7 +21,14 @@ from pathlib import Path
 import numpy as np
 
 from .._resources import peak_rss_mb
+from ..codec import TetcReader
+from ..codec.container import MAGIC
 from ..errors import CorruptFileError, OptionError
+from ..mesh import default_step, mesh_batches, read_mesh
+from ..render.camera import Camera
+from ..render.raycast import render_mesh
+from ..render.stream import render_batches
+from ..simplify.filter import SimplifyFilter
 from ..simplify.forest import mesh_from_ancestors
 from ..simplify.levels import Target, resolve_target, stored_levels, target_ancestors  # noqa: F401 (re-exported)
 
@@ -33,7 +40,7 @@ LEAN_BATCH_TETS = 16384  # decode batch of a lean streaming render
 class View:
     """How to draw: the camera (image size and angles), transfer function and sampling."""
 
-    camera: object = None  # gatun_py.render.camera.Camera; default 256x256, VTK's default view
+    camera: Camera = None  # default 256x256, VTK's default view
     tf: object = "default"
     mode: str = "volume"
     step: float | None = None
@@ -41,8 +48,6 @@ class View:
 
     def __post_init__(self):
         if self.camera is None:
-            from ..render.camera import Camera
-
             object.__setattr__(self, "camera", Camera())
 
 
@@ -68,8 +73,6 @@ def file_render_defaults(reader) -> tuple[np.ndarray, np.ndarray, tuple[float, f
         raise CorruptFileError("corrupt metadata: bad bounding box or scalar range") from None
     step = reader.meta.get("render_step")
     if not (isinstance(step, (int, float)) and math.isfinite(step) and step > 0):
-        from ..render.raycast import default_step
-
         stream = reader.iter_decode(0)
         first = next(stream)
         stream.close()
@@ -79,13 +82,14 @@ def file_render_defaults(reader) -> tuple[np.ndarray, np.ndarray, tuple[float, f
 
 # -- running ------------------------------------------------------------------------------------
 
-def render_tetc(path, view: View, *, ratio: float | None = None, level: int | None = None,
+def render_tetc(source, view: View, *, ratio: float | None = None, level: int | None = None,
                 pipeline: str = "streaming", target: Target | None = None, progress=None) -> PipelineResult:
     """Render a ``.tetc`` file at a ratio or stored level.
 
     Parameters
     ----------
-    path : path-like
+    source : path-like, bytes or TetcReader
+        The file; an open reader is reused (a viewer renders many frames from one).
     view : View
     ratio, level : optional
         Simplification target (see :func:`gatun_py.simplify.levels.resolve_target`); default the full mesh.
@@ -101,11 +105,9 @@ def render_tetc(path, view: View, *, ratio: float | None = None, level: int | No
         ``stats`` has ``decode_s``, ``filter_s``, ``render_s``, ``level``, ``ratio``, ``merges``,
         ``tets_decoded``, ``tets_rendered``, ``rays``, ``rays_unfinished``, ``samples``, ``peak_rss_mb``.
     """
-    from ..codec import TetcReader
-
     if pipeline not in PIPELINES:
         raise OptionError(f"unknown pipeline {pipeline!r} (choose from {', '.join(PIPELINES)})")
-    reader = TetcReader(path)
+    reader = source if isinstance(source, TetcReader) else TetcReader(source)
     if target is None:
         target = resolve_target(reader, ratio=ratio, level=level)
     lo, hi, rng, step = file_render_defaults(reader)
@@ -134,9 +136,6 @@ def render_tetc(path, view: View, *, ratio: float | None = None, level: int | No
 
 
 def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress):
-    from ..render.stream import render_batches
-    from ..simplify.filter import SimplifyFilter
-
     lv = reader.level_meta(target.level)
     # A lean render holds about one batch of tets in flight: smaller batches, less memory.
     batches = reader.iter_decode(target.level, **({"batch_tets": LEAN_BATCH_TETS} if view.lean else {}))
@@ -155,8 +154,6 @@ def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress
 
 
 def _run_generic(reader, target, anc, camera, view, rng, step, times):
-    from ..render.raycast import render_mesh
-
     t0 = time.perf_counter()
     mesh = reader.decode_mesh(target.level)
     times["decode_s"] = time.perf_counter() - t0
@@ -172,9 +169,6 @@ def _run_generic(reader, target, anc, camera, view, rng, step, times):
 
 def render_mesh_file(path, view: View, *, read_kwargs: dict | None = None, progress=None) -> PipelineResult:
     """Render any mesh file (not ``.tetc``) whole, fed batch-wise like a decoded stream."""
-    from ..mesh import read_mesh
-    from ..render.stream import mesh_batches, render_batches
-
     t0 = time.perf_counter()
     mesh, report = read_mesh(path, **(read_kwargs or {}))
     read_s = time.perf_counter() - t0
@@ -189,8 +183,6 @@ def render_mesh_file(path, view: View, *, read_kwargs: dict | None = None, progr
 
 
 def is_tetc(path) -> bool:
-    from ..codec.container import MAGIC
-
     try:
         with open(path, "rb") as fh:
             return fh.read(len(MAGIC)) == MAGIC

@@ -48,7 +48,7 @@ from numba import njit, prange, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int64)
+from ..mesh.model import TET_FACES
 
 MODE_VOLUME = 0
 MODE_FACE = 1

@@ -18,7 +18,8 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from gatun_py.errors import MeshError, OptionError
+from ..errors import MeshError, OptionError
+from ..mesh.model import default_step
 
 from . import _raycast_kernels as K
 from .camera import Camera, FittedCamera
@@ -46,23 +47,6 @@ class RenderResult:
 
     image: np.ndarray
     stats: dict = field(default_factory=dict)
-
-
-def default_step(points, boundary_faces) -> float:
-    """Half the median edge length of the boundary surface (the volume-mode sample spacing).
-
-    Boundary edges are used because they are known before the first tet arrives, so the
-    streaming and in-memory renderers agree on the step.
-    """
-    faces = np.asarray(boundary_faces)
-    if len(faces) == 0:
-        return 1.0
-    p = np.asarray(points, dtype=np.float64)
-    e = np.concatenate([p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 1]],
-                        p[faces[:, 0]] - p[faces[:, 2]]])
-    lengths = np.linalg.norm(e, axis=1)
-    lengths = lengths[lengths > 0]
-    return float(np.median(lengths)) * 0.5 if len(lengths) else 1.0
 
 
 class StreamingRaycaster:
@@ -497,4 +481,4 @@ def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = 
     return rc._result(image, unfinished, hidden)
 
 
-__all__ = ["RenderResult", "StreamingRaycaster", "render_mesh", "default_step", "MODES", "TransferFunction"]
+__all__ = ["RenderResult", "StreamingRaycaster", "render_mesh", "MODES", "TransferFunction"]

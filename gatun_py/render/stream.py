@@ -1,43 +1,10 @@
-"""Render a stream of :class:`DecodeBatch`es: the loop the CLI and the pipeline share."""
+"""Render a stream of :class:`~gatun_py.mesh.TetBatch`es: the loop the pipeline shares."""
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
-
-import numpy as np
 
 from .raycast import RenderResult, StreamingRaycaster
-
-
-@dataclass
-class MeshBatch:
-    """A DecodeBatch-shaped piece of an in-memory mesh (see ``docs/architecture.md``)."""
-
-    first: int
-    points: np.ndarray
-    density: np.ndarray
-    boundary: np.ndarray
-    tets: np.ndarray
-
-
-def mesh_batches(mesh, *, batch_tets: int = 65536, order=None):
-    """Feed an in-memory mesh as batches: all vertices and the boundary first, then the tets.
-
-    Parameters
-    ----------
-    mesh : TetMesh
-    batch_tets : int
-        Tets per batch.
-    order : array of int, optional
-        A permutation of the tets (default: file order).
-    """
-    no_tets = np.zeros((0, 4), np.int32)
-    yield MeshBatch(0, mesh.points, mesh.density, mesh.boundary_faces(), no_tets)
-    tets = mesh.tets if order is None else mesh.tets[np.asarray(order)]
-    for i in range(0, len(tets), max(1, int(batch_tets))):
-        yield MeshBatch(mesh.n_points, mesh.points[:0], mesh.density[:0], np.zeros((0, 3), np.int32),
-                        tets[i:i + batch_tets])
 
 
 def render_batches(batches, camera, tf, *, mode: str = "volume", step: float | None = None, scalar_range=None,
@@ -46,7 +13,7 @@ def render_batches(batches, camera, tf, *, mode: str = "volume", step: float | N
 
     Parameters
     ----------
-    batches : iterable of DecodeBatch
+    batches : iterable of TetBatch
         Vertices in id order; the whole boundary before the first tet.
     camera, tf, mode, step, scalar_range, expected_tets, lean
         As for :class:`StreamingRaycaster`.

@@ -8,7 +8,7 @@ Accepted sources (``load_transfer_function``):
   optionally ``"opacity_model": "vtk"`` (below);
 * ParaView's exported colormap JSON (``RGBPoints`` = x, r, g, b, ...; optionally ``Points`` =
   x, a, 0.5, 0.0, ...), possibly a list holding one such object;
-* a preset name: one of the files in ``sample_meshes/tf/`` (``bluntfin``, ``default``, ...);
+* a preset name: one of the package's ``presets/*.json`` (``bluntfin``, ``default``, ...);
 * a matplotlib colormap name (matplotlib is optional), with the default opacity ramp.
 
 Two opacity models (``TransferFunction.opacity_model``) say what the opacity ``a`` of a point means:
@@ -29,13 +29,15 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, replace
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
-from gatun_py.errors import OptionError
+from ..errors import OptionError
 
-PRESET_DIR = Path(__file__).resolve().parents[2] / "sample_meshes" / "tf"
+# Presets ship inside the package (read through importlib.resources, so a wheel or a zip works).
+PRESETS = resources.files(__package__) / "presets"
 
 # Number of entries of the lookup tables the kernels interpolate in (per table, over the scalar
 # range); fine enough that the piecewise-linear re-interpolation error is far below 8-bit output.
@@ -257,13 +259,13 @@ DEFAULT_OPACITY = (np.array([0.0, 1.0]), np.array([0.0, 0.5]))
 
 
 def preset_names() -> list[str]:
-    """Names of the bundled presets (the files in ``sample_meshes/tf``)."""
-    return sorted(p.stem for p in PRESET_DIR.glob("*.json")) if PRESET_DIR.is_dir() else []
+    """Names of the bundled presets (``gatun_py/render/presets/*.json``)."""
+    return sorted(p.name[:-5] for p in PRESETS.iterdir() if p.name.endswith(".json"))
 
 
 def _from_matplotlib(name: str) -> TransferFunction:
     try:
-        import matplotlib
+        import matplotlib  # optional dependency
     except ImportError:
         _fail(repr(name), "not a file or preset; matplotlib colormap names need matplotlib "
               "(pip install matplotlib)")
@@ -302,15 +304,15 @@ def load_transfer_function(spec) -> TransferFunction:
     s = str(spec)
     path = Path(s)
     if not path.is_file():
-        preset = PRESET_DIR / f"{s}.json"
-        if preset.is_file():
+        preset = PRESETS / f"{s}.json"
+        if s in preset_names():
             path = preset
         elif s.lower().endswith(".json"):
             _fail(s, "file not found")
         else:
             return _from_matplotlib(s)
     try:
-        obj = json.loads(path.read_text())
+        obj = json.loads(path.read_text(encoding="utf-8"))
     except OSError as e:
         _fail(s, f"cannot read: {e.strerror or e}")
     except (json.JSONDecodeError, UnicodeDecodeError) as e:

@@ -34,10 +34,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-ROOT_RANK = 2**31 - 1
-
-# Face k of a positively oriented tet, opposite corner k, wound outward (as gatun_py.mesh.TET_FACES).
-_TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int64)
+from ..codec.forest import ROOT_RANK  # noqa: F401 (decimate.py reads it as K.ROOT_RANK)
+from ..mesh.model import TET_FACES as _TET_FACES
 
 # A surviving tet must keep at least this fraction of (longest edge)^3 as 6x its volume, or not
 # shrink below its current volume: far above float64 rounding of the triple product, so "positive

@@ -7,7 +7,7 @@ have been decoded it is forwarded; otherwise it is parked on each missing ancest
 and released the moment the count reaches zero, when the decoder emits the last of them.
 
 Neither the decoder nor the renderer knows about the filter: it consumes and yields
-``DecodeBatch``es (``docs/architecture.md``). Vertices pass through unchanged (merged-away vertices
+``gatun_py.mesh.TetBatch``es (``docs/architecture.md``). Vertices pass through unchanged (merged-away vertices
 are simply never referenced again).
 """
 

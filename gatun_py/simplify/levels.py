@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import OptionError
+from ..codec import TetcReader
+from ..errors import CorruptFileError, OptionError
 from ..mesh import TetMesh
 from .forest import ROOT_RANK, MergeForest, ancestors, forest_prefix, mesh_from_ancestors, simplified_mesh
 
@@ -142,20 +144,9 @@ def _describe_levels(levels_meta) -> str:
     return ", ".join(f"{lv['level']} (ratio {float(lv.get('ratio', 0.0)):.6f})" for lv in levels_meta)
 
 
-def forest_merges(reader) -> int:
+def forest_merges(reader: TetcReader) -> int:
     """Merges the file's full forest holds (0 when it stores no forest)."""
-    from .forest import forest_header
-
-    lv0 = min(reader.levels, key=lambda lv: lv["level"])
-    name = f"L{lv0['level']}/forest"
-    if not reader.container.has_section(name):
-        return 0
-    n, k = forest_header(reader.read_section(name))
-    if n != lv0["points"]:
-        from ..errors import CorruptFileError
-
-        raise CorruptFileError(f"{name}: covers {n} vertices, the level has {lv0['points']}")
-    return k
+    return reader.forest_merges()
 
 
 @dataclass(frozen=True)
@@ -221,8 +212,6 @@ def target_ancestors(reader, target: Target, *, times: dict | None = None) -> np
     ``times``, if given, receives ``forest_decode_s`` (reading and decoding the forest section)
     and ``ancestors_s`` (the top-down pass).
     """
-    import time
-
     rest = target.merges - target.level_merges
     if rest == 0:
         return None
@@ -230,8 +219,6 @@ def target_ancestors(reader, target: Target, *, times: dict | None = None) -> np
     parent, rank = reader.read_forest(target.level)
     t1 = time.perf_counter()
     if rest > int((rank != ROOT_RANK).sum()):
-        from ..errors import CorruptFileError
-
         raise CorruptFileError(f"level {target.level}: its forest holds fewer merges than the metadata says")
     anc = ancestors(parent, rank, rest)
     if times is not None:
@@ -264,8 +251,6 @@ def read_simplified(source, *, ratio: float | None = None, level: int | None = N
     OptionError
         Impossible ratio or level; the message lists what the file holds.
     """
-    from ..codec import TetcReader
-
     reader = source if isinstance(source, TetcReader) else TetcReader(source)
     target = resolve_target(reader, ratio=ratio, level=level)
     mesh = reader.decode_mesh(target.level)

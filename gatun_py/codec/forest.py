@@ -1,0 +1,168 @@
+"""The merge forest's bytes: the ``L{i}/forest`` section of a ``.tetc`` file.
+
+A forest is two arrays over the vertices of a level, in decode order: ``parent[v]`` (v itself for
+a root) and ``rank[v]``, the 0-based execution order of v's merge (``ROOT_RANK`` for roots). The
+first N merges are those with rank < N; a parent always outranks its children (it was still alive
+when they were merged into it). The simplify stage builds forests; this module only stores them.
+
+Section layout (format 1, magic ``GFR1``): ``<4sII`` header (magic, vertices n, merges k), then,
+when k > 0, one LZMA (xz) stream of 8n bytes: every vertex's rank (roots as k) as uint32, then its
+parent as a zigzagged delta from the vertex, each array byte-planed (all low bytes, ..., all high
+bytes). Decoding stops at 8n + 1 bytes of output whatever the stream claims.
+"""
+
+from __future__ import annotations
+
+import lzma
+import struct
+
+import numpy as np
+
+from ..errors import CorruptFileError
+
+__all__ = ["ROOT_RANK", "check_forest", "encode_forest", "decode_forest", "forest_header"]
+
+ROOT_RANK = 2**31 - 1  # the rank of a vertex that is never merged
+
+
+def check_forest(parent: np.ndarray, rank: np.ndarray) -> int:
+    """Validate a forest; return its number of merges or raise :class:`CorruptFileError`.
+
+    Ranks of merged vertices must be exactly 0..k-1, roots must be their own parent with
+    ``ROOT_RANK``, and every parent must outrank its child (which also rules out cycles).
+    """
+    parent = np.asarray(parent)
+    rank = np.asarray(rank)
+    n = parent.shape[0]
+    if parent.shape != (n,) or rank.shape != (n,):
+        raise CorruptFileError("merge forest: parent and rank arrays differ in length")
+    if n == 0:
+        return 0
+    if parent.min() < 0 or parent.max() >= n:
+        raise CorruptFileError("merge forest: a parent id is out of range")
+    idx = np.arange(n)
+    root = parent == idx
+    if np.any(rank[root] != ROOT_RANK):
+        raise CorruptFileError("merge forest: a root has a merge rank")
+    merged = ~root
+    k = int(merged.sum())
+    r = np.sort(rank[merged].astype(np.int64))
+    if not np.array_equal(r, np.arange(k)):
+        raise CorruptFileError("merge forest: merge ranks are not 0..k-1")
+    if np.any(rank[parent[merged]].astype(np.int64) <= rank[merged]):
+        raise CorruptFileError("merge forest: a vertex is merged into one that was merged before it")
+    return k
+
+
+_MAGIC = b"GFR1"
+_HEADER = struct.Struct("<4sII")
+
+
+def _zigzag(x: np.ndarray) -> np.ndarray:
+    x = x.astype(np.int64)
+    return ((x << 1) ^ (x >> 63)).astype(np.uint32)
+
+
+def _unzigzag(z: np.ndarray) -> np.ndarray:
+    z = z.astype(np.int64)
+    return (z >> 1) ^ -(z & 1)
+
+
+def _shuffle(a: np.ndarray) -> bytes:
+    """uint32 array -> its bytes grouped by significance (low bytes, then ..., high bytes)."""
+    return np.ascontiguousarray(a.astype("<u4").view(np.uint8).reshape(-1, 4).T).tobytes()
+
+
+def _unshuffle(b: bytes, k: int) -> np.ndarray:
+    return np.frombuffer(b, np.uint8).reshape(4, k).T.copy().view("<u4").reshape(-1)
+
+
+def encode_forest(parent: np.ndarray, rank: np.ndarray) -> bytes:
+    """Code a merge forest compactly.
+
+    In vertex order: every vertex's rank (roots as k = the number of merges) and its parent as
+    a delta from the vertex (0 for roots), both zigzagged/byte-planed and LZMA-coded. Ranks cost
+    close to the log2(n!)/n bits of an arbitrary permutation; parents are mesh neighbours, so in a
+    locality-preserving vertex order (the codec's decode order) their deltas are small.
+
+    Parameters
+    ----------
+    parent, rank : (n,) int
+        A valid forest (see :func:`check_forest`).
+
+    Returns
+    -------
+    bytes
+    """
+    parent = np.asarray(parent, np.int64)
+    rank = np.asarray(rank, np.int64)
+    k = check_forest(parent, rank)
+    n = parent.shape[0]
+    ranks = np.where(rank == ROOT_RANK, k, rank).astype(np.uint32)
+    d_parent = _zigzag(parent - np.arange(n))
+    body = lzma.compress(_shuffle(ranks) + _shuffle(d_parent), preset=9 | lzma.PRESET_EXTREME) if k else b""
+    return _HEADER.pack(_MAGIC, n, k) + body
+
+
+def forest_header(data: bytes) -> tuple[int, int]:
+    """(vertices, merges) of a coded forest, read from its header only."""
+    data = bytes(data[: _HEADER.size])
+    if len(data) < _HEADER.size:
+        raise CorruptFileError("merge forest: truncated header")
+    magic, n, k = _HEADER.unpack(data)
+    if magic != _MAGIC or k > n:
+        raise CorruptFileError("merge forest: bad header")
+    return int(n), int(k)
+
+
+def decode_forest(data: bytes, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of :func:`encode_forest`.
+
+    Parameters
+    ----------
+    data : bytes
+    n : int
+        The number of vertices the forest must cover (from the mesh it belongs to).
+
+    Returns
+    -------
+    parent, rank : (n,) int32
+
+    Raises
+    ------
+    CorruptFileError
+        On any inconsistency (wrong size, bad ids, a cycle, ...).
+    """
+    data = bytes(data)
+    if len(data) < _HEADER.size:
+        raise CorruptFileError("merge forest: truncated header")
+    magic, n_stored, k = _HEADER.unpack_from(data)
+    if magic != _MAGIC:
+        raise CorruptFileError("merge forest: bad magic")
+    if n_stored != n:
+        raise CorruptFileError(f"merge forest: covers {n_stored} vertices, the mesh has {n}")
+    if k > n:
+        raise CorruptFileError("merge forest: more merges than vertices")
+    parent = np.arange(n, dtype=np.int64)
+    rank = np.full(n, ROOT_RANK, np.int64)
+    if k:
+        try:
+            dec = lzma.LZMADecompressor()
+            raw = dec.decompress(data[_HEADER.size:], max_length=8 * n + 1)
+        except lzma.LZMAError as e:
+            raise CorruptFileError(f"merge forest: {e}") from None
+        if len(raw) != 8 * n or not dec.eof or dec.unused_data:
+            raise CorruptFileError("merge forest: payload has the wrong length")
+        ranks = _unshuffle(raw[: 4 * n], n).astype(np.int64)
+        if ranks.max() > k:
+            raise CorruptFileError("merge forest: a rank is out of range")
+        parent = np.arange(n) + _unzigzag(_unshuffle(raw[4 * n:], n))
+        if parent.min() < 0 or parent.max() >= n:
+            raise CorruptFileError("merge forest: a parent id is out of range")
+        rank = np.where(ranks == k, ROOT_RANK, ranks)
+    elif len(data) != _HEADER.size:
+        raise CorruptFileError("merge forest: trailing bytes")
+    parent = parent.astype(np.int32)
+    rank = rank.astype(np.int32)
+    check_forest(parent, rank)
+    return parent, rank

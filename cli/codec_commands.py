@@ -1,19 +1,58 @@
-"""``tetc compress`` and ``tetc decompress``."""
+"""``tetc info``, ``tetc convert``, ``tetc compress`` and ``tetc decompress``."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import click
 
-from .main import tetc
-from .options import force_option, mesh_input_options, progress_bar, quiet_option, read_kwargs, status
+import gatun_py
+
+from .options import (RATIO, echo_json, force_option, json_option, logger, mesh_input_options, output_option,
+                      progress_reporter, quiet_option, read_kwargs, status)
 
 
-@tetc.command()
+@click.command()
 @click.argument("input", type=click.Path(dir_okay=False))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
-              help="Output .tetc file.")
+@mesh_input_options
+@json_option
+def info(input, scalar, q_file, q_var, cell_to_point, as_json):
+    """Describe INPUT: sizes, boundary, degenerate tets, and for .tetc files the codec figures."""
+    data = gatun_py.info(input, **read_kwargs(scalar, q_file, q_var, cell_to_point))
+    if as_json:
+        echo_json(data)
+        return
+    for k, v in data.items():
+        if isinstance(v, list) and v and isinstance(v[0], dict):
+            click.echo(f"{k}:")
+            for row in v:
+                click.echo("  " + ", ".join(f"{a}={b}" for a, b in row.items()))
+        else:
+            click.echo(f"{k}: {v}")
+
+
+@click.command()
+@click.argument("input", type=click.Path(dir_okay=False))
+@output_option("Output mesh; format from the extension (.vtu, .vtk, .msh, .xdmf, ...).")
+@mesh_input_options
+@click.option("--refine", type=click.IntRange(min=1, max=16), default=1, show_default=True, metavar="K",
+              help="PLOT3D only: cut every grid cell into K×K×K cells on its trilinear map before the "
+                   "tet split; the scalar is trilinearly interpolated, so this makes larger meshes "
+                   "for scale tests, not new data.")
+@force_option
+@quiet_option
+def convert(input, output, scalar, q_file, q_var, cell_to_point, refine, force, quiet):
+    """Convert INPUT (any readable mesh or PLOT3D grid) into a linear tet mesh file.
+
+    Hexahedra, wedges and pyramids are split into tets conformingly; the scalar is written as
+    point data. Floats are kept bit for bit (with --refine, the original grid points are).
+    """
+    mesh = gatun_py.convert(input, output, refine=refine, force=force, log=logger(quiet),
+                            **read_kwargs(scalar, q_file, q_var, cell_to_point))
+    status(f"wrote {output}: {mesh.n_points} points, {mesh.n_tets} tets", quiet)
+
+
+@click.command()
+@click.argument("input", type=click.Path(dir_okay=False))
+@output_option("Output .tetc file.")
 @click.option("--levels", "n_levels", type=click.IntRange(min=0), default=None,
               help="Store pre-simplified levels 1..K (ratio 1-1/2^i) [default: every level the merge forest "
                    "reaches, up to 13].")
@@ -34,63 +73,25 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, scalar, 
     Unless --mesh-only, the mesh is also decimated (Van Gelder) into a merge forest stored with it,
     plus pre-simplified levels, for `tetc decompress --ratio` and time-critical rendering.
     """
-    import time
-
-    from gatun_py.codec import write_tetc
-    from gatun_py.codec.info import tetc_info
-    from gatun_py.mesh import read_mesh
-    from gatun_py._atomic import check_output_path
-
-    check_output_path(output, force=force)  # fail before the (long) work
-    t0 = time.perf_counter()
-    mesh, report = read_mesh(input, **read_kwargs(scalar, q_file, q_var, cell_to_point))
-    for note in report.notes:
-        status(f"note: {note}", quiet)
-    status(f"read {input}: {mesh.n_points} points, {mesh.n_tets} tets", quiet)
-    if mesh_only:
-        payload = mesh
-    else:
-        from gatun_py.codec import LevelPayload
-        from gatun_py.simplify import build_levels, decimate, storage_forests
-
-        with progress_bar("decimating", mesh.n_points, quiet) as update:
-            forest = decimate(mesh, w_density=w_density, w_geometry=w_geometry, progress=update)
-        levels = build_levels(mesh, forest, n_levels)
-        status(f"merge forest: {forest.n_merges} merges (max ratio {forest.max_ratio:.5f}); "
-               f"levels {', '.join(str(lv.level) for lv in levels)}", quiet)
-        payload = [LevelPayload(lv.level, lv.ratio, lv.n_merges, lv.mesh, (f.parent, f.rank))
-                   for lv, f in zip(levels, storage_forests(levels))]
-    status("compressing...", quiet)
-    n = write_tetc(output, payload, source=Path(input).name, force=force)
-    dt = time.perf_counter() - t0
-    if not quiet:
-        info = tetc_info(output)
-        status(f"wrote {output}: {n} bytes ({8.0 * n / max(mesh.n_tets, 1):.2f} bits/tet overall, "
-               f"connectivity {info['bits_per_tet_connectivity']:.2f} bits/tet, "
-               f"geometry {info['bits_per_vertex_geometry']:.1f} bits/vertex) in {dt:.1f} s", quiet)
+    with progress_reporter("decimating", quiet, min_total=1) as progress:
+        gatun_py.compress(input, output, levels=n_levels, mesh_only=mesh_only, force=force, w_density=w_density,
+                          w_geometry=w_geometry, progress=progress, log=logger(quiet),
+                          **read_kwargs(scalar, q_file, q_var, cell_to_point))
 
 
-@tetc.command()
+@click.command()
 @click.argument("input", type=click.Path(dir_okay=False))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
-              help="Output mesh; format from the extension (.vtu, .vtk, .msh, .xdmf, ...).")
+@output_option("Output mesh; format from the extension (.vtu, .vtk, .msh, .xdmf, ...).")
 @click.option("--level", default=None, type=click.IntRange(min=0),
               help="Which stored level to decode (0 = the full mesh, the default).")
-@click.option("--ratio", default=None, type=float,
-              help="Simplify to this ratio (merged / all vertices) with the stored merge forest, starting "
-                   "from the most simplified stored level that is still finer.")
+@click.option("--ratio", default=None, type=RATIO,
+              help="Simplify to this ratio (merged / all vertices, 0..1) with the stored merge forest, "
+                   "starting from the most simplified stored level that is still finer.")
 @force_option
 @quiet_option
 def decompress(input, output, level, ratio, force, quiet):
-    """Decompress a .tetc file into any mesh format meshio writes."""
-    from gatun_py.errors import OptionError
-    from gatun_py.mesh import write_mesh
-    from gatun_py.simplify import read_simplified
-    from gatun_py._atomic import check_output_path
-
+    """Decompress a .tetc file into any mesh format meshio writes that holds tets."""
     if level is not None and ratio is not None:
-        raise OptionError("--level and --ratio are exclusive")
-    check_output_path(output, force=force)
-    mesh = read_simplified(input, ratio=ratio, level=level)
-    write_mesh(mesh, output, force=force)
+        raise click.UsageError("--level and --ratio are exclusive")
+    mesh = gatun_py.decompress(input, output, ratio=ratio, level=level, force=force)
     status(f"wrote {output}: {mesh.n_points} points, {mesh.n_tets} tets", quiet)

@@ -9,14 +9,12 @@ import sys
 import click
 
 from gatun_py.errors import TetcError
+from gatun_py.pipeline.quality import compare_files
 
-from .main import tetc
 from .options import echo_json, json_option
 
 
 def _compare(a, b, as_json):
-    from gatun_py.pipeline.quality import compare_files
-
     d = compare_files(a, b)
     if as_json:
         out = d.as_dict()
@@ -26,7 +24,7 @@ def _compare(a, b, as_json):
         click.echo(f"rmse {d.rmse:.4f}  psnr {d.psnr:.2f} dB  ssim {d.ssim:.4f}  pixels {d.pixels}")
 
 
-@tetc.command("compare")
+@click.command("compare")
 @click.argument("a", type=click.Path(dir_okay=False))
 @click.argument("b", type=click.Path(dir_okay=False))
 @json_option

@@ -1,21 +1,88 @@
-"""Option decorators and helpers shared by the ``tetc`` commands."""
+"""Option types, decorators and output helpers shared by the ``tetc`` commands.
+
+Option values are checked by click types, so a bad value is a usage error (exit 2) with click's
+message naming the option; whatever depends on the input file is checked by the library (exit 1).
+"""
 
 from __future__ import annotations
 
 import contextlib
-import functools
 import json
+import math
+import re
 import sys
 
 import click
+import numpy as np
 
 from gatun_py.mesh.plot3d import Q_VARIABLES
+from gatun_py.render.camera import MAX_ZOOM
+from gatun_py.render.image import parse_colour
+
+MAX_IMAGE_SIDE = 8192
+
+
+class FiniteFloat(click.ParamType):
+    """A finite float, optionally bounded (``lo_open``: strictly above ``lo``)."""
+
+    name = "float"
+
+    def __init__(self, lo=None, hi=None, *, lo_open=False):
+        self.lo, self.hi, self.lo_open = lo, hi, lo_open
+
+    def convert(self, value, param, ctx):
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        if not math.isfinite(v):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        if self.lo is not None and (v <= self.lo if self.lo_open else v < self.lo):
+            self.fail(f"{value} must be {'>' if self.lo_open else '>='} {self.lo:g}", param, ctx)
+        if self.hi is not None and v > self.hi:
+            self.fail(f"{value} must be <= {self.hi:g}", param, ctx)
+        return v
+
+
+class ImageSize(click.ParamType):
+    """``256`` or ``320x200``: whole pixels in 1..MAX_IMAGE_SIDE."""
+
+    name = "W[xH]"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, tuple):
+            return value
+        m = re.fullmatch(r"\s*(\d+)\s*(?:[xX*]\s*(\d+)\s*)?", str(value))
+        if not m:
+            self.fail(f"{value!r} is not W or WxH in pixels", param, ctx)
+        w = int(m.group(1))
+        h = int(m.group(2)) if m.group(2) is not None else w
+        if not (1 <= w <= MAX_IMAGE_SIDE and 1 <= h <= MAX_IMAGE_SIDE):
+            self.fail(f"{value!r}: each side must be 1..{MAX_IMAGE_SIDE} pixels", param, ctx)
+        return w, h
+
+
+class Colour(click.ParamType):
+    name = "COLOUR"
+
+    def convert(self, value, param, ctx):
+        try:
+            return parse_colour(value)
+        except ValueError as e:
+            self.fail(str(e), param, ctx)
+
+
+POSITIVE = FiniteFloat(0.0, lo_open=True)
+ANGLE = FiniteFloat()
+RATIO = FiniteFloat(0.0, 1.0)
+ZOOM = FiniteFloat(1.0 / MAX_ZOOM, MAX_ZOOM)
 
 
 def mesh_input_options(f):
     """--scalar, --q, --q-var, --cell-to-point: how to read a mesh file."""
     f = click.option("--cell-to-point", is_flag=True,
-                     help="Allow a cell-data scalar, averaged to the points (volume-weighted).")(f)
+                     help="Use a cell-data array, averaged to the points (volume-weighted): the only one, or "
+                          "the one --scalar names.")(f)
     f = click.option("--q-var", type=click.Choice(Q_VARIABLES), default="density", show_default=True,
                      help="PLOT3D: which quantity of the Q file becomes the scalar.")(f)
     f = click.option("--q", "q_file", type=click.Path(dir_okay=False), default=None,
@@ -29,6 +96,10 @@ def read_kwargs(scalar, q_file, q_var, cell_to_point) -> dict:
     return dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point)
 
 
+def output_option(help_text: str):
+    return click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help=help_text)
+
+
 force_option = click.option("--force", "-f", is_flag=True, help="Overwrite the output file if it exists.")
 quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress output on stderr.")
 json_option = click.option("--json", "as_json", is_flag=True, help="Print one JSON object on stdout.")
@@ -39,8 +110,6 @@ def echo_json(obj) -> None:
 
 
 def _json_default(o):
-    import numpy as np
-
     if isinstance(o, np.generic):
         return o.item()
     if isinstance(o, np.ndarray):
@@ -54,6 +123,33 @@ def status(msg: str, quiet: bool) -> None:
         click.echo(msg, err=True)
 
 
+def logger(quiet: bool):
+    """The ``log`` callable the library's verbs take: one line on stderr unless --quiet."""
+    return lambda msg: status(msg, quiet)
+
+
+@contextlib.contextmanager
+def progress_reporter(label: str, quiet: bool, *, min_total: int = 100_000):
+    """Yield a ``progress(done, total)`` callable (the library verbs' protocol) that draws a bar on
+    stderr once it knows the total, for work of at least ``min_total`` items; a no-op when quiet."""
+    state = {"bar": None, "done": 0}
+
+    def progress(done: int, total: int) -> None:
+        if quiet or total < min_total:
+            return
+        if state["bar"] is None:
+            state["bar"] = click.progressbar(length=total, label=label, file=sys.stderr, show_eta=True)
+            state["bar"].__enter__()
+        state["bar"].update(done - state["done"])
+        state["done"] = done
+
+    try:
+        yield progress
+    finally:
+        if state["bar"] is not None:
+            state["bar"].__exit__(None, None, None)
+
+
 @contextlib.contextmanager
 def progress_bar(label: str, total: int, quiet: bool):
     """Yield an ``update(n)`` callable drawing a progress bar on stderr; a no-op when quiet."""
@@ -62,13 +158,3 @@ def progress_bar(label: str, total: int, quiet: bool):
         return
     with click.progressbar(length=total, label=label, file=sys.stderr, show_eta=True) as bar:
         yield bar.update
-
-
-def with_progress(f):
-    """Inject ``progress(label, total)`` -> context manager honouring --quiet."""
-
-    @functools.wraps(f)
-    def wrapper(*args, quiet=False, **kwargs):
-        return f(*args, quiet=quiet, **kwargs)
-
-    return quiet_option(wrapper)

@@ -7,7 +7,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from .errors import OutputError
+from .errors import OutputError, OutputExistsError
 
 
 def _umask() -> int:
@@ -20,7 +20,7 @@ def check_output_path(path: str | os.PathLike, *, force: bool = False) -> Path:
     """Refuse to clobber an existing file unless ``force``; check the directory is writable."""
     path = Path(path)
     if path.exists() and not force:
-        raise OutputError(f"{path} already exists (use --force to overwrite)")
+        raise OutputExistsError(f"{path} already exists")
     if path.is_dir():
         raise OutputError(f"{path} is a directory")
     parent = path.parent if str(path.parent) else Path(".")

@@ -12,6 +12,14 @@ def run(*args):
     return CliRunner().invoke(tetc, [str(a) for a in args], catch_exceptions=False)
 
 
+def assert_usage_error(res, *fragments):
+    """Exit code 2 (click's usage error), naming every fragment, no traceback."""
+    assert res.exit_code == 2, res.output
+    assert "Traceback" not in res.output and "Error:" in res.output
+    for f in fragments:
+        assert f in res.output, (f, res.output)
+
+
 def assert_error(res, *fragments):
     """Exit code 1, exactly one non-empty line starting ``tetc: error:``, containing every fragment."""
     assert res.exit_code == 1, res.output

@@ -61,7 +61,7 @@ def test_convert_refuses_to_overwrite(tmp_path):
 
 def test_convert_unwritable_and_bad_extension(tmp_path):
     assert_error(run("convert", POST, "-o", tmp_path / "nodir" / "x.vtu"), "does not exist")
-    assert_error(run("convert", POST, "-o", tmp_path / "x.what"), "output format")
+    assert_error(run("convert", POST, "-o", tmp_path / "x.what"), "unknown extension", ".vtu")
 
 
 @pytest.mark.parametrize("case", ["missing", "unreadable", "no_volume", "unknown_scalar", "nan", "out_of_range",

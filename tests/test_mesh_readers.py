@@ -95,7 +95,7 @@ def test_plot3d_q_variables(tmp_path):
     m, _ = read_mesh(tmp_path / "gxyz.bin", q_var="velocity-magnitude")
     expect = (np.sqrt((q64[1:4] ** 2).sum(0)) / q64[0]).astype(np.float32)
     assert np.array_equal(m.density, expect)
-    with pytest.raises(ReadError, match="unknown --q-var"):
+    with pytest.raises(ReadError, match="unknown Q variable"):
         read_mesh(tmp_path / "gxyz.bin", q_var="vorticity")
 
 
@@ -112,7 +112,7 @@ def test_plot3d_iblank_drops_blanked_cells(tmp_path):
 def test_plot3d_errors(tmp_path):
     _write_plot3d(tmp_path, (3, 3, 3))
     (tmp_path / "gq.bin").unlink()
-    with pytest.raises(ReadError, match="--q"):
+    with pytest.raises(ReadError, match="give its solution file"):
         read_mesh(tmp_path / "gxyz.bin")
     _write_plot3d(tmp_path, (3, 3, 3))
     other = tmp_path / "o"
@@ -200,12 +200,18 @@ def test_no_volume_cells_and_cell_data(tmp_path):
     pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], float)
     meshio.Mesh(pts, [("tetra", np.array([[0, 1, 2, 3], [1, 2, 3, 4]]))],
                 cell_data={"c": [np.array([1.0, 3.0])]}).write(tmp_path / "c.vtu")
-    with pytest.raises(ReadError, match="--cell-to-point"):
+    with pytest.raises(ReadError, match=r"cell data \(c\) can be averaged .*cell-to-point"):
         read_mesh(tmp_path / "c.vtu")
-    with pytest.raises(ReadError, match="cell data; add --cell-to-point"):
+    with pytest.raises(ReadError, match="is cell data; it can be used only averaged"):
         read_mesh(tmp_path / "c.vtu", scalar="c")
     mesh, _ = read_mesh(tmp_path / "c.vtu", scalar="c", cell_to_point=True)
     assert mesh.density[0] == 1.0 and mesh.density[4] == 3.0
+    alone, _ = read_mesh(tmp_path / "c.vtu", cell_to_point=True)  # the only cell array: no name needed
+    np.testing.assert_array_equal(alone.density, mesh.density)
+    meshio.Mesh(pts, [("tetra", np.array([[0, 1, 2, 3], [1, 2, 3, 4]]))],
+                cell_data={"c": [np.array([1.0, 3.0])], "d": [np.array([0.0, 1.0])]}).write(tmp_path / "cd.vtu")
+    with pytest.raises(ReadError, match="several cell arrays.*: c, d"):
+        read_mesh(tmp_path / "cd.vtu", cell_to_point=True)
     assert 1.0 < mesh.density[1] < 3.0  # volume-weighted mix on shared points
 
 

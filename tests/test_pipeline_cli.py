@@ -50,7 +50,7 @@ def test_level_and_budget(post_tetc, tmp_path, monkeypatch):
     assert b["budget_s"] == 5 and "predicted_s" in b
     assert (tmp_path / "cache" / "timing.json").exists()  # calibration kept for next time
     assert b["level"] == 0  # a generous budget renders the full mesh
-    res = run("render", post_tetc, "-o", tmp_path / "z.png", "--tf", "post", "--size", "40x32", "--budget", "0",
+    res = run("render", post_tetc, "-o", tmp_path / "z.png", "--tf", "post", "--size", "40x32", "--budget", "1e-9",
               "--stats")
     assert res.exit_code == 0
     assert "cannot be met" in res.stderr
@@ -62,7 +62,9 @@ def test_bad_combinations(post_tetc, tmp_path):
     res = run("render", post_tetc, "-o", tmp_path / "x.png", "--ratio", "0.5", "--budget", "0.1")
     assert res.exit_code == 2
     res = run("render", post_tetc, "-o", tmp_path / "x.png", "--ratio", "1.5")
-    assert res.exit_code == 1 and "ratio 1.5 is outside" in res.output and "stored levels: 0 (ratio 0" in res.output
+    assert res.exit_code == 2 and "--ratio" in res.output
+    res = run("render", post_tetc, "-o", tmp_path / "x.png", "--ratio", "0.9999")
+    assert res.exit_code == 1 and "maximum ratio" in res.output and "stored levels: 0 (ratio 0" in res.output
     res = run("render", post_tetc, "-o", tmp_path / "x.png", "--level", "40")
     assert res.exit_code == 1 and "level 40 is not stored" in res.output
     res = run("render", POST, "-o", tmp_path / "x.png", "--ratio", "0.5")

@@ -200,9 +200,9 @@ def test_convert_refine_cli(tmp_path):
     assert back.n_tets == 8 * 5 * 3 * 2 * 2 and back.n_points == 7 * 5 * 5
     assert back.points.reshape(5, 5, 7, 3)[::2, ::2, ::2].reshape(-1, 3).tobytes() == xyz.tobytes()
     assert back.density.reshape(5, 5, 7)[::2, ::2, ::2].reshape(-1).tobytes() == q.tobytes()
-    # --refine on a non-PLOT3D input is a usage error, and so is a bad factor.
+    # refining a non-PLOT3D input is an error about that input; a bad factor is a usage error.
     res = run("convert", out, "-o", tmp_path / "again.vtu", "--refine", 2)
-    assert res.exit_code == 2 and "--refine needs a PLOT3D grid" in res.output
+    assert res.exit_code == 1 and "refinement needs a PLOT3D grid" in res.output
     res = run("convert", tmp_path / "gxyz.bin", "-o", tmp_path / "x.vtu", "--refine", 0)
     assert res.exit_code == 2
     # Factor 1 on a mesh file is the plain conversion.

@@ -59,19 +59,33 @@ def test_render_tetc_file(tmp_path):
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--tf", "nope-not-a-map"], "unknown name"),
-    (["--size", "0"], "positive"),
-    (["--size", "-5x3"], "positive"),
+    (["--size", "0"], "1..8192"),
+    (["--size", "-5x3"], "W or WxH"),
     (["--size", "abc"], "W or WxH"),
-    (["--zoom", "0"], "zoom"),
-    (["--zoom", "1e9"], "zoom"),
-    (["--step", "-1"], "positive"),
+    (["--size", "100000"], "1..8192"),
+    (["--zoom", "0"], "--zoom"),
+    (["--zoom", "1e9"], "--zoom"),
+    (["--zoom", "nan"], "finite"),
+    (["--step", "-1"], "--step"),
+    (["--step", "inf"], "finite"),
+    (["--azimuth", "nan"], "finite"),
+    (["--budget", "-1"], "--budget"),
+    (["--ratio", "1.5"], "--ratio"),
+    (["--range", "2", "1"], "MIN must be below MAX"),
+    (["--background", "no-such-colour"], "unknown colour"),
 ])
-def test_bad_options(mesh_file, tmp_path, args, message):
+def test_bad_option_values_are_usage_errors(mesh_file, tmp_path, args, message):
     _, path = mesh_file
     res = CliRunner().invoke(tetc, ["render", str(path), "-o", str(tmp_path / "x.png"), *args])
-    assert res.exit_code == 1, res.output
-    assert "tetc: error:" in res.output and message in res.output
+    assert res.exit_code == 2, res.output
+    assert "Traceback" not in res.output and message in res.output
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_unknown_transfer_function(mesh_file, tmp_path):
+    _, path = mesh_file
+    res = CliRunner().invoke(tetc, ["render", str(path), "-o", str(tmp_path / "x.png"), "--tf", "nope-not-a-map"])
+    assert res.exit_code == 1 and "tetc: error:" in res.output and "unknown name" in res.output
     assert not (tmp_path / "x.png").exists()
 
 

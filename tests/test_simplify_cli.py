@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from cli_util import assert_error, run
+from cli_util import assert_error, assert_usage_error, run
 from conftest import SAMPLES, load_sample
 from meshgen import single_tet
 
@@ -77,11 +77,11 @@ def test_decompress_level(post_tetc, tmp_path):
 
 def test_impossible_requests(post_tetc, tmp_path):
     out = tmp_path / "x.vtu"
-    assert_error(run("decompress", post_tetc, "-o", out, "--ratio", 1.5), "outside [0, 1]", "stored levels: 0")
-    assert_error(run("decompress", post_tetc, "-o", out, "--ratio", -0.1), "outside [0, 1]")
+    assert_usage_error(run("decompress", post_tetc, "-o", out, "--ratio", 1.5), "--ratio", "<= 1")
+    assert_usage_error(run("decompress", post_tetc, "-o", out, "--ratio", -0.1), "--ratio", ">= 0")
     assert_error(run("decompress", post_tetc, "-o", out, "--level", 40), "level 40 is not stored", "9 (ratio")
     assert_error(run("decompress", post_tetc, "-o", out, "--ratio", 0.9999), "maximum ratio", "stored levels")
-    assert_error(run("decompress", post_tetc, "-o", out, "--ratio", 0.5, "--level", 1), "exclusive")
+    assert_usage_error(run("decompress", post_tetc, "-o", out, "--ratio", 0.5, "--level", 1), "exclusive")
     assert not out.exists()
 
 

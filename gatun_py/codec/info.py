@@ -5,12 +5,12 @@ from __future__ import annotations
 from .tetcfile import TetcReader
 
 
-def tetc_info(path) -> dict:
+def tetc_info(source) -> dict:
     """Describe a ``.tetc`` file without decoding it.
 
     Parameters
     ----------
-    path : str or os.PathLike
+    source : path-like, bytes or TetcReader
 
     Returns
     -------
@@ -21,7 +21,7 @@ def tetc_info(path) -> dict:
         points), ``sections`` (name -> bytes), ``levels`` (one dict per stored level) and
         ``forest`` (``merges``, ``max_ratio``, ``bytes`` of all stored forests).
     """
-    r = TetcReader(path)
+    r = source if isinstance(source, TetcReader) else TetcReader(source)
     c = r.container
     sizes = {name: c.section_size(name) for name in c.section_names()}
     lv0 = r.levels[0]

@@ -15,7 +15,9 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
+import meshio
 import numpy as np
+from meshio import _helpers
 
 from .._atomic import atomic_path
 from ..errors import MeshError, OptionError, OutputError, ReadError
@@ -32,6 +34,13 @@ VOLUME_CELLS = {
     "wedge": ("wedge", 6), "wedge12": ("wedge", 6), "wedge15": ("wedge", 6), "wedge18": ("wedge", 6),
     "pyramid": ("pyramid", 5), "pyramid13": ("pyramid", 5), "pyramid14": ("pyramid", 5),
 }
+
+
+# meshio formats that hold linear tetrahedra with point data (written by write_mesh)
+TET_FORMATS = {"vtu", "vtk", "gmsh", "xdmf", "medit", "exodus", "abaqus", "avsucd", "flac3d", "h5m", "med",
+               "nastran", "permas", "su2", "tetgen", "ugrid", "dolfin-xml", "cgns", "netgen", "mdpa", "hmf"}
+TET_EXTENSIONS = (".vtu", ".vtk", ".msh", ".xdmf", ".mesh", ".exo", ".inp", ".avs", ".f3grid", ".med", ".bdf",
+                  ".su2", ".ugrid", ".xml", ".vol", ".mdpa")
 
 
 @dataclass
@@ -89,7 +98,7 @@ def _read_plot3d(path: Path, q_file, q_var: str, refine: int = 1) -> tuple[TetMe
     if q_file is None:
         q_file = plot3d.find_q_file(path)
         if q_file is None:
-            raise ReadError(f"{path} is a PLOT3D grid: give its solution file with --q FILE")
+            raise ReadError(f"{path} is a PLOT3D grid: give its solution file (the Q file; none found beside it)")
         notes.append(f"scalar from {Path(q_file).name}")
     dens = plot3d.read_q(q_file, grid.dims, q_var)
     xyz, dims = grid.xyz, grid.dims
@@ -126,10 +135,6 @@ def _prefer_gmsh(formats):
 
 def _meshio_read(path: Path):
     """meshio.read without its habit of printing and calling sys.exit on unreadable files."""
-    # meshio costs 0.7 s to import: only the commands that read or write mesh files pay it
-    import meshio
-    from meshio import _helpers
-
     try:
         formats = _helpers._filetypes_from_path(path)
     except (KeyError, ValueError, meshio.ReadError):
@@ -248,19 +253,26 @@ def _choose_scalar(m, n, scalar, cell_to_point, p32, tet_chunks, cell_of_tet, so
             return point_scalars[scalar], scalar
         if scalar in m.cell_data:
             if not cell_to_point:
-                raise ReadError(f"{source}: {scalar!r} is cell data; add --cell-to-point to average it to the points")
+                raise ReadError(f"{source}: {scalar!r} is cell data; it can be used only averaged to the points "
+                                "(cell-to-point)")
             return _cell_to_point(m, scalar, p32, tet_chunks, cell_of_tet, n), scalar
         names = sorted(point_scalars) + [f"{k} (cell data)" for k in sorted(m.cell_data)]
         raise ReadError(f"{source}: no point scalar named {scalar!r}; available: {', '.join(names) or 'none'}")
+    if cell_to_point:
+        cell_names = sorted(m.cell_data)
+        if len(cell_names) == 1:
+            return _cell_to_point(m, cell_names[0], p32, tet_chunks, cell_of_tet, n), cell_names[0]
+        if len(cell_names) > 1:
+            raise ReadError(f"{source}: several cell arrays, choose the scalar by name: {', '.join(cell_names)}")
     if len(point_scalars) == 1:
         (name, arr), = point_scalars.items()
         return arr, name
     if len(point_scalars) > 1:
-        raise ReadError(f"{source}: several point scalars, choose one with --scalar: {', '.join(sorted(point_scalars))}")
+        raise ReadError(f"{source}: several point scalars, choose one by name: {', '.join(sorted(point_scalars))}")
     cell_names = sorted(m.cell_data)
     if cell_names:
-        raise ReadError(f"{source}: no point scalar; cell data {', '.join(cell_names)} can be used with "
-                        f"--scalar NAME --cell-to-point")
+        raise ReadError(f"{source}: no point scalar; cell data ({', '.join(cell_names)}) can be averaged to the "
+                        "points on request (cell-to-point)")
     raise ReadError(f"{source}: the mesh has no scalar data")
 
 
@@ -286,13 +298,15 @@ def _cell_to_point(m, name, p32, tet_chunks, cell_of_tet, n):
 
 def write_mesh(mesh: TetMesh, path, *, force: bool = False) -> None:
     """Write a linear tet mesh with density as point data, format from the extension, atomically."""
-    import meshio  # start-up time: see _meshio_read
-
     path = Path(path)
     try:
-        fmt = _prefer_gmsh(meshio._helpers._filetypes_from_path(path))[0]
+        fmt = _prefer_gmsh(_helpers._filetypes_from_path(path))[0]
     except Exception:
-        raise ReadError(f"cannot tell the output format from {path.name!r}; use an extension such as .vtu, .vtk, .msh, .xdmf") from None
+        fmt = None
+    if fmt not in TET_FORMATS:
+        raise OutputError(f"cannot write a tet mesh as {path.name!r}: "
+                          f"{'that format holds no tetrahedra' if fmt else 'unknown extension'}; "
+                          f"use one of {', '.join(TET_EXTENSIONS)}")
     if fmt in ("xdmf", "h5m", "med") and importlib.util.find_spec("h5py") is None:
         raise OutputError(f"writing {fmt} files needs h5py (pip install h5py); .vtu needs nothing extra")
     m = meshio.Mesh(np.asarray(mesh.points), [("tetra", np.asarray(mesh.tets))],

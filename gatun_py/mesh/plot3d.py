@@ -105,7 +105,7 @@ def read_q(path, dims: tuple[int, int, int], variable: str = "density") -> np.nd
     """One scalar per grid point from a Q file, as float32."""
     path = Path(path)
     if variable not in Q_VARIABLES:
-        raise ReadError(f"unknown --q-var {variable!r}; choose one of {', '.join(Q_VARIABLES)}")
+        raise ReadError(f"unknown Q variable {variable!r}; choose one of {', '.join(Q_VARIABLES)}")
     try:
         raw = path.read_bytes()
     except OSError as e:

@@ -24,7 +24,7 @@ from .._resources import peak_rss_mb
 from ..codec import TetcReader
 from ..codec.container import MAGIC
 from ..errors import CorruptFileError, OptionError
-from ..mesh import default_step, mesh_batches, read_mesh
+from ..mesh import TetMesh, default_step, mesh_batches, read_mesh
 from ..render.camera import Camera
 from ..render.raycast import render_mesh
 from ..render.stream import render_batches
@@ -45,6 +45,7 @@ class View:
     mode: str = "volume"
     step: float | None = None
     lean: bool = False  # StreamingRaycaster's: free the faces no ray needs any more
+    scalar_range: tuple | None = None  # what the transfer function is normalised to (default: the mesh's)
 
     def __post_init__(self):
         if self.camera is None:
@@ -111,6 +112,7 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
     if target is None:
         target = resolve_target(reader, ratio=ratio, level=level)
     lo, hi, rng, step = file_render_defaults(reader)
+    rng = view.scalar_range if view.scalar_range is not None else rng
     camera = view.camera.fit(lo, hi)
     step = view.step if view.step is not None else step
     times = {"decode_s": 0.0, "filter_s": 0.0}
@@ -167,17 +169,22 @@ def _run_generic(reader, target, anc, camera, view, rng, step, times):
     return res, fstats
 
 
-def render_mesh_file(path, view: View, *, read_kwargs: dict | None = None, progress=None) -> PipelineResult:
-    """Render any mesh file (not ``.tetc``) whole, fed batch-wise like a decoded stream."""
+def render_mesh_file(source, view: View, *, read_kwargs: dict | None = None, progress=None) -> PipelineResult:
+    """Render a mesh file (not ``.tetc``) or a :class:`TetMesh` whole, fed batch-wise like a decoded stream."""
     t0 = time.perf_counter()
-    mesh, report = read_mesh(path, **(read_kwargs or {}))
+    if isinstance(source, TetMesh):
+        mesh, notes = source, []
+    else:
+        mesh, report = read_mesh(source, **(read_kwargs or {}))
+        notes = list(report.notes)
     read_s = time.perf_counter() - t0
     lo, hi = mesh.bbox
+    rng = view.scalar_range if view.scalar_range is not None else mesh.scalar_range
     res = render_batches(mesh_batches(mesh), view.camera.fit(lo, hi), view.tf, mode=view.mode, step=view.step,
-                         scalar_range=mesh.scalar_range, expected_tets=mesh.n_tets, lean=False, progress=progress)
+                         scalar_range=rng, expected_tets=mesh.n_tets, lean=False, progress=progress)
     stats = dict(res.stats)
     stats.update(decode_s=read_s + stats.get("decode_s", 0.0), filter_s=0.0, pipeline="streaming", level=0,
-                 ratio=0.0, merges=0, tets_decoded=mesh.n_tets, notes=list(report.notes),
+                 ratio=0.0, merges=0, tets_decoded=mesh.n_tets, notes=notes,
                  peak_rss_mb=peak_rss_mb())
     return PipelineResult(res.image, stats)
 

@@ -1,20 +1,113 @@
-"""Turning a premultiplied RGBA render into an 8-bit PNG (black background), written atomically."""
+"""From a premultiplied RGBA render to an 8-bit picture: background, colour bar, image files.
+
+PNG is written by our own encoder (no filtering, zlib level 6: byte-stable across library versions);
+the other formats go through Pillow, which scikit-image already depends on. Every file is written
+atomically, in the format its extension names, or refused.
+"""
 
 from __future__ import annotations
 
+import io
 import struct
 import zlib
+from pathlib import Path
 
 import numpy as np
+from PIL import Image, ImageDraw, ImageFont
 
-from gatun_py._atomic import write_bytes_atomic
+from .._atomic import write_bytes_atomic
+from ..errors import OptionError, OutputError
+
+# extension -> Pillow format name (PNG is ours)
+IMAGE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".webp": "WEBP", ".tif": "TIFF",
+                 ".tiff": "TIFF", ".bmp": "BMP"}
 
 
-def to_rgb8(image) -> np.ndarray:
-    """(H, W, 3) uint8 of a premultiplied RGBA image composited on black."""
-    rgb = np.asarray(image, dtype=np.float64)[..., :3]
-    rgb = np.nan_to_num(rgb, nan=0.0, posinf=1.0, neginf=0.0)
+def to_rgb8(image, background=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """(H, W, 3) uint8 of a premultiplied RGBA image composited over ``background`` (RGB in 0..1).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> px = np.array([[[0.5, 0.0, 0.0, 0.5]]])           # half-transparent red, premultiplied
+    >>> to_rgb8(px).tolist(), to_rgb8(px, (1, 1, 1)).tolist()
+    ([[[128, 0, 0]]], [[[255, 128, 128]]])
+    """
+    img = np.asarray(image, dtype=np.float64)
+    rgb = np.nan_to_num(img[..., :3], nan=0.0, posinf=1.0, neginf=0.0)
+    bg = np.asarray(background, dtype=np.float64).reshape(3)
+    if np.any(bg != 0.0) and img.shape[-1] == 4:
+        alpha = np.clip(np.nan_to_num(img[..., 3:4], nan=0.0), 0.0, 1.0)
+        rgb = rgb + (1.0 - alpha) * bg
     return np.clip(np.rint(rgb * 255.0), 0, 255).astype(np.uint8)
+
+
+def parse_colour(text) -> tuple[float, float, float]:
+    """A colour as RGB in 0..1 from a name (``white``), ``#rrggbb`` or ``r,g,b`` in 0..1.
+
+    Examples
+    --------
+    >>> parse_colour("white"), parse_colour("#ff8000"), parse_colour("0, 0.5, 1")
+    ((1.0, 1.0, 1.0), (1.0, 0.5019607843137255, 0.0), (0.0, 0.5, 1.0))
+    """
+    if isinstance(text, (tuple, list, np.ndarray)):
+        vals = [float(v) for v in text]
+    else:
+        s = str(text).strip()
+        if "," in s:
+            try:
+                vals = [float(v) for v in s.split(",")]
+            except ValueError:
+                raise OptionError(f"colour {text!r}: expected r,g,b in 0..1") from None
+        else:
+            from PIL import ImageColor
+
+            try:
+                vals = [c / 255.0 for c in ImageColor.getrgb(s)[:3]]
+            except ValueError:
+                raise OptionError(f"unknown colour {text!r} (a name, #rrggbb or r,g,b in 0..1)") from None
+    if len(vals) != 3 or not all(np.isfinite(vals)) or min(vals) < 0.0 or max(vals) > 1.0:
+        raise OptionError(f"colour {text!r}: expected three values in 0..1")
+    return tuple(float(v) for v in vals)
+
+
+def add_colorbar(rgb8: np.ndarray, table: np.ndarray, scalar_range, label: str,
+                 background=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """The image with a colour bar on its right: the transfer function's colours (opacity as
+    brightness over the background), the scalar's name, and the range's two ends.
+
+    ``table`` is the (k, 4) RGBA lookup table over ``scalar_range`` (``TransferFunction.table``).
+    """
+    h, w, _ = rgb8.shape
+    bar_w = max(8, w // 32)
+    pad = max(4, w // 64)
+    font = ImageFont.load_default()
+    lo, hi = (float(v) for v in scalar_range)
+    texts = [label, f"{hi:.4g}", f"{lo:.4g}"]
+    probe = ImageDraw.Draw(Image.new("RGB", (1, 1)))
+    text_w = max(probe.textbbox((0, 0), t, font=font)[2] for t in texts)
+    text_h = max(probe.textbbox((0, 0), t, font=font)[3] for t in texts)
+    panel_w = 2 * pad + max(bar_w + pad + text_w, text_w)
+    out = np.empty((h, w + panel_w, 3), np.uint8)
+    out[:, :w] = rgb8
+    bg = np.asarray(background, np.float64).reshape(3)
+    out[:, w:] = np.clip(np.rint(bg * 255), 0, 255).astype(np.uint8)
+    top, bottom = pad + text_h + pad, h - pad
+    if bottom - top >= 4:
+        t = np.linspace(1.0, 0.0, bottom - top)
+        idx = np.clip(np.rint(t * (len(table) - 1)).astype(int), 0, len(table) - 1)
+        rgba = table[idx]
+        alpha = np.clip(0.25 + 0.75 * rgba[:, 3:4] / max(float(table[:, 3].max()), 1e-12), 0.0, 1.0)
+        col = np.clip(np.rint((rgba[:, :3] * alpha + (1 - alpha) * bg) * 255), 0, 255).astype(np.uint8)
+        out[top:bottom, w + pad:w + pad + bar_w] = col[:, None, :]
+    img = Image.fromarray(out)
+    draw = ImageDraw.Draw(img)
+    ink = (0, 0, 0) if bg.mean() > 0.5 else (255, 255, 255)
+    draw.text((w + pad, pad), label, fill=ink, font=font)
+    x = w + pad + bar_w + pad
+    draw.text((x, top), texts[1], fill=ink, font=font)
+    draw.text((x, max(top, bottom - text_h)), texts[2], fill=ink, font=font)
+    return np.asarray(img)
 
 
 def png_bytes(rgb8) -> bytes:
@@ -34,18 +127,38 @@ def png_bytes(rgb8) -> bytes:
             + chunk(b"IEND", b""))
 
 
-def read_png_rgb(path) -> np.ndarray:
-    """Read an 8-bit RGB(A) PNG into (H, W, 3) uint8 (uses scikit-image)."""
-    from skimage.io import imread  # 1 s to import: only image comparison reads images
+def image_format(path) -> str:
+    """The image format a file name asks for; :class:`OutputError` listing the choices otherwise."""
+    ext = Path(path).suffix.lower()
+    if ext not in IMAGE_FORMATS:
+        raise OutputError(f"{path}: cannot write images as {ext or 'a file without an extension'!r}; "
+                          f"choose one of {', '.join(sorted(IMAGE_FORMATS))}")
+    return IMAGE_FORMATS[ext]
 
-    img = imread(path)
-    if img.ndim == 2:
-        img = np.stack([img] * 3, axis=-1)
+
+def image_bytes(rgb8, fmt: str) -> bytes:
+    """Encode (H, W, 3) uint8 in ``fmt`` (a value of :data:`IMAGE_FORMATS`)."""
+    if fmt == "PNG":
+        return png_bytes(rgb8)
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(rgb8, dtype=np.uint8)).save(buf, format=fmt, **(
+        {"quality": 92} if fmt in ("JPEG", "WEBP") else {}))
+    return buf.getvalue()
+
+
+def read_png_rgb(path) -> np.ndarray:
+    """Read an 8-bit RGB(A) image into (H, W, 3) uint8."""
+    with Image.open(path) as im:
+        img = np.asarray(im.convert("RGB"))
     return np.asarray(img[..., :3], dtype=np.uint8)
 
 
-def write_png(path, image, *, force: bool = False) -> None:
-    """Write a render (premultiplied RGBA float, or RGB uint8) as an 8-bit RGB PNG atomically."""
+def write_image(path, image, *, force: bool = False) -> None:
+    """Write a render (premultiplied RGBA float, or RGB uint8) atomically, in the format of its extension."""
+    fmt = image_format(path)
     img = np.asarray(image)
     rgb8 = img if img.dtype == np.uint8 and img.shape[-1] == 3 else to_rgb8(img)
-    write_bytes_atomic(path, png_bytes(rgb8), force=force)
+    write_bytes_atomic(path, image_bytes(rgb8, fmt), force=force)
+
+
+write_png = write_image  # the name the pipeline has always used; any extension in IMAGE_FORMATS works

@@ -37,7 +37,7 @@ import numpy as np
 from ..errors import OptionError
 
 # Presets ship inside the package (read through importlib.resources, so a wheel or a zip works).
-PRESETS = resources.files(__package__) / "presets"
+PRESETS = resources.files(f"{__package__}.presets")
 
 # Number of entries of the lookup tables the kernels interpolate in (per table, over the scalar
 # range); fine enough that the piecewise-linear re-interpolation error is far below 8-bit output.

@@ -104,7 +104,7 @@ def build_levels(mesh: TetMesh, forest: MergeForest, levels=None) -> list[LevelM
         wanted = reach
     elif isinstance(levels, (int, np.integer)):
         if levels < 0:
-            raise OptionError(f"--levels must be >= 0, got {levels}")
+            raise OptionError(f"levels must be >= 0, got {levels}")
         wanted = [i for i in reach if i <= levels]
     else:
         wanted = sorted({int(i) for i in levels} | {0})

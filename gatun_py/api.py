@@ -1,0 +1,512 @@
+"""The public verbs: :func:`compress`, :func:`open`, :func:`render`, and what they return.
+
+Each verb validates its arguments, then calls down the pipeline's stages. The command line
+(``tetc compress``, ``tetc render``, ...) is a thin layer over these, so a script gets exactly what
+the command does::
+
+    import gatun_py
+    gatun_py.compress("mesh.vtu", "mesh.tetc")
+    f = gatun_py.open("mesh.tetc")
+    frame = gatun_py.render(f, size=512, tf="bluntfin", azimuth=30, elevation=20, ratio=0.9)
+    frame.save("mesh.png")
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ._atomic import check_output_path
+from ._resources import peak_rss_mb
+from .codec import LevelPayload, TetcReader, write_tetc
+from .codec.info import tetc_info
+from .errors import OptionError
+from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
+from .pipeline.budget import plan_file_budget
+from .pipeline.stream import PIPELINES, View, is_tetc, render_mesh_file, render_tetc
+from .render.camera import Camera
+from .render.image import add_colorbar, image_bytes, parse_colour, to_rgb8, write_image
+from .render.raycast import MODES
+from .render.transfer import load_transfer_function
+from .simplify import build_levels, decimate, storage_forests
+from .simplify.filter import SimplifyFilter
+from .simplify.levels import read_simplified, resolve_target, target_ancestors
+
+__all__ = ["compress", "decompress", "convert", "info", "open", "render", "TetcFile", "Frame"]
+
+# The largest image a verb renders: 16384² is what the camera accepts, but 4096² already takes
+# 200 MB of float RGBA; larger is nearly always a typo.
+MAX_IMAGE_SIDE = 8192
+
+
+# -- reading the source --------------------------------------------------------------------------
+
+def _as_mesh(source, read_options: dict, log) -> TetMesh:
+    """A TetMesh from a path, a TetMesh or a meshio.Mesh (notes of the reader go to ``log``)."""
+    if isinstance(source, TetMesh):
+        return source
+    if type(source).__name__ == "Mesh" and hasattr(source, "cells") and hasattr(source, "points"):
+        mesh, report = mesh_from_meshio(source, scalar=read_options.get("scalar"),
+                                        cell_to_point=read_options.get("cell_to_point", False), source="<meshio.Mesh>")
+    elif isinstance(source, (str, os.PathLike)):
+        mesh, report = read_mesh(source, **read_options)
+    else:
+        raise OptionError(f"cannot read a mesh from a {type(source).__name__}: give a path, a TetMesh or a meshio.Mesh")
+    for note in report.notes:
+        log(f"note: {note}")
+    return mesh
+
+
+def _quiet(_msg: str) -> None:
+    pass
+
+
+# -- compress ------------------------------------------------------------------------------------
+
+def compress(source, output, *, levels: int | None = None, mesh_only: bool = False, force: bool = False,
+             w_density: float = 1.0, w_geometry: float = 1.0, scalar: str | None = None, q_file=None,
+             q_var: str = "density", cell_to_point: bool = False, progress=None, log=None) -> "TetcFile":
+    """Compress a mesh losslessly into a ``.tetc`` file, with its merge forest and levels.
+
+    Parameters
+    ----------
+    source : path-like, TetMesh or meshio.Mesh
+        Any meshio volume format or a PLOT3D grid (see :func:`gatun_py.read_mesh`).
+    output : path-like
+        The ``.tetc`` file, written atomically.
+    levels : int, optional
+        Store pre-simplified levels 1..K (ratio 1 - 1/2^i); default every level the forest reaches.
+    mesh_only : bool
+        Store the mesh alone: no merge forest, no levels.
+    force : bool
+        Overwrite ``output`` if it exists.
+    w_density, w_geometry : float
+        Decimation weights of the mass error and the boundary geometry error (>= 0).
+    scalar, q_file, q_var, cell_to_point
+        How to read ``source`` (see :func:`gatun_py.read_mesh`).
+    progress : callable, optional
+        ``progress(done, total)``: vertices the decimation has processed so far, of ``total``.
+    log : callable, optional
+        Called with one-line status messages (notes about the input, the forest, the sizes).
+
+    Returns
+    -------
+    TetcFile
+        The written file, open.
+
+    Examples
+    --------
+    >>> import gatun_py, tempfile, os
+    >>> from gatun_py.warmup import tiny_mesh
+    >>> out = os.path.join(tempfile.mkdtemp(), "tiny.tetc")
+    >>> f = gatun_py.compress(tiny_mesh(), out)
+    >>> f.n_points, f.n_tets, f.mesh().n_tets
+    (48, 90, 90)
+    """
+    log = log or _quiet
+    if levels is not None and (not isinstance(levels, (int, np.integer)) or levels < 0):
+        raise OptionError(f"levels must be a non-negative integer, got {levels!r}")
+    for name, w in (("w_density", w_density), ("w_geometry", w_geometry)):
+        if not (isinstance(w, (int, float)) and math.isfinite(w) and w >= 0):
+            raise OptionError(f"{name} must be a finite number >= 0, got {w!r}")
+    check_output_path(output, force=force)  # fail before the (long) work
+    if isinstance(source, (str, os.PathLike)) and _same_file(source, output):
+        raise OptionError(f"the output {output} is the input file")
+    t0 = time.perf_counter()
+    mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point), log)
+    name = Path(source).name if isinstance(source, (str, os.PathLike)) else ""
+    log(f"read {name or 'mesh'}: {mesh.n_points} points, {mesh.n_tets} tets")
+    if mesh_only:
+        payload = mesh
+    else:
+        forest = decimate(mesh, w_density=w_density, w_geometry=w_geometry, progress=_counter(progress, mesh.n_points))
+        lv = build_levels(mesh, forest, levels)
+        log(f"merge forest: {forest.n_merges} merges (max ratio {forest.max_ratio:.5f}); "
+            f"levels {', '.join(str(x.level) for x in lv)}")
+        payload = [LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
+                   for x, f in zip(lv, storage_forests(lv))]
+    n = write_tetc(output, payload, source=name, force=force)
+    out = TetcFile(output)
+    info = out.info
+    log(f"wrote {output}: {n} bytes ({8.0 * n / max(mesh.n_tets, 1):.2f} bits/tet overall, "
+        f"connectivity {info['bits_per_tet_connectivity']:.2f} bits/tet, "
+        f"geometry {info['bits_per_vertex_geometry']:.1f} bits/vertex) in {time.perf_counter() - t0:.1f} s")
+    return out
+
+
+def _counter(progress, total: int):
+    """Adapt ``progress(done, total)`` to the stages' ``update(increment)`` callbacks."""
+    if progress is None:
+        return None
+    done = [0]
+
+    def update(n: int = 1) -> None:
+        done[0] += int(n)
+        progress(done[0], total)
+
+    return update
+
+
+def decompress(source, output, *, ratio: float | None = None, level: int | None = None, force: bool = False) -> TetMesh:
+    """Decode a ``.tetc`` file (optionally simplified) and write it in any meshio format.
+
+    Returns the mesh written.
+    """
+    check_output_path(output, force=force)
+    if isinstance(source, (str, os.PathLike)) and _same_file(source, output):
+        raise OptionError(f"the output {output} is the input file")
+    f = source if isinstance(source, TetcFile) else TetcFile(source)
+    mesh = f.mesh(ratio=ratio, level=level)
+    write_mesh(mesh, output, force=force)
+    return mesh
+
+
+def convert(source, output, *, refine: int = 1, force: bool = False, scalar: str | None = None, q_file=None,
+            q_var: str = "density", cell_to_point: bool = False, log=None) -> TetMesh:
+    """Read any mesh (or PLOT3D grid), split it into tets and write it in any meshio format.
+
+    ``refine`` (PLOT3D only) cuts every grid cell into refine³ cells on its trilinear map first
+    (interpolated scalar: larger meshes for scale tests, not new data). Returns the mesh written.
+    """
+    log = log or _quiet
+    if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)) or not 1 <= refine <= 16:
+        raise OptionError(f"refine must be an integer in 1..16, got {refine!r}")
+    check_output_path(output, force=force)
+    if isinstance(source, (str, os.PathLike)) and _same_file(source, output):
+        raise OptionError(f"the output {output} is the input file")
+    if isinstance(source, (str, os.PathLike)):
+        mesh, report = read_mesh(source, refine=int(refine), scalar=scalar, q_file=q_file, q_var=q_var,
+                                 cell_to_point=cell_to_point)
+        for note in report.notes:
+            log(f"note: {note}")
+    else:
+        mesh = _as_mesh(source, dict(scalar=scalar, cell_to_point=cell_to_point), log)
+    write_mesh(mesh, output, force=force)
+    return mesh
+
+
+def info(source, *, scalar: str | None = None, q_file=None, q_var: str = "density",
+         cell_to_point: bool = False) -> dict:
+    """Describe a ``.tetc`` file (sizes, bits per tet, levels, forest) or any mesh file (sizes,
+    boundary, degenerate tets, the reader's notes): what ``tetc info --json`` prints."""
+    if isinstance(source, TetcFile) or (isinstance(source, (str, os.PathLike)) and is_tetc(source)):
+        return (source if isinstance(source, TetcFile) else TetcFile(source)).info
+    mesh, report = read_mesh(source, scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point)
+    lo, hi = mesh.bbox
+    return {
+        "points": mesh.n_points,
+        "tets": mesh.n_tets,
+        "boundary_faces": int(len(mesh.boundary_faces())),
+        "zero_volume_tets": report.zero_volume_tets,
+        "reoriented_tets": report.reoriented_tets,
+        "coincident_points": report.coincident_points,
+        "unreferenced_points": report.unreferenced_points,
+        "bbox": [lo.tolist(), hi.tolist()],
+        "scalar": mesh.scalar_name,
+        "scalar_range": list(mesh.scalar_range),
+        "notes": list(report.notes),
+    }
+
+
+def _same_file(a, b) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+# -- open ----------------------------------------------------------------------------------------
+
+class TetcFile:
+    """An open ``.tetc`` file: what it holds, its meshes and its stream.
+
+    Parameters
+    ----------
+    path : path-like or bytes
+
+    Attributes
+    ----------
+    reader : TetcReader
+        The low-level reader (sections, levels, the decoder).
+
+    Examples
+    --------
+    >>> import gatun_py, tempfile, os
+    >>> from gatun_py.warmup import tiny_mesh
+    >>> out = os.path.join(tempfile.mkdtemp(), "tiny.tetc")
+    >>> f = gatun_py.open(gatun_py.compress(tiny_mesh(), out).path)
+    >>> f.levels[:2]
+    [0, 1]
+    >>> sum(len(b.tets) for b in f)   # the decoded stream of level 0
+    90
+    """
+
+    def __init__(self, path):
+        self.reader = path.reader if isinstance(path, TetcFile) else TetcReader(path)
+        self.path = self.reader.container.name
+
+    def __repr__(self) -> str:
+        return (f"TetcFile({self.path!r}, points={self.n_points}, tets={self.n_tets}, "
+                f"scalar={self.scalar_name!r}, levels={self.levels}, max_ratio={self.max_ratio:.4f})")
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def __iter__(self):
+        return self.batches()
+
+    @property
+    def info(self) -> dict:
+        """What ``tetc info --json`` prints: sizes, bits per tet, sections, levels, forest."""
+        return tetc_info(self.reader)
+
+    @property
+    def levels(self) -> list[int]:
+        """The stored levels (0 = the full mesh)."""
+        return sorted(int(lv["level"]) for lv in self.reader.levels)
+
+    @property
+    def n_points(self) -> int:
+        return int(self.reader.meta.get("points", 0))
+
+    @property
+    def n_tets(self) -> int:
+        return int(self.reader.meta.get("tets", 0))
+
+    @property
+    def scalar_name(self) -> str:
+        return self.reader.scalar_name
+
+    @property
+    def max_ratio(self) -> float:
+        """The largest simplification ratio the stored forest reaches (0 without one)."""
+        return self.reader.forest_merges() / self.n_points if self.n_points else 0.0
+
+    def mesh(self, ratio: float | None = None, *, level: int | None = None) -> TetMesh:
+        """The mesh at a simplification ratio (merged / all vertices) or a stored level; default the full mesh."""
+        if ratio is not None and level is not None:
+            raise OptionError("give a ratio or a level, not both")
+        return read_simplified(self.reader, ratio=ratio, level=level)
+
+    def batches(self, *, ratio: float | None = None, level: int | None = None, batch_tets: int = 65536):
+        """The decoded stream (:class:`~gatun_py.mesh.TetBatch`), simplified on the fly to ``ratio``."""
+        if not (isinstance(batch_tets, (int, np.integer)) and batch_tets > 0):
+            raise OptionError(f"batch_tets must be a positive integer, got {batch_tets!r}")
+        target = resolve_target(self.reader, ratio=ratio, level=level)
+        stream = self.reader.iter_decode(target.level, batch_tets=int(batch_tets))
+        anc = target_ancestors(self.reader, target)
+        return stream if anc is None else SimplifyFilter(anc).filter(stream)
+
+    def render(self, **options) -> "Frame":
+        """:func:`render` this file (same keyword options)."""
+        return render(self, **options)
+
+
+def open(path) -> TetcFile:  # noqa: A001 (the verb users look for, as gzip.open, tarfile.open)
+    """Open a ``.tetc`` file.
+
+    Parameters
+    ----------
+    path : path-like or bytes
+
+    Returns
+    -------
+    TetcFile
+
+    Raises
+    ------
+    ReadError
+        Missing or unreadable file.
+    CorruptFileError
+        Not a ``.tetc`` file, or damaged.
+    """
+    return TetcFile(path)
+
+
+# -- render --------------------------------------------------------------------------------------
+
+@dataclass
+class Frame:
+    """A rendered image.
+
+    Attributes
+    ----------
+    rgb : (H, W, 3) uint8
+        The picture (over the background, with the colour bar if one was asked for).
+    image : (H, W, 4) float32
+        The ray caster's premultiplied RGBA, before background and colour bar.
+    stats : dict
+        Timings and counts (what ``tetc render --stats`` prints).
+    """
+
+    rgb: np.ndarray
+    image: np.ndarray
+    stats: dict = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        h, w, _ = self.rgb.shape
+        return f"Frame({w}x{h}, tets_rendered={self.stats.get('tets_rendered')}, render_s={self.stats.get('render_s', 0):.3f})"
+
+    def save(self, path, *, force: bool = False) -> None:
+        """Write the picture atomically, in the format of the extension (.png, .jpg, .webp, .tif, .bmp)."""
+        write_image(path, self.rgb, force=force)
+
+    def _repr_png_(self) -> bytes:
+        return image_bytes(self.rgb, "PNG")
+
+
+def _check_number(name, v, *, lo=None, lo_open=False, hi=None, allow_none=True):
+    if v is None and allow_none:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
+        raise OptionError(f"{name} must be a finite number, got {v!r}")
+    if lo is not None and (v <= lo if lo_open else v < lo):
+        raise OptionError(f"{name} must be {'>' if lo_open else '>='} {lo:g}, got {v!r}")
+    if hi is not None and v > hi:
+        raise OptionError(f"{name} must be <= {hi:g}, got {v!r}")
+    return float(v)
+
+
+def _size(size) -> tuple[int, int]:
+    w, h = (size, size) if isinstance(size, (int, np.integer)) else tuple(size)
+    for v in (w, h):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= MAX_IMAGE_SIDE:
+            raise OptionError(f"image size must be whole pixels in 1..{MAX_IMAGE_SIDE}, got {size!r}")
+    return int(w), int(h)
+
+
+def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0,
+           ratio: float | None = None, level: int | None = None, budget: float | None = None, mode: str = "volume",
+           step: float | None = None, scalar_range=None, opacity_model: str | None = None,
+           background="black", colorbar: bool = False, lean: bool = False, pipeline: str = "streaming",
+           scalar: str | None = None, q_file=None, q_var: str = "density", cell_to_point: bool = False,
+           progress=None, log=None) -> Frame:
+    """Volume-render a mesh: decode, simplify and ray-cast in one streaming pass.
+
+    Parameters
+    ----------
+    source : path-like, TetcFile, TetMesh or meshio.Mesh
+        A ``.tetc`` file (opened once), any mesh file, or a mesh in memory.
+    size : int or (int, int)
+        Image width and height in pixels.
+    tf : str, path-like, dict or TransferFunction
+        Transfer function: a preset name (``default``, ``bluntfin``, ``combustion``, ``post``,
+        ``fire``), a JSON file (project or ParaView format), a matplotlib colormap name, or a dict.
+    azimuth, elevation, zoom : float
+        VTK's camera: 30 degree perspective fitted to the bounding sphere, then these.
+    ratio : float, optional
+        Simplify to this ratio (merged / all vertices), ``.tetc`` only.
+    level : int, optional
+        Render a stored level as it is, ``.tetc`` only.
+    budget : float, optional
+        Seconds per frame: the finest level and ratio predicted to fit, ``.tetc`` only.
+    mode : {"volume", "face"}
+        Uniform samples every ``step``, or one sample per tet at its faces.
+    step : float, optional
+        Sample spacing (default: half the median boundary edge of the full mesh).
+    scalar_range : (float, float), optional
+        The range the transfer function is normalised to (default: the mesh's). Fix it to compare
+        files or time steps.
+    opacity_model : {"gatun", "vtk"}, optional
+        How opacity accumulates (see :mod:`gatun_py.render.transfer`).
+    background : str or (r, g, b)
+        A colour name, ``#rrggbb`` or RGB in 0..1.
+    colorbar : bool
+        Add a colour bar with the scalar's name and range on the right.
+    lean : bool
+        Hold only the tets in flight (less memory, slower).
+    pipeline : {"streaming", "generic"}
+        One pass, or decode-all-then-render (the paper's baseline).
+    scalar, q_file, q_var, cell_to_point
+        How to read a mesh file (see :func:`gatun_py.read_mesh`).
+    progress : callable, optional
+        ``progress(done, total)``: tets rendered so far, of ``total``.
+    log : callable, optional
+        Called with one-line notes (reader notes, an unmeetable budget, a black image).
+
+    Returns
+    -------
+    Frame
+
+    Examples
+    --------
+    >>> import gatun_py
+    >>> from gatun_py.warmup import tiny_mesh
+    >>> frame = gatun_py.render(tiny_mesh(), size=32, azimuth=30, elevation=20)
+    >>> frame.rgb.shape, frame.stats["rays_unfinished"]
+    ((32, 32, 3), 0)
+    """
+    log = log or _quiet
+    width, height = _size(size)
+    azimuth = _check_number("azimuth", azimuth, allow_none=False)
+    elevation = _check_number("elevation", elevation, allow_none=False)
+    zoom = _check_number("zoom", zoom, lo=0.0, lo_open=True, allow_none=False)
+    step = _check_number("step", step, lo=0.0, lo_open=True)
+    budget = _check_number("budget", budget, lo=0.0, lo_open=True)
+    ratio = _check_number("ratio", ratio, lo=0.0, hi=1.0)
+    if mode not in MODES:
+        raise OptionError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+    if pipeline not in PIPELINES:
+        raise OptionError(f"pipeline must be one of {', '.join(PIPELINES)}, got {pipeline!r}")
+    if sum(x is not None for x in (ratio, level, budget)) > 1:
+        raise OptionError("give at most one of ratio, level and budget")
+    if scalar_range is not None:
+        lo, hi = (_check_number("scalar_range", v, allow_none=False) for v in scalar_range)
+        if not hi > lo:
+            raise OptionError(f"scalar_range must be (min, max) with min < max, got {tuple(scalar_range)}")
+        scalar_range = (lo, hi)
+    bg = parse_colour(background)
+    tf = load_transfer_function(tf)
+    if opacity_model is not None:
+        tf = tf.with_opacity_model(opacity_model)
+    view = View(Camera(width, height, azimuth, elevation, zoom), tf, mode, step, bool(lean), scalar_range)
+
+    t0 = time.perf_counter()
+    planned = {}
+    if isinstance(source, TetcFile) or (isinstance(source, (str, os.PathLike)) and is_tetc(source)):
+        f = source if isinstance(source, TetcFile) else TetcFile(source)
+        target = resolve_target(f.reader, ratio=ratio, level=level)
+        if budget is not None:
+            target, plan, _model, _ = plan_file_budget(f.path, view, budget)
+            planned = {"predicted_s": plan.predicted_s, "budget_s": budget}
+            if not plan.feasible:
+                log(f"note: the budget of {budget:g} s cannot be met: rendering the coarsest level "
+                    f"(predicted {plan.predicted_s:.3f} s)")
+        total = int(f.reader.level_meta(target.level)["tets"])
+        result = render_tetc(f.reader, view, pipeline=pipeline, target=target, progress=_counter(progress, total))
+        name, rng = f.scalar_name, f.reader.meta.get("scalar_range", (0.0, 1.0))
+    else:
+        if ratio is not None or level is not None or budget is not None:
+            raise OptionError("ratio, level and budget need a .tetc file with a merge forest "
+                              "(make one with gatun_py.compress or `tetc compress`)")
+        mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point), log)
+        result = render_mesh_file(mesh, view, progress=_counter(progress, mesh.n_tets))
+        name, rng = mesh.scalar_name, mesh.scalar_range
+    st = result.stats
+    st.pop("filter", None)
+    st.pop("notes", None)
+    st.update(planned)
+    rng = scalar_range if scalar_range is not None else tuple(float(v) for v in rng)
+    rgb = to_rgb8(result.image, bg)
+    if colorbar:
+        table = tf.table(rng)[0]
+        rgb = add_colorbar(rgb, table, rng, name, bg)
+    st["render_total_s"] = time.perf_counter() - t0
+    st["peak_rss_mb"] = peak_rss_mb()
+    st["size"] = [width, height]
+    st["scalar"] = name
+    st["scalar_range"] = list(rng)
+    if st.get("rays_hit", 1) == 0:
+        log("note: no ray hits the mesh; the image is black")
+    if st.get("rays_unfinished"):
+        log(f"warning: {st['rays_unfinished']} rays could not be completed")
+    return Frame(rgb, result.image, st)
+

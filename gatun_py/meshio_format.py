@@ -1,0 +1,32 @@
+"""``.tetc`` as a meshio format: ``meshio.read("x.tetc")`` and ``meshio.write("x.tetc", mesh)``.
+
+Registered by ``import gatun_py``, so ``meshio convert``, PyVista (``pyvista.read`` goes through
+meshio for formats VTK does not know) and any meshio user can open compressed files.
+"""
+
+from __future__ import annotations
+
+import meshio
+import numpy as np
+
+from .api import compress, open as open_tetc
+
+FORMAT_NAME = "tetc"
+
+
+def read(filename) -> meshio.Mesh:
+    """The full mesh of a ``.tetc`` file as a ``meshio.Mesh`` (tetra cells, the scalar as point data)."""
+    mesh = open_tetc(filename).mesh()
+    return meshio.Mesh(np.asarray(mesh.points), [("tetra", np.asarray(mesh.tets))],
+                       point_data={mesh.scalar_name: np.asarray(mesh.density)})
+
+
+def write(filename, mesh: meshio.Mesh, **options) -> None:
+    """Compress a ``meshio.Mesh`` into ``filename`` (with its merge forest and levels; like
+    meshio's other writers it overwrites). Options go to :func:`gatun_py.compress`."""
+    options.setdefault("force", True)
+    compress(mesh, filename, **options)
+
+
+def register() -> None:
+    meshio.register_format(FORMAT_NAME, [".tetc"], read, {FORMAT_NAME: write})

@@ -10,18 +10,13 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-SAMPLES = ROOT / "sample_meshes"
+sys.path.insert(0, str(ROOT / "tests"))
+from samples import SAMPLE_DIR as SAMPLES  # noqa: E402  (the one table of samples, shared with the tests)
+from samples import SAMPLES as SAMPLE_FILES  # noqa: E402,F401
+
 SECTIONS = ROOT / "bench" / "sections"
 FIGURES = ROOT / "bench" / "figures"
 WORK = ROOT / "bench" / "out"  # scratch files, not committed
-
-# name -> (path, read_mesh keyword arguments, transfer function preset)
-SAMPLE_FILES = {
-    "bluntfin": (SAMPLES / "bluntfin" / "bluntfinxyz.bin", {}, "bluntfin"),
-    "combustion": (SAMPLES / "combustion_chamber" / "combxyz.bin", {}, "combustion"),
-    "post": (SAMPLES / "lox_post_tets" / "post.vtk", {}, "post"),
-    "fire": (SAMPLES / "room_fire" / "fire_ug.vtu", {"scalar": "t"}, "fire"),
-}
 
 
 def load(name):

@@ -7,16 +7,13 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
-SAMPLES = ROOT / "sample_meshes"
+from samples import SAMPLE_DIR as SAMPLES
+from samples import SAMPLES as _TABLE
 
-# name -> (path, read_mesh keyword arguments)
-SAMPLE_FILES = {
-    "bluntfin": (SAMPLES / "bluntfin" / "bluntfinxyz.bin", {}),
-    "combustion": (SAMPLES / "combustion_chamber" / "combxyz.bin", {}),
-    "post": (SAMPLES / "lox_post_tets" / "post.vtk", {}),
-    "fire": (SAMPLES / "room_fire" / "fire_ug.vtu", {"scalar": "t"}),
-}
+ROOT = Path(__file__).resolve().parent.parent
+
+# name -> (path, read_mesh keyword arguments); the table itself is tests/samples.py
+SAMPLE_FILES = {name: (path, kw) for name, (path, kw, _tf) in _TABLE.items()}
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "2")
 

@@ -13,7 +13,7 @@ import zlib
 from pathlib import Path
 
 import numpy as np
-from PIL import Image, ImageDraw, ImageFont
+from PIL import Image, ImageColor, ImageDraw, ImageFont
 
 from .._atomic import write_bytes_atomic
 from ..errors import OptionError, OutputError
@@ -60,8 +60,6 @@ def parse_colour(text) -> tuple[float, float, float]:
             except ValueError:
                 raise OptionError(f"colour {text!r}: expected r,g,b in 0..1") from None
         else:
-            from PIL import ImageColor
-
             try:
                 vals = [c / 255.0 for c in ImageColor.getrgb(s)[:3]]
             except ValueError:

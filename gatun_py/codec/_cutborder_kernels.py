@@ -35,6 +35,14 @@ MAX_C1 = 15  # coded edge-adjacent candidates (symbol 15 = escape)
 MAX_C2 = 64  # vertex-adjacent candidates
 ESC = 15
 
+# What follows an escape: the codes the encoder writes and the decoder reads (docs/format.md).
+# Tet phase, a 2-bit kind symbol: the paper's cases (b), (c) and (d).
+KIND_NEW, KIND_VERTEX_ADJACENT, KIND_TABLE = 0, 1, 2
+# Boundary phase and seed triangles, one adaptive bit: a new vertex, or a raw vertex-table index.
+BIT_NEW, BIT_TABLE = 1, 0
+# The encoder's per-tet symbol log (``syms``, for statistics): candidate 0..14, or the escape kind.
+SYM_NEW, SYM_VERTEX_ADJACENT, SYM_TABLE = ESC + KIND_NEW, ESC + KIND_VERTEX_ADJACENT, ESC + KIND_TABLE
+
 # model layout of the tet phase
 N_C1_CTX = 5 * 4 * 4 * 2
 TM_C1 = 0
@@ -480,14 +488,14 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
             for k in range(3):
                 v = faces[f, k]
                 if dec_of[v] == -1:
-                    rc.enc_bit(st, out, probs, SM_SEED + k, 1)
+                    rc.enc_bit(st, out, probs, SM_SEED + k, BIT_NEW)
                     dec_of[v] = nv
                     order[nv] = v
                     for j in range(2):
                         pred[nv, j] = tri[j] if j < k else -1
                     nv += 1
                 else:
-                    rc.enc_bit(st, out, probs, SM_SEED + k, 0)
+                    rc.enc_bit(st, out, probs, SM_SEED + k, BIT_TABLE)
                     rc.enc_raw(st, out, dec_of[v], _bitlen(nv - 1))
                 tri[k] = dec_of[v]
             fvisited[f] = True
@@ -528,7 +536,7 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
         prev_new = 0
         if sym == ESC:
             if x == -1:
-                rc.enc_bit(st, out, probs, SM_NEW + (1 if n1 > 0 else 0), 1)
+                rc.enc_bit(st, out, probs, SM_NEW + (1 if n1 > 0 else 0), BIT_NEW)
                 x = nv
                 dec_of[xo] = nv
                 order[nv] = xo
@@ -538,7 +546,7 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
                 nv += 1
                 prev_new = 1
             else:
-                rc.enc_bit(st, out, probs, SM_NEW + (1 if n1 > 0 else 0), 0)
+                rc.enc_bit(st, out, probs, SM_NEW + (1 if n1 > 0 else 0), BIT_TABLE)
                 rc.enc_raw(st, out, x, _bitlen(nv - 1))
         fvisited[f] = True
         face_src[done] = f
@@ -580,7 +588,7 @@ def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
         s = _pop(B)
         if s == -1:
             for k in range(3):
-                if rc.dec_bit(st, data, probs, SM_SEED + k) == 1:
+                if rc.dec_bit(st, data, probs, SM_SEED + k) == BIT_NEW:
                     if nv >= n_points:
                         return nv, ST_ERROR
                     for j in range(2):
@@ -613,7 +621,7 @@ def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
             if sym >= n1:
                 return nv, ST_ERROR
             x = cand[sym]
-        elif rc.dec_bit(st, data, probs, SM_NEW + (1 if n1 > 0 else 0)) == 1:
+        elif rc.dec_bit(st, data, probs, SM_NEW + (1 if n1 > 0 else 0)) == BIT_NEW:
             if nv >= n_points:
                 return nv, ST_ERROR
             x = nv
@@ -806,7 +814,7 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
         if sym == ESC:
             kctx = TM_KIND + 4 * ((1 if n1 > 0 else 0) + 2 * prev_esc)
             if d == -1:
-                rc.enc_sym(st, out, probs, kctx, 2, 0)
+                rc.enc_sym(st, out, probs, kctx, 2, KIND_NEW)
                 d = nv
                 dec_of[do] = nv
                 order[nv] = do
@@ -823,12 +831,12 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
                         j = i
                         break
                 if j >= 0:
-                    rc.enc_sym(st, out, probs, kctx, 2, 1)
-                    syms[done] = ESC + 1
+                    rc.enc_sym(st, out, probs, kctx, 2, KIND_VERTEX_ADJACENT)
+                    syms[done] = SYM_VERTEX_ADJACENT
                     rc.enc_uint(st, out, probs, TM_C2 + (rc.INT_MODEL_SIZE if n2 > 8 else 0), j)
                 else:
-                    rc.enc_sym(st, out, probs, kctx, 2, 2)
-                    syms[done] = ESC + 2
+                    rc.enc_sym(st, out, probs, kctx, 2, KIND_TABLE)
+                    syms[done] = SYM_TABLE
                     rc.enc_raw(st, out, d, _bitlen(nv - 1))
             prev_esc = 1
         else:
@@ -918,7 +926,7 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         else:
             kctx = TM_KIND + 4 * ((1 if n1 > 0 else 0) + 2 * prev_esc)
             kind = rc.dec_sym(st, data, probs, kctx, 2)
-            if kind == 0:
+            if kind == KIND_NEW:
                 if nv >= n_limit:
                     status = ST_ERROR
                     break
@@ -928,14 +936,14 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
                 pred[nv, 2] = c
                 pred[nv, 3] = behind
                 nv += 1
-            elif kind == 1:
+            elif kind == KIND_VERTEX_ADJACENT:
                 n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq)
                 j = rc.dec_uint(st, data, probs, TM_C2 + (rc.INT_MODEL_SIZE if n2 > 8 else 0))
                 if j >= n2:
                     status = ST_ERROR
                     break
                 d = c2[j]
-            elif kind == 2:
+            elif kind == KIND_TABLE:
                 d = rc.dec_raw(st, data, _bitlen(nv - 1))
                 if d >= nv:
                     status = ST_ERROR

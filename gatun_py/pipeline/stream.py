@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +28,7 @@ from ..mesh import TetMesh, default_step, mesh_batches, read_mesh
 from ..render.camera import Camera
 from ..render.raycast import render_mesh
 from ..render.stream import render_batches
+from ..render.transfer import load_transfer_function
 from ..simplify.filter import SimplifyFilter
 from ..simplify.forest import mesh_from_ancestors
 from ..simplify.levels import Target, resolve_target, stored_levels, target_ancestors  # noqa: F401 (re-exported)
@@ -113,6 +114,8 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
         target = resolve_target(reader, ratio=ratio, level=level)
     lo, hi, rng, step = file_render_defaults(reader)
     rng = view.scalar_range if view.scalar_range is not None else rng
+    # a relative opacity unit is a fraction of the full mesh's size, whatever level is drawn
+    view = replace(view, tf=load_transfer_function(view.tf).for_size(float(np.linalg.norm(hi - lo))))
     camera = view.camera.fit(lo, hi)
     step = view.step if view.step is not None else step
     times = {"decode_s": 0.0, "filter_s": 0.0}

@@ -208,7 +208,11 @@ class StreamingRaycaster:
         if self.scalar_range is None:
             self.scalar_range = (float(self._dens[: self._nv].min()), float(self._dens[: self._nv].max())) \
                 if self._nv else (0.0, 1.0)
-        tf = self.tf.resolve(self.scalar_range)
+        # a relative unit distance is a fraction of the mesh's size: the boundary's bounding box,
+        # unless the caller resolved it already against the full mesh (levels must agree)
+        used_pts = pts[np.unique(faces)] if len(faces) else pts
+        diag = float(np.linalg.norm(np.ptp(used_pts, axis=0))) if len(used_pts) else 1.0
+        tf = self.tf.for_size(diag).resolve(self.scalar_range)
         tab, lo, inv = tf.table(self.scalar_range)
         if self.mode == "volume":  # opacity for a path of one step
             tab[:, 3] = 1.0 - np.power(1.0 - tab[:, 3], self.step / tf.unit_distance)

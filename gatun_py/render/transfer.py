@@ -4,7 +4,9 @@ Accepted sources (``load_transfer_function``):
 
 * the project's JSON format (BRIEF.md, "Conventions"): ``color`` points ``{"x", "rgb"}``,
   ``opacity`` points ``{"x", "a"}``, ``x`` normalised to the scalar range unless
-  ``"absolute": true``, and ``unit_distance`` (opacity ``a`` is for a path of that length);
+  ``"absolute": true``, and ``unit_distance`` (opacity ``a`` is for a path of that length, in the
+  mesh's units) or ``unit_distance_relative`` (the same as a fraction of the mesh's bounding-box
+  diagonal, so that a mesh in any unit renders alike; the default when neither is given, 0.01);
   optionally ``"opacity_model": "vtk"`` (below);
 * ParaView's exported colormap JSON (``RGBPoints`` = x, r, g, b, ...; optionally ``Points`` =
   x, a, 0.5, 0.0, ...), possibly a list holding one such object;
@@ -28,6 +30,7 @@ Two opacity models (``TransferFunction.opacity_model``) say what the opacity ``a
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
@@ -59,7 +62,8 @@ class TransferFunction:
     absolute : bool
         ``x`` in scalar units; otherwise normalised to the mesh's scalar range.
     unit_distance : float
-        Path length for which the opacity values hold (VTK's ScalarOpacityUnitDistance).
+        Path length for which the opacity values hold (VTK's ScalarOpacityUnitDistance); with
+        ``unit_relative`` a fraction of the mesh's bounding-box diagonal (:meth:`for_size`).
     name : str
         Where it came from, for messages.
     opacity_model : {"gatun", "vtk"}
@@ -75,11 +79,32 @@ class TransferFunction:
     unit_distance: float = 1.0
     name: str = "transfer function"
     opacity_model: str = "gatun"
+    unit_relative: bool = False
 
     def __post_init__(self):
         if self.opacity_model not in OPACITY_MODELS:
             raise OptionError(f"opacity model must be one of {', '.join(OPACITY_MODELS)}, "
                               f"got {self.opacity_model!r}")
+        if not (math.isfinite(self.unit_distance) and self.unit_distance > 0):
+            raise OptionError(f"transfer function {self.name}: the unit distance must be a positive number, "
+                              f"got {self.unit_distance!r}")
+
+    def for_size(self, diagonal: float) -> "TransferFunction":
+        """The function with its unit distance in the mesh's units, for a mesh whose bounding box
+        has this diagonal (a relative unit distance is a fraction of it; an absolute one is kept).
+
+        Examples
+        --------
+        >>> tf = load_transfer_function("default")
+        >>> tf.unit_relative, tf.for_size(200.0).unit_distance
+        (True, 2.0)
+        """
+        if not self.unit_relative:
+            return self
+        d = float(diagonal)
+        if not (math.isfinite(d) and d > 0):
+            d = 1.0
+        return replace(self, unit_distance=self.unit_distance * d, unit_relative=False)
 
     def with_opacity_model(self, model: str) -> "TransferFunction":
         """The same function read with another opacity model (``"gatun"`` or ``"vtk"``)."""
@@ -213,20 +238,32 @@ def from_dict(obj, src: str = "transfer function") -> TransferFunction:
         _fail(src, "expected 'color' and 'opacity' lists (or ParaView 'RGBPoints')")
     cx, crgb = _points(obj, "color", "rgb", 3, src)
     ox, oa = _points(obj, "opacity", "a", 1, src)
-    ud = obj.get("unit_distance", 1.0)
+    ud, relative = _unit_distance(obj, src)
     absolute = obj.get("absolute", False)
     if not isinstance(absolute, bool):
         _fail(src, "'absolute' must be true or false")
-    try:
-        ud = float(ud)
-    except (TypeError, ValueError):
-        _fail(src, "'unit_distance' must be a number")
-    if not (np.isfinite(ud) and ud > 0):
-        _fail(src, "'unit_distance' must be a positive number")
     model = obj.get("opacity_model", "gatun")
     if model not in OPACITY_MODELS:
         _fail(src, f"'opacity_model' must be one of {', '.join(map(repr, OPACITY_MODELS))}")
-    return TransferFunction(cx, crgb, ox, oa.reshape(-1), absolute, ud, src, model)
+    return TransferFunction(cx, crgb, ox, oa.reshape(-1), absolute, ud, src, model, relative)
+
+
+DEFAULT_RELATIVE_UNIT = 0.01  # of the bounding-box diagonal, when a source gives no unit distance
+
+
+def _unit_distance(obj, src) -> tuple[float, bool]:
+    """(unit distance, relative?) of a JSON object: ``unit_distance`` in mesh units, or
+    ``unit_distance_relative`` as a fraction of the bounding-box diagonal (the default, 0.01)."""
+    if "unit_distance" in obj and "unit_distance_relative" in obj:
+        _fail(src, "give 'unit_distance' or 'unit_distance_relative', not both")
+    key = "unit_distance" if "unit_distance" in obj else "unit_distance_relative"
+    raw = obj.get(key, DEFAULT_RELATIVE_UNIT)
+    if isinstance(raw, bool) or not isinstance(raw, (int, float)):
+        _fail(src, f"'{key}' must be a number, got {raw!r}")
+    ud = float(raw)
+    if not (math.isfinite(ud) and ud > 0):
+        _fail(src, f"'{key}' must be a positive finite number, got {raw!r}")
+    return ud, key == "unit_distance_relative"
 
 
 def _from_paraview(obj, src):
@@ -250,8 +287,9 @@ def _from_paraview(obj, src):
         ox, oa = _check_xy((pts[:, 0] - lo) / span, pts[:, 1], "Points", src)
     else:
         ox, oa = DEFAULT_OPACITY
-    return TransferFunction(cx, crgb, np.asarray(ox, float), np.asarray(oa, float), False,
-                            float(obj.get("unit_distance", 1.0)), src)
+    ud, relative = _unit_distance(obj, src)
+    return TransferFunction(cx, crgb, np.asarray(ox, float), np.asarray(oa, float), False, ud, src,
+                            unit_relative=relative)
 
 
 # A linear opacity ramp, used with colour-only sources (ParaView RGBPoints, matplotlib names).
@@ -276,7 +314,8 @@ def _from_matplotlib(name: str) -> TransferFunction:
               "or a matplotlib colormap")
     xs = np.linspace(0.0, 1.0, 256)
     rgb = np.asarray(cmap(xs))[:, :3].astype(np.float64)
-    return TransferFunction(xs, rgb, *DEFAULT_OPACITY, False, 1.0, f"matplotlib:{name}")
+    return TransferFunction(xs, rgb, *DEFAULT_OPACITY, False, DEFAULT_RELATIVE_UNIT, f"matplotlib:{name}",
+                            unit_relative=True)
 
 
 def load_transfer_function(spec) -> TransferFunction:

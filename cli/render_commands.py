@@ -64,8 +64,9 @@ def _kernels_cached() -> bool:
                    "stored level still finer, then simplifies on the fly. .tetc input only.")
 @click.option("--level", type=click.IntRange(min=0), default=None, help="Render stored level i as it is.")
 @click.option("--budget", type=float, default=None, metavar="SECONDS",
-              help="Frame-time budget: pick the finest level and ratio predicted to fit (a time model of this "
-                   "file on this machine, calibrated on first use and cached).")
+              help="Frame-time budget: pick the finest level and ratio predicted to fit, by a model of costs per "
+                   "decoded tet, ray-tet step, sample and boundary face (measured once per machine in under a "
+                   "second and cached; no per-file calibration).")
 @click.option("--pipeline", type=click.Choice(["streaming", "generic"]), default="streaming", show_default=True,
               help="streaming: decode, simplify and render in one pass; generic: decode all, simplify, render "
                    "(the paper's baseline).")
@@ -120,20 +121,18 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
         reader = TetcReader(input)
         target = resolve_target(reader, ratio=ratio, level=level)
         if budget is not None:
-            from gatun_py.pipeline.budget import plan_file_budget
+            from gatun_py.pipeline.budget import load_costs, plan_file_budget
 
-            from gatun_py.pipeline import budget as budget_model
-
-            if budget_model.load_model(budget_model.model_key(input, view)) is None:
-                status("calibrating the time model for this file, size and view (first use only)...", quiet)
-            target, plan, model, _ = plan_file_budget(input, view, budget)
+            if load_costs() is None:
+                status("measuring this machine's rendering costs for --budget (once, under a second)...", quiet)
+            target, plan, _planner, _ = plan_file_budget(reader, view, budget)
             planned = {"predicted_s": plan.predicted_s, "budget_s": budget}
             if not plan.feasible:
                 status(f"note: the budget of {budget:g} s cannot be met: rendering the coarsest level "
                        f"(predicted {plan.predicted_s:.3f} s)", quiet)
         n_tets = int(reader.level_meta(target.level)["tets"])
         with progress_bar("rendering", n_tets if n_tets >= 100_000 else 0, quiet) as update:
-            result = render_tetc(input, view, pipeline=pipeline, target=target, progress=update)
+            result = render_tetc(reader, view, pipeline=pipeline, target=target, progress=update)
     else:
         if ratio is not None or level is not None or budget is not None:
             raise OptionError("--ratio, --level and --budget need a .tetc file with a merge forest "

@@ -85,7 +85,7 @@ def render_tetc(path, view: View, *, ratio: float | None = None, level: int | No
 
     Parameters
     ----------
-    path : path-like
+    path : path-like or TetcReader
     view : View
     ratio, level : optional
         Simplification target (see :func:`gatun_py.simplify.levels.resolve_target`); default the full mesh.
@@ -105,7 +105,7 @@ def render_tetc(path, view: View, *, ratio: float | None = None, level: int | No
 
     if pipeline not in PIPELINES:
         raise OptionError(f"unknown pipeline {pipeline!r} (choose from {', '.join(PIPELINES)})")
-    reader = TetcReader(path)
+    reader = path if isinstance(path, TetcReader) else TetcReader(path)  # an open reader is kept across frames
     if target is None:
         target = resolve_target(reader, ratio=ratio, level=level)
     lo, hi, rng, step = file_render_defaults(reader)

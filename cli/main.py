@@ -132,6 +132,11 @@ for _module in ("codec_commands", "render_commands", "compare"):
             raise
 
 
+from .view_commands import view  # noqa: E402 (after the group it joins)
+
+tetc.add_command(view)
+
+
 def main(argv=None):
     return tetc.main(args=argv, prog_name="tetc")
 

@@ -12,10 +12,11 @@ import io
 import math
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..codec import TetcReader
 from ..errors import OptionError, TetcError
 from ..pipeline.budget import FramePlanner, TimeModel, machine_costs
 from ..pipeline.stream import View, file_render_defaults, render_tetc
@@ -144,6 +145,46 @@ class Frame:
     rgb8: np.ndarray | None = None
 
 
+class CachingReader(TetcReader):
+    """A :class:`TetcReader` that keeps the decoded batches of levels up to ``max_tets`` in total.
+
+    Every interactive frame would otherwise decode its level again; a viewer redraws the same few
+    coarse levels many times. Levels too large for the cache (a 10 M-tet level 0) stream from the
+    file each time, as ``tetc render`` does. A level enters the cache only once decoded whole (a
+    cancelled frame leaves nothing half-cached).
+    """
+
+    def __init__(self, source, *, max_tets: int = 3_000_000):
+        super().__init__(source)
+        self.max_tets = max_tets
+        self._batches: dict[int, list] = {}
+        self._forests: dict[int, tuple] = {}
+
+    def is_decoded(self, level: int) -> bool:
+        return level in self._batches
+
+    def cached_tets(self) -> int:
+        return sum(int(self.level_meta(lv)["tets"]) for lv in self._batches)
+
+    def iter_decode(self, level: int = 0, **kw):
+        if level in self._batches:
+            yield from self._batches[level]
+            return
+        keep = self.cached_tets() + int(self.level_meta(level)["tets"]) <= self.max_tets
+        out = []
+        for batch in super().iter_decode(level, **kw):
+            if keep:
+                out.append(batch)
+            yield batch
+        if keep:
+            self._batches[level] = out
+
+    def read_forest(self, level: int = 0):
+        if level not in self._forests:
+            self._forests[level] = super().read_forest(level)
+        return self._forests[level]
+
+
 class ViewerSession:
     """A ``.tetc`` file kept open for a viewer: file info, frame planning and rendering.
 
@@ -173,7 +214,7 @@ class ViewerSession:
                 data = fh.read()
         except OSError as e:
             raise TetcError(f"{self.path}: cannot read ({e.strerror or e})") from None
-        self.reader = TetcReader(data)
+        self.reader = CachingReader(data)
         self.bbox_lo, self.bbox_hi, self.scalar_range, self.step = file_render_defaults(self.reader)
         self.planners = {}  # by mode: each keeps its own view statistics, the costs are shared
         self.model = TimeModel(self.costs)
@@ -186,7 +227,8 @@ class ViewerSession:
 
     def planner(self, mode: str) -> FramePlanner:
         if mode not in self.planners:
-            self.planners[mode] = FramePlanner(self.reader, self.model, step=self.step, mode=mode)
+            self.planners[mode] = FramePlanner(self.reader, self.model, step=self.step, mode=mode,
+                                               decoded=self.reader.is_decoded)
         return self.planners[mode]
 
     # -- what the page shows before the first frame ---------------------------------------------
@@ -221,22 +263,40 @@ class ViewerSession:
     # -- frames ---------------------------------------------------------------------------------
 
     def render(self, req: FrameRequest, *, cancelled=None) -> Frame:
-        """Plan, render, encode one frame; ``cancelled()`` returning True aborts it between batches."""
-        t0 = time.perf_counter()
-        self.check_file()
-        view = View(req.camera, req.tf, req.mode, None, False)
-        fitted = req.camera.fit(self.bbox_lo, self.bbox_hi)
-        planner = self.planner(req.mode)
+        """Plan, render, encode one frame; ``cancelled()`` returning True aborts it between batches.
+
+        With a budget, the planner picks the level and merges (and, while ``interacting``, a coarser
+        sample step and a smaller image, which the page scales up) predicted to fit; without, the
+        file's full mesh at the file's step, as ``tetc render`` draws it.
+        """
         from ..simplify.levels import resolve_target
 
+        t0 = time.perf_counter()
+        self.check_file()
+        planner = self.planner(req.mode)
+        fitted = req.camera.fit(self.bbox_lo, self.bbox_hi)
+        probe_s = 0.0
         plan = None
         if req.level is not None:
             target = resolve_target(self.reader, level=req.level)
         elif req.budget_s is None:
             target = resolve_target(self.reader)
         else:
-            plan = planner.plan(req.budget_s, fitted)
+            if planner.estimator.hit_fraction is None:  # first frame of this mode: learn the view cheaply
+                planner.probe(self.reader, View(req.camera, req.tf, req.mode, None, False))
+                probe_s = time.perf_counter() - t0
+            plan = planner.plan(max(req.budget_s - probe_s, 1e-3), fitted, drag=req.interacting)
             target = planner.target(plan)
+        scale = plan.scale if plan is not None else 1.0
+        step_factor = plan.step_factor if plan is not None else 1.0
+        camera = req.camera
+        if scale != 1.0:
+            camera = replace(camera, width=max(1, round(camera.width * scale)), height=max(1, round(camera.height * scale)))
+        view = View(camera, req.tf, req.mode, self.step * step_factor if step_factor != 1.0 else None, False)
+        decoded = self.reader.is_decoded(target.level)
+        work = planner.estimate(target.level, target.merges, camera.width * camera.height,
+                                planner.estimator.coverage(fitted), step_factor)
+        predicted = planner.model.predict(work)
 
         def progress(_n):
             if cancelled is not None and cancelled():
@@ -250,23 +310,20 @@ class ViewerSession:
         t_end = time.perf_counter()
         st = res.stats
         encode_s = t_end - t_render
-        total = t_end - t0
-        predicted = planner.model.predict(planner.estimator.estimate(planner.level_size(target.level), target.merges,
-                                                                      fitted.width * fitted.height,
-                                                                      planner.estimator.coverage(fitted)))
-        planner.observe(st, total_s=total, extra_s=encode_s)
+        planner.observe(st, total_s=t_end - t_plan, extra_s=encode_s, step_factor=step_factor, decoded=decoded)
         stats = {
             "level": int(target.level), "merges": int(target.merges), "ratio": float(target.ratio),
-            "tets_decoded": int(st["tets_decoded"]), "tets_rendered": int(st["tets_rendered"]),
+            "cut": "uniform",
+            "tets_decoded": 0 if decoded else int(st["tets_decoded"]), "tets_rendered": int(st["tets_rendered"]),
             "rays": int(st["rays"]), "rays_hit": int(st["rays_hit"]), "steps": int(st["steps"]),
-            "samples": int(st["samples"]),
-            "plan_s": t_plan - t0,
+            "samples": int(st["samples"]), "scale": scale, "step_factor": step_factor,
+            "plan_s": t_plan - t0, "probe_s": probe_s,
             "decode_s": float(st["decode_s"]), "filter_s": float(st["filter_s"]), "render_s": float(st["render_s"]),
-            "encode_s": encode_s, "server_s": total,
-            "budget_s": req.budget_s, "predicted_s": predicted if plan is None else plan.predicted_s,
+            "encode_s": encode_s, "server_s": t_end - t0,
+            "budget_s": req.budget_s, "predicted_s": predicted,
             "feasible": True if plan is None else plan.feasible,
             "full_quality": plan is None and req.level is None,
-            "format": req.fmt, "bytes": len(data), "width": fitted.width, "height": fitted.height,
+            "format": req.fmt, "bytes": len(data), "width": camera.width, "height": camera.height,
         }
         return Frame(data, FORMATS[req.fmt], stats, rgb8)
 

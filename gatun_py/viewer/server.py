@@ -15,9 +15,11 @@ Routes (every one needs ``?token=...`` or an ``Authorization: token ...`` header
 
 One render runs at a time, whoever asks (a single worker thread behind a lock); each websocket
 keeps only its newest request, so a client that sends faster than frames come back never queues
-old views. A still request (``"still": true``) is rendered at full quality, preceded by a quick
+old views. A still request (``"still": true``) is rendered at full quality as a PNG (lossless: it equals
+``tetc render`` of the same view), preceded by a quick
 preview when the full frame is predicted to take long, and abandoned between batches as soon as a
-newer request of the same client arrives.
+newer request of the same client arrives; a drag frame is abandoned likewise when a still request
+follows it (its image would be replaced at once).
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ from .session import FrameCancelled, ViewerSession, parse_request
 
 STATIC_FILES = {"viewer.js": "text/javascript", "viewer.css": "text/css"}
 PREVIEW_ABOVE_S = 0.5  # a still frame predicted to take longer than this gets a quick preview first
-PREVIEW_SHARE = 0.12  # the preview's budget, as a share of the full frame's predicted time
+PREVIEW_SHARE = 0.1  # the preview's budget, as a share of the full frame's predicted time
 
 
 def new_token() -> str:
@@ -193,7 +195,7 @@ class _Client:
         try:
             still = bool(obj.get("still", False))
             req = parse_request({**{k: v for k, v in obj.items() if k not in ("type", "id", "still")},
-                                 **({"budget": None, "format": obj.get("format", "png")} if still else {})})
+                                 **({"budget": None, "format": "png"} if still else {})})
         except OptionError as e:
             await self.send({"type": "error", "id": rid, "message": str(e)})
             return
@@ -202,6 +204,10 @@ class _Client:
 
     def superseded(self) -> bool:
         return self.latest is not None
+
+    def still_waiting(self) -> bool:
+        """A still request arrived: the drag frame being drawn would be replaced at once."""
+        return self.latest is not None and self.latest[2]
 
     async def run(self):
         while True:
@@ -215,7 +221,7 @@ class _Client:
                 if still:
                     await self._still(rid, req)
                 else:
-                    f = await self.service.render(req)
+                    f = await self.service.render(req, cancelled=self.still_waiting)
                     await self.send({"type": "frame", "id": rid, "final": False, "mime": f.mime, "stats": f.stats},
                                     f.data)
             except FrameCancelled:

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import ipaddress
+import os
 import time
 
 import click
 
-from gatun_py.errors import OptionError, TetcError
+from gatun_py.errors import OptionError, ReadError, TetcError
 
 from .options import quiet_option, status
 
@@ -52,6 +53,8 @@ def view(input, port, host, no_browser, token, quiet):
 
     if token is not None and (len(token) < 8 or not token.isalnum()):
         raise OptionError("--token must be at least 8 letters or digits")
+    if not os.path.isfile(input):
+        raise ReadError(f"{input}: no such file")
     if not is_tetc(input):
         raise OptionError(f"{input}: tetc view needs a .tetc file (make one with: tetc compress {input} -o FILE.tetc)")
     server = require_web()

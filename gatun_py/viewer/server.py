@@ -77,6 +77,9 @@ class FrameService:
         self.executor.shutdown(wait=False, cancel_futures=True)
 
 
+SERVICE = web.AppKey("service", FrameService)  # the app's FrameService, for tests and scripts
+
+
 def _error(status: int, message: str) -> web.Response:
     return web.json_response({"error": message}, status=status)
 
@@ -153,7 +156,7 @@ def make_app(session: ViewerSession, token: str) -> web.Application:
     app.router.add_get("/api/info", info)
     app.router.add_post("/api/frame", frame)
     app.router.add_get("/ws", websocket)
-    app["service"] = service
+    app[SERVICE] = service
 
     async def shutdown(app):
         service.close()

@@ -30,6 +30,7 @@ DEFAULT_BUDGET_S = 0.1
 # Frames are planned to this share of the budget: the model predicts a typical frame, and a frame
 # time varies by +-15 % on a machine shared with other work; the rest is headroom for the target.
 PLAN_SHARE = 0.85
+HISTOGRAM_POINTS = 20_000
 COLORMAPS = ("viridis", "plasma", "inferno", "magma", "cividis", "coolwarm", "jet", "gray")
 
 
@@ -236,10 +237,12 @@ class ViewerSession:
 
     # -- what the page shows before the first frame ---------------------------------------------
 
-    def histogram(self, bins: int = 64) -> list[int]:
-        """Counts of the scalar over the coarsest stored level's vertices (cheap; the shape is what matters)."""
+    def histogram(self, bins: int = 64, *, points: int = HISTOGRAM_POINTS) -> list[int]:
+        """Counts of the scalar over the vertices of the coarsest stored level that still has
+        ``points`` of them (or level 0): the shape of the distribution, without decoding it all."""
         if self._histogram is None:
-            lv = max(self.reader.levels, key=lambda x: int(x.get("merges_before", 0)))
+            big_enough = [lv for lv in self.reader.levels if int(lv["points"]) >= points] or self.reader.levels[:1]
+            lv = max(big_enough, key=lambda x: int(x.get("merges_before", 0)))
             mesh = self.reader.decode_mesh(int(lv["level"]))
             lo, hi = self.scalar_range
             counts, _ = np.histogram(mesh.density, bins=bins, range=(lo, hi if hi > lo else lo + 1))

@@ -35,7 +35,8 @@
     const proto = location.protocol === "https:" ? "wss" : "ws";
     ws = new WebSocket(`${proto}://${location.host}/ws?token=${encodeURIComponent(token)}`);
     ws.binaryType = "blob";
-    ws.onopen = () => { hideError(); requestFrame(false); scheduleStill(0); };
+    // A quick frame within the budget first, then the full-quality one after the still delay.
+    ws.onopen = () => { hideError(); send(false); scheduleStill(); };
     ws.onmessage = onMessage;
     ws.onclose = () => { showError("connection to the tetc server lost; retrying..."); setTimeout(connect, 1000); };
   }
@@ -288,7 +289,7 @@
     state.unitDistance = tf.unit_distance;
     state.range = [lo, hi];
     $("unit-distance").value = tf.unit_distance;
-    $("range-lo").value = lo; $("range-hi").value = hi;
+    $("range-lo").value = +lo.toPrecision(6); $("range-hi").value = +hi.toPrecision(6); // shown rounded, kept exact
     $("colormap").value = "";
   }
 

@@ -7,7 +7,7 @@ OUT    ?= out
 # Two threads, as on the benchmark machines; override with NUMBA_NUM_THREADS=... make ...
 export NUMBA_NUM_THREADS ?= 2
 
-.PHONY: install test demo bench clean distclean
+.PHONY: install test demo bench clean distclean browser
 
 install: $(STAMP)
 
@@ -18,8 +18,22 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m gatun_py.warmup
 	touch $(STAMP)
 
-test: $(STAMP)
+test: $(STAMP) browser
 	$(BIN)/pytest -q
+
+# tests/test_viewer_browser.py drives headless Chromium (Debian's chromium and chromium-driver).
+# Installed here when missing and we may (root with apt-get, as in CI); otherwise that test skips
+# and says why. Quiet, and a failed install does not fail the build.
+browser:
+	@if ! command -v chromedriver >/dev/null 2>&1 || ! command -v chromium >/dev/null 2>&1; then \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing chromium and chromium-driver for the browser test..."; \
+	    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver \
+	      >/dev/null 2>&1) || echo "note: could not install chromium; the browser test will skip"; \
+	  else \
+	    echo "note: chromium/chromedriver not found (install Debian's chromium chromium-driver); the browser test will skip"; \
+	  fi; \
+	fi
 
 # The main job on a bundled sample: compress Blunt-fin losslessly with its pre-simplified levels,
 # then decode, simplify and render it in one streaming pass (full and 90 % simplified).

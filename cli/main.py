@@ -16,6 +16,7 @@ from gatun_py.errors import OutputExistsError, TetcError
 from .codec_commands import compress, convert, decompress, info
 from .compare import compare_command
 from .render_commands import render
+from .view_commands import view
 
 
 class TetcGroup(click.Group):
@@ -53,8 +54,10 @@ def tetc():
     """
 
 
-for _command in (info, convert, compress, decompress, render, compare_command):
+for _command in (info, convert, compress, decompress, render, view, compare_command):
     tetc.add_command(_command)
+
+
 
 
 def main(argv=None):

@@ -59,8 +59,9 @@ def _kernels_cached() -> bool:
                    "stored level still finer, then simplifies on the fly. .tetc input only.")
 @click.option("--level", type=click.IntRange(min=0), default=None, help="Render stored level i as it is.")
 @click.option("--budget", type=POSITIVE, default=None, metavar="SECONDS",
-              help="Frame-time budget: pick the finest level and ratio predicted to fit (a time model of this "
-                   "machine, kept in the user's cache directory). .tetc input only.")
+              help="Frame-time budget: pick the finest level and ratio predicted to fit, by a model of costs per "
+                   "decoded tet, ray-tet step, sample and boundary face (measured once per machine in under a "
+                   "second and cached; no per-file calibration). .tetc input only.")
 @click.option("--pipeline", type=click.Choice(["streaming", "generic"]), default="streaming", show_default=True,
               help="streaming: decode, simplify and render in one pass; generic: decode all, simplify, render "
                    "(the paper's baseline).")

@@ -17,8 +17,7 @@ The stages, in pipeline order (each imports only the ones before it):
 ``import gatun_py`` also registers ``.tetc`` with meshio.
 """
 
-__version__ = "0.2.0"
-
+from ._version import __version__  # noqa: E402
 from .api import Frame, TetcFile, compress, convert, decompress, info, open, render  # noqa: E402,A004
 from .errors import (CorruptFileError, FormatVersionError, MeshError, OptionError, OutputError,  # noqa: E402
                      OutputExistsError, ReadError, TetcError)

@@ -27,7 +27,7 @@ from .codec import LevelPayload, TetcReader, write_tetc
 from .codec.info import tetc_info
 from .errors import OptionError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
-from .pipeline.budget import plan_file_budget
+from .pipeline.budget import load_costs, plan_file_budget
 from .pipeline.stream import PIPELINES, View, is_tetc, render_mesh_file, render_tetc
 from .render.camera import Camera
 from .render.image import add_colorbar, image_bytes, parse_colour, to_rgb8, write_image
@@ -475,7 +475,9 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
         f = source if isinstance(source, TetcFile) else TetcFile(source)
         target = resolve_target(f.reader, ratio=ratio, level=level)
         if budget is not None:
-            target, plan, _model, _ = plan_file_budget(f.path, view, budget)
+            if load_costs() is None:
+                log("measuring this machine's rendering costs for the budget (once, under a second)...")
+            target, plan, _planner, _ = plan_file_budget(f.reader, view, budget)
             planned = {"predicted_s": plan.predicted_s, "budget_s": budget}
             if not plan.feasible:
                 log(f"note: the budget of {budget:g} s cannot be met: rendering the coarsest level "

@@ -1,15 +1,25 @@
-"""Time-critical rendering (paper 5, 6.3): map a frame-time budget to a level and a ratio.
+"""Time-critical rendering (paper 5, 6.3): plan every frame against a time budget, no calibration pause.
 
-End-to-end time is close to linear in the tets handled (paper Figure 10), but not exactly: per-pixel
-work (ray set-up, boundary, samples) does not shrink with the mesh. So instead of one straight line
-the model is the measured frame time of every stored level at its own ratio (total, and the part
-spent decoding), taken on first use for this file, image size and view (a few seconds) and kept in
-the user's cache directory. Between two stored levels, starting from the finer one, decoding costs
-what that level costs and rendering is interpolated in the tets left.
+A frame's time is modelled as the sum of its work, each kind at a cost per unit (Farias et al. adapt
+such costs per frame):
+
+* **decode**: per tet of the stored level decoded (and filtered), per vertex whose ancestor the
+  run-time filter computes (the forest section and the top-down pass);
+* **render**: per ray-tet step, per sample, per boundary face, per pixel (ray set-up, image);
+* a fixed part per frame (opening the file, the first batch).
+
+The costs are *seeded once per machine* by timing a few small renders of a synthetic grid (a few
+tenths of a second, cached in the user's cache directory, :func:`machine_costs`), then *corrected
+from every frame's measured stats* (:meth:`TimeModel.observe`: one multiplicative correction per
+stage, smoothed). The work of a frame that has not been rendered yet is estimated from the file's
+metadata and the view (:class:`WorkEstimator`): tets and boundary faces per stored level are in the
+file, steps grow as tets^(1/3) per ray that hits, samples as the depth of the mesh over the sample
+step, and once a frame of this view has been drawn its measured counts replace the guesses.
 
 Given a budget B, :func:`plan_for_budget` walks the stored levels from the finest: the first level
-whose own time fits is taken as is; if it does not fit but can be simplified on the fly far enough
-before the next level starts, the finest such ratio is taken (starting from that level).
+whose own predicted time fits is taken as is; if it does not fit but can be simplified on the fly far
+enough before the next level starts, the finest such ratio is taken (starting from that level).
+``tetc render --budget`` and the viewer (``tetc view``) use the same model.
 """
 
 from __future__ import annotations
@@ -20,35 +30,225 @@ import math
 import os
 import platform
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
+
+import numpy as np
+
+from .._version import __version__
+from ..codec import LevelPayload, TetcReader, encode_tetc
+from ..errors import OptionError
+from ..mesh.plot3d import grid_hexes
+from ..mesh.split import orient_positive, split_hexes_two_colour
+from ..mesh.validate import validate_tets
+from ..render.camera import Camera
+from ..mesh import mesh_batches
+from ..render.stream import render_batches
+from ..simplify import ROOT_RANK, ancestors
+from ..simplify.levels import Target, forest_merges, stored_levels
+from .stream import file_render_defaults, render_tetc
+
+SEED_VERSION = 1  # bump when the seeding procedure changes: cached costs of older versions are re-seeded
 
 
 @dataclass(frozen=True)
 class LevelSize:
+    """What the file says about one stored level."""
+
     level: int
     merges: int  # N_i: merges of the full forest applied in this stored level
     tets: int
+    points: int = 0
+    boundary_faces: int = 0
+    has_forest: bool = True
 
 
 @dataclass(frozen=True)
-class LevelTimes:
-    """Measured frame time of every stored level at its own ratio, finest level first."""
+class Work:
+    """Units of work of one frame (what the costs multiply)."""
 
-    total_s: tuple
-    decode_s: tuple  # the part spent decoding (and filtering)
+    tets_decoded: float = 0.0  # tets the decoder produces (0 when the level is already in memory)
+    forest_points: float = 0.0  # vertices whose ancestor the run-time filter computes (0: no filter)
+    tets_rendered: float = 0.0  # tets inserted into the ray caster's face table
+    steps: float = 0.0  # ray-tet steps
+    samples: float = 0.0
+    boundary_faces: float = 0.0
+    pixels: float = 0.0
 
-    def predict(self, levels: list[LevelSize], i: int, merges: int) -> float:
-        """Frame time starting from stored level ``i`` (finest first) and going to ``merges``."""
-        t_i, d_i = self.total_s[i], self.decode_s[i]
-        if i + 1 >= len(levels) or merges <= levels[i].merges:
-            return t_i
-        r_i = t_i - d_i
-        r_next = self.total_s[i + 1] - self.decode_s[i + 1]
-        span = max(levels[i].tets - levels[i + 1].tets, 1)
-        frac = (estimated_tets(levels, merges) - levels[i + 1].tets) / span
-        return d_i + r_next + (r_i - r_next) * min(max(frac, 0.0), 1.0)
 
+@dataclass(frozen=True)
+class Costs:
+    """Seconds per unit of work (see the module docstring); ``render_fixed_s`` is per frame.
+
+    The defaults are the reference machine's (2 cores, no GPU, where the project's figures are
+    measured): a non-negative least-squares fit, on relative error, of 130 renders of the four
+    samples (every few levels, 96² to 512², two sample steps) and of the seeding grid; it predicts
+    the render stage within -25 %/+25 % for 80 % of them. Boundary faces came out at zero: their
+    cost hides in the per-tet and per-step terms, so it gets only a small share here.
+    """
+
+    fixed_s: float = 2e-3
+    per_tet_decoded: float = 5.0e-7
+    per_forest_point: float = 1.5e-7
+    render_fixed_s: float = 1e-3
+    per_tet_rendered: float = 2.4e-7
+    per_step: float = 3.4e-8
+    per_sample: float = 1.4e-8
+    per_boundary_face: float = 2e-8
+    per_pixel: float = 3.8e-8
+
+    def decode_s(self, w: Work) -> float:
+        return self.per_tet_decoded * w.tets_decoded + self.per_forest_point * w.forest_points
+
+    def render_s(self, w: Work) -> float:
+        return (self.render_fixed_s + self.per_tet_rendered * w.tets_rendered + self.per_step * w.steps
+                + self.per_sample * w.samples + self.per_boundary_face * w.boundary_faces + self.per_pixel * w.pixels)
+
+    def scaled(self, decode: float, render: float) -> "Costs":
+        """These costs on a machine ``decode`` / ``render`` times as slow in each stage."""
+        return Costs(self.fixed_s * render, self.per_tet_decoded * decode, self.per_forest_point * decode,
+                     self.render_fixed_s * render, self.per_tet_rendered * render, self.per_step * render,
+                     self.per_sample * render, self.per_boundary_face * render, self.per_pixel * render)
+
+
+@dataclass
+class TimeModel:
+    """Machine costs and this session's corrections: predicts a frame, learns from each one.
+
+    Each stage (decode, render, fixed) has a multiplicative correction, updated after every frame
+    from measured over predicted time (an exponential average of the logarithm, so one slow frame
+    moves it part way and a change of regime takes a few frames); ``extra`` adds per-frame work
+    that is not the pipeline's (the viewer's image encoding and transfer).
+
+    Examples
+    --------
+    >>> m = TimeModel(replace(Costs(*[0.0] * 9), per_tet_decoded=1e-6))
+    >>> w = Work(tets_decoded=1e5)
+    >>> round(m.predict(w), 3)
+    0.1
+    >>> for _ in range(20):
+    ...     m.observe(w, decode_s=0.2, render_s=0.0, other_s=0.0)
+    >>> round(m.predict(w), 2)          # the machine turned out twice as slow: the model follows
+    0.2
+    """
+
+    costs: Costs = field(default_factory=Costs)
+    decode_scale: float = 1.0
+    render_scale: float = 1.0
+    fixed_s: float | None = None  # measured per-frame overhead (None: the seed's)
+    per_pixel_extra: float = 0.0  # seconds per pixel outside the pipeline (encode, transfer)
+    alpha: float = 0.35
+    frames: int = 0
+
+    def predict_stages(self, w: Work) -> dict:
+        fixed = self.costs.fixed_s if self.fixed_s is None else self.fixed_s
+        return {"decode_s": self.decode_scale * self.costs.decode_s(w),
+                "render_s": self.render_scale * self.costs.render_s(w),
+                "other_s": fixed + self.per_pixel_extra * w.pixels}
+
+    def predict(self, w: Work) -> float:
+        return sum(self.predict_stages(w).values())
+
+    def observe(self, w: Work, *, decode_s: float, render_s: float, other_s: float, extra_s: float = 0.0) -> None:
+        """Correct the model with one frame's measured stage times (seconds)."""
+
+        def update(scale, measured, predicted):
+            if predicted <= 0 or not math.isfinite(measured) or measured <= 0:
+                return scale
+            target = min(max(measured / predicted * scale, 1e-3), 1e3)
+            return math.exp((1 - self.alpha) * math.log(scale) + self.alpha * math.log(target))
+
+        self.decode_scale = update(self.decode_scale, decode_s, self.decode_scale * self.costs.decode_s(w))
+        self.render_scale = update(self.render_scale, render_s, self.render_scale * self.costs.render_s(w))
+        fixed = self.costs.fixed_s if self.fixed_s is None else self.fixed_s
+        if math.isfinite(other_s) and other_s >= 0:
+            self.fixed_s = (1 - self.alpha) * fixed + self.alpha * other_s
+        if w.pixels > 0 and math.isfinite(extra_s) and extra_s >= 0:
+            self.per_pixel_extra = (1 - self.alpha) * self.per_pixel_extra + self.alpha * extra_s / w.pixels
+        self.frames += 1
+
+
+# -- estimating a frame's work before it is rendered ------------------------------------------------
+
+def estimated_tets(levels: list[LevelSize], merges: int, attr: str = "tets") -> float:
+    """Tets (or another per-level count) left after ``merges`` merges, interpolated between stored levels."""
+    ls = sorted(levels, key=lambda x: x.merges)
+    if merges <= ls[0].merges:
+        return float(getattr(ls[0], attr))
+    for lo, hi in zip(ls[:-1], ls[1:]):
+        if merges <= hi.merges:
+            f = (merges - lo.merges) / max(hi.merges - lo.merges, 1)
+            return getattr(lo, attr) + f * (getattr(hi, attr) - getattr(lo, attr))
+    return float(getattr(ls[-1], attr))
+
+
+class WorkEstimator:
+    """The work of a frame at a level and merge count, for one file and view.
+
+    Before any frame of the view: rays that hit = the projected bounding box's share of the image
+    (a rectangle, an overestimate); steps per hit ray = 1.5 * tets^(1/3) (a grid of n tets is about
+    (n/6)^(1/3) cubes deep, 2-3 tets per cube); samples per hit ray = half the bounding-box diagonal
+    over the sample step (volume mode) or the steps (face mode). After a frame, :meth:`observe`
+    replaces these by the measured rays hit, steps / tets^(1/3) and samples per hit ray.
+    """
+
+    STEPS_PER_CUBE_ROOT = 1.5
+
+    def __init__(self, levels: list[LevelSize], *, bbox, step: float, mode: str = "volume"):
+        self.levels = sorted(levels, key=lambda x: x.merges)
+        lo, hi = (np.asarray(x, np.float64) for x in bbox)
+        self.bbox = (lo, hi)
+        self.diagonal = float(np.linalg.norm(hi - lo)) or 1.0
+        self.step = float(step) if step and step > 0 else self.diagonal / 100
+        self.mode = mode
+        self.hit_fraction: float | None = None
+        self.steps_per_root: float | None = None  # steps / (hit rays * tets^(1/3))
+        self.samples_per_hit: float | None = None  # at the file's own sample step
+
+    def coverage(self, fitted_camera) -> float:
+        """Share of the image the bounding box covers (its projected rectangle, clipped)."""
+        lo, hi = self.bbox
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        fwd = fitted_camera.basis()[0]
+        if np.any((corners - fitted_camera.position) @ fwd <= 0):
+            return 1.0  # the camera is inside the box
+        px = fitted_camera.project(corners)
+        w, h = fitted_camera.width, fitted_camera.height
+        x0, x1 = np.clip([px[:, 0].min(), px[:, 0].max()], 0, w)
+        y0, y1 = np.clip([px[:, 1].min(), px[:, 1].max()], 0, h)
+        return float(max(x1 - x0, 0) * max(y1 - y0, 0) / (w * h))
+
+    def estimate(self, start: LevelSize, merges: int, pixels: int, coverage: float = 1.0, *,
+                 step_factor: float = 1.0, decoded: bool = False) -> Work:
+        """Work of a frame from stored level ``start`` simplified to ``merges``, ``pixels`` rays, the
+        sample step ``step_factor`` times the file's; ``decoded``: the level is already in memory."""
+        tets = max(estimated_tets(self.levels, merges), 1.0)
+        hit = pixels * (self.hit_fraction if self.hit_fraction is not None else min(max(coverage, 0.0), 1.0))
+        per_root = self.steps_per_root if self.steps_per_root is not None else self.STEPS_PER_CUBE_ROOT
+        steps = hit * per_root * tets ** (1 / 3)
+        if self.mode == "face":
+            samples = steps
+        elif self.samples_per_hit is not None:
+            samples = hit * self.samples_per_hit / step_factor
+        else:
+            samples = hit * 0.5 * self.diagonal / (self.step * step_factor)
+        filtering = merges > start.merges
+        return Work(0.0 if decoded else float(start.tets), float(start.points) if filtering else 0.0, tets, steps,
+                    samples, estimated_tets(self.levels, merges, "boundary_faces"), float(pixels))
+
+    def observe(self, stats: dict, *, step_factor: float = 1.0) -> None:
+        """Learn this view's rays hit, steps and samples from a rendered frame's stats."""
+        rays, hit = int(stats.get("rays", 0)), int(stats.get("rays_hit", 0))
+        tets = max(int(stats.get("tets_rendered", 0)), 1)
+        if rays <= 0:
+            return
+        self.hit_fraction = hit / rays
+        if hit > 0:
+            self.steps_per_root = max(float(stats.get("steps", 0)), 1.0) / (hit * tets ** (1 / 3))
+            self.samples_per_hit = float(stats.get("samples", 0)) * step_factor / hit
+
+
+# -- planning ----------------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
 class BudgetPlan:
@@ -56,168 +256,301 @@ class BudgetPlan:
     merges: int  # target number of merges N (>= that level's N_i)
     predicted_s: float
     feasible: bool  # False: even the coarsest level is predicted to exceed the budget
+    scale: float = 1.0  # image rendered at scale * the requested size (the viewer upscales)
+    step_factor: float = 1.0  # sample step = step_factor * the file's
 
 
-def estimated_tets(levels: list[LevelSize], merges: int) -> float:
-    """Tets left after ``merges`` merges, interpolated linearly between stored levels."""
-    ls = sorted(levels, key=lambda x: x.merges)
-    if merges <= ls[0].merges:
-        return float(ls[0].tets)
-    for lo, hi in zip(ls[:-1], ls[1:]):
-        if merges <= hi.merges:
-            f = (merges - lo.merges) / max(hi.merges - lo.merges, 1)
-            return lo.tets + f * (hi.tets - lo.tets)
-    return float(ls[-1].tets)
-
-
-def plan_for_budget(levels: list[LevelSize], model: LevelTimes, budget_s: float, max_merges: int) -> BudgetPlan:
+def plan_for_budget(levels: list[LevelSize], predict, budget_s: float, max_merges: int) -> BudgetPlan:
     """The finest simplification whose predicted frame time is within ``budget_s``.
+
+    ``predict(i, merges)`` is the predicted frame time starting from stored level ``i`` (finest
+    first) and simplifying on the fly to ``merges``; it is taken to shrink as ``merges`` grows.
 
     Examples
     --------
     >>> lv = [LevelSize(0, 0, 1000), LevelSize(1, 50, 500), LevelSize(2, 75, 250)]
-    >>> m = LevelTimes((0.21, 0.11, 0.06), (0.05, 0.03, 0.02))
-    >>> plan_for_budget(lv, m, 0.2, 80).level          # level 0 needs 0.21 s: simplify it on the fly
-    0
-    >>> plan_for_budget(lv, m, 0.1, 80).level          # level 1 (0.11 s) too slow at its own ratio
+    >>> def predict(i, n):                    # decode the start level, render what is left
+    ...     return 1e-4 * lv[i].tets + 1e-4 * estimated_tets(lv, n)
+    >>> plan_for_budget(lv, predict, 0.14, 80).level     # level 0 needs 0.15 s even at N = 50
     1
+    >>> plan_for_budget(lv, predict, 0.19, 80).merges    # level 0 simplified on the fly, 900 tets
+    10
     """
     ls = sorted(levels, key=lambda x: x.merges)
     for i, lv in enumerate(ls):
-        t_own = model.predict(ls, i, lv.merges)
+        t_own = predict(i, lv.merges)
         if t_own <= budget_s:
             return BudgetPlan(lv.level, lv.merges, t_own, True)
         end = ls[i + 1].merges if i + 1 < len(ls) else max_merges
-        if end <= lv.merges or model.predict(ls, i, end) > budget_s:
+        if not lv.has_forest or end <= lv.merges or predict(i, end) > budget_s:
             continue
         lo, hi = lv.merges, end  # t(lo) > budget >= t(hi): bisect for the smallest fitting N
         while hi - lo > 1:
             mid = (lo + hi) // 2
-            if model.predict(ls, i, mid) <= budget_s:
+            if predict(i, mid) <= budget_s:
                 hi = mid
             else:
                 lo = mid
-        return BudgetPlan(lv.level, hi, model.predict(ls, i, hi), True)
+        return BudgetPlan(lv.level, hi, predict(i, hi), True)
     last = len(ls) - 1
-    return BudgetPlan(ls[last].level, ls[last].merges, model.predict(ls, last, ls[last].merges), False)
+    end = max(max_merges if ls[last].has_forest else ls[last].merges, ls[last].merges)
+    return BudgetPlan(ls[last].level, end, predict(last, end), False)
 
 
-# -- calibration cache ------------------------------------------------------------------------
+# While the user drags, levels alone cannot always reach the budget: samples and rays do not shrink
+# with the mesh. The viewer then also coarsens the sample step and the image (upscaled on screen),
+# in this order, taking the first setting whose plan fits without simplifying past MAX_DRAG_RATIO.
+PROBE_PIXELS = 64 * 64
+PROBE_TETS = 2000
+
+DRAG_SETTINGS = ((1.0, 1.0), (1.0, 2.0), (1.0, 4.0), (0.75, 4.0), (0.5, 4.0), (0.35, 4.0), (0.25, 4.0))
+MAX_DRAG_RATIO = 1 - 1 / 2 ** 9
+
+
+class FramePlanner:
+    """Plans the frames of one open file: levels from its metadata, a :class:`TimeModel` and a
+    :class:`WorkEstimator` for its view. The viewer keeps one per session and render mode; ``tetc
+    render --budget`` builds one for its single frame.
+
+    Parameters
+    ----------
+    reader : TetcReader
+    model : TimeModel
+    step : float
+        The file's volume-mode sample step.
+    mode : {"volume", "face"}
+    decoded : callable, optional
+        ``decoded(level)`` is True when that level is already in memory (no decoding cost).
+    """
+
+    def __init__(self, reader, model: TimeModel, *, step: float, mode: str = "volume", decoded=None):
+        self.model = model
+        self.levels = levels_of(stored_levels(reader))
+        self.max_merges = int(forest_merges(reader))
+        self.points = int(reader.meta["points"])
+        self.estimator = WorkEstimator(self.levels, bbox=reader.meta["bbox"], step=step, mode=mode)
+        self.decoded = decoded or (lambda level: False)
+
+    def level_size(self, level: int) -> LevelSize:
+        return next(lv for lv in self.levels if lv.level == level)
+
+    def probe(self, reader, view, *, pixels: int = PROBE_PIXELS) -> dict:
+        """Learn the view's rays hit, steps and samples from a tiny render (a few milliseconds).
+
+        The coarsest stored level with at least :data:`PROBE_TETS` tets (or level 0), at about
+        ``pixels`` rays with the image's aspect: its counts, scaled, stand in for the frame's until
+        frames of this view have been drawn. Returns the probe's stats.
+        """
+        lv = next((x for x in reversed(self.levels) if x.tets >= PROBE_TETS), self.levels[0])
+        cam = view.camera
+        scale = min(1.0, math.sqrt(pixels / (cam.width * cam.height)))
+        small = replace(cam, width=max(1, round(cam.width * scale)), height=max(1, round(cam.height * scale)))
+        stats = render_tetc(reader, replace(view, camera=small, lean=False), level=lv.level).stats
+        self.estimator.observe(stats, step_factor=1.0)
+        return stats
+
+    def estimate(self, level: int, merges: int, pixels: int, coverage: float, step_factor: float = 1.0) -> Work:
+        return self.estimator.estimate(self.level_size(level), merges, pixels, coverage, step_factor=step_factor,
+                                       decoded=self.decoded(level))
+
+    def plan(self, budget_s: float, fitted_camera, *, drag: bool = False) -> BudgetPlan:
+        """The finest frame predicted to fit ``budget_s``; ``drag``: also coarsen step and image."""
+        if not (isinstance(budget_s, (int, float)) and math.isfinite(budget_s) and budget_s > 0):
+            raise OptionError(f"the budget must be a positive number of seconds, got {budget_s!r}")
+        pixels = fitted_camera.width * fitted_camera.height
+        coverage = self.estimator.coverage(fitted_camera)
+        first = None
+        for scale, step_factor in (DRAG_SETTINGS if drag else DRAG_SETTINGS[:1]):
+            px = max(int(round(fitted_camera.width * scale)), 1) * max(int(round(fitted_camera.height * scale)), 1)
+            plan = plan_for_budget(
+                self.levels, lambda i, n: self.model.predict(self.estimate(self.levels[i].level, n, px, coverage,
+                                                                           step_factor)),
+                float(budget_s), self.max_merges)
+            plan = BudgetPlan(plan.level, plan.merges, plan.predicted_s, plan.feasible, scale, step_factor)
+            if plan.feasible and plan.merges <= MAX_DRAG_RATIO * self.points:
+                return plan
+            if first is None or (plan.feasible and not first.feasible):
+                first = plan
+            elif not first.feasible and not plan.feasible and plan.predicted_s < first.predicted_s:
+                first = plan
+        return first
+
+    def target(self, plan: BudgetPlan):
+        start = self.level_size(plan.level)
+        merges = plan.merges if start.has_forest else start.merges
+        return Target(plan.level, merges, merges / max(self.points, 1), start.merges)
+
+    def work_of(self, stats: dict, *, decoded: bool = False) -> Work:
+        """The work a rendered frame did (``decoded``: its level came from memory)."""
+        start = self.level_size(int(stats["level"]))
+        filtering = int(stats["merges"]) > start.merges
+        return Work(0.0 if decoded else float(stats["tets_decoded"]), float(start.points) if filtering else 0.0,
+                    float(stats["tets_rendered"]), float(stats["steps"]), float(stats["samples"]),
+                    estimated_tets(self.levels, int(stats["merges"]), "boundary_faces"), float(stats["rays"]))
+
+    def observe(self, stats: dict, *, total_s: float, extra_s: float = 0.0, step_factor: float = 1.0,
+                decoded: bool = False) -> Work:
+        """Correct the model and the view's work estimate from a rendered frame's stats.
+
+        ``total_s`` is the whole frame; ``extra_s`` the part outside the pipeline that grows with
+        the pixels (the viewer's image encoding).
+        """
+        w = self.work_of(stats, decoded=decoded)
+        decode_s = stats.get("decode_s", 0.0) + stats.get("filter_s", 0.0)
+        render_s = stats.get("render_s", 0.0)
+        other = max(total_s - decode_s - render_s - extra_s, 0.0)
+        self.model.observe(w, decode_s=decode_s, render_s=render_s, other_s=other, extra_s=extra_s)
+        self.estimator.observe(stats, step_factor=step_factor)
+        return w
+
+
+def levels_of(stored: list[dict]) -> list[LevelSize]:
+    return sorted((LevelSize(int(lv["level"]), int(lv.get("merges_before", 0)), int(lv["tets"]),
+                             int(lv.get("points", 0)), int(lv.get("boundary_faces", 0)), bool(lv.get("has_forest")))
+                   for lv in stored), key=lambda x: x.merges)
+
+
+# -- seeding the costs once per machine ----------------------------------------------------------------
 
 def cache_dir() -> Path:
-    """Where calibrations live: $TETC_CACHE_DIR, else $XDG_CACHE_HOME/tetc, else ~/.cache/tetc."""
+    """Where the machine's costs live: $TETC_CACHE_DIR, else $XDG_CACHE_HOME/tetc, else ~/.cache/tetc."""
     if os.environ.get("TETC_CACHE_DIR"):
         return Path(os.environ["TETC_CACHE_DIR"])
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "tetc"
 
 
-def calibration_key(file_id: str, size: tuple[int, int], mode: str, extra: str = "") -> str:
-    machine = f"{platform.node()}|{platform.machine()}|{os.cpu_count()}|{os.environ.get('NUMBA_NUM_THREADS', '')}"
-    return hashlib.sha1(f"{machine}|{file_id}|{size[0]}x{size[1]}|{mode}|{extra}".encode()).hexdigest()[:20]
+def machine_key() -> str:
+    text = (f"{platform.node()}|{platform.machine()}|{platform.processor()}|{os.cpu_count()}|"
+            f"{os.environ.get('NUMBA_NUM_THREADS', '')}|{__version__}|{SEED_VERSION}")
+    return hashlib.sha1(text.encode()).hexdigest()[:20]
 
 
-def load_model(key: str, n_levels: int | None = None) -> LevelTimes | None:
-    """The cached calibration under ``key`` (None if absent, damaged, or for another level count)."""
+def load_costs(key: str | None = None) -> Costs | None:
+    """The cached costs of this machine (None if absent or damaged)."""
+    key = key or machine_key()
     try:
-        data = json.loads((cache_dir() / "timing.json").read_text())
-        model = LevelTimes(tuple(float(x) for x in data[key]["total_s"]),
-                           tuple(float(x) for x in data[key]["decode_s"]))
+        data = json.loads((cache_dir() / "costs.json").read_text())
+        entry = data[key]
+        costs = Costs(**{f.name: float(entry[f.name]) for f in fields(Costs)})
     except (OSError, ValueError, KeyError, TypeError):
         return None
-    if len(model.total_s) != len(model.decode_s) or (n_levels is not None and len(model.total_s) != n_levels):
+    if not all(math.isfinite(v) and v >= 0 for v in asdict(costs).values()):
         return None
-    return model
+    return costs
 
 
-def save_model(key: str, model: LevelTimes) -> None:
+def save_costs(costs: Costs, key: str | None = None) -> None:
+    key = key or machine_key()
     d = cache_dir()
     try:
         d.mkdir(parents=True, exist_ok=True)
-        path = d / "timing.json"
+        path = d / "costs.json"
         try:
             data = json.loads(path.read_text())
             if not isinstance(data, dict):
                 data = {}
         except (OSError, ValueError):
             data = {}
-        data[key] = asdict(model)
+        data[key] = asdict(costs)
         tmp = path.with_suffix(f".tmp{os.getpid()}")
         tmp.write_text(json.dumps(data, indent=1))
         os.replace(tmp, path)
     except OSError:
-        pass  # a read-only home only costs a re-calibration next time
+        pass  # a read-only home only costs a re-seed next time
 
 
-# -- planning a file's render ---------------------------------------------------------------------
+def _seed_grid(n: int):
+    """A jittered n x n x n grid split into tets, with a smooth scalar (the seeding mesh)."""
 
-def _file_id(path) -> str:
-    st = os.stat(path)
-    return f"{os.path.abspath(path)}|{st.st_size}|{st.st_mtime_ns}"
+    dims = (n, n, n)
+    k, j, i = np.meshgrid(*(np.arange(d) for d in dims[::-1]), indexing="ij")
+    pts = np.stack([i, j, k], -1).reshape(-1, 3).astype(np.float64)
+    pts += np.random.default_rng(0).uniform(-0.2, 0.2, pts.shape)
+    pts = pts.astype(np.float32)
+    hexes, colour = grid_hexes(dims)
+    tets = orient_positive(pts, split_hexes_two_colour(hexes, colour))
+    dens = (np.sin(pts[:, 0] * 0.7) + 0.2 * pts[:, 1] + 0.1 * pts[:, 2]).astype(np.float32)
+    return validate_tets(pts, dens, tets)[0]
 
 
-def calibrate(path, view, levels: list[LevelSize], *, repeats: int = 3) -> LevelTimes:
-    """Time whole frames (open, decode, render, PNG written) of every stored level, finest first.
+def seed_costs(*, repeats: int = 3) -> Costs:
+    """How fast this machine is, in a few tenths of a second: the reference costs, scaled.
 
-    Each level's figure is the median of ``repeats`` warm frames, so the model predicts a typical
-    frame, not the luckiest one.
+    The ratios between the costs are properties of the code (measured once on the reference
+    machine, :class:`Costs`' defaults); what differs between machines is mostly their speed. So
+    the seed times the decoder and the streaming ray caster on a synthetic 15³ grid (13.7 k tets, a
+    few image sizes and sample steps, best of ``repeats``) and scales the reference costs of each
+    stage by measured / predicted. The frames a user renders then correct the rest
+    (:meth:`TimeModel.observe`).
     """
-    import statistics
-    import tempfile
+    ref = Costs()
+    big, small = _seed_grid(15), _seed_grid(9)
+    # A forest where the first half of the vertices merge into the second half, in id order.
+    half = big.n_points // 2
+    parent = np.arange(big.n_points, dtype=np.int32)
+    rank = np.full(big.n_points, ROOT_RANK, np.int32)
+    parent[:half] = np.arange(half, 2 * half, dtype=np.int32)
+    rank[:half] = np.arange(half, dtype=np.int32)
+    reader = TetcReader(encode_tetc([LevelPayload(0, 0.0, 0, big, (parent, rank))]))
 
-    from ..render.image import write_png
-    from .stream import Target, render_tetc
+    def best_of(fn):
+        best = math.inf
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            fn()
+            best = min(best, time.perf_counter() - t0)
+        return best
 
-    ls = sorted(levels, key=lambda x: x.merges)
-    totals, decodes = [], []
-    with tempfile.TemporaryDirectory(prefix="tetc-calib-") as tmp:
-        png = Path(tmp) / "probe.png"
-        for lv in ls:
-            target = Target(lv.level, lv.merges, 0.0, lv.merges)
-            runs = []
-            for _ in range(repeats):
-                t0 = time.perf_counter()
-                res = render_tetc(path, view, target=target)
-                write_png(png, res.image, force=True)  # a frame ends with its PNG on disk
-                runs.append((time.perf_counter() - t0, res.stats["decode_s"] + res.stats["filter_s"]))
-            total = statistics.median(t for t, _ in runs)
-            totals.append(total)
-            decodes.append(min(runs, key=lambda r: abs(r[0] - total))[1])
-    return LevelTimes(tuple(totals), tuple(decodes))
+    decode_s = best_of(lambda: (reader.decode_mesh(0), ancestors(*reader.read_forest(0), half)))
+    decode_scale = decode_s / ref.decode_s(Work(tets_decoded=big.n_tets, forest_points=big.n_points))
 
-
-def model_key(path, view) -> str:
-    """Calibration key of a file rendered with a view (camera, transfer function, sampling)."""
-    tf = view.tf
-    tf_key = tf if isinstance(tf, str) else json.dumps(getattr(tf, "__dict__", tf), sort_keys=True, default=str)
-    cam = view.camera
-    return calibration_key(_file_id(path), (cam.width, cam.height), view.mode,
-                           f"{tf_key}|{view.step}|{cam.azimuth}|{cam.elevation}|{cam.zoom}")
+    step0 = float(np.linalg.norm(big.bbox[1] - big.bbox[0])) / 60
+    ratios = []
+    for mesh, size, step in ((big, 48, step0), (big, 96, step0 / 4), (small, 96, step0)):
+        runs = [render_batches(mesh_batches(mesh), Camera(size, size, 30, 20), "default", step=step,
+                               scalar_range=mesh.scalar_range).stats for _ in range(repeats)]
+        st = min(runs, key=lambda r: r["render_s"])
+        w = Work(0.0, 0.0, st["tets_rendered"], st["steps"], st["samples"], len(mesh.boundary_faces()), st["rays"])
+        ratios.append(st["render_s"] / ref.render_s(w))
+    return ref.scaled(decode_scale, float(np.median(ratios)))
 
 
-def plan_file_budget(path, view, budget_s: float, *, recalibrate: bool = False):
-    """(Target, BudgetPlan, LevelTimes, calibrated_now) for rendering ``path`` within ``budget_s``."""
-    if not math.isfinite(float(budget_s)):
-        from ..errors import OptionError
+def machine_costs(*, reseed: bool = False) -> tuple[Costs, bool]:
+    """(the costs of this machine, seeded_now): from the cache, else seeded and cached."""
+    costs = None if reseed else load_costs()
+    if costs is not None:
+        return costs, False
+    costs = seed_costs()
+    save_costs(costs)
+    return costs, True
 
-        raise OptionError(f"--budget must be a number of seconds, got {budget_s}")
-    from ..codec import TetcReader
-    from ..simplify.levels import Target, forest_merges, stored_levels
 
-    reader = TetcReader(path)
-    pts = int(reader.meta["points"])
-    levels = [LevelSize(int(lv["level"]), int(lv.get("merges_before", 0)), int(lv["tets"]))
-              for lv in stored_levels(reader)]
-    key = model_key(path, view)
-    model = None if recalibrate else load_model(key, len(levels))
-    calibrated = model is None
-    if model is None:
-        model = calibrate(path, view, levels)
-        save_model(key, model)
-    reach = forest_merges(reader)
-    # Only stored levels with a forest can be simplified further on the fly.
-    plan = plan_for_budget(levels, model, float(budget_s), reach)
-    start = next(lv for lv in reader.levels if int(lv["level"]) == plan.level)
-    merges = plan.merges if start.get("has_forest") else int(start.get("merges_before", 0))
-    target = Target(plan.level, merges, merges / max(pts, 1), int(start.get("merges_before", 0)))
-    return target, plan, model, calibrated
+# -- planning one file's render (tetc render --budget) ---------------------------------------------
+
+PNG_S_PER_PIXEL = 5e-8  # writing the 8-bit PNG (zlib level 6), reference machine
+
+
+def plan_file_budget(path_or_reader, view, budget_s: float, *, reseed: bool = False):
+    """(Target, BudgetPlan, FramePlanner, seeded_now) for rendering a file within ``budget_s``.
+
+    The budget covers the whole command from opening the file to the PNG written: what the
+    probe and the seeding (first use on a machine) took is taken off it before planning.
+    """
+    if not (isinstance(budget_s, (int, float)) and math.isfinite(float(budget_s)) and budget_s > 0):
+        raise OptionError(f"--budget must be a positive number of seconds, got {budget_s}")
+    t0 = time.perf_counter()
+    reader = path_or_reader if isinstance(path_or_reader, TetcReader) else TetcReader(path_or_reader)
+    costs, seeded = machine_costs(reseed=reseed)
+    lo, hi, _rng, step = file_render_defaults(reader)
+    planner = FramePlanner(reader, TimeModel(costs, per_pixel_extra=PNG_S_PER_PIXEL * costs.per_step / Costs().per_step),
+                           step=view.step or step, mode=view.mode)
+    planner.probe(reader, view)
+    left = max(float(budget_s) - (time.perf_counter() - t0), 1e-3)
+    plan = planner.plan(left, view.camera.fit(lo, hi))
+    return planner.target(plan), plan, planner, seeded
+
+
+__all__ = ["LevelSize", "Work", "Costs", "TimeModel", "WorkEstimator", "BudgetPlan", "plan_for_budget",
+           "FramePlanner", "estimated_tets", "levels_of", "machine_costs", "seed_costs", "load_costs",
+           "save_costs", "cache_dir", "plan_file_budget"]

@@ -33,6 +33,9 @@ class Camera:
         VTK's ``Zoom`` (the view angle is divided by it).
     view_angle : float
         Vertical view angle in degrees before zooming (VTK's default 30).
+    pan_x, pan_y : float
+        Shift of the focal point (and the camera with it) along the view's right and up vectors,
+        in radii of the bounding sphere, applied after the fit (the viewer's pan; 0 for VTK's view).
     """
 
     width: int = 256
@@ -41,13 +44,15 @@ class Camera:
     elevation: float = 0.0
     zoom: float = 1.0
     view_angle: float = 30.0
+    pan_x: float = 0.0
+    pan_y: float = 0.0
 
     def __post_init__(self):
         for name in ("width", "height"):
             v = getattr(self, name)
             if not isinstance(v, (int, np.integer)) or not 1 <= v <= MAX_SIZE:
                 raise OptionError(f"image {name} must be an integer in 1..{MAX_SIZE}, got {v!r}")
-        for name in ("azimuth", "elevation", "zoom", "view_angle"):
+        for name in ("azimuth", "elevation", "zoom", "view_angle", "pan_x", "pan_y"):
             if not math.isfinite(float(getattr(self, name))):
                 raise OptionError(f"camera {name} must be a finite number")
         if not (1.0 / MAX_ZOOM <= self.zoom <= MAX_ZOOM):
@@ -70,6 +75,13 @@ class Camera:
         position, up = _elevation(position, focal, up, self.elevation)
         up = _orthogonal_up(position, focal, up)
         position, focal, up = _reset(position, focal, up, lo, hi, self.view_angle, aspect)
+        if self.pan_x or self.pan_y:
+            fwd = (focal - position) / np.linalg.norm(focal - position)
+            right = np.cross(fwd, up)
+            right = right / np.linalg.norm(right)
+            radius = 0.5 * math.sqrt(float(np.sum((hi - lo) ** 2)) or 1.0)
+            shift = radius * (self.pan_x * right + self.pan_y * np.cross(right, fwd))
+            position, focal = position + shift, focal + shift
         return FittedCamera(self.width, self.height, position, focal, up, self.view_angle / self.zoom)
 
 

@@ -1,0 +1,30 @@
+"""``tetc view``: interactive exploration of a ``.tetc`` file in the browser.
+
+* :mod:`gatun_py.viewer.session`  frame requests -> planned, rendered, encoded frames (no web code);
+* :mod:`gatun_py.viewer.server`   the local web server: the page, its websocket, ``POST /api/frame``
+  (needs the optional extra ``view``: ``pip install 'gatun_py[view]'``);
+* ``static/``                     the page (HTML, script, style), package data.
+
+A script can drive the frame service without a browser; see :mod:`gatun_py.viewer.server` for the
+routes and :func:`gatun_py.viewer.session.parse_request` for the request.
+"""
+
+from ..errors import OptionError
+from .session import Frame, FrameRequest, ViewerSession, parse_request
+
+WEB_EXTRA_MESSAGE = ("tetc view needs the optional web server package aiohttp: "
+                     "pip install 'gatun_py[view]' (or: pip install aiohttp)")
+
+
+def require_web():
+    """Import the server module, or raise OptionError saying how to install what it needs."""
+    try:  # optional dependency: only the viewer's server needs aiohttp
+        from . import server
+    except ImportError as e:
+        if getattr(e, "name", "") and not str(e.name).startswith("aiohttp"):
+            raise
+        raise OptionError(WEB_EXTRA_MESSAGE) from None
+    return server
+
+
+__all__ = ["ViewerSession", "FrameRequest", "Frame", "parse_request", "require_web"]

@@ -1,0 +1,352 @@
+"""One open file in the viewer: frame requests in, images and stats out (no web code here).
+
+A :class:`FrameRequest` is what a browser, a script or a test asks for: a camera, a transfer function,
+a frame-time budget (or none: full quality) and an image format. :meth:`ViewerSession.render` plans the
+frame with the shared time model (:mod:`gatun_py.pipeline.budget`), renders it through the streaming
+pipeline on the file kept open, encodes it, and corrects the model from the frame's measured stats.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..codec import TetcReader
+from ..errors import OptionError, TetcError
+from ..pipeline.budget import FramePlanner, TimeModel, machine_costs
+from ..pipeline.stream import View, file_render_defaults, render_tetc
+from ..render.camera import MAX_ZOOM, Camera
+from ..render.image import png_bytes, to_rgb8
+from ..render.transfer import from_dict, load_transfer_function, preset_names
+from ..simplify.levels import resolve_target
+
+FORMATS = {"jpeg": "image/jpeg", "png": "image/png", "webp": "image/webp"}
+MAX_VIEW_SIZE = 2048  # pixels per side the viewer renders
+DEFAULT_BUDGET_S = 0.1
+# Frames are planned to this share of the budget: the model predicts a typical frame, and a frame
+# time varies by +-15 % on a machine shared with other work; the rest is headroom for the target.
+PLAN_SHARE = 0.85
+HISTOGRAM_POINTS = 20_000
+COLORMAPS = ("viridis", "plasma", "inferno", "magma", "cividis", "coolwarm", "jet", "gray")
+
+
+class FrameCancelled(Exception):
+    """A newer request superseded the frame being rendered."""
+
+
+@dataclass(frozen=True)
+class FrameRequest:
+    """A validated frame request (see :func:`parse_request` for the JSON it comes from)."""
+
+    camera: Camera
+    tf: object  # a TransferFunction
+    budget_s: float | None  # None: full quality (the file's level 0, or ``level``)
+    level: int | None = None
+    fmt: str = "jpeg"
+    quality: int = 85
+    mode: str = "volume"
+    interacting: bool = False
+
+
+def _number(obj: dict, key: str, default, lo=-math.inf, hi=math.inf, integer=False):
+    v = obj.get(key, default)
+    if v is None and default is None:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise OptionError(f"{key!r} must be a finite number, got {v!r}")
+    if integer:
+        if int(v) != v:
+            raise OptionError(f"{key!r} must be an integer, got {v!r}")
+        v = int(v)
+    if not lo <= v <= hi:
+        raise OptionError(f"{key!r} must lie in [{lo:g}, {hi:g}], got {v!r}")
+    return v
+
+
+def parse_request(obj) -> FrameRequest:
+    """Validate a frame request given as parsed JSON.
+
+    The request (every key optional)::
+
+        {"camera": {"width": 512, "height": 512, "azimuth": 0, "elevation": 0, "zoom": 1,
+                    "pan_x": 0, "pan_y": 0},
+         "tf": "bluntfin" | {project transfer-function JSON},
+         "budget": 0.1 | null,        # seconds; null = full quality
+         "level": null | 3,           # a stored level instead of a budget
+         "mode": "volume" | "face",
+         "format": "jpeg" | "png" | "webp", "quality": 85,
+         "interacting": false}
+
+    Raises
+    ------
+    OptionError
+        Anything malformed, with a message naming the key. A ``tf`` string must be a preset name:
+        file paths are never read on a client's behalf.
+
+    Examples
+    --------
+    >>> r = parse_request({"camera": {"width": 64, "height": 48, "azimuth": 30}, "budget": 0.2})
+    >>> (r.camera.width, r.camera.height, r.camera.azimuth, r.budget_s, r.fmt)
+    (64, 48, 30.0, 0.2, 'jpeg')
+    """
+    if not isinstance(obj, dict):
+        raise OptionError("a frame request must be a JSON object")
+    cam = obj.get("camera", {})
+    if not isinstance(cam, dict):
+        raise OptionError("'camera' must be an object")
+    camera = Camera(
+        width=_number(cam, "width", 512, 1, MAX_VIEW_SIZE, integer=True),
+        height=_number(cam, "height", 512, 1, MAX_VIEW_SIZE, integer=True),
+        azimuth=float(_number(cam, "azimuth", 0.0, -1e6, 1e6)),
+        elevation=float(_number(cam, "elevation", 0.0, -1e6, 1e6)),
+        zoom=float(_number(cam, "zoom", 1.0, 1 / MAX_ZOOM, MAX_ZOOM)),
+        pan_x=float(_number(cam, "pan_x", 0.0, -100, 100)),
+        pan_y=float(_number(cam, "pan_y", 0.0, -100, 100)),
+    )
+    spec = obj.get("tf", "default")
+    if isinstance(spec, str):
+        if spec not in preset_names():
+            raise OptionError(f"unknown transfer-function preset {spec!r} (presets: {', '.join(preset_names())})")
+        tf = load_transfer_function(spec)
+    elif isinstance(spec, dict):
+        tf = from_dict(spec, "the request's transfer function")
+    else:
+        raise OptionError("'tf' must be a preset name or a transfer-function object")
+    budget = _number(obj, "budget", DEFAULT_BUDGET_S, 1e-3, 3600.0) if obj.get("budget", 0) is not None else None
+    level = _number(obj, "level", None, 0, 64, integer=True)
+    fmt = obj.get("format", "jpeg")
+    if fmt not in FORMATS:
+        raise OptionError(f"'format' must be one of {', '.join(FORMATS)}, got {fmt!r}")
+    mode = obj.get("mode", "volume")
+    if mode not in ("volume", "face"):
+        raise OptionError(f"'mode' must be volume or face, got {mode!r}")
+    return FrameRequest(camera, tf, budget, level, fmt, _number(obj, "quality", 85, 1, 100, integer=True),
+                        mode, bool(obj.get("interacting", False)))
+
+
+def encode_image(rgb8: np.ndarray, fmt: str, quality: int = 85) -> bytes:
+    """JPEG/WebP (Pillow, which scikit-image brings) or PNG bytes of an (H, W, 3) uint8 image."""
+    if fmt == "png":
+        return png_bytes(rgb8)
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(rgb8).save(buf, format=fmt.upper(), quality=quality)
+    return buf.getvalue()
+
+
+@dataclass
+class Frame:
+    """An encoded image and what it took (``stats`` is JSON-ready)."""
+
+    data: bytes
+    mime: str
+    stats: dict = field(default_factory=dict)
+    rgb8: np.ndarray | None = None
+
+
+class CachingReader(TetcReader):
+    """A :class:`TetcReader` that keeps the decoded batches of levels up to ``max_tets`` in total.
+
+    Every interactive frame would otherwise decode its level again; a viewer redraws the same few
+    coarse levels many times. Levels too large for the cache (a 10 M-tet level 0) stream from the
+    file each time, as ``tetc render`` does. A level enters the cache only once decoded whole (a
+    cancelled frame leaves nothing half-cached).
+    """
+
+    def __init__(self, source, *, max_tets: int = 3_000_000):
+        super().__init__(source)
+        self.max_tets = max_tets
+        self._batches: dict[int, list] = {}
+        self._forests: dict[int, tuple] = {}
+
+    def is_decoded(self, level: int) -> bool:
+        return level in self._batches
+
+    def cached_tets(self) -> int:
+        return sum(int(self.level_meta(lv)["tets"]) for lv in self._batches)
+
+    def iter_decode(self, level: int = 0, **kw):
+        if level in self._batches:
+            yield from self._batches[level]
+            return
+        keep = self.cached_tets() + int(self.level_meta(level)["tets"]) <= self.max_tets
+        out = []
+        for batch in super().iter_decode(level, **kw):
+            if keep:
+                out.append(batch)
+            yield batch
+        if keep:
+            self._batches[level] = out
+
+    def read_forest(self, level: int = 0):
+        if level not in self._forests:
+            self._forests[level] = super().read_forest(level)
+        return self._forests[level]
+
+
+class ViewerSession:
+    """A ``.tetc`` file kept open for a viewer: file info, frame planning and rendering.
+
+    Every frame checks that the file on disk is still the one opened (size and modification time):
+    a changed file is reopened, a vanished or corrupt one raises :class:`~gatun_py.errors.TetcError`
+    with a clear message (the server shows it and keeps serving).
+    """
+
+    def __init__(self, path, *, costs=None):
+        self.path = os.fspath(path)
+        self.costs = costs if costs is not None else machine_costs()[0]
+        self._open()
+
+    def _signature(self):
+        try:
+            st = os.stat(self.path)
+        except OSError as e:
+            raise TetcError(f"{self.path}: the file is gone ({e.strerror or e})") from None
+        return st.st_size, st.st_mtime_ns
+
+    def _open(self):
+        self.signature = self._signature()
+        try:
+            with open(self.path, "rb") as fh:  # read whole: the file may change under a long session
+                data = fh.read()
+        except OSError as e:
+            raise TetcError(f"{self.path}: cannot read ({e.strerror or e})") from None
+        self.reader = CachingReader(data)
+        self.bbox_lo, self.bbox_hi, self.scalar_range, self.step = file_render_defaults(self.reader)
+        self.planners = {}  # by mode: each keeps its own view statistics, the costs are shared
+        self.model = TimeModel(self.costs)
+        self._histogram = None
+
+    def check_file(self) -> None:
+        """Reopen the file if it changed on disk; raise TetcError if it vanished or is corrupt."""
+        if self._signature() != self.signature:
+            self._open()
+
+    def planner(self, mode: str) -> FramePlanner:
+        if mode not in self.planners:
+            self.planners[mode] = FramePlanner(self.reader, self.model, step=self.step, mode=mode,
+                                               decoded=self.reader.is_decoded)
+        return self.planners[mode]
+
+    # -- what the page shows before the first frame ---------------------------------------------
+
+    def histogram(self, bins: int = 64, *, points: int = HISTOGRAM_POINTS) -> list[int]:
+        """Counts of the scalar over the vertices of the coarsest stored level that still has
+        ``points`` of them (or level 0): the shape of the distribution, without decoding it all."""
+        if self._histogram is None:
+            big_enough = [lv for lv in self.reader.levels if int(lv["points"]) >= points] or self.reader.levels[:1]
+            lv = max(big_enough, key=lambda x: int(x.get("merges_before", 0)))
+            mesh = self.reader.decode_mesh(int(lv["level"]))
+            lo, hi = self.scalar_range
+            counts, _ = np.histogram(mesh.density, bins=bins, range=(lo, hi if hi > lo else lo + 1))
+            self._histogram = [int(c) for c in counts]
+        return self._histogram
+
+    def info(self) -> dict:
+        meta = self.reader.meta
+        return {
+            "file": os.path.basename(self.path),
+            "points": int(meta["points"]), "tets": int(meta["tets"]),
+            "scalar": self.reader.scalar_name,
+            "scalar_range": list(self.scalar_range),
+            "bbox": [list(map(float, self.bbox_lo)), list(map(float, self.bbox_hi))],
+            "levels": [{k: lv.get(k) for k in ("level", "ratio", "merges_before", "points", "tets", "has_forest")}
+                       for lv in self.reader.levels],
+            "histogram": self.histogram(),
+            "presets": {name: _tf_json(load_transfer_function(name)) for name in preset_names()},
+            "colormaps": colormap_tables(),
+            "selective_refinement": False,
+            "default_budget": DEFAULT_BUDGET_S,
+        }
+
+    # -- frames ---------------------------------------------------------------------------------
+
+    def render(self, req: FrameRequest, *, cancelled=None) -> Frame:
+        """Plan, render, encode one frame; ``cancelled()`` returning True aborts it between batches.
+
+        With a budget, the planner picks the level and merges (and, when levels alone cannot make it,
+        a coarser sample step and a smaller image, which the page scales up) predicted to fit;
+        without, the file's full mesh at the file's step, as ``tetc render`` draws it.
+        """
+        t0 = time.perf_counter()
+        self.check_file()
+        planner = self.planner(req.mode)
+        fitted = req.camera.fit(self.bbox_lo, self.bbox_hi)
+        plan = None
+        if req.level is not None:
+            target = resolve_target(self.reader, level=req.level)
+        elif req.budget_s is None:
+            target = resolve_target(self.reader)
+        else:
+            # Before the first frame of a view the work is guessed from the bounding box (an
+            # overestimate: the first frame comes out coarse and fast); each frame then teaches it.
+            plan = planner.plan(PLAN_SHARE * req.budget_s, fitted, drag=True)
+            target = planner.target(plan)
+        scale = plan.scale if plan is not None else 1.0
+        step_factor = plan.step_factor if plan is not None else 1.0
+        camera = req.camera
+        if scale != 1.0:
+            camera = replace(camera, width=max(1, round(camera.width * scale)), height=max(1, round(camera.height * scale)))
+        view = View(camera, req.tf, req.mode, self.step * step_factor if step_factor != 1.0 else None, False)
+        decoded = self.reader.is_decoded(target.level)
+        work = planner.estimate(target.level, target.merges, camera.width * camera.height,
+                                planner.estimator.coverage(fitted), step_factor)
+        predicted = planner.model.predict(work)
+
+        def progress(_n):
+            if cancelled is not None and cancelled():
+                raise FrameCancelled()
+
+        t_plan = time.perf_counter()
+        res = render_tetc(self.reader, view, target=target, progress=progress)
+        t_render = time.perf_counter()
+        rgb8 = to_rgb8(res.image)
+        data = encode_image(rgb8, req.fmt, req.quality)
+        t_end = time.perf_counter()
+        st = res.stats
+        encode_s = t_end - t_render
+        planner.observe(st, total_s=t_end - t_plan, extra_s=encode_s, step_factor=step_factor, decoded=decoded)
+        stats = {
+            "level": int(target.level), "merges": int(target.merges), "ratio": float(target.ratio),
+            "cut": "uniform",
+            "tets_decoded": 0 if decoded else int(st["tets_decoded"]), "tets_rendered": int(st["tets_rendered"]),
+            "rays": int(st["rays"]), "rays_hit": int(st["rays_hit"]), "steps": int(st["steps"]),
+            "samples": int(st["samples"]), "scale": scale, "step_factor": step_factor,
+            "plan_s": t_plan - t0,
+            "decode_s": float(st["decode_s"]), "filter_s": float(st["filter_s"]), "render_s": float(st["render_s"]),
+            "encode_s": encode_s, "server_s": t_end - t0,
+            "budget_s": req.budget_s, "predicted_s": predicted,
+            "feasible": True if plan is None else plan.feasible,
+            "full_quality": plan is None and req.level is None,
+            "format": req.fmt, "bytes": len(data), "width": camera.width, "height": camera.height,
+        }
+        return Frame(data, FORMATS[req.fmt], stats, rgb8)
+
+
+def _tf_json(tf) -> dict:
+    return {"absolute": bool(tf.absolute), "unit_distance": float(tf.unit_distance),
+            "color": [{"x": float(x), "rgb": [float(c) for c in rgb]} for x, rgb in zip(tf.color_x, tf.color_rgb)],
+            "opacity": [{"x": float(x), "a": float(a)} for x, a in zip(tf.opacity_x, tf.opacity_a)]}
+
+
+def colormap_tables(n: int = 17) -> dict:
+    """Colour tables the page offers: matplotlib's common maps (when installed), ``n`` points each."""
+    try:  # optional: matplotlib only widens the colormap choice
+        import matplotlib
+    except ImportError:
+        return {}
+    xs = np.linspace(0.0, 1.0, n)
+    out = {}
+    for name in COLORMAPS:
+        try:
+            rgb = np.asarray(matplotlib.colormaps[name](xs))[:, :3]
+        except KeyError:
+            continue
+        out[name] = [{"x": float(x), "rgb": [round(float(c), 4) for c in row]} for x, row in zip(xs, rgb)]
+    return out

@@ -1,0 +1,1 @@
+"""The viewer's page: HTML, script and style sheet (package data, read with importlib.resources)."""

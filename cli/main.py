@@ -132,6 +132,11 @@ for _module in ("codec_commands", "render_commands", "compare"):
             raise
 
 
+from .isosurface_commands import isosurface as _isosurface  # noqa: E402
+
+tetc.add_command(_isosurface)
+
+
 def main(argv=None):
     return tetc.main(args=argv, prog_name="tetc")
 

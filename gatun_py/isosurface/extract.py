@@ -23,6 +23,7 @@ from ..errors import OptionError, ReadError
 from . import marching, qem
 
 DEFAULT_BATCH_FACES = 100_000
+CHUNK_TETS = 8192  # tets per extraction step (rounds start between steps)
 #: keep at least this share of ``batch_faces`` modifiable faces between rounds (Hou & Chen's
 #: initial phase: early rounds must not over-decimate what little has been seen)
 KEEP_SHARE = 0.5
@@ -146,6 +147,7 @@ class _Extractor:
         self.importance = importance
         self.grad_scale = grad_scale
         self.check = check
+        self.tets_done = 0
         self.fa = self.fb = self.fc = np.full(16, marching.EMPTY, np.int32)
         self.fa, self.fb, self.fc = (np.full(16, marching.EMPTY, np.int32) for _ in range(3))
         self.ek = np.full(16, marching.EMPTY, np.int64)
@@ -191,7 +193,18 @@ class _Extractor:
             t[:self.nt] = self.tris[:self.nt]
             self.tris = t
 
-    def add(self, pts, dens, tets, boundary):
+    def add(self, pts, dens, tets, boundary, tets_before: int):
+        """Feed one batch, in chunks small enough that a round runs close to every B faces."""
+        step = CHUNK_TETS
+        if len(tets) <= step:
+            self._add(pts, dens, tets, boundary, tets_before + len(tets))
+            return
+        for i in range(0, len(tets), step):
+            self._add(pts, dens, tets[i:i + step], boundary if i == 0 else boundary[:0],
+                      tets_before + min(i + step, len(tets)))
+
+    def _add(self, pts, dens, tets, boundary, tets_done):
+        self.tets_done = tets_done
         t0 = time.perf_counter()
         self._reserve(len(tets), len(boundary))
         zero = np.empty(12 * len(tets) + 3 * len(boundary) + 1, np.int64)
@@ -238,7 +251,7 @@ class _Extractor:
         alive, done = qem.decimate(self.vpos, self.vq, self.vbnd, self.vlock, self.vdead, self.vimp, self.vfresh,
                                    self.tris, n, self.nt, target, MIN_DOT, touched)
         if self.check is not None and done:
-            self.check(self.vkey[touched[:2 * done]])
+            self.check(self.vkey[touched[:2 * done]], self.tets_done)
         self.collapses += done
         self.rounds += 1
         remap, self.nv, self.nt = qem.compact(self.vdead, self.tris, n, self.nt)
@@ -318,7 +331,7 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
         Called with the number of tets processed so far.
     check : callable, optional
         Test hook: called after every round with the edge keys (a << 32 | b) of the surface
-        vertices each collapse removed or moved, while the stream is at that point.
+        vertices its collapses removed or moved, and the number of tets streamed so far.
 
     Returns
     -------
@@ -366,7 +379,7 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
         tets = np.ascontiguousarray(batch.tets, dtype=np.int32)
         bnd = np.ascontiguousarray(bnd, dtype=np.int32)
         for ex in extractors:
-            ex.add(points, density, tets, bnd)
+            ex.add(points, density, tets, bnd, tets_done)
         tets_done += len(tets)
         if extractors and (len(tets) or len(bnd)):
             band.append({"tets": tets_done, "t_s": round(time.perf_counter() - t_start, 4),
@@ -398,6 +411,7 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
     stats = {
         "values": vals, "values_outside_range": [v for v in vals if v not in inside],
         "scalar_range": [float(smin), float(smax)], "tets": tets_done,
+        "bbox": [np.asarray(lo, float).tolist(), np.asarray(hi, float).tolist()],
         "faces_extracted": sum(e.extracted for e in extractors), "faces": int(len(surf_tris)),
         "peak_faces": sum(e.peak_faces for e in extractors),
         "peak_locked": max((b["locked"] for b in band), default=0),

@@ -32,7 +32,7 @@ def sample_surface(points, triangles, n_samples: int, seed: int = 0):
     return np.vstack([p, s]), np.concatenate([np.full(len(p), -1), f])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")  # a flat triangle divides by zero: nan, not an exception
 def _point_triangle(px, py, pz, a, b, c):
     """Squared distance from a point to a triangle (Ericson, Real-Time Collision Detection 5.1.5)."""
     abx, aby, abz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
@@ -76,7 +76,7 @@ def _point_triangle(px, py, pz, a, b, c):
     return (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def _distances(q, cand, pts, tris):
     """Per query point, the smallest exact distance to the candidate triangles of its row."""
     out = np.empty(q.shape[0])

@@ -303,6 +303,8 @@ def _push_edges(v, start, cnt, refs, tris, vpos, vq, vbnd, vlock, stamp, qs, hea
     hc, hu, hv, hsu, hsv = heap
     for i in range(cnt[v]):
         f = refs[start[v] + i]
+        if tris[f, 0] < 0:
+            continue
         for k in range(3):
             w = tris[f, k]
             # each neighbour appears in two faces around an interior vertex: push once, from the
@@ -364,6 +366,8 @@ def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, m
         tag += 1
         for i in range(cnt[u]):
             f = refs[start[u] + i]
+            if tris[f, 0] < 0:  # dead faces stay in the apexes' lists until rewritten
+                continue
             for k in range(3):
                 mark[tris[f, k]] = tag
         on_edge = 0
@@ -372,6 +376,8 @@ def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, m
         for i in range(cnt[v]):
             f = refs[start[v] + i]
             a, b, c = tris[f, 0], tris[f, 1], tris[f, 2]
+            if a < 0:
+                continue
             if a == u or b == u or c == u:
                 on_edge += 1
                 apex = a if (a != u and a != v) else (b if (b != u and b != v) else c)
@@ -387,6 +393,8 @@ def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, m
         tag += 1  # count each common neighbour once
         for i in range(cnt[v]):
             f = refs[start[v] + i]
+            if tris[f, 0] < 0:
+                continue
             for k in range(3):
                 w = tris[f, k]
                 if w != u and w != v and mark[w] == tag - 1:

@@ -309,9 +309,15 @@ def extract_batch(pts, dens, tets, boundary, iso, case_count, case_tris, tet_edg
     vid = np.empty(6, np.int64)
     for t in range(tets.shape[0]):
         case = 0
+        on_iso = False
         for i in range(4):
-            if dens[tets[t, i]] >= iso:
+            s = dens[tets[t, i]]
+            if s >= iso:
                 case |= 1 << i
+            if s == iso:
+                on_iso = True
+        if case_count[case] == 0 and not on_iso:
+            continue  # none of its faces touches the surface: nothing to extract or to track
         if case_count[case] > 0:
             # gradient magnitude of the tet's linear scalar (0 for a flat tet)
             p0 = tets[t, 0]

@@ -369,7 +369,8 @@ def plots(curves, big):
         band = big["stats"]["band"]
         fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
         t = [b["t_s"] for b in band]
-        ax[0].plot(t, [b["rss_mb"] for b in band], label="ours: peak RSS so far")
+        ax[0].plot(t, [b["rss_mb"] for b in band], label="ours: RSS")
+        ax[0].plot(t, [b["peak_rss_mb"] for b in band], label="ours: peak RSS so far")
         for row in big["rows"][1:]:
             ax[0].axhline(float(row[3]), ls="--", lw=1, label=f"{row[0].split(' + ')[-1]} cascade peak", color="grey")
         ax[0].set_xlabel("seconds")

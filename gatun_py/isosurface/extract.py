@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -388,7 +389,7 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
                          "locked": sum(e.locked for e in extractors),
                          "vertices": sum(e.nv for e in extractors),
                          "border_faces": sum(int(e.sizes[0]) for e in extractors),
-                         "rss_mb": round(peak_rss_mb(), 1)})
+                         "rss_mb": round(_rss_mb(), 1), "peak_rss_mb": round(peak_rss_mb(), 1)})
         if progress is not None:
             progress(tets_done)
         t_wait = time.perf_counter()
@@ -422,6 +423,15 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
         "peak_rss_mb": peak_rss_mb(), "band": band,
     }
     return Surface(surf_pts, surf_tris, point_data, stats)
+
+
+def _rss_mb() -> float:
+    """Resident memory now (not the peak), for the memory-over-time record; 0 where /proc is absent."""
+    try:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError, IndexError):
+        return 0.0
 
 
 def _open_stream(source, *, level, ratio_mesh, read_kwargs):

@@ -20,7 +20,12 @@ from pathlib import Path
 import numpy as np
 
 from .._resources import peak_rss_mb
-from ..errors import OptionError, ReadError
+from ..codec import TetcReader
+from ..codec.container import MAGIC
+from ..errors import CorruptFileError, OptionError, ReadError
+from ..mesh import TetMesh, read_mesh
+from ..simplify.filter import SimplifyFilter
+from ..simplify.levels import resolve_target, target_ancestors
 from . import marching, qem
 
 DEFAULT_BATCH_FACES = 100_000
@@ -149,7 +154,6 @@ class _Extractor:
         self.grad_scale = grad_scale
         self.check = check
         self.tets_done = 0
-        self.fa = self.fb = self.fc = np.full(16, marching.EMPTY, np.int32)
         self.fa, self.fb, self.fc = (np.full(16, marching.EMPTY, np.int32) for _ in range(3))
         self.ek = np.full(16, marching.EMPTY, np.int64)
         self.evid = np.full(16, marching.EMPTY, np.int32)
@@ -268,7 +272,8 @@ class _Extractor:
         self.qem_s += time.perf_counter() - t0
 
     def finish(self):
-        if self.locked:  # only a mesh whose tets overlap can leave a star open at the end
+        self.locked_at_end = self.locked
+        if self.locked_at_end:  # only a mesh whose tets overlap can leave a star open at the end
             self.vlock[:self.nv] = 0
         if self.ratio is not None or self.faces_target is not None:
             self.decimate(final=True)
@@ -416,6 +421,7 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
         "faces_extracted": sum(e.extracted for e in extractors), "faces": int(len(surf_tris)),
         "peak_faces": sum(e.peak_faces for e in extractors),
         "peak_locked": max((b["locked"] for b in band), default=0),
+        "locked_at_end": sum(e.locked_at_end for e in extractors),
         "rounds": sum(e.rounds for e in extractors), "collapses": sum(e.collapses for e in extractors),
         "decode_s": wait_s, "extract_s": sum(e.extract_s for e in extractors),
         "qem_s": sum(e.qem_s for e in extractors), "total_s": time.perf_counter() - t_start,
@@ -437,9 +443,6 @@ def _rss_mb() -> float:
 def _open_stream(source, *, level, ratio_mesh, read_kwargs):
     """(batches, info) for any source; info has points, bbox_lo/hi, scalar_range and, for a
     simplified start, the boundary of the simplified mesh (see below)."""
-    from ..codec import TetcReader
-    from ..mesh import TetMesh, read_mesh
-
     if isinstance(source, TetMesh) or (not isinstance(source, TetcReader) and not _is_tetc(source)):
         if level is not None or ratio_mesh is not None:
             raise OptionError("level and ratio_mesh need a .tetc file (a mesh file has no merge forest)")
@@ -447,9 +450,6 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs):
         lo, hi = mesh.bbox
         info = {"points": mesh.n_points, "bbox_lo": lo, "bbox_hi": hi, "scalar_range": mesh.scalar_range}
         return _mesh_batches(mesh), info
-    from ..simplify.filter import SimplifyFilter
-    from ..simplify.levels import resolve_target, target_ancestors
-
     reader = source if isinstance(source, TetcReader) else TetcReader(source)
     target = resolve_target(reader, ratio=ratio_mesh, level=level)
     lv = reader.level_meta(target.level)
@@ -457,8 +457,6 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs):
         lo, hi = (np.asarray(x, np.float64).reshape(3) for x in reader.meta["bbox"])
         rng = tuple(float(x) for x in reader.meta["scalar_range"])
     except (KeyError, TypeError, ValueError):
-        from ..errors import CorruptFileError
-
         raise CorruptFileError("corrupt metadata: bad bounding box or scalar range") from None
     info = {"points": int(lv["points"]), "bbox_lo": lo, "bbox_hi": hi, "scalar_range": rng,
             "level": target.level, "mesh_ratio": target.ratio}
@@ -498,8 +496,6 @@ def _mesh_batches(mesh, batch_tets: int = 65536):
 
 
 def _is_tetc(path) -> bool:
-    from ..codec.container import MAGIC
-
     try:
         with open(path, "rb") as fh:
             return fh.read(len(MAGIC)) == MAGIC

@@ -15,6 +15,7 @@ from gatun_py.errors import OutputExistsError, TetcError
 
 from .codec_commands import compress, convert, decompress, info
 from .compare import compare_command
+from .isosurface_commands import isosurface
 from .render_commands import render
 from .view_commands import view
 
@@ -54,10 +55,8 @@ def tetc():
     """
 
 
-for _command in (info, convert, compress, decompress, render, view, compare_command):
+for _command in (info, convert, compress, decompress, render, isosurface, view, compare_command):
     tetc.add_command(_command)
-
-
 
 
 def main(argv=None):

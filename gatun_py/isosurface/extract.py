@@ -1,0 +1,503 @@
+"""Isosurfaces straight from a tet stream, simplified while they are extracted (Hou & Chen).
+
+The driver feeds every batch of the stream (a ``.tetc`` file's decoder, optionally through the
+on-the-fly mesh simplification filter, or an in-memory mesh cut into batches) to one
+:class:`_Extractor` per isovalue: marching tetrahedra with edge-keyed vertices and locks
+(:mod:`.marching`), and after every ``batch_faces`` new faces a round of QEM edge collapses over the
+whole intermediate surface (:mod:`.qem`), after which dead vertices and faces are compacted away.
+The full-resolution surface never exists unless no reduction was asked for.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .._resources import peak_rss_mb
+from ..codec import TetcReader
+from ..codec.container import MAGIC
+from ..errors import CorruptFileError, OptionError, ReadError
+from ..mesh import TetMesh, read_mesh
+from ..simplify.filter import SimplifyFilter
+from ..simplify.levels import resolve_target, target_ancestors
+from . import marching, qem
+
+DEFAULT_BATCH_FACES = 100_000
+CHUNK_TETS = 8192  # tets per extraction step (rounds start between steps)
+#: keep at least this share of ``batch_faces`` modifiable faces between rounds (Hou & Chen's
+#: initial phase: early rounds must not over-decimate what little has been seen)
+KEEP_SHARE = 0.5
+MIN_DOT = 0.2  # a collapse may not tilt a face by more than ~78 degrees (cos 78 = 0.2)
+
+
+@dataclass
+class Surface:
+    """A triangle surface with per-point data.
+
+    Attributes
+    ----------
+    points : (n, 3) float64
+    triangles : (m, 3) int32, wound so that normals point toward lower scalar values
+    point_data : dict of name -> (n,) array (``scalar``: the isovalue; ``gradient_magnitude``;
+        ``importance`` when an importance function was given)
+    stats : dict
+        Timings, counts and the locked band over time (``band``: list of per-batch records).
+    """
+
+    points: np.ndarray
+    triangles: np.ndarray
+    point_data: dict = field(default_factory=dict)
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def n_points(self) -> int:
+        return int(self.points.shape[0])
+
+    @property
+    def n_triangles(self) -> int:
+        return int(self.triangles.shape[0])
+
+    def __repr__(self) -> str:
+        vals = self.stats.get("values")
+        v = f", values={vals}" if vals is not None else ""
+        return (f"<Surface: {self.n_points} points, {self.n_triangles} triangles{v}, "
+                f"point data {sorted(self.point_data)}>")
+
+    @property
+    def bbox(self) -> tuple[np.ndarray, np.ndarray]:
+        if self.n_points == 0:
+            return np.zeros(3), np.zeros(3)
+        return self.points.min(axis=0), self.points.max(axis=0)
+
+
+# -- importance ------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ImportanceFunction:
+    """Importance of a surface vertex as a piecewise-linear function of a feature (Peng et al.).
+
+    The feature is the scalar's gradient magnitude at the surface; ``x`` is in units of the scalar
+    range per bounding-box diagonal (a linear ramp across the whole box has x = 1) unless
+    ``absolute``. Importance multiplies the quadric error of the faces, so a region with importance
+    10 keeps its detail until its error is ten times what it would otherwise be.
+    """
+
+    x: np.ndarray
+    w: np.ndarray
+    absolute: bool = False
+
+    def __call__(self, gradient, scale: float) -> np.ndarray:
+        g = np.asarray(gradient, np.float64) * (1.0 if self.absolute else scale)
+        return np.interp(g, self.x, self.w)
+
+
+def load_importance(spec) -> ImportanceFunction:
+    """Read an importance function: a JSON file or dict ``{"points": [{"x": .., "w": ..}, ...],
+    "absolute": false}`` (``feature``, if present, must be ``"gradient_magnitude"``).
+
+    Examples
+    --------
+    >>> f = load_importance({"points": [{"x": 0, "w": 1}, {"x": 2, "w": 10}]})
+    >>> float(f(np.array([1.0]), 1.0)[0])
+    5.5
+    """
+    if isinstance(spec, ImportanceFunction):
+        return spec
+    if not isinstance(spec, dict):
+        try:
+            spec = json.loads(Path(spec).read_text())
+        except OSError as e:
+            raise ReadError(f"cannot read importance function {spec}: {e.strerror or e}") from None
+        except ValueError as e:
+            raise ReadError(f"importance function {spec} is not valid JSON: {e}") from None
+    try:
+        feature = spec.get("feature", "gradient_magnitude")
+        if feature != "gradient_magnitude":
+            raise OptionError(f"importance feature {feature!r} is not supported (only 'gradient_magnitude')")
+        pts = spec["points"]
+        x = np.array([float(p["x"]) for p in pts])
+        w = np.array([float(p["w"]) for p in pts])
+    except OptionError:
+        raise
+    except (KeyError, TypeError, ValueError, AttributeError):
+        raise OptionError('importance function must be {"points": [{"x": X, "w": W}, ...]}') from None
+    if len(x) == 0 or not (np.all(np.isfinite(x)) and np.all(np.isfinite(w))):
+        raise OptionError("importance function needs at least one point with finite x and w")
+    if np.any(w <= 0):
+        raise OptionError("importance weights must be positive")
+    if np.any(np.diff(x) < 0):
+        raise OptionError("importance points must be sorted by x")
+    return ImportanceFunction(x, w, bool(spec.get("absolute", False)))
+
+
+# -- one isovalue ------------------------------------------------------------------------------------
+
+def _pow2(n: int) -> int:
+    return 1 << max(4, int(n - 1).bit_length())
+
+
+class _Extractor:
+    """Streaming extraction + locked QEM for one isovalue (state: the arrays below)."""
+
+    def __init__(self, iso: float, *, ratio, faces, batch_faces, importance, grad_scale, check=None):
+        self.iso = float(iso)
+        self.ratio = ratio
+        self.faces_target = faces
+        self.batch_faces = int(batch_faces)
+        self.importance = importance
+        self.grad_scale = grad_scale
+        self.check = check
+        self.tets_done = 0
+        self.fa, self.fb, self.fc = (np.full(16, marching.EMPTY, np.int32) for _ in range(3))
+        self.ek = np.full(16, marching.EMPTY, np.int64)
+        self.evid = np.full(16, marching.EMPTY, np.int32)
+        self.ecount = np.zeros(16, np.int32)
+        self.sizes = np.zeros(2, np.int64)
+        self.nv = 0
+        self.nt = 0
+        self._alloc_vertices(1024)
+        self.tris = np.empty((2048, 3), np.int32)
+        self.nq = 0  # faces whose quadrics are added
+        self.extracted = 0  # faces extracted in total
+        self.since = 0  # faces extracted since the last round
+        self.rounds = 0
+        self.collapses = 0
+        self.peak_faces = 0
+        self.qem_s = 0.0
+        self.extract_s = 0.0
+
+    def _alloc_vertices(self, cap):
+        old = getattr(self, "vpos", None)
+        n = self.nv
+        new = dict(vpos=np.empty((cap, 3)), vgrad=np.zeros((cap, 2)), vkey=np.empty(cap, np.int64),
+                   vlock=np.zeros(cap, np.uint8), vq=np.zeros((cap, 10)), vbnd=np.zeros(cap, np.uint8),
+                   vdead=np.zeros(cap, np.uint8), vimp=np.ones(cap), vfresh=np.ones(cap, np.uint8))
+        if old is not None:
+            for name, arr in new.items():
+                arr[:n] = getattr(self, name)[:n]
+        for name, arr in new.items():
+            setattr(self, name, arr)
+
+    def _reserve(self, n_tets: int, n_faces: int):
+        need_f = int(self.sizes[0]) + 4 * n_tets + n_faces
+        if 2 * need_f > self.fa.shape[0]:
+            self.fa, self.fb, self.fc = marching.rehash_faces(self.fa, self.fb, self.fc, _pow2(4 * need_f))
+        need_e = int(self.sizes[1]) + 6 * n_tets + 3 * n_faces
+        if 2 * need_e > self.ek.shape[0]:
+            self.ek, self.evid, self.ecount = marching.rehash_edges(self.ek, self.evid, self.ecount, _pow2(4 * need_e))
+        if self.nv + 4 * n_tets > self.vpos.shape[0]:
+            self._alloc_vertices(max(2 * self.vpos.shape[0], self.nv + 4 * n_tets))
+        if self.nt + 2 * n_tets > self.tris.shape[0]:
+            t = np.empty((max(2 * self.tris.shape[0], self.nt + 2 * n_tets), 3), np.int32)
+            t[:self.nt] = self.tris[:self.nt]
+            self.tris = t
+
+    def add(self, pts, dens, tets, boundary, tets_before: int):
+        """Feed one batch, in chunks small enough that a round runs close to every B faces."""
+        step = CHUNK_TETS
+        if len(tets) <= step:
+            self._add(pts, dens, tets, boundary, tets_before + len(tets))
+            return
+        for i in range(0, len(tets), step):
+            self._add(pts, dens, tets[i:i + step], boundary if i == 0 else boundary[:0],
+                      tets_before + min(i + step, len(tets)))
+
+    def _add(self, pts, dens, tets, boundary, tets_done):
+        self.tets_done = tets_done
+        t0 = time.perf_counter()
+        self._reserve(len(tets), len(boundary))
+        zero = np.empty(12 * len(tets) + 3 * len(boundary) + 1, np.int64)
+        nt0 = self.nt
+        self.nv, self.nt, _ = marching.extract_batch(
+            pts, dens, tets, boundary, self.iso, marching.CASE_COUNT, marching.CASE_TRIS, marching.TET_EDGES,
+            self.fa, self.fb, self.fc, self.ek, self.evid, self.ecount, self.vpos, self.vgrad, self.vkey,
+            self.vlock, self.nv, self.tris, self.nt, zero, self.sizes)
+        new = self.nt - nt0
+        self.extracted += new
+        self.since += new
+        self.peak_faces = max(self.peak_faces, self.nt)
+        self.extract_s += time.perf_counter() - t0
+        if self.since >= self.batch_faces and (self.ratio is not None or self.faces_target is not None):
+            self.decimate(final=False)
+
+    @property
+    def locked(self) -> int:
+        return int(self.vlock[:self.nv].sum())
+
+    def _target(self, final: bool) -> int:
+        if final:
+            if self.faces_target is not None:
+                return int(self.faces_target)
+            return int(math.ceil(self.ratio * self.extracted))
+        tris = self.tris[:self.nt]
+        faces_locked = int(self.vlock[tris].any(axis=1).sum()) if self.nt else 0
+        keep = KEEP_SHARE * self.batch_faces
+        if self.faces_target is not None:
+            mod = max(self.faces_target, keep)
+        else:
+            mod = max(self.ratio * (self.extracted - faces_locked), keep)
+        return faces_locked + int(mod)
+
+    def decimate(self, *, final: bool):
+        t0 = time.perf_counter()
+        n = self.nv
+        if self.importance is not None:
+            g = self.vgrad[:n, 0] / np.maximum(self.vgrad[:n, 1], 1.0)
+            self.vimp[:n] = self.importance(g, self.grad_scale)
+        qem.add_face_quadrics(self.vpos, self.vq, self.vimp, self.tris, self.nq, self.nt)
+        target = self._target(final)
+        touched = np.empty(2 * self.nt if self.check is not None else 0, np.int64)
+        alive, done = qem.decimate(self.vpos, self.vq, self.vbnd, self.vlock, self.vdead, self.vimp, self.vfresh,
+                                   self.tris, n, self.nt, target, MIN_DOT, touched)
+        if self.check is not None and done:
+            self.check(self.vkey[touched[:2 * done]], self.tets_done)
+        self.collapses += done
+        self.rounds += 1
+        remap, self.nv, self.nt = qem.compact(self.vdead, self.tris, n, self.nt)
+        live = remap >= 0
+        for name in ("vpos", "vgrad", "vkey", "vlock", "vq", "vbnd", "vimp", "vfresh"):
+            arr = getattr(self, name)
+            arr[:self.nv] = arr[:n][live]
+        self.vdead[:n] = 0
+        used = (self.ek != marching.EMPTY) & (self.evid >= 0)
+        self.evid[used] = remap[self.evid[used]].astype(np.int32)
+        self.nq = self.nt
+        self.since = 0
+        self.qem_s += time.perf_counter() - t0
+
+    def finish(self):
+        self.locked_at_end = self.locked
+        if self.locked_at_end:  # only a mesh whose tets overlap can leave a star open at the end
+            self.vlock[:self.nv] = 0
+        if self.ratio is not None or self.faces_target is not None:
+            self.decimate(final=True)
+        points = self.vpos[:self.nv].copy()
+        tris = self.tris[:self.nt].copy()
+        grad = self.vgrad[:self.nv, 0] / np.maximum(self.vgrad[:self.nv, 1], 1.0)
+        data = {"scalar": np.full(self.nv, self.iso, np.float32), "gradient_magnitude": grad.astype(np.float32)}
+        if self.importance is not None:
+            data["importance"] = self.vimp[:self.nv].astype(np.float32)
+        return points, tris, data
+
+
+# -- the public verb -------------------------------------------------------------------------------
+
+def _check_options(values, ratio, faces, batch_faces):
+    vals = np.atleast_1d(np.asarray(values, dtype=np.float64))
+    if vals.size == 0:
+        raise OptionError("give at least one isovalue")
+    if not np.all(np.isfinite(vals)):
+        raise OptionError("isovalues must be finite numbers (got NaN or infinity)")
+    if ratio is not None and faces is not None:
+        raise OptionError("give either ratio or faces, not both")
+    if ratio is not None and not (isinstance(ratio, (int, float)) and 0.0 < ratio <= 1.0):
+        raise OptionError(f"ratio must lie in (0, 1] (faces kept / faces extracted), got {ratio}")
+    if faces is not None and not (isinstance(faces, (int, np.integer)) and faces >= 1):
+        raise OptionError(f"faces must be a positive integer, got {faces}")
+    if not (isinstance(batch_faces, (int, np.integer)) and batch_faces >= 1):
+        raise OptionError(f"batch_faces must be a positive integer, got {batch_faces}")
+    if ratio == 1.0:
+        ratio = None
+    return [float(v) for v in vals], ratio
+
+
+def isosurface(source, *, values, ratio: float | None = None, faces: int | None = None,
+               batch_faces: int = DEFAULT_BATCH_FACES, level: int | None = None, ratio_mesh: float | None = None,
+               importance_tf=None, read_kwargs: dict | None = None, progress=None, check=None) -> Surface:
+    """Extract (and simplify on the fly) the isosurfaces of a tet mesh, streaming.
+
+    Parameters
+    ----------
+    source : path, TetcReader or TetMesh
+        A ``.tetc`` file (decoded in a stream), any mesh file :func:`gatun_py.mesh.read_mesh` reads,
+        or an in-memory mesh.
+    values : float or sequence of float
+        Isovalues (finite).
+    ratio : float in (0, 1], optional
+        Faces kept / faces extracted. 1 or None (and no ``faces``): the exact surface.
+    faces : int, optional
+        Target face count instead of ``ratio`` (per isovalue).
+    batch_faces : int
+        Run a round of QEM collapses after every this many new faces (Hou & Chen's B).
+    level, ratio_mesh : optional, ``.tetc`` only
+        Extract from a stored level, or from the mesh simplified on the fly to this ratio (merged /
+        all vertices, as ``tetc render --ratio``); the tet mesh stays conforming, so the surface
+        has no cracks.
+    importance_tf : path, dict or ImportanceFunction, optional
+        Importance over the gradient magnitude at the surface (:func:`load_importance`).
+    read_kwargs : dict, optional
+        Passed to :func:`gatun_py.mesh.read_mesh` for a mesh file.
+    progress : callable, optional
+        Called with the number of tets processed so far.
+    check : callable, optional
+        Test hook: called after every round with the edge keys (a << 32 | b) of the surface
+        vertices its collapses removed or moved, and the number of tets streamed so far.
+
+    Returns
+    -------
+    Surface
+        All isovalues in one surface; ``point_data["scalar"]`` tells them apart.
+
+    Examples
+    --------
+    >>> from gatun_py.mesh import TetMesh
+    >>> pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float32)
+    >>> mesh = TetMesh(pts, np.array([0, 1, 0, 0], np.float32), np.array([[0, 1, 2, 3]], np.int32))
+    >>> s = isosurface(mesh, values=0.5)
+    >>> s.n_triangles, s.points[:, 0].tolist()
+    (1, [0.5, 0.5, 0.5])
+    """
+    vals, ratio = _check_options(values, ratio, faces, batch_faces)
+    imp = load_importance(importance_tf) if importance_tf is not None else None
+    t_start = time.perf_counter()
+    stream, info = _open_stream(source, level=level, ratio_mesh=ratio_mesh, read_kwargs=read_kwargs)
+    lo, hi, (smin, smax) = info["bbox_lo"], info["bbox_hi"], info["scalar_range"]
+    diag = float(np.linalg.norm(np.asarray(hi, float) - np.asarray(lo, float)))
+    grad_scale = diag / (smax - smin) if smax > smin else 1.0
+    inside = [v for v in vals if smin <= v <= smax]
+    extractors = [_Extractor(v, ratio=ratio, faces=faces, batch_faces=batch_faces, importance=imp,
+                             grad_scale=grad_scale, check=check) for v in inside]
+    n = int(info["points"])
+    points = np.empty((n, 3), np.float32)
+    density = np.empty(n, np.float32)
+    boundary_override = info.get("boundary")
+    band = []
+    first_batch = True
+    tets_done = 0
+    wait_s = 0.0
+    t_wait = time.perf_counter()
+    for batch in stream:
+        wait_s += time.perf_counter() - t_wait
+        k = len(batch.points)
+        points[batch.first:batch.first + k] = batch.points
+        density[batch.first:batch.first + k] = batch.density
+        if boundary_override is not None:  # simplified start: the whole boundary with the first batch
+            bnd = boundary_override if first_batch else np.zeros((0, 3), np.int32)
+        else:
+            bnd = batch.boundary
+        first_batch = False
+        tets = np.ascontiguousarray(batch.tets, dtype=np.int32)
+        bnd = np.ascontiguousarray(bnd, dtype=np.int32)
+        for ex in extractors:
+            ex.add(points, density, tets, bnd, tets_done)
+        tets_done += len(tets)
+        if extractors and (len(tets) or len(bnd)):
+            band.append({"tets": tets_done, "t_s": round(time.perf_counter() - t_start, 4),
+                         "faces_extracted": sum(e.extracted for e in extractors),
+                         "faces": sum(e.nt for e in extractors),
+                         "locked": sum(e.locked for e in extractors),
+                         "vertices": sum(e.nv for e in extractors),
+                         "border_faces": sum(int(e.sizes[0]) for e in extractors),
+                         "rss_mb": round(_rss_mb(), 1), "peak_rss_mb": round(peak_rss_mb(), 1)})
+        if progress is not None:
+            progress(tets_done)
+        t_wait = time.perf_counter()
+    parts = [ex.finish() for ex in extractors]
+    off = 0
+    pts_all, tris_all, data_all = [], [], {}
+    for p, t, d in parts:
+        pts_all.append(p)
+        tris_all.append(t + off)
+        off += len(p)
+        for name, arr in d.items():
+            data_all.setdefault(name, []).append(arr)
+    if parts:
+        surf_pts = np.concatenate(pts_all)
+        surf_tris = np.concatenate(tris_all).astype(np.int32)
+        point_data = {name: np.concatenate(a) for name, a in data_all.items()}
+    else:
+        surf_pts, surf_tris = np.zeros((0, 3)), np.zeros((0, 3), np.int32)
+        point_data = {"scalar": np.zeros(0, np.float32), "gradient_magnitude": np.zeros(0, np.float32)}
+    stats = {
+        "values": vals, "values_outside_range": [v for v in vals if v not in inside],
+        "scalar_range": [float(smin), float(smax)], "tets": tets_done,
+        "bbox": [np.asarray(lo, float).tolist(), np.asarray(hi, float).tolist()],
+        "faces_extracted": sum(e.extracted for e in extractors), "faces": int(len(surf_tris)),
+        "peak_faces": sum(e.peak_faces for e in extractors),
+        "peak_locked": max((b["locked"] for b in band), default=0),
+        "locked_at_end": sum(e.locked_at_end for e in extractors),
+        "rounds": sum(e.rounds for e in extractors), "collapses": sum(e.collapses for e in extractors),
+        "decode_s": wait_s, "extract_s": sum(e.extract_s for e in extractors),
+        "qem_s": sum(e.qem_s for e in extractors), "total_s": time.perf_counter() - t_start,
+        "level": info.get("level", 0), "mesh_ratio": info.get("mesh_ratio", 0.0),
+        "peak_rss_mb": peak_rss_mb(), "band": band,
+    }
+    return Surface(surf_pts, surf_tris, point_data, stats)
+
+
+def _rss_mb() -> float:
+    """Resident memory now (not the peak), for the memory-over-time record; 0 where /proc is absent."""
+    try:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError, IndexError):
+        return 0.0
+
+
+def _open_stream(source, *, level, ratio_mesh, read_kwargs):
+    """(batches, info) for any source; info has points, bbox_lo/hi, scalar_range and, for a
+    simplified start, the boundary of the simplified mesh (see below)."""
+    if isinstance(source, TetMesh) or (not isinstance(source, TetcReader) and not _is_tetc(source)):
+        if level is not None or ratio_mesh is not None:
+            raise OptionError("level and ratio_mesh need a .tetc file (a mesh file has no merge forest)")
+        mesh = source if isinstance(source, TetMesh) else read_mesh(source, **(read_kwargs or {}))[0]
+        lo, hi = mesh.bbox
+        info = {"points": mesh.n_points, "bbox_lo": lo, "bbox_hi": hi, "scalar_range": mesh.scalar_range}
+        return _mesh_batches(mesh), info
+    reader = source if isinstance(source, TetcReader) else TetcReader(source)
+    target = resolve_target(reader, ratio=ratio_mesh, level=level)
+    lv = reader.level_meta(target.level)
+    try:
+        lo, hi = (np.asarray(x, np.float64).reshape(3) for x in reader.meta["bbox"])
+        rng = tuple(float(x) for x in reader.meta["scalar_range"])
+    except (KeyError, TypeError, ValueError):
+        raise CorruptFileError("corrupt metadata: bad bounding box or scalar range") from None
+    info = {"points": int(lv["points"]), "bbox_lo": lo, "bbox_hi": hi, "scalar_range": rng,
+            "level": target.level, "mesh_ratio": target.ratio}
+    batches = reader.iter_decode(target.level)
+    anc = target_ancestors(reader, target)
+    if anc is None:
+        return batches, info
+    # The filter parks boundary faces until their ancestors arrive, but the lock test needs the
+    # whole boundary up front. Boundary vertices merge only into boundary vertices, so the first
+    # batch (all boundary vertices) already has every ancestor: map its faces ourselves.
+    first = next(batches)
+    f = anc[first.boundary]
+    keep = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
+    info["boundary"] = np.ascontiguousarray(f[keep], dtype=np.int32)
+
+    def chained():
+        yield first
+        yield from batches
+
+    return SimplifyFilter(anc).filter(chained()), info
+
+
+@dataclass
+class _Batch:
+    first: int
+    points: np.ndarray
+    density: np.ndarray
+    boundary: np.ndarray
+    tets: np.ndarray
+
+
+def _mesh_batches(mesh, batch_tets: int = 65536):
+    yield _Batch(0, mesh.points, mesh.density, mesh.boundary_faces(), np.zeros((0, 4), np.int32))
+    for i in range(0, mesh.n_tets, batch_tets):
+        yield _Batch(mesh.n_points, mesh.points[:0], mesh.density[:0], np.zeros((0, 3), np.int32),
+                     mesh.tets[i:i + batch_tets])
+
+
+def _is_tetc(path) -> bool:
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(len(MAGIC)) == MAGIC
+    except (OSError, TypeError):
+        return str(path).lower().endswith(".tetc")

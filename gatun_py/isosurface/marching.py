@@ -1,0 +1,388 @@
+"""Marching tetrahedra over a stream of tet batches, with edge-keyed vertices and locks.
+
+A surface vertex lives on a mesh edge (a, b) whose scalars straddle the isovalue, or on a mesh
+vertex whose scalar equals it exactly (key (v, v)). Every tet around that edge adds its triangles
+to the same vertex, so the streamed surface is indexed (shared vertices) without a position hash.
+
+**Locks** (Hou & Chen's modifiability, on tets). A surface vertex may be changed only once every
+tet around its edge has been decoded: before that, more triangles will arrive on it. We track the
+*cut border* of the stream ourselves: the multiset of mesh boundary faces and faces of decoded tets,
+kept modulo 2 in a hash table, is exactly the set of faces between the decoded and the undecoded
+part (a boundary face whose tet is still to come, or an interior face with one decoded tet). Only
+faces that touch the isosurface matter (a face with a straddling edge or an iso-valued vertex), so
+the table holds the border's intersection with the surface, a band, not the mesh. Per surface
+vertex we count the open faces around its edge (around its vertex for key (v, v)); the vertex
+unlocks when that count falls to zero at the end of a batch. Why that is safe: once a tet around
+edge e has been decoded, if some other tet around e has not, then either they are face-connected
+around e, and some face around e between a decoded and an undecoded tet is open, or the undecoded
+tets form another fan around e, which in a mesh whose tets do not overlap ends in mesh boundary
+faces, and those are open until their tets arrive. So a zero count means the edge's star is
+complete. The count is read only at the end of a batch, because within one tet a face may leave
+the border before its sibling enters it. (The decoder's own cut border holds the same information,
+but it lives in the codec kernel; counting here keeps the codec untouched and also works for plain
+mesh files fed as batches.)
+
+Classification follows VTK: a vertex is *above* when s >= iso. The point on a straddling edge is
+p_below + t (p_above - p_below) with t = (iso - s_below) / (s_above - s_below).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+EMPTY = -1
+#: the six edges of a tet, as local vertex pairs (i < j)
+TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]], np.int64)
+#: the four faces of a tet, by local vertex ids (orientation does not matter here: keys are sorted)
+_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], np.int64)
+
+
+def _edge_index(i: int, j: int) -> int:
+    i, j = min(i, j), max(i, j)
+    return int(np.flatnonzero((TET_EDGES[:, 0] == i) & (TET_EDGES[:, 1] == j))[0])
+
+
+#: the diagonal (two tet edges) that splits the quad of each two-above case: VTK's choice
+#: (vtkTetra's case table), so that the triangles equal vtkContour3DLinearGrid's one for one
+_QUAD_DIAGONAL = {3: (1, 4), 5: (2, 3), 6: (0, 5), 9: (0, 5), 10: (0, 5), 12: (2, 3)}
+
+
+def _case_table() -> tuple[np.ndarray, np.ndarray]:
+    """Triangles per case (bit i set: vertex i above), as tet edge indices, wound so that the normal
+    points from above toward below (out of the region s >= iso) for a positively oriented tet.
+
+    Built by construction on the reference tet (0,0,0), (1,0,0), (0,1,0), (0,0,1), whose signed
+    volume is positive; orientation is preserved by every positive affine map and does not depend
+    on where the points sit on their edges, so the table holds for every positive tet.
+    """
+    ref = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    count = np.zeros(16, np.int64)
+    tris = np.full((16, 2, 3), -1, np.int64)
+    for case in range(1, 15):
+        above = [i for i in range(4) if case >> i & 1]
+        below = [i for i in range(4) if not case >> i & 1]
+        if len(above) == 1 or len(below) == 1:
+            lone, others = (above[0], below) if len(above) == 1 else (below[0], above)
+            polys = [[_edge_index(lone, o) for o in others]]
+        else:
+            a0, a1 = above
+            b0, b1 = below
+            quad = [_edge_index(a0, b0), _edge_index(a0, b1), _edge_index(a1, b1), _edge_index(a1, b0)]
+            k = quad.index(_QUAD_DIAGONAL[case][0])
+            quad = quad[k:] + quad[:k]  # start the cycle at one end of the diagonal
+            polys = [[quad[0], quad[1], quad[2]], [quad[0], quad[2], quad[3]]]
+        # gradient direction of a scalar that is 1 above and 0 below, and the midpoint positions
+        s = np.array([1.0 if case >> i & 1 else 0.0 for i in range(4)])
+        grad = np.linalg.solve(ref[1:] - ref[0], s[1:] - s[0])
+        for k, poly in enumerate(polys):
+            p = np.array([(ref[TET_EDGES[e, 0]] + ref[TET_EDGES[e, 1]]) / 2 for e in poly])
+            n = np.cross(p[1] - p[0], p[2] - p[0])
+            if np.dot(n, grad) > 0:  # normal toward above: flip to point toward below
+                poly = [poly[0], poly[2], poly[1]]
+            tris[case, k] = poly
+        count[case] = len(polys)
+    return count, tris
+
+
+CASE_COUNT, CASE_TRIS = _case_table()
+
+
+# -- hash tables (linear probing, backward-shift deletion, power-of-two capacity) ----------------
+
+@njit(cache=True, inline="always")
+def _mix(x):
+    x = (x ^ (x >> 31)) * 0x7FB5D329728EA185
+    x = (x ^ (x >> 27)) * 0x81DADEF4BC2DD44D
+    return x ^ (x >> 33)
+
+
+@njit(cache=True, inline="always")
+def _face_home(a, b, c, mask):
+    return _mix(np.int64(a) * 0x9E3779B1 + np.int64(b) * 0x85EBCA77 + np.int64(c) * 0xC2B2AE3D) & mask
+
+
+@njit(cache=True)
+def _face_toggle(fa, fb, fc, a, b, c):
+    """Insert face (a < b < c) if absent (returns +1), remove it if present (returns -1)."""
+    mask = fa.shape[0] - 1
+    i = _face_home(a, b, c, mask)
+    while fa[i] != EMPTY:
+        if fa[i] == a and fb[i] == b and fc[i] == c:
+            # backward-shift deletion keeps every probe chain unbroken, no tombstones
+            j = i
+            while True:
+                j = (j + 1) & mask
+                if fa[j] == EMPTY:
+                    break
+                h = _face_home(fa[j], fb[j], fc[j], mask)
+                if (j > i and (h <= i or h > j)) or (j < i and (h <= i and h > j)):
+                    fa[i] = fa[j]
+                    fb[i] = fb[j]
+                    fc[i] = fc[j]
+                    i = j
+            fa[i] = EMPTY
+            return -1
+        i = (i + 1) & mask
+    fa[i] = a
+    fb[i] = b
+    fc[i] = c
+    return 1
+
+
+@njit(cache=True)
+def _edge_find(ek, key):
+    """Slot of ``key`` in the edge table, or the empty slot where it would go."""
+    mask = ek.shape[0] - 1
+    i = _mix(key) & mask
+    while ek[i] != EMPTY and ek[i] != key:
+        i = (i + 1) & mask
+    return i
+
+
+@njit(cache=True)
+def _edge_delete(ek, evid, ecount, i):
+    mask = ek.shape[0] - 1
+    j = i
+    while True:
+        j = (j + 1) & mask
+        if ek[j] == EMPTY:
+            break
+        h = _mix(ek[j]) & mask
+        if (j > i and (h <= i or h > j)) or (j < i and (h <= i and h > j)):
+            ek[i] = ek[j]
+            evid[i] = evid[j]
+            ecount[i] = ecount[j]
+            i = j
+    ek[i] = EMPTY
+
+
+@njit(cache=True)
+def rehash_faces(fa, fb, fc, cap):
+    na = np.full(cap, EMPTY, np.int32)
+    nb = np.full(cap, EMPTY, np.int32)
+    nc = np.full(cap, EMPTY, np.int32)
+    for i in range(fa.shape[0]):
+        if fa[i] != EMPTY:
+            _face_toggle(na, nb, nc, fa[i], fb[i], fc[i])
+    return na, nb, nc
+
+
+@njit(cache=True)
+def rehash_edges(ek, evid, ecount, cap):
+    nk = np.full(cap, EMPTY, np.int64)
+    nv = np.full(cap, EMPTY, np.int32)
+    nn = np.zeros(cap, np.int32)
+    for i in range(ek.shape[0]):
+        if ek[i] != EMPTY:
+            j = _edge_find(nk, ek[i])
+            nk[j] = ek[i]
+            nv[j] = evid[i]
+            nn[j] = ecount[i]
+    return nk, nv, nn
+
+
+# -- the kernel ------------------------------------------------------------------------------------
+
+@njit(cache=True, inline="always")
+def _edge_key(a, b):
+    if a > b:
+        a, b = b, a
+    return (np.int64(a) << 32) | np.int64(b)
+
+
+@njit(cache=True)
+def _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, dens, iso, a, b, c, sizes):
+    """Toggle face (a, b, c) in the border if it touches the surface; update its edges' counts.
+    Returns the new number of recorded count-hits-zero keys."""
+    # sort the triple
+    if a > b:
+        a, b = b, a
+    if b > c:
+        b, c = c, b
+    if a > b:
+        a, b = b, a
+    sa = dens[a] >= iso
+    sb = dens[b] >= iso
+    sc = dens[c] >= iso
+    ea = dens[a] == iso
+    eb = dens[b] == iso
+    ec = dens[c] == iso
+    if sa == sb and sb == sc and not (ea or eb or ec):
+        return nzero
+    d = _face_toggle(fa, fb, fc, a, b, c)
+    sizes[0] += d
+    for k in range(6):
+        # three straddling-edge keys, then three vertex keys
+        if k == 0:
+            if sa == sb:
+                continue
+            key = _edge_key(a, b)
+        elif k == 1:
+            if sa == sc:
+                continue
+            key = _edge_key(a, c)
+        elif k == 2:
+            if sb == sc:
+                continue
+            key = _edge_key(b, c)
+        elif k == 3:
+            if not ea:
+                continue
+            key = _edge_key(a, a)
+        elif k == 4:
+            if not eb:
+                continue
+            key = _edge_key(b, b)
+        else:
+            if not ec:
+                continue
+            key = _edge_key(c, c)
+        i = _edge_find(ek, key)
+        if ek[i] == EMPTY:
+            ek[i] = key
+            evid[i] = EMPTY
+            ecount[i] = 0
+            sizes[1] += 1
+        ecount[i] += d
+        if ecount[i] == 0:
+            zero[nzero] = key
+            nzero += 1
+    return nzero
+
+
+@njit(cache=True)
+def _surface_vertex(ek, evid, ecount, pts, dens, iso, a, b, vpos, vgrad, vkey, nv, gmag, sizes):
+    """Id of the surface vertex on edge (a, b) (a above, b below), created if new."""
+    if dens[a] == iso:
+        key = _edge_key(a, a)
+    else:
+        key = _edge_key(a, b)
+    i = _edge_find(ek, key)
+    if ek[i] == EMPTY:
+        ek[i] = key
+        evid[i] = EMPTY
+        ecount[i] = 0
+        sizes[1] += 1
+    if evid[i] == EMPTY:
+        evid[i] = nv
+        vkey[nv] = key
+        if dens[a] == iso:
+            for k in range(3):
+                vpos[nv, k] = pts[a, k]
+        else:
+            sa = np.float64(dens[a])
+            sb = np.float64(dens[b])
+            t = (iso - sb) / (sa - sb)
+            for k in range(3):
+                pb = np.float64(pts[b, k])
+                vpos[nv, k] = pb + t * (np.float64(pts[a, k]) - pb)
+        vgrad[nv, 0] = 0.0
+        vgrad[nv, 1] = 0.0
+        nv += 1
+    v = evid[i]
+    vgrad[v, 0] += gmag
+    vgrad[v, 1] += 1.0
+    return v, nv
+
+
+@njit(cache=True)
+def extract_batch(pts, dens, tets, boundary, iso, case_count, case_tris, tet_edges,
+                  fa, fb, fc, ek, evid, ecount, vpos, vgrad, vkey, vlock, nv, tris, nt, zero, sizes):
+    """Marching tetrahedra on one batch; border bookkeeping; unlock complete edges.
+
+    Capacities (checked by the caller): the tables hold at least twice their entries after the
+    batch, ``vpos``/``vgrad``/``vlock`` room for 4 new vertices per tet, ``tris`` 2 per tet,
+    ``zero`` 12 per tet + 3 per boundary face.
+
+    ``sizes`` = [faces in the border table, entries in the edge table], updated. ``vkey`` gets the
+    edge key of every new vertex (a << 32 | b, a <= b).
+
+    Returns (nv, nt, unlocked): the new vertex and triangle counts and how many vertices unlocked.
+    """
+    nzero = 0
+    for f in range(boundary.shape[0]):
+        nzero = _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, dens, iso,
+                            boundary[f, 0], boundary[f, 1], boundary[f, 2], sizes)
+    g = np.empty(3)
+    m = np.empty((3, 3))
+    vid = np.empty(6, np.int64)
+    for t in range(tets.shape[0]):
+        case = 0
+        on_iso = False
+        for i in range(4):
+            s = dens[tets[t, i]]
+            if s >= iso:
+                case |= 1 << i
+            if s == iso:
+                on_iso = True
+        if case_count[case] == 0 and not on_iso:
+            continue  # none of its faces touches the surface: nothing to extract or to track
+        if case_count[case] > 0:
+            # gradient magnitude of the tet's linear scalar (0 for a flat tet)
+            p0 = tets[t, 0]
+            for r in range(3):
+                q = tets[t, r + 1]
+                for k in range(3):
+                    m[r, k] = np.float64(pts[q, k]) - np.float64(pts[p0, k])
+                g[r] = np.float64(dens[q]) - np.float64(dens[p0])
+            det = (m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1])
+                   - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
+                   + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]))
+            gmag = 0.0
+            if det != 0.0:
+                # grad = M^-1 g via Cramer's rule
+                gx = (g[0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1])
+                      - m[0, 1] * (g[1] * m[2, 2] - m[1, 2] * g[2])
+                      + m[0, 2] * (g[1] * m[2, 1] - m[1, 1] * g[2])) / det
+                gy = (m[0, 0] * (g[1] * m[2, 2] - m[1, 2] * g[2])
+                      - g[0] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
+                      + m[0, 2] * (m[1, 0] * g[2] - g[1] * m[2, 0])) / det
+                gz = (m[0, 0] * (m[1, 1] * g[2] - g[1] * m[2, 1])
+                      - m[0, 1] * (m[1, 0] * g[2] - g[1] * m[2, 0])
+                      + g[0] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0])) / det
+                gmag = np.sqrt(gx * gx + gy * gy + gz * gz)
+            for e in range(6):
+                vid[e] = EMPTY
+            for k in range(case_count[case]):
+                tri0 = EMPTY
+                tri1 = EMPTY
+                tri2 = EMPTY
+                for c in range(3):
+                    e = case_tris[case, k, c]
+                    if vid[e] == EMPTY:
+                        a = tets[t, tet_edges[e, 0]]
+                        b = tets[t, tet_edges[e, 1]]
+                        if dens[b] >= iso:
+                            a, b = b, a
+                        nv0 = nv
+                        vid[e], nv = _surface_vertex(ek, evid, ecount, pts, dens, iso, a, b, vpos, vgrad, vkey,
+                                                     nv, gmag, sizes)
+                        if nv > nv0:
+                            vlock[nv0] = 1
+                    if c == 0:
+                        tri0 = vid[e]
+                    elif c == 1:
+                        tri1 = vid[e]
+                    else:
+                        tri2 = vid[e]
+                # iso-valued mesh vertices can merge two corners: such a triangle has no area
+                if tri0 != tri1 and tri1 != tri2 and tri0 != tri2:
+                    tris[nt, 0] = tri0
+                    tris[nt, 1] = tri1
+                    tris[nt, 2] = tri2
+                    nt += 1
+        for f in range(4):
+            nzero = _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, dens, iso,
+                                tets[t, _FACES[f, 0]], tets[t, _FACES[f, 1]], tets[t, _FACES[f, 2]], sizes)
+    unlocked = 0
+    for z in range(nzero):
+        i = _edge_find(ek, zero[z])
+        if ek[i] != EMPTY and ecount[i] == 0:
+            if evid[i] != EMPTY:
+                vlock[evid[i]] = 0
+                unlocked += 1
+            _edge_delete(ek, evid, ecount, i)
+            sizes[1] -= 1
+    return nv, nt, unlocked
+

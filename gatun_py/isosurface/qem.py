@@ -1,0 +1,469 @@
+"""QEM edge collapse (Garland & Heckbert) over a growing surface with locked vertices.
+
+One call of :func:`decimate` runs the global priority queue over the current intermediate surface
+until it holds ``target`` faces or no legal collapse is left. An edge is a candidate only when both
+its vertices are unlocked (their mesh edges' stars are complete, see ``marching``): nothing that is
+still to arrive can then reference a vertex that a collapse removes or moves. Legality:
+
+* the link condition (the common neighbours of u and v are exactly the apexes of the faces on uv);
+* no face around u or v turns over (its normal keeps a positive dot product with the old one);
+* the surface boundary stays: a boundary vertex only merges with a boundary neighbour along a
+  boundary edge (with Garland's perpendicular constraint planes in its quadric), and an interior
+  vertex merging into a boundary one lands on the boundary vertex.
+
+Quadrics accumulate over collapses and across calls, so the error of the whole history is kept;
+each face's quadric is weighted by its area and by the importance of its vertices (Peng et al.).
+
+State is plain arrays (the driver owns and grows them); the heap is local to a call.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+BOUNDARY_WEIGHT = 100.0  # Garland's constraint planes: strong enough to keep the border in place
+
+
+@njit(cache=True)
+def _add_plane(q, v, nx, ny, nz, d, w):
+    q[v, 0] += w * nx * nx
+    q[v, 1] += w * nx * ny
+    q[v, 2] += w * nx * nz
+    q[v, 3] += w * nx * d
+    q[v, 4] += w * ny * ny
+    q[v, 5] += w * ny * nz
+    q[v, 6] += w * ny * d
+    q[v, 7] += w * nz * nz
+    q[v, 8] += w * nz * d
+    q[v, 9] += w * d * d
+
+
+@njit(cache=True)
+def add_face_quadrics(vpos, vq, vimp, tris, f0, f1):
+    """Add the area-weighted plane quadric of faces f0..f1-1 to their three vertices."""
+    for f in range(f0, f1):
+        a, b, c = tris[f, 0], tris[f, 1], tris[f, 2]
+        if a < 0:
+            continue
+        ux = vpos[b, 0] - vpos[a, 0]
+        uy = vpos[b, 1] - vpos[a, 1]
+        uz = vpos[b, 2] - vpos[a, 2]
+        wx = vpos[c, 0] - vpos[a, 0]
+        wy = vpos[c, 1] - vpos[a, 1]
+        wz = vpos[c, 2] - vpos[a, 2]
+        nx = uy * wz - uz * wy
+        ny = uz * wx - ux * wz
+        nz = ux * wy - uy * wx
+        ln = np.sqrt(nx * nx + ny * ny + nz * nz)
+        if ln == 0.0:
+            continue
+        area = 0.5 * ln
+        nx /= ln
+        ny /= ln
+        nz /= ln
+        d = -(nx * vpos[a, 0] + ny * vpos[a, 1] + nz * vpos[a, 2])
+        w = area * (vimp[a] + vimp[b] + vimp[c]) / 3.0
+        _add_plane(vq, a, nx, ny, nz, d, w)
+        _add_plane(vq, b, nx, ny, nz, d, w)
+        _add_plane(vq, c, nx, ny, nz, d, w)
+
+
+@njit(cache=True)
+def _qcost(q, x, y, z):
+    return (q[0] * x * x + 2 * q[1] * x * y + 2 * q[2] * x * z + 2 * q[3] * x
+            + q[4] * y * y + 2 * q[5] * y * z + 2 * q[6] * y
+            + q[7] * z * z + 2 * q[8] * z + q[9])
+
+
+@njit(cache=True)
+def _placement(vq, vpos, vbnd, u, v, qs):
+    """Best position and cost for collapsing edge (u, v): (cost, x, y, z)."""
+    for k in range(10):
+        qs[k] = vq[u, k] + vq[v, k]
+    if vbnd[u] != vbnd[v]:  # interior into boundary: stay on the boundary vertex
+        b = u if vbnd[u] else v
+        x, y, z = vpos[b, 0], vpos[b, 1], vpos[b, 2]
+        return max(_qcost(qs, x, y, z), 0.0), x, y, z
+    a00, a01, a02, a11, a12, a22 = qs[0], qs[1], qs[2], qs[4], qs[5], qs[7]
+    c00 = a11 * a22 - a12 * a12
+    c01 = a02 * a12 - a01 * a22
+    c02 = a01 * a12 - a02 * a11
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    scale = a00 + a11 + a22
+    if scale > 0 and abs(det) > 1e-12 * scale * scale * scale:
+        c11 = a00 * a22 - a02 * a02
+        c12 = a01 * a02 - a00 * a12
+        c22 = a00 * a11 - a01 * a01
+        bx, by, bz = -qs[3], -qs[6], -qs[8]
+        x = (c00 * bx + c01 * by + c02 * bz) / det
+        y = (c01 * bx + c11 * by + c12 * bz) / det
+        z = (c02 * bx + c12 * by + c22 * bz) / det
+        # keep the optimum near the edge: a far-off solve of a nearly flat quadric is no good
+        ex = vpos[u, 0] - vpos[v, 0]
+        ey = vpos[u, 1] - vpos[v, 1]
+        ez = vpos[u, 2] - vpos[v, 2]
+        mx = x - 0.5 * (vpos[u, 0] + vpos[v, 0])
+        my = y - 0.5 * (vpos[u, 1] + vpos[v, 1])
+        mz = z - 0.5 * (vpos[u, 2] + vpos[v, 2])
+        if mx * mx + my * my + mz * mz <= 4.0 * (ex * ex + ey * ey + ez * ez):
+            return max(_qcost(qs, x, y, z), 0.0), x, y, z
+    best = np.inf
+    bx = by = bz = 0.0
+    for k in range(3):
+        if k == 0:
+            x, y, z = vpos[u, 0], vpos[u, 1], vpos[u, 2]
+        elif k == 1:
+            x, y, z = vpos[v, 0], vpos[v, 1], vpos[v, 2]
+        else:
+            x = 0.5 * (vpos[u, 0] + vpos[v, 0])
+            y = 0.5 * (vpos[u, 1] + vpos[v, 1])
+            z = 0.5 * (vpos[u, 2] + vpos[v, 2])
+        c = _qcost(qs, x, y, z)
+        if c < best:
+            best, bx, by, bz = c, x, y, z
+    return max(best, 0.0), bx, by, bz
+
+
+# -- binary min-heap over parallel arrays ---------------------------------------------------------
+
+@njit(cache=True)
+def _heap_push(hc, hu, hv, hsu, hsv, n, cost, u, v, su, sv):
+    if n == hc.shape[0]:
+        cap = 2 * n + 16
+        hc2 = np.empty(cap)
+        hu2 = np.empty(cap, np.int32)
+        hv2 = np.empty(cap, np.int32)
+        hsu2 = np.empty(cap, np.int32)
+        hsv2 = np.empty(cap, np.int32)
+        hc2[:n] = hc[:n]
+        hu2[:n] = hu[:n]
+        hv2[:n] = hv[:n]
+        hsu2[:n] = hsu[:n]
+        hsv2[:n] = hsv[:n]
+        hc, hu, hv, hsu, hsv = hc2, hu2, hv2, hsu2, hsv2
+    i = n
+    while i > 0:
+        p = (i - 1) >> 1
+        if hc[p] <= cost:
+            break
+        hc[i], hu[i], hv[i], hsu[i], hsv[i] = hc[p], hu[p], hv[p], hsu[p], hsv[p]
+        i = p
+    hc[i], hu[i], hv[i], hsu[i], hsv[i] = cost, u, v, su, sv
+    return hc, hu, hv, hsu, hsv, n + 1
+
+
+@njit(cache=True)
+def _heap_pop(hc, hu, hv, hsu, hsv, n):
+    """Remove the top (the caller read it at index 0); returns the new size."""
+    n -= 1
+    c, u, v, su, sv = hc[n], hu[n], hv[n], hsu[n], hsv[n]
+    i = 0
+    while True:
+        l = 2 * i + 1
+        if l >= n:
+            break
+        r = l + 1
+        m = r if (r < n and hc[r] < hc[l]) else l
+        if hc[m] >= c:
+            break
+        hc[i], hu[i], hv[i], hsu[i], hsv[i] = hc[m], hu[m], hv[m], hsu[m], hsv[m]
+        i = m
+    if n > 0:
+        hc[i], hu[i], hv[i], hsu[i], hsv[i] = c, u, v, su, sv
+    return n
+
+
+# -- adjacency: per-vertex face lists in one array, rewritten at the end on change ----------------
+
+@njit(cache=True)
+def _build_adjacency(nv, tris, nt, extra):
+    cnt = np.zeros(nv, np.int64)
+    for f in range(nt):
+        if tris[f, 0] >= 0:
+            for k in range(3):
+                cnt[tris[f, k]] += 1
+    start = np.zeros(nv, np.int64)
+    s = 0
+    for v in range(nv):
+        start[v] = s
+        s += cnt[v]
+    refs = np.empty(s + extra, np.int32)
+    fill = np.zeros(nv, np.int64)
+    for f in range(nt):
+        if tris[f, 0] >= 0:
+            for k in range(3):
+                v = tris[f, k]
+                refs[start[v] + fill[v]] = f
+                fill[v] += 1
+    return start, fill, refs, s
+
+
+@njit(cache=True)
+def _mark_boundary(u, start, cnt, refs, tris, vpos, vq, vbnd, nbr, nbr_n):
+    """Find u's boundary edges (edges of one face) and add their constraint planes to u."""
+    m = 0
+    for i in range(cnt[u]):
+        f = refs[start[u] + i]
+        for k in range(3):
+            w = tris[f, k]
+            if w != u:
+                found = False
+                for j in range(m):
+                    if nbr[j] == w:
+                        nbr_n[j] += 1
+                        found = True
+                        break
+                if not found and m < nbr.shape[0]:
+                    nbr[m] = w
+                    nbr_n[m] = 1
+                    m += 1
+    for j in range(m):
+        if nbr_n[j] != 1:
+            continue
+        w = nbr[j]
+        vbnd[u] = 1
+        # the face on edge (u, w): its normal and the plane through the edge perpendicular to it
+        for i in range(cnt[u]):
+            f = refs[start[u] + i]
+            if tris[f, 0] == w or tris[f, 1] == w or tris[f, 2] == w:
+                a, b, c = tris[f, 0], tris[f, 1], tris[f, 2]
+                ux = vpos[b, 0] - vpos[a, 0]
+                uy = vpos[b, 1] - vpos[a, 1]
+                uz = vpos[b, 2] - vpos[a, 2]
+                wx = vpos[c, 0] - vpos[a, 0]
+                wy = vpos[c, 1] - vpos[a, 1]
+                wz = vpos[c, 2] - vpos[a, 2]
+                nx = uy * wz - uz * wy
+                ny = uz * wx - ux * wz
+                nz = ux * wy - uy * wx
+                ex = vpos[w, 0] - vpos[u, 0]
+                ey = vpos[w, 1] - vpos[u, 1]
+                ez = vpos[w, 2] - vpos[u, 2]
+                px = ey * nz - ez * ny
+                py = ez * nx - ex * nz
+                pz = ex * ny - ey * nx
+                lp = np.sqrt(px * px + py * py + pz * pz)
+                if lp > 0:
+                    px /= lp
+                    py /= lp
+                    pz /= lp
+                    d = -(px * vpos[u, 0] + py * vpos[u, 1] + pz * vpos[u, 2])
+                    el2 = ex * ex + ey * ey + ez * ez
+                    _add_plane(vq, u, px, py, pz, d, BOUNDARY_WEIGHT * el2)
+                break
+
+
+@njit(cache=True)
+def _flips(x, y, z, moving, other, start, cnt, refs, tris, vpos, min_dot):
+    """Whether moving vertex ``moving`` to (x, y, z) turns over one of its faces not on the edge."""
+    for i in range(cnt[moving]):
+        f = refs[start[moving] + i]
+        a, b, c = tris[f, 0], tris[f, 1], tris[f, 2]
+        if a < 0 or a == other or b == other or c == other:
+            continue
+        # old normal
+        ux = vpos[b, 0] - vpos[a, 0]
+        uy = vpos[b, 1] - vpos[a, 1]
+        uz = vpos[b, 2] - vpos[a, 2]
+        wx = vpos[c, 0] - vpos[a, 0]
+        wy = vpos[c, 1] - vpos[a, 1]
+        wz = vpos[c, 2] - vpos[a, 2]
+        n0x = uy * wz - uz * wy
+        n0y = uz * wx - ux * wz
+        n0z = ux * wy - uy * wx
+        # new normal
+        p = np.empty((3, 3))
+        for k in range(3):
+            vk = tris[f, k]
+            if vk == moving:
+                p[k, 0], p[k, 1], p[k, 2] = x, y, z
+            else:
+                p[k, 0], p[k, 1], p[k, 2] = vpos[vk, 0], vpos[vk, 1], vpos[vk, 2]
+        ux = p[1, 0] - p[0, 0]
+        uy = p[1, 1] - p[0, 1]
+        uz = p[1, 2] - p[0, 2]
+        wx = p[2, 0] - p[0, 0]
+        wy = p[2, 1] - p[0, 1]
+        wz = p[2, 2] - p[0, 2]
+        n1x = uy * wz - uz * wy
+        n1y = uz * wx - ux * wz
+        n1z = ux * wy - uy * wx
+        l0 = np.sqrt(n0x * n0x + n0y * n0y + n0z * n0z)
+        l1 = np.sqrt(n1x * n1x + n1y * n1y + n1z * n1z)
+        if l1 == 0.0:
+            return True
+        if l0 > 0.0 and n0x * n1x + n0y * n1y + n0z * n1z < min_dot * l0 * l1:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _push_edges(v, start, cnt, refs, tris, vpos, vq, vbnd, vlock, stamp, qs, heap, hn):
+    hc, hu, hv, hsu, hsv = heap
+    for i in range(cnt[v]):
+        f = refs[start[v] + i]
+        if tris[f, 0] < 0:
+            continue
+        for k in range(3):
+            w = tris[f, k]
+            # each neighbour appears in two faces around an interior vertex: push once, from the
+            # face where w follows v in winding order (boundary edges from either)
+            if w == v or vlock[w]:
+                continue
+            if tris[f, (k + 2) % 3] != v and not (vbnd[v] and vbnd[w]):
+                continue
+            cost, _, _, _ = _placement(vq, vpos, vbnd, v, w, qs)
+            hc, hu, hv, hsu, hsv, hn = _heap_push(hc, hu, hv, hsu, hsv, hn, cost, v, w, stamp[v], stamp[w])
+    return (hc, hu, hv, hsu, hsv), hn
+
+
+@njit(cache=True)
+def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, min_dot, touched):
+    """Collapse edges, cheapest first, until ``target`` faces remain or nothing legal is left.
+
+    Dead faces get ``tris[f, 0] = -1``, dead vertices ``vdead[v] = 1``. ``vfresh[v]`` marks unlocked
+    vertices whose boundary planes were not added yet. ``touched`` (len >= 2 * collapses, or 0 to
+    skip) receives the vertices each collapse removed or moved (the lock check of the tests).
+
+    Returns (faces alive, collapses done).
+    """
+    alive = 0
+    for f in range(nt):
+        if tris[f, 0] >= 0:
+            alive += 1
+    start, cnt, refs, used = _build_adjacency(nv, tris, nt, 4 * nt + 64)
+    nbr = np.empty(256, np.int32)
+    nbr_n = np.empty(256, np.int32)
+    for v in range(nv):
+        if vfresh[v] and not vlock[v] and not vdead[v]:
+            _mark_boundary(v, start, cnt, refs, tris, vpos, vq, vbnd, nbr, nbr_n)
+            vfresh[v] = 0
+    if alive <= target:
+        return alive, 0
+    stamp = np.zeros(nv, np.int32)
+    qs = np.empty(10)
+    cap = 3 * alive + 16
+    heap = (np.empty(cap), np.empty(cap, np.int32), np.empty(cap, np.int32),
+            np.empty(cap, np.int32), np.empty(cap, np.int32))
+    hn = 0
+    for v in range(nv):
+        if not vlock[v] and not vdead[v]:
+            heap, hn = _push_edges(v, start, cnt, refs, tris, vpos, vq, vbnd, vlock, stamp, qs, heap, hn)
+    mark = np.zeros(nv, np.int64)
+    tag = 0
+    done = 0
+    while alive > target and hn > 0:
+        hc, hu, hv, hsu, hsv = heap
+        u, v, su, sv = hu[0], hv[0], hsu[0], hsv[0]
+        hn = _heap_pop(hc, hu, hv, hsu, hsv, hn)
+        if vdead[u] or vdead[v] or stamp[u] != su or stamp[v] != sv:
+            continue
+        # keep the boundary vertex when there is one
+        if vbnd[u] and not vbnd[v]:
+            u, v = v, u
+        # faces on the edge and the link condition
+        tag += 1
+        for i in range(cnt[u]):
+            f = refs[start[u] + i]
+            if tris[f, 0] < 0:  # dead faces stay in the apexes' lists until rewritten
+                continue
+            for k in range(3):
+                mark[tris[f, k]] = tag
+        on_edge = 0
+        apex0 = -1
+        apex1 = -1
+        for i in range(cnt[v]):
+            f = refs[start[v] + i]
+            a, b, c = tris[f, 0], tris[f, 1], tris[f, 2]
+            if a < 0:
+                continue
+            if a == u or b == u or c == u:
+                on_edge += 1
+                apex = a if (a != u and a != v) else (b if (b != u and b != v) else c)
+                if apex0 < 0:
+                    apex0 = apex
+                else:
+                    apex1 = apex
+        if on_edge == 0 or on_edge > 2:
+            continue
+        if vbnd[u] and vbnd[v] and on_edge != 1:
+            continue  # two boundary vertices across the inside: the collapse would pinch
+        common = 0
+        tag += 1  # count each common neighbour once
+        for i in range(cnt[v]):
+            f = refs[start[v] + i]
+            if tris[f, 0] < 0:
+                continue
+            for k in range(3):
+                w = tris[f, k]
+                if w != u and w != v and mark[w] == tag - 1:
+                    mark[w] = tag
+                    common += 1
+        if common != on_edge:
+            continue
+        cost, x, y, z = _placement(vq, vpos, vbnd, u, v, qs)
+        if _flips(x, y, z, u, v, start, cnt, refs, tris, vpos, min_dot):
+            continue
+        if _flips(x, y, z, v, u, start, cnt, refs, tris, vpos, min_dot):
+            continue
+        # collapse u into v
+        if touched.shape[0] > 0:
+            touched[2 * done] = u
+            touched[2 * done + 1] = v
+        done += 1
+        vpos[v, 0], vpos[v, 1], vpos[v, 2] = x, y, z
+        for k in range(10):
+            vq[v, k] += vq[u, k]
+        vdead[u] = 1
+        stamp[v] += 1
+        need = cnt[u] + cnt[v]
+        if used + need > refs.shape[0]:
+            start, cnt, refs, used = _build_adjacency(nv, tris, nt, 4 * nt + 64)
+        s0 = used
+        m = 0
+        for i in range(cnt[v]):
+            f = refs[start[v] + i]
+            if tris[f, 0] < 0:
+                continue
+            a, b, c = tris[f, 0], tris[f, 1], tris[f, 2]
+            if a == u or b == u or c == u:
+                tris[f, 0] = -1
+                alive -= 1
+                continue
+            refs[s0 + m] = f
+            m += 1
+        for i in range(cnt[u]):
+            f = refs[start[u] + i]
+            if tris[f, 0] < 0:
+                continue
+            for k in range(3):
+                if tris[f, k] == u:
+                    tris[f, k] = v
+            refs[s0 + m] = f
+            m += 1
+        start[v] = s0
+        cnt[v] = m
+        used = s0 + m
+        cnt[u] = 0
+        heap, hn = _push_edges(v, start, cnt, refs, tris, vpos, vq, vbnd, vlock, stamp, qs, heap, hn)
+    return alive, done
+
+
+@njit(cache=True)
+def compact(vdead, tris, nv, nt):
+    """Renumber the live vertices and faces in order: returns (vertex map old -> new or -1,
+    new vertex count, new face count); ``tris`` is rewritten in place."""
+    remap = np.full(nv, -1, np.int64)
+    k = 0
+    for v in range(nv):
+        if not vdead[v]:
+            remap[v] = k
+            k += 1
+    m = 0
+    for f in range(nt):
+        if tris[f, 0] >= 0:
+            for c in range(3):
+                tris[m, c] = remap[tris[f, c]]
+            m += 1
+    return remap, k, m

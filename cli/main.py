@@ -59,7 +59,39 @@ for _command in (info, convert, compress, decompress, render, isosurface, view, 
     tetc.add_command(_command)
 
 
+class _UnbreakableStream:
+    """A text stream whose writes never raise: once the reader of a pipe has gone (``tetc compress
+    ... 2>&1 | head -1``) progress and notes are dropped, and the work goes on to its output."""
+
+    def __init__(self, stream):
+        self._stream = stream
+        self._broken = stream is None
+
+    def write(self, text):
+        if not self._broken:
+            try:
+                return self._stream.write(text)
+            except (OSError, ValueError):  # EPIPE, or a closed file
+                self._broken = True
+        return len(text)
+
+    def flush(self):
+        if not self._broken:
+            try:
+                self._stream.flush()
+            except (OSError, ValueError):
+                self._broken = True
+
+    def isatty(self):
+        return not self._broken and self._stream.isatty()
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 def main(argv=None):
+    sys.stdout = _UnbreakableStream(sys.stdout)
+    sys.stderr = _UnbreakableStream(sys.stderr)
     return tetc.main(args=argv, prog_name="tetc")
 
 

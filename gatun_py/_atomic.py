@@ -7,7 +7,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from .errors import OutputError, OutputExistsError
+from .errors import OutputError, OutputExistsError, TetcError
 
 
 def _umask() -> int:
@@ -17,12 +17,17 @@ def _umask() -> int:
 
 
 def check_output_path(path: str | os.PathLike, *, force: bool = False) -> Path:
-    """Refuse to clobber an existing file unless ``force``; check the directory is writable."""
+    """Refuse to clobber an existing file unless ``force``, and anything but a regular file even
+    then (``/dev/null``, a pipe, a socket: renaming over it would replace it); check the directory
+    is writable."""
     path = Path(path)
-    if path.exists() and not force:
-        raise OutputExistsError(f"{path} already exists")
     if path.is_dir():
         raise OutputError(f"{path} is a directory")
+    if path.exists() or path.is_symlink():
+        if not path.is_file():
+            raise OutputError(f"{path} is not a regular file (a device, pipe or socket): refusing to replace it")
+        if not force:
+            raise OutputExistsError(f"{path} already exists")
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
         raise OutputError(f"cannot write {path}: directory {parent} does not exist")
@@ -37,18 +42,24 @@ def atomic_path(path: str | os.PathLike, *, force: bool = False):
 
     The temporary file keeps the target's suffix so that format detection by extension (meshio,
     PNG writers) works on it. On any exception the temporary file is removed and the target is
-    left untouched.
+    left untouched; an operating-system error (a full disk, a vanished directory) becomes one
+    :class:`OutputError` naming the file.
     """
     path = check_output_path(path, force=force)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent or ".")
-    os.close(fd)
-    os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual permissions
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent or ".")
+        os.close(fd)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual permissions
+    except OSError as e:
+        raise OutputError(f"cannot write {path}: {e.strerror or e}") from None
     try:
         yield Path(tmp)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if isinstance(e, OSError) and not isinstance(e, TetcError):
+            raise OutputError(f"cannot write {path}: {e.strerror or e}") from None
         raise
 
 

@@ -2,7 +2,8 @@
 
 Every failure a user can cause (bad input file, corrupt ``.tetc``, impossible option) raises a
 subclass of :class:`TetcError`, which is also a ``ValueError`` (bad values, damaged data) or an
-``OSError`` (files that cannot be read or written), so generic handlers catch them too. The command-line front end turns these into one line on stderr and
+``OSError`` (files that cannot be read or written), so generic handlers catch them too. The
+command-line front end turns these into one line on stderr and
 exit code 1; anything else is a bug.
 """
 

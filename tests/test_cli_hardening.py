@@ -1,0 +1,65 @@
+"""What breaks outside the happy path: full disks, special files, closed pipes, outputs that are inputs."""
+
+from __future__ import annotations
+
+import errno
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cli_util import assert_error, run
+from samples import SAMPLES
+
+POST = SAMPLES["post"][0]
+
+
+def test_full_disk_is_one_line_and_leaves_nothing(tmp_path, monkeypatch):
+    def no_space(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", no_space)
+    out = tmp_path / "x.tetc"
+    assert_error(run("compress", POST, "-o", out, "--mesh-only", "--quiet"), "cannot write", "No space left")
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+    png = tmp_path / "x.png"
+    assert_error(run("render", POST, "-o", png, "--size", 16, "--quiet"), "No space left")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_special_files_are_never_replaced(tmp_path):
+    fifo = tmp_path / "pipe.png"
+    os.mkfifo(fifo)
+    assert_error(run("render", POST, "-o", fifo, "--size", 8, "--force", "--quiet"), "not a regular file")
+    assert fifo.is_fifo()
+    link = tmp_path / "null.vtu"
+    link.symlink_to("/dev/null")
+    assert_error(run("convert", POST, "-o", link, "--force", "--quiet"), "not a regular file")
+    assert Path("/dev/null").is_char_device()
+
+
+def test_output_equal_to_input_is_refused_even_with_force(tmp_path):
+    src = tmp_path / "post.vtk"
+    src.write_bytes(Path(POST).read_bytes())
+    assert_error(run("convert", src, "-o", src, "--force", "--quiet"), "is the input file")
+    assert_error(run("compress", src, "-o", src, "--force", "--quiet"), "is the input file")
+    assert src.read_bytes() == Path(POST).read_bytes()
+
+
+@pytest.mark.parametrize("ext", [".stl", ".ply", ".obj"])
+def test_mesh_outputs_that_hold_no_tets_are_refused(tmp_path, ext):
+    out = tmp_path / f"x{ext}"
+    assert_error(run("convert", POST, "-o", out, "--quiet"), "holds no tetrahedra", ".vtu")
+    assert not out.exists()
+
+
+def test_a_closed_stderr_pipe_does_not_abort_the_work(tmp_path):
+    """`tetc compress ... 2>&1 | head -1`: the reader goes away after one line; the file is still written."""
+    out = tmp_path / "x.tetc"
+    tetc = Path(sys.executable).parent / "tetc"
+    proc = subprocess.run(f"'{tetc}' compress '{POST}' -o '{out}' 2>&1 | head -c 1", shell=True,
+                          capture_output=True, timeout=300, executable="/bin/bash")
+    assert proc.returncode == 0
+    assert out.exists() and out.stat().st_size > 1000

@@ -494,7 +494,8 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
         name, rng = mesh.scalar_name, mesh.scalar_range
     st = result.stats
     st.pop("filter", None)
-    st.pop("notes", None)
+    for note in st.pop("notes", []):
+        log(f"note: {note}")
     st.update(planned)
     rng = scalar_range if scalar_range is not None else tuple(float(v) for v in rng)
     rgb = to_rgb8(result.image, bg)

@@ -34,6 +34,10 @@ from ..simplify.forest import mesh_from_ancestors
 from ..simplify.levels import Target, resolve_target, stored_levels, target_ancestors  # noqa: F401 (re-exported)
 
 PIPELINES = ("streaming", "generic")
+# The finest volume-mode step: this many samples along the bounding-box diagonal (the default step
+# gives a few hundred to a few thousand). A step from the user or from a file below it is raised to
+# it with a note, so no render can sample for ever (a 1e-9 step would take years).
+MAX_SAMPLES_PER_DIAGONAL = 20_000
 LEAN_BATCH_TETS = 16384  # decode batch of a lean streaming render
 
 
@@ -57,6 +61,22 @@ class View:
 class PipelineResult:
     image: np.ndarray  # (H, W, 4) float32 premultiplied RGBA
     stats: dict = field(default_factory=dict)
+
+
+def bounded_step(step: float, lo, hi, what: str = "step") -> tuple[float, list[str]]:
+    """``step`` raised to the finest step the mesh allows, and a note when that changed it.
+
+    Examples
+    --------
+    >>> bounded_step(1e-9, [0, 0, 0], [3, 4, 0])
+    (0.00025, ['step 1e-09 is below the finest this mesh allows (0.00025: 20000 samples along the bounding-box diagonal); using 0.00025'])
+    """
+    diag = float(np.linalg.norm(np.asarray(hi, np.float64) - np.asarray(lo, np.float64)))
+    finest = diag / MAX_SAMPLES_PER_DIAGONAL if diag > 0 and math.isfinite(diag) else 0.0
+    if finest > 0 and not step >= finest:
+        return finest, [f"{what} {step:g} is below the finest this mesh allows ({finest:g}: "
+                        f"{MAX_SAMPLES_PER_DIAGONAL} samples along the bounding-box diagonal); using {finest:g}"]
+    return step, []
 
 
 def file_render_defaults(reader) -> tuple[np.ndarray, np.ndarray, tuple[float, float], float]:
@@ -117,7 +137,10 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
     # a relative opacity unit is a fraction of the full mesh's size, whatever level is drawn
     view = replace(view, tf=load_transfer_function(view.tf).for_size(float(np.linalg.norm(hi - lo))))
     camera = view.camera.fit(lo, hi)
-    step = view.step if view.step is not None else step
+    if view.step is not None:
+        step, notes = bounded_step(view.step, lo, hi)
+    else:
+        step, notes = bounded_step(step, lo, hi, "the file's step")
     times = {"decode_s": 0.0, "filter_s": 0.0}
     # Decoding the forest section is decompression; the top-down pass is part of the filter.
     forest_times = {"forest_decode_s": 0.0, "ancestors_s": 0.0}
@@ -134,7 +157,7 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
     stats.update(forest_times)
     stats.update(
         pipeline=pipeline, level=target.level, ratio=target.ratio, merges=target.merges,
-        tets_decoded=int(lv["tets"]), filter=fstats,
+        tets_decoded=int(lv["tets"]), filter=fstats, notes=notes,
         peak_rss_mb=peak_rss_mb(),
     )
     return PipelineResult(res.image, stats)
@@ -183,7 +206,11 @@ def render_mesh_file(source, view: View, *, read_kwargs: dict | None = None, pro
     read_s = time.perf_counter() - t0
     lo, hi = mesh.bbox
     rng = view.scalar_range if view.scalar_range is not None else mesh.scalar_range
-    res = render_batches(mesh_batches(mesh), view.camera.fit(lo, hi), view.tf, mode=view.mode, step=view.step,
+    step = view.step
+    if step is not None:
+        step, step_notes = bounded_step(step, lo, hi)
+        notes += step_notes
+    res = render_batches(mesh_batches(mesh), view.camera.fit(lo, hi), view.tf, mode=view.mode, step=step,
                          scalar_range=rng, expected_tets=mesh.n_tets, lean=False, progress=progress)
     stats = dict(res.stats)
     stats.update(decode_s=read_s + stats.get("decode_s", 0.0), filter_s=0.0, pipeline="streaming", level=0,

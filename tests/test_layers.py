@@ -44,6 +44,7 @@ LOCAL_OK_REASONS = {
     "scipy": "start-up time (1.1 s; only hexahedral inputs need it)",
     "skimage": "start-up time (1 s; only image comparison needs it)",
     "vtk": "optional dependency",
+    "vtkmodules": "optional dependency",
     "netCDF4": "optional dependency",
     "h5py": "optional dependency",
     "selenium": "optional dependency",

@@ -14,6 +14,7 @@ import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import unquote
 
 import meshio
 import numpy as np
@@ -25,6 +26,7 @@ from . import plot3d
 from .model import TetMesh, signed_volumes
 from .split import orient_positive, split_hexes_two_colour, split_min_id_star, two_colour
 from .validate import MeshReport, validate_tets
+from .vtk_reader import INSTALL_HINT, VTK_SUFFIXES, read_with_vtk, vtk_available
 
 # meshio cell type -> (linear type, number of corner vertices)
 VOLUME_CELLS = {
@@ -125,7 +127,19 @@ def _read_plot3d(path: Path, q_file, q_var: str, refine: int = 1) -> tuple[TetMe
 
 def _read_meshio(path: Path, scalar: str | None, cell_to_point: bool) -> tuple[TetMesh, MeshReport]:
     m = _meshio_read(path)
+    if path.suffix.lower() == ".vtk":
+        _unescape_names(m)
     return mesh_from_meshio(m, scalar=scalar, cell_to_point=cell_to_point, source=str(path))
+
+
+def _unescape_names(m) -> None:
+    """VTK's legacy writer percent-escapes array names (``Nodal Stress`` -> ``Nodal%20Stress``) and
+    meshio keeps them escaped: give them back their own names (unless two would then collide)."""
+    for data in (m.point_data, m.cell_data):
+        names = {k: unquote(k) for k in data}
+        if len(set(names.values())) == len(names) and any(k != v for k, v in names.items()):
+            for k in list(data):
+                data[names[k]] = data.pop(k)
 
 
 def _prefer_gmsh(formats):
@@ -156,6 +170,10 @@ def _meshio_read(path: Path):
         except SystemExit:
             reasons.append("reader gave up")
     why = reasons[0] if reasons else "no reader for this extension"
+    if path.suffix.lower() in VTK_SUFFIXES:
+        if vtk_available():
+            return read_with_vtk(path)
+        raise ReadError(f"cannot read {path} as {'/'.join(formats)}: {why}; {INSTALL_HINT}")
     raise ReadError(f"cannot read {path} as {'/'.join(formats)}: {why}")
 
 

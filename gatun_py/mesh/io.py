@@ -172,7 +172,11 @@ def _meshio_read(path: Path):
     why = reasons[0] if reasons else "no reader for this extension"
     if path.suffix.lower() in VTK_SUFFIXES:
         if vtk_available():
-            return read_with_vtk(path)
+            try:
+                return read_with_vtk(path)
+            except ReadError:
+                raise ReadError(f"cannot read {path} as {'/'.join(formats)}: {why}; "
+                                "VTK's reader could not read it either") from None
         raise ReadError(f"cannot read {path} as {'/'.join(formats)}: {why}; {INSTALL_HINT}")
     raise ReadError(f"cannot read {path} as {'/'.join(formats)}: {why}")
 

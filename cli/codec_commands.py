@@ -14,9 +14,9 @@ from .options import (RATIO, echo_json, force_option, json_option, logger, mesh_
 @click.argument("input", type=click.Path(dir_okay=False))
 @mesh_input_options
 @json_option
-def info(input, scalar, q_file, q_var, cell_to_point, as_json):
+def info(input, scalar, q_file, q_var, cell_to_point, time_step, as_json):
     """Describe INPUT: sizes, boundary, degenerate tets, and for .tetc files the codec figures."""
-    data = gatun_py.info(input, **read_kwargs(scalar, q_file, q_var, cell_to_point))
+    data = gatun_py.info(input, **read_kwargs(scalar, q_file, q_var, cell_to_point, time_step))
     if as_json:
         echo_json(data)
         return
@@ -39,14 +39,14 @@ def info(input, scalar, q_file, q_var, cell_to_point, as_json):
                    "for scale tests, not new data.")
 @force_option
 @quiet_option
-def convert(input, output, scalar, q_file, q_var, cell_to_point, refine, force, quiet):
+def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refine, force, quiet):
     """Convert INPUT (any readable mesh or PLOT3D grid) into a linear tet mesh file.
 
     Hexahedra, wedges and pyramids are split into tets conformingly; the scalar is written as
     point data. Floats are kept bit for bit (with --refine, the original grid points are).
     """
     mesh = gatun_py.convert(input, output, refine=refine, force=force, log=logger(quiet),
-                            **read_kwargs(scalar, q_file, q_var, cell_to_point))
+                            **read_kwargs(scalar, q_file, q_var, cell_to_point, time_step))
     status(f"wrote {output}: {mesh.n_points} points, {mesh.n_tets} tets", quiet)
 
 
@@ -65,7 +65,7 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, refine, force, 
 @force_option
 @quiet_option
 def compress(input, output, n_levels, mesh_only, w_density, w_geometry, scalar, q_file, q_var, cell_to_point,
-             force, quiet):
+             time_step, force, quiet):
     """Compress INPUT (any readable mesh or PLOT3D grid) losslessly into a .tetc file.
 
     Connectivity is cut-border coded, coordinates and density are predicted and coded exactly:
@@ -76,7 +76,7 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, scalar, 
     with progress_reporter("decimating", quiet, min_total=1) as progress:
         gatun_py.compress(input, output, levels=n_levels, mesh_only=mesh_only, force=force, w_density=w_density,
                           w_geometry=w_geometry, progress=progress, log=logger(quiet),
-                          **read_kwargs(scalar, q_file, q_var, cell_to_point))
+                          **read_kwargs(scalar, q_file, q_var, cell_to_point, time_step))
 
 
 @click.command()

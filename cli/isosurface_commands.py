@@ -61,7 +61,7 @@ def _size(text: str) -> tuple[int, int]:
 @force_option
 @quiet_option
 def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_ratio, importance_tf, png, size,
-               azimuth, elevation, zoom, show_stats, scalar, q_file, q_var, cell_to_point, force, quiet):
+               azimuth, elevation, zoom, show_stats, scalar, q_file, q_var, cell_to_point, time_step, force, quiet):
     """Extract the isosurface(s) of INPUT (a .tetc file or any mesh file) at --value V.
 
     Marching tetrahedra on each decoded batch, so the surface is exact (no ambiguous cases) and
@@ -100,7 +100,7 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
 
         surf = extract(input, values=list(values), ratio=ratio, faces=faces, batch_faces=batch_faces, level=level,
                        ratio_mesh=mesh_ratio, importance_tf=importance_tf,
-                       read_kwargs=read_kwargs(scalar, q_file, q_var, cell_to_point), progress=progress)
+                       read_kwargs=read_kwargs(scalar, q_file, q_var, cell_to_point, time_step), progress=progress)
     st = surf.stats
     lo_s, hi_s = st["scalar_range"]
     for v in st["values_outside_range"]:

@@ -87,13 +87,16 @@ def mesh_input_options(f):
                      help="PLOT3D: which quantity of the Q file becomes the scalar.")(f)
     f = click.option("--q", "q_file", type=click.Path(dir_okay=False), default=None,
                      help="PLOT3D: the Q (solution) file; default: the ...q... file beside an ...xyz... grid.")(f)
+    f = click.option("--time-step", type=int, default=None, metavar="T",
+                     help="Exodus: the time step whose nodal variables to read (0-based, -1 the last) "
+                          "[default: the last].")(f)
     f = click.option("--scalar", default=None, metavar="NAME",
                      help="Point-data array to use as the scalar (needed when the file has several).")(f)
     return f
 
 
-def read_kwargs(scalar, q_file, q_var, cell_to_point) -> dict:
-    return dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point)
+def read_kwargs(scalar, q_file, q_var, cell_to_point, time_step=None) -> dict:
+    return dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point, time_step=time_step)
 
 
 def output_option(help_text: str):

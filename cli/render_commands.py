@@ -76,7 +76,7 @@ def _kernels_cached() -> bool:
 @quiet_option
 def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, elevation, zoom, scalar_range,
            background, colorbar, ratio, level, budget, pipeline, lean, show_stats, scalar, q_file, q_var,
-           cell_to_point, force, quiet):
+           cell_to_point, time_step, force, quiet):
     """Volume-render INPUT (a .tetc file or any mesh file) into an image.
 
     Tets are rendered as they are decoded: rays start on the boundary surface and walk inward
@@ -102,7 +102,7 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
                                 ratio=ratio, level=level, budget=budget, mode=mode, step=step,
                                 scalar_range=scalar_range, opacity_model=opacity_model, background=background,
                                 colorbar=colorbar, lean=lean, pipeline=pipeline, progress=progress,
-                                log=logger(quiet), **read_kwargs(scalar, q_file, q_var, cell_to_point))
+                                log=logger(quiet), **read_kwargs(scalar, q_file, q_var, cell_to_point, time_step))
     frame.save(output, force=force)
     st = frame.stats
     st["total_s"] = time.perf_counter() - t_start

@@ -70,7 +70,8 @@ def _quiet(_msg: str) -> None:
 
 def compress(source, output, *, levels: int | None = None, mesh_only: bool = False, force: bool = False,
              w_density: float = 1.0, w_geometry: float = 1.0, scalar: str | None = None, q_file=None,
-             q_var: str = "density", cell_to_point: bool = False, progress=None, log=None) -> "TetcFile":
+             q_var: str = "density", cell_to_point: bool = False, time_step: int | None = None, progress=None,
+             log=None) -> "TetcFile":
     """Compress a mesh losslessly into a ``.tetc`` file, with its merge forest and levels.
 
     Parameters
@@ -87,7 +88,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
         Overwrite ``output`` if it exists.
     w_density, w_geometry : float
         Decimation weights of the mass error and the boundary geometry error (>= 0).
-    scalar, q_file, q_var, cell_to_point
+    scalar, q_file, q_var, cell_to_point, time_step
         How to read ``source`` (see :func:`gatun_py.read_mesh`).
     progress : callable, optional
         ``progress(done, total)``: vertices the decimation has processed so far, of ``total``.
@@ -118,7 +119,8 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     if isinstance(source, (str, os.PathLike)) and _same_file(source, output):
         raise OptionError(f"the output {output} is the input file")
     t0 = time.perf_counter()
-    mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point), log)
+    mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point,
+                              time_step=time_step), log)
     name = Path(source).name if isinstance(source, (str, os.PathLike)) else ""
     log(f"read {name or 'mesh'}: {mesh.n_points} points, {mesh.n_tets} tets")
     if mesh_only:
@@ -167,7 +169,7 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
 
 
 def convert(source, output, *, refine: int = 1, force: bool = False, scalar: str | None = None, q_file=None,
-            q_var: str = "density", cell_to_point: bool = False, log=None) -> TetMesh:
+            q_var: str = "density", cell_to_point: bool = False, time_step: int | None = None, log=None) -> TetMesh:
     """Read any mesh (or PLOT3D grid), split it into tets and write it in any meshio format.
 
     ``refine`` (PLOT3D only) cuts every grid cell into refine³ cells on its trilinear map first
@@ -181,7 +183,7 @@ def convert(source, output, *, refine: int = 1, force: bool = False, scalar: str
         raise OptionError(f"the output {output} is the input file")
     if isinstance(source, (str, os.PathLike)):
         mesh, report = read_mesh(source, refine=int(refine), scalar=scalar, q_file=q_file, q_var=q_var,
-                                 cell_to_point=cell_to_point)
+                                 cell_to_point=cell_to_point, time_step=time_step)
         for note in report.notes:
             log(f"note: {note}")
     else:
@@ -191,12 +193,13 @@ def convert(source, output, *, refine: int = 1, force: bool = False, scalar: str
 
 
 def info(source, *, scalar: str | None = None, q_file=None, q_var: str = "density",
-         cell_to_point: bool = False) -> dict:
+         cell_to_point: bool = False, time_step: int | None = None) -> dict:
     """Describe a ``.tetc`` file (sizes, bits per tet, levels, forest) or any mesh file (sizes,
     boundary, degenerate tets, the reader's notes): what ``tetc info --json`` prints."""
     if isinstance(source, TetcFile) or (isinstance(source, (str, os.PathLike)) and is_tetc(source)):
         return (source if isinstance(source, TetcFile) else TetcFile(source)).info
-    mesh, report = read_mesh(source, scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point)
+    mesh, report = read_mesh(source, scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point,
+                             time_step=time_step)
     lo, hi = mesh.bbox
     return {
         "points": mesh.n_points,
@@ -388,6 +391,7 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
            step: float | None = None, scalar_range=None, opacity_model: str | None = None,
            background="black", colorbar: bool = False, lean: bool = False, pipeline: str = "streaming",
            scalar: str | None = None, q_file=None, q_var: str = "density", cell_to_point: bool = False,
+           time_step: int | None = None,
            progress=None, log=None) -> Frame:
     """Volume-render a mesh: decode, simplify and ray-cast in one streaming pass.
 
@@ -425,7 +429,7 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
         Hold only the tets in flight (less memory, slower).
     pipeline : {"streaming", "generic"}
         One pass, or decode-all-then-render (the paper's baseline).
-    scalar, q_file, q_var, cell_to_point
+    scalar, q_file, q_var, cell_to_point, time_step
         How to read a mesh file (see :func:`gatun_py.read_mesh`).
     progress : callable, optional
         ``progress(done, total)``: tets rendered so far, of ``total``.
@@ -489,7 +493,8 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
         if ratio is not None or level is not None or budget is not None:
             raise OptionError("ratio, level and budget need a .tetc file with a merge forest "
                               "(make one with gatun_py.compress or `tetc compress`)")
-        mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point), log)
+        mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point,
+                              time_step=time_step), log)
         result = render_mesh_file(mesh, view, progress=_counter(progress, mesh.n_tets))
         name, rng = mesh.scalar_name, mesh.scalar_range
     st = result.stats

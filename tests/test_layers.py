@@ -45,7 +45,7 @@ LOCAL_OK_REASONS = {
     "skimage": "start-up time (1 s; only image comparison needs it)",
     "vtk": "optional dependency",
     "vtkmodules": "optional dependency",
-    "netCDF4": "optional dependency",
+    "netCDF4": "optional dependency (Exodus input)",
     "h5py": "optional dependency",
     "selenium": "optional dependency",
     "aiohttp": "optional dependency",

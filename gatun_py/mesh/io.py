@@ -26,6 +26,7 @@ from . import plot3d
 from .model import TetMesh, signed_volumes
 from .split import orient_positive, split_hexes_two_colour, split_min_id_star, two_colour
 from .validate import MeshReport, validate_tets
+from .exodus import EXODUS_SUFFIXES, read_exodus
 from .vtk_reader import INSTALL_HINT, VTK_SUFFIXES, read_with_vtk, vtk_available
 
 # meshio cell type -> (linear type, number of corner vertices)
@@ -56,7 +57,7 @@ class ReadOptions:
 
 
 def read_mesh(path, *, scalar: str | None = None, q_file=None, q_var: str = "density",
-              cell_to_point: bool = False, refine: int = 1) -> tuple[TetMesh, MeshReport]:
+              cell_to_point: bool = False, refine: int = 1, time_step: int | None = None) -> tuple[TetMesh, MeshReport]:
     """Read, split into tets, validate.
 
     Parameters
@@ -75,6 +76,9 @@ def read_mesh(path, *, scalar: str | None = None, q_file=None, q_var: str = "den
     refine : int
         PLOT3D only: refine the grid trilinearly by this factor per axis before splitting
         (:func:`plot3d.refine_grid`; interpolated scalar, for scale tests). Default 1: as stored.
+    time_step : int, optional
+        Exodus only: which time step's nodal variables to read (0-based, negative from the end;
+        default the last).
 
     Raises
     ------
@@ -85,6 +89,13 @@ def read_mesh(path, *, scalar: str | None = None, q_file=None, q_var: str = "den
         raise ReadError(f"no such file: {path}")
     if path.is_dir():
         raise ReadError(f"{path} is a directory, not a mesh file")
+    if time_step is not None and path.suffix.lower() not in EXODUS_SUFFIXES:
+        raise OptionError(f"{path}: a time step applies to Exodus files ({', '.join(EXODUS_SUFFIXES)}) only")
+    if path.suffix.lower() in EXODUS_SUFFIXES:
+        m, notes = read_exodus(path, time_step=time_step)
+        mesh, report = mesh_from_meshio(m, scalar=scalar, cell_to_point=cell_to_point, source=str(path))
+        report.notes[:0] = notes
+        return mesh, report
     if plot3d.is_plot3d_input(path, q_file):
         return _read_plot3d(path, q_file, q_var, refine)
     if refine != 1:

@@ -1,0 +1,92 @@
+"""Exodus II files (``.e``, ``.exo``, ``.ex2``) with a choice of time step.
+
+Exodus is netCDF; reading it needs the optional ``netCDF4`` package (``pip install
+'gatun_py[exodus]'``). meshio's own Exodus reader keeps only the first time step, so this one reads
+the nodal variables of the step asked for (default: the last, the converged or final state) and
+hands a ``meshio.Mesh`` to the common conversion.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import meshio
+import numpy as np
+
+from ..errors import OptionError, ReadError
+
+EXODUS_SUFFIXES = (".e", ".exo", ".ex2")
+INSTALL_HINT = "reading Exodus files needs netCDF4: pip install 'gatun_py[exodus]' (or: pip install netCDF4)"
+
+# Exodus element type (upper case, digits stripped of the node count where it is the linear one)
+# -> meshio cell type; only volume cells matter here, the rest are reported as ignored
+ELEMENT_TYPES = {
+    "TETRA": "tetra", "TETRA4": "tetra", "TET4": "tetra", "TET": "tetra", "TETRA10": "tetra10", "TET10": "tetra10",
+    "HEX": "hexahedron", "HEX8": "hexahedron", "HEXAHEDRON": "hexahedron", "HEX20": "hexahedron20",
+    "HEX27": "hexahedron27", "WEDGE": "wedge", "WEDGE6": "wedge", "WEDGE15": "wedge15",
+    "PYRAMID": "pyramid", "PYRAMID5": "pyramid", "PYRAMID13": "pyramid13",
+    "TRI": "triangle", "TRI3": "triangle", "TRIANGLE": "triangle", "QUAD": "quad", "QUAD4": "quad",
+    "SHELL": "quad", "SHELL4": "quad", "BAR2": "line", "BEAM": "line",
+}
+
+
+def _text(rows) -> list[str]:
+    return [b"".join(r).decode("utf-8", "replace").strip("\x00 ") for r in np.asarray(rows)]
+
+
+def read_exodus(path, *, time_step: int | None = None) -> tuple[meshio.Mesh, list[str]]:
+    """The mesh and the nodal variables of one time step (index, negative from the end; default last).
+
+    Returns
+    -------
+    (meshio.Mesh, notes)
+    """
+    path = Path(path)
+    try:
+        import netCDF4  # optional dependency
+    except ImportError:
+        raise ReadError(f"{path}: {INSTALL_HINT}") from None
+    try:
+        nc = netCDF4.Dataset(str(path))
+    except OSError as e:
+        raise ReadError(f"cannot read {path} as Exodus: {e}") from None
+    notes = []
+    with nc:
+        nc.set_auto_mask(False)
+        v = nc.variables
+        if "num_nodes" not in nc.dimensions:
+            raise ReadError(f"{path}: not an Exodus mesh (no num_nodes dimension)")
+        n = len(nc.dimensions["num_nodes"])
+        if "coord" in v:
+            points = np.asarray(v["coord"][:]).T
+        else:
+            axes = [np.asarray(v[f"coord{a}"][:]) if f"coord{a}" in v else np.zeros(n) for a in "xyz"]
+            points = np.stack(axes, axis=1)
+        cells = []
+        for key in sorted((k for k in v if k.startswith("connect")), key=lambda k: int(k[7:] or 0)):
+            etype = str(getattr(v[key], "elem_type", "")).upper()
+            if etype not in ELEMENT_TYPES:
+                notes.append(f"element block {key} of type {etype or '?'} ignored")
+                continue
+            cells.append((ELEMENT_TYPES[etype], np.asarray(v[key][:], np.int64) - 1))
+        names = _text(v["name_nod_var"][:]) if "name_nod_var" in v else []
+        n_steps = len(nc.dimensions["time_step"]) if "time_step" in nc.dimensions else 0
+        point_data = {}
+        if names and n_steps:
+            t = n_steps - 1 if time_step is None else int(time_step)
+            if not -n_steps <= t < n_steps:
+                raise OptionError(f"{path}: time step {time_step} does not exist (the file has {n_steps}: "
+                                  f"0..{n_steps - 1}, or -1 for the last)")
+            t %= n_steps
+            times = np.asarray(v["time_whole"][:]) if "time_whole" in v else None
+            when = f" (time {float(times[t]):g})" if times is not None and len(times) > t else ""
+            if n_steps > 1:
+                notes.append(f"nodal variables of time step {t} of 0..{n_steps - 1}{when}")
+            for k, name in enumerate(names):
+                if f"vals_nod_var{k + 1}" in v:
+                    point_data[name] = np.asarray(v[f"vals_nod_var{k + 1}"][t])
+                elif "vals_nod_var" in v:  # the older layout: one (time, variable, node) array
+                    point_data[name] = np.asarray(v["vals_nod_var"][t, k])
+        elif time_step not in (None, 0, -1):
+            raise OptionError(f"{path}: the file has no time steps of nodal variables")
+    return meshio.Mesh(points, cells, point_data=point_data), notes

@@ -10,7 +10,9 @@ import contextlib
 import json
 import math
 import re
+import signal
 import sys
+import threading
 
 import click
 import numpy as np
@@ -129,6 +131,26 @@ def status(msg: str, quiet: bool) -> None:
 def logger(quiet: bool):
     """The ``log`` callable the library's verbs take: one line on stderr unless --quiet."""
     return lambda msg: status(msg, quiet)
+
+
+@contextlib.contextmanager
+def interruptible():
+    """Let Ctrl-C end the process at once while compiled kernels run.
+
+    numba's kernels hold the interpreter for as long as they run, so Python's own SIGINT handler
+    (KeyboardInterrupt) would only fire when a kernel returns: seconds or minutes into a large
+    render. Inside this block SIGINT has its default action, which ends the process immediately.
+    Nothing is lost: outputs are written atomically after the block, so an interrupted render
+    leaves no file behind.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_DFL)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 @contextlib.contextmanager

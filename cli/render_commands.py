@@ -16,7 +16,7 @@ from gatun_py.render.image import image_format
 from gatun_py.warmup import compile_for_render, load_kernels
 
 from .options import (ANGLE, POSITIVE, RATIO, ZOOM, Colour, FiniteFloat, ImageSize, echo_json, force_option,
-                      logger, mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
+                      interruptible, logger, mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
                       status)
 
 
@@ -97,7 +97,7 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
         compile_for_render()
     startup_s = load_kernels(lean=lean) + (time.perf_counter() - t_start)
     t_start = time.perf_counter()  # total_s: from opening the input to the image written
-    with progress_reporter("rendering", quiet) as progress:
+    with progress_reporter("rendering", quiet) as progress, interruptible():
         frame = gatun_py.render(input, size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom,
                                 ratio=ratio, level=level, budget=budget, mode=mode, step=step,
                                 scalar_range=scalar_range, opacity_model=opacity_model, background=background,

@@ -18,10 +18,10 @@ import click
 import numpy as np
 
 from gatun_py.mesh.plot3d import Q_VARIABLES
-from gatun_py.render.camera import MAX_ZOOM
-from gatun_py.render.image import parse_colour
 
 MAX_IMAGE_SIDE = 8192
+MAX_ZOOM = 1.0e4  # gatun_py.render.camera.MAX_ZOOM (tests/test_cli_options.py keeps them equal); not
+# imported from there so that parsing options does not load numba and the render kernels
 
 
 class FiniteFloat(click.ParamType):
@@ -68,6 +68,8 @@ class Colour(click.ParamType):
     name = "COLOUR"
 
     def convert(self, value, param, ctx):
+        from gatun_py.render.image import parse_colour  # start-up time (see MAX_ZOOM)
+
         try:
             return parse_colour(value)
         except ValueError as e:

@@ -6,14 +6,10 @@ import time
 from pathlib import Path
 
 import click
-import numba
 
 import gatun_py
 from gatun_py._atomic import check_output_path
 from gatun_py._resources import peak_rss_mb
-from gatun_py.render import _raycast_kernels
-from gatun_py.render.image import image_format
-from gatun_py.warmup import compile_for_render, load_kernels
 
 from .options import (ANGLE, POSITIVE, RATIO, ZOOM, Colour, FiniteFloat, ImageSize, echo_json, force_option,
                       interruptible, logger, mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
@@ -22,6 +18,10 @@ from .options import (ANGLE, POSITIVE, RATIO, ZOOM, Colour, FiniteFloat, ImageSi
 
 def _kernels_cached() -> bool:
     """Whether numba has compiled the render kernels into its cache already."""
+    import numba  # start-up time: options are parsed, and usage errors reported, before numba loads
+
+    from gatun_py.render import _raycast_kernels
+
     src = Path(_raycast_kernels.__file__)
     if numba.config.CACHE_DIR:  # NUMBA_CACHE_DIR: one folder per source folder, "<name>_<hash>"
         dirs = list(Path(numba.config.CACHE_DIR).glob(f"{src.parent.name}_*"))
@@ -83,6 +83,9 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     from both ends of each segment. The camera follows VTK: 30 degree perspective fitted to the
     bounding sphere, then --azimuth, --elevation, refit, --zoom.
     """
+    from gatun_py.render.image import image_format  # start-up time: see _kernels_cached
+    from gatun_py.warmup import compile_for_render, load_kernels
+
     t_start = time.perf_counter()
     if sum(x is not None for x in (ratio, level, budget)) > 1:
         raise click.UsageError("give at most one of --ratio, --level and --budget")

@@ -14,15 +14,77 @@ The stages, in pipeline order (each imports only the ones before it):
 * :mod:`gatun_py.render`    object-space ray casting, camera, transfer functions (imports only mesh)
 * :mod:`gatun_py.pipeline`  decompress -> simplify -> render in one pass, time budgets, quality
 
-``import gatun_py`` also registers ``.tetc`` with meshio.
+The verbs load ``gatun_py.api`` (and with it numba and the kernels) on first use, as scikit-image
+loads its submodules, so ``import gatun_py``, a command's ``--help`` and its usage errors are quick.
+``import gatun_py`` registers ``.tetc`` with meshio.
 """
 
-from ._version import __version__  # noqa: E402
-from .api import Frame, TetcFile, compress, convert, decompress, info, open, render  # noqa: E402,A004
-from .errors import (CorruptFileError, FormatVersionError, MeshError, OptionError, OutputError,  # noqa: E402
+import importlib
+import inspect
+
+from . import render as _render_stage  # noqa: F401  (bound first: the verb `render` below must win the name)
+from ._version import __version__
+from .errors import (CorruptFileError, FormatVersionError, MeshError, OptionError, OutputError,
                      OutputExistsError, ReadError, TetcError)
-from .mesh import TetBatch, TetMesh, read_mesh, write_mesh  # noqa: E402
-from .meshio_format import register as _register_meshio  # noqa: E402
+from .meshio_format import register as _register_meshio
+
+
+class _Verb:
+    """A public verb of :mod:`gatun_py.api`, imported when first called (or its help is read)."""
+
+    def __init__(self, name: str):
+        self.__name__ = self.__qualname__ = name
+
+    @property
+    def _target(self):
+        return getattr(importlib.import_module(".api", __name__), self.__name__)
+
+    def __call__(self, *args, **kwargs):
+        return self._target(*args, **kwargs)
+
+    @property
+    def __doc__(self):
+        return self._target.__doc__
+
+    @property
+    def __signature__(self):
+        return inspect.signature(self._target)
+
+    @property
+    def __wrapped__(self):
+        return self._target
+
+    def __get__(self, obj, objtype=None):
+        # a descriptor is a routine to inspect and pydoc: help(gatun_py.render) shows the verb's own help
+        return self
+
+    def __repr__(self) -> str:
+        return f"<gatun_py verb {self.__name__}>"
+
+
+compress = _Verb("compress")
+decompress = _Verb("decompress")
+convert = _Verb("convert")
+info = _Verb("info")
+open = _Verb("open")  # noqa: A001 (the verb users look for, as gzip.open)
+render = _Verb("render")
+
+# classes load with their module on first access
+_LAZY = {"TetcFile": "api", "Frame": "api", "TetMesh": "mesh", "TetBatch": "mesh", "read_mesh": "mesh",
+         "write_mesh": "mesh"}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'gatun_py' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
+
 
 _register_meshio()
 

@@ -27,6 +27,7 @@ from .codec import LevelPayload, TetcReader, write_tetc
 from .codec.info import tetc_info
 from .errors import OptionError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
+from .mesh.io import mesh_output_format
 from .pipeline.budget import load_costs, plan_file_budget
 from .pipeline.stream import PIPELINES, View, is_tetc, render_mesh_file, render_tetc
 from .render.camera import Camera
@@ -159,6 +160,7 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
 
     Returns the mesh written.
     """
+    mesh_output_format(output)  # refuse a format that cannot hold the mesh before decoding it
     check_output_path(output, force=force)
     if isinstance(source, (str, os.PathLike)) and _same_file(source, output):
         raise OptionError(f"the output {output} is the input file")
@@ -178,6 +180,7 @@ def convert(source, output, *, refine: int = 1, force: bool = False, scalar: str
     log = log or _quiet
     if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)) or not 1 <= refine <= 16:
         raise OptionError(f"refine must be an integer in 1..16, got {refine!r}")
+    mesh_output_format(output)
     check_output_path(output, force=force)
     if isinstance(source, (str, os.PathLike)) and _same_file(source, output):
         raise OptionError(f"the output {output} is the input file")

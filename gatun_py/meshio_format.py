@@ -9,13 +9,13 @@ from __future__ import annotations
 import meshio
 import numpy as np
 
-from .api import compress, open as open_tetc
-
 FORMAT_NAME = "tetc"
 
 
 def read(filename) -> meshio.Mesh:
     """The full mesh of a ``.tetc`` file as a ``meshio.Mesh`` (tetra cells, the scalar as point data)."""
+    from .api import open as open_tetc  # start-up time: the verbs load numba; registering must not
+
     mesh = open_tetc(filename).mesh()
     return meshio.Mesh(np.asarray(mesh.points), [("tetra", np.asarray(mesh.tets))],
                        point_data={mesh.scalar_name: np.asarray(mesh.density)})
@@ -24,6 +24,8 @@ def read(filename) -> meshio.Mesh:
 def write(filename, mesh: meshio.Mesh, **options) -> None:
     """Compress a ``meshio.Mesh`` into ``filename`` (with its merge forest and levels; like
     meshio's other writers it overwrites). Options go to :func:`gatun_py.compress`."""
+    from .api import compress  # start-up time: as in read
+
     options.setdefault("force", True)
     compress(mesh, filename, **options)
 

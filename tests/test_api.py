@@ -133,3 +133,16 @@ def test_meshio_reads_and_writes_tetc(post_file, tmp_path, small_sample):
     meshio.write(out, meshio.Mesh(small_sample.points, [("tetra", small_sample.tets)],
                                   point_data={"p": small_sample.density}), mesh_only=True)
     assert gatun_py.open(out).mesh().n_tets == small_sample.n_tets
+
+
+def test_import_is_light_and_the_verbs_document_themselves():
+    import pydoc
+    import subprocess
+    import sys
+
+    code = "import sys, gatun_py; print('numba' in sys.modules, 'gatun_py.api' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.stdout.split() == ["False", "False"], out
+    text = pydoc.render_doc(gatun_py.render, renderer=pydoc.plaintext)
+    assert "Volume-render a mesh" in text and "render(source, *, size=256" in text
+    assert callable(gatun_py.open) and gatun_py.TetcFile.__name__ == "TetcFile"

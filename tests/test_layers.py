@@ -59,6 +59,7 @@ LOCAL_OK_REASONS = {
 # gatun_py modules that may be imported inside a function, and why
 LOCAL_OK_MODULES = {
     "viewer.server": "needs the optional aiohttp: imported only when the viewer starts",
+    "api": "start-up time: meshio's .tetc reader and writer load the verbs (and numba) when first called",
 }
 
 

@@ -329,8 +329,9 @@ def _cell_to_point(m, name, p32, tet_chunks, cell_of_tet, n):
     return out
 
 
-def write_mesh(mesh: TetMesh, path, *, force: bool = False) -> None:
-    """Write a linear tet mesh with density as point data, format from the extension, atomically."""
+def mesh_output_format(path) -> str:
+    """The meshio format a tet mesh is written in for this file name; :class:`OutputError` listing the
+    choices when the extension is unknown or names a format that holds no tetrahedra (STL, PLY, OBJ)."""
     path = Path(path)
     try:
         fmt = _prefer_gmsh(_helpers._filetypes_from_path(path))[0]
@@ -340,6 +341,13 @@ def write_mesh(mesh: TetMesh, path, *, force: bool = False) -> None:
         raise OutputError(f"cannot write a tet mesh as {path.name!r}: "
                           f"{'that format holds no tetrahedra' if fmt else 'unknown extension'}; "
                           f"use one of {', '.join(TET_EXTENSIONS)}")
+    return fmt
+
+
+def write_mesh(mesh: TetMesh, path, *, force: bool = False) -> None:
+    """Write a linear tet mesh with density as point data, format from the extension, atomically."""
+    path = Path(path)
+    fmt = mesh_output_format(path)
     if fmt in ("xdmf", "h5m", "med") and importlib.util.find_spec("h5py") is None:
         raise OutputError(f"writing {fmt} files needs h5py (pip install h5py); .vtu needs nothing extra")
     m = meshio.Mesh(np.asarray(mesh.points), [("tetra", np.asarray(mesh.tets))],

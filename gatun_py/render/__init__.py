@@ -1,11 +1,31 @@
-"""Stage 4: object-space ray casting with bidirectional segments, camera and transfer functions."""
+"""Stage 4: object-space ray casting with bidirectional segments, camera and transfer functions.
 
-from .camera import Camera, FittedCamera
-from .image import to_rgb8, write_png
-from .raycast import MODES, RenderResult, StreamingRaycaster, render_mesh
-from .stream import render_batches
-from .transfer import TransferFunction, load_transfer_function, preset_names
+The names below load on first use (PEP 562), so importing the package, or one light module of it
+(the camera, the transfer functions), does not load numba and the ray caster's kernels.
+"""
 
-__all__ = ["Camera", "FittedCamera", "MODES", "RenderResult", "StreamingRaycaster", "render_mesh",
-           "TransferFunction", "load_transfer_function", "preset_names", "to_rgb8", "write_png",
-           "render_batches"]
+import importlib
+
+# public name -> the submodule that defines it
+_LAZY = {
+    "Camera": "camera", "FittedCamera": "camera",
+    "to_rgb8": "image", "write_png": "image",
+    "MODES": "raycast", "RenderResult": "raycast", "StreamingRaycaster": "raycast", "render_mesh": "raycast",
+    "render_batches": "stream",
+    "TransferFunction": "transfer", "load_transfer_function": "transfer", "preset_names": "transfer",
+}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
+
+
+__all__ = sorted(_LAZY)

@@ -1,0 +1,164 @@
+"""Every bad input of issue 17 that the command line meets, run as a user would: command, exit code,
+the message, wall time and peak memory (``python bench/bench_hostile.py`` -> ``sections/hostile.md``).
+
+The crafted ``.tetc`` files (forest bomb, tiny stored step) are built here from the golden file;
+the decoder's own adversarial suite is ``tests/test_hostile_files.py``.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import resource
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from common import ROOT, SAMPLE_FILES, WORK, table, write_section
+
+from gatun_py.codec import TetcReader
+from gatun_py.codec.container import build_container
+
+TETC = Path(sys.executable).parent / "tetc"
+GOLDEN = ROOT / "tests" / "data" / "post_v1.tetc"
+POST = SAMPLE_FILES["post"][0]
+
+
+def run(args, cwd, *, shell=False, timeout=120):
+    """(exit code, first error or note line of stderr, wall s, peak MB of this child alone)."""
+    t0 = time.perf_counter()
+    p = subprocess.Popen(args if shell else [str(a) for a in args], cwd=cwd, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, shell=shell, executable="/bin/bash" if shell else None)
+    try:
+        _, err = p.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        _, err = p.communicate()
+    # wait4 on the reaped child is not possible; its rusage is the process's own when not a shell
+    dt = time.perf_counter() - t0
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    msg = next((ln for ln in lines if "error" in ln or "note" in ln or "Error" in ln), lines[0] if lines else "")
+    return p.returncode, msg, dt, _PEAKS.pop(p.pid, float("nan"))
+
+
+_PEAKS: dict = {}
+
+
+class _Reaper(subprocess.Popen):
+    """Popen that reaps its child with wait4, keeping the child's own peak memory (ru_maxrss)."""
+
+    def _try_wait(self, wait_flags):
+        try:
+            pid, sts, usage = os.wait4(self.pid, wait_flags)
+        except ChildProcessError:
+            return self.pid, 0
+        if pid:
+            _PEAKS[pid] = usage.ru_maxrss / 1024.0
+        return pid, sts
+
+
+subprocess.Popen = _Reaper  # every child this script starts reports its own peak
+
+
+def _with_meta(src, out, **changes):
+    r = TetcReader(src)
+    meta = copy.deepcopy(r.meta)
+    meta.pop("sections", None)
+    for k, v in changes.items():
+        if k == "level0":
+            meta["levels"][0].update(v)
+        else:
+            meta[k] = v
+    out.write_bytes(build_container(meta, [(n, r.read_section(n)) for n in r.container.section_names()]))
+    return out
+
+
+def main() -> int:
+    work = WORK / "hostile"
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir(parents=True)
+    (work / "post.vtk").write_bytes(Path(POST).read_bytes())
+    bomb = _with_meta(GOLDEN, work / "bomb.tetc", points=2**31 - 2,
+                      level0={"points": 2**31 - 2, "referenced_points": 2**31 - 2, "boundary_vertices": 1000})
+    tiny = _with_meta(GOLDEN, work / "tiny_step.tetc", render_step=1e-12)
+    pv = {"RGBPoints": [0, 0, 0, 1, 1, 1, 0, 0]}
+    for name, ud in (("zero", 0), ("abc", "abc"), ("nan", "nan")):
+        (work / f"pv_{name}.json").write_text(json.dumps(dict(pv, unit_distance=ud)))
+    fifo = work / "fifo.png"
+    os.mkfifo(fifo)
+    cases = [
+        ("crafted 90 KB-style file claiming 2^31 points, --ratio", [TETC, "render", bomb, "-o", "b.png", "--ratio", "0.5"]),
+        ("crafted file, decompress", [TETC, "decompress", bomb, "-o", "b.vtu"]),
+        ("--step 1e-9 at 64²", [TETC, "render", "post.vtk", "-o", "s.png", "--size", "64", "--step", "1e-9"]),
+        ("file whose stored render_step is 1e-12", [TETC, "render", tiny, "-o", "t.png", "--size", "64"]),
+        ("decompress to .stl", [TETC, "decompress", GOLDEN, "-o", "x.stl"]),
+        ("convert to .ply", [TETC, "convert", "post.vtk", "-o", "x.ply"]),
+        ("convert to .obj", [TETC, "convert", "post.vtk", "-o", "x.obj"]),
+        ("render -o x.jpg", [TETC, "render", GOLDEN, "-o", "x.jpg", "--size", "32"]),
+        ("render -o x.gif (no writer)", [TETC, "render", GOLDEN, "-o", "x.gif", "--size", "32"]),
+        ("compress a.vtk -o a.vtk -f", [TETC, "compress", "post.vtk", "-o", "post.vtk", "-f"]),
+        ("output /dev/null --force", [TETC, "convert", "post.vtk", "-o", "/dev/null", "--force"]),
+        ("output a named pipe --force", [TETC, "render", GOLDEN, "-o", fifo, "--force", "--size", "8"]),
+        ("ParaView TF, unit_distance 0", [TETC, "render", GOLDEN, "-o", "p0.png", "--tf", "pv_zero.json"]),
+        ("ParaView TF, unit_distance \"abc\"", [TETC, "render", GOLDEN, "-o", "p1.png", "--tf", "pv_abc.json"]),
+        ("ParaView TF, unit_distance \"nan\"", [TETC, "render", GOLDEN, "-o", "p2.png", "--tf", "pv_nan.json"]),
+        ("--size 0", [TETC, "render", GOLDEN, "-o", "z.png", "--size", "0"]),
+        ("--size 1000000", [TETC, "render", GOLDEN, "-o", "z.png", "--size", "1000000"]),
+        ("--step -1", [TETC, "render", GOLDEN, "-o", "z.png", "--step", "-1"]),
+        ("--zoom 0", [TETC, "render", GOLDEN, "-o", "z.png", "--zoom", "0"]),
+        ("--ratio 1.5", [TETC, "render", GOLDEN, "-o", "z.png", "--ratio", "1.5"]),
+        ("--budget -1", [TETC, "render", GOLDEN, "-o", "z.png", "--budget", "-1"]),
+        ("missing input", [TETC, "render", "nope.tetc", "-o", "z.png"]),
+    ]
+    rows = []
+    for label, args in cases:
+        code, msg, dt, peak = run(args, work)
+        rows.append([label, "`" + " ".join(Path(str(a)).name if str(a).startswith(str(ROOT)) else str(a)
+                                           for a in args[1:]) + "`", code, msg.replace("|", "/")[:150],
+                     f"{dt:.2f}", f"{peak:.0f}"])
+    code, msg, dt, peak = run(f"'{TETC}' compress post.vtk -o piped.tetc 2>&1 | head -1", work, shell=True)
+    rows.append(["closed stderr pipe (`2>&1 | head -1`)", "`tetc compress post.vtk -o piped.tetc`", code,
+                 f"file written: {(work / 'piped.tetc').exists()}", f"{dt:.2f}", ""])
+    jpg = (work / "x.jpg").read_bytes()[:3] == b"\xff\xd8\xff" if (work / "x.jpg").exists() else False
+    rows.append(["(check) x.jpg holds JPEG bytes", "", "", str(jpg), "", ""])
+
+    # Ctrl-C: a render that would take minutes, interrupted past start-up
+    p = subprocess.Popen([str(TETC), "render", "post.vtk", "-o", "c.png", "--size", "512", "--step", "1e-9", "-q"],
+                         cwd=work, stderr=subprocess.PIPE, stdout=subprocess.PIPE)
+    time.sleep(6.0)
+    t0 = time.perf_counter()
+    p.send_signal(signal.SIGINT)
+    p.wait(timeout=60)
+    rows.append(["SIGINT 6 s into a minutes-long 512² render", "`tetc render post.vtk --size 512 --step 1e-9`",
+                 p.returncode, f"stopped {time.perf_counter() - t0:.3f} s after SIGINT; image left: "
+                               f"{(work / 'c.png').exists()}", "", ""])
+
+    # a mesh in millimetres and the same in metres: the default transfer function renders alike
+    from gatun_py import TetMesh, read_mesh, render
+    m = read_mesh(POST)[0]
+    small = TetMesh(np.asarray(m.points) * np.float32(0.001), m.density, m.tets, m.scalar_name)
+    a, b = render(m, size=128).rgb.astype(float), render(small, size=128).rgb.astype(float)
+    rows.append(["default TF, mesh scaled by 0.001", "`gatun_py.render(mesh)` vs scaled", "",
+                 f"mean brightness {a.mean():.2f} vs {b.mean():.2f}; max pixel difference {np.abs(a - b).max():.0f}",
+                 "", ""])
+
+    text = ("## Hostile and careless input (issue 17)\n\n"
+            f"`python bench/bench_hostile.py`, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}: every case run "
+            "as a user would from a shell (exit 0 success, 1 error, 2 usage error); the message is the first "
+            "error or note line on stderr; peak is the child's maximum resident memory. The decoder's own "
+            "adversarial suite (hypothesis over headers, sections and metadata under a memory and time limit) is "
+            "`tests/test_hostile_files.py`; a full disk is simulated in `tests/test_cli_hardening.py`.\n\n"
+            + table(["case", "command", "exit", "message", "s", "peak MB"], rows) + "\n")
+    write_section("hostile", text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

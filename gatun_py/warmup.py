@@ -106,11 +106,11 @@ def _render_kernels(*, lean: bool) -> None:
 
 def _purge_kernels() -> None:
     """A lean face table fills up (and is purged) only on real meshes: call those kernels here."""
-    from .render import _raycast_kernels as K
+    from .render._facetable import count_live, make_face_table, rehash
 
-    table = np.full((8, 7), -1, dtype=np.int32)
+    table = make_face_table(8, 0, 0, counting=True)
     mark = np.zeros(1, dtype=np.uint8)
-    K.rehash(table, 8, 0, K.count_live(table, True, mark) >= 0, mark)
+    rehash(table, 8, 0, count_live(table, True, mark) >= 0, mark)
 
 
 def _render_only() -> str:

@@ -178,7 +178,7 @@ def test_bad_input():
 
 # -- lean streaming: faces freed once no ray needs them --------------------------------------------
 def _crossings(mesh, cam):
-    from gatun_py.render import _raycast_kernels as K
+    from gatun_py.render import _facetable as K
 
     fitted_cam = fitted(mesh, cam)
     P = mesh.points.astype(np.float64) - fitted_cam.position
@@ -231,7 +231,10 @@ def test_lean_frees_every_face_of_a_clean_mesh():
     cam = Camera(40, 40, azimuth=33.0, elevation=21.0)
     rc, res = stream_rc(mesh, cam, "volume", order_seed=5, n_batches=25, lean=True)
     assert res.stats["rays_unfinished"] == 0 and res.stats["rays_hit"] > 500
-    counters = rc._htab[rc._htab[:, 0] >= 0, 6]
+    from gatun_py.render._facetable import FT_A, FT_COUNT, FT_TABLE
+
+    table = rc._ft[FT_TABLE]
+    counters = table[table[:, FT_A] >= 0, FT_COUNT]
     assert np.all(counters == 0)
 
 
@@ -239,7 +242,8 @@ def test_compose_counts_incomplete_segments_only_in_front_of_opacity():
     """A segment left unfinished behind an opaque one (opacity >= 0.99, the early-termination
     threshold) does not leave its ray unfinished; in front of it, it does. Colours combine by
     eq. (3)/(4) either way."""
-    from gatun_py.render import _raycast_kernels as K
+    from gatun_py.render import _segments as K
+    from gatun_py.render._walk import compose
 
     # ray 0: done segment of opacity 0.995, then a stuck one; ray 1: 0.5 then stuck;
     # ray 2: stuck first, then a done opaque one; ray 3: a stuck segment whose front
@@ -257,9 +261,12 @@ def test_compose_counts_incomplete_segments_only_in_front_of_opacity():
     seg_acc[4, 0] = [0.1, 0.0, 0.0, 0.1]
     seg_acc[5, 0] = [0.0, 0.999, 0.0, 0.999]
     state = np.array([K.STATE_DONE, K.STATE_STUCK, K.STATE_DONE, K.STATE_ACTIVE, K.STATE_STUCK, K.STATE_DONE,
-                      K.STATE_STUCK, K.STATE_DONE, K.STATE_ACTIVE], dtype=np.int32)
+                      K.STATE_STUCK, K.STATE_DONE, K.STATE_ACTIVE], dtype=np.uint8)
+    seg = list(K.make_segments(seg_ray, np.zeros((9, 2, 3), np.int32), np.zeros((9, 2), np.int32),
+                               np.zeros((9, 2, 2)), 5)[0])
+    seg[K.SEG_ACC], seg[K.SEG_STATE] = seg_acc, state
     image = np.zeros((5, 4))
-    unfinished, hidden = K.compose(5, seg_ray, seg_acc, state, image)
+    unfinished, hidden = compose(tuple(seg), image)
     assert (unfinished, hidden) == (3, 2)
     np.testing.assert_allclose(image[3], [0.0, 0.995, 0.005, 1.0])
     np.testing.assert_allclose(image[0], [0.995, 0.005 * 0.6, 0.0, 0.995 + 0.005 * 0.6])

@@ -155,7 +155,7 @@ def _by_edge(na, nb, e, vab, sab, vbc, sbc, vac, sac):
 @njit(cache=True)
 def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state, seg_steps,
           seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps):
-    """Advance subsegment ``sub`` (``FRONT`` or ``BACK``) of segment ``s`` of ``S`` through every present tet.
+    """Advance subsegment ``sub`` (``FRONT`` or ``BACK``) of segment ``s`` through every present tet.
 
     Stops when the next tet is missing (the subsegment stays parked on that face), when it
     reaches the other subsegment's face (segment done), or after ``max_steps`` steps in total
@@ -354,13 +354,13 @@ def advance(active, n_active, P, dens, dirs, S, F, V, max_steps):
     whose keys and tets nobody writes during the phase: the result cannot depend on the thread
     count. (The counters of a counting table are taken off atomically; only their totals matter.)
     """
-    # Blocks of neighbouring rays (they meet the same tets: cache reuse); the caller hands
-    # them out dynamically (numba.set_parallel_chunksize) so both threads stay busy.
-    # the walk takes the arrays one by one: a tuple of arrays passed on every call costs ~2 %
+    # The walk takes the arrays one by one: a tuple of arrays passed on every call cost ~2 %.
     seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state, seg_steps, seg_samples, _ = S
     htab = F[FT_TABLE]
     mul = F[FT_INFO][INFO_MUL]
     mode, step, tab, lo, inv, unit = V
+    # Blocks of neighbouring rays (they meet the same tets: cache reuse); the caller hands
+    # them out dynamically (numba.set_parallel_chunksize) so both threads stay busy.
     block = 16
     n_blocks = (n_active + block - 1) // block
     for blk in prange(n_blocks):
@@ -368,15 +368,15 @@ def advance(active, n_active, P, dens, dirs, S, F, V, max_steps):
             s = active[i]
             if seg_state[s] != STATE_ACTIVE:
                 continue
-            # The literals 0 and 1 make numba compile _walk twice (10 s more on a fresh cache), each
-            # with its direction folded into the hot loop: 3 % faster at 512² than one compile.
-            # the state comes back from the walk rather than from seg_state: this loop holds
-            # seg_state apart from S, and a parallel loop's arrays are compiled as not aliasing
-            # (a re-read of seg_state[s] after the walk may be folded into the read above)
-            if _walk(s, 0, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state, seg_steps,
-                     seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps) == STATE_ACTIVE:
-                _walk(s, 1, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state, seg_steps,
-                      seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps)
+            # front, then back if the front did not finish the segment; ``sub`` is a variable, not
+            # a literal 0 / 1, so numba compiles _walk once (two literal calls compiled it twice)
+            for sub in range(2):
+                # the state comes back from the walk rather than from seg_state: a parallel loop's
+                # arrays are compiled as not aliasing the walk's, and a re-read of seg_state[s]
+                # after the walk may be folded into the read above
+                if _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state,
+                         seg_steps, seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps) != STATE_ACTIVE:
+                    break
 
 
 @njit(cache=True)

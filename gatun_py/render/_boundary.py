@@ -18,7 +18,7 @@ from ._geom import NEAR, _edge_cross, _edge_terms, _face_values, _norm, _project
 from ._segments import FRONT, TS_SCALAR, TS_T, make_segments
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _clip_side(lo, hi, b, r, inv_r, tol):
     """Narrow [lo, hi] to (a superset of) the x with b + x r >= -tol (empty: lo > hi).
 
@@ -35,12 +35,12 @@ def _clip_side(lo, hi, b, r, inv_r, tol):
     return lo, hi
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _inverse(r):
     return 1.0 / r if abs(r) > 1e-300 else 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _row_span(b0, r0, i0, t0, b1, r1, i1, t1, b2, r2, i2, t2, xlo, xhi):
     """The x in [xlo, xhi] where three sides b_k + x r_k can share a sign (within their bounds t_k):
     the hull of the part where all are >= -t_k and the part where all are <= t_k. ``i_k`` = 1 / r_k
@@ -58,7 +58,7 @@ def _row_span(b0, r0, i0, t0, b1, r1, i1, t1, b2, r2, i2, t2, xlo, xhi):
     return lo, hi
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _box_edge(v, n):
     """A pixel box bound ``v`` (a float) clamped to 0..n as an int."""
     if not v > 0.0:  # also NaN
@@ -68,7 +68,7 @@ def _box_edge(v, n):
     return int(v)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _pixel_box(P, i0, i1, i2, fwd, right, up, tan_half, width, height):
     """Pixel box [col0, col1) x [row0, row1) of triangle (i0, i1, i2) (in front of the eye), one pixel
     to spare on each side."""
@@ -106,7 +106,7 @@ def _boundary_hits(P, dens, dirs, width, height, faces, fwd, right, up, xs, ys, 
             counts[f] = n
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _face_hits(P, dens, dirs, width, height, faces, f, fwd, right, up, xs, ys, tan_half, base, out_ray, out_t,
                out_face, out_enter, fill):
     """:func:`_boundary_hits` for face ``f``: records its hits from ``base`` on (if ``fill``); returns their number."""

@@ -105,7 +105,7 @@ def _atomic_sub_i32(typingctx, arr, i, j, v):
 
 # ---------------------------------------------------------------------------------------------
 # face hash
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _hash0(a, b, c, mul, mask):
     # Faces are grouped by their smallest vertex id: meshes number neighbouring vertices close
     # together, so the faces a ray meets in a row sit in nearby slots (far fewer cache misses
@@ -122,7 +122,7 @@ def _hash0(a, b, c, mul, mask):
     return (((np.int64(a) * mul) >> 16) + (((mix & 0xFFFF) * mul) >> 32)) & mask
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _hash_find(htab, mul, a, b, c):
     """The slot of face (a, b, c) (sorted ids), or -1."""
     mask = htab.shape[0] - 1
@@ -136,7 +136,7 @@ def _hash_find(htab, mul, a, b, c):
         h = (h + 1) & mask
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _hash_insert(htab, mul, info, a, b, c):
     """The slot of face (a, b, c) (sorted ids), added with no tets if new (counted in ``info``)."""
     mask = htab.shape[0] - 1
@@ -159,7 +159,7 @@ def _hash_insert(htab, mul, info, a, b, c):
         h = (h + 1) & mask
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _live(htab, h, purge, fold_mark):
     """Whether slot ``h`` holds a face worth keeping (with ``purge``: still needed, or next to a
     fold, see :func:`count_crossings`)."""
@@ -254,7 +254,7 @@ def insert_tets(tets, crossings, fold_mark, F, S, mark, active):
 
 # ---------------------------------------------------------------------------------------------
 # counting (lean rendering)
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _pixel_span(u0, u1, u2, u3, n):
     """Pixels k (centres at k + 0.5) within [min u, max u], a thousandth of a pixel to spare:
     the span must hold every pixel whose ray can cross the tet, or a face would be freed early."""
@@ -264,7 +264,7 @@ def _pixel_span(u0, u1, u2, u3, n):
         return 0, 0
     return max(int(math.ceil(lo)), 0), min(int(math.floor(hi)), n - 1) + 1
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _near_crossing(x0, t0, x1, t1, x2, t2):
     """1 if the ray crosses the face with directed edge sides x0, x1, x2, or misses it by no more
     than rounding (each side within its bound t of agreeing with the others), else 0."""
@@ -278,7 +278,7 @@ def _near_crossing(x0, t0, x1, t1, x2, t2):
 ODD_MARGIN = 3.0  # pixels around a ray with unpaired boundary crossings whose tets are all kept
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _near_odd_ray(c0, c1, c2, c3, r0, r1, r2, r3, width, height, odd_pixels):
     """Whether a pixel of ``odd_pixels`` lies within ODD_MARGIN of the tet's pixel box."""
     lo_c = max(int(math.floor(min(min(c0, c1), min(c2, c3)) - ODD_MARGIN)), 0)

@@ -30,7 +30,7 @@ from numba import njit
 NEAR = 1e-12  # relative rounding bound of an edge side (float64 error is ~1e-16 of |P_lo| |P_hi|)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _edge_cross(P, i, j):
     """The ray-independent part of the side of i -> j: P_lo x P_hi and the sign of the order."""
     if i < j:
@@ -42,7 +42,7 @@ def _edge_cross(P, i, j):
     return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx, flip
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _side_cross(cx, cy, cz, flip, dx, dy, dz):
     """:func:`_side` from the edge's :func:`_edge_cross`."""
     v = dx * cx + dy * cy + dz * cz
@@ -62,14 +62,14 @@ def _side_cross(cx, cy, cz, flip, dx, dy, dz):
     return v * flip, s * flip
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _side(P, dx, dy, dz, i, j):
     """Pluecker side of the directed edge i -> j: (value, sign), sign never 0."""
     cx, cy, cz, flip = _edge_cross(P, i, j)
     return _side_cross(cx, cy, cz, flip, dx, dy, dz)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _sort3(a, b, c):
     """Sorted triple and the parity (0 even, 1 odd) of the sorting permutation."""
     par = 0
@@ -85,7 +85,7 @@ def _sort3(a, b, c):
     return a, b, c, par
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _face_values(P, dens, dx, dy, dz, a, b, c):
     """Ray parameter t and scalar where the ray crosses the face with sorted ids a < b < c.
 
@@ -101,7 +101,7 @@ def _face_values(P, dens, dx, dy, dz, a, b, c):
     return _face_values_w(P, dens, dx, dy, dz, a, b, c, wa, wb, wc)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _face_values_w(P, dens, dx, dy, dz, a, b, c, wa, wb, wc):
     """:func:`_face_values` with the sides of (b, c), (c, a), (a, b) already known (up to a
     common sign)."""
@@ -112,13 +112,13 @@ def _face_values_w(P, dens, dx, dy, dz, a, b, c, wa, wb, wc):
     return _chord_midpoint(P, dens, dx, dy, dz, a, b, c)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _depth(P, v, dx, dy, dz):
     """P_v . d: the ray parameter of vertex v's foot on the ray."""
     return P[v, 0] * dx + P[v, 1] * dy + P[v, 2] * dz
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _barycentric(ta, tb, tc, da, db, dc, wa, wb, wc):
     """(t, scalar, ok) of the face point with (unnormalised) weights wa, wb, wc, from the vertices'
     depths t and scalars d; ok False when no weight is left (the ray lies in the face's plane:
@@ -139,7 +139,7 @@ def _barycentric(ta, tb, tc, da, db, dc, wa, wb, wc):
     return 0.0, 0.0, False
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _chord_midpoint(P, dens, dx, dy, dz, a, b, c):
     """Midpoint (t, scalar) of the part of the ray inside triangle (a, b, c), ray in its plane."""
     tmin = np.inf
@@ -189,7 +189,7 @@ def _chord_midpoint(P, dens, dx, dy, dz, a, b, c):
 
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _project(P, v, fwd, right, up, tan_half, aspect, width, height):
     """Depth and continuous pixel (column, row from the top) of vertex v, as Camera.project."""
     z = P[v, 0] * fwd[0] + P[v, 1] * fwd[1] + P[v, 2] * fwd[2]
@@ -200,7 +200,7 @@ def _project(P, v, fwd, right, up, tan_half, aspect, width, height):
 
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _edge_terms(P, i, j, fwd, right, up):
     """The directed edge i -> j's side as fwd . c + x right . c + y up . c, c its canonical cross."""
     cx, cy, cz, flip = _edge_cross(P, i, j)
@@ -208,12 +208,12 @@ def _edge_terms(P, i, j, fwd, right, up):
             (up[0] * cx + up[1] * cy + up[2] * cz) * flip)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _norm(P, v):
     return math.sqrt(P[v, 0] * P[v, 0] + P[v, 1] * P[v, 1] + P[v, 2] * P[v, 2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _flat(P, a, b, c, d):
     """Whether tet (a, b, c, d) has (nearly) zero volume: |6 V| <= 1e-9 of its longest edge cubed."""
     ux, uy, uz = P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2]

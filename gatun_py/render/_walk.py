@@ -39,7 +39,7 @@ def make_sampling(mode: int, step: float, tab, lo: float, inv: float, unit: floa
 
 # ---------------------------------------------------------------------------------------------
 # sampling and compositing
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _lookup(tab, lo, inv, s):
     """(r, g, b, a) of the table at scalar ``s`` (a tuple: no buffer to allocate in the walk)."""
     n = tab.shape[0]
@@ -56,7 +56,7 @@ def _lookup(tab, lo, inv, s):
             tab[i, 2] * (1.0 - f) + tab[i + 1, 2] * f, tab[i, 3] * (1.0 - f) + tab[i + 1, 3] * f)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _first_sample(t0, step):
     k = math.ceil(t0 / step)
     if (k - 1) * step >= t0:
@@ -66,7 +66,7 @@ def _first_sample(t0, step):
     return k
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False, inline="always")
 def _composite(a0, a1, a2, a3, t0, s0, t1, s1, k0, k1, forward, mode, step, tab, lo, inv, unit):
     """Composite the tet interval [t0, t1) (scalar s0 -> s1) into the running colour (a0, a1, a2, a3);
     return (samples taken, new colour). The colour stays in registers for the whole walk.
@@ -98,7 +98,7 @@ def _composite(a0, a1, a2, a3, t0, s0, t1, s1, k0, k1, forward, mode, step, tab,
     return 1, a0, a1, a2, a3
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _blend(a0, a1, a2, a3, c0, c1, c2, al, forward):
     """The running colour with a sample (colour c, opacity al) added behind it (``forward``: a
     front subsegment) or in front of it (a back subsegment walking toward the eye)."""
@@ -109,7 +109,7 @@ def _blend(a0, a1, a2, a3, c0, c1, c2, al, forward):
     return al * c0 + r * a0, al * c1 + r * a1, al * c2 + r * a2, al + r * a3
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _first_sample_at(t, step, mode):
     """``_first_sample(t)`` in volume mode for a finite ``t``; 0 where it is not needed."""
     if mode == MODE_VOLUME and math.isfinite(t):
@@ -119,7 +119,7 @@ def _first_sample_at(t, step, mode):
 
 # ---------------------------------------------------------------------------------------------
 # walking
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _sort3w(a, b, c, wa, wb, wc):
     """Sort three ids, carrying a weight with each."""
     if a > b:
@@ -131,7 +131,7 @@ def _sort3w(a, b, c, wa, wb, wc):
     return a, b, c, wa, wb, wc
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _canon(i, j, x, g):
     """An edge side known for the directed edge i -> j, as (lo, hi, value, sign) of lo -> hi.
 
@@ -142,7 +142,7 @@ def _canon(i, j, x, g):
     return j, i, -x, -g
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _by_edge(na, nb, e, vab, sab, vbc, sbc, vac, sac):
     """File the canonical edge side ``e`` under its edge of the face (na, nb, nc)."""
     if e[0] == na:
@@ -152,7 +152,7 @@ def _by_edge(na, nb, e, vab, sab, vbc, sbc, vac, sac):
     return vab, sab, e[2], e[3], vac, sac
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state, seg_steps,
           seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps):
     """Advance subsegment ``sub`` (``FRONT`` or ``BACK``) of segment ``s`` through every present tet.
@@ -379,7 +379,7 @@ def advance(active, n_active, P, dens, dirs, S, F, V, max_steps):
                     break
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _in_sorted(keys, a, b, c):
     lo, hi = 0, keys.shape[0]
     while lo < hi:

@@ -29,16 +29,16 @@ def parse_size(text: str) -> tuple[int, int]:
 
 def _kernels_cached() -> bool:
     """Whether numba has compiled the render kernels into its cache already."""
-    from gatun_py.render import _raycast_kernels
+    from gatun_py.render import _walk
 
     import numba
 
-    src = Path(_raycast_kernels.__file__)
+    src = Path(_walk.__file__)
     if numba.config.CACHE_DIR:  # NUMBA_CACHE_DIR: one folder per source folder, "<name>_<hash>"
         dirs = list(Path(numba.config.CACHE_DIR).glob(f"{src.parent.name}_*"))
     else:
         dirs = [src.parent / "__pycache__"]
-    return any(any(d.glob("_raycast_kernels.*.nbc")) for d in dirs)
+    return any(any(d.glob("_walk.*.nbc")) for d in dirs)
 
 
 @tetc.command()

@@ -286,3 +286,40 @@ def test_folded_real_grid_leaves_no_ray_unfinished(az, el):
     assert res.stats["rays_unfinished"] == 0
     assert res.stats["segments_stuck"] == 0
     assert res.stats["nan_pixels"] == 0
+
+
+# -- the face table ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("mul", [0, 3 << 16])
+def test_face_table_holds_each_face_with_its_two_tets_across_rehash(mul):
+    """Every face of a mesh is found after insertion and after rehashing into a larger table
+    (grouped or scattered slots), with the fourth vertex of each of its tets; boundary faces have
+    one tet, interior faces two; the face count is exact."""
+    from gatun_py.mesh.model import TET_FACES
+    from gatun_py.render import _facetable as FT
+    from gatun_py.render._segments import make_segments
+
+    mesh = delaunay_mesh(80, 4)
+    tets = np.ascontiguousarray(mesh.tets, dtype=np.int32)
+    S, _ = make_segments(np.zeros(0, np.int32), np.zeros((0, 2, 3), np.int32), np.zeros((0, 2), np.int32),
+                         np.zeros((0, 2, 2)), 1)
+    F = FT.make_face_table(1 << 12, mul, 0, counting=False)
+    n_active, conflicts = FT.insert_tets(tets, np.zeros((0, 4), np.int32), np.zeros(mesh.n_points, np.uint8), F, S,
+                                         1, np.zeros(0, np.int64))
+    assert (n_active, conflicts) == (0, 0)
+    want = {}
+    for t, tet in enumerate(tets):
+        for k in range(4):
+            want.setdefault(tuple(sorted(tet[TET_FACES[k]].tolist())), set()).add(int(tet[k]))
+    n_boundary = len(mesh.boundary_faces())
+    assert sum(len(v) == 1 for v in want.values()) == n_boundary
+    for grown in (False, True):
+        if grown:
+            F = FT.with_table(F, FT.rehash(F, 1 << 13, mul, False, np.zeros(mesh.n_points, np.uint8)))
+        table, info = F[FT.FT_TABLE], F[FT.FT_INFO]
+        assert info[FT.INFO_FACES] == len(want) and info[FT.INFO_MUL] == mul
+        for (a, b, c), fourth in want.items():
+            slot = FT._hash_find(table, mul, a, b, c)
+            assert slot >= 0
+            codes = table[slot, [FT.FT_TET0, FT.FT_TET1]]
+            assert {int(x) >> 1 for x in codes if x >= 0} == fourth
+        assert FT._hash_find(table, mul, 0, 0, 0) == -1

@@ -201,17 +201,9 @@ def _pair_hits(n_rays, hit_ray, hit_t, hit_face, hit_enter):
         # curvilinear grids) can give two entries or two exits in a row: the odd one gets a
         # segment with one end only (-1), whose single subsegment walks until the boundary.
         open_ = -1
-        for i in range(lo, hi):
-            x = order[i]
-            if hit_enter[x]:
-                if open_ != -1:
-                    seg_ray[nseg] = r
-                    seg_in[nseg] = open_
-                    seg_out[nseg] = -1
-                    nseg += 1
-                    anomalies += 1
-                open_ = x
-            else:
+        for i in range(lo, hi + 1):
+            x = order[i] if i < hi else -1
+            if i < hi and not hit_enter[x]:  # an exit: closes the open entry, or stands alone
                 seg_ray[nseg] = r
                 seg_in[nseg] = open_
                 seg_out[nseg] = x
@@ -219,12 +211,14 @@ def _pair_hits(n_rays, hit_ray, hit_t, hit_face, hit_enter):
                 if open_ == -1:
                     anomalies += 1
                 open_ = -1
-        if open_ != -1:
-            seg_ray[nseg] = r
-            seg_in[nseg] = open_
-            seg_out[nseg] = -1
-            nseg += 1
-            anomalies += 1
+            else:  # an entry, or the end of the ray: an entry still open gets a segment of its own
+                if open_ != -1:
+                    seg_ray[nseg] = r
+                    seg_in[nseg] = open_
+                    seg_out[nseg] = -1
+                    nseg += 1
+                    anomalies += 1
+                open_ = x
     return seg_ray[:nseg], seg_in[:nseg], seg_out[:nseg], anomalies
 
 

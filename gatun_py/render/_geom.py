@@ -16,8 +16,11 @@ sorted vertex ids, so a face gives bit-identical values from both sides and in e
 direction. That is what makes the streaming render (front and back subsegments, any tet order)
 equal to the in-memory one.
 
-Every helper here is either inlined into its callers (``inline="always"``: a few arithmetic
-operations, called in hot loops) or compiled once and shared (the rare, longer paths).
+The helpers here, as those of the other kernel modules, are compiled with ``_nrt=False``: they
+never allocate, and without numba's reference counting a call passing arrays costs no atomic
+increments and decrements; LLVM then inlines the small ones into their callers. (Numba-level
+inlining, ``inline="always"``, gave the same code at twice the compile time: the walk alone took
+10 s to compile.)
 """
 
 from __future__ import annotations
@@ -122,8 +125,7 @@ def _depth(P, v, dx, dy, dz):
 def _barycentric(ta, tb, tc, da, db, dc, wa, wb, wc):
     """(t, scalar, ok) of the face point with (unnormalised) weights wa, wb, wc, from the vertices'
     depths t and scalars d; ok False when no weight is left (the ray lies in the face's plane:
-    :func:`_chord_midpoint`). Scalars only, no arrays: the walk's hot loop calls it, and arrays
-    passed to an inlined function that calls out cost reference-count updates on every step."""
+    :func:`_chord_midpoint`)."""
     w = wa + wb + wc
     if w < 0.0:
         wa, wb, wc = -wa, -wb, -wc

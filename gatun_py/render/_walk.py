@@ -66,6 +66,7 @@ def _first_sample(t0, step):
     return k
 
 
+# Inlined by numba: LLVM leaves a function with a loop as a call, which cost 4 % at 512² here.
 @njit(cache=True, _nrt=False, inline="always")
 def _composite(a0, a1, a2, a3, t0, s0, t1, s1, k0, k1, forward, mode, step, tab, lo, inv, unit):
     """Composite the tet interval [t0, t1) (scalar s0 -> s1) into the running colour (a0, a1, a2, a3);

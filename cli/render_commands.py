@@ -20,9 +20,9 @@ def _kernels_cached() -> bool:
     """Whether numba has compiled the render kernels into its cache already."""
     import numba  # start-up time: options are parsed, and usage errors reported, before numba loads
 
-    from gatun_py.render import _raycast_kernels
+    from gatun_py.render import _walk
 
-    src = Path(_raycast_kernels.__file__)
+    src = Path(_walk.__file__)
     if numba.config.CACHE_DIR:  # NUMBA_CACHE_DIR: one folder per source folder, "<name>_<hash>"
         dirs = list(Path(numba.config.CACHE_DIR).glob(f"{src.parent.name}_*"))
     else:

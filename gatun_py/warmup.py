@@ -22,7 +22,7 @@ from .mesh.plot3d import grid_hexes
 from .mesh.split import orient_positive, split_hexes_two_colour
 from .mesh.validate import validate_tets
 from .pipeline.stream import View, render_tetc
-from .render import _raycast_kernels as K
+from .render._facetable import count_live, make_face_table, rehash
 from .render.camera import Camera
 from .render.raycast import render_mesh
 from .render.stream import render_batches
@@ -101,9 +101,9 @@ def _render_kernels(*, lean: bool) -> None:
 
 def _purge_kernels() -> None:
     """A lean face table fills up (and is purged) only on real meshes: call those kernels here."""
-    table = np.full((8, 7), -1, dtype=np.int32)
+    table = make_face_table(8, 0, 0, counting=True)
     mark = np.zeros(1, dtype=np.uint8)
-    K.rehash(table, 8, 0, K.count_live(table, True, mark) >= 0, mark)
+    rehash(table, 8, 0, count_live(table, True, mark) >= 0, mark)
 
 
 def _render_only() -> str:

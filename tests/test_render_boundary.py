@@ -8,7 +8,7 @@ from meshgen import AWKWARD, grid_mesh
 from naive_render import naive_boundary_hits
 
 from gatun_py.render import Camera, FittedCamera
-from gatun_py.render import _raycast_kernels as K
+from gatun_py.render import _boundary as K
 from gatun_py.render.raycast import _ray_grid
 
 

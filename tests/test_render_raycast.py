@@ -178,7 +178,7 @@ def test_bad_input():
 
 # -- lean streaming: faces freed once no ray needs them --------------------------------------------
 def _crossings(mesh, cam):
-    from gatun_py.render import _raycast_kernels as K
+    from gatun_py.render import _facetable as K
 
     fitted_cam = fitted(mesh, cam)
     P = mesh.points.astype(np.float64) - fitted_cam.position
@@ -231,7 +231,10 @@ def test_lean_frees_every_face_of_a_clean_mesh():
     cam = Camera(40, 40, azimuth=33.0, elevation=21.0)
     rc, res = stream_rc(mesh, cam, "volume", order_seed=5, n_batches=25, lean=True)
     assert res.stats["rays_unfinished"] == 0 and res.stats["rays_hit"] > 500
-    counters = rc._htab[rc._htab[:, 0] >= 0, 6]
+    from gatun_py.render._facetable import FT_A, FT_COUNT, FT_TABLE
+
+    table = rc._ft[FT_TABLE]
+    counters = table[table[:, FT_A] >= 0, FT_COUNT]
     assert np.all(counters == 0)
 
 
@@ -239,7 +242,8 @@ def test_compose_counts_incomplete_segments_only_in_front_of_opacity():
     """A segment left unfinished behind an opaque one (opacity >= 0.99, the early-termination
     threshold) does not leave its ray unfinished; in front of it, it does. Colours combine by
     eq. (3)/(4) either way."""
-    from gatun_py.render import _raycast_kernels as K
+    from gatun_py.render import _segments as K
+    from gatun_py.render._walk import compose
 
     # ray 0: done segment of opacity 0.995, then a stuck one; ray 1: 0.5 then stuck;
     # ray 2: stuck first, then a done opaque one; ray 3: a stuck segment whose front
@@ -257,9 +261,12 @@ def test_compose_counts_incomplete_segments_only_in_front_of_opacity():
     seg_acc[4, 0] = [0.1, 0.0, 0.0, 0.1]
     seg_acc[5, 0] = [0.0, 0.999, 0.0, 0.999]
     state = np.array([K.STATE_DONE, K.STATE_STUCK, K.STATE_DONE, K.STATE_ACTIVE, K.STATE_STUCK, K.STATE_DONE,
-                      K.STATE_STUCK, K.STATE_DONE, K.STATE_ACTIVE], dtype=np.int32)
+                      K.STATE_STUCK, K.STATE_DONE, K.STATE_ACTIVE], dtype=np.uint8)
+    seg = list(K.make_segments(seg_ray, np.zeros((9, 2, 3), np.int32), np.zeros((9, 2), np.int32),
+                               np.zeros((9, 2, 2)), 5)[0])
+    seg[K.SEG_ACC], seg[K.SEG_STATE] = seg_acc, state
     image = np.zeros((5, 4))
-    unfinished, hidden = K.compose(5, seg_ray, seg_acc, state, image)
+    unfinished, hidden = compose(tuple(seg), image)
     assert (unfinished, hidden) == (3, 2)
     np.testing.assert_allclose(image[3], [0.0, 0.995, 0.005, 1.0])
     np.testing.assert_allclose(image[0], [0.995, 0.005 * 0.6, 0.0, 0.995 + 0.005 * 0.6])
@@ -279,3 +286,40 @@ def test_folded_real_grid_leaves_no_ray_unfinished(az, el):
     assert res.stats["rays_unfinished"] == 0
     assert res.stats["segments_stuck"] == 0
     assert res.stats["nan_pixels"] == 0
+
+
+# -- the face table ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("mul", [0, 3 << 16])
+def test_face_table_holds_each_face_with_its_two_tets_across_rehash(mul):
+    """Every face of a mesh is found after insertion and after rehashing into a larger table
+    (grouped or scattered slots), with the fourth vertex of each of its tets; boundary faces have
+    one tet, interior faces two; the face count is exact."""
+    from gatun_py.mesh.model import TET_FACES
+    from gatun_py.render import _facetable as FT
+    from gatun_py.render._segments import make_segments
+
+    mesh = delaunay_mesh(80, 4)
+    tets = np.ascontiguousarray(mesh.tets, dtype=np.int32)
+    S, _ = make_segments(np.zeros(0, np.int32), np.zeros((0, 2, 3), np.int32), np.zeros((0, 2), np.int32),
+                         np.zeros((0, 2, 2)), 1)
+    F = FT.make_face_table(1 << 12, mul, 0, counting=False)
+    n_active, conflicts = FT.insert_tets(tets, np.zeros((0, 4), np.int32), np.zeros(mesh.n_points, np.uint8), F, S,
+                                         1, np.zeros(0, np.int64))
+    assert (n_active, conflicts) == (0, 0)
+    want = {}
+    for t, tet in enumerate(tets):
+        for k in range(4):
+            want.setdefault(tuple(sorted(tet[TET_FACES[k]].tolist())), set()).add(int(tet[k]))
+    n_boundary = len(mesh.boundary_faces())
+    assert sum(len(v) == 1 for v in want.values()) == n_boundary
+    for grown in (False, True):
+        if grown:
+            F = FT.with_table(F, FT.rehash(F, 1 << 13, mul, False, np.zeros(mesh.n_points, np.uint8)))
+        table, info = F[FT.FT_TABLE], F[FT.FT_INFO]
+        assert info[FT.INFO_FACES] == len(want) and info[FT.INFO_MUL] == mul
+        for (a, b, c), fourth in want.items():
+            slot = FT._hash_find(table, mul, a, b, c)
+            assert slot >= 0
+            codes = table[slot, [FT.FT_TET0, FT.FT_TET1]]
+            assert {int(x) >> 1 for x in codes if x >= 0} == fourth
+        assert FT._hash_find(table, mul, 0, 0, 0) == -1

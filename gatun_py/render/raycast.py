@@ -1,6 +1,6 @@
 """The object-space ray caster: streaming (tets in any order, as they arrive) and in-memory.
 
-Both share one set of kernels (``_raycast_kernels``): rays from the eye through every pixel are
+Both share one set of kernels (``_boundary``, ``_facetable``, ``_walk``): rays from the eye through every pixel are
 intersected with the boundary surface and cut into segments (entry/exit pairs; several for
 non-convex meshes and cavities). Each segment has a front subsegment walking from its entry face
 along the ray and a back subsegment walking from its exit face toward the eye. A subsegment steps
@@ -21,7 +21,12 @@ import numpy as np
 from ..errors import MeshError, OptionError
 from ..mesh.model import default_step
 
-from . import _raycast_kernels as K
+from ._boundary import find_segments
+from ._facetable import (FT_INFO, FT_NODES, FT_PARKED, FT_TABLE, INFO_FACES, INFO_MUL, INFO_NODES, count_crossings,
+                         count_live, insert_tets, make_face_table, park, rehash, with_nodes, with_table)
+from ._segments import (FOLD_END, SEG_FACE, SEG_FROM, SEG_RAY, SEG_SAMPLES, SEG_STATE, SEG_STEPS, STATE_ACTIVE,
+                        STATE_STUCK)
+from ._walk import MODE_FACE, MODE_VOLUME, advance, compose, make_sampling, settle
 from .camera import Camera, FittedCamera
 from .transfer import TransferFunction, load_transfer_function
 
@@ -140,10 +145,10 @@ class StreamingRaycaster:
             # The face table groups faces by their smallest vertex id, ``mul`` slots per id; sized
             # for fewer vertices, the new ids would wrap around onto the old ones' slots and pile
             # up into long probe chains.
-            mul = self._slots_per_vertex(len(self._htab))
-            if mul < self._hmul:
-                self._hmul = mul
-                self._htab, _ = K.rehash(self._htab, len(self._htab), mul, False, self._fold_mark)
+            cap = len(self._ft[FT_TABLE])
+            mul = self._slots_per_vertex(cap)
+            if mul < self._ft[FT_INFO][INFO_MUL]:
+                self._ft = with_table(self._ft, rehash(self._ft, cap, mul, False, self._fold_mark))
 
     def set_boundary(self, faces) -> None:
         """Add boundary faces (outward wound); all of them must come before the first tet."""
@@ -177,8 +182,8 @@ class StreamingRaycaster:
         if not self._started:
             self._start()
         image = np.zeros((self._n_rays, 4), dtype=np.float64)
-        K.settle(self._seg_face, self._seg_from, self._seg_state, self._boundary_keys)
-        unfinished, hidden = K.compose(self._n_rays, self._seg_ray, self._seg_acc, self._seg_state, image)
+        settle(self._seg, self._boundary_keys)
+        unfinished, hidden = compose(self._seg, image)
         self._t_render += time.perf_counter() - t0
         return self._result(image, unfinished, hidden)
 
@@ -216,50 +221,31 @@ class StreamingRaycaster:
         tab, lo, inv = tf.table(self.scalar_range)
         if self.mode == "volume":  # opacity for a path of one step
             tab[:, 3] = 1.0 - np.power(1.0 - tab[:, 3], self.step / tf.unit_distance)
-        self._tab, self._lo, self._inv = tab, float(lo), float(inv)
-        self._unit = float(tf.unit_distance)
+        self._sampling = make_sampling(MODE_VOLUME if self.mode == "volume" else MODE_FACE, self.step, tab, lo, inv,
+                                       tf.unit_distance)
         self._points[: self._nv] -= self._eye
         self._n_rays = cam.width * cam.height
         self._dirs = cam.ray_directions()
         P = self._points[: self._nv]
         faces = self._faces_in_front(P, faces, cam)
         self._bfaces, self._bkeys = faces, None
-        (self._seg_ray, self._seg_face, self._seg_from, self._seg_ts, self._anomalies,
-         self._boundary_hits) = K.find_segments(P, self._dens, self._dirs, cam.width, cam.height, faces,
-                                                *_ray_grid(cam))
-        nseg = self._nseg = len(self._seg_ray)
-        self._seg_acc = np.zeros((nseg, 2, 4), dtype=np.float64)
-        self._seg_state = np.zeros(nseg, dtype=np.uint8)
-        self._seg_steps = np.zeros(nseg, dtype=np.int64)
-        self._seg_samples = np.zeros(nseg, dtype=np.int64)
-        self._seg_mark = np.zeros(nseg, dtype=np.int64)
-        self._seg_clean = (self._seg_face[:, :, 0] >= 0).astype(np.uint8)  # boundary crossings are clean
-        one_ended = self._seg_face[:, :, 0].min(axis=1) < 0
-        self._odd_pixels = np.zeros(0, dtype=np.uint8)
-        if np.any(one_ended):  # rays whose crossings did not pair up may walk some tets twice
-            odd_rays = np.zeros(self._n_rays, dtype=np.uint8)
-            odd_rays[self._seg_ray[one_ended]] = 1
-            self._seg_clean[odd_rays[self._seg_ray] != 0] = K.NEVER_COUNTS
-            self._odd_pixels = odd_rays  # count_crossings keeps the tets around them
+        # the segments; the rays whose boundary crossings did not pair up (count_crossings keeps
+        # the tets around them)
+        self._seg, self._odd_pixels, self._anomalies, self._boundary_hits = find_segments(
+            P, self._dens, self._dirs, cam.width, cam.height, faces, *_ray_grid(cam))
+        nseg = self._nseg = len(self._seg[SEG_RAY])
         self._active = np.arange(nseg, dtype=np.int64)
-        self._park_ver = np.zeros(2 * nseg, dtype=np.int32)
-        self._in_list = np.zeros(2 * nseg, dtype=np.uint8)
-        self._park_face = np.full((2 * nseg, 3), -1, dtype=np.int32)
-        self._nodes = np.empty((2 * nseg + 16, 3), dtype=np.int32)
-        self._n_nodes = 0
         if self._counting:  # grows with the tets in flight
             cap = 1 << int(np.ceil(np.log2(max(1024, 4 * len(faces)))))
         else:
             expected = self.expected_tets or max(len(faces), 1024)
             cap = 1 << int(np.ceil(np.log2(max(16, 2.5 * (2 * expected + len(faces) // 2)))))
-        self._htab = np.full((cap, 7 if self._counting else 6), -1, dtype=np.int32)
-        self._table_peak = self._htab.nbytes
-        self._hmul = self._slots_per_vertex(cap)
-        self._hcount = np.zeros(1, dtype=np.int64)
+        self._ft = make_face_table(cap, self._slots_per_vertex(cap), nseg, counting=self._counting)
+        self._table_peak = self._ft[FT_TABLE].nbytes
         self._park(nseg, new_faces=min(2 * nseg, len(faces)))
 
     def _insert(self, tets, crossings, mark):
-        """Enter tets into the face table (:func:`K.insert_tets`); returns (segments to advance, conflicts).
+        """Enter tets into the face table (:func:`_facetable.insert_tets`); returns (segments to advance, conflicts).
 
         A tet adds at most four faces, but a batch of a whole mesh adds about two per tet: rather
         than doubling a table sized for the expected tets (a full rehash) to fit a worst case that
@@ -269,16 +255,15 @@ class StreamingRaycaster:
         n_active = conflicts = done = 0
         while done < len(tets):
             left = len(tets) - done
-            room = (int(0.6 * len(self._htab)) - int(self._hcount[0])) // 4
+            room = (int(0.6 * len(self._ft[FT_TABLE])) - int(self._ft[FT_INFO][INFO_FACES])) // 4
             if self._counting or room < min(left, 4096):
                 self._ensure_capacity(4 * left)  # a counting table purges first; see there
                 take = left
             else:
                 take = min(left, room)
             part = crossings[done: done + take] if len(crossings) else crossings
-            k, c = K.insert_tets(tets[done: done + take], part, self._fold_mark, self._htab, self._hmul,
-                                 self._hcount, self._nodes, self._park_ver, self._in_list, self._seg_mark, mark,
-                                 self._active[n_active:])
+            k, c = insert_tets(tets[done: done + take], part, self._fold_mark, self._ft, self._seg, mark,
+                               self._active[n_active:])
             n_active += k
             conflicts += c
             done += take
@@ -293,37 +278,35 @@ class StreamingRaycaster:
             self._ensure_capacity(new_faces)
         else:
             self._ensure_capacity(2 * n_active, load=0.6 if self._counting else 0.9)
-        if self._n_nodes + 2 * n_active > len(self._nodes):
+        nodes = self._ft[FT_NODES]
+        if self._ft[FT_INFO][INFO_NODES] + 2 * n_active > len(nodes):
             live = self._compact_nodes()
-            if live + 2 * n_active > len(self._nodes) // 2:
+            if live + 2 * n_active > len(nodes) // 2:
                 grown = np.empty((2 * (live + 2 * n_active) + 16, 3), dtype=np.int32)
-                grown[:live] = self._nodes[:live]
-                self._nodes = grown
-        self._n_nodes = K.park(self._active, n_active, self._seg_face, self._seg_state, self._htab, self._hmul,
-                               self._hcount, self._nodes, self._n_nodes, self._park_ver,
-                               self._in_list, self._park_face)
+                grown[:live] = nodes[:live]
+                self._ft = with_nodes(self._ft, grown)
+        park(self._active, n_active, self._seg, self._ft)
 
     def _compact_nodes(self):
         """Drop stale park-list nodes (rebuild the lists from the live items); return the count."""
-        self._htab[:, 5] = -1
-        self._in_list[:] = 0
-        self._n_nodes = 0
-        live = np.flatnonzero(self._seg_state == K.STATE_ACTIVE).astype(np.int64)
+        htab, info, _, _, in_list, _ = self._ft
+        htab[:, FT_PARKED] = -1
+        in_list[:] = 0
+        info[INFO_NODES] = 0
+        live = np.flatnonzero(self._seg[SEG_STATE] == STATE_ACTIVE).astype(np.int64)
         # re-park every live subsegment where it waits
-        self._n_nodes = K.park(live, len(live), self._seg_face, self._seg_state, self._htab, self._hmul,
-                               self._hcount, self._nodes, 0, self._park_ver, self._in_list,
-                               self._park_face)
-        return self._n_nodes
+        park(live, len(live), self._seg, self._ft)
+        return int(info[INFO_NODES])
 
     @property
     def _boundary_keys(self):
-        """The boundary faces' id triples, each sorted, in lexicographic order (for :func:`K.settle`).
+        """The boundary faces' id triples, each sorted, in lexicographic order (for :func:`_walk.settle`).
 
         ``settle`` looks a face up only for a segment still active at the end, which most frames
         have none of: the sort waits until one is.
         """
         if self._bkeys is None:
-            if not np.any(self._seg_state == K.STATE_ACTIVE):
+            if not np.any(self._seg[SEG_STATE] == STATE_ACTIVE):
                 return np.zeros((0, 3), dtype=np.int32)
             keys = np.sort(self._bfaces, axis=1).astype(np.int32)
             self._bkeys = np.ascontiguousarray(keys[np.lexsort((keys[:, 2], keys[:, 1], keys[:, 0]))])
@@ -351,7 +334,7 @@ class StreamingRaycaster:
         fwd, right, up = cam.basis()
         out = np.empty((len(tets), 4), dtype=np.int32)
         xs, ys = cam.ray_offsets()
-        K.count_crossings(tets, self._points[: self._nv], xs, ys, cam.width, cam.height,
+        count_crossings(tets, self._points[: self._nv], xs, ys, cam.width, cam.height,
                           np.asarray(fwd, np.float64), np.asarray(right, np.float64), np.asarray(up, np.float64),
                           float(np.tan(np.radians(cam.view_angle) / 2.0)), self._odd_pixels, self._fold_mark, out)
         return out
@@ -359,8 +342,8 @@ class StreamingRaycaster:
     def _ensure_capacity(self, extra, load=0.6):
         """Make room for ``extra`` more faces within ``load`` of the table (rehashing to a larger
         table, a counting table purged first, to load 0.6 or 0.25)."""
-        cap = len(self._htab)
-        need = int(self._hcount[0]) + int(extra)
+        cap = len(self._ft[FT_TABLE])
+        need = int(self._ft[FT_INFO][INFO_FACES]) + int(extra)
         if need <= load * cap:
             return
         # A counting table first drops the faces no ray needs, then fits the rest. A walk that
@@ -368,19 +351,17 @@ class StreamingRaycaster:
         # around where it stopped (the loop circles an edge or a vertex of that face).
         purge = self._counting
         if purge:
-            stuck = self._seg_state == K.STATE_STUCK
+            stuck = self._seg[SEG_STATE] == STATE_STUCK
             if np.any(stuck):
-                ids = np.concatenate([self._seg_face[stuck].ravel(), self._seg_from[stuck].ravel()])
+                ids = np.concatenate([self._seg[SEG_FACE][stuck].ravel(), self._seg[SEG_FROM][stuck].ravel()])
                 self._fold_mark[ids[ids >= 0]] = 1
-        live = K.count_live(self._htab, purge, self._fold_mark) if purge else int(self._hcount[0])
+        live = count_live(self._ft, purge, self._fold_mark) if purge else int(self._ft[FT_INFO][INFO_FACES])
         need = live + int(extra)
         new = 1024 if purge else cap
         while need > (0.25 if purge else 0.6) * new:  # room for many batches before the next purge
             new *= 2
-        self._hmul = self._slots_per_vertex(new)
-        self._htab, n = K.rehash(self._htab, new, self._hmul, purge, self._fold_mark)
-        self._hcount[0] = n
-        self._table_peak = max(self._table_peak, self._htab.nbytes)
+        self._ft = with_table(self._ft, rehash(self._ft, new, self._slots_per_vertex(new), purge, self._fold_mark))
+        self._table_peak = max(self._table_peak, self._ft[FT_TABLE].nbytes)
 
     def _slots_per_vertex(self, cap):
         """Table slots per vertex id in 16-bit fixed point (faces are grouped by smallest vertex).
@@ -389,7 +370,7 @@ class StreamingRaycaster:
         count of the expected tets (meshes have about 5 tets per vertex) spares rehashing the
         table at every vertex batch.
         """
-        if self._counting:  # scattered, see _raycast_kernels._hash0
+        if self._counting:  # scattered, see _facetable._hash0
             return 0
         return (int(cap) << 16) // max(self._nv, (self.expected_tets or 0) // 4, 1)
 
@@ -401,28 +382,26 @@ class StreamingRaycaster:
             numba.set_parallel_chunksize(old)
 
     def _advance_kernel(self, n_active):
-        K.advance(self._active, n_active, self._points[: self._nv], self._dens[: self._nv], self._dirs,
-                  self._seg_ray, self._seg_face, self._seg_from, self._seg_clean, self._seg_ts, self._seg_acc,
-                  self._seg_state, self._seg_steps, self._seg_samples, self._htab, self._hmul,
-                  0 if self.mode == "volume" else 1, float(self.step), self._tab, self._lo, self._inv, self._unit,
-                  self._n_tets + 8)
+        advance(self._active, n_active, self._points[: self._nv], self._dens[: self._nv], self._dirs, self._seg,
+                self._ft, self._sampling, self._n_tets + 8)
 
     def _result(self, image, unfinished, hidden):
         cam = self.fitted
         img = image.reshape(cam.height, cam.width, 4).astype(np.float32)
-        hit_rays = int(len(np.unique(self._seg_ray))) if self._nseg else 0
+        seg = self._seg
+        hit_rays = int(len(np.unique(seg[SEG_RAY]))) if self._nseg else 0
         stats = {
             "rays": int(self._n_rays),
             "rays_hit": hit_rays,
             "segments": int(self._nseg),
             "rays_unfinished": int(unfinished),
-            "segments_stuck": int(np.count_nonzero(self._seg_state == K.STATE_STUCK)),
+            "segments_stuck": int(np.count_nonzero(seg[SEG_STATE] == STATE_STUCK)),
             "segments_behind_opaque": int(hidden),
-            "subsegments_folded": int(np.count_nonzero(self._seg_from == K.FOLD_END)),
+            "subsegments_folded": int(np.count_nonzero(seg[SEG_FROM] == FOLD_END)),
             "boundary_anomalies": int(self._anomalies),
             "face_conflicts": int(self._conflicts),
-            "samples": int(self._seg_samples.sum()),
-            "steps": int(self._seg_steps.sum()),
+            "samples": int(seg[SEG_SAMPLES].sum()),
+            "steps": int(seg[SEG_STEPS].sum()),
             "tets_rendered": int(self._n_tets),
             "face_table_peak_mb": round(self._table_peak / 2**20, 2),
             "lean": self._counting,
@@ -479,8 +458,8 @@ def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = 
         rc._active = np.arange(rc._nseg, dtype=np.int64)
         rc._advance(rc._nseg)
     image = np.zeros((rc._n_rays, 4), dtype=np.float64)
-    K.settle(rc._seg_face, rc._seg_from, rc._seg_state, rc._boundary_keys)
-    unfinished, hidden = K.compose(rc._n_rays, rc._seg_ray, rc._seg_acc, rc._seg_state, image)
+    settle(rc._seg, rc._boundary_keys)
+    unfinished, hidden = compose(rc._seg, image)
     rc._t_render = time.perf_counter() - t0
     return rc._result(image, unfinished, hidden)
 

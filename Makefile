@@ -7,7 +7,7 @@ OUT    ?= out
 # Two threads, as on the benchmark machines; override with NUMBA_NUM_THREADS=... make ...
 export NUMBA_NUM_THREADS ?= 2
 
-.PHONY: install test demo bench clean distclean
+.PHONY: install test demo bench clean distclean gmsh-libs
 
 install: $(STAMP)
 
@@ -15,6 +15,7 @@ $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 	$(BIN)/pip install -q -e '.[test]'
+	$(BIN)/python -c 'import gmsh' 2>/dev/null || $(MAKE) gmsh-libs
 	$(BIN)/python -m gatun_py.warmup
 	touch $(STAMP)
 
@@ -36,7 +37,16 @@ demo: $(STAMP)
 # Benchmarks against the peers (xz, fpzip, VTK): writes bench/REPORT.md and bench/figures/.
 bench: $(STAMP)
 	$(BIN)/pip install -q -e '.[test,bench,vtk]'
+	$(BIN)/python -c 'import gmsh' 2>/dev/null || $(MAKE) gmsh-libs
 	$(BIN)/python bench/run.py
+
+# gmsh's wheel (the unstructured test meshes, bench/gmsh_meshes.py) links X11/OpenGL libraries that a
+# bare Debian machine lacks; installed only when `import gmsh` fails, and only where apt-get runs.
+gmsh-libs:
+	@if command -v apt-get >/dev/null && [ "$$(id -u)" = 0 ]; then \
+		apt-get update -qq && apt-get install -y -qq libglu1-mesa libgl1 libxcursor1 libxft2 libxinerama1 \
+			libxrender1 libfontconfig1 libgomp1 >/dev/null; \
+	else echo "gmsh needs libGLU, libXcursor, libXft, libXinerama: install them (tests using gmsh meshes skip)"; fi
 
 clean:
 	rm -rf $(OUT) build dist *.egg-info .pytest_cache .hypothesis

@@ -32,7 +32,7 @@ simplex), which guarantees that the collapse keeps the mesh a manifold with a cl
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import get_thread_id, njit, prange
 
 ROOT_RANK = 2**31 - 1
 
@@ -145,30 +145,48 @@ def _tri_normal(p, a, b, c, out):
 
 
 @njit(cache=True)
-def _star(v, head, nxt, T, alive):
-    """Slots (4*t + corner) of the live tets around v; unlinks dead slots on the way."""
-    cnt = 0
+def _tidy(v, head, nxt, T, alive):
+    """Unlink the slots of dead tets (and of tets that no longer hold v) from v's list."""
     prev = -1
     s = head[v]
     while s >= 0:
         ns = nxt[s]
         t = s >> 2
         if alive[t] and T[t, s & 3] == v:
-            cnt += 1
             prev = s
         elif prev < 0:
             head[v] = ns
         else:
             nxt[prev] = ns
         s = ns
-    out = np.empty(cnt, np.int64)
+
+
+@njit(cache=True)
+def _star_view(v, head, nxt, T, alive):
+    """Slots (4*t + corner) of the live tets around v, in list order, without touching the lists
+    (so that evaluations can run in parallel)."""
+    cnt = 0
     s = head[v]
-    i = 0
     while s >= 0:
-        out[i] = s
-        i += 1
+        if alive[s >> 2] and T[s >> 2, s & 3] == v:
+            cnt += 1
+        s = nxt[s]
+    out = np.empty(cnt, np.int64)
+    i = 0
+    s = head[v]
+    while s >= 0:
+        if alive[s >> 2] and T[s >> 2, s & 3] == v:
+            out[i] = s
+            i += 1
         s = nxt[s]
     return out
+
+
+@njit(cache=True)
+def _star(v, head, nxt, T, alive):
+    """Slots (4*t + corner) of the live tets around v; unlinks dead slots on the way."""
+    _tidy(v, head, nxt, T, alive)
+    return _star_view(v, head, nxt, T, alive)
 
 
 @njit(cache=True)
@@ -208,7 +226,7 @@ def _boundary_faces_of(st, T, nbr):
 @njit(cache=True)
 def _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
     """The link condition Lk(a) ∩ Lk(b) = Lk(ab) for collapsing edge ab (with a virtual vertex ω)."""
-    st_b = _star(b, head, nxt, T, alive)
+    st_b = _star_view(b, head, nxt, T, alive)
     s_b = _next_stamp(counters)
     for i in range(st_b.shape[0]):
         t = st_b[i] >> 2
@@ -797,7 +815,7 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
     still beat the best found so far: the same choice as computing every error, for a fraction
     of the cost.
     """
-    st = _star(a, head, nxt, T, alive)
+    st = _star_view(a, head, nxt, T, alive)
     if st.shape[0] == 0 or pinned[a]:
         return -1, 0.0
     cap = 3 * st.shape[0] + 1
@@ -910,20 +928,6 @@ def _heap_pop(h_err, h_v, h_b, h_ver, counters):
     counters[C_HEAP] = n
     _sift_down(h_err, h_v, h_b, h_ver, 0, n)
     return e, v, b, ver
-
-
-@njit(cache=True)
-def _push_best(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab,
-               counters, ver, h_err, h_v, h_b, h_ver, last_err, pw, tp_head, p_next):
-    ver[v] += 1
-    b, e = _evaluate(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab,
-                     counters, pw, tp_head, p_next)
-    if b >= 0:
-        last_err[v] = e
-        _heap_push(h_err, h_v, h_b, h_ver, counters, e, v, b, ver[v], ver)
-        return True
-    last_err[v] = -1.0
-    return False
 
 
 @njit(cache=True)
@@ -1068,14 +1072,37 @@ def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, p_next):
             tp_head[best] = p
 
 
+@njit(cache=True, parallel=True)
+def _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4,
+                   marks, marks_b, marks_ab, tcount, pw, tp_head, p_next):
+    """:func:`_evaluate` of ``todo[:n_todo]`` in parallel: every evaluation only reads the mesh
+    (each thread stamps its own mark rows), so the results cannot depend on the scheduling."""
+    for i in prange(n_todo):
+        tid = get_thread_id()
+        b, e = _evaluate(todo[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks[tid],
+                         marks_b[tid], marks_ab[tid], tcount[tid], pw, tp_head, p_next)
+        out_b[i] = b
+        out_e[i] = e
+
+
 @njit(cache=True)
-def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab, counters,
-         ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pw, tp_head, p_next):
-    """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left."""
+def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks, marks_b, marks_ab, tcount,
+         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pw, tp_head, p_next):
+    """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left.
+
+    ``marks*`` and ``tcount`` have one row per thread (stamps, evaluation counts); the sequential
+    steps use row 0.
+    """
     n = head.shape[0]
-    # vertices to (re-)evaluate now; evaluated at a single call site below, because every call
-    # site of _push_best inlines the whole candidate evaluation (compile time)
+    mark = marks[0]
+    mark_b = marks_b[0]
+    mark_ab = marks_ab[0]
+    tc = tcount[0]
+    # vertices to (re-)evaluate now: all of them at the start and in a sweep (in parallel), one
+    # when a lazy re-evaluation comes up
     todo = np.empty(n, np.int64)
+    out_b = np.empty(n, np.int64)
+    out_e = np.empty(n)
     n_todo = 0
     sweeping = False
     if counters[C_STARTED] == 0:
@@ -1085,10 +1112,22 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         n_todo = n
     while True:
         found = False
+        if n_todo == 1:
+            out_b[0], out_e[0] = _evaluate(todo[0], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
+                                           u4, mark, mark_b, mark_ab, tc, pw, tp_head, p_next)
+        elif n_todo > 1:
+            _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params,
+                           quad, u4, marks, marks_b, marks_ab, tcount, pw, tp_head, p_next)
+        # pushed in todo order, as evaluated one by one
         for i in range(n_todo):
-            if _push_best(todo[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b,
-                          mark_ab, counters, ver, h_err, h_v, h_b, h_ver, last_err, pw, tp_head, p_next):
+            v = todo[i]
+            ver[v] += 1
+            if out_b[i] >= 0:
+                last_err[v] = out_e[i]
+                _heap_push(h_err, h_v, h_b, h_ver, counters, out_e[i], v, out_b[i], ver[v], ver)
                 found = True
+            else:
+                last_err[v] = -1.0
         n_todo = 0
         if sweeping and not found:
             return True
@@ -1118,12 +1157,12 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         st_a = _star(a, head, nxt, T, alive)
         # a's star is unchanged since the entry was made (that would have bumped its version),
         # but b's may have changed: check the link condition again
-        if not _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
+        if not _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, tc):
             todo[0] = a
             n_todo = 1
             continue
         # the neighbourhood whose stars change: b and every vertex of a's star
-        stamp = _next_stamp(counters)
+        stamp = _next_stamp(tc)
         nb = np.empty(3 * st_a.shape[0] + 1, np.int64)
         k = 0
         for i in range(st_a.shape[0]):
@@ -1134,11 +1173,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
                     mark[w] = stamp
                     nb[k] = w
                     k += 1
-        _apply_merge(a, b, st_a, T, alive, nbr, head, nxt)
-        if params[P_WS] > 0.0:
-            _reassign_points(a, st_a, T, alive, pts, dens, tp_head, p_next)
-        for j in range(quad.shape[1]):
-            quad[b, j] += quad[a, j]
+        _merge(a, b, st_a, nb[:k], T, alive, nbr, head, nxt, pts, dens, params, quad, tp_head, p_next)
         parent[a] = b
         rank[a] = counters[C_MERGES]
         counters[C_MERGES] += 1
@@ -1148,6 +1183,19 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
             if parent[w] == w and not pinned[w]:
                 ver[w] += 1
                 _heap_push(h_err, h_v, h_b, h_ver, counters, max(e, last_err[w]), w, -1, ver[w], ver)
+
+
+@njit(cache=True)
+def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, tp_head, p_next):
+    """Everything a merge a -> b changes: the tets, the lists of the vertices around it (``nb``:
+    the vertices of a's star but a), the sample points and b's quadric."""
+    _apply_merge(a, b, st_a, T, alive, nbr, head, nxt)
+    for i in range(nb.shape[0]):
+        _tidy(nb[i], head, nxt, T, alive)
+    if params[P_WS] > 0.0:
+        _reassign_points(a, st_a, T, alive, pts, dens, tp_head, p_next)
+    for j in range(quad.shape[1]):
+        quad[b, j] += quad[a, j]
 
 
 @njit(cache=True)

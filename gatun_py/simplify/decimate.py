@@ -48,6 +48,7 @@ our additions; the constants below give their measured effect. The legality rule
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from ..errors import OptionError
@@ -286,9 +287,12 @@ class DecimationState:
         self.dens = np.concatenate([self.dens, self.dens[self.T].mean(axis=1) if m else np.zeros(0)])
         self.p_next = np.full(n + m, -1, np.int32)
         self.tp_head = np.arange(n, n + m, dtype=np.int32)
-        self.mark = np.zeros(n, np.int64)
-        self.mark_b = np.zeros(n, np.int64)
-        self.mark_ab = np.zeros(n, np.int64)
+        # per thread of the parallel evaluations: stamp rows and counters (stamps, evaluations)
+        threads = max(1, int(numba.config.NUMBA_NUM_THREADS))
+        self.marks = np.zeros((threads, n), np.int64)
+        self.marks_b = np.zeros((threads, n), np.int64)
+        self.marks_ab = np.zeros((threads, n), np.int64)
+        self.tcount = np.zeros((threads, 8), np.int64)
         self.counters = np.zeros(8, np.int64)
         self.ver = np.zeros(n, np.int32)
         self.last_err = np.full(n, -1.0)
@@ -302,7 +306,7 @@ class DecimationState:
 
     def _mesh_args(self):
         return (self.T, self.alive, self.nbr, self.head, self.nxt, self.pts, self.dens, self.isb, self.pinned,
-                self.params, self.quad, self.u4, self.mark, self.mark_b, self.mark_ab, self.counters)
+                self.params, self.quad, self.u4)
 
     def _sample_args(self):
         return (self.pw, self.tp_head, self.p_next)
@@ -316,8 +320,8 @@ class DecimationState:
 
     def run(self, max_merges: int) -> bool:
         """Merge until ``max_merges`` in total; True when no legal merge is left."""
-        return bool(K._run(*self._mesh_args(), *self._heap_args(), self.parent, self.rank, np.int64(max_merges),
-                           *self._sample_args()))
+        return bool(K._run(*self._mesh_args(), self.marks, self.marks_b, self.marks_ab, self.tcount, self.counters,
+                           *self._heap_args(), self.parent, self.rank, np.int64(max_merges), *self._sample_args()))
 
     def evaluate(self, a: int, b: int):
         """(legal, error) of merging a into b in the current state (for tests against the reference)."""
@@ -325,21 +329,20 @@ class DecimationState:
         cand = np.empty(3 * st.shape[0] + 1, np.int64)
         err = np.empty(cand.shape[0])
         nc = K._candidate_errors(a, st, self.T, self.nbr, self.pts, self.dens, self.isb, self.pinned, self.params,
-                                 self.quad, self.u4, self.mark, self.counters, cand, err, *self._sample_args())
+                                 self.quad, self.u4, self.marks[0], self.tcount[0], cand, err, *self._sample_args())
         hit = np.flatnonzero(cand[:nc] == b)
         if hit.size == 0 or self.pinned[a]:
             return False, None
-        ok = K._link_ok(a, b, st, self.T, self.alive, self.nbr, self.head, self.nxt, self.isb, self.mark_b,
-                        self.mark_ab, self.counters)
+        ok = K._link_ok(a, b, st, self.T, self.alive, self.nbr, self.head, self.nxt, self.isb, self.marks_b[0],
+                        self.marks_ab[0], self.tcount[0])
         return bool(ok), float(err[hit[0]])
 
     def apply(self, a: int, b: int) -> None:
         """Merge a into b without any check (tests replay a forest with this)."""
         st = K._star(a, self.head, self.nxt, self.T, self.alive)
-        K._apply_merge(a, b, st, self.T, self.alive, self.nbr, self.head, self.nxt)
-        if self.params[K.P_WS] > 0.0:
-            K._reassign_points(a, st, self.T, self.alive, self.pts, self.dens, self.tp_head, self.p_next)
-        self.quad[b] += self.quad[a]
+        nb = np.unique(self.T[st >> 2])
+        K._merge(a, b, st, nb[nb != a].astype(np.int64), self.T, self.alive, self.nbr, self.head, self.nxt, self.pts,
+                 self.dens, self.params, self.quad, self.tp_head, self.p_next)
         self.parent[a] = b
         self.rank[a] = self.counters[K.C_MERGES]
         self.counters[K.C_MERGES] += 1

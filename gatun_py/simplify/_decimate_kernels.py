@@ -1198,6 +1198,142 @@ def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, tp
         quad[b, j] += quad[a, j]
 
 
+# -- set-up: incidence, adjacency, vertex topology, sample points, quadrics (O(1) memory per tet
+# beyond the state itself) -------------------------------------------------------------------------
+@njit(cache=True)
+def _incidence(T, n):
+    """(head, nxt): every vertex's list of slots 4*t + c in increasing order."""
+    head = np.full(n, -1, np.int32)
+    nxt = np.full(4 * T.shape[0], -1, np.int32)
+    for s in range(4 * T.shape[0] - 1, -1, -1):
+        v = T[s >> 2, s & 3]
+        nxt[s] = head[v]
+        head[v] = s
+    return head, nxt
+
+
+@njit(cache=True)
+def _face_neighbours(T, head, nxt):
+    """nbr[t, k] = the tet across face k of t (the face opposite corner k), -1 on the boundary
+    (found in the incidence list of the face's smallest vertex)."""
+    m = T.shape[0]
+    nbr = np.full((m, 4), -1, np.int32)
+    for t in range(m):
+        for k in range(4):
+            if nbr[t, k] >= 0:
+                continue
+            x = T[t, _TET_FACES[k, 0]]
+            y = T[t, _TET_FACES[k, 1]]
+            z = T[t, _TET_FACES[k, 2]]
+            s = head[min(x, min(y, z))]
+            while s >= 0:
+                u = s >> 2
+                if u != t and _contains(T, u, x) and _contains(T, u, y) and _contains(T, u, z):
+                    nbr[t, k] = u
+                    for j in range(4):
+                        w = T[u, j]
+                        if w != x and w != y and w != z:
+                            nbr[u, j] = t
+                    break
+                s = nxt[s]
+    return nbr
+
+
+@njit(cache=True)
+def _vertex_topology(T, nbr, head, nxt, n):
+    """(is_boundary, pinned): boundary vertices, and vertices whose neighbourhood is not a manifold.
+
+    A vertex is left alone when its link is not a sphere (interior) or a disk (boundary), judged by
+    the link's Euler characteristic, or when it lies on a boundary edge not shared by exactly two
+    boundary faces (edge- or vertex-touching parts). The link condition keeps every other vertex
+    manifold, so this is decided once.
+    """
+    isb = np.zeros(n, np.bool_)
+    pinned = np.zeros(n, np.bool_)
+    for t in range(T.shape[0]):
+        for k in range(4):
+            if nbr[t, k] < 0:
+                for j in range(3):
+                    isb[T[t, _TET_FACES[k, j]]] = True
+    seen = np.full(n, -1, np.int64)
+    n_bf = np.zeros(n, np.int32)  # boundary faces at v containing the neighbour
+    for v in range(n):
+        if head[v] < 0:
+            continue
+        n_tets = 0
+        n_faces = 0
+        n_edges = 0
+        s = head[v]
+        while s >= 0:
+            t = s >> 2
+            c = s & 3
+            n_tets += 1
+            for j in range(4):
+                w = T[t, j]
+                if w != v and seen[w] != v:
+                    seen[w] = v
+                    n_bf[w] = 0
+                    n_edges += 1
+            for f in range(4):
+                if f != c and nbr[t, f] < 0:
+                    n_faces += 1
+                    for j in range(3):
+                        w = T[t, _TET_FACES[f, j]]
+                        if w != v:
+                            n_bf[w] += 1
+            s = nxt[s]
+        # Euler characteristic of the link: vertices - edges + triangles (every face at v is in two
+        # of its tets, or in one when it is a boundary face)
+        chi = n_edges - (3 * n_tets + n_faces) // 2 + n_tets
+        if chi != (1 if isb[v] else 2):
+            pinned[v] = True
+        if isb[v]:
+            # boundary edges not shared by exactly two boundary faces
+            s = head[v]
+            while s >= 0:
+                t = s >> 2
+                for j in range(4):
+                    w = T[t, j]
+                    if w != v and n_bf[w] != 0 and n_bf[w] != 2:
+                        pinned[v] = True
+                        pinned[w] = True
+                s = nxt[s]
+    return isb, pinned
+
+
+@njit(cache=True)
+def _sample_points(pts, dens, T, tet_w, centroid_weight):
+    """(pw, points, values) of the sample points: the n vertices (weight a quarter of their tets'
+    volume fractions), then every tet's centroid (its volume fraction x ``centroid_weight``)."""
+    n = pts.shape[0]
+    m = T.shape[0]
+    pw = np.zeros(n + m)
+    p = np.empty((n + m, 3))
+    d = np.empty(n + m)
+    p[:n] = pts
+    d[:n] = dens
+    for t in range(m):
+        for c in range(4):
+            pw[T[t, c]] += tet_w[t] / 4.0
+    for t in range(m):
+        pw[n + t] = tet_w[t] * centroid_weight
+        for k in range(3):
+            p[n + t, k] = (((pts[T[t, 0], k] + pts[T[t, 1], k]) + pts[T[t, 2], k]) + pts[T[t, 3], k]) / 4.0
+        d[n + t] = (((dens[T[t, 0]] + dens[T[t, 1]]) + dens[T[t, 2]]) + dens[T[t, 3]]) / 4.0
+    return pw, p, d
+
+
+@njit(cache=True)
+def _accumulate_quadrics(T, q, out):
+    """out[v] += q[t] for every corner v of every tet t, corner by corner (the order of a bincount
+    over the corner-major index list)."""
+    for c in range(4):
+        for t in range(T.shape[0]):
+            v = T[t, c]
+            for j in range(q.shape[1]):
+                out[v, j] += q[t, j]
+
+
 @njit(cache=True)
 def _ancestors(parent, rank, n_merges):
     """Ancestor of every vertex after the first ``n_merges`` merges.

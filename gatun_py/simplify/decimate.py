@@ -124,6 +124,8 @@ COLLAPSE_POWER = 1.5
 MAX_SAMPLES = 256
 # Weight of the input tets' centroids among the sample points (the merged vertices have 1).
 CENTROID_WEIGHT = 1.0
+# Tets per chunk of the vectorised set-up (bounds its temporaries).
+_CHUNK = 1 << 16
 
 
 def tet_quadrics(u4: np.ndarray, tets: np.ndarray, weight: np.ndarray) -> np.ndarray:
@@ -145,86 +147,30 @@ def tet_quadrics(u4: np.ndarray, tets: np.ndarray, weight: np.ndarray) -> np.nda
     """
     n = u4.shape[0]
     out = np.zeros((n, 15))
-    if tets.shape[0] == 0:
+    m = tets.shape[0]
+    if m == 0:
         return out
-    P = u4[tets]  # (m, 4, 4)
-    e = P[:, 1:, :] - P[:, :1, :]  # (m, 3, 4)
-    # generalised cross product: the normal orthogonal to the three edge vectors in 4D
-    nrm = np.empty((tets.shape[0], 4))
-    for k in range(4):
-        cols = [j for j in range(4) if j != k]
-        nrm[:, k] = (-1) ** k * np.linalg.det(e[:, :, cols])
-    ln = np.linalg.norm(nrm, axis=1)
-    ok = (ln > 0) & (weight > 0)
-    nrm[ok] /= ln[ok, None]
-    nrm[~ok] = 0.0
-    d = -np.einsum("mk,mk->m", nrm, P[:, 0, :])
+    q = np.empty((m, 15))
     iu = np.triu_indices(4)
-    A = (nrm[:, :, None] * nrm[:, None, :])[:, iu[0], iu[1]]  # (m, 10)
-    q = np.concatenate([A, nrm * d[:, None], (d * d)[:, None]], axis=1) * np.where(ok, weight, 0.0)[:, None]
-    idx = np.asarray(tets, np.int64).T.reshape(-1)  # corner-major, as q repeated 4 times
-    for j in range(15):
-        out[:, j] = np.bincount(idx, weights=np.tile(q[:, j], 4), minlength=n)
+    for lo in range(0, m, _CHUNK):  # bounded temporaries
+        hi = min(m, lo + _CHUNK)
+        P = u4[tets[lo:hi]]  # (k, 4, 4)
+        e = P[:, 1:, :] - P[:, :1, :]  # (k, 3, 4)
+        # generalised cross product: the normal orthogonal to the three edge vectors in 4D
+        nrm = np.empty((hi - lo, 4))
+        for k in range(4):
+            cols = [j for j in range(4) if j != k]
+            nrm[:, k] = (-1) ** k * np.linalg.det(e[:, :, cols])
+        ln = np.linalg.norm(nrm, axis=1)
+        w = weight[lo:hi]
+        ok = (ln > 0) & (w > 0)
+        nrm[ok] /= ln[ok, None]
+        nrm[~ok] = 0.0
+        d = -np.einsum("mk,mk->m", nrm, P[:, 0, :])
+        A = (nrm[:, :, None] * nrm[:, None, :])[:, iu[0], iu[1]]  # (k, 10)
+        q[lo:hi] = np.concatenate([A, nrm * d[:, None], (d * d)[:, None]], axis=1) * np.where(ok, w, 0.0)[:, None]
+    K._accumulate_quadrics(tets, q, out)
     return out
-
-
-def _face_adjacency(tets: np.ndarray) -> np.ndarray:
-    """nbr[t, k] = the tet across face k of t (the face opposite corner k), -1 on the boundary."""
-    m = tets.shape[0]
-    nbr = np.full((m, 4), -1, np.int32)
-    if m == 0:
-        return nbr
-    f = np.sort(tets[:, TET_FACES].reshape(-1, 3).astype(np.int64), axis=1)
-    n = int(tets.max()) + 1
-    key = (f[:, 0] * n + f[:, 1]) * n + f[:, 2] if n < 2**21 else None
-    order = np.argsort(key, kind="stable") if key is not None else np.lexsort((f[:, 2], f[:, 1], f[:, 0]))
-    s = f[order]
-    same = np.all(s[1:] == s[:-1], axis=1)
-    i = np.flatnonzero(same)
-    a, b = order[i], order[i + 1]
-    nbr.reshape(-1)[a] = (b // 4).astype(np.int32)
-    nbr.reshape(-1)[b] = (a // 4).astype(np.int32)
-    return nbr
-
-
-def _pinned_vertices(tets: np.ndarray, nbr: np.ndarray, n: int):
-    """(is_boundary, pinned): boundary vertices, and vertices whose neighbourhood is not a manifold.
-
-    A vertex is left alone when its link is not a sphere (interior) or a disk (boundary), judged by
-    the link's Euler characteristic, or when it lies on a boundary edge not shared by exactly two
-    boundary faces (edge- or vertex-touching parts). The link condition keeps every other vertex
-    manifold, so this is decided once.
-    """
-    isb = np.zeros(n, bool)
-    pinned = np.zeros(n, bool)
-    m = tets.shape[0]
-    if m == 0:
-        return isb, pinned
-    t = tets.astype(np.int64)
-    bt, bk = np.nonzero(nbr < 0)
-    bfaces = t[bt[:, None], TET_FACES[bk]]
-    isb[bfaces.ravel()] = True
-    # boundary edges shared by != 2 boundary faces
-    if bfaces.shape[0]:
-        e = np.sort(bfaces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-        ue, cnt = np.unique(e[:, 0] * n + e[:, 1], return_counts=True)
-        bad = ue[cnt != 2]
-        pinned[bad // n] = True
-        pinned[bad % n] = True
-    # Euler characteristic of every vertex link: V (edges at v) - E (faces at v) + F (tets at v)
-    ei = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
-    pairs = np.sort(t[:, ei].reshape(-1, 2), axis=1)
-    ue = np.unique(pairs[:, 0] * n + pairs[:, 1])
-    chi = np.bincount(ue // n, minlength=n) + np.bincount(ue % n, minlength=n)
-    # every face at v is in two of v's tets, or in one when it is a boundary face
-    n_tets_at = np.bincount(t.ravel(), minlength=n)
-    n_bfaces_at = np.bincount(bfaces.ravel(), minlength=n)
-    chi -= (3 * n_tets_at + n_bfaces_at) // 2
-    chi += n_tets_at
-    used = np.zeros(n, bool)
-    used[t.ravel()] = True
-    pinned |= used & np.where(isb, chi != 1, chi != 2)
-    return isb, pinned
 
 
 class DecimationState:
@@ -236,19 +182,10 @@ class DecimationState:
         self.pts = mesh.points.astype(np.float64)
         self.T = np.array(mesh.tets, np.int32)
         self.alive = np.ones(m, bool)
-        self.nbr = _face_adjacency(self.T)
-        self.isb, self.pinned = _pinned_vertices(self.T, self.nbr, n)
         # incidence lists: slot 4t+c, each vertex's slots in tet order
-        slots = np.argsort(self.T.reshape(-1), kind="stable").astype(np.int32)
-        verts = self.T.reshape(-1)[slots]
-        self.head = np.full(n, -1, np.int32)
-        self.nxt = np.full(4 * m, -1, np.int32)
-        if m:
-            first = np.ones(slots.size, bool)
-            first[1:] = verts[1:] != verts[:-1]
-            self.head[verts[first]] = slots[first]
-            cont = ~first[1:]
-            self.nxt[slots[:-1][cont]] = slots[1:][cont]
+        self.head, self.nxt = K._incidence(self.T, n)
+        self.nbr = K._face_neighbours(self.T, self.head, self.nxt)
+        self.isb, self.pinned = K._vertex_topology(self.T, self.nbr, self.head, self.nxt, n)
         # normalisation: both errors as fractions of a whole-mesh quantity
         vol = float(np.abs(mesh.signed_volumes()).sum()) if m else 0.0
         lo, hi = mesh.scalar_range
@@ -281,10 +218,7 @@ class DecimationState:
         # tet's centroid from the start (ids n + t, weight its volume fraction x CENTROID_WEIGHT),
         # every vertex once merged away (weight a quarter of its tets' volume fraction). Their
         # positions and values follow the vertices' in pts and dens: tets only index the first n.
-        pw_v = np.bincount(np.asarray(self.T, np.int64).ravel(), weights=np.repeat(tet_w / 4.0, 4), minlength=n)
-        self.pw = np.concatenate([pw_v, tet_w * CENTROID_WEIGHT])
-        self.pts = np.concatenate([self.pts, self.pts[self.T].mean(axis=1) if m else np.zeros((0, 3))])
-        self.dens = np.concatenate([self.dens, self.dens[self.T].mean(axis=1) if m else np.zeros(0)])
+        self.pw, self.pts, self.dens = K._sample_points(self.pts, self.dens, self.T, tet_w, CENTROID_WEIGHT)
         self.p_next = np.full(n + m, -1, np.int32)
         self.tp_head = np.arange(n, n + m, dtype=np.int32)
         # per thread of the parallel evaluations: stamp rows and counters (stamps, evaluations)

@@ -15,10 +15,11 @@ validates the input and drives the loop. The mesh state during decimation:
 ``quad`` (n, 15) float64, ``u4`` (n, 4) float64
     every vertex's error quadric (A's upper triangle, b, c; see :func:`_quadric_at`) and its
     (x, y, z, s) point; merging a into b adds a's quadric to b's.
-``pw`` (n + m,) float64, ``tp_head`` (m,) int32, ``p_next`` (n + m,) int32
+``pw`` (n + m,) float64, ``tp_head``, ``tp_count`` (m,) int32, ``p_next`` (n + m,) int32
     sample points of the original field (ids 0..n-1: the vertices, once merged away; n + t: the
     centroid of input tet t; positions and values in rows n.. of ``pts`` and ``dens``, which
-    tets never index): every one is listed in the live tet that holds it (``tp_head[t]`` ->
+    tets never index): every one is listed in the live tet that holds it (``tp_count[t]`` of them,
+    ``tp_head[t]`` ->
     ``p_next`` chain), with weight ``pw`` (its share of the original volume); a merge a -> b hands
     a and the points of a's star to the tets of the new star.
 
@@ -493,19 +494,16 @@ def _star_boundary(bf, pts, n_old, area_old):
 
 
 @njit(cache=True)
-def _star_sample_count(st, tp_head, p_next):
+def _star_sample_count(st, tp_count):
     """Number of sample points listed in the star's tets."""
     npt = 0
     for i in range(st.shape[0]):
-        p = tp_head[st[i] >> 2]
-        while p >= 0:
-            npt += 1
-            p = p_next[p]
+        npt += tp_count[st[i] >> 2]
     return npt
 
 
 @njit(cache=True)
-def _star_samples(st, T, pts, dens, pw, tp_head, p_next, stride, p_id, p_k, lam, val, q):
+def _star_samples(st, T, pts, dens, pw, tp_head, tp_count, p_next, stride, p_id, p_k, lam, val, q):
     """Every stride-th sample point of the star (``p_id``) with its star tet (``p_k``); returns the
     sum of their weighted squared errors against the current interpolant (``lam``, ``val``: scratch)."""
     e_old = 0.0
@@ -686,7 +684,7 @@ def _total_error(dm_w, di, ge_w, swept_w, qe_w, se, n_col, power):
 
 
 @njit(cache=True)
-def _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, p_next):
+def _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next):
     """Everything about a's star that every candidate merge of a shares, and the scratch arrays of
     one evaluation, as one tuple (see the names unpacked in :func:`_candidate_terms`)."""
     ns = st.shape[0]
@@ -706,7 +704,7 @@ def _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, p_next):
     area_sum = _star_boundary(bf, pts, n_old, area_old)
     # the sample points in a's star (only they see the interpolant change) and their squared error
     # now; late on, stars hold many points: every stride-th one stands for stride points
-    npt = _star_sample_count(st, tp_head, p_next) if params[P_WS] > 0.0 else 0
+    npt = _star_sample_count(st, tp_count) if params[P_WS] > 0.0 else 0
     max_s = max(1, int(params[P_MAXS]))
     stride = (npt + max_s - 1) // max_s if npt > max_s else 1
     p_id = np.empty((npt + stride - 1) // stride, np.int64)
@@ -717,7 +715,7 @@ def _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, p_next):
     q = np.empty(4, np.int64)
     e_old = 0.0
     if npt > 0:
-        e_old = _star_samples(st, T, pts, dens, pw, tp_head, p_next, stride, p_id, p_k, s_lam[0], s_val[0], q)
+        e_old = _star_samples(st, T, pts, dens, pw, tp_head, tp_count, p_next, stride, p_id, p_k, s_lam[0], s_val[0], q)
     return (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
             stride, e_old, np.empty(ns), np.empty(2), q, np.empty(3), np.empty(bf.shape[0]), s_ok, s_lam, s_val)
 
@@ -792,13 +790,13 @@ def _candidate_exact(a, b, terms, st, T, pts, dens, params, pw, ctx):
 
 @njit(cache=True)
 def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, mark, counters, cand_out, err_out,
-                      pw, tp_head, p_next):
+                      pw, tp_head, tp_count, p_next):
     """Error of every geometrically legal merge a -> b (b a neighbour of a): fills the outputs.
 
     Returns the number of candidates. Legality here covers volumes, boundary orientation and the
     boundary-into-interior rule; the link condition is checked by the caller, best first.
     """
-    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, p_next)
+    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next)
     terms = np.empty((cand_out.shape[0], 5))
     return _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mark, counters, ctx, cand_out,
                             err_out, terms, True)
@@ -806,7 +804,7 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, m
 
 @njit(cache=True)
 def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab, counters,
-              pw, tp_head, p_next):
+              pw, tp_head, tp_count, p_next):
     """Best legal merge of a: (target, error), or (-1, 0) when a has none.
 
     The best is the smallest (error, target id) among the candidates that pass the link
@@ -822,7 +820,7 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
     cand = np.empty(cap, np.int64)
     low = np.empty(cap)
     terms = np.empty((cap, 5))
-    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, p_next)
+    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next)
     nc = _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mark, counters, ctx, cand, low,
                           terms, False)
     if nc == 0:
@@ -968,7 +966,7 @@ def _apply_merge(a, b, st_a, T, alive, nbr, head, nxt):
 
 
 @njit(cache=True)
-def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, p_next):
+def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next):
     """After merging a: a and every point listed in a's former star go to the first live tet of
     the new star (star order) that contains them, else the one they are nearest to (largest
     smallest barycentric coordinate of :func:`_value_at`, the first of equals; as :func:`_new_value`).
@@ -994,6 +992,7 @@ def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, p_next):
             cnt += 1
             p = p_next[p]
         tp_head[t] = -1
+        tp_count[t] = 0
     ns = st_a.shape[0]
     # the extent of every coordinate involved (star vertices and points): bounds the rounding
     lo3 = np.full(3, 1e300)
@@ -1070,24 +1069,25 @@ def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, p_next):
         if best >= 0:  # else no tet of a's star is left (or all are flat): the point is dropped
             p_next[p] = tp_head[best]
             tp_head[best] = p
+            tp_count[best] += 1
 
 
 @njit(cache=True, parallel=True)
 def _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4,
-                   marks, marks_b, marks_ab, tcount, pw, tp_head, p_next):
+                   marks, marks_b, marks_ab, tcount, pw, tp_head, tp_count, p_next):
     """:func:`_evaluate` of ``todo[:n_todo]`` in parallel: every evaluation only reads the mesh
     (each thread stamps its own mark rows), so the results cannot depend on the scheduling."""
     for i in prange(n_todo):
         tid = get_thread_id()
         b, e = _evaluate(todo[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks[tid],
-                         marks_b[tid], marks_ab[tid], tcount[tid], pw, tp_head, p_next)
+                         marks_b[tid], marks_ab[tid], tcount[tid], pw, tp_head, tp_count, p_next)
         out_b[i] = b
         out_e[i] = e
 
 
 @njit(cache=True)
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks, marks_b, marks_ab, tcount,
-         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pw, tp_head, p_next):
+         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pw, tp_head, tp_count, p_next):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left.
 
     ``marks*`` and ``tcount`` have one row per thread (stamps, evaluation counts); the sequential
@@ -1114,10 +1114,10 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         found = False
         if n_todo == 1:
             out_b[0], out_e[0] = _evaluate(todo[0], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
-                                           u4, mark, mark_b, mark_ab, tc, pw, tp_head, p_next)
+                                           u4, mark, mark_b, mark_ab, tc, pw, tp_head, tp_count, p_next)
         elif n_todo > 1:
             _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params,
-                           quad, u4, marks, marks_b, marks_ab, tcount, pw, tp_head, p_next)
+                           quad, u4, marks, marks_b, marks_ab, tcount, pw, tp_head, tp_count, p_next)
         # pushed in todo order, as evaluated one by one
         for i in range(n_todo):
             v = todo[i]
@@ -1173,7 +1173,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
                     mark[w] = stamp
                     nb[k] = w
                     k += 1
-        _merge(a, b, st_a, nb[:k], T, alive, nbr, head, nxt, pts, dens, params, quad, tp_head, p_next)
+        _merge(a, b, st_a, nb[:k], T, alive, nbr, head, nxt, pts, dens, params, quad, tp_head, tp_count, p_next)
         parent[a] = b
         rank[a] = counters[C_MERGES]
         counters[C_MERGES] += 1
@@ -1186,14 +1186,14 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
 
 
 @njit(cache=True)
-def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, tp_head, p_next):
+def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, tp_head, tp_count, p_next):
     """Everything a merge a -> b changes: the tets, the lists of the vertices around it (``nb``:
     the vertices of a's star but a), the sample points and b's quadric."""
     _apply_merge(a, b, st_a, T, alive, nbr, head, nxt)
     for i in range(nb.shape[0]):
         _tidy(nb[i], head, nxt, T, alive)
     if params[P_WS] > 0.0:
-        _reassign_points(a, st_a, T, alive, pts, dens, tp_head, p_next)
+        _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next)
     for j in range(quad.shape[1]):
         quad[b, j] += quad[a, j]
 

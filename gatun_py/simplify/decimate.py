@@ -221,6 +221,7 @@ class DecimationState:
         self.pw, self.pts, self.dens = K._sample_points(self.pts, self.dens, self.T, tet_w, CENTROID_WEIGHT)
         self.p_next = np.full(n + m, -1, np.int32)
         self.tp_head = np.arange(n, n + m, dtype=np.int32)
+        self.tp_count = np.ones(m, np.int32)
         # per thread of the parallel evaluations: stamp rows and counters (stamps, evaluations)
         threads = max(1, int(numba.config.NUMBA_NUM_THREADS))
         self.marks = np.zeros((threads, n), np.int64)
@@ -243,7 +244,7 @@ class DecimationState:
                 self.params, self.quad, self.u4)
 
     def _sample_args(self):
-        return (self.pw, self.tp_head, self.p_next)
+        return (self.pw, self.tp_head, self.tp_count, self.p_next)
 
     def _heap_args(self):
         return (self.ver, self.h_err, self.h_v, self.h_b, self.h_ver, self.last_err)
@@ -276,7 +277,7 @@ class DecimationState:
         st = K._star(a, self.head, self.nxt, self.T, self.alive)
         nb = np.unique(self.T[st >> 2])
         K._merge(a, b, st, nb[nb != a].astype(np.int64), self.T, self.alive, self.nbr, self.head, self.nxt, self.pts,
-                 self.dens, self.params, self.quad, self.tp_head, self.p_next)
+                 self.dens, self.params, self.quad, self.tp_head, self.tp_count, self.p_next)
         self.parent[a] = b
         self.rank[a] = self.counters[K.C_MERGES]
         self.counters[K.C_MERGES] += 1

@@ -44,6 +44,16 @@ by the collapsed tets (the comparison that matters is at equal tet counts: it pr
 remove more tets for the same error; Combustion at ratio 0.9, quadric alone: 1.020 -> 0.996) are
 our additions; the constants below give their measured effect. The legality rules are listed in
 :mod:`gatun_py.simplify._decimate_kernels`.
+
+Each term is one small kernel (``_mass_error``, ``_interp_deviation``, ``_area_error``,
+``_swept_volume``, ``_quadric_at``, ``_sample_error``, summed by ``_total_error`` in one fixed
+order). The search for a vertex's best merge is a branch and bound: the cheap terms of every
+candidate first, with the interpolation term (>= 0) left out and the sampled error at its most
+negative (every point's new error 0) as a lower bound, then the two expensive terms only for the
+candidates whose bound can still win; the choice is the one of computing every error, bit for bit
+(Combustion: 19 % of the candidates get them). The first evaluation of every vertex and the sweeps
+run in parallel (each evaluation only reads the mesh), and their results are pushed in vertex
+order, so the forest does not depend on the thread count either.
 """
 
 from __future__ import annotations

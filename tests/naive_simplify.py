@@ -320,3 +320,18 @@ def check_valid(mesh, n_flat_input: int, label: str = "", *, manifold: bool = Tr
         assert np.all(ec % 2 == 0), f"{label}: boundary not closed ({int((ec % 2 == 1).sum())} open edges)"
         if manifold:
             assert np.all(ec == 2), f"{label}: {int((ec != 2).sum())} boundary edges not in exactly two faces"
+
+
+def face_neighbours(tets):
+    """nbr[t][k] = the tet across the face opposite corner k of t, -1 on the boundary (by a dict of
+    sorted faces)."""
+    owner = {}
+    for t, q in enumerate(tets):
+        for k in range(4):
+            owner.setdefault(tuple(sorted(w for j, w in enumerate(q) if j != k)), []).append((t, k))
+    nbr = [[-1] * 4 for _ in tets]
+    for pair in owner.values():
+        if len(pair) == 2:
+            (t, k), (u, j) = pair
+            nbr[t][k], nbr[u][j] = u, t
+    return nbr

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
+import numba
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from meshgen import AWKWARD, delaunay_mesh, degenerate_grid, grid_mesh, mesh_strategy, single_tet
-from naive_simplify import (check_valid, collapse, evaluate_merge, interpolate, legal_merges, pinned_vertices,
-                            quadric_value, reassign_samples, tet_quadrics)
+from naive_simplify import (check_valid, collapse, evaluate_merge, face_neighbours, interpolate, legal_merges,
+                            pinned_vertices, quadric_value, reassign_samples, tet_quadrics)
 
 from gatun_py.errors import OptionError
 from gatun_py.simplify import ROOT_RANK, check_forest, decimate, simplified_mesh
@@ -240,3 +244,89 @@ def test_meshes_without_tets():
         mesh = TetMesh(np.zeros((n, 3), np.float32), np.zeros(n, np.float32), np.zeros((0, 4), np.int32))
         forest = decimate(mesh)
         assert forest.n_merges == 0 and np.array_equal(forest.parent, np.arange(n))
+
+
+@pytest.mark.parametrize("name", sorted(AWKWARD))
+def test_set_up_matches_reference(name):
+    """Face neighbours, boundary and pinned vertices and incidence lists of the set-up kernels."""
+    mesh = AWKWARD[name]()
+    state = DecimationState(mesh, 1.0, 1.0)
+    tets = [tuple(int(x) for x in t) for t in mesh.tets]
+    assert state.nbr.tolist() == face_neighbours(tets)
+    assert set(np.flatnonzero(state.pinned).tolist()) == pinned_vertices(tets, mesh.n_points)
+    assert set(np.flatnonzero(state.isb).tolist()) == {w for t, k in zip(*np.nonzero(state.nbr < 0))
+                                                       for j, w in enumerate(tets[t]) if j != k}
+    for v in range(mesh.n_points):
+        slots = K._star(v, state.head, state.nxt, state.T, state.alive).tolist()
+        assert slots == [4 * t + c for t, q in enumerate(tets) for c, w in enumerate(q) if w == v]
+
+
+def _best_by_every_error(state, a):
+    """The best legal merge of a with every candidate's error computed (the rule the bound keeps)."""
+    st = K._star(a, state.head, state.nxt, state.T, state.alive)
+    if st.shape[0] == 0 or state.pinned[a]:
+        return -1, 0.0
+    cand = np.empty(3 * st.shape[0] + 1, np.int64)
+    err = np.empty(cand.shape[0])
+    nc = K._candidate_errors(a, st, state.T, state.nbr, state.pts, state.dens, state.isb, state.pinned,
+                             state.params, state.quad, state.u4, state.marks[0], state.tcount[0], cand, err,
+                             *state._sample_args())
+    for i in sorted(range(nc), key=lambda i: (err[i], cand[i])):
+        if K._link_ok(a, int(cand[i]), st, state.T, state.alive, state.nbr, state.head, state.nxt, state.isb,
+                      state.marks_b[0], state.marks_ab[0], state.tcount[0]):
+            return int(cand[i]), float(err[i])
+    return -1, 0.0
+
+
+@pytest.mark.parametrize("mesh", [delaunay_mesh(25, 4), grid_mesh(4, 4, 3, jitter=0.2, seed=3), degenerate_grid()],
+                         ids=["delaunay", "grid", "degenerate"])
+def test_branch_and_bound_picks_the_best_merge(mesh):
+    """The bounded search of _evaluate picks what computing every candidate's error would, bit for bit,
+    at the start and part way through (where the sample points make the bound loose)."""
+    forest = decimate(mesh)
+    state = DecimationState(mesh, 1.0, 1.0)
+    order = np.argsort(forest.rank)[: forest.n_merges]
+    done = 0
+    for stop in (0, len(order) // 3, 2 * len(order) // 3):
+        for a in order[done:stop]:
+            state.apply(int(a), int(forest.parent[a]))
+        done = stop
+        for a in np.flatnonzero(state.parent == np.arange(mesh.n_points)):
+            got = K._evaluate(int(a), *state._mesh_args(), state.marks[0], state.marks_b[0], state.marks_ab[0],
+                              state.tcount[0], *state._sample_args())
+            assert (int(got[0]), float(got[1])) == _best_by_every_error(state, int(a)), (stop, a)
+
+
+def test_forest_does_not_depend_on_the_thread_count():
+    mesh = delaunay_mesh(50, 7)
+    saved = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = decimate(mesh)
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+        many = decimate(mesh)
+    finally:
+        numba.set_num_threads(saved)
+    assert np.array_equal(one.parent, many.parent) and np.array_equal(one.rank, many.rank)
+
+
+def _gmsh_mesh(name):
+    """A small unstructured gmsh mesh (bench/gmsh_meshes.py), skipped when gmsh is not installed."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
+    import gmsh_meshes
+
+    if not (gmsh_meshes.CACHE / f"{name}.vtu").exists():
+        pytest.importorskip("gmsh", reason="the gmsh test meshes need the gmsh package (test extra)")
+    from gatun_py.mesh import read_mesh
+
+    return read_mesh(gmsh_meshes.mesh_path(name))[0]
+
+
+def test_unstructured_gmsh_mesh():
+    """A graded Delaunay mesh of a CAD-like shape: reaches far, every checked prefix is valid."""
+    mesh = _gmsh_mesh("block-50k")
+    assert 30_000 < mesh.n_tets <= 50_000
+    forest = decimate(mesh)
+    assert forest.max_ratio > 0.99
+    n = forest.n_merges
+    _check_forest_prefixes(mesh, forest, [0, 1, n // 4, n // 2, 9 * n // 10, n - 1, n], "block-50k")

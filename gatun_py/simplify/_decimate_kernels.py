@@ -15,10 +15,11 @@ validates the input and drives the loop. The mesh state during decimation:
 ``quad`` (n, 15) float64, ``u4`` (n, 4) float64
     every vertex's error quadric (A's upper triangle, b, c; see :func:`_quadric_at`) and its
     (x, y, z, s) point; merging a into b adds a's quadric to b's.
-``pw`` (n + m,) float64, ``tp_head`` (m,) int32, ``p_next`` (n + m,) int32
+``pw`` (n + m,) float64, ``tp_head``, ``tp_count`` (m,) int32, ``p_next`` (n + m,) int32
     sample points of the original field (ids 0..n-1: the vertices, once merged away; n + t: the
     centroid of input tet t; positions and values in rows n.. of ``pts`` and ``dens``, which
-    tets never index): every one is listed in the live tet that holds it (``tp_head[t]`` ->
+    tets never index): every one is listed in the live tet that holds it (``tp_count[t]`` of them,
+    ``tp_head[t]`` ->
     ``p_next`` chain), with weight ``pw`` (its share of the original volume); a merge a -> b hands
     a and the points of a's star to the tets of the new star.
 
@@ -32,7 +33,7 @@ simplex), which guarantees that the collapse keeps the mesh a manifold with a cl
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import get_thread_id, njit, prange
 
 from ..codec.forest import ROOT_RANK  # noqa: F401 (decimate.py reads it as K.ROOT_RANK)
 from ..mesh.model import TET_FACES as _TET_FACES
@@ -47,7 +48,7 @@ NORMAL_EPS = 1e-6
 # Indices into the float parameter array.
 P_WD, P_WG, P_WV, P_WI, P_WQ, P_WS, P_NCP, P_MAXS = 0, 1, 2, 3, 4, 5, 6, 7
 # Indices into the int64 counter array.
-C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS, C_STARTED = 0, 1, 2, 3, 4, 5
+C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS, C_STARTED, C_EXACT = 0, 1, 2, 3, 4, 5, 6
 
 
 @njit(cache=True)
@@ -143,30 +144,48 @@ def _tri_normal(p, a, b, c, out):
 
 
 @njit(cache=True)
-def _star(v, head, nxt, T, alive):
-    """Slots (4*t + corner) of the live tets around v; unlinks dead slots on the way."""
-    cnt = 0
+def _tidy(v, head, nxt, T, alive):
+    """Unlink the slots of dead tets (and of tets that no longer hold v) from v's list."""
     prev = -1
     s = head[v]
     while s >= 0:
         ns = nxt[s]
         t = s >> 2
         if alive[t] and T[t, s & 3] == v:
-            cnt += 1
             prev = s
         elif prev < 0:
             head[v] = ns
         else:
             nxt[prev] = ns
         s = ns
-    out = np.empty(cnt, np.int64)
+
+
+@njit(cache=True)
+def _star_view(v, head, nxt, T, alive):
+    """Slots (4*t + corner) of the live tets around v, in list order, without touching the lists
+    (so that evaluations can run in parallel)."""
+    cnt = 0
     s = head[v]
-    i = 0
     while s >= 0:
-        out[i] = s
-        i += 1
+        if alive[s >> 2] and T[s >> 2, s & 3] == v:
+            cnt += 1
+        s = nxt[s]
+    out = np.empty(cnt, np.int64)
+    i = 0
+    s = head[v]
+    while s >= 0:
+        if alive[s >> 2] and T[s >> 2, s & 3] == v:
+            out[i] = s
+            i += 1
         s = nxt[s]
     return out
+
+
+@njit(cache=True)
+def _star(v, head, nxt, T, alive):
+    """Slots (4*t + corner) of the live tets around v; unlinks dead slots on the way."""
+    _tidy(v, head, nxt, T, alive)
+    return _star_view(v, head, nxt, T, alive)
 
 
 @njit(cache=True)
@@ -206,7 +225,7 @@ def _boundary_faces_of(st, T, nbr):
 @njit(cache=True)
 def _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
     """The link condition Lk(a) ∩ Lk(b) = Lk(ab) for collapsing edge ab (with a virtual vertex ω)."""
-    st_b = _star(b, head, nxt, T, alive)
+    st_b = _star_view(b, head, nxt, T, alive)
     s_b = _next_stamp(counters)
     for i in range(st_b.shape[0]):
         t = st_b[i] >> 2
@@ -424,33 +443,21 @@ def _new_value(p, k0, pts, ok, lam, val, fallback):
     return v
 
 
-@njit(cache=True)
-def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, mark, counters, cand_out, err_out,
-                      pw, tp_head, p_next):
-    """Error of every geometrically legal merge a -> b (b a neighbour of a): fills the outputs.
+# -- the error of a merge a -> b, one term per function ------------------------------------------
+# Per vertex a, the star's quantities every candidate b shares are computed once (``_star_*``);
+# per candidate, the legality tests (``_new_volumes``, ``_boundary_ok``) and then each error term.
+# The whole error is combined by :func:`_total_error`, always in the same order, so that the
+# bound of :func:`_evaluate` (the terms that cannot be negative left out) rounds below it.
 
-    Returns the number of candidates. Legality here covers volumes, boundary orientation and the
-    boundary-into-interior rule; the link condition is checked by the caller, best first.
-    """
-    wd = params[P_WD]
-    wg = params[P_WG]
-    wv = params[P_WV]
-    wi = params[P_WI]
-    wq = params[P_WQ]
-    ns = st.shape[0]
-    v6n = np.empty(ns)
-    vout = np.empty(2)
+
+@njit(cache=True)
+def _star_volumes(a, st, T, pts, dens, vol_old, mass_old, dsum, nrm, off, fn):
+    """Per star tet: 6 x volume, mass, density sum without a, and the plane of the face opposite a
+    (so that the volume with a moved onto b is one dot product: 6 vol = off - nrm . p_b, linear in
+    the moved corner). Returns (volume of the star, squared distance from a to its farthest vertex)."""
     vol_star = 0.0
-    # per star tet: old volume and mass, and the plane of the face opposite a, so that the volume
-    # with a moved onto b is one dot product: 6 vol = off - nrm . p_b (linear in the moved corner)
-    vol_old = np.empty(ns)
-    mass_old = np.empty(ns)
-    dsum = np.empty(ns)
-    nrm = np.empty((ns, 3))
-    off = np.empty(ns)
-    fn = np.empty(3)
     reach2 = 0.0
-    for i in range(ns):
+    for i in range(st.shape[0]):
         t = st[i] >> 2
         c = st[i] & 3
         v6 = _orient6(pts, T[t, 0], T[t, 1], T[t, 2], T[t, 3])
@@ -470,65 +477,280 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, m
             d2 = (pts[w, 0] - pts[a, 0]) ** 2 + (pts[w, 1] - pts[a, 1]) ** 2 + (pts[w, 2] - pts[a, 2]) ** 2
             if d2 > reach2:
                 reach2 = d2
-    # every new tet's vertices lie within sqrt(reach2) of a, so its edges are <= 2 sqrt(reach2):
-    # a value above twice this bound is safely positive whatever the rounding
-    fast_ok = 2.0 * VOLUME_EPS * (4.0 * reach2) ** 1.5
-    a_bnd = isb[a]
-    bf = _boundary_faces_of(st, T, nbr) if a_bnd else np.empty((0, 3), np.int64)
-    nf = bf.shape[0]
-    n_old = np.empty((nf, 3))
-    area_old = np.empty(nf)
+    return vol_star, reach2
+
+
+@njit(cache=True)
+def _star_boundary(bf, pts, n_old, area_old):
+    """Outward normals (2 x area) and areas of a's boundary faces; returns their total area."""
     area_sum = 0.0
-    for f in range(nf):
+    for f in range(bf.shape[0]):
         _tri_normal(pts, bf[f, 0], bf[f, 1], bf[f, 2], n_old[f])
         area_old[f] = 0.5 * np.sqrt(n_old[f, 0] ** 2 + n_old[f, 1] ** 2 + n_old[f, 2] ** 2)
         area_sum += area_old[f]
-    n_new = np.empty(3)
-    area_new = np.empty(nf)
-    q = np.empty(4, np.int64)
-    # the sample points in a's star (only they see the interpolant change) and their squared error now
-    ws = params[P_WS]
+    return area_sum
+
+
+@njit(cache=True)
+def _star_sample_count(st, tp_count):
+    """Number of sample points listed in the star's tets."""
     npt = 0
-    if ws > 0.0:
-        for i in range(ns):
-            p = tp_head[st[i] >> 2]
-            while p >= 0:
+    for i in range(st.shape[0]):
+        npt += tp_count[st[i] >> 2]
+    return npt
+
+
+@njit(cache=True)
+def _star_samples(st, T, pts, dens, pw, tp_head, tp_count, p_next, stride, p_id, p_k, lam, val, q):
+    """Every stride-th sample point of the star (``p_id``) with its star tet (``p_k``); returns the
+    sum of their weighted squared errors against the current interpolant (``lam``, ``val``: scratch)."""
+    e_old = 0.0
+    npt = 0
+    seen = 0
+    for i in range(st.shape[0]):
+        t = st[i] >> 2
+        p = tp_head[t]
+        if p < 0:
+            continue
+        for j in range(4):
+            q[j] = T[t, j]
+        flat = not _tet_planes(pts, dens, q, lam, val)
+        while p >= 0:
+            if seen % stride == 0:
+                p_id[npt] = p
+                p_k[npt] = i
+                if not flat:
+                    f = val[0] * pts[p, 0] + val[1] * pts[p, 1] + val[2] * pts[p, 2] + val[3]
+                    e_old += pw[p] * (dens[p] - f) ** 2
                 npt += 1
-                p = p_next[p]
-    s_ok = np.zeros(ns, np.bool_)
-    s_lam = np.empty((ns, 4, 4))
-    s_val = np.empty((ns, 4))
-    # late on, stars hold many points: every stride-th one stands for stride points (bounded cost)
+            seen += 1
+            p = p_next[p]
+    return e_old
+
+
+@njit(cache=True)
+def _new_volumes(b, st, T, pts, vol_old, nrm, off, fast_ok, v6n, q):
+    """Legality of the volumes after a -> b: every tet of a's star without b stays positive (or
+    the input's flat tets stay flat). Fills ``v6n`` (6 x new volume) of the surviving tets and
+    returns the number of tets the merge collapses, or -1 when a tet would flatten or invert."""
+    n_col = 0
+    pbx = pts[b, 0]
+    pby = pts[b, 1]
+    pbz = pts[b, 2]
+    for k in range(st.shape[0]):
+        t = st[k] >> 2
+        if _contains(T, t, b):
+            n_col += 1
+            continue
+        v6 = off[k] - (nrm[k, 0] * pbx + nrm[k, 1] * pby + nrm[k, 2] * pbz)
+        if not v6 > fast_ok:
+            # near the limit: decide with the exact evaluation order of signed_volumes
+            c = st[k] & 3
+            for j in range(4):
+                q[j] = T[t, j]
+            q[c] = b
+            v6 = _orient6(pts, q[0], q[1], q[2], q[3])
+            old = vol_old[k]
+            if old == 0.0:
+                good = v6 == 0.0 or v6 > VOLUME_EPS * _max_edge2(pts, q) ** 1.5
+            else:
+                good = v6 > VOLUME_EPS * _max_edge2(pts, q) ** 1.5 or (v6 >= old and v6 > 0.0)
+            if not good:
+                return -1
+        v6n[k] = v6
+    return n_col
+
+
+@njit(cache=True)
+def _mass_error(b, st, T, dens, mass_old, dsum, v6n):
+    """The paper's density error: sum over a's tets of |mass after - mass before| (a collapsed tet
+    loses all its mass)."""
+    dm = 0.0
+    for k in range(st.shape[0]):
+        if _contains(T, st[k] >> 2, b):
+            dm += abs(mass_old[k])
+        else:
+            dm += abs(v6n[k] / 6.0 * (dsum[k] + dens[b]) * 0.25 - mass_old[k])
+    return dm
+
+
+@njit(cache=True)
+def _interp_deviation(a, b, st, T, pts, dens, v6n, q, vout):
+    """|value of a - the new mesh's interpolant at a's position|: in the new tet containing it (the
+    smallest deviation if several do, which only happens on shared faces or at coincident points),
+    else in the one it is nearest outside of."""
+    best_lo = -1e300
+    dev_out = abs(dens[a] - dens[b])
+    dev_in = -1.0
+    for k in range(st.shape[0]):
+        t = st[k] >> 2
+        if _contains(T, t, b) or v6n[k] <= 0.0:
+            continue
+        for j in range(4):
+            q[j] = T[t, j]
+        q[st[k] & 3] = b
+        _value_at(pts, dens, q, v6n[k], pts[a, 0], pts[a, 1], pts[a, 2], vout)
+        if vout[0] >= 0.0:
+            dev = abs(dens[a] - vout[1])
+            if dev_in < 0.0 or dev < dev_in:
+                dev_in = dev
+        else:
+            dev = abs(dens[a] - vout[1])
+            if vout[0] > best_lo or (vout[0] == best_lo and dev < dev_out):
+                best_lo = vout[0]
+                dev_out = dev
+    return dev_in if dev_in >= 0.0 else dev_out
+
+
+@njit(cache=True)
+def _boundary_ok(a, b, bf, n_old, area_old, pts, area_new, n_new):
+    """Legality on the boundary: no face of a's that survives turns by 90 degrees or more (the
+    paper's negative area). Fills ``area_new`` (-1 for the faces that collapse)."""
+    for f in range(bf.shape[0]):
+        if bf[f, 0] == b or bf[f, 1] == b or bf[f, 2] == b:
+            area_new[f] = -1.0  # collapses
+            continue
+        x0 = b if bf[f, 0] == a else bf[f, 0]
+        x1 = b if bf[f, 1] == a else bf[f, 1]
+        x2 = b if bf[f, 2] == a else bf[f, 2]
+        _tri_normal(pts, x0, x1, x2, n_new)
+        ln = np.sqrt(n_new[0] ** 2 + n_new[1] ** 2 + n_new[2] ** 2)
+        dot = n_new[0] * n_old[f, 0] + n_new[1] * n_old[f, 1] + n_new[2] * n_old[f, 2]
+        if not (dot > NORMAL_EPS * ln * 2.0 * area_old[f]):
+            return False
+        area_new[f] = 0.5 * ln
+    return True
+
+
+@njit(cache=True)
+def _swept_volume(b, bf, n_old, pts):
+    """Volume swept by a's boundary faces moving a onto b (the tet between each old face and b)."""
+    swept = 0.0
+    for f in range(bf.shape[0]):
+        if bf[f, 0] == b or bf[f, 1] == b or bf[f, 2] == b:
+            continue
+        swept += abs(n_old[f, 0] * (pts[b, 0] - pts[bf[f, 0], 0]) + n_old[f, 1] * (pts[b, 1] - pts[bf[f, 0], 1])
+                     + n_old[f, 2] * (pts[b, 2] - pts[bf[f, 0], 2])) / 6.0
+    return swept
+
+
+@njit(cache=True)
+def _area_error(a, b, bf, area_old, area_new, area_sum):
+    """The paper's geometry error: each new face against every old face sharing an edge with it,
+    weighted by the old face's share of the affected area."""
+    ge = 0.0
+    nf = bf.shape[0]
+    for f in range(nf):
+        if area_new[f] < 0.0:
+            continue
+        for g in range(nf):
+            shared = 0
+            for j in range(3):
+                w = b if bf[f, j] == a else bf[f, j]
+                if w == bf[g, 0] or w == bf[g, 1] or w == bf[g, 2]:
+                    shared += 1
+            if shared >= 2 and area_sum > 0.0:
+                ge += abs(area_new[f] - area_old[g]) * area_old[g] / area_sum
+    return ge
+
+
+@njit(cache=True)
+def _sample_error(b, st, T, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val, q):
+    """Sum of the weighted squared errors at the sample points after a -> b (``p_id``, ``p_k``
+    from :func:`_star_samples`; the other arrays are scratch)."""
+    for k in range(st.shape[0]):
+        t = st[k] >> 2
+        s_ok[k] = False
+        if not _contains(T, t, b):
+            for j in range(4):
+                q[j] = T[t, j]
+            q[st[k] & 3] = b
+            s_ok[k] = _tet_planes(pts, dens, q, s_lam[k], s_val[k])
+    se = 0.0
+    for ip in range(p_id.shape[0]):
+        p = p_id[ip]
+        f = _new_value(p, p_k[ip], pts, s_ok, s_lam, s_val, dens[b])
+        se += pw[p] * (dens[p] - f) ** 2
+    return se
+
+
+@njit(cache=True)
+def _total_error(dm_w, di, ge_w, swept_w, qe_w, se, n_col, power):
+    """The merge error from its weighted terms, per collapsed tet (to a power): the comparison
+    that matters is at equal tet counts."""
+    return (dm_w + di + ge_w + swept_w + qe_w + se) / float(n_col) ** power
+
+
+@njit(cache=True)
+def _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next):
+    """Everything about a's star that every candidate merge of a shares, and the scratch arrays of
+    one evaluation, as one tuple (see the names unpacked in :func:`_candidate_terms`)."""
+    ns = st.shape[0]
+    vol_old = np.empty(ns)
+    mass_old = np.empty(ns)
+    dsum = np.empty(ns)
+    nrm = np.empty((ns, 3))
+    off = np.empty(ns)
+    fn = np.empty(3)
+    vol_star, reach2 = _star_volumes(a, st, T, pts, dens, vol_old, mass_old, dsum, nrm, off, fn)
+    # every new tet's vertices lie within sqrt(reach2) of a, so its edges are <= 2 sqrt(reach2):
+    # a value above twice this bound is safely positive whatever the rounding
+    fast_ok = 2.0 * VOLUME_EPS * (4.0 * reach2) ** 1.5
+    bf = _boundary_faces_of(st, T, nbr) if isb[a] else np.empty((0, 3), np.int64)
+    n_old = np.empty((bf.shape[0], 3))
+    area_old = np.empty(bf.shape[0])
+    area_sum = _star_boundary(bf, pts, n_old, area_old)
+    # the sample points in a's star (only they see the interpolant change) and their squared error
+    # now; late on, stars hold many points: every stride-th one stands for stride points
+    npt = _star_sample_count(st, tp_count) if params[P_WS] > 0.0 else 0
     max_s = max(1, int(params[P_MAXS]))
     stride = (npt + max_s - 1) // max_s if npt > max_s else 1
     p_id = np.empty((npt + stride - 1) // stride, np.int64)
     p_k = np.empty(p_id.shape[0], np.int64)
+    s_ok = np.zeros(ns, np.bool_)
+    s_lam = np.empty((ns, 4, 4))
+    s_val = np.empty((ns, 4))
+    q = np.empty(4, np.int64)
     e_old = 0.0
     if npt > 0:
-        npt = 0
-        seen = 0
-        for i in range(ns):
-            t = st[i] >> 2
-            p = tp_head[t]
-            if p < 0:
-                continue
-            for j in range(4):
-                q[j] = T[t, j]
-            flat = not _tet_planes(pts, dens, q, s_lam[0], s_val[0])
-            while p >= 0:
-                if seen % stride == 0:
-                    p_id[npt] = p
-                    p_k[npt] = i
-                    if not flat:
-                        f = s_val[0, 0] * pts[p, 0] + s_val[0, 1] * pts[p, 1] + s_val[0, 2] * pts[p, 2] + s_val[0, 3]
-                        e_old += pw[p] * (dens[p] - f) ** 2
-                    npt += 1
-                seen += 1
-                p = p_next[p]
+        e_old = _star_samples(st, T, pts, dens, pw, tp_head, tp_count, p_next, stride, p_id, p_k, s_lam[0], s_val[0], q)
+    return (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
+            stride, e_old, np.empty(ns), np.empty(2), q, np.empty(3), np.empty(bf.shape[0]), s_ok, s_lam, s_val)
+
+
+@njit(cache=True)
+def _exact_terms(a, b, st, T, pts, dens, params, pw, ctx):
+    """The two terms left out of the bound: (interpolation term, sampled error term), weighted."""
+    (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
+     stride, e_old, v6n, vout, q, n_new, area_new, s_ok, s_lam, s_val) = ctx
+    di = 0.0
+    if params[P_WI] > 0.0:
+        f_dev = _interp_deviation(a, b, st, T, pts, dens, v6n, q, vout)
+        di = params[P_WI] * f_dev * f_dev * vol_star
+    se = 0.0
+    if p_id.shape[0] > 0:
+        se = _sample_error(b, st, T, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val, q)
+        se = params[P_WS] * stride * (se - e_old)
+    return di, se
+
+
+@njit(cache=True)
+def _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mark, counters, ctx, cand_out,
+                     err_out, terms_out, exact):
+    """Every geometrically legal merge a -> b (b a neighbour of a): its target in ``cand_out``,
+    its weighted mass, area, swept volume and quadric terms and collapsed-tet count in
+    ``terms_out``, and in ``err_out`` its error (``exact``) or a lower bound of it (the
+    interpolation term, >= 0, left out; the sampled error at its most negative, every point's
+    new error 0). Returns the number of candidates. Legality here covers volumes, boundary
+    orientation and the boundary-into-interior rule; the link condition is the caller's."""
+    (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
+     stride, e_old, v6n, vout, q, n_new, area_new, s_ok, s_lam, s_val) = ctx
+    se_low = params[P_WS] * stride * (0.0 - e_old) if p_id.shape[0] > 0 else 0.0
+    a_bnd = isb[a]
     stamp = _next_stamp(counters)
     mark[a] = stamp
     nc = 0
-    for i in range(ns):
+    for i in range(st.shape[0]):
         t0 = st[i] >> 2
         for j0 in range(4):
             b = T[t0, j0]
@@ -538,155 +760,99 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, m
             if pinned[b] or (a_bnd and not isb[b]):
                 continue
             counters[C_EVALS] += 1
-            ok = True
-            dm = 0.0
-            di = 0.0
-            pbx = pts[b, 0]
-            pby = pts[b, 1]
-            pbz = pts[b, 2]
-            db = dens[b]
-            n_col = 0
-            for k in range(ns):
-                t = st[k] >> 2
-                if _contains(T, t, b):
-                    dm += abs(mass_old[k])
-                    n_col += 1
-                    continue
-                v6 = off[k] - (nrm[k, 0] * pbx + nrm[k, 1] * pby + nrm[k, 2] * pbz)
-                if not v6 > fast_ok:
-                    # near the limit: decide with the exact evaluation order of signed_volumes
-                    c = st[k] & 3
-                    for j in range(4):
-                        q[j] = T[t, j]
-                    q[c] = b
-                    v6 = _orient6(pts, q[0], q[1], q[2], q[3])
-                    old = vol_old[k]
-                    if old == 0.0:
-                        good = v6 == 0.0 or v6 > VOLUME_EPS * _max_edge2(pts, q) ** 1.5
-                    else:
-                        good = v6 > VOLUME_EPS * _max_edge2(pts, q) ** 1.5 or (v6 >= old and v6 > 0.0)
-                    if not good:
-                        ok = False
-                        break
-                v6n[k] = v6
-                dm += abs(v6 / 6.0 * (dsum[k] + db) * 0.25 - mass_old[k])
-            if not ok:
+            n_col = _new_volumes(b, st, T, pts, vol_old, nrm, off, fast_ok, v6n, q)
+            if n_col < 0:
                 continue
-            if wi > 0.0:
-                # how far the new mesh's interpolant at a's position is from a's own value: in the
-                # new tet containing it (the smallest deviation if several do, which only happens on
-                # shared faces or at coincident points), else in the one it is nearest outside of
-                best_lo = -1e300
-                dev_out = abs(dens[a] - db)
-                dev_in = -1.0
-                for k in range(ns):
-                    t = st[k] >> 2
-                    if _contains(T, t, b) or v6n[k] <= 0.0:
-                        continue
-                    for j in range(4):
-                        q[j] = T[t, j]
-                    q[st[k] & 3] = b
-                    _value_at(pts, dens, q, v6n[k], pts[a, 0], pts[a, 1], pts[a, 2], vout)
-                    if vout[0] >= 0.0:
-                        dev = abs(dens[a] - vout[1])
-                        if dev_in < 0.0 or dev < dev_in:
-                            dev_in = dev
-                    else:
-                        dev = abs(dens[a] - vout[1])
-                        if vout[0] > best_lo or (vout[0] == best_lo and dev < dev_out):
-                            best_lo = vout[0]
-                            dev_out = dev
-                f_dev = dev_in if dev_in >= 0.0 else dev_out
-                di = wi * f_dev * f_dev * vol_star
-            ge = 0.0
-            swept = 0.0
-            if nf > 0:
-                for f in range(nf):
-                    if bf[f, 0] == b or bf[f, 1] == b or bf[f, 2] == b:
-                        area_new[f] = -1.0  # collapses
-                        continue
-                    # the volume between the old and the new face (the tet of the face and b)
-                    swept += abs(n_old[f, 0] * (pbx - pts[bf[f, 0], 0]) + n_old[f, 1] * (pby - pts[bf[f, 0], 1])
-                                 + n_old[f, 2] * (pbz - pts[bf[f, 0], 2])) / 6.0
-                    x0 = b if bf[f, 0] == a else bf[f, 0]
-                    x1 = b if bf[f, 1] == a else bf[f, 1]
-                    x2 = b if bf[f, 2] == a else bf[f, 2]
-                    _tri_normal(pts, x0, x1, x2, n_new)
-                    ln = np.sqrt(n_new[0] ** 2 + n_new[1] ** 2 + n_new[2] ** 2)
-                    dot = n_new[0] * n_old[f, 0] + n_new[1] * n_old[f, 1] + n_new[2] * n_old[f, 2]
-                    if not (dot > NORMAL_EPS * ln * 2.0 * area_old[f]):
-                        ok = False
-                        break
-                    area_new[f] = 0.5 * ln
-                if not ok:
-                    continue
-                # each new face against every old face sharing an edge with it, weighted by the
-                # old face's share of the affected area (the paper's geometry error)
-                for f in range(nf):
-                    if area_new[f] < 0.0:
-                        continue
-                    for g in range(nf):
-                        shared = 0
-                        for j in range(3):
-                            w = b if bf[f, j] == a else bf[f, j]
-                            if w == bf[g, 0] or w == bf[g, 1] or w == bf[g, 2]:
-                                shared += 1
-                        if shared >= 2 and area_sum > 0.0:
-                            ge += abs(area_new[f] - area_old[g]) * area_old[g] / area_sum
-            se = 0.0
-            if npt > 0:
-                for k in range(ns):
-                    t = st[k] >> 2
-                    s_ok[k] = False
-                    if not _contains(T, t, b):
-                        for j in range(4):
-                            q[j] = T[t, j]
-                        q[st[k] & 3] = b
-                        s_ok[k] = _tet_planes(pts, dens, q, s_lam[k], s_val[k])
-                for ip in range(npt):
-                    p = p_id[ip]
-                    f = _new_value(p, p_k[ip], pts, s_ok, s_lam, s_val, dens[b])
-                    se += pw[p] * (dens[p] - f) ** 2
-                se = ws * stride * (se - e_old)
+            if not _boundary_ok(a, b, bf, n_old, area_old, pts, area_new, n_new):
+                continue
+            terms_out[nc, 0] = params[P_WD] * _mass_error(b, st, T, dens, mass_old, dsum, v6n)
+            terms_out[nc, 1] = params[P_WG] * _area_error(a, b, bf, area_old, area_new, area_sum)
+            terms_out[nc, 2] = params[P_WV] * _swept_volume(b, bf, n_old, pts)
+            terms_out[nc, 3] = params[P_WQ] * (_quadric_at(quad, u4, a, b) if params[P_WQ] > 0.0 else 0.0)
+            terms_out[nc, 4] = n_col
+            di, se = _exact_terms(a, b, st, T, pts, dens, params, pw, ctx) if exact else (0.0, se_low)
+            err_out[nc] = _total_error(terms_out[nc, 0], di, terms_out[nc, 1], terms_out[nc, 2], terms_out[nc, 3],
+                                       se, n_col, params[P_NCP])
             cand_out[nc] = b
-            qe = _quadric_at(quad, u4, a, b) if wq > 0.0 else 0.0
-            # per collapsed tet (to a power): the comparison that matters is at equal tet counts
-            err_out[nc] = (wd * dm + di + wg * ge + wv * swept + wq * qe + se) / float(n_col) ** params[P_NCP]
             nc += 1
     return nc
 
 
 @njit(cache=True)
+def _candidate_exact(a, b, terms, st, T, pts, dens, params, pw, ctx):
+    """The exact error of candidate b of :func:`_candidate_terms` (``terms`` its row)."""
+    _new_volumes(b, st, T, pts, ctx[0], ctx[3], ctx[4], ctx[6], ctx[15], ctx[17])  # v6n, for the interpolant
+    di, se = _exact_terms(a, b, st, T, pts, dens, params, pw, ctx)
+    return _total_error(terms[0], di, terms[1], terms[2], terms[3], se, int(terms[4]), params[P_NCP])
+
+
+@njit(cache=True)
+def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, mark, counters, cand_out, err_out,
+                      pw, tp_head, tp_count, p_next):
+    """Error of every geometrically legal merge a -> b (b a neighbour of a): fills the outputs.
+
+    Returns the number of candidates. Legality here covers volumes, boundary orientation and the
+    boundary-into-interior rule; the link condition is checked by the caller, best first.
+    """
+    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next)
+    terms = np.empty((cand_out.shape[0], 5))
+    return _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mark, counters, ctx, cand_out,
+                            err_out, terms, True)
+
+
+@njit(cache=True)
 def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab, counters,
-              pw, tp_head, p_next):
-    """Best legal merge of a: (target, error), or (-1, 0) when a has none."""
-    st = _star(a, head, nxt, T, alive)
+              pw, tp_head, tp_count, p_next):
+    """Best legal merge of a: (target, error), or (-1, 0) when a has none.
+
+    The best is the smallest (error, target id) among the candidates that pass the link
+    condition. Branch and bound: candidates are visited by their lower bound (the cheap terms),
+    and the expensive ones (interpolation, sample points) are computed only while the bound can
+    still beat the best found so far: the same choice as computing every error, for a fraction
+    of the cost.
+    """
+    st = _star_view(a, head, nxt, T, alive)
     if st.shape[0] == 0 or pinned[a]:
         return -1, 0.0
     cap = 3 * st.shape[0] + 1
     cand = np.empty(cap, np.int64)
-    err = np.empty(cap)
-    nc = _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, mark, counters, cand, err,
-                           pw, tp_head, p_next)
+    low = np.empty(cap)
+    terms = np.empty((cap, 5))
+    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next)
+    nc = _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mark, counters, ctx, cand, low,
+                          terms, False)
     if nc == 0:
         return -1, 0.0
-    # best first, ties broken by target id, so the result does not depend on list order
-    keys = np.empty(nc)
-    for i in range(nc):
-        keys[i] = err[i]
-    done = np.zeros(nc, np.bool_)
-    for _ in range(nc):
-        best = -1
-        for i in range(nc):
-            if done[i]:
+    # by bound, ties by target id, so the result does not depend on list order
+    order = np.argsort(low[:nc], kind="mergesort")
+    best_b = -1
+    best_e = 0.0
+    i = 0
+    while i < nc:
+        # candidates of equal bound in target-id order
+        j = i + 1
+        while j < nc and low[order[j]] == low[order[i]]:
+            j += 1
+        if j - i > 1:
+            for x in range(i + 1, j):
+                y = x
+                while y > i and cand[order[y]] < cand[order[y - 1]]:
+                    order[y], order[y - 1] = order[y - 1], order[y]
+                    y -= 1
+        for x in range(i, j):
+            k = order[x]
+            b = cand[k]
+            if best_b >= 0 and (low[k] > best_e or (low[k] == best_e and b > best_b)):
+                return best_b, best_e
+            counters[C_EXACT] += 1
+            e = _candidate_exact(a, b, terms[k], st, T, pts, dens, params, pw, ctx)
+            if best_b >= 0 and (e > best_e or (e == best_e and b > best_b)):
                 continue
-            if best < 0 or keys[i] < keys[best] or (keys[i] == keys[best] and cand[i] < cand[best]):
-                best = i
-        done[best] = True
-        b = cand[best]
-        if _link_ok(a, b, st, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
-            return b, keys[best]
-    return -1, 0.0
+            if _link_ok(a, b, st, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
+                best_b = b
+                best_e = e
+        i = j
+    return best_b, best_e
 
 
 # -- a binary min-heap over (error, vertex) with a version stamp for lazy deletion ----------------
@@ -761,20 +927,6 @@ def _heap_pop(h_err, h_v, h_b, h_ver, counters):
 
 
 @njit(cache=True)
-def _push_best(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab,
-               counters, ver, h_err, h_v, h_b, h_ver, last_err, pw, tp_head, p_next):
-    ver[v] += 1
-    b, e = _evaluate(v, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab,
-                     counters, pw, tp_head, p_next)
-    if b >= 0:
-        last_err[v] = e
-        _heap_push(h_err, h_v, h_b, h_ver, counters, e, v, b, ver[v], ver)
-        return True
-    last_err[v] = -1.0
-    return False
-
-
-@njit(cache=True)
 def _apply_merge(a, b, st_a, T, alive, nbr, head, nxt):
     """Merge a into b: collapse the tets of edge ab (gluing their outer neighbours), relabel the rest."""
     for i in range(st_a.shape[0]):
@@ -812,9 +964,15 @@ def _apply_merge(a, b, st_a, T, alive, nbr, head, nxt):
 
 
 @njit(cache=True)
-def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, p_next):
-    """After merging a: a and every point listed in a's former star go to the live tet of the new
-    star that contains them (else the one they are nearest to, as :func:`_new_value`)."""
+def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next):
+    """After merging a: a and every point listed in a's former star go to the first live tet of
+    the new star (star order) that contains them, else the one they are nearest to (largest
+    smallest barycentric coordinate of :func:`_value_at`, the first of equals; as :func:`_new_value`).
+
+    Containment is decided by :func:`_value_at`'s determinants; the tet planes (four dot products
+    per point) settle it first wherever they are farther from 0 than any rounding of either could
+    reach, so the determinants only run for points within rounding of a face (or in slivers).
+    """
     cnt = 1
     for i in range(st_a.shape[0]):
         p = tp_head[st_a[i] >> 2]
@@ -832,40 +990,117 @@ def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, p_next):
             cnt += 1
             p = p_next[p]
         tp_head[t] = -1
-    vout = np.empty(2)
+        tp_count[t] = 0
+    ns = st_a.shape[0]
+    # the extent of every coordinate involved (star vertices and points): bounds the rounding
+    lo3 = np.full(3, 1e300)
+    hi3 = np.full(3, -1e300)
+    for i in range(ns):
+        t = st_a[i] >> 2
+        for j in range(4):
+            for d in range(3):
+                lo3[d] = min(lo3[d], pts[T[t, j], d])
+                hi3[d] = max(hi3[d], pts[T[t, j], d])
+    for ip in range(cnt):
+        for d in range(3):
+            lo3[d] = min(lo3[d], pts[plist[ip], d])
+            hi3[d] = max(hi3[d], pts[plist[ip], d])
+    ext3 = ((hi3[0] - lo3[0]) ** 2 + (hi3[1] - lo3[1]) ** 2 + (hi3[2] - lo3[2]) ** 2) ** 1.5
+    v6s = np.zeros(ns)
+    usable = np.zeros(ns, np.bool_)
+    margin = np.empty(ns)
+    lam = np.empty((ns, 4, 4))
+    val = np.empty((ns, 4))
     q = np.empty(4, np.int64)
+    for i in range(ns):
+        t = st_a[i] >> 2
+        if not alive[t]:
+            continue
+        for j in range(4):
+            q[j] = T[t, j]
+        v6 = _orient6(pts, q[0], q[1], q[2], q[3])
+        v6s[i] = v6
+        if v6 > 0.0:
+            usable[i] = _tet_planes(pts, dens, q, lam[i], val[i])
+            c = ext3 / v6
+            margin[i] = 1e-10 * c * (1.0 + c)
+    vout = np.empty(2)
     for ip in range(cnt):
         p = plist[ip]
+        x = pts[p, 0]
+        y = pts[p, 1]
+        z = pts[p, 2]
         best = -1
-        best_lo = -1e300
-        for i in range(st_a.shape[0]):
-            t = st_a[i] >> 2
-            if not alive[t]:
+        for i in range(ns):
+            if not usable[i]:
                 continue
+            low = 1e300
+            for j in range(4):
+                lj = lam[i, j, 0] * x + lam[i, j, 1] * y + lam[i, j, 2] * z + lam[i, j, 3]
+                if lj < low:
+                    low = lj
+            if low < -margin[i]:
+                continue
+            t = st_a[i] >> 2
+            if low > margin[i]:
+                best = t
+                break
             for j in range(4):
                 q[j] = T[t, j]
-            v6 = _orient6(pts, q[0], q[1], q[2], q[3])
-            if not v6 > 0.0:
-                continue
-            _value_at(pts, dens, q, v6, pts[p, 0], pts[p, 1], pts[p, 2], vout)
-            if vout[0] > best_lo:
-                best_lo = vout[0]
+            _value_at(pts, dens, q, v6s[i], x, y, z, vout)
+            if vout[0] >= 0.0:
                 best = t
-                if best_lo >= 0.0:
-                    break
+                break
+        if best < 0:
+            # outside every tet: the nearest, by the determinants
+            best_lo = -1e300
+            for i in range(ns):
+                t = st_a[i] >> 2
+                if not alive[t] or not v6s[i] > 0.0:
+                    continue
+                for j in range(4):
+                    q[j] = T[t, j]
+                _value_at(pts, dens, q, v6s[i], x, y, z, vout)
+                if vout[0] > best_lo:
+                    best_lo = vout[0]
+                    best = t
         if best >= 0:  # else no tet of a's star is left (or all are flat): the point is dropped
             p_next[p] = tp_head[best]
             tp_head[best] = p
+            tp_count[best] += 1
+
+
+@njit(cache=True, parallel=True)
+def _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4,
+                   marks, marks_b, marks_ab, tcount, pw, tp_head, tp_count, p_next):
+    """:func:`_evaluate` of ``todo[:n_todo]`` in parallel: every evaluation only reads the mesh
+    (each thread stamps its own mark rows), so the results cannot depend on the scheduling."""
+    for i in prange(n_todo):
+        tid = get_thread_id()
+        b, e = _evaluate(todo[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks[tid],
+                         marks_b[tid], marks_ab[tid], tcount[tid], pw, tp_head, tp_count, p_next)
+        out_b[i] = b
+        out_e[i] = e
 
 
 @njit(cache=True)
-def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab, counters,
-         ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pw, tp_head, p_next):
-    """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left."""
+def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks, marks_b, marks_ab, tcount,
+         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pw, tp_head, tp_count, p_next):
+    """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left.
+
+    ``marks*`` and ``tcount`` have one row per thread (stamps, evaluation counts); the sequential
+    steps use row 0.
+    """
     n = head.shape[0]
-    # vertices to (re-)evaluate now; evaluated at a single call site below, because every call
-    # site of _push_best inlines the whole candidate evaluation (compile time)
+    mark = marks[0]
+    mark_b = marks_b[0]
+    mark_ab = marks_ab[0]
+    tc = tcount[0]
+    # vertices to (re-)evaluate now: all of them at the start and in a sweep (in parallel), one
+    # when a lazy re-evaluation comes up
     todo = np.empty(n, np.int64)
+    out_b = np.empty(n, np.int64)
+    out_e = np.empty(n)
     n_todo = 0
     sweeping = False
     if counters[C_STARTED] == 0:
@@ -875,10 +1110,22 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         n_todo = n
     while True:
         found = False
+        if n_todo == 1:
+            out_b[0], out_e[0] = _evaluate(todo[0], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
+                                           u4, mark, mark_b, mark_ab, tc, pw, tp_head, tp_count, p_next)
+        elif n_todo > 1:
+            _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params,
+                           quad, u4, marks, marks_b, marks_ab, tcount, pw, tp_head, tp_count, p_next)
+        # pushed in todo order, as evaluated one by one
         for i in range(n_todo):
-            if _push_best(todo[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b,
-                          mark_ab, counters, ver, h_err, h_v, h_b, h_ver, last_err, pw, tp_head, p_next):
+            v = todo[i]
+            ver[v] += 1
+            if out_b[i] >= 0:
+                last_err[v] = out_e[i]
+                _heap_push(h_err, h_v, h_b, h_ver, counters, out_e[i], v, out_b[i], ver[v], ver)
                 found = True
+            else:
+                last_err[v] = -1.0
         n_todo = 0
         if sweeping and not found:
             return True
@@ -908,12 +1155,12 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         st_a = _star(a, head, nxt, T, alive)
         # a's star is unchanged since the entry was made (that would have bumped its version),
         # but b's may have changed: check the link condition again
-        if not _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
+        if not _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, tc):
             todo[0] = a
             n_todo = 1
             continue
         # the neighbourhood whose stars change: b and every vertex of a's star
-        stamp = _next_stamp(counters)
+        stamp = _next_stamp(tc)
         nb = np.empty(3 * st_a.shape[0] + 1, np.int64)
         k = 0
         for i in range(st_a.shape[0]):
@@ -924,11 +1171,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
                     mark[w] = stamp
                     nb[k] = w
                     k += 1
-        _apply_merge(a, b, st_a, T, alive, nbr, head, nxt)
-        if params[P_WS] > 0.0:
-            _reassign_points(a, st_a, T, alive, pts, dens, tp_head, p_next)
-        for j in range(quad.shape[1]):
-            quad[b, j] += quad[a, j]
+        _merge(a, b, st_a, nb[:k], T, alive, nbr, head, nxt, pts, dens, params, quad, tp_head, tp_count, p_next)
         parent[a] = b
         rank[a] = counters[C_MERGES]
         counters[C_MERGES] += 1
@@ -938,6 +1181,155 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
             if parent[w] == w and not pinned[w]:
                 ver[w] += 1
                 _heap_push(h_err, h_v, h_b, h_ver, counters, max(e, last_err[w]), w, -1, ver[w], ver)
+
+
+@njit(cache=True)
+def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, tp_head, tp_count, p_next):
+    """Everything a merge a -> b changes: the tets, the lists of the vertices around it (``nb``:
+    the vertices of a's star but a), the sample points and b's quadric."""
+    _apply_merge(a, b, st_a, T, alive, nbr, head, nxt)
+    for i in range(nb.shape[0]):
+        _tidy(nb[i], head, nxt, T, alive)
+    if params[P_WS] > 0.0:
+        _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next)
+    for j in range(quad.shape[1]):
+        quad[b, j] += quad[a, j]
+
+
+# -- set-up: incidence, adjacency, vertex topology, sample points, quadrics (O(1) memory per tet
+# beyond the state itself) -------------------------------------------------------------------------
+@njit(cache=True)
+def _incidence(T, n):
+    """(head, nxt): every vertex's list of slots 4*t + c in increasing order."""
+    head = np.full(n, -1, np.int32)
+    nxt = np.full(4 * T.shape[0], -1, np.int32)
+    for s in range(4 * T.shape[0] - 1, -1, -1):
+        v = T[s >> 2, s & 3]
+        nxt[s] = head[v]
+        head[v] = s
+    return head, nxt
+
+
+@njit(cache=True)
+def _face_neighbours(T, head, nxt):
+    """nbr[t, k] = the tet across face k of t (the face opposite corner k), -1 on the boundary
+    (found in the incidence list of the face's smallest vertex)."""
+    m = T.shape[0]
+    nbr = np.full((m, 4), -1, np.int32)
+    for t in range(m):
+        for k in range(4):
+            if nbr[t, k] >= 0:
+                continue
+            x = T[t, _TET_FACES[k, 0]]
+            y = T[t, _TET_FACES[k, 1]]
+            z = T[t, _TET_FACES[k, 2]]
+            s = head[min(x, min(y, z))]
+            while s >= 0:
+                u = s >> 2
+                if u != t and _contains(T, u, x) and _contains(T, u, y) and _contains(T, u, z):
+                    nbr[t, k] = u
+                    for j in range(4):
+                        w = T[u, j]
+                        if w != x and w != y and w != z:
+                            nbr[u, j] = t
+                    break
+                s = nxt[s]
+    return nbr
+
+
+@njit(cache=True)
+def _vertex_topology(T, nbr, head, nxt, n):
+    """(is_boundary, pinned): boundary vertices, and vertices whose neighbourhood is not a manifold.
+
+    A vertex is left alone when its link is not a sphere (interior) or a disk (boundary), judged by
+    the link's Euler characteristic, or when it lies on a boundary edge not shared by exactly two
+    boundary faces (edge- or vertex-touching parts). The link condition keeps every other vertex
+    manifold, so this is decided once.
+    """
+    isb = np.zeros(n, np.bool_)
+    pinned = np.zeros(n, np.bool_)
+    for t in range(T.shape[0]):
+        for k in range(4):
+            if nbr[t, k] < 0:
+                for j in range(3):
+                    isb[T[t, _TET_FACES[k, j]]] = True
+    seen = np.full(n, -1, np.int64)
+    n_bf = np.zeros(n, np.int32)  # boundary faces at v containing the neighbour
+    for v in range(n):
+        if head[v] < 0:
+            continue
+        n_tets = 0
+        n_faces = 0
+        n_edges = 0
+        s = head[v]
+        while s >= 0:
+            t = s >> 2
+            c = s & 3
+            n_tets += 1
+            for j in range(4):
+                w = T[t, j]
+                if w != v and seen[w] != v:
+                    seen[w] = v
+                    n_bf[w] = 0
+                    n_edges += 1
+            for f in range(4):
+                if f != c and nbr[t, f] < 0:
+                    n_faces += 1
+                    for j in range(3):
+                        w = T[t, _TET_FACES[f, j]]
+                        if w != v:
+                            n_bf[w] += 1
+            s = nxt[s]
+        # Euler characteristic of the link: vertices - edges + triangles (every face at v is in two
+        # of its tets, or in one when it is a boundary face)
+        chi = n_edges - (3 * n_tets + n_faces) // 2 + n_tets
+        if chi != (1 if isb[v] else 2):
+            pinned[v] = True
+        if isb[v]:
+            # boundary edges not shared by exactly two boundary faces
+            s = head[v]
+            while s >= 0:
+                t = s >> 2
+                for j in range(4):
+                    w = T[t, j]
+                    if w != v and n_bf[w] != 0 and n_bf[w] != 2:
+                        pinned[v] = True
+                        pinned[w] = True
+                s = nxt[s]
+    return isb, pinned
+
+
+@njit(cache=True)
+def _sample_points(pts, dens, T, tet_w, centroid_weight):
+    """(pw, points, values) of the sample points: the n vertices (weight a quarter of their tets'
+    volume fractions), then every tet's centroid (its volume fraction x ``centroid_weight``)."""
+    n = pts.shape[0]
+    m = T.shape[0]
+    pw = np.zeros(n + m)
+    p = np.empty((n + m, 3))
+    d = np.empty(n + m)
+    p[:n] = pts
+    d[:n] = dens
+    for t in range(m):
+        for c in range(4):
+            pw[T[t, c]] += tet_w[t] / 4.0
+    for t in range(m):
+        pw[n + t] = tet_w[t] * centroid_weight
+        for k in range(3):
+            p[n + t, k] = (((pts[T[t, 0], k] + pts[T[t, 1], k]) + pts[T[t, 2], k]) + pts[T[t, 3], k]) / 4.0
+        d[n + t] = (((dens[T[t, 0]] + dens[T[t, 1]]) + dens[T[t, 2]]) + dens[T[t, 3]]) / 4.0
+    return pw, p, d
+
+
+@njit(cache=True)
+def _accumulate_quadrics(T, q, out):
+    """out[v] += q[t] for every corner v of every tet t, corner by corner (the order of a bincount
+    over the corner-major index list)."""
+    for c in range(4):
+        for t in range(T.shape[0]):
+            v = T[t, c]
+            for j in range(q.shape[1]):
+                out[v, j] += q[t, j]
 
 
 @njit(cache=True)

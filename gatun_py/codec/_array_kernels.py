@@ -1,0 +1,115 @@
+"""Numba kernels of the point-array coder (:mod:`gatun_py.codec.arrays`).
+
+Values arrive as *reduced ordered integers* (int64): the order-preserving integer image of a float's
+bit pattern (or an integer's value), shifted right by the component's common trailing zero bits.
+Vertex ``k`` is predicted from already known vertices: its refs ``(a, b, c, apex)`` (decode ids
+``< k`` or -1) or the vertex before it, or an external prediction (the float32 rounding the geometry
+section already holds). The residual ``value - prediction`` is taken modulo 2**64 and zigzagged, so
+any prediction, even a wrapped one, gives back the value exactly. Encoder and decoder compute
+predictions with the same function, in integers only (no floating point anywhere).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+PRED_ZERO = 0  # raw values
+PRED_PREV = 1  # the vertex before in decode order
+PRED_FIRST = 2  # the first ref (a), else the previous vertex
+PRED_MEAN = 3  # mean of the face refs (a, b, c) that exist
+PRED_REFLECT = 4  # 2 * mean(face) - apex: the apex reflected through the face (linear field)
+PRED_EXTERNAL = 5  # a given prediction (the float32 rounding of the value)
+N_PREDICTORS = 6
+
+OK = 0
+BAD_REF = 1
+
+
+@njit(cache=True, inline="always")
+def _mean_floor(s_q, s_r, f):
+    # floor((sum of f values) / f) from per-value quotients and remainders by f (no overflow)
+    return s_q + s_r // f
+
+
+@njit(cache=True)
+def _predict(o, refs, row, k, kind, ext, lo, hi):
+    """Prediction of ``o[k]`` (int64) from earlier entries of ``o``; ``ext`` for PRED_EXTERNAL.
+
+    ``refs[row]`` and ``ext[row]`` belong to vertex k (a decoder passes one batch at a time).
+    """
+    if kind == PRED_ZERO:
+        return np.int64(0)
+    if kind == PRED_EXTERNAL:
+        return ext[row]
+    prev = o[k - 1] if k > 0 else np.int64(0)
+    if kind == PRED_PREV:
+        return prev
+    a = refs[row, 0]
+    if kind == PRED_FIRST:
+        return o[a] if a >= 0 else prev
+    f = 0
+    s_q = np.int64(0)
+    s_r = np.int64(0)
+    for j in range(3):
+        if refs[row, j] >= 0:
+            f += 1
+    if f == 0:
+        return prev
+    for j in range(3):
+        r = refs[row, j]
+        if r >= 0:
+            v = o[r]
+            # Python-style floor division and modulo: q * f + m == v exactly
+            s_q += v // f
+            s_r += v % f
+    mean = _mean_floor(s_q, s_r, f)
+    d = refs[row, 3]
+    if kind == PRED_MEAN or d < 0 or f < 2:
+        return mean
+    p = mean + mean - o[d]  # may wrap: only a worse prediction, still exact after the residual
+    if p < lo:
+        p = lo
+    elif p > hi:
+        p = hi
+    return p
+
+
+@njit(cache=True)
+def residuals(o, refs, kind, ext, lo, hi):
+    """Zigzagged residuals (as int64 bit patterns of uint64) of every vertex for one predictor."""
+    n = o.shape[0]
+    out = np.empty(n, np.int64)
+    for k in range(n):
+        r = o[k] - _predict(o, refs, k, k, kind, ext, lo, hi)
+        out[k] = (r << 1) ^ (r >> 63)
+    return out
+
+
+@njit(cache=True)
+def bit_cost(zz):
+    """Sum of the bit lengths of the zigzagged residuals: the encoder's estimate of a stream's cost."""
+    total = 0
+    for k in range(zz.shape[0]):
+        u = np.uint64(zz[k])
+        b = 0
+        while u:
+            u >>= np.uint64(1)
+            b += 1
+        total += b
+    return total
+
+
+@njit(cache=True)
+def reconstruct(o, zz, refs, start, stop, kind, ext, lo, hi):
+    """Decode ``o[start:stop]`` from residuals; every ref is checked (``< k``, ``>= -1``)."""
+    for k in range(start, stop):
+        for j in range(4):
+            r = refs[k - start, j]
+            if r < -1 or r >= k:
+                return BAD_REF
+    for k in range(start, stop):
+        z = zz[k]
+        r = ((z >> 1) & np.int64(0x7FFFFFFFFFFFFFFF)) ^ -(z & 1)
+        o[k] = _predict(o, refs, k - start, k, kind, ext, lo, hi) + r
+    return OK

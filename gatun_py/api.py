@@ -46,8 +46,13 @@ MAX_IMAGE_SIDE = 8192
 
 # -- reading the source --------------------------------------------------------------------------
 
-def _as_mesh(source, read_options: dict, log) -> TetMesh:
-    """A TetMesh from a path, a TetMesh or a meshio.Mesh (notes of the reader go to ``log``)."""
+def _as_mesh(source, read_options: dict, log, *, storing: bool = False, drop_cell_data: bool = False) -> TetMesh:
+    """A TetMesh from a path, a TetMesh or a meshio.Mesh (notes of the reader go to ``log``).
+
+    ``storing``: the mesh is about to be compressed, so cell arrays not averaged to the points are
+    refused unless ``drop_cell_data`` (a ``.tetc`` file does not hold cell data; nothing is dropped
+    without a word).
+    """
     if isinstance(source, TetMesh):
         return source
     if type(source).__name__ == "Mesh" and hasattr(source, "cells") and hasattr(source, "points"):
@@ -59,6 +64,12 @@ def _as_mesh(source, read_options: dict, log) -> TetMesh:
         raise OptionError(f"cannot read a mesh from a {type(source).__name__}: give a path, a TetMesh or a meshio.Mesh")
     for note in report.notes:
         log(f"note: {note}")
+    if storing and report.cell_arrays:
+        names = ", ".join(map(repr, report.cell_arrays))
+        if not drop_cell_data:
+            raise OptionError(f"the mesh has cell data ({names}), which a .tetc file does not store: average it to "
+                              "the points (cell-to-point) or drop it explicitly (drop-cell-data)")
+        log(f"note: cell data dropped on request: {names}")
     return mesh
 
 
@@ -70,7 +81,8 @@ def _quiet(_msg: str) -> None:
 
 def compress(source, output, *, levels: int | None = None, mesh_only: bool = False, force: bool = False,
              w_density: float = 1.0, w_geometry: float = 1.0, scalar: str | None = None, q_file=None,
-             q_var: str = "density", cell_to_point: bool = False, progress=None, log=None) -> "TetcFile":
+             q_var: str = "density", cell_to_point: bool = False, drop_cell_data: bool = False, progress=None,
+             log=None) -> "TetcFile":
     """Compress a mesh losslessly into a ``.tetc`` file, with its merge forest and levels.
 
     Parameters
@@ -88,7 +100,11 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     w_density, w_geometry : float
         Decimation weights of the mass error and the boundary geometry error (>= 0).
     scalar, q_file, q_var, cell_to_point
-        How to read ``source`` (see :func:`gatun_py.read_mesh`).
+        How to read ``source`` (see :func:`gatun_py.read_mesh`). Every point array is stored, in its
+        dtype; ``scalar`` is the default one (rendered and decimated).
+    drop_cell_data : bool
+        Compress a mesh whose cell arrays were not averaged to the points (``cell_to_point``),
+        leaving them out; without it such a mesh is refused.
     progress : callable, optional
         ``progress(done, total)``: vertices the decimation has processed so far, of ``total``.
     log : callable, optional
@@ -118,7 +134,8 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     if isinstance(source, (str, os.PathLike)) and _same_file(source, output):
         raise OptionError(f"the output {output} is the input file")
     t0 = time.perf_counter()
-    mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point), log)
+    mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point), log,
+                    storing=True, drop_cell_data=drop_cell_data)
     name = Path(source).name if isinstance(source, (str, os.PathLike)) else ""
     log(f"read {name or 'mesh'}: {mesh.n_points} points, {mesh.n_tets} tets")
     if mesh_only:
@@ -284,6 +301,11 @@ class TetcFile:
     @property
     def scalar_name(self) -> str:
         return self.reader.scalar_name
+
+    @property
+    def arrays(self) -> list[tuple[str, str, int]]:
+        """``(name, dtype, components)`` of every stored point array (the default scalar among them)."""
+        return [(name, dt.name, k) for name, dt, k in self.reader.arrays]
 
     @property
     def max_ratio(self) -> float:

@@ -84,7 +84,12 @@ class TetMesh:
             if den.shape[0] != n:
                 raise ValueError(f"density has {den.shape[0]} values for {n} points")
             data = {name: den, **data}
-        tets = np.ascontiguousarray(self.tets, dtype=np.int32).reshape(-1, 4)
+        raw_tets = np.asarray(self.tets)
+        if raw_tets.size and raw_tets.dtype.kind not in "iu":
+            raise ValueError(f"tet vertex ids must be integers, got {raw_tets.dtype}")
+        if raw_tets.size and raw_tets.dtype.itemsize > 4 and (raw_tets.min() < -1 or raw_tets.max() >= 2**31 - 1):
+            raise ValueError("tet vertex ids do not fit in 32 bits")
+        tets = np.ascontiguousarray(raw_tets, dtype=np.int32).reshape(-1, 4)
         for a in (pts, den, tets, *data.values()):
             a.flags.writeable = False
         object.__setattr__(self, "points", pts)
@@ -212,6 +217,8 @@ def _point_array(name, arr, n: int) -> np.ndarray:
         raise ValueError(f"point array {name!r}: unsupported dtype {a.dtype} (floats and integers only)")
     if a.dtype.kind == "b":
         a = a.astype(np.uint8)
+    if not a.dtype.isnative:  # legacy VTK is big endian: same values, native bytes
+        a = a.astype(a.dtype.newbyteorder("="))
     if a.ndim == 2 and a.shape[1] == 1:
         a = a.reshape(-1)
     if a.ndim not in (1, 2) or a.shape[0] != n or (a.ndim == 2 and a.shape[1] == 0):

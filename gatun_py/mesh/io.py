@@ -237,8 +237,8 @@ def mesh_from_meshio(m, *, scalar: str | None = None, cell_to_point: bool = Fals
 
 def _coordinates(points: np.ndarray, notes: list) -> np.ndarray:
     """float32 and float64 coordinates as they are; other dtypes in the float that holds them."""
-    if points.dtype in (np.float32, np.float64):
-        return points
+    if points.dtype.kind == "f" and points.dtype.itemsize in (4, 8):
+        return points.astype(points.dtype.newbyteorder("="))  # legacy VTK is big endian
     if points.dtype == np.float16:
         return points.astype(np.float32)
     out = points.astype(np.float64)

@@ -61,7 +61,7 @@ class TetMesh:
 
     def __post_init__(self):
         raw = np.asarray(self.points)
-        pdtype = np.float64 if raw.dtype == np.float64 else np.float32
+        pdtype = np.float64 if raw.dtype.kind == "f" and raw.dtype.itemsize == 8 else np.float32
         pts = np.ascontiguousarray(raw, dtype=pdtype).reshape(-1, 3)
         n = pts.shape[0]
         data = {}

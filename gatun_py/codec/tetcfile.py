@@ -250,7 +250,16 @@ class TetcReader:
             _int(lv, "boundary_faces")
             _int(lv, "boundary_vertices", 0, n)
             _int(lv, "referenced_points", 0, n)
+            if "merges_before" in lv:
+                _int(lv, "merges_before")
+            ratio = lv.get("ratio", 0.0)
+            if not isinstance(ratio, (int, float)) or isinstance(ratio, bool) or not 0.0 <= ratio <= 1.0:
+                raise CorruptFileError("corrupt metadata: bad level ratio")
             self.levels.append(lv)
+        _int(self.meta, "points")
+        _int(self.meta, "tets")
+        if not isinstance(self.meta.get("scalar", ""), str):
+            raise CorruptFileError("corrupt metadata: bad scalar name")
         self.points_dtype, self.arrays = self._parse_arrays()
 
     def _parse_arrays(self):
@@ -431,7 +440,8 @@ class TetcReader:
             raise OptionError(str(e)) from None
         dec = self._array_decoder(level, j, n)
         for batch, exact in self._batches(level, batch_tets, {scalar: dec}):
-            batch.density = scalar_of(exact, scalar, component).astype(np.float32)
+            with np.errstate(over="ignore"):  # beyond float32: inf, like any float32 rounding
+                batch.density = scalar_of(exact, scalar, component).astype(np.float32)
             yield batch
 
     def decode_mesh(self, level: int = 0):

@@ -243,7 +243,8 @@ def scalar_of(point_data: dict, name: str, component=None) -> np.ndarray:
     if component is None:
         raise ValueError(f"{name!r} has {k} components: choose one (0..{k - 1}) or 'magnitude'")
     if component == "magnitude":
-        return np.sqrt(np.sum(np.square(a.astype(np.float64)), axis=1))
+        with np.errstate(over="ignore", invalid="ignore"):  # huge components: inf, as the values say
+            return np.sqrt(np.sum(np.square(a.astype(np.float64)), axis=1))
     if isinstance(component, (int, np.integer)) and not isinstance(component, bool) and 0 <= component < k:
         return a[:, int(component)].astype(np.float64)
     raise ValueError(f"{name!r} has components 0..{k - 1} and 'magnitude', not {component!r}")

@@ -170,14 +170,14 @@ def encode_array(values, refs, *, external=None) -> bytes:
     dt = np.dtype(dtype_name(values.dtype)).newbyteorder("<")
     values = np.ascontiguousarray(values, dtype=dt)
     n = values.shape[0]
-    cols = values.reshape(n, -1)
-    k = cols.shape[1]
+    k = 1 if values.ndim == 1 else (values.shape[1] if values.ndim == 2 else MAX_COMPONENTS + 1)
+    cols = values.reshape(n, k) if k <= MAX_COMPONENTS else values
     if values.ndim > 2 or k > MAX_COMPONENTS or (values.ndim == 2 and k == 0):
         raise ValueError(f"point arrays are (n,) or (n, k) with k <= {MAX_COMPONENTS}, got shape {values.shape}")
     refs = np.ascontiguousarray(refs, dtype=np.int32)
     if refs.shape != (n, 4):
         raise ValueError(f"refs must have shape ({n}, 4), got {refs.shape}")
-    ext_cols = None if external is None else np.asarray(external).reshape(n, -1)
+    ext_cols = None if external is None else np.asarray(external).reshape(n, k)
     header = [_HEADER.pack(FORMAT_VERSION, DTYPES.index(dtype_name(dt)), k, n)]
     planes = []
     for c in range(k):
@@ -286,7 +286,7 @@ class ArrayDecoder:
         start, stop = self.n_decoded, self.n_decoded + len(refs)
         if refs.ndim != 2 or refs.shape[1] != 4 or stop > self.n_points:
             raise CorruptFileError("corrupt array section: more vertices than announced")
-        ext_cols = None if external is None else np.asarray(external).reshape(len(refs), -1)
+        ext_cols = None if external is None else np.asarray(external).reshape(len(refs), self.components)
         for c in range(self.components):
             lo, hi = self._bounds[c]
             kind = self.kinds[c]

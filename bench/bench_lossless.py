@@ -198,7 +198,7 @@ def main() -> int:
                measure("gmsh flange float64 nodes", flange64())]
     for r in results:
         print(json.dumps({k: v for k, v in r.items() if k not in ("sections", "arrays")}))
-    hostile = hostile_figures()
+    hostile = hostile_figures() if "--no-hostile" not in sys.argv else None
     rows = []
     for r in results:
         best = r["coords_peers"][r["coords_best"]]

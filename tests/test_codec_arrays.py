@@ -13,7 +13,8 @@ import gatun_py
 from conftest import load_sample
 from gatun_py.codec import LevelPayload, TetcReader, encode_tetc
 from gatun_py.codec import _array_kernels as K
-from gatun_py.codec.arrays import DTYPES, ArrayDecoder, encode_array
+from gatun_py.codec.arrays import DTYPES, ArrayDecoder, _range_code, encode_array
+from gatun_py.codec.rangecoder import check_decoder, dec_init, dec_state, new_model
 from gatun_py.errors import CorruptFileError, MeshError, OptionError
 from gatun_py.mesh import TetMesh
 from gatun_py.mesh.validate import validate_tets
@@ -70,10 +71,14 @@ def test_every_predictor_round_trips():
     lo, hi = -(1 << 63), (1 << 63) - 1
     for kind in range(K.N_PREDICTORS):
         e = ext if kind == K.PRED_EXTERNAL else o[:0]
-        zz = K.residuals(o, refs, kind, e, lo, hi)
+        stream = np.frombuffer(_range_code(K.residuals(o, refs, kind, e, lo, hi), refs), np.uint8)
+        st = dec_state()
+        dec_init(st, stream)
         back = np.zeros(n, np.int64)
-        assert K.reconstruct(back, zz, refs, 0, n, kind, e, lo, hi) == K.OK
-        assert np.array_equal(back, o), kind
+        status = K.decode_component(st, stream, new_model(K.MODEL_SIZE), np.zeros(n, np.uint8), back, refs, 0, n,
+                                    kind, e, lo, hi)
+        assert status == K.OK and np.array_equal(back, o), kind
+        check_decoder(st, stream)
 
 
 def test_float32_values_in_float64_cost_nothing_extra():

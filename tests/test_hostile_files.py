@@ -287,7 +287,8 @@ def _array_sections(sections):
 
 
 @pytest.mark.parametrize("field,value", [("n", 2**32 - 1), ("k", 0), ("k", 65535), ("code", 99),
-                                         ("width", 0), ("width", 9), ("shift", 64), ("kind", 200)])
+                                         ("coder", 7), ("length", 2**32 - 1), ("length", 0), ("shift", 64),
+                                         ("kind", 200)])
 def test_crafted_array_section_headers(worker, files, field, value):
     meta, sections = _split(files[1])
     for i in _array_sections(sections):
@@ -299,23 +300,28 @@ def test_crafted_array_section_headers(worker, files, field, value):
             struct.pack_into("<H", p, 2, value)
         elif field == "n":
             struct.pack_into("<I", p, 4, value)
+        elif field == "length":
+            struct.pack_into("<I", p, 8 + 3, value)
         else:
-            p[8 + {"kind": 0, "shift": 1, "width": 2}[field]] = value
+            p[8 + {"kind": 0, "shift": 1, "coder": 2}[field]] = value
         crafted = list(sections)
         crafted[i] = (name, bytes(p))
         assert check(worker, _build(meta, crafted), f"{name} {field}={value}")[0] == "rejected"
 
 
 def test_array_section_lzma_bomb(worker, files):
-    """An array section whose LZMA stream expands far past what its header announces."""
+    """An array section (planes coder) whose LZMA stream expands far past what its header announces."""
     import lzma
 
     meta, sections = _split(files[1])
     i = _array_sections(sections)[0]
     name, payload = sections[i]
-    head = 8 + 3 * struct.unpack_from("<H", payload, 2)[0]
+    bomb = bytes([8]) + lzma.compress(bytes(200 << 20), preset=1)
+    head = bytearray(payload[:8])
+    struct.pack_into("<H", head, 2, 1)  # one component: the bomb
+    head += struct.pack("<BBBI", 0, 0, 1, len(bomb))
     crafted = list(sections)
-    crafted[i] = (name, payload[:head] + lzma.compress(bytes(200 << 20), preset=1))
+    crafted[i] = (name, bytes(head) + bomb)
     assert check(worker, _build(meta, crafted))[0] == "rejected"
 
 

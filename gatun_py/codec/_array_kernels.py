@@ -14,6 +14,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .rangecoder import dec_bit, dec_failed, dec_raw, dec_sym, enc_bit, enc_finish, enc_raw, enc_sym
+
 PRED_ZERO = 0  # raw values
 PRED_PREV = 1  # the vertex before in decode order
 PRED_FIRST = 2  # the first ref (a), else the previous vertex
@@ -24,6 +26,7 @@ N_PREDICTORS = 6
 
 OK = 0
 BAD_REF = 1
+BAD_STREAM = 2
 
 
 @njit(cache=True, inline="always")
@@ -86,23 +89,100 @@ def residuals(o, refs, kind, ext, lo, hi):
     return out
 
 
+# -- entropy coding of the residuals: adaptive range coding ------------------------------------
+# A zigzagged residual z is coded as its bit length L (0..64, a 7-bit tree in a context: the bit
+# length of the residual of the vertex's first ref, else of the previous vertex), then the MANT
+# bits below its leading one modelled (context L), then the rest raw.
+LEN_BITS = 7
+N_LEN_CONTEXTS = 65
+MANT_BITS = 3
+_MANT_BASE = N_LEN_CONTEXTS * (1 << LEN_BITS)
+MODEL_SIZE = _MANT_BASE + 65 * (1 << MANT_BITS)
+
+
+@njit(cache=True, inline="always")
+def _bit_length(z):
+    u = np.uint64(z)
+    b = 0
+    while u:
+        u >>= np.uint64(1)
+        b += 1
+    return b
+
+
+@njit(cache=True, inline="always")
+def _context(lens, refs, row, k):
+    a = refs[row, 0]
+    if a >= 0:
+        return np.int64(lens[a])
+    return np.int64(lens[k - 1]) if k > 0 else np.int64(0)
+
+
 @njit(cache=True)
-def bit_cost(zz):
-    """Sum of the bit lengths of the zigzagged residuals: the encoder's estimate of a stream's cost."""
-    total = 0
+def encode_residuals(st, out, zz, refs, probs, lens):
+    """Range-code the zigzagged residuals ``zz`` of one component (refs give the contexts)."""
     for k in range(zz.shape[0]):
-        u = np.uint64(zz[k])
-        b = 0
-        while u:
-            u >>= np.uint64(1)
-            b += 1
-        total += b
-    return total
+        z = zz[k]
+        nb = _bit_length(z)
+        lens[k] = nb
+        enc_sym(st, out, probs, _context(lens, refs, k, k) * (1 << LEN_BITS), LEN_BITS, nb)
+        if nb > 1:
+            mbits = nb - 1
+            nmod = mbits if mbits < MANT_BITS else MANT_BITS
+            base = _MANT_BASE + nb * (1 << MANT_BITS)
+            node = 1
+            for j in range(nmod):
+                b = (z >> (mbits - 1 - j)) & 1
+                enc_bit(st, out, probs, base + node, b)
+                node = (node << 1) | b
+            rest = mbits - nmod
+            if rest > 32:  # raw bits go 32 at a time
+                enc_raw(st, out, z >> 32, rest - 32)
+                enc_raw(st, out, z & 0xFFFFFFFF, 32)
+            elif rest > 0:
+                enc_raw(st, out, z, rest)
+    return enc_finish(st, out)
+
+
+@njit(cache=True, _nrt=False)
+def decode_component(st, data, probs, lens, o, refs, start, stop, kind, ext, lo, hi):
+    """Decode the residuals of vertices ``start:stop`` and rebuild their values ``o`` (refs checked)."""
+    for k in range(start, stop):
+        for j in range(4):
+            r = refs[k - start, j]
+            if r < -1 or r >= k:
+                return BAD_REF
+    for k in range(start, stop):
+        row = k - start
+        nb = dec_sym(st, data, probs, _context(lens, refs, row, k) * (1 << LEN_BITS), LEN_BITS)
+        if nb > 64 or dec_failed(st):
+            return BAD_STREAM
+        lens[k] = nb
+        z = np.int64(0)
+        if nb >= 1:
+            z = np.int64(1)
+            mbits = nb - 1
+            nmod = mbits if mbits < MANT_BITS else MANT_BITS
+            base = _MANT_BASE + nb * (1 << MANT_BITS)
+            node = 1
+            for j in range(nmod):
+                b = dec_bit(st, data, probs, base + node)
+                node = (node << 1) | b
+                z = (z << 1) | b
+            rest = mbits - nmod
+            if rest > 32:
+                high = dec_raw(st, data, rest - 32)
+                z = (z << rest) | (np.int64(high) << 32) | dec_raw(st, data, 32)
+            elif rest > 0:
+                z = (z << rest) | dec_raw(st, data, rest)
+        r = ((z >> 1) & np.int64(0x7FFFFFFFFFFFFFFF)) ^ -(z & 1)
+        o[k] = _predict(o, refs, row, k, kind, ext, lo, hi) + r
+    return OK
 
 
 @njit(cache=True)
 def reconstruct(o, zz, refs, start, stop, kind, ext, lo, hi):
-    """Decode ``o[start:stop]`` from residuals; every ref is checked (``< k``, ``>= -1``)."""
+    """Rebuild ``o[start:stop]`` from already decoded residuals ``zz`` (the LZMA coder); refs checked."""
     for k in range(start, stop):
         for j in range(4):
             r = refs[k - start, j]

@@ -11,8 +11,12 @@ Any (n,) or (n, k) array of float32, float64 or integers, in decode order, comes
    connectivity coder put around it (the refs ``(a, b, c, apex)`` of :mod:`.geometry`: the face the
    vertex closes and the apex behind it), from the previous vertex, or from the float32 rounding
    that the geometry section already holds (coordinates, the default scalar);
-3. the residual modulo 2**64 is zigzagged and cut into byte planes (all low bytes, ..., up to the
-   component's widest residual), and all planes of all components go into one LZMA stream.
+3. the residual modulo 2**64 is zigzagged and coded by one of two coders, whichever is smaller:
+   *range*: range coded (:mod:`.rangecoder`), its bit length in a context (the bit length of the
+   first ref's residual), three modelled bits below the leading one, the rest raw; *planes*: a
+   width byte w, then an xz (LZMA) stream of the w low bytes of every residual, plane by plane
+   (it wins on repeated patterns). The encoder range-codes every predictor, keeps the smallest,
+   and tries the planes on that predictor's residuals.
 
 Layout (little endian)::
 
@@ -20,11 +24,11 @@ Layout (little endian)::
     u8  dtype code (DTYPES)
     u16 components k
     u32 n
-    k x (u8 predictor, u8 shift, u8 width in bytes)
-    ... LZMA (xz) stream of n * sum(width) bytes
+    k x (u8 predictor, u8 shift, u8 coder (0 range, 1 planes), u32 stream length)
+    ... the k streams
 
-The decoder checks the header against what the metadata expects, decompresses at most the
-announced number of bytes (``max_length``), and checks every ref in its kernel.
+The decoder checks the header against what the metadata expects and the stream lengths against the
+block's size, checks every ref in its kernel, and requires each stream to be consumed exactly.
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ import numpy as np
 
 from ..errors import CorruptFileError
 from . import _array_kernels as K
+from .rangecoder import check_decoder, dec_init, dec_state, enc_state, new_model
 
 __all__ = ["DTYPES", "encode_array", "ArrayDecoder", "dtype_name", "check_dtype"]
 
@@ -43,9 +48,10 @@ FORMAT_VERSION = 1
 DTYPES = ["float32", "float64", "int8", "int16", "int32", "int64", "uint8", "uint16", "uint32", "uint64"]
 MAX_COMPONENTS = 1024
 _HEADER = struct.Struct("<BBHI")
-_COMPONENT = struct.Struct("<BBB")
-# LZMA's best ratio on real residual planes is far below this; a stream that claims more output
-# per input byte is a bomb (checked before decompressing)
+_COMPONENT = struct.Struct("<BBBI")
+CODER_RANGE, CODER_PLANES = 0, 1
+# LZMA's best ratio on real residual planes is far below this; a planes stream that claims more
+# output per input byte is a bomb (checked before decompressing)
 _MAX_EXPANSION = 8000
 
 
@@ -179,7 +185,7 @@ def encode_array(values, refs, *, external=None) -> bytes:
         raise ValueError(f"refs must have shape ({n}, 4), got {refs.shape}")
     ext_cols = None if external is None else np.asarray(external).reshape(n, k)
     header = [_HEADER.pack(FORMAT_VERSION, DTYPES.index(dtype_name(dt)), k, n)]
-    planes = []
+    streams = []
     for c in range(k):
         raw = _to_int64(cols[:, c])
         shift = _shift_of(raw, dt)
@@ -191,17 +197,51 @@ def encode_array(values, refs, *, external=None) -> bytes:
         best = None
         for kind in kinds:
             zz = K.residuals(o, refs, kind, ext if kind == K.PRED_EXTERNAL else o[:0], lo, hi)
-            cost = K.bit_cost(zz)
-            if best is None or cost < best[0]:
-                best = (cost, kind, zz)
-        _, kind, zz = best
-        top = int(zz.view(np.uint64).max()) if n else 0
-        width = max(1, (top.bit_length() + 7) // 8)
-        header.append(_COMPONENT.pack(kind, shift, width))
-        b = zz.view(np.uint8).reshape(n, 8)[:, :width]
-        planes.append(np.ascontiguousarray(b.T).tobytes())
-    body = lzma.compress(b"".join(planes), preset=9 | lzma.PRESET_EXTREME)
-    return b"".join(header) + body
+            stream = _range_code(zz, refs)
+            if best is None or len(stream) < len(best[2]):
+                best = (kind, CODER_RANGE, stream, zz)
+        planes = _planes(best[3])
+        if len(planes) < len(best[2]):
+            best = (best[0], CODER_PLANES, planes, None)
+        header.append(_COMPONENT.pack(best[0], shift, best[1], len(best[2])))
+        streams.append(best[2])
+    return b"".join(header) + b"".join(streams)
+
+
+def _planes(zz: np.ndarray) -> bytes:
+    n = zz.shape[0]
+    top = int(zz.view(np.uint64).max()) if n else 0
+    width = max(1, (top.bit_length() + 7) // 8)
+    b = np.ascontiguousarray(zz.view(np.uint8).reshape(n, 8)[:, :width].T).tobytes()
+    return bytes([width]) + lzma.compress(b, preset=9 | lzma.PRESET_EXTREME)
+
+
+def _unplanes(stream: bytes, n: int) -> np.ndarray:
+    """Residuals of a planes stream, decompressing no more than they can fill."""
+    if len(stream) < 1 or not 1 <= stream[0] <= 8:
+        raise CorruptFileError("corrupt array section: bad plane width")
+    width = stream[0]
+    raw_len = n * width
+    if raw_len > _MAX_EXPANSION * (len(stream) - 1) + 4096:
+        raise CorruptFileError(f"corrupt array section: {raw_len} bytes cannot come from {len(stream) - 1}")
+    try:
+        dec = lzma.LZMADecompressor(format=lzma.FORMAT_XZ)
+        body = dec.decompress(stream[1:], max_length=raw_len + 1)
+    except lzma.LZMAError as e:
+        raise CorruptFileError(f"corrupt array section: {e}") from None
+    if len(body) != raw_len or not dec.eof or dec.unused_data:
+        raise CorruptFileError("corrupt array section: payload has the wrong length")
+    zz = np.zeros((n, 8), np.uint8)
+    zz[:, :width] = np.frombuffer(body, np.uint8).reshape(width, n).T
+    return zz.view(np.int64).reshape(n)
+
+
+def _range_code(zz: np.ndarray, refs: np.ndarray) -> bytes:
+    n = zz.shape[0]
+    st = enc_state()
+    out = np.empty(16 * n + 64, np.uint8)  # at most ~9 bytes per residual: never overflows
+    nbytes = K.encode_residuals(st, out, zz, refs, new_model(K.MODEL_SIZE), np.zeros(n, np.uint8))
+    return out[:nbytes].tobytes()
 
 
 class ArrayDecoder:
@@ -239,36 +279,34 @@ class ArrayDecoder:
         off = _HEADER.size + k * _COMPONENT.size
         if len(data) < off:
             raise CorruptFileError("corrupt array section: truncated header")
-        self.kinds, self.shifts, self.widths = [], [], []
+        self.kinds, self.shifts, self.coders, lengths = [], [], [], []
         for c in range(k):
-            kind, shift, width = _COMPONENT.unpack_from(data, _HEADER.size + c * _COMPONENT.size)
-            if kind >= K.N_PREDICTORS or shift >= _bits(dt) or not 1 <= width <= 8:
+            kind, shift, coder, length = _COMPONENT.unpack_from(data, _HEADER.size + c * _COMPONENT.size)
+            if kind >= K.N_PREDICTORS or shift >= _bits(dt) or coder not in (CODER_RANGE, CODER_PLANES):
                 raise CorruptFileError("corrupt array section: bad component header")
             self.kinds.append(kind)
             self.shifts.append(shift)
-            self.widths.append(width)
-        raw_len = n * sum(self.widths)
-        if raw_len > _MAX_EXPANSION * (len(data) - off) + 4096:
-            raise CorruptFileError(f"corrupt array section: {raw_len} bytes cannot come from {len(data) - off}")
-        try:
-            dec = lzma.LZMADecompressor(format=lzma.FORMAT_XZ)
-            body = dec.decompress(data[off:], max_length=raw_len + 1)
-        except lzma.LZMAError as e:
-            raise CorruptFileError(f"corrupt array section: {e}") from None
-        if len(body) != raw_len or not dec.eof or dec.unused_data:
-            raise CorruptFileError("corrupt array section: payload has the wrong length")
+            self.coders.append(coder)
+            lengths.append(length)
+        if off + sum(lengths) != len(data):
+            raise CorruptFileError("corrupt array section: stream lengths do not match the section size")
         self.n_points, self.dtype, self.components = int(n), dt, int(k)
-        self._zz, self._o, self._bounds = [], [], []
-        pos = 0
+        buf = np.frombuffer(data, np.uint8)
+        self._streams, self._st, self._probs, self._lens, self._o, self._bounds = [], [], [], [], [], []
         for c in range(k):
-            w = self.widths[c]
-            zz = np.zeros((n, 8), np.uint8)
-            zz[:, :w] = np.frombuffer(body, np.uint8, n * w, pos).reshape(w, n).T
-            pos += n * w
-            self._zz.append(zz.view(np.int64).reshape(n))
+            stream = buf[off:off + lengths[c]]
+            off += lengths[c]
+            st = dec_state()
+            if self.coders[c] == CODER_RANGE:
+                dec_init(st, stream)
+            else:  # residuals decoded now (bounded by n), the stream is no longer needed
+                stream = _unplanes(stream.tobytes(), n)
+            self._streams.append(stream)
+            self._st.append(st)
+            self._probs.append(new_model(K.MODEL_SIZE))
+            self._lens.append(np.zeros(n, np.uint8))
             self._o.append(np.zeros(n, np.int64))
             self._bounds.append(_bounds(dt, self.shifts[c]))
-        del body
         self.values = np.empty((n,) if components == 1 else (n, k), dt)
         self.n_decoded = 0
 
@@ -295,9 +333,17 @@ class ArrayDecoder:
                 if ext_cols is None:
                     raise CorruptFileError("corrupt array section: external prediction without a float32 channel")
                 ext = np.ascontiguousarray(_external(ext_cols[:, c], self.dtype, self.shifts[c], lo, hi))
-            status = K.reconstruct(self._o[c], self._zz[c], refs, start, stop, kind, ext, lo, hi)
-            if status != K.OK:
+            if self.coders[c] == CODER_RANGE:
+                status = K.decode_component(self._st[c], self._streams[c], self._probs[c], self._lens[c],
+                                            self._o[c], refs, start, stop, kind, ext, lo, hi)
+                if status != K.BAD_REF:
+                    check_decoder(self._st[c], self._streams[c], "array section", complete=False)
+            else:
+                status = K.reconstruct(self._o[c], self._streams[c], refs, start, stop, kind, ext, lo, hi)
+            if status == K.BAD_REF:
                 raise CorruptFileError("corrupt file: a vertex refers to one not yet decoded")
+            if status != K.OK:
+                raise CorruptFileError("corrupt array section: the coded data is damaged")
             col = _expand(self._o[c][start:stop], self.dtype, self.shifts[c])
             if self.components == 1:
                 self.values[start:stop] = col
@@ -310,4 +356,7 @@ class ArrayDecoder:
         """The whole array; CorruptFileError unless every vertex was decoded."""
         if self.n_decoded != self.n_points:
             raise CorruptFileError("corrupt array section: fewer vertices decoded than announced")
+        for st, stream, coder in zip(self._st, self._streams, self.coders):
+            if coder == CODER_RANGE:
+                check_decoder(st, stream, "array section")
         return self.values

@@ -100,6 +100,17 @@ _MANT_BASE = N_LEN_CONTEXTS * (1 << LEN_BITS)
 MODEL_SIZE = _MANT_BASE + 65 * (1 << MANT_BITS)
 
 
+@njit(cache=True, _nrt=False)
+def _refs_valid(refs, start, stop):
+    """Every ref of vertices ``start:stop`` (rows of ``refs``) is -1 or an earlier vertex."""
+    for k in range(start, stop):
+        for j in range(4):
+            r = refs[k - start, j]
+            if r < -1 or r >= k:
+                return False
+    return True
+
+
 @njit(cache=True, inline="always")
 def _bit_length(z):
     u = np.uint64(z)
@@ -147,11 +158,8 @@ def encode_residuals(st, out, zz, refs, probs, lens):
 @njit(cache=True, _nrt=False)
 def decode_component(st, data, probs, lens, o, refs, start, stop, kind, ext, lo, hi):
     """Decode the residuals of vertices ``start:stop`` and rebuild their values ``o`` (refs checked)."""
-    for k in range(start, stop):
-        for j in range(4):
-            r = refs[k - start, j]
-            if r < -1 or r >= k:
-                return BAD_REF
+    if not _refs_valid(refs, start, stop):
+        return BAD_REF
     for k in range(start, stop):
         row = k - start
         nb = dec_sym(st, data, probs, _context(lens, refs, row, k) * (1 << LEN_BITS), LEN_BITS)
@@ -183,11 +191,8 @@ def decode_component(st, data, probs, lens, o, refs, start, stop, kind, ext, lo,
 @njit(cache=True)
 def reconstruct(o, zz, refs, start, stop, kind, ext, lo, hi):
     """Rebuild ``o[start:stop]`` from already decoded residuals ``zz`` (the LZMA coder); refs checked."""
-    for k in range(start, stop):
-        for j in range(4):
-            r = refs[k - start, j]
-            if r < -1 or r >= k:
-                return BAD_REF
+    if not _refs_valid(refs, start, stop):
+        return BAD_REF
     for k in range(start, stop):
         z = zz[k]
         r = ((z >> 1) & np.int64(0x7FFFFFFFFFFFFFFF)) ^ -(z & 1)

@@ -206,3 +206,14 @@ def test_cell_data_is_refused_or_dropped_on_request(tmp_path):
     assert any("cell data dropped" in n and "material" in n for n in notes)
     f = gatun_py.compress(m, tmp_path / "c.tetc", mesh_only=True, cell_to_point=True, scalar="d")
     assert [a[0] for a in f.arrays] == ["d", "material"] and f.arrays[1][1] == "float64"
+
+
+def test_array_ranges_in_the_metadata():
+    m = _mesh64()
+    r = TetcReader(encode_tetc([LevelPayload(0, 0.0, 0, m)]))
+    p = m.point_data["p"]
+    assert r.array_range("p") == (p.min(), p.max()) == r.array_range()
+    mag = m.scalar("u", "magnitude")
+    assert r.array_range("u", "magnitude") == (mag.min(), mag.max())
+    assert r.array_range("u", 2) == (m.point_data["u"][:, 2].min(), m.point_data["u"][:, 2].max())
+    assert r.array_range("nope") is None

@@ -155,8 +155,28 @@ def check_mesh(mesh) -> None:
             raise MeshError(f"point array {name!r} has shape {a.shape} for {n} points")
 
 
-def _arrays_meta(mesh) -> list:
-    return [{"name": name, "dtype": dtype_name(dt), "components": k} for name, dt, k in mesh.arrays]
+def _finite_range(values) -> list:
+    """[lo, hi] of the finite values (JSON holds no NaN or inf); [0, 0] when there are none."""
+    v = np.asarray(values, np.float64)
+    v = v[np.isfinite(v)]
+    return [float(v.min()), float(v.max())] if v.size else [0.0, 0.0]
+
+
+def _arrays_meta(mesh, *, ranges: bool = False) -> list:
+    """The metadata's ``arrays``; with ``ranges`` also each one's value range (the magnitude's for a
+    vector, plus ``component_ranges``) so a renderer can normalise any of them before decoding."""
+    out = []
+    for name, dt, k in mesh.arrays:
+        e = {"name": name, "dtype": dtype_name(dt), "components": k}
+        if ranges:
+            a = mesh.point_data[name]
+            if k == 1:
+                e["range"] = _finite_range(a)
+            else:
+                e["range"] = _finite_range(mesh.scalar(name, "magnitude"))
+                e["component_ranges"] = [_finite_range(a[:, c]) for c in range(k)]
+        out.append(e)
+    return out
 
 
 def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None) -> bytes:
@@ -191,7 +211,7 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None) 
         "bbox": [lo.tolist(), hi.tolist()],
         "scalar": str(mesh0.scalar_name),
         "points_dtype": dtype_name(mesh0.points.dtype),
-        "arrays": _arrays_meta(mesh0),
+        "arrays": _arrays_meta(mesh0, ranges=True),
         "scalar_range": [float(x) for x in mesh0.scalar_range],
         "source": os.path.basename(str(source)),
         # The full mesh's volume-mode sample step, so that every level and ratio samples alike.
@@ -300,6 +320,23 @@ class TetcReader:
     def read_section(self, name: str) -> bytes:
         """The CRC-checked payload of section ``name``."""
         return self.container.read_section(name)
+
+    def array_range(self, name: str | None = None, component=None) -> tuple[float, float] | None:
+        """(lo, hi) of a point array (a vector's component or magnitude) from the metadata, without
+        decoding; None when the file does not record it (format 1 records only the default scalar's)."""
+        name = self.scalar_name if name is None else name
+        entry = next((e for e in self.meta.get("arrays", []) if isinstance(e, dict) and e.get("name") == name), None)
+        if entry is None:
+            rng = self.meta.get("scalar_range") if name == self.scalar_name else None
+        elif isinstance(component, (int, np.integer)) and not isinstance(component, bool) and entry.get("components", 1) > 1:
+            ranges = entry.get("component_ranges")
+            rng = ranges[component] if isinstance(ranges, list) and 0 <= component < len(ranges) else None
+        else:
+            rng = entry.get("range")
+        if (isinstance(rng, list) and len(rng) == 2 and all(isinstance(x, (int, float)) and np.isfinite(x) for x in rng)
+                and rng[0] <= rng[1]):
+            return float(rng[0]), float(rng[1])
+        return None
 
     def _size(self, name: str) -> int:
         if not self.container.has_section(name):

@@ -394,3 +394,23 @@ def test_crc_is_what_catches_plain_damage(files):
     data[-10] ^= 0xFF
     with pytest.raises(CorruptFileError):
         TetcReader(bytes(data)).decode_mesh(0)
+
+
+def test_geometry_header_and_metadata_agree_on_a_huge_count(worker, files):
+    """Metadata and geometry header both claim the most vertices the geometry section could hold."""
+    from gatun_py.codec import geometry
+
+    meta, sections = _split(files[0])
+    out = []
+    for name, payload in sections:
+        if name == "L0/geometry":
+            lengths = struct.unpack_from("<4I", payload, 6)
+            n = geometry.max_vertices(lengths)
+            p = bytearray(payload)
+            struct.pack_into("<I", p, 2, n)
+            payload = bytes(p)
+        out.append((name, payload))
+    for key in ("points", "referenced_points"):
+        meta["levels"][0][key] = n
+    meta["points"] = n
+    assert check(worker, _build(meta, out), f"n={n}")[0] == "rejected"

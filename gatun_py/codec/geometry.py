@@ -52,6 +52,16 @@ HEADER_SIZE = _HEADER.size
 # INT_BUCKET_BITS decisions. So a stream of L bytes holds at most ~8 L / cost of them.
 _MIN_DECISION_BITS = -np.log2(1.0 - ((1 << ADAPT_SHIFT) - 1) / PROB_ONE)
 _MAX_VERTICES_PER_BYTE = int(8.0 / _MIN_DECISION_BITS) + 1
+# What real blocks reach: a regular 40^3 grid with a constant scalar, the most compressible mesh we
+# know, codes 3.5 vertices per byte of its four streams together; 256 leaves 70x headroom and keeps
+# a crafted count (and the decoder's ~120 bytes of state per vertex) within a bound of the file size.
+MAX_VERTICES_PER_STREAM_BYTE = 256
+
+
+def max_vertices(lengths) -> int:
+    """The most vertices a block with these four stream lengths is accepted to hold."""
+    return min(MAX_VERTICES_PER_STREAM_BYTE * (sum(int(x) for x in lengths) + 16),
+               _MAX_VERTICES_PER_BYTE * (min(int(x) for x in lengths) + 8), MAX_POINTS - 1)
 _MAX_TABLE_PER_BYTE = int(8.0 / (INT_BUCKET_BITS * _MIN_DECISION_BITS)) + 1
 
 
@@ -236,7 +246,7 @@ def check_geometry_header(data, n_points: int | None = None) -> tuple[int, int, 
         raise CorruptFileError(f"corrupt geometry block: {n} vertices, expected {n_points}")
     if HEADER_SIZE + sum(lengths) != len(data):
         raise CorruptFileError("corrupt geometry block: stream lengths do not match the block size")
-    if n > _MAX_VERTICES_PER_BYTE * (min(lengths) + 8) or n >= MAX_POINTS:
+    if n > max_vertices(lengths):
         raise CorruptFileError(f"corrupt geometry block: {n} vertices cannot fit in {len(data)} bytes")
     return mode_bits, n, lengths
 

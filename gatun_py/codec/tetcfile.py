@@ -31,10 +31,11 @@ from .geometry import GeometryDecoder, check_geometry_header, encode_geometry
 
 FORMAT_NAME = "tetc"
 DEFAULT_BATCH_TETS = 65536
-# a coded tet costs at least a few hundredths of a bit, a vertex at least a fraction of a byte:
-# counts beyond these bounds cannot come from a stream of the given size (rejected before allocating)
-_MAX_TETS_PER_BYTE = 2000
-_MAX_FACES_PER_BYTE = 2000
+# counts beyond these bounds are not believed from a stream of the given size (rejected before
+# allocating): a regular 40^3 grid, the most compressible mesh we know, codes 8.3 tets per byte of
+# its tet section and 5 boundary faces per byte; 512 leaves 60x headroom
+_MAX_TETS_PER_BYTE = 512
+_MAX_FACES_PER_BYTE = 512
 _POINTS = ("points",)  # key of the float64 coordinates among the exact arrays (no array name is a tuple)
 
 

@@ -193,12 +193,85 @@ def hostile_figures() -> dict | None:
     return stats
 
 
+def _cli(args, cwd) -> tuple[int, str, float, float]:
+    """(exit code, last line it printed, seconds, peak RSS MB) of one ``tetc`` run (GNU time's %M)."""
+    tetc = str(Path(sys.executable).with_name("tetc"))
+    t = time.perf_counter()
+    p = subprocess.run(["/usr/bin/time", "-f", "peak-kb %M", tetc, *map(str, args)], cwd=cwd, capture_output=True,
+                       text=True, timeout=600)
+    seconds = time.perf_counter() - t
+    lines = [ln for ln in (p.stderr + p.stdout).splitlines() if ln.strip()]
+    rss = next((int(ln.split()[1]) / 1024 for ln in lines if ln.startswith("peak-kb ")), float("nan"))
+    lines = [ln for ln in lines if not ln.startswith(("peak-kb ", "Command exited"))]
+    return p.returncode, lines[-1] if lines else "", seconds, rss
+
+
+def issue_cases() -> list:
+    """The issue's cases this branch owns, run through the CLI (each in its own process)."""
+    import meshio
+
+    from gatun_py.codec import LevelPayload, encode_tetc
+    from gatun_py.codec.container import Container, build_container
+    from gatun_py.mesh import TetMesh
+    from samples import SAMPLES
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        # 1. a float64 .vtu with a float64 scalar (0.1) and more arrays: everything back bit for bit
+        pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], np.float64) * 0.1
+        tets = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])
+        m = TetMesh(pts, None, tets, "p", point_data={"p": np.full(5, 0.1), "u": np.arange(15.0).reshape(5, 3) / 7,
+                                                     "id": np.arange(5, dtype=np.int64)})
+        from gatun_py.mesh.validate import validate_tets
+        m = validate_tets(m.points, None, m.tets, scalar_name="p", point_data=m.point_data)[0]
+        meshio.write(tmp / "f64.vtu", meshio.Mesh(m.points, [("tetra", m.tets)], point_data=dict(m.point_data)))
+        code, msg, sec, _ = _cli(["compress", "f64.vtu", "--scalar", "p", "-o", "f64.tetc", "--mesh-only"], tmp)
+        code2, _, _, _ = _cli(["decompress", "f64.tetc", "-o", "back.vtu"], tmp)
+        back = meshio.read(tmp / "back.vtu")
+        exact = (back.points.dtype == np.float64 and float(back.point_data["p"][0]) == 0.1
+                 and back.point_data["id"].dtype == np.int64 and back.point_data["u"].shape == (5, 3))
+        rows.append(["float64 .vtu, 0.1 and 3 arrays", "tetc compress f64.vtu --scalar p -o f64.tetc --mesh-only; "
+                     "tetc decompress f64.tetc -o back.vtu", f"{code}, {code2}",
+                     f"0.1 -> {float(back.point_data['p'][0])!r}, every array and dtype back: {exact}"])
+        # 2. cell data: refused with both ways out
+        meshio.write(tmp / "cells.vtu", meshio.Mesh(m.points, [("tetra", m.tets)], point_data={"p": m.point_data["p"]},
+                                                    cell_data={"mat": [np.array([1, 2])]}))
+        code, msg, _, _ = _cli(["compress", "cells.vtu", "-o", "c.tetc", "--mesh-only"], tmp)
+        rows.append(["cell data", "tetc compress cells.vtu -o c.tetc --mesh-only", code, msg])
+        # 3. the forest bomb: a level claiming 2^29 - 1 vertices behind a valid CRC
+        path, kw, _ = SAMPLES["post"]
+        code, msg, _, _ = _cli(["compress", path, "-o", "post.tetc", "--levels", "2"], tmp)
+        c = Container(tmp / "post.tetc")
+        meta = {k: v for k, v in c.meta.items() if k != "sections"}
+        for lv in meta["levels"]:
+            lv["points"] = 2**29 - 1
+        meta["points"] = 2**29 - 1
+        (tmp / "bomb.tetc").write_bytes(build_container(meta, [(n, c.read_section(n)) for n in c.section_names()]))
+        _, _, base_sec, base_rss = _cli(["info", "post.tetc"], tmp)  # the interpreter and imports alone
+        code, msg, sec, rss = _cli(["render", "bomb.tetc", "--ratio", "0.5", "-o", "bomb.png", "--size", "64"], tmp)
+        msg += f"; `tetc info` on the valid file: {base_sec:.2f} s, {base_rss:.0f} MB"
+        rows.append(["forest bomb (level points = 2^29-1, valid CRC)", "tetc render bomb.tetc --ratio 0.5 -o bomb.png",
+                     code, f"{msg} ({sec:.2f} s for the whole process, peak RSS {rss:.0f} MB)"])
+        # 4. the encoder on a mesh with an out-of-range id and with -1
+        for bad in (5, -1):
+            t = TetMesh(m.points, None, np.array([[0, 1, 2, 3], [1, 2, 3, bad]]), "p", point_data=m.point_data)
+            try:
+                encode_tetc([LevelPayload(0, 0.0, 0, t)])
+                outcome = "accepted (BUG)"
+            except Exception as e:  # noqa: BLE001 - the row reports whatever happens
+                outcome = f"{type(e).__name__}: {e}"
+            rows.append([f"encoder, tet id {bad}", "gatun_py.codec.encode_tetc(...)", "-", outcome])
+    return rows
+
+
 def main() -> int:
     results = [measure("Blunt-fin float64 (PLOT3D Q in float64)", bluntfin64()),
                measure("gmsh flange float64 nodes", flange64())]
     for r in results:
         print(json.dumps({k: v for k, v in r.items() if k not in ("sections", "arrays")}))
     hostile = hostile_figures() if "--no-hostile" not in sys.argv else None
+    cases = issue_cases()
     rows = []
     for r in results:
         best = r["coords_peers"][r["coords_best"]]
@@ -229,6 +302,11 @@ Per array (bytes; the float32 default scalar's share is the geometry section's d
 
 {table(["mesh", "array", "dtype", "ours", "xz -9", "fpzip", "pcodec"], arr_rows)}
 """
+    text += f"""
+### The issue's cases (this branch's part)
+
+{table(["case", "command", "exit code", "message / result"], cases)}
+"""
     if hostile:
         text += f"""
 ### Adversarial files
@@ -237,7 +315,7 @@ Per array (bytes; the float32 default scalar's share is the geometry section's d
 bytes behind valid CRCs, crafted array headers, the forest bomb, an LZMA bomb): each case in a worker under
 RLIMIT_AS = its warmed-up size + 300 MB and a 2 s alarm; the whole read API per case.
 
-| cases | rejected (typed error) | decoded fine | crashes / hangs / tracebacks / MemoryError | max time per case | peak RSS above the warmed-up worker |
+| cases | rejected (typed error) | decoded fine | crashes / hangs / tracebacks / MemoryError | max time per case | peak RSS above the warmed-up worker's {hostile['base_rss'] / 2**20:.0f} MB |
 |---|---|---|---|---|---|
 | {hostile['cases']} | {hostile.get('rejected', 0)} | {hostile.get('ok', 0)} | {sum(hostile.get(k, 0) for k in ('crash', 'hang', 'traceback', 'memory', 'timeout'))} | {hostile['max_seconds']:.3f} s | {hostile['max_rss_above_base_mb']} MB |
 

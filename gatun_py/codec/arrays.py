@@ -52,7 +52,8 @@ _COMPONENT = struct.Struct("<BBBI")
 CODER_RANGE, CODER_PLANES = 0, 1
 # LZMA's best ratio on real residual planes is far below this; a planes stream that claims more
 # output per input byte is a bomb (checked before decompressing)
-_MAX_EXPANSION = 8000
+_MAX_EXPANSION = 1 << 16  # xz reaches ~7000:1 on long runs of zeros (a constant array is legit)
+_MAX_VALUES_PER_RANGE_BYTE = 1024
 
 
 def dtype_name(dtype) -> str:
@@ -290,6 +291,11 @@ class ArrayDecoder:
             lengths.append(length)
         if off + sum(lengths) != len(data):
             raise CorruptFileError("corrupt array section: stream lengths do not match the section size")
+        for coder, length in zip(self.coders, lengths):
+            # a range-coded value costs at least 7 decisions of the most skewed probability the coder
+            # reaches (~0.01 bit): more values per byte cannot be (checked before allocating)
+            if coder == CODER_RANGE and n > _MAX_VALUES_PER_RANGE_BYTE * (length + 16):
+                raise CorruptFileError(f"corrupt array section: {n} values cannot fit in a {length}-byte stream")
         self.n_points, self.dtype, self.components = int(n), dt, int(k)
         buf = np.frombuffer(data, np.uint8)
         self._streams, self._st, self._probs, self._lens, self._o, self._bounds = [], [], [], [], [], []

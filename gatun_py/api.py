@@ -13,6 +13,8 @@ the command does::
 
 from __future__ import annotations
 
+import dataclasses
+
 import math
 import os
 import time
@@ -410,7 +412,7 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
            step: float | None = None, scalar_range=None, opacity_model: str | None = None,
            background="black", colorbar: bool = False, lean: bool = False, pipeline: str = "streaming",
            scalar: str | None = None, q_file=None, q_var: str = "density", cell_to_point: bool = False,
-           progress=None, log=None) -> Frame:
+           component=None, progress=None, log=None) -> Frame:
     """Volume-render a mesh: decode, simplify and ray-cast in one streaming pass.
 
     Parameters
@@ -448,7 +450,10 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
     pipeline : {"streaming", "generic"}
         One pass, or decode-all-then-render (the paper's baseline).
     scalar, q_file, q_var, cell_to_point
-        How to read a mesh file (see :func:`gatun_py.read_mesh`).
+        How to read a mesh file (see :func:`gatun_py.read_mesh`). For a ``.tetc`` file, ``scalar``
+        names the stored point array to render (default: the file's default scalar).
+    component : None, int or "magnitude"
+        ``.tetc``: for a vector array, the component to render or its magnitude.
     progress : callable, optional
         ``progress(done, total)``: tets rendered so far, of ``total``.
     log : callable, optional
@@ -503,8 +508,11 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
                 log(f"note: the budget of {budget:g} s cannot be met: rendering the coarsest level "
                     f"(predicted {plan.predicted_s:.3f} s)")
         total = int(f.reader.level_meta(target.level)["tets"])
+        if scalar is not None or component is not None:
+            view = dataclasses.replace(view, scalar=scalar or f.scalar_name, component=component)
         result = render_tetc(f.reader, view, pipeline=pipeline, target=target, progress=_counter(progress, total))
-        name, rng = f.scalar_name, f.reader.meta.get("scalar_range", (0.0, 1.0))
+        name = f.scalar_name if view.scalar is None else view.scalar + ("" if component is None else f"[{component}]")
+        rng = f.reader.array_range(view.scalar, view.component) or (0.0, 1.0)
     else:
         if ratio is not None or level is not None or budget is not None:
             raise OptionError("ratio, level and budget need a .tetc file with a merge forest "

@@ -217,3 +217,22 @@ def test_array_ranges_in_the_metadata():
     assert r.array_range("u", "magnitude") == (mag.min(), mag.max())
     assert r.array_range("u", 2) == (m.point_data["u"][:, 2].min(), m.point_data["u"][:, 2].max())
     assert r.array_range("nope") is None
+
+
+def test_render_any_stored_array(tmp_path):
+    """render(scalar=, component=) on a .tetc equals rendering the decoded mesh with that array as scalar."""
+    m = _mesh64()
+    f = gatun_py.compress(m, tmp_path / "m.tetc", mesh_only=True)
+    for pipeline in ("streaming", "generic"):
+        a = gatun_py.render(f, size=24, scalar="u", component="magnitude", pipeline=pipeline)
+        ref_mesh = f.mesh().with_scalar("u", "magnitude")
+        mag = m.scalar("u", "magnitude")
+        b = gatun_py.render(ref_mesh, size=24, scalar_range=(mag.min(), mag.max()),
+                            step=f.reader.meta["render_step"])
+        assert a.stats["scalar"] == "u[magnitude]" and a.stats["scalar_range"] == [mag.min(), mag.max()]
+        assert np.abs(a.rgb.astype(int) - b.rgb.astype(int)).max() <= 1, pipeline
+        assert a.rgb.any()
+    with pytest.raises(OptionError, match="components"):
+        gatun_py.render(f, size=8, scalar="u")
+    with pytest.raises(OptionError, match="no point array"):
+        gatun_py.render(f, size=8, scalar="nope")

@@ -84,9 +84,12 @@ def main() -> int:
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
     (work / "post.vtk").write_bytes(Path(POST).read_bytes())
-    bomb = _with_meta(GOLDEN, work / "bomb.tetc", points=2**31 - 2,
+    from gatun_py import compress
+
+    fresh = compress(work / "post.vtk", work / "post.tetc").path  # today's format
+    bomb = _with_meta(fresh, work / "bomb.tetc", points=2**31 - 2,
                       level0={"points": 2**31 - 2, "referenced_points": 2**31 - 2, "boundary_vertices": 1000})
-    tiny = _with_meta(GOLDEN, work / "tiny_step.tetc", render_step=1e-12)
+    tiny = _with_meta(fresh, work / "tiny_step.tetc", render_step=1e-12)
     pv = {"RGBPoints": [0, 0, 0, 1, 1, 1, 0, 0]}
     for name, ud in (("zero", 0), ("abc", "abc"), ("nan", "nan")):
         (work / f"pv_{name}.json").write_text(json.dumps(dict(pv, unit_distance=ud)))
@@ -129,13 +132,13 @@ def main() -> int:
     rows.append(["(check) x.jpg holds JPEG bytes", "", "", str(jpg), "", ""])
 
     # Ctrl-C: a render that would take minutes, interrupted past start-up
-    p = subprocess.Popen([str(TETC), "render", "post.vtk", "-o", "c.png", "--size", "512", "--step", "1e-9", "-q"],
+    p = subprocess.Popen([str(TETC), "render", "post.vtk", "-o", "c.png", "--size", "2048", "--step", "1e-9", "-q"],
                          cwd=work, stderr=subprocess.PIPE, stdout=subprocess.PIPE)
     time.sleep(6.0)
     t0 = time.perf_counter()
     p.send_signal(signal.SIGINT)
     p.wait(timeout=60)
-    rows.append(["SIGINT 6 s into a minutes-long 512² render", "`tetc render post.vtk --size 512 --step 1e-9`",
+    rows.append(["SIGINT 6 s into a minute-long 2048² render", "`tetc render post.vtk --size 2048 --step 1e-9`",
                  p.returncode, f"stopped {time.perf_counter() - t0:.3f} s after SIGINT; image left: "
                                f"{(work / 'c.png').exists()}", "", ""])
 

@@ -62,20 +62,25 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
 @click.option("--w-geometry", type=click.FloatRange(min=0), default=1.0, show_default=True,
               help="Decimation: weight of the boundary geometry error.")
 @mesh_input_options
+@click.option("--drop-cell-data", is_flag=True,
+              help="Leave out cell arrays (a .tetc file stores point arrays only; without this flag or "
+                   "--cell-to-point a mesh with cell data is refused).")
 @force_option
 @quiet_option
 def compress(input, output, n_levels, mesh_only, w_density, w_geometry, scalar, q_file, q_var, cell_to_point,
-             time_step, force, quiet):
+             time_step, drop_cell_data, force, quiet):
     """Compress INPUT (any readable mesh or PLOT3D grid) losslessly into a .tetc file.
 
-    Connectivity is cut-border coded, coordinates and density are predicted and coded exactly:
-    decompressing gives back every float bit for bit (vertices and tets in another order).
+    Connectivity is cut-border coded; coordinates (float32 or float64) and every point array, in its
+    own dtype, are predicted and coded exactly: decompressing gives back every value bit for bit
+    (vertices and tets in another order). --scalar names the default array (rendered, decimated).
     Unless --mesh-only, the mesh is also decimated (Van Gelder) into a merge forest stored with it,
     plus pre-simplified levels, for `tetc decompress --ratio` and time-critical rendering.
     """
     with progress_reporter("decimating", quiet, min_total=1) as progress:
         gatun_py.compress(input, output, levels=n_levels, mesh_only=mesh_only, force=force, w_density=w_density,
                           w_geometry=w_geometry, progress=progress, log=logger(quiet),
+                          drop_cell_data=drop_cell_data,
                           **read_kwargs(scalar, q_file, q_var, cell_to_point, time_step))
 
 

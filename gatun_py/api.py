@@ -13,6 +13,8 @@ the command does::
 
 from __future__ import annotations
 
+import dataclasses
+
 import math
 import os
 import time
@@ -47,8 +49,13 @@ MAX_IMAGE_SIDE = 8192
 
 # -- reading the source --------------------------------------------------------------------------
 
-def _as_mesh(source, read_options: dict, log) -> TetMesh:
-    """A TetMesh from a path, a TetMesh or a meshio.Mesh (notes of the reader go to ``log``)."""
+def _as_mesh(source, read_options: dict, log, *, storing: bool = False, drop_cell_data: bool = False) -> TetMesh:
+    """A TetMesh from a path, a TetMesh or a meshio.Mesh (notes of the reader go to ``log``).
+
+    ``storing``: the mesh is about to be compressed, so cell arrays not averaged to the points are
+    refused unless ``drop_cell_data`` (a ``.tetc`` file does not hold cell data; nothing is dropped
+    without a word).
+    """
     if isinstance(source, TetMesh):
         return source
     if type(source).__name__ == "Mesh" and hasattr(source, "cells") and hasattr(source, "points"):
@@ -60,6 +67,12 @@ def _as_mesh(source, read_options: dict, log) -> TetMesh:
         raise OptionError(f"cannot read a mesh from a {type(source).__name__}: give a path, a TetMesh or a meshio.Mesh")
     for note in report.notes:
         log(f"note: {note}")
+    if storing and report.cell_arrays:
+        names = ", ".join(map(repr, report.cell_arrays))
+        if not drop_cell_data:
+            raise OptionError(f"the mesh has cell data ({names}), which a .tetc file does not store: average it to "
+                              "the points (cell-to-point) or drop it explicitly (drop-cell-data)")
+        log(f"note: cell data dropped on request: {names}")
     return mesh
 
 
@@ -71,7 +84,8 @@ def _quiet(_msg: str) -> None:
 
 def compress(source, output, *, levels: int | None = None, mesh_only: bool = False, force: bool = False,
              w_density: float = 1.0, w_geometry: float = 1.0, scalar: str | None = None, q_file=None,
-             q_var: str = "density", cell_to_point: bool = False, time_step: int | None = None, progress=None,
+             q_var: str = "density", cell_to_point: bool = False, time_step: int | None = None,
+             drop_cell_data: bool = False, progress=None,
              log=None) -> "TetcFile":
     """Compress a mesh losslessly into a ``.tetc`` file, with its merge forest and levels.
 
@@ -90,7 +104,11 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     w_density, w_geometry : float
         Decimation weights of the mass error and the boundary geometry error (>= 0).
     scalar, q_file, q_var, cell_to_point, time_step
-        How to read ``source`` (see :func:`gatun_py.read_mesh`).
+        How to read ``source`` (see :func:`gatun_py.read_mesh`). Every point array is stored, in its
+        dtype; ``scalar`` is the default one (rendered and decimated).
+    drop_cell_data : bool
+        Compress a mesh whose cell arrays were not averaged to the points (``cell_to_point``),
+        leaving them out; without it such a mesh is refused.
     progress : callable, optional
         ``progress(done, total)``: vertices the decimation has processed so far, of ``total``.
     log : callable, optional
@@ -121,7 +139,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
         raise OptionError(f"the output {output} is the input file")
     t0 = time.perf_counter()
     mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point,
-                              time_step=time_step), log)
+                                 time_step=time_step), log, storing=True, drop_cell_data=drop_cell_data)
     name = Path(source).name if isinstance(source, (str, os.PathLike)) else ""
     log(f"read {name or 'mesh'}: {mesh.n_points} points, {mesh.n_tets} tets")
     if mesh_only:
@@ -292,6 +310,11 @@ class TetcFile:
         return self.reader.scalar_name
 
     @property
+    def arrays(self) -> list[tuple[str, str, int]]:
+        """``(name, dtype, components)`` of every stored point array (the default scalar among them)."""
+        return [(name, dt.name, k) for name, dt, k in self.reader.arrays]
+
+    @property
     def max_ratio(self) -> float:
         """The largest simplification ratio the stored forest reaches (0 without one)."""
         return self.reader.forest_merges() / self.n_points if self.n_points else 0.0
@@ -394,8 +417,7 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
            step: float | None = None, scalar_range=None, opacity_model: str | None = None,
            background="black", colorbar: bool = False, lean: bool = False, pipeline: str = "streaming",
            scalar: str | None = None, q_file=None, q_var: str = "density", cell_to_point: bool = False,
-           time_step: int | None = None,
-           progress=None, log=None) -> Frame:
+           time_step: int | None = None, component=None, progress=None, log=None) -> Frame:
     """Volume-render a mesh: decode, simplify and ray-cast in one streaming pass.
 
     Parameters
@@ -433,7 +455,10 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
     pipeline : {"streaming", "generic"}
         One pass, or decode-all-then-render (the paper's baseline).
     scalar, q_file, q_var, cell_to_point, time_step
-        How to read a mesh file (see :func:`gatun_py.read_mesh`).
+        How to read a mesh file (see :func:`gatun_py.read_mesh`). For a ``.tetc`` file, ``scalar``
+        names the stored point array to render (default: the file's default scalar).
+    component : None, int or "magnitude"
+        ``.tetc``: for a vector array, the component to render or its magnitude.
     progress : callable, optional
         ``progress(done, total)``: tets rendered so far, of ``total``.
     log : callable, optional
@@ -490,8 +515,11 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
                 log(f"note: the budget of {budget:g} s cannot be met: rendering the coarsest level "
                     f"(predicted {plan.predicted_s:.3f} s)")
         total = int(f.reader.level_meta(target.level)["tets"])
+        if scalar is not None or component is not None:
+            view = dataclasses.replace(view, scalar=scalar or f.scalar_name, component=component)
         result = render_tetc(f.reader, view, pipeline=pipeline, target=target, progress=_counter(progress, total))
-        name, rng = f.scalar_name, f.reader.meta.get("scalar_range", (0.0, 1.0))
+        name = f.scalar_name if view.scalar is None else view.scalar + ("" if component is None else f"[{component}]")
+        rng = f.reader.array_range(view.scalar, view.component) or (0.0, 1.0)
     else:
         if ratio is not None or level is not None or budget is not None:
             raise OptionError("ratio, level and budget need a .tetc file with a merge forest "

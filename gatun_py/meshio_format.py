@@ -13,12 +13,12 @@ FORMAT_NAME = "tetc"
 
 
 def read(filename) -> meshio.Mesh:
-    """The full mesh of a ``.tetc`` file as a ``meshio.Mesh`` (tetra cells, the scalar as point data)."""
+    """The full mesh of a ``.tetc`` file as a ``meshio.Mesh`` (tetra cells, every point array)."""
     from .api import open as open_tetc  # start-up time: the verbs load numba; registering must not
 
     mesh = open_tetc(filename).mesh()
     return meshio.Mesh(np.asarray(mesh.points), [("tetra", np.asarray(mesh.tets))],
-                       point_data={mesh.scalar_name: np.asarray(mesh.density)})
+                       point_data={name: np.asarray(a) for name, a in mesh.point_data.items()})
 
 
 def write(filename, mesh: meshio.Mesh, **options) -> None:

@@ -29,6 +29,8 @@ def _write_vtk9(path, mesh, name, *, xml=False):
     arr.SetName(name)
     ug.GetPointData().AddArray(arr)
     w = vtk.vtkXMLUnstructuredGridWriter() if xml else vtk.vtkUnstructuredGridWriter()
+    if not xml:
+        w.SetFileTypeToBinary()  # VTK's ASCII writes 10 significant digits: not the mesh's floats
     w.SetFileName(str(path))
     w.SetInputData(ug)
     w.Write()

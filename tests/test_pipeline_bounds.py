@@ -14,6 +14,7 @@ from gatun_py.codec.container import build_container
 from gatun_py.pipeline.stream import MAX_SAMPLES_PER_DIAGONAL, bounded_step
 
 GOLDEN = Path(__file__).resolve().parent / "data" / "post_v1.tetc"
+POST = Path(__file__).resolve().parents[1] / "sample_meshes" / "lox_post_tets" / "post.vtk"
 
 
 def _with_meta(path, out, **changes):
@@ -43,7 +44,8 @@ def test_a_tiny_step_from_the_user_is_raised_with_a_note(tmp_path):
 
 
 def test_a_file_with_a_tiny_stored_step_renders_bounded(tmp_path):
-    bad = _with_meta(GOLDEN, tmp_path / "tiny_step.tetc", render_step=1e-12)
+    src = gatun_py.compress(POST, tmp_path / "post.tetc", mesh_only=True).path
+    bad = _with_meta(src, tmp_path / "tiny_step.tetc", render_step=1e-12)
     notes = []
     frame = gatun_py.render(bad, size=16, tf="post", log=notes.append)
     assert any("the file's step 1e-12" in n for n in notes)

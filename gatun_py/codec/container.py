@@ -26,7 +26,7 @@ import zlib
 from ..errors import CorruptFileError, FormatVersionError, ReadError
 
 MAGIC = b"TETC\x89\r\n\x1a"
-VERSION_MAJOR = 1
+VERSION_MAJOR = 2  # 2: float64 coordinates and every point array (points64, array/j)
 VERSION_MINOR = 0
 _PREAMBLE = struct.Struct("<8sHHII")
 PREAMBLE_SIZE = _PREAMBLE.size
@@ -120,6 +120,7 @@ class Container:
                 f"{self.name}: written by a newer tetc (format version {major}, this reader knows {VERSION_MAJOR})")
         if major < 1:
             raise CorruptFileError(f"{self.name}: invalid format version {major}")
+        self.major = int(major)
         if meta_len > MAX_METADATA_BYTES or PREAMBLE_SIZE + meta_len > self.size:
             raise CorruptFileError(f"{self.name}: truncated or corrupt metadata block")
         blob = self._read(PREAMBLE_SIZE, meta_len)

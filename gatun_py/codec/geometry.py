@@ -52,6 +52,16 @@ HEADER_SIZE = _HEADER.size
 # INT_BUCKET_BITS decisions. So a stream of L bytes holds at most ~8 L / cost of them.
 _MIN_DECISION_BITS = -np.log2(1.0 - ((1 << ADAPT_SHIFT) - 1) / PROB_ONE)
 _MAX_VERTICES_PER_BYTE = int(8.0 / _MIN_DECISION_BITS) + 1
+# What real blocks reach: a regular 40^3 grid with a constant scalar, the most compressible mesh we
+# know, codes 3.5 vertices per byte of its four streams together; 256 leaves 70x headroom and keeps
+# a crafted count (and the decoder's ~120 bytes of state per vertex) within a bound of the file size.
+MAX_VERTICES_PER_STREAM_BYTE = 256
+
+
+def max_vertices(lengths) -> int:
+    """The most vertices a block with these four stream lengths is accepted to hold."""
+    return min(MAX_VERTICES_PER_STREAM_BYTE * (sum(int(x) for x in lengths) + 16),
+               _MAX_VERTICES_PER_BYTE * (min(int(x) for x in lengths) + 8), MAX_POINTS - 1)
 _MAX_TABLE_PER_BYTE = int(8.0 / (INT_BUCKET_BITS * _MIN_DECISION_BITS)) + 1
 
 
@@ -219,6 +229,28 @@ def geometry_stream_sizes(data: bytes) -> dict:
     return sizes
 
 
+def check_geometry_header(data, n_points: int | None = None) -> tuple[int, int, list]:
+    """Check a geometry block's header against its size (and the expected vertex count).
+
+    Returns ``(mode bits, vertices, stream lengths)``; raises :class:`CorruptFileError` before
+    anything is allocated when the counts cannot come from a block of this size.
+    """
+    if len(data) < HEADER_SIZE:
+        raise CorruptFileError("corrupt geometry block: truncated header")
+    version, mode_bits, n, *lengths = _HEADER.unpack_from(data)
+    if version != FORMAT_VERSION:
+        raise CorruptFileError(f"corrupt geometry block: unknown geometry format version {version}")
+    if mode_bits >> K.N_CHANNELS:
+        raise CorruptFileError("corrupt geometry block: invalid channel modes")
+    if n_points is not None and n != n_points:
+        raise CorruptFileError(f"corrupt geometry block: {n} vertices, expected {n_points}")
+    if HEADER_SIZE + sum(lengths) != len(data):
+        raise CorruptFileError("corrupt geometry block: stream lengths do not match the block size")
+    if n > max_vertices(lengths):
+        raise CorruptFileError(f"corrupt geometry block: {n} vertices cannot fit in {len(data)} bytes")
+    return mode_bits, n, lengths
+
+
 class GeometryDecoder:
     """Streaming decoder of a geometry block, batch by batch in decode order.
 
@@ -246,19 +278,7 @@ class GeometryDecoder:
 
     def __init__(self, data, n_points: int | None = None):
         buf = np.frombuffer(bytes(data), dtype=np.uint8)
-        if len(buf) < HEADER_SIZE:
-            raise CorruptFileError("corrupt geometry block: truncated header")
-        version, mode_bits, n, *lengths = _HEADER.unpack_from(buf)
-        if version != FORMAT_VERSION:
-            raise CorruptFileError(f"corrupt geometry block: unknown geometry format version {version}")
-        if mode_bits >> K.N_CHANNELS:
-            raise CorruptFileError("corrupt geometry block: invalid channel modes")
-        if n_points is not None and n != n_points:
-            raise CorruptFileError(f"corrupt geometry block: {n} vertices, expected {n_points}")
-        if HEADER_SIZE + sum(lengths) != len(buf):
-            raise CorruptFileError("corrupt geometry block: stream lengths do not match the block size")
-        if n > _MAX_VERTICES_PER_BYTE * (min(lengths) + 8) or n >= MAX_POINTS:
-            raise CorruptFileError(f"corrupt geometry block: {n} vertices cannot fit in {len(buf)} bytes")
+        mode_bits, n, lengths = check_geometry_header(buf, n_points)
         self.n_points = int(n)
         self.modes = np.array([(mode_bits >> ch) & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64)
         self.offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)

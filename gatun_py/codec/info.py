@@ -19,7 +19,9 @@ def tetc_info(source) -> dict:
         ``source``, ``bytes_total``, ``bits_per_tet_connectivity`` (boundary and tet sections of
         level 0 over its tets), ``bits_per_vertex_geometry`` (geometry section of level 0 over its
         points), ``sections`` (name -> bytes), ``levels`` (one dict per stored level) and
-        ``forest`` (``merges``, ``max_ratio``, ``bytes`` of all stored forests).
+        ``forest`` (``merges``, ``max_ratio``, ``bytes`` of all stored forests), ``format_version``,
+        ``points_dtype`` and ``arrays`` (``name``, ``dtype``, ``components``, ``bytes`` in level 0
+        -- for the float32 default scalar, its share is inside the geometry section).
     """
     r = source if isinstance(source, TetcReader) else TetcReader(source)
     c = r.container
@@ -50,6 +52,10 @@ def tetc_info(source) -> dict:
         "bits_per_tet_connectivity": round(8.0 * conn / lv0["tets"], 4) if lv0["tets"] else 0.0,
         "bits_per_vertex_geometry": round(8.0 * geo / lv0["points"], 4) if lv0["points"] else 0.0,
         "sections": sizes,
+        "format_version": c.major,
+        "points_dtype": r.points_dtype.name,
+        "arrays": [{"name": name, "dtype": dt.name, "components": k, "bytes": sizes.get(f"L{i0}/array/{j}", 0)}
+                   for j, (name, dt, k) in enumerate(r.arrays)],
         "levels": levels,
         "forest": _forest_info(r, sizes),
     }

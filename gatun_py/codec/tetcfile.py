@@ -2,10 +2,13 @@
 
 A file holds one or more *levels* (level 0 is the full mesh; the simplify stage adds
 pre-simplified levels). Level ``i`` has the sections ``L{i}/boundary`` and ``L{i}/tets``
-(connectivity, :mod:`.cutborder`), ``L{i}/geometry`` (coordinates and density in decode order,
-:mod:`.geometry`) and optionally ``L{i}/forest`` (the remaining merge forest in decode order,
-:mod:`.forest`). The metadata lists the levels with the counts
-the decoder needs, so a reader seeks straight to one level.
+(connectivity, :mod:`.cutborder`), ``L{i}/geometry`` (coordinates and default scalar as float32 in
+decode order, :mod:`.geometry`: the stream the renderer needs), ``L{i}/points64`` (float64
+coordinates, exact, when they are not all float32 values) and ``L{i}/array/{j}`` (point array j of
+the metadata's ``arrays``, exact in its dtype, :mod:`.arrays`; absent for a float32 default scalar,
+which the geometry holds exactly), and optionally ``L{i}/forest`` (the remaining merge forest in
+decode order, :mod:`.forest`). The metadata lists the levels with the counts the decoder needs, so
+a reader seeks straight to one level.
 """
 
 from __future__ import annotations
@@ -17,19 +20,23 @@ from typing import Iterator
 import numpy as np
 
 from .._atomic import write_bytes_atomic
-from ..errors import CorruptFileError, OptionError
+from ..errors import CorruptFileError, MeshError, OptionError
 from ..mesh import TetBatch, TetMesh, default_step
+from ..mesh.model import scalar_of
+from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
 from .container import Container, build_container
 from .cutborder import ConnectivityDecoder, encode_connectivity
 from .forest import decode_forest, encode_forest, forest_header
-from .geometry import GeometryDecoder, encode_geometry
+from .geometry import GeometryDecoder, check_geometry_header, encode_geometry
 
 FORMAT_NAME = "tetc"
 DEFAULT_BATCH_TETS = 65536
-# a coded tet costs at least a few hundredths of a bit, a vertex at least a fraction of a byte:
-# counts beyond these bounds cannot come from a stream of the given size (rejected before allocating)
-_MAX_TETS_PER_BYTE = 2000
-_MAX_FACES_PER_BYTE = 2000
+# counts beyond these bounds are not believed from a stream of the given size (rejected before
+# allocating): a regular 40^3 grid, the most compressible mesh we know, codes 8.3 tets per byte of
+# its tet section and 5 boundary faces per byte; 512 leaves 60x headroom
+_MAX_TETS_PER_BYTE = 512
+_MAX_FACES_PER_BYTE = 512
+_POINTS = ("points",)  # key of the float64 coordinates among the exact arrays (no array name is a tuple)
 
 
 @dataclass
@@ -70,11 +77,22 @@ class EncodedLevel:
 def encode_level(payload: LevelPayload) -> EncodedLevel:
     """Compress one level: connectivity, geometry (in decode order) and the optional forest."""
     mesh = payload.mesh
+    check_mesh(mesh)
     conn = encode_connectivity(mesh.n_points, mesh.tets)
     vo = conn.vertex_order
-    geometry = encode_geometry(np.asarray(mesh.points)[vo], np.asarray(mesh.density)[vo], conn.predictors)
+    refs = np.ascontiguousarray(conn.predictors, dtype=np.int32)
+    p32, d32 = mesh.points32[vo], mesh.density[vo]
+    geometry = encode_geometry(p32, d32, refs)
     i = int(payload.level)
     sections = {f"L{i}/boundary": conn.boundary_code, f"L{i}/tets": conn.tet_code, f"L{i}/geometry": geometry}
+    if mesh.points.dtype == np.float64:
+        p64 = mesh.points[vo]
+        if not np.array_equal(p64.view(np.int64), p32.astype(np.float64).view(np.int64)):
+            sections[f"L{i}/points64"] = encode_array(p64, refs, external=p32)
+    for j, (name, values) in enumerate(mesh.point_data.items()):
+        if name == mesh.scalar_name and values.dtype == np.float32:
+            continue  # the geometry section holds it exactly
+        sections[f"L{i}/array/{j}"] = encode_array(values[vo], refs, external=d32 if name == mesh.scalar_name else None)
     if payload.forest is not None:
         parent, rank = (np.asarray(a) for a in payload.forest)
         if parent.shape != (mesh.n_points,) or rank.shape != (mesh.n_points,):
@@ -99,6 +117,69 @@ def encode_level(payload: LevelPayload) -> EncodedLevel:
     return EncodedLevel(i, sections, meta, vo, conn.peak_border)
 
 
+def check_mesh(mesh) -> None:
+    """What the encoder's kernels assume, checked before any of them runs (from every entry point).
+
+    Raises :class:`~gatun_py.errors.MeshError` on ids out of range (-1 included), a tet that
+    repeats a vertex, a negatively oriented tet, unsupported dtypes, or arrays of the wrong length.
+    """
+    if not isinstance(mesh, TetMesh):
+        raise MeshError(f"expected a TetMesh, got {type(mesh).__name__}")
+    n, t = mesh.n_points, mesh.tets
+    if n >= 2**31 - 1:
+        raise MeshError(f"mesh too large for 32-bit ids ({n} points)")
+    if t.size:
+        lo, hi = int(t.min()), int(t.max())
+        if lo < 0 or hi >= n:
+            bad = ((t < 0) | (t >= n)).any(axis=1)
+            i = int(np.flatnonzero(bad)[0])
+            raise MeshError(f"tet {i} refers to vertex {t[i].tolist()} but the mesh has {n} points "
+                            f"(valid ids 0..{n - 1}); {int(bad.sum())} tets affected")
+        s = np.sort(t, axis=1)
+        rep = (s[:, 1:] == s[:, :-1]).any(axis=1)
+        if rep.any():
+            i = int(np.flatnonzero(rep)[0])
+            raise MeshError(f"tet {i} repeats a vertex id {t[i].tolist()}; {int(rep.sum())} tets affected")
+        neg = mesh.signed_volumes() < 0
+        if neg.any():
+            i = int(np.flatnonzero(neg)[0])
+            raise MeshError(f"tet {i} is negatively oriented; {int(neg.sum())} tets affected "
+                            "(validate_tets re-orients them)")
+    if mesh.points.dtype not in (np.float32, np.float64):
+        raise MeshError(f"coordinates must be float32 or float64, not {mesh.points.dtype}")
+    for name, a in mesh.point_data.items():
+        try:
+            dtype_name(a.dtype)
+        except ValueError as e:
+            raise MeshError(f"point array {name!r}: {e}") from None
+        if a.shape[0] != n or a.ndim not in (1, 2) or (a.ndim == 2 and not 1 <= a.shape[1] <= MAX_COMPONENTS):
+            raise MeshError(f"point array {name!r} has shape {a.shape} for {n} points")
+
+
+def _finite_range(values) -> list:
+    """[lo, hi] of the finite values (JSON holds no NaN or inf); [0, 0] when there are none."""
+    v = np.asarray(values, np.float64)
+    v = v[np.isfinite(v)]
+    return [float(v.min()), float(v.max())] if v.size else [0.0, 0.0]
+
+
+def _arrays_meta(mesh, *, ranges: bool = False) -> list:
+    """The metadata's ``arrays``; with ``ranges`` also each one's value range (the magnitude's for a
+    vector, plus ``component_ranges``) so a renderer can normalise any of them before decoding."""
+    out = []
+    for name, dt, k in mesh.arrays:
+        e = {"name": name, "dtype": dtype_name(dt), "components": k}
+        if ranges:
+            a = mesh.point_data[name]
+            if k == 1:
+                e["range"] = _finite_range(a)
+            else:
+                e["range"] = _finite_range(mesh.scalar(name, "magnitude"))
+                e["component_ranges"] = [_finite_range(a[:, c]) for c in range(k)]
+        out.append(e)
+    return out
+
+
 def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None) -> bytes:
     """Build a whole ``.tetc`` file from levels (level 0 first).
 
@@ -113,6 +194,10 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None) 
     if not levels:
         raise OptionError("nothing to write: no levels")
     mesh0 = levels[0].mesh
+    for lv in levels:
+        check_mesh(lv.mesh)
+        if _arrays_meta(lv.mesh) != _arrays_meta(mesh0) or lv.mesh.points.dtype != mesh0.points.dtype:
+            raise OptionError(f"level {lv.level} does not carry the arrays of level 0")
     encoded = []
     for lv in levels:
         encoded.append(encode_level(lv))
@@ -126,10 +211,12 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None) 
         "boundary_faces": encoded[0].meta["boundary_faces"],
         "bbox": [lo.tolist(), hi.tolist()],
         "scalar": str(mesh0.scalar_name),
+        "points_dtype": dtype_name(mesh0.points.dtype),
+        "arrays": _arrays_meta(mesh0, ranges=True),
         "scalar_range": [float(x) for x in mesh0.scalar_range],
         "source": os.path.basename(str(source)),
         # The full mesh's volume-mode sample step, so that every level and ratio samples alike.
-        "render_step": float(default_step(mesh0.points, mesh0.boundary_faces())),
+        "render_step": float(default_step(mesh0.points32, mesh0.boundary_faces())),
         "levels": [e.meta for e in encoded],
     }
     sections = [(name, data) for e in encoded for name, data in e.sections.items()]
@@ -184,7 +271,41 @@ class TetcReader:
             _int(lv, "boundary_faces")
             _int(lv, "boundary_vertices", 0, n)
             _int(lv, "referenced_points", 0, n)
+            if "merges_before" in lv:
+                _int(lv, "merges_before")
+            ratio = lv.get("ratio", 0.0)
+            if not isinstance(ratio, (int, float)) or isinstance(ratio, bool) or not 0.0 <= ratio <= 1.0:
+                raise CorruptFileError("corrupt metadata: bad level ratio")
             self.levels.append(lv)
+        _int(self.meta, "points")
+        _int(self.meta, "tets")
+        if not isinstance(self.meta.get("scalar", ""), str):
+            raise CorruptFileError("corrupt metadata: bad scalar name")
+        self.points_dtype, self.arrays = self._parse_arrays()
+
+    def _parse_arrays(self):
+        """(points dtype, [(name, dtype, components)]) from the metadata; format 1 has one float32 scalar."""
+        if ("arrays" in self.meta) != (self.container.major >= 2):
+            raise CorruptFileError("corrupt metadata: the array list does not match the format version")
+        if "arrays" not in self.meta:  # format 1: float32 coordinates and one float32 scalar
+            return np.dtype("<f4"), [(self.scalar_name, np.dtype("<f4"), 1)]
+        pdt = check_dtype(self.meta.get("points_dtype"))
+        if pdt.kind != "f":
+            raise CorruptFileError("corrupt metadata: bad points_dtype")
+        entries = self.meta["arrays"]
+        if not isinstance(entries, list) or not 1 <= len(entries) <= 4096:
+            raise CorruptFileError("corrupt metadata: bad array list")
+        arrays = []
+        for e in entries:
+            if not isinstance(e, dict) or not isinstance(e.get("name"), str):
+                raise CorruptFileError("corrupt metadata: bad array entry")
+            arrays.append((e["name"], check_dtype(e.get("dtype")), _int(e, "components", 1, MAX_COMPONENTS)))
+        names = [a[0] for a in arrays]
+        if len(set(names)) != len(names) or self.scalar_name not in names:
+            raise CorruptFileError("corrupt metadata: array names repeat or miss the default scalar")
+        if arrays[names.index(self.scalar_name)][2] != 1:
+            raise CorruptFileError("corrupt metadata: the default scalar has several components")
+        return pdt, arrays
 
     @property
     def scalar_name(self) -> str:
@@ -201,6 +322,41 @@ class TetcReader:
         """The CRC-checked payload of section ``name``."""
         return self.container.read_section(name)
 
+    def array_range(self, name: str | None = None, component=None) -> tuple[float, float] | None:
+        """(lo, hi) of a point array (a vector's component or magnitude) from the metadata, without
+        decoding; None when the file does not record it (format 1 records only the default scalar's)."""
+        name = self.scalar_name if name is None else name
+        entry = next((e for e in self.meta.get("arrays", []) if isinstance(e, dict) and e.get("name") == name), None)
+        if entry is None:
+            rng = self.meta.get("scalar_range") if name == self.scalar_name else None
+        elif isinstance(component, (int, np.integer)) and not isinstance(component, bool) and entry.get("components", 1) > 1:
+            ranges = entry.get("component_ranges")
+            rng = ranges[component] if isinstance(ranges, list) and 0 <= component < len(ranges) else None
+        else:
+            rng = entry.get("range")
+        if (isinstance(rng, list) and len(rng) == 2 and all(isinstance(x, (int, float)) and np.isfinite(x) for x in rng)
+                and rng[0] <= rng[1]):
+            return float(rng[0]), float(rng[1])
+        return None
+
+    def _size(self, name: str) -> int:
+        if not self.container.has_section(name):
+            raise CorruptFileError(f"{self.container.name}: missing section {name!r}")
+        return self.container.section_size(name)
+
+    def _checked_points(self, level: int) -> int:
+        """The level's vertex count, checked with its tet and face counts against the sizes of the
+        sections that code them, before anything is allocated."""
+        lv = self.level_meta(level)
+        check_geometry_header(self.read_section(f"L{level}/geometry"), lv["points"])
+        m, nf = lv["tets"], lv["boundary_faces"]
+        tlen, blen = (self._size(f"L{level}/{part}") for part in ("tets", "boundary"))
+        if m > _MAX_TETS_PER_BYTE * (tlen + 8) or nf > _MAX_FACES_PER_BYTE * (blen + 8):
+            raise CorruptFileError("corrupt metadata: counts cannot fit in the stored sections")
+        if (m == 0) != (nf == 0):
+            raise CorruptFileError("corrupt metadata: inconsistent tet and face counts")
+        return lv["points"]
+
     def read_forest(self, level: int = 0):
         """The merge forest of ``level`` in decode order as (parent, rank), or None if not stored."""
         lv = self.level_meta(level)
@@ -209,7 +365,11 @@ class TetcReader:
             if lv.get("has_forest"):
                 raise CorruptFileError(f"missing section {name!r}")
             return None
-        return decode_forest(self.read_section(name), lv["points"])
+        data = self.read_section(name)
+        n, _ = forest_header(data)
+        if n != lv["points"]:
+            raise CorruptFileError(f"{name}: covers {n} vertices, the level has {lv['points']}")
+        return decode_forest(data, self._checked_points(level))
 
     def forest_merges(self) -> int:
         """Merges the file's full forest holds (0 when it stores none), from the section header only."""
@@ -222,66 +382,142 @@ class TetcReader:
             raise CorruptFileError(f"{name}: covers {n} vertices, the level has {lv0['points']}")
         return k
 
-    def iter_decode(self, level: int = 0, *, batch_tets: int = DEFAULT_BATCH_TETS) -> Iterator[TetBatch]:
-        """Stream the mesh of ``level`` as :class:`~gatun_py.mesh.TetBatch`es.
+    def _array_decoder(self, level: int, j: int, n: int):
+        """Decoder of array j of ``level`` (None for a float32 default scalar: the geometry holds it)."""
+        name, dt, k = self.arrays[j]
+        section = f"L{level}/array/{j}"
+        if not self.container.has_section(section):
+            if name == self.scalar_name and dt == np.float32:
+                return None
+            raise CorruptFileError(f"missing section {section!r}")
+        return ArrayDecoder(self.read_section(section), n_points=n, dtype=dt.name, components=k)
 
-        The first batch holds the boundary surface and its vertices, then batches of up to
-        ``batch_tets`` tets with the vertices they introduce, and a last batch with the
-        unreferenced vertices (if any). Raises :class:`CorruptFileError` on damaged data, at the
-        latest when the last batch is produced.
+    def _points_decoder(self, level: int, n: int):
+        section = f"L{level}/points64"
+        if self.points_dtype != np.float64 or not self.container.has_section(section):
+            return None
+        return ArrayDecoder(self.read_section(section), n_points=n, dtype="float64", components=3)
+
+    def _batches(self, level: int, batch_tets: int, extra: dict):
+        """Decode ``level``: yields (TetBatch, {key: exact values of the batch's new vertices}).
+
+        ``extra`` maps keys to :class:`ArrayDecoder`s fed alongside the geometry; a decoder under the
+        key ``_POINTS`` is predicted from the float32 coordinates, the default scalar's from the
+        float32 density.
         """
         lv = self.level_meta(level)
         n, m, nf = lv["points"], lv["tets"], lv["boundary_faces"]
+        self._checked_points(level)
         bcode = self.read_section(f"L{level}/boundary")
         tcode = self.read_section(f"L{level}/tets")
-        if m > _MAX_TETS_PER_BYTE * (len(tcode) + 8) or nf > _MAX_FACES_PER_BYTE * (len(bcode) + 8):
-            raise CorruptFileError("corrupt metadata: counts cannot fit in the stored sections")
-        if (m == 0) != (nf == 0):
-            raise CorruptFileError("corrupt metadata: inconsistent tet and face counts")
         geo = GeometryDecoder(self.read_section(f"L{level}/geometry"), n_points=n)
         conn = ConnectivityDecoder(bcode, tcode, n_points=n, n_tets=m, n_boundary_faces=nf,
                                    n_referenced=lv["referenced_points"])
+
+        def exact(refs, pts, dens):
+            out = {}
+            for key, dec in extra.items():
+                ext = pts if key == _POINTS else dens if key == self.scalar_name else None
+                out[key] = dec.decode(refs, ext)
+            return out
+
         faces, nbv = conn.boundary()
         if nbv != lv["boundary_vertices"]:
             raise CorruptFileError("corrupt boundary section: vertex count does not match the metadata")
         refs = conn.predictors
         pts, dens = geo.decode(refs[:nbv])
-        yield TetBatch.of_vertices(0, pts, dens, faces)
+        yield TetBatch.of_vertices(0, pts, dens, faces), exact(refs[:nbv], pts, dens)
         conn.start_tets()
         known = nbv
         while conn.tets_done < m:
             tets = conn.next_tets(batch_tets)
             nv = conn.vertices_known
             pts, dens = geo.decode(refs[known:nv])
-            yield TetBatch.of_tets(known, tets, pts, dens)
+            yield TetBatch.of_tets(known, tets, pts, dens), exact(refs[known:nv], pts, dens)
             known = nv
         if known != lv["referenced_points"]:
             raise CorruptFileError("corrupt tet section: vertex count does not match the metadata")
         if known < n:
-            pts, dens = geo.decode(np.full((n - known, 4), -1, np.int32))
-            yield TetBatch.of_vertices(known, pts, dens)
+            none = np.full((n - known, 4), -1, np.int32)
+            pts, dens = geo.decode(none)
+            yield TetBatch.of_vertices(known, pts, dens), exact(none, pts, dens)
         geo.finish()
+        for dec in extra.values():
+            dec.finish()
         self.last_peak_border = conn.peak_border
 
+    def iter_decode(self, level: int = 0, *, scalar: str | None = None, component=None,
+                    batch_tets: int = DEFAULT_BATCH_TETS) -> Iterator[TetBatch]:
+        """Stream the mesh of ``level`` as :class:`~gatun_py.mesh.TetBatch`es.
+
+        The first batch holds the boundary surface and its vertices, then batches of up to
+        ``batch_tets`` tets with the vertices they introduce, and a last batch with the
+        unreferenced vertices (if any). Raises :class:`CorruptFileError` on damaged data, at the
+        latest when the last batch is produced.
+
+        Parameters
+        ----------
+        scalar : str, optional
+            The point array to put in the batches' ``density`` (float32; default: the file's
+            default scalar, straight from the geometry section).
+        component : None, int or "magnitude"
+            For a vector array: the component, or the Euclidean norm.
+        """
+        n = self._checked_points(level)
+        names = [a[0] for a in self.arrays]
+        if scalar is None or (scalar == self.scalar_name and component in (None, 0)):
+            for batch, _ in self._batches(level, batch_tets, {}):
+                yield batch
+            return
+        if scalar not in names:
+            raise OptionError(f"no point array named {scalar!r}; arrays: {', '.join(map(repr, names))}")
+        j = names.index(scalar)
+        try:  # check the component before decoding anything
+            scalar_of({scalar: np.zeros((0,) if self.arrays[j][2] == 1 else (0, self.arrays[j][2]))}, scalar, component)
+        except ValueError as e:
+            raise OptionError(str(e)) from None
+        dec = self._array_decoder(level, j, n)
+        for batch, exact in self._batches(level, batch_tets, {scalar: dec}):
+            with np.errstate(over="ignore"):  # beyond float32: inf, like any float32 rounding
+                batch.density = scalar_of(exact, scalar, component).astype(np.float32)
+            yield batch
+
     def decode_mesh(self, level: int = 0):
-        """The whole mesh of ``level`` as a :class:`~gatun_py.mesh.TetMesh` (vertices in decode order)."""
+        """The whole mesh of ``level`` as a :class:`~gatun_py.mesh.TetMesh` (vertices in decode order).
+
+        Coordinates in their stored dtype and every point array in its own, bit for bit.
+        """
         lv = self.level_meta(level)
-        n = lv["points"]
+        n = self._checked_points(level)
+        extra = {}
+        pdec = self._points_decoder(level, n)
+        if pdec is not None:
+            extra[_POINTS] = pdec
+        for j, (name, _, _) in enumerate(self.arrays):
+            dec = self._array_decoder(level, j, n)
+            if dec is not None:
+                extra[name] = dec
         points = np.empty((n, 3), np.float32)
         density = np.empty(n, np.float32)
         tets = np.empty((lv["tets"], 4), np.int32)
-        faces = None
         t = 0
-        for b in self.iter_decode(level):
+        for b, _ in self._batches(level, DEFAULT_BATCH_TETS, extra):
             k = len(b.points)
             points[b.first:b.first + k] = b.points
             density[b.first:b.first + k] = b.density
             tets[t:t + len(b.tets)] = b.tets
             t += len(b.tets)
-            if faces is None:
-                faces = b.boundary
+        point_data = {}
+        for name, dt, _ in self.arrays:
+            point_data[name] = extra[name].values if name in extra else density
+        if pdec is not None:
+            if not np.array_equal(pdec.values.astype(np.float32), points):
+                raise CorruptFileError("corrupt file: float64 coordinates disagree with the geometry section")
+            points = pdec.values
+        elif self.points_dtype == np.float64:
+            points = points.astype(np.float64)
         try:
-            return TetMesh(points, density, tets, self.scalar_name)
+            return TetMesh(points, density, tets, self.scalar_name, point_data=point_data)
         except Exception as e:  # a mesh that fails its own invariants can only come from damage
             raise CorruptFileError(f"corrupt file: decoded mesh is invalid ({e})") from None
 

@@ -201,12 +201,7 @@ def mesh_from_meshio(m, *, scalar: str | None = None, cell_to_point: bool = Fals
     if points.shape[1] == 2:
         raise ReadError(f"{source}: a 2-D mesh has no volume cells")
     notes = []
-    p32 = points.astype(np.float32)
-    if points.dtype != np.float32:
-        with np.errstate(invalid="ignore"):
-            changed = int((p32.astype(points.dtype) != points)[np.isfinite(points)].sum())
-        if changed:
-            notes.append(f"{changed} coordinates rounded from {points.dtype} to float32")
+    pts = _coordinates(points, notes)
 
     blocks = []  # (linear type, corner ids, block index)
     other = set()
@@ -251,55 +246,91 @@ def mesh_from_meshio(m, *, scalar: str | None = None, cell_to_point: bool = Fals
             tt = split_min_id_star(data, lin)
             per = len(tt) // max(len(data), 1)
         if lin != "tetra":  # our own split: orient it; only the file's own tets count as re-oriented
-            tt = orient_positive(p32, tt)
+            tt = orient_positive(pts, tt)
         tet_chunks.append(tt)
         cell_of_tet.append((bi, offset, per, len(data)))
         offset += len(data)
     tets = np.concatenate(tet_chunks)
 
-    density, name = _choose_scalar(m, n, scalar, cell_to_point, p32, tet_chunks, cell_of_tet, source)
-    mesh, report = _validated(source, p32, density, tets, name)
+    point_data = _point_arrays(m.point_data, n, notes)
+    cell_names = sorted(m.cell_data)
+    if cell_to_point:  # every cell array is carried, averaged to the points
+        for cname in cell_names:
+            key = cname if cname not in point_data else f"{cname} (cell)"
+            point_data[key] = _cell_to_point(m, cname, pts, tet_chunks, cell_of_tet, n)
+            if key != cname:
+                notes.append(f"cell array {cname!r} averaged to the points as {key!r}")
+    density, name = _choose_scalar(m, n, scalar, cell_to_point, point_data, source)
+    mesh, report = _validated(source, pts, density, tets, name, point_data)
     report.notes += notes
+    if not cell_to_point:
+        report.cell_arrays = cell_names
     return mesh, report
 
 
-def _validated(source, points, density, tets, name):
+def _coordinates(points: np.ndarray, notes: list) -> np.ndarray:
+    """float32 and float64 coordinates as they are; other dtypes in the float that holds them."""
+    if points.dtype.kind == "f" and points.dtype.itemsize in (4, 8):
+        return points.astype(points.dtype.newbyteorder("="))  # legacy VTK is big endian
+    if points.dtype == np.float16:
+        return points.astype(np.float32)
+    out = points.astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        changed = int((out.astype(points.dtype) != points)[np.isfinite(out)].sum())
+    if changed:
+        notes.append(f"{changed} coordinates rounded from {points.dtype} to float64")
+    return out
+
+
+def _point_arrays(data: dict, n: int, notes: list) -> dict:
+    """Every numeric point array as (n,) or (n, k) in its own dtype; a note for anything skipped."""
+    out = {}
+    for k, v in data.items():
+        a = np.asarray(v)
+        if a.ndim == 0 or a.shape[0] != n:
+            notes.append(f"point array {k!r} skipped: shape {a.shape} does not match {n} points")
+            continue
+        if a.dtype.kind not in "fiub" or a.dtype.itemsize > 8:
+            notes.append(f"point array {k!r} skipped: dtype {a.dtype} cannot be stored (floats and integers only)")
+            continue
+        if a.ndim > 2:
+            notes.append(f"point array {k!r} of shape {a.shape} stored as {a.shape[0]} x {a[0].size} components")
+            a = a.reshape(n, -1)
+        out[str(k)] = a.reshape(-1) if a.ndim == 2 and a.shape[1] == 1 else a
+    return out
+
+
+def _validated(source, points, density, tets, name, point_data=None):
     try:
-        return validate_tets(points, density, tets, scalar_name=name)
+        return validate_tets(points, density, tets, scalar_name=name, point_data=point_data)
     except MeshError as e:
         raise MeshError(f"{source}: {e}") from None
 
 
-def _scalar_arrays(data: dict, n: int) -> dict:
-    out = {}
-    for k, v in data.items():
-        a = np.asarray(v)
-        if a.shape[0] == n and (a.ndim == 1 or (a.ndim == 2 and a.shape[1] == 1)) and np.issubdtype(a.dtype, np.number):
-            out[k] = a.reshape(-1)
-    return out
-
-
-def _choose_scalar(m, n, scalar, cell_to_point, p32, tet_chunks, cell_of_tet, source):
-    point_scalars = _scalar_arrays(m.point_data, n)
+def _choose_scalar(m, n, scalar, cell_to_point, point_data, source):
+    """(None, name) of the default scalar among the point arrays (cell arrays already averaged in)."""
+    cell_names = set(m.cell_data) if cell_to_point else set()
+    point_scalars = {k: v for k, v in point_data.items() if v.ndim == 1 and k not in cell_names}
     if scalar is not None:
-        if scalar in point_scalars:
-            return point_scalars[scalar], scalar
+        if scalar in point_data and point_data[scalar].ndim == 1:
+            return None, scalar
+        if scalar in point_data:
+            raise ReadError(f"{source}: {scalar!r} has {point_data[scalar].shape[1]} components; the default "
+                            "scalar must be one value per point (a vector's component is chosen at render time)")
         if scalar in m.cell_data:
-            if not cell_to_point:
-                raise ReadError(f"{source}: {scalar!r} is cell data; it can be used only averaged to the points "
-                                "(cell-to-point)")
-            return _cell_to_point(m, scalar, p32, tet_chunks, cell_of_tet, n), scalar
-        names = sorted(point_scalars) + [f"{k} (cell data)" for k in sorted(m.cell_data)]
+            raise ReadError(f"{source}: {scalar!r} is cell data; it can be used only averaged to the points "
+                            "(cell-to-point)")
+        names = sorted(point_scalars) + [f"{k} (cell data)" for k in sorted(m.cell_data) if k not in point_data]
         raise ReadError(f"{source}: no point scalar named {scalar!r}; available: {', '.join(names) or 'none'}")
     if cell_to_point:
         cell_names = sorted(m.cell_data)
-        if len(cell_names) == 1:
-            return _cell_to_point(m, cell_names[0], p32, tet_chunks, cell_of_tet, n), cell_names[0]
+        if len(cell_names) == 1 and point_data[cell_names[0]].ndim == 1:
+            return None, cell_names[0]
         if len(cell_names) > 1:
             raise ReadError(f"{source}: several cell arrays, choose the scalar by name: {', '.join(cell_names)}")
     if len(point_scalars) == 1:
-        (name, arr), = point_scalars.items()
-        return arr, name
+        (name, _), = point_scalars.items()
+        return None, name
     if len(point_scalars) > 1:
         raise ReadError(f"{source}: several point scalars, choose one by name: {', '.join(sorted(point_scalars))}")
     cell_names = sorted(m.cell_data)
@@ -309,24 +340,29 @@ def _choose_scalar(m, n, scalar, cell_to_point, p32, tet_chunks, cell_of_tet, so
     raise ReadError(f"{source}: the mesh has no scalar data")
 
 
-def _cell_to_point(m, name, p32, tet_chunks, cell_of_tet, n):
-    """Volume-weighted average of a cell scalar onto the points (only on request)."""
-    acc = np.zeros(n)
+def _cell_to_point(m, name, points, tet_chunks, cell_of_tet, n):
+    """Volume-weighted average of a cell array (scalar or vector) onto the points, as float64."""
+    acc = None
     w = np.zeros(n)
     for (bi, _, per, ncell), tt in zip(cell_of_tet, tet_chunks):
         vals = np.asarray(m.cell_data[name][bi])
-        if vals.ndim > 1:
-            if vals.shape[1] != 1:
-                raise ReadError(f"cell data {name!r} is not a scalar (shape {vals.shape})")
-            vals = vals[:, 0]
-        vol = np.abs(signed_volumes(p32, tt))
-        per_tet = np.repeat(vals.astype(np.float64), per)[: len(tt)]
+        if vals.dtype.kind not in "fiub" or vals.shape[:1] != (ncell,):
+            raise ReadError(f"cell data {name!r} cannot be averaged (dtype {vals.dtype}, shape {vals.shape})")
+        vals = vals.reshape(ncell, -1).astype(np.float64)
+        if acc is None:
+            acc = np.zeros((n, vals.shape[1]))
+        elif vals.shape[1] != acc.shape[1]:
+            raise ReadError(f"cell data {name!r} has a different number of components per block")
+        vol = np.abs(signed_volumes(points, tt))
+        per_tet = np.repeat(vals, per, axis=0)[: len(tt)]
         for c in range(4):
-            np.add.at(acc, tt[:, c], vol * per_tet)
+            np.add.at(acc, tt[:, c], vol[:, None] * per_tet)
             np.add.at(w, tt[:, c], vol)
+    if acc is None:
+        acc = np.zeros((n, 1))
     with np.errstate(invalid="ignore", divide="ignore"):
-        out = np.where(w > 0, acc / np.where(w > 0, w, 1), 0.0)
-    return out
+        out = np.where(w[:, None] > 0, acc / np.where(w > 0, w, 1)[:, None], 0.0)
+    return out[:, 0] if out.shape[1] == 1 else out
 
 
 def mesh_output_format(path) -> str:
@@ -345,13 +381,13 @@ def mesh_output_format(path) -> str:
 
 
 def write_mesh(mesh: TetMesh, path, *, force: bool = False) -> None:
-    """Write a linear tet mesh with density as point data, format from the extension, atomically."""
+    """Write a linear tet mesh with every point array, format from the extension, atomically."""
     path = Path(path)
     fmt = mesh_output_format(path)
     if fmt in ("xdmf", "h5m", "med") and importlib.util.find_spec("h5py") is None:
         raise OutputError(f"writing {fmt} files needs h5py (pip install h5py); .vtu needs nothing extra")
     m = meshio.Mesh(np.asarray(mesh.points), [("tetra", np.asarray(mesh.tets))],
-                    point_data={mesh.scalar_name: np.asarray(mesh.density)})
+                    point_data={name: np.asarray(a) for name, a in mesh.point_data.items()})
     with atomic_path(path, force=force) as tmp:
         try:
             with warnings.catch_warnings():

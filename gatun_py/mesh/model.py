@@ -13,21 +13,27 @@ TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int6
 
 @dataclass(frozen=True, eq=False, repr=False)
 class TetMesh:
-    """A linear tetrahedral mesh with one scalar per point.
+    """A linear tetrahedral mesh with its point arrays.
 
     Immutable by convention: the arrays are marked read-only, stages that change a mesh build a
     new one.
 
     Parameters
     ----------
-    points : (n, 3) float32
-        Vertex coordinates.
-    density : (n,) float32
-        The scalar sampled at every vertex (the paper's "density").
+    points : (n, 3) float32 or float64
+        Vertex coordinates, kept in their dtype (float64 stays float64; any other dtype becomes
+        float32).
+    density : (n,) array or None
+        The scalar rendered and decimated by default (the paper's "density"), as float32. ``None``
+        when ``point_data`` holds ``scalar_name``: then it is that array rounded to float32.
     tets : (m, 4) int32
         Vertex ids of every tetrahedron, positively oriented (signed volume >= 0).
     scalar_name : str
-        Name of the scalar in the source file, kept for output.
+        Name of the default scalar, kept for output.
+    point_data : dict, optional
+        Every point array, ``name -> (n,) or (n, k)`` array in its own dtype (floats and integers),
+        bit for bit what the user gave. The default scalar is ``point_data[scalar_name]``; when it
+        is absent, ``density`` is stored under that name.
 
     Examples
     --------
@@ -38,23 +44,59 @@ class TetMesh:
     TetMesh(points=4, tets=1, scalar='density' in [0, 3])
     >>> float(m.signed_volumes()[0])
     0.16666666666666666
+    >>> v = TetMesh(np.eye(4, 3, k=-1), None, [[0, 1, 2, 3]], "p",
+    ...             point_data={"p": np.arange(4.0), "u": np.ones((4, 3))})
+    >>> v
+    TetMesh(points=4 float64, tets=1, scalar='p' in [0, 3], arrays=['p' float64, 'u' float64 x3])
+    >>> v.scalar("u", "magnitude")[:2]
+    array([1.73205081, 1.73205081])
     """
 
     points: np.ndarray
-    density: np.ndarray
+    density: np.ndarray | None
     tets: np.ndarray
     scalar_name: str = "density"
+    point_data: dict | None = None
     _cache: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self):
-        pts = np.ascontiguousarray(self.points, dtype=np.float32).reshape(-1, 3)
-        den = np.ascontiguousarray(self.density, dtype=np.float32).reshape(-1)
-        tets = np.ascontiguousarray(self.tets, dtype=np.int32).reshape(-1, 4)
-        for a in (pts, den, tets):
+        raw = np.asarray(self.points)
+        pdtype = np.float64 if raw.dtype.kind == "f" and raw.dtype.itemsize == 8 else np.float32
+        pts = np.ascontiguousarray(raw, dtype=pdtype).reshape(-1, 3)
+        n = pts.shape[0]
+        data = {}
+        for name, arr in (self.point_data or {}).items():
+            data[str(name)] = _point_array(name, arr, n)
+        name = str(self.scalar_name)
+        if name in data:
+            if data[name].ndim != 1:
+                raise ValueError(f"the default scalar {name!r} must be one value per point, "
+                                 f"got shape {data[name].shape}")
+            den = np.ascontiguousarray(data[name], dtype=np.float32)
+            if self.density is not None:
+                given = np.asarray(self.density, dtype=np.float32).reshape(-1)
+                if given.shape != den.shape or not np.array_equal(given.view(np.int32), den.view(np.int32)):
+                    raise ValueError(f"density differs from point_data[{name!r}] rounded to float32")
+        else:
+            if self.density is None:
+                raise ValueError(f"no density given and no point array named {name!r}")
+            den = np.ascontiguousarray(self.density, dtype=np.float32).reshape(-1)
+            if den.shape[0] != n:
+                raise ValueError(f"density has {den.shape[0]} values for {n} points")
+            data = {name: den, **data}
+        raw_tets = np.asarray(self.tets)
+        if raw_tets.size and raw_tets.dtype.kind not in "iu":
+            raise ValueError(f"tet vertex ids must be integers, got {raw_tets.dtype}")
+        if raw_tets.size and raw_tets.dtype.itemsize > 4 and (raw_tets.min() < -1 or raw_tets.max() >= 2**31 - 1):
+            raise ValueError("tet vertex ids do not fit in 32 bits")
+        tets = np.ascontiguousarray(raw_tets, dtype=np.int32).reshape(-1, 4)
+        for a in (pts, den, tets, *data.values()):
             a.flags.writeable = False
         object.__setattr__(self, "points", pts)
         object.__setattr__(self, "density", den)
         object.__setattr__(self, "tets", tets)
+        object.__setattr__(self, "scalar_name", name)
+        object.__setattr__(self, "point_data", data)
 
     # -- sizes -------------------------------------------------------------------------------
     @property
@@ -71,7 +113,61 @@ class TetMesh:
             rng = f" in [{lo:.6g}, {hi:.6g}]"
         else:
             rng = ""
-        return f"TetMesh(points={self.n_points}, tets={self.n_tets}, scalar={self.scalar_name!r}{rng})"
+        pdt = "" if self.points.dtype == np.float32 else f" {self.points.dtype}"
+        arrays = ""
+        if len(self.point_data) > 1 or self.point_data[self.scalar_name].dtype != np.float32:
+            arrays = ", arrays=[" + ", ".join(
+                f"{name!r} {dt}" + (f" x{k}" if k > 1 else "") for name, dt, k in self.arrays) + "]"
+        return (f"TetMesh(points={self.n_points}{pdt}, tets={self.n_tets}, "
+                f"scalar={self.scalar_name!r}{rng}{arrays})")
+
+    # -- point arrays ------------------------------------------------------------------------
+    @property
+    def arrays(self) -> list[tuple[str, np.dtype, int]]:
+        """``(name, dtype, components)`` of every point array, the default scalar first."""
+        return [(name, a.dtype, 1 if a.ndim == 1 else int(a.shape[1])) for name, a in self.point_data.items()]
+
+    def scalar(self, name: str | None = None, component=None) -> np.ndarray:
+        """One value per point from a point array, as float64.
+
+        Parameters
+        ----------
+        name : str, optional
+            The array (default: the default scalar).
+        component : None, int or "magnitude"
+            For a vector array: which component, or the Euclidean norm. Required for vectors.
+
+        Raises
+        ------
+        KeyError
+            No such array (the message lists the names).
+        ValueError
+            A vector without ``component``, or a component out of range.
+        """
+        return scalar_of(self.point_data, self.scalar_name if name is None else name, component)
+
+    def with_scalar(self, name: str, component=None) -> "TetMesh":
+        """The same mesh with ``name`` (a component or the magnitude of a vector) as default scalar.
+
+        For a vector, the derived scalar is added as ``"name[i]"`` or ``"name[magnitude]"``.
+        """
+        if component is None and name in self.point_data and self.point_data[name].ndim == 1:
+            return TetMesh(self.points, None, self.tets, name, point_data=self.point_data)
+        label = f"{name}[{component}]"
+        data = dict(self.point_data)
+        data[label] = self.scalar(name, component)
+        return TetMesh(self.points, None, self.tets, label, point_data=data)
+
+    @property
+    def points32(self) -> np.ndarray:
+        """The coordinates rounded to float32 (the array itself when already float32)."""
+        if self.points.dtype == np.float32:
+            return self.points
+        if "p32" not in self._cache:
+            p = self.points.astype(np.float32)
+            p.flags.writeable = False
+            self._cache["p32"] = p
+        return self._cache["p32"]
 
     # -- geometry ----------------------------------------------------------------------------
     def signed_volumes(self) -> np.ndarray:
@@ -112,6 +208,46 @@ class TetMesh:
         p = self.points.astype(np.float64)
         e = np.linalg.norm(p[t[:, 0]] - p[t[:, 1]], axis=1)
         return float(np.median(e))
+
+
+def _point_array(name, arr, n: int) -> np.ndarray:
+    """A point array in its own dtype as a contiguous (n,) or (n, k) array."""
+    a = np.asarray(arr)
+    if a.dtype.kind not in "fiub" or a.dtype.itemsize > 8:
+        raise ValueError(f"point array {name!r}: unsupported dtype {a.dtype} (floats and integers only)")
+    if a.dtype.kind == "b":
+        a = a.astype(np.uint8)
+    if not a.dtype.isnative:  # legacy VTK is big endian: same values, native bytes
+        a = a.astype(a.dtype.newbyteorder("="))
+    if a.ndim == 2 and a.shape[1] == 1:
+        a = a.reshape(-1)
+    if a.ndim not in (1, 2) or a.shape[0] != n or (a.ndim == 2 and a.shape[1] == 0):
+        raise ValueError(f"point array {name!r}: shape {a.shape} is not ({n},) or ({n}, k)")
+    # a read-only contiguous array is shared; anything else is copied (the mesh marks its arrays
+    # read-only, which must not change the caller's array)
+    if a.flags.c_contiguous and not a.flags.writeable:
+        return a
+    return np.array(a, order="C")
+
+
+def scalar_of(point_data: dict, name: str, component=None) -> np.ndarray:
+    """One float64 value per point from ``point_data[name]`` (see :meth:`TetMesh.scalar`)."""
+    if name not in point_data:
+        raise KeyError(f"no point array named {name!r}; arrays: {', '.join(map(repr, point_data)) or 'none'}")
+    a = point_data[name]
+    if a.ndim == 1:
+        if component not in (None, 0):
+            raise ValueError(f"{name!r} is a scalar array: it has no component {component!r}")
+        return a.astype(np.float64)
+    k = a.shape[1]
+    if component is None:
+        raise ValueError(f"{name!r} has {k} components: choose one (0..{k - 1}) or 'magnitude'")
+    if component == "magnitude":
+        with np.errstate(over="ignore", invalid="ignore"):  # huge components: inf, as the values say
+            return np.sqrt(np.sum(np.square(a.astype(np.float64)), axis=1))
+    if isinstance(component, (int, np.integer)) and not isinstance(component, bool) and 0 <= component < k:
+        return a[:, int(component)].astype(np.float64)
+    raise ValueError(f"{name!r} has components 0..{k - 1} and 'magnitude', not {component!r}")
 
 
 def default_step(points, boundary_faces) -> float:

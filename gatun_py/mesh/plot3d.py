@@ -101,8 +101,9 @@ def read_xyz(path) -> Plot3DGrid:
     return Plot3DGrid(dims, np.ascontiguousarray(xyz), iblank)
 
 
-def read_q(path, dims: tuple[int, int, int], variable: str = "density") -> np.ndarray:
-    """One scalar per grid point from a Q file, as float32."""
+def read_q(path, dims: tuple[int, int, int], variable: str = "density", *, dtype=np.float32) -> np.ndarray:
+    """One scalar per grid point from a Q file, as float32 (or ``dtype=np.float64``: the derived
+    variables computed and kept in float64, the stored ones exactly)."""
     path = Path(path)
     if variable not in Q_VARIABLES:
         raise ReadError(f"unknown Q variable {variable!r}; choose one of {', '.join(Q_VARIABLES)}")
@@ -120,7 +121,7 @@ def read_q(path, dims: tuple[int, int, int], variable: str = "density") -> np.nd
     q = np.frombuffer(raw, dtype=f"{bo}f4", count=5 * n, offset=28).reshape(5, n)
     direct = {"density": 0, "momentum-x": 1, "momentum-y": 2, "momentum-z": 3, "energy": 4}
     if variable in direct:
-        return np.ascontiguousarray(q[direct[variable]].astype(np.float32))
+        return np.ascontiguousarray(q[direct[variable]].astype(dtype))
     q64 = q.astype(np.float64)
     rho = q64[0]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -132,7 +133,7 @@ def read_q(path, dims: tuple[int, int, int], variable: str = "density") -> np.nd
             out = np.sqrt((q64[1:4] ** 2).sum(axis=0))
         else:  # pressure, ideal gas
             out = (GAMMA - 1.0) * (q64[4] - 0.5 * (q64[1:4] ** 2).sum(axis=0) / rho)
-    return out.astype(np.float32)
+    return out.astype(dtype)
 
 
 def grid_hexes(dims: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:

@@ -28,6 +28,7 @@ class MeshReport:
     zero_volume_tets: int = 0
     coincident_points: int = 0
     unreferenced_points: int = 0
+    cell_arrays: list[str] = field(default_factory=list)  # cell data read but not carried to the points
     notes: list[str] = field(default_factory=list)
 
     def as_dict(self) -> dict:
@@ -38,17 +39,19 @@ def _plural(n: int, word: str) -> str:
     return f"{n} {word}{'' if n == 1 else 's'}"
 
 
-def validate_tets(points: np.ndarray, density: np.ndarray, tets: np.ndarray, *, scalar_name: str = "density",
-                  orient: bool = True) -> tuple[TetMesh, MeshReport]:
+def validate_tets(points: np.ndarray, density: np.ndarray | None, tets: np.ndarray, *, scalar_name: str = "density",
+                  orient: bool = True, point_data: dict | None = None) -> tuple[TetMesh, MeshReport]:
     """Check a raw mesh, orient its tets positively, and return it with a report.
 
     Parameters
     ----------
-    points : (n, 3) array, converted to float32
-    density : (n,) array, converted to float32
+    points : (n, 3) array, float64 kept, anything else converted to float32
+    density : (n,) array, converted to float32; None when ``point_data`` holds ``scalar_name``
     tets : (m, 4) integer array of vertex ids
     orient : bool
         Re-orient negative tets (default). With ``False`` a negative tet is an error.
+    point_data : dict, optional
+        Every point array in its own dtype (see :class:`TetMesh`).
 
     Raises
     ------
@@ -56,13 +59,17 @@ def validate_tets(points: np.ndarray, density: np.ndarray, tets: np.ndarray, *, 
         With a message naming the first offending element and how many there are.
     """
     points = np.asarray(points)
+    if density is None:
+        if not point_data or scalar_name not in point_data:
+            raise MeshError(f"no point array named {scalar_name!r}")
+        density = point_data[scalar_name]
     density = np.asarray(density)
     if points.ndim != 2 or points.shape[1] != 3:
         raise MeshError(f"points must be an (n, 3) array, got shape {points.shape}")
     n = points.shape[0]
     if density.reshape(-1).shape[0] != n:
         raise MeshError(f"scalar has {density.reshape(-1).shape[0]} values for {n} points")
-    pts = points.astype(np.float32)
+    pts = points.astype(np.float64 if points.dtype == np.float64 else np.float32)
     den = density.reshape(-1).astype(np.float32)
     t = np.asarray(tets)
     if t.ndim != 2 or t.shape[1] != 4:
@@ -131,6 +138,10 @@ def validate_tets(points: np.ndarray, density: np.ndarray, tets: np.ndarray, *, 
     used = np.zeros(n, bool)
     used[t.reshape(-1)] = True
     report.unreferenced_points = int(n - used.sum())
-    mesh = TetMesh(pts, den, t.astype(np.int32), scalar_name)
+    try:
+        mesh = TetMesh(pts, None if point_data and scalar_name in point_data else den, t.astype(np.int32),
+                       scalar_name, point_data=point_data)
+    except ValueError as e:
+        raise MeshError(str(e)) from None
     mesh._cache["vol"] = vol
     return mesh, report

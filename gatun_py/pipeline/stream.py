@@ -51,6 +51,8 @@ class View:
     step: float | None = None
     lean: bool = False  # StreamingRaycaster's: free the faces no ray needs any more
     scalar_range: tuple | None = None  # what the transfer function is normalised to (default: the mesh's)
+    scalar: str | None = None  # .tetc: the point array to render (default: the file's default scalar)
+    component: object = None  # for a vector array: its component (int) or "magnitude"
 
     def __post_init__(self):
         if self.camera is None:
@@ -133,6 +135,8 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
     if target is None:
         target = resolve_target(reader, ratio=ratio, level=level)
     lo, hi, rng, step = file_render_defaults(reader)
+    if view.scalar is not None:  # another point array: its range is in the metadata (format 2)
+        rng = reader.array_range(view.scalar, view.component) or rng
     rng = view.scalar_range if view.scalar_range is not None else rng
     # a relative opacity unit is a fraction of the full mesh's size, whatever level is drawn
     view = replace(view, tf=load_transfer_function(view.tf).for_size(float(np.linalg.norm(hi - lo))))
@@ -166,7 +170,8 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
 def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress):
     lv = reader.level_meta(target.level)
     # A lean render holds about one batch of tets in flight: smaller batches, less memory.
-    batches = reader.iter_decode(target.level, **({"batch_tets": LEAN_BATCH_TETS} if view.lean else {}))
+    batches = reader.iter_decode(target.level, scalar=view.scalar, component=view.component,
+                                 **({"batch_tets": LEAN_BATCH_TETS} if view.lean else {}))
     filt = None
     if anc is not None:
         filt = SimplifyFilter(anc)
@@ -184,6 +189,11 @@ def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress
 def _run_generic(reader, target, anc, camera, view, rng, step, times):
     t0 = time.perf_counter()
     mesh = reader.decode_mesh(target.level)
+    if view.scalar is not None:
+        try:
+            mesh = mesh.with_scalar(view.scalar, view.component)
+        except (KeyError, ValueError) as e:
+            raise OptionError(str(e).strip("'\"")) from None
     times["decode_s"] = time.perf_counter() - t0
     fstats = None
     if anc is not None:

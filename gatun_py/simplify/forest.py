@@ -129,7 +129,8 @@ def mesh_from_ancestors(mesh: TetMesh, anc: np.ndarray):
     """(simplified TetMesh, input id of each of its vertices) for an ancestor table.
 
     Tets whose four ancestors are distinct, rewritten to the ancestors; the surviving vertices
-    (``anc[v] == v``) compacted in their input order.
+    (``anc[v] == v``) compacted in their input order, each keeping its exact coordinates and the
+    values of every point array.
     """
     t = anc[mesh.tets]
     s = np.sort(t, axis=1)
@@ -137,5 +138,6 @@ def mesh_from_ancestors(mesh: TetMesh, anc: np.ndarray):
     ids = np.flatnonzero(anc == np.arange(mesh.n_points))
     new_id = np.full(mesh.n_points, -1, np.int64)
     new_id[ids] = np.arange(ids.size)
-    out = TetMesh(mesh.points[ids], mesh.density[ids], new_id[t[keep]].astype(np.int32), mesh.scalar_name)
+    out = TetMesh(mesh.points[ids], None, new_id[t[keep]].astype(np.int32), mesh.scalar_name,
+                  point_data={name: a[ids] for name, a in mesh.point_data.items()})
     return out, ids

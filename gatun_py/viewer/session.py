@@ -162,18 +162,18 @@ class CachingReader(TetcReader):
     def __init__(self, source, *, max_tets: int = 3_000_000):
         super().__init__(source)
         self.max_tets = max_tets
-        self._batches: dict[int, list] = {}
+        self._decoded_levels: dict[int, list] = {}
         self._forests: dict[int, tuple] = {}
 
     def is_decoded(self, level: int) -> bool:
-        return level in self._batches
+        return level in self._decoded_levels
 
     def cached_tets(self) -> int:
-        return sum(int(self.level_meta(lv)["tets"]) for lv in self._batches)
+        return sum(int(self.level_meta(lv)["tets"]) for lv in self._decoded_levels)
 
     def iter_decode(self, level: int = 0, **kw):
-        if level in self._batches:
-            yield from self._batches[level]
+        if level in self._decoded_levels:
+            yield from self._decoded_levels[level]
             return
         keep = self.cached_tets() + int(self.level_meta(level)["tets"]) <= self.max_tets
         out = []
@@ -182,7 +182,7 @@ class CachingReader(TetcReader):
                 out.append(batch)
             yield batch
         if keep:
-            self._batches[level] = out
+            self._decoded_levels[level] = out
 
     def read_forest(self, level: int = 0):
         if level not in self._forests:

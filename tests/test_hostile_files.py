@@ -1,0 +1,416 @@
+"""Hostile ``.tetc`` files: every case is rejected cleanly, fast, and within a memory budget.
+
+Each case runs in a worker process (one for the whole module, restarted if it dies) whose address
+space is limited to what it uses after warming up plus ``MEMORY_BUDGET``, under a ``TIME_LIMIT``
+alarm. A case passes when the whole read API (metadata, every level's mesh and forest, the stream
+of every array, simplification to a ratio) either succeeds or raises a :class:`TetcError`; a crash,
+another exception type (a traceback), a MemoryError, a timeout or a dead worker fail the test.
+
+The cases: hypothesis over bit flips, truncations, rewritten metadata values (CRC recomputed, so
+they reach the decoder), section headers with crafted counts, lengths and dtypes; and the known
+attacks: the forest bomb (a 90 KB file whose metadata announced 4 GB of forest), absurd counts.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing as mp
+import os
+import resource
+import signal
+import struct
+import time
+import traceback
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+TIME_LIMIT = 2.0  # seconds per case
+MEMORY_BUDGET = 300 << 20  # bytes of address space above the warmed-up worker's
+
+
+# -- the worker ---------------------------------------------------------------------------------
+
+def _exercise(data: bytes) -> None:
+    """Everything a reader of an untrusted file may call."""
+    import gatun_py
+    from gatun_py.codec import TetcReader
+    from gatun_py.codec.info import tetc_info
+
+    r = TetcReader(data)
+    tetc_info(r)
+    r.forest_merges()
+    for lv in r.levels:
+        r.decode_mesh(lv["level"])
+        r.read_forest(lv["level"])
+    for name, _, k in r.arrays:
+        for _ in r.iter_decode(0, scalar=name, component=None if k == 1 else "magnitude"):
+            pass
+    f = gatun_py.open(data)
+    if f.max_ratio > 0:
+        f.mesh(ratio=min(0.5, f.max_ratio))
+
+
+def _vm_size() -> int:
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith("VmSize:"):
+                return int(line.split()[1]) * 1024
+    return 0
+
+
+class _Timeout(Exception):
+    pass
+
+
+def _on_alarm(signum, frame):
+    raise _Timeout()
+
+
+def _worker(conn, warmup: list) -> None:
+    from gatun_py.errors import TetcError
+
+    for data in warmup:  # load every kernel before the address space is limited
+        _exercise(data)
+    limit = _vm_size() + MEMORY_BUDGET
+    resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+    signal.signal(signal.SIGALRM, _on_alarm)
+    conn.send(("ready", limit, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024))
+    while True:
+        data = conn.recv()
+        if data is None:
+            return
+        t0 = time.perf_counter()
+        signal.setitimer(signal.ITIMER_REAL, TIME_LIMIT)
+        try:
+            _exercise(data)
+            outcome, message = "ok", ""
+        except TetcError as e:
+            outcome, message = "rejected", str(e)
+        except _Timeout:
+            outcome, message = "timeout", ""
+        except MemoryError:
+            outcome, message = "memory", traceback.format_exc()
+        except Exception:  # noqa: BLE001 - any other exception is the failure we look for
+            outcome, message = "traceback", traceback.format_exc()
+        finally:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+        rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+        conn.send((outcome, message, time.perf_counter() - t0, rss))
+
+
+class Worker:
+    def __init__(self, warmup):
+        self.warmup = warmup
+        self.stats = {"cases": 0, "rejected": 0, "ok": 0, "max_seconds": 0.0, "max_rss": 0}
+        self._start()
+
+    def _start(self):
+        ctx = mp.get_context("spawn")  # a fresh interpreter: no forked numba threads
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_worker, args=(child, self.warmup), daemon=True)
+        self.proc.start()
+        if not self.conn.poll(600):
+            raise RuntimeError("worker did not start")
+        status, self.limit, self.base_rss = self.conn.recv()
+        assert status == "ready"
+        self.stats["base_rss"] = self.base_rss
+
+    def run(self, data: bytes):
+        self.conn.send(bytes(data))
+        if not self.conn.poll(TIME_LIMIT + 10):
+            self.proc.kill()
+            self._start()
+            return "hang", "worker did not answer", TIME_LIMIT + 10, 0
+        try:
+            outcome, message, seconds, rss = self.conn.recv()
+        except EOFError:
+            code = self.proc.exitcode
+            self._start()
+            return "crash", f"worker died (exit code {code})", 0.0, 0
+        self.stats["cases"] += 1
+        self.stats[outcome] = self.stats.get(outcome, 0) + 1
+        self.stats["max_seconds"] = max(self.stats["max_seconds"], seconds)
+        self.stats["max_rss"] = max(self.stats["max_rss"], rss)
+        return outcome, message, seconds, rss
+
+    def close(self):
+        try:
+            self.conn.send(None)
+        except OSError:
+            pass
+        self.proc.join(5)
+        if self.proc.is_alive():
+            self.proc.kill()
+
+
+def check(worker, data, what=""):
+    outcome, message, seconds, _ = worker.run(data)
+    assert outcome in ("ok", "rejected"), f"{what[:300]}: {outcome} after {seconds:.2f} s\n{message}"
+    assert seconds <= TIME_LIMIT, f"{what}: took {seconds:.2f} s"
+    return outcome, message
+
+
+# -- the files ----------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def files():
+    """(post with forest and levels, a float64 mesh with several arrays) as bytes."""
+    from conftest import load_sample
+    from gatun_py.codec import LevelPayload, encode_tetc
+    from gatun_py.mesh.validate import validate_tets
+    from gatun_py.simplify import build_levels, decimate
+    from gatun_py.simplify.levels import storage_forests
+
+    mesh = load_sample("post")[0]
+    forest = decimate(mesh)
+    levels = build_levels(mesh, forest, 3)
+    with_forest = encode_tetc([LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
+                               for x, f in zip(levels, storage_forests(levels))])
+    rng = np.random.default_rng(5)
+    n = mesh.n_points
+    pd = {"p": mesh.points[:, 0].astype(np.float64) * np.pi, "rho": mesh.density.astype(np.float64),
+          "id": np.arange(n, dtype=np.int32), "u": rng.normal(size=(n, 3))}
+    arrays, _ = validate_tets(mesh.points.astype(np.float64) * 1.1, None, mesh.tets, scalar_name="p", point_data=pd)
+    return _Files(with_forest, encode_tetc([LevelPayload(0, 0.0, 0, arrays)]))
+
+
+class _Files(tuple):
+    """The two valid files (a short repr: hypothesis prints the arguments of a failing case)."""
+
+    def __new__(cls, *files):
+        return super().__new__(cls, files)
+
+    def __repr__(self):
+        return f"<{len(self)} valid .tetc files: {', '.join(str(len(f)) for f in self)} bytes>"
+
+
+@pytest.fixture(scope="module")
+def worker(files):
+    w = Worker(list(files))
+    yield w
+    w.close()
+    stats = dict(w.stats, max_rss_above_base_mb=round((w.stats["max_rss"] - w.stats["base_rss"]) / 2**20, 1))
+    print(f"\nhostile files: {json.dumps(stats)}")
+    out = os.environ.get("TETC_HOSTILE_STATS")  # the bench report reads the figures from here
+    if out:
+        with open(out, "w") as fh:
+            json.dump(stats, fh)
+
+
+def _split(data: bytes):
+    """(metadata dict, [(name, payload)]) of a valid file."""
+    from gatun_py.codec.container import Container
+
+    c = Container(data)
+    meta = {k: v for k, v in c.meta.items() if k != "sections"}
+    return meta, [(name, c.read_section(name)) for name in c.section_names()]
+
+
+def _build(meta, sections, major=None) -> bytes:
+    from gatun_py.codec.container import build_container
+
+    data = bytearray(build_container(meta, sections))
+    if major is not None:
+        struct.pack_into("<H", data, 8, major)
+    return bytes(data)
+
+
+# -- known attacks ------------------------------------------------------------------------------
+
+def test_valid_files_decode(worker, files):
+    for data in files:
+        assert check(worker, data)[0] == "ok"
+
+
+def test_forest_bomb(worker, files):
+    """A level claiming 2^29 - 1 vertices: rejected before the forest or anything else is allocated."""
+    meta, sections = _split(files[0])
+    for key in ("points",):
+        for value in (2**29 - 1, 2**31 - 1, 10**6):
+            m = json.loads(json.dumps(meta))
+            for lv in m["levels"]:
+                lv[key] = value
+            m[key] = value
+            assert check(worker, _build(m, sections), f"{key}={value}")[0] == "rejected"
+
+
+def test_forest_bomb_with_matching_forest_header(worker, files):
+    """The forest header agrees with the lie: the geometry section still rules it out."""
+    import lzma
+
+    meta, sections = _split(files[0])
+    n = 1 << 27
+    body = lzma.compress(bytes(8 * n // 64), preset=0)  # 2 MB of zeros, expands 8n / 64
+    out = []
+    for name, payload in sections:
+        if name == "L0/forest":
+            payload = struct.pack("<4sII", b"GFR1", n, 5) + body
+        out.append((name, payload))
+    m = json.loads(json.dumps(meta))
+    m["levels"][0]["points"] = n
+    assert check(worker, _build(m, out))[0] == "rejected"
+
+
+@pytest.mark.parametrize("key,value", [("tets", 2**31 - 1), ("boundary_faces", 2**31 - 1),
+                                       ("boundary_vertices", 10**9), ("referenced_points", -1),
+                                       ("level", 63), ("points", 0)])
+def test_absurd_level_counts(worker, files, key, value):
+    meta, sections = _split(files[0])
+    meta["levels"][0][key] = value
+    assert check(worker, _build(meta, sections), f"{key}={value}")[0] == "rejected"
+
+
+@pytest.mark.parametrize("edit", [
+    {"points_dtype": "float16"}, {"points_dtype": "int32"}, {"arrays": []}, {"arrays": "x"},
+    {"arrays": [{"name": "p", "dtype": "float64", "components": 70000}]},
+    {"arrays": [{"name": "p", "dtype": "complex128", "components": 1}]},
+    {"arrays": [{"name": "p", "dtype": "float64", "components": 1}] * 2},
+    {"arrays": [{"name": "q", "dtype": "float64", "components": 1}]},
+    {"scalar": "u"}, {"scalar": 5},
+])
+def test_crafted_array_metadata(worker, files, edit):
+    meta, sections = _split(files[1])
+    meta.update(edit)
+    assert check(worker, _build(meta, sections), str(edit))[0] == "rejected"
+
+
+def test_version_and_array_list_must_agree(worker, files):
+    meta, sections = _split(files[1])
+    assert check(worker, _build(meta, sections, major=1))[0] == "rejected"
+
+
+def _array_sections(sections):
+    return [i for i, (name, _) in enumerate(sections) if "/array/" in name or name.endswith("/points64")]
+
+
+@pytest.mark.parametrize("field,value", [("n", 2**32 - 1), ("k", 0), ("k", 65535), ("code", 99),
+                                         ("coder", 7), ("length", 2**32 - 1), ("length", 0), ("shift", 64),
+                                         ("kind", 200)])
+def test_crafted_array_section_headers(worker, files, field, value):
+    meta, sections = _split(files[1])
+    for i in _array_sections(sections):
+        name, payload = sections[i]
+        p = bytearray(payload)
+        if field == "code":
+            p[1] = value
+        elif field == "k":
+            struct.pack_into("<H", p, 2, value)
+        elif field == "n":
+            struct.pack_into("<I", p, 4, value)
+        elif field == "length":
+            struct.pack_into("<I", p, 8 + 3, value)
+        else:
+            p[8 + {"kind": 0, "shift": 1, "coder": 2}[field]] = value
+        crafted = list(sections)
+        crafted[i] = (name, bytes(p))
+        assert check(worker, _build(meta, crafted), f"{name} {field}={value}")[0] == "rejected"
+
+
+def test_array_section_lzma_bomb(worker, files):
+    """An array section (planes coder) whose LZMA stream expands far past what its header announces."""
+    import lzma
+
+    meta, sections = _split(files[1])
+    i = _array_sections(sections)[0]
+    name, payload = sections[i]
+    bomb = bytes([8]) + lzma.compress(bytes(200 << 20), preset=1)
+    head = bytearray(payload[:8])
+    struct.pack_into("<H", head, 2, 1)  # one component: the bomb
+    head += struct.pack("<BBBI", 0, 0, 1, len(bomb))
+    crafted = list(sections)
+    crafted[i] = (name, bytes(head) + bomb)
+    assert check(worker, _build(meta, crafted))[0] == "rejected"
+
+
+# -- hypothesis ---------------------------------------------------------------------------------
+
+HYPO = settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
+
+
+@HYPO
+@given(st.data())
+def test_bit_flips_and_truncations(worker, files, data):
+    blob = bytearray(files[data.draw(st.integers(0, 1))])
+    for _ in range(data.draw(st.integers(1, 4))):
+        pos = data.draw(st.integers(0, len(blob) - 1))
+        blob[pos] ^= 1 << data.draw(st.integers(0, 7))
+    if data.draw(st.booleans()):
+        blob = blob[: data.draw(st.integers(0, len(blob)))]
+    check(worker, bytes(blob))
+
+
+_VALUES = st.one_of(st.integers(-2**63, 2**64), st.sampled_from([0, -1, 1, 2**31 - 1, 2**32, 2**29 - 1]),
+                    st.floats(allow_nan=True), st.text(max_size=8), st.none(), st.booleans(),
+                    st.lists(st.integers(-3, 3), max_size=3))
+
+
+@HYPO
+@given(st.data())
+def test_rewritten_metadata(worker, files, data):
+    """Any value of any metadata key (top level, a level, an array entry) with a valid CRC."""
+    meta, sections = _split(files[data.draw(st.integers(0, 1))])
+    where = data.draw(st.sampled_from(["top", "level", "array"]))
+    target = meta
+    if where == "level":
+        target = data.draw(st.sampled_from(meta["levels"]))
+    elif where == "array" and "arrays" in meta:
+        target = data.draw(st.sampled_from(meta["arrays"]))
+    key = data.draw(st.sampled_from(sorted(target)))
+    target[key] = data.draw(_VALUES)
+    check(worker, _build(meta, sections), f"{where}.{key}={target[key]!r}")
+
+
+@HYPO
+@given(st.data())
+def test_rewritten_section_bytes(worker, files, data):
+    """Section payloads changed behind a valid CRC: header fields, truncation, random bytes."""
+    meta, sections = _split(files[data.draw(st.integers(0, 1))])
+    i = data.draw(st.integers(0, len(sections) - 1))
+    name, payload = sections[i]
+    p = bytearray(payload)
+    action = data.draw(st.sampled_from(["u32", "byte", "cut", "append"]))
+    if action == "u32" and len(p) >= 4:
+        pos = data.draw(st.integers(0, min(len(p), 64) - 4))
+        struct.pack_into("<I", p, pos, data.draw(st.sampled_from([0, 1, 2**31 - 1, 2**32 - 1, 2**29, 12345])))
+    elif action == "byte" and p:
+        p[data.draw(st.integers(0, len(p) - 1))] = data.draw(st.integers(0, 255))
+    elif action == "cut":
+        p = p[: data.draw(st.integers(0, len(p)))]
+    else:
+        p += bytes(data.draw(st.integers(1, 64)))
+    sections[i] = (name, bytes(p))
+    check(worker, _build(meta, sections), f"{name} {action}")
+
+
+def test_crc_is_what_catches_plain_damage(files):
+    """Sanity of the harness: a flipped payload byte without a new CRC is a CRC error."""
+    from gatun_py.codec import TetcReader
+    from gatun_py.errors import CorruptFileError
+
+    data = bytearray(files[1])
+    data[-10] ^= 0xFF
+    with pytest.raises(CorruptFileError):
+        TetcReader(bytes(data)).decode_mesh(0)
+
+
+def test_geometry_header_and_metadata_agree_on_a_huge_count(worker, files):
+    """Metadata and geometry header both claim the most vertices the geometry section could hold."""
+    from gatun_py.codec import geometry
+
+    meta, sections = _split(files[0])
+    out = []
+    for name, payload in sections:
+        if name == "L0/geometry":
+            lengths = struct.unpack_from("<4I", payload, 6)
+            n = geometry.max_vertices(lengths)
+            p = bytearray(payload)
+            struct.pack_into("<I", p, 2, n)
+            payload = bytes(p)
+        out.append((name, payload))
+    for key in ("points", "referenced_points"):
+        meta["levels"][0][key] = n
+    meta["points"] = n
+    assert check(worker, _build(meta, out), f"n={n}")[0] == "rejected"

@@ -157,7 +157,7 @@ def _edge_delete(ek, evid, ecount, i):
     ek[i] = EMPTY
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def rehash_faces(fa, fb, fc, cap):
     na = np.full(cap, EMPTY, np.int32)
     nb = np.full(cap, EMPTY, np.int32)
@@ -168,7 +168,7 @@ def rehash_faces(fa, fb, fc, cap):
     return na, nb, nc
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def rehash_edges(ek, evid, ecount, cap):
     nk = np.full(cap, EMPTY, np.int64)
     nv = np.full(cap, EMPTY, np.int32)
@@ -286,7 +286,7 @@ def _surface_vertex(ek, evid, ecount, pts, dens, iso, a, b, vpos, vgrad, vkey, n
     return v, nv
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def extract_batch(pts, dens, tets, boundary, iso, case_count, case_tris, tet_edges,
                   fa, fb, fc, ek, evid, ecount, vpos, vgrad, vkey, vlock, nv, tris, nt, zero, sizes):
     """Marching tetrahedra on one batch; border bookkeeping; unlock complete edges.

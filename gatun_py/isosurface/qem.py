@@ -39,7 +39,7 @@ def _add_plane(q, v, nx, ny, nz, d, w):
     q[v, 9] += w * d * d
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def add_face_quadrics(vpos, vq, vimp, tris, f0, f1):
     """Add the area-weighted plane quadric of faces f0..f1-1 to their three vertices."""
     for f in range(f0, f1):
@@ -318,7 +318,7 @@ def _push_edges(v, start, cnt, refs, tris, vpos, vq, vbnd, vlock, stamp, qs, hea
     return (hc, hu, hv, hsu, hsv), hn
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, min_dot, touched):
     """Collapse edges, cheapest first, until ``target`` faces remain or nothing legal is left.
 
@@ -450,7 +450,7 @@ def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, m
     return alive, done
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def compact(vdead, tris, nv, nt):
     """Renumber the live vertices and faces in order: returns (vertex map old -> new or -1,
     new vertex count, new face count); ``tris`` is rewritten in place."""

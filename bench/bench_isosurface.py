@@ -207,7 +207,7 @@ def part_quality(quick: bool):
     from gatun_py.isosurface.metrics import surface_distance
 
     rows, curves, exact_rows = [], {}, []
-    samples = 100_000 if quick else 300_000
+    samples = 60_000 if quick else 150_000
     for name, (src, kw) in datasets(quick).items():
         mesh, tetc, vtu = prepared(name, src, kw)
         lo, hi = mesh.bbox

@@ -141,6 +141,18 @@ def _edge_find(ek, key):
 
 
 @njit(cache=True)
+def _edge_slot(ek, evid, ecount, key, sizes):
+    """Slot of ``key``, inserted (no vertex yet, count 0) if absent."""
+    i = _edge_find(ek, key)
+    if ek[i] == EMPTY:
+        ek[i] = key
+        evid[i] = EMPTY
+        ecount[i] = 0
+        sizes[1] += 1
+    return i
+
+
+@njit(cache=True)
 def _edge_delete(ek, evid, ecount, i):
     mask = ek.shape[0] - 1
     j = i
@@ -238,12 +250,7 @@ def _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, dens, iso, a, b, c, s
             if not ec:
                 continue
             key = _edge_key(c, c)
-        i = _edge_find(ek, key)
-        if ek[i] == EMPTY:
-            ek[i] = key
-            evid[i] = EMPTY
-            ecount[i] = 0
-            sizes[1] += 1
+        i = _edge_slot(ek, evid, ecount, key, sizes)
         ecount[i] += d
         if ecount[i] == 0:
             zero[nzero] = key
@@ -258,12 +265,7 @@ def _surface_vertex(ek, evid, ecount, pts, dens, iso, a, b, vpos, vgrad, vkey, n
         key = _edge_key(a, a)
     else:
         key = _edge_key(a, b)
-    i = _edge_find(ek, key)
-    if ek[i] == EMPTY:
-        ek[i] = key
-        evid[i] = EMPTY
-        ecount[i] = 0
-        sizes[1] += 1
+    i = _edge_slot(ek, evid, ecount, key, sizes)
     if evid[i] == EMPTY:
         evid[i] = nv
         vkey[nv] = key

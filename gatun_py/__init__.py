@@ -5,6 +5,7 @@ The public verbs (``gatun_py.api``)::
     gatun_py.compress(source, "mesh.tetc")      # lossless, with the merge forest and levels
     f = gatun_py.open("mesh.tetc")              # .info, .levels, .mesh(ratio), iteration over batches
     frame = gatun_py.render(f, size=512, ratio=0.9)   # .rgb, .stats, .save(path), shown in Jupyter
+    surf = gatun_py.isosurface(f, values=[2.5], ratio=0.1)   # simplified while it is extracted
 
 The stages, in pipeline order (each imports only the ones before it):
 
@@ -22,7 +23,11 @@ loads its submodules, so ``import gatun_py``, a command's ``--help`` and its usa
 import importlib
 import inspect
 
-from . import render as _render_stage  # noqa: F401  (bound first: the verb `render` below must win the name)
+# The stages named like verbs are bound first, so that the verbs below win the names `render` and
+# `isosurface` (a later `import gatun_py.render.camera` finds the package in sys.modules and leaves
+# the attribute alone); both packages load their contents lazily.
+from . import isosurface as _isosurface_stage  # noqa: F401
+from . import render as _render_stage  # noqa: F401
 from ._version import __version__
 from .errors import (CorruptFileError, FormatVersionError, MeshError, OptionError, OutputError,
                      OutputExistsError, ReadError, TetcError)
@@ -32,12 +37,14 @@ from .meshio_format import register as _register_meshio
 class _Verb:
     """A public verb of :mod:`gatun_py.api`, imported when first called (or its help is read)."""
 
-    def __init__(self, name: str):
+    def __init__(self, name: str, module: str = ".api"):
         self.__name__ = self.__qualname__ = name
+        self._module = module
+        self.__module__ = __name__ + module  # where it is defined (doctests run there, not here)
 
     @property
     def _target(self):
-        return getattr(importlib.import_module(".api", __name__), self.__name__)
+        return getattr(importlib.import_module(self._module, __name__), self.__name__)
 
     def __call__(self, *args, **kwargs):
         return self._target(*args, **kwargs)
@@ -68,9 +75,10 @@ convert = _Verb("convert")
 info = _Verb("info")
 open = _Verb("open")  # noqa: A001 (the verb users look for, as gzip.open)
 render = _Verb("render")
+isosurface = _Verb("isosurface", ".isosurface.extract")
 
 # classes load with their module on first access
-_LAZY = {"TetcFile": "api", "Frame": "api", "TetMesh": "mesh", "TetBatch": "mesh", "read_mesh": "mesh",
+_LAZY = {"TetcFile": "api", "Frame": "api", "Surface": "isosurface.extract", "TetMesh": "mesh", "TetBatch": "mesh", "read_mesh": "mesh",
          "write_mesh": "mesh"}
 
 
@@ -88,6 +96,7 @@ def __dir__():
 
 _register_meshio()
 
-__all__ = ["compress", "decompress", "convert", "info", "open", "render", "TetcFile", "Frame", "TetMesh",
+__all__ = ["compress", "decompress", "convert", "info", "open", "render", "isosurface", "TetcFile", "Frame",
+           "Surface", "TetMesh",
            "TetBatch", "read_mesh", "write_mesh", "TetcError", "ReadError", "MeshError", "CorruptFileError",
            "FormatVersionError", "OptionError", "OutputError", "OutputExistsError", "__version__"]

@@ -4,8 +4,26 @@
 * :mod:`.qem`      QEM edge collapse with a global heap, link condition, flip test, locks
 * :mod:`.extract`  the streaming driver and the public verb :func:`isosurface`
 * :mod:`.io`       writing a :class:`Surface` (any meshio surface format, and ``.vtp``)
+
+The names below load on first use (PEP 562): ``gatun_py.isosurface`` is also the name of the public
+verb, and importing this package must not load numba.
 """
 
-from .extract import ImportanceFunction, Surface, isosurface, load_importance
+import importlib
 
-__all__ = ["isosurface", "Surface", "ImportanceFunction", "load_importance"]
+_LAZY = {"isosurface": "extract", "Surface": "extract", "ImportanceFunction": "extract", "load_importance": "extract"}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
+
+
+__all__ = sorted(_LAZY)

@@ -10,10 +10,12 @@ The full-resolution surface never exists unless no reduction was asked for.
 
 from __future__ import annotations
 
+import collections
 import json
 import math
 import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -23,7 +25,7 @@ from .._resources import peak_rss_mb
 from ..codec import TetcReader
 from ..codec.container import MAGIC
 from ..errors import CorruptFileError, OptionError, ReadError
-from ..mesh import TetMesh, read_mesh
+from ..mesh import TetMesh, mesh_batches, read_mesh
 from ..simplify.filter import SimplifyFilter
 from ..simplify.levels import resolve_target, target_ancestors
 from . import marching, qem
@@ -371,33 +373,52 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
     first_batch = True
     tets_done = 0
     wait_s = 0.0
-    t_wait = time.perf_counter()
-    for batch in stream:
-        wait_s += time.perf_counter() - t_wait
-        k = len(batch.points)
-        points[batch.first:batch.first + k] = batch.points
-        density[batch.first:batch.first + k] = batch.density
-        if boundary_override is not None:  # simplified start: the whole boundary with the first batch
-            bnd = boundary_override if first_batch else np.zeros((0, 3), np.int32)
-        else:
-            bnd = batch.boundary
-        first_batch = False
-        tets = np.ascontiguousarray(batch.tets, dtype=np.int32)
-        bnd = np.ascontiguousarray(bnd, dtype=np.int32)
+
+    def work(tets, bnd, before):
         for ex in extractors:
-            ex.add(points, density, tets, bnd, tets_done)
-        tets_done += len(tets)
+            ex.add(points, density, tets, bnd, before)
+        done = before + len(tets)
         if extractors and (len(tets) or len(bnd)):
-            band.append({"tets": tets_done, "t_s": round(time.perf_counter() - t_start, 4),
+            band.append({"tets": done, "t_s": round(time.perf_counter() - t_start, 4),
                          "faces_extracted": sum(e.extracted for e in extractors),
                          "faces": sum(e.nt for e in extractors),
                          "locked": sum(e.locked for e in extractors),
                          "vertices": sum(e.nv for e in extractors),
                          "border_faces": sum(int(e.sizes[0]) for e in extractors),
                          "rss_mb": round(_rss_mb(), 1), "peak_rss_mb": round(peak_rss_mb(), 1)})
-        if progress is not None:
-            progress(tets_done)
+        return done
+
+    # Extraction and collapses run in a worker thread (their kernels release the GIL) while the
+    # decoder produces the next batch: the two stages overlap on two cores. At most two batches
+    # are in flight, so memory stays bounded; the worker reads only vertices of batches already
+    # stored, the main thread writes only the new batch's.
+    in_flight = collections.deque()
+    with ThreadPoolExecutor(max_workers=1) as pool:
         t_wait = time.perf_counter()
+        for batch in stream:
+            wait_s += time.perf_counter() - t_wait
+            k = len(batch.points)
+            points[batch.first:batch.first + k] = batch.points
+            density[batch.first:batch.first + k] = batch.density
+            if boundary_override is not None:  # simplified start: the whole boundary with the first batch
+                bnd = boundary_override if first_batch else np.zeros((0, 3), np.int32)
+            else:
+                bnd = batch.boundary
+            first_batch = False
+            # copies: the worker must own its input even if a producer reuses its buffers
+            tets = np.array(batch.tets, dtype=np.int32, order="C", copy=True)
+            bnd = np.array(bnd, dtype=np.int32, order="C", copy=True)
+            in_flight.append(pool.submit(work, tets, bnd, tets_done))
+            tets_done += len(tets)
+            while len(in_flight) > 1:
+                done = in_flight.popleft().result()  # re-raises the worker's exception here
+                if progress is not None:
+                    progress(done)
+            t_wait = time.perf_counter()
+        while in_flight:
+            done = in_flight.popleft().result()
+            if progress is not None:
+                progress(done)
     parts = [ex.finish() for ex in extractors]
     off = 0
     pts_all, tris_all, data_all = [], [], {}
@@ -449,7 +470,7 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs):
         mesh = source if isinstance(source, TetMesh) else read_mesh(source, **(read_kwargs or {}))[0]
         lo, hi = mesh.bbox
         info = {"points": mesh.n_points, "bbox_lo": lo, "bbox_hi": hi, "scalar_range": mesh.scalar_range}
-        return _mesh_batches(mesh), info
+        return mesh_batches(mesh), info
     reader = source if isinstance(source, TetcReader) else TetcReader(source)
     target = resolve_target(reader, ratio=ratio_mesh, level=level)
     lv = reader.level_meta(target.level)
@@ -477,22 +498,6 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs):
         yield from batches
 
     return SimplifyFilter(anc).filter(chained()), info
-
-
-@dataclass
-class _Batch:
-    first: int
-    points: np.ndarray
-    density: np.ndarray
-    boundary: np.ndarray
-    tets: np.ndarray
-
-
-def _mesh_batches(mesh, batch_tets: int = 65536):
-    yield _Batch(0, mesh.points, mesh.density, mesh.boundary_faces(), np.zeros((0, 4), np.int32))
-    for i in range(0, mesh.n_tets, batch_tets):
-        yield _Batch(mesh.n_points, mesh.points[:0], mesh.density[:0], np.zeros((0, 3), np.int32),
-                     mesh.tets[i:i + batch_tets])
 
 
 def _is_tetc(path) -> bool:

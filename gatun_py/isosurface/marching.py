@@ -141,6 +141,18 @@ def _edge_find(ek, key):
 
 
 @njit(cache=True)
+def _edge_slot(ek, evid, ecount, key, sizes):
+    """Slot of ``key``, inserted (no vertex yet, count 0) if absent."""
+    i = _edge_find(ek, key)
+    if ek[i] == EMPTY:
+        ek[i] = key
+        evid[i] = EMPTY
+        ecount[i] = 0
+        sizes[1] += 1
+    return i
+
+
+@njit(cache=True)
 def _edge_delete(ek, evid, ecount, i):
     mask = ek.shape[0] - 1
     j = i
@@ -157,7 +169,7 @@ def _edge_delete(ek, evid, ecount, i):
     ek[i] = EMPTY
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def rehash_faces(fa, fb, fc, cap):
     na = np.full(cap, EMPTY, np.int32)
     nb = np.full(cap, EMPTY, np.int32)
@@ -168,7 +180,7 @@ def rehash_faces(fa, fb, fc, cap):
     return na, nb, nc
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def rehash_edges(ek, evid, ecount, cap):
     nk = np.full(cap, EMPTY, np.int64)
     nv = np.full(cap, EMPTY, np.int32)
@@ -238,12 +250,7 @@ def _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, dens, iso, a, b, c, s
             if not ec:
                 continue
             key = _edge_key(c, c)
-        i = _edge_find(ek, key)
-        if ek[i] == EMPTY:
-            ek[i] = key
-            evid[i] = EMPTY
-            ecount[i] = 0
-            sizes[1] += 1
+        i = _edge_slot(ek, evid, ecount, key, sizes)
         ecount[i] += d
         if ecount[i] == 0:
             zero[nzero] = key
@@ -258,12 +265,7 @@ def _surface_vertex(ek, evid, ecount, pts, dens, iso, a, b, vpos, vgrad, vkey, n
         key = _edge_key(a, a)
     else:
         key = _edge_key(a, b)
-    i = _edge_find(ek, key)
-    if ek[i] == EMPTY:
-        ek[i] = key
-        evid[i] = EMPTY
-        ecount[i] = 0
-        sizes[1] += 1
+    i = _edge_slot(ek, evid, ecount, key, sizes)
     if evid[i] == EMPTY:
         evid[i] = nv
         vkey[nv] = key
@@ -286,7 +288,7 @@ def _surface_vertex(ek, evid, ecount, pts, dens, iso, a, b, vpos, vgrad, vkey, n
     return v, nv
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def extract_batch(pts, dens, tets, boundary, iso, case_count, case_tris, tet_edges,
                   fa, fb, fc, ek, evid, ecount, vpos, vgrad, vkey, vlock, nv, tris, nt, zero, sizes):
     """Marching tetrahedra on one batch; border bookkeeping; unlock complete edges.

@@ -13,9 +13,13 @@ import numpy as np
 from numba import njit, prange
 
 
-def sample_surface(points, triangles, n_samples: int, seed: int = 0):
+def sample_surface(points, triangles, n_samples: int, seed: int = 0, *, cover: bool = False):
     """The vertices plus ``n_samples`` area-weighted uniform points on the faces: (points, face id
-    of each sample, -1 for vertices)."""
+    of each sample, -1 for vertices).
+
+    ``cover``: also put points on every face in proportion to its longest edge, so that a long
+    sliver (tiny area, few area-weighted samples) is still found by a nearest-sample search.
+    """
     p = np.asarray(points, np.float64)
     t = np.asarray(triangles, np.int64)
     if len(t) == 0:
@@ -26,6 +30,12 @@ def sample_surface(points, triangles, n_samples: int, seed: int = 0):
     tot = area.sum()
     prob = area / tot if tot > 0 else np.full(len(t), 1.0 / len(t))
     f = rng.choice(len(t), size=int(n_samples), p=prob)
+    if cover:
+        spacing = np.sqrt(tot / max(n_samples, 1)) if tot > 0 else 1.0
+        longest = np.max([np.linalg.norm(b - a, axis=1), np.linalg.norm(c - b, axis=1),
+                          np.linalg.norm(a - c, axis=1)], axis=0)
+        per_face = np.clip(np.ceil(longest / max(spacing, 1e-300)), 1, 64).astype(np.int64)
+        f = np.concatenate([f, np.repeat(np.arange(len(t)), per_face)])
     r1 = np.sqrt(rng.random(len(f)))
     r2 = rng.random(len(f))
     s = (1 - r1)[:, None] * a[f] + (r1 * (1 - r2))[:, None] * b[f] + (r1 * r2)[:, None] * c[f]
@@ -93,7 +103,7 @@ def _distances(q, cand, pts, tris):
     return out
 
 
-def one_sided(query, points, triangles, *, k: int = 16, n_samples: int = 200_000, seed: int = 1):
+def one_sided(query, points, triangles, *, k: int = 64, n_samples: int = 200_000, seed: int = 1):
     """Distance from every query point to the surface (points, triangles).
 
     The candidates are the faces of the ``k`` surface samples nearest the query (plus the faces
@@ -106,7 +116,7 @@ def one_sided(query, points, triangles, *, k: int = 16, n_samples: int = 200_000
     t = np.asarray(triangles, np.int64)
     if len(t) == 0:
         return np.full(len(query), np.inf)
-    samples, face = sample_surface(p, t, max(n_samples, 4 * len(t)), seed)
+    samples, face = sample_surface(p, t, max(n_samples, 4 * len(t)), seed, cover=True)
     # vertices map to one face around them
     vface = np.full(len(p), -1, np.int64)
     vface[t[:, 0]] = np.arange(len(t))

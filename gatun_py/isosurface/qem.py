@@ -39,22 +39,28 @@ def _add_plane(q, v, nx, ny, nz, d, w):
     q[v, 9] += w * d * d
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _normal(vpos, a, b, c):
+    """Unnormalised normal (b - a) x (c - a) of face (a, b, c)."""
+    return _cross(vpos[a, 0], vpos[a, 1], vpos[a, 2], vpos[b, 0], vpos[b, 1], vpos[b, 2],
+                  vpos[c, 0], vpos[c, 1], vpos[c, 2])
+
+
+@njit(cache=True, inline="always")
+def _cross(ax, ay, az, bx, by, bz, cx, cy, cz):
+    ux, uy, uz = bx - ax, by - ay, bz - az
+    wx, wy, wz = cx - ax, cy - ay, cz - az
+    return uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+
+
+@njit(cache=True, nogil=True)
 def add_face_quadrics(vpos, vq, vimp, tris, f0, f1):
     """Add the area-weighted plane quadric of faces f0..f1-1 to their three vertices."""
     for f in range(f0, f1):
         a, b, c = tris[f, 0], tris[f, 1], tris[f, 2]
         if a < 0:
             continue
-        ux = vpos[b, 0] - vpos[a, 0]
-        uy = vpos[b, 1] - vpos[a, 1]
-        uz = vpos[b, 2] - vpos[a, 2]
-        wx = vpos[c, 0] - vpos[a, 0]
-        wy = vpos[c, 1] - vpos[a, 1]
-        wz = vpos[c, 2] - vpos[a, 2]
-        nx = uy * wz - uz * wy
-        ny = uz * wx - ux * wz
-        nz = ux * wy - uy * wx
+        nx, ny, nz = _normal(vpos, a, b, c)
         ln = np.sqrt(nx * nx + ny * ny + nz * nz)
         if ln == 0.0:
             continue
@@ -227,16 +233,7 @@ def _mark_boundary(u, start, cnt, refs, tris, vpos, vq, vbnd, nbr, nbr_n):
         for i in range(cnt[u]):
             f = refs[start[u] + i]
             if tris[f, 0] == w or tris[f, 1] == w or tris[f, 2] == w:
-                a, b, c = tris[f, 0], tris[f, 1], tris[f, 2]
-                ux = vpos[b, 0] - vpos[a, 0]
-                uy = vpos[b, 1] - vpos[a, 1]
-                uz = vpos[b, 2] - vpos[a, 2]
-                wx = vpos[c, 0] - vpos[a, 0]
-                wy = vpos[c, 1] - vpos[a, 1]
-                wz = vpos[c, 2] - vpos[a, 2]
-                nx = uy * wz - uz * wy
-                ny = uz * wx - ux * wz
-                nz = ux * wy - uy * wx
+                nx, ny, nz = _normal(vpos, tris[f, 0], tris[f, 1], tris[f, 2])
                 ex = vpos[w, 0] - vpos[u, 0]
                 ey = vpos[w, 1] - vpos[u, 1]
                 ez = vpos[w, 2] - vpos[u, 2]
@@ -262,33 +259,12 @@ def _flips(x, y, z, moving, other, start, cnt, refs, tris, vpos, min_dot):
         a, b, c = tris[f, 0], tris[f, 1], tris[f, 2]
         if a < 0 or a == other or b == other or c == other:
             continue
-        # old normal
-        ux = vpos[b, 0] - vpos[a, 0]
-        uy = vpos[b, 1] - vpos[a, 1]
-        uz = vpos[b, 2] - vpos[a, 2]
-        wx = vpos[c, 0] - vpos[a, 0]
-        wy = vpos[c, 1] - vpos[a, 1]
-        wz = vpos[c, 2] - vpos[a, 2]
-        n0x = uy * wz - uz * wy
-        n0y = uz * wx - ux * wz
-        n0z = ux * wy - uy * wx
-        # new normal
-        p = np.empty((3, 3))
-        for k in range(3):
-            vk = tris[f, k]
-            if vk == moving:
-                p[k, 0], p[k, 1], p[k, 2] = x, y, z
-            else:
-                p[k, 0], p[k, 1], p[k, 2] = vpos[vk, 0], vpos[vk, 1], vpos[vk, 2]
-        ux = p[1, 0] - p[0, 0]
-        uy = p[1, 1] - p[0, 1]
-        uz = p[1, 2] - p[0, 2]
-        wx = p[2, 0] - p[0, 0]
-        wy = p[2, 1] - p[0, 1]
-        wz = p[2, 2] - p[0, 2]
-        n1x = uy * wz - uz * wy
-        n1y = uz * wx - ux * wz
-        n1z = ux * wy - uy * wx
+        n0x, n0y, n0z = _normal(vpos, a, b, c)
+        # the same face with the moving vertex at (x, y, z)
+        ax, ay, az = (x, y, z) if a == moving else (vpos[a, 0], vpos[a, 1], vpos[a, 2])
+        bx, by, bz = (x, y, z) if b == moving else (vpos[b, 0], vpos[b, 1], vpos[b, 2])
+        cx, cy, cz = (x, y, z) if c == moving else (vpos[c, 0], vpos[c, 1], vpos[c, 2])
+        n1x, n1y, n1z = _cross(ax, ay, az, bx, by, bz, cx, cy, cz)
         l0 = np.sqrt(n0x * n0x + n0y * n0y + n0z * n0z)
         l1 = np.sqrt(n1x * n1x + n1y * n1y + n1z * n1z)
         if l1 == 0.0:
@@ -318,7 +294,7 @@ def _push_edges(v, start, cnt, refs, tris, vpos, vq, vbnd, vlock, stamp, qs, hea
     return (hc, hu, hv, hsu, hsv), hn
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, min_dot, touched):
     """Collapse edges, cheapest first, until ``target`` faces remain or nothing legal is left.
 
@@ -450,7 +426,7 @@ def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, m
     return alive, done
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def compact(vdead, tris, nv, nt):
     """Renumber the live vertices and faces in order: returns (vertex map old -> new or -1,
     new vertex count, new face count); ``tris`` is rewritten in place."""

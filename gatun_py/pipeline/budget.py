@@ -138,17 +138,35 @@ class TimeModel:
     per_pixel_extra: float = 0.0  # seconds per pixel outside the pipeline (encode, transfer)
     alpha: float = 0.35
     frames: int = 0
+    # Render corrections per kind of frame (the viewer keys them by stored level): on a busy
+    # machine a long frame loses more than a short one, so one factor for all would swing between
+    # them. A kind never observed uses the overall factor.
+    keyed_render_scale: dict = field(default_factory=dict)
 
-    def predict_stages(self, w: Work) -> dict:
+    def predict_stages(self, w: Work, key=None) -> dict:
         fixed = self.costs.fixed_s if self.fixed_s is None else self.fixed_s
         return {"decode_s": self.decode_scale * self.costs.decode_s(w),
-                "render_s": self.render_scale * self.costs.render_s(w),
+                "render_s": self.render_scale_for(key) * self.costs.render_s(w),
                 "other_s": fixed + self.per_pixel_extra * w.pixels}
 
-    def predict(self, w: Work) -> float:
-        return sum(self.predict_stages(w).values())
+    def predict(self, w: Work, key=None) -> float:
+        return sum(self.predict_stages(w, key).values())
 
-    def observe(self, w: Work, *, decode_s: float, render_s: float, other_s: float, extra_s: float = 0.0) -> None:
+    def render_scale_for(self, key=None) -> float:
+        """The render correction of ``key``; for a key never observed, that of the nearest observed
+        key below it (keys order kinds of frames from costly to cheap: a stored level is costlier than
+        the next one, and a costly frame's factor is the cautious guess), else above it, else the
+        overall factor."""
+        if key is None or not self.keyed_render_scale:
+            return self.render_scale
+        if key in self.keyed_render_scale:
+            return self.keyed_render_scale[key]
+        below = [k for k in self.keyed_render_scale if k < key]
+        near = max(below) if below else min(self.keyed_render_scale)
+        return max(self.keyed_render_scale[near], self.render_scale)
+
+    def observe(self, w: Work, *, decode_s: float, render_s: float, other_s: float, extra_s: float = 0.0,
+                key=None) -> None:
         """Correct the model with one frame's measured stage times (seconds)."""
 
         def update(scale, measured, predicted):
@@ -158,6 +176,9 @@ class TimeModel:
             return math.exp((1 - self.alpha) * math.log(scale) + self.alpha * math.log(target))
 
         self.decode_scale = update(self.decode_scale, decode_s, self.decode_scale * self.costs.decode_s(w))
+        if key is not None:
+            k = self.render_scale_for(key)
+            self.keyed_render_scale[key] = update(k, render_s, k * self.costs.render_s(w))
         self.render_scale = update(self.render_scale, render_s, self.render_scale * self.costs.render_s(w))
         fixed = self.costs.fixed_s if self.fixed_s is None else self.fixed_s
         if math.isfinite(other_s) and other_s >= 0:
@@ -187,8 +208,13 @@ class WorkEstimator:
     Before any frame of the view: rays that hit = the projected bounding box's share of the image
     (a rectangle, an overestimate); steps per hit ray = 1.5 * tets^(1/3) (a grid of n tets is about
     (n/6)^(1/3) cubes deep, 2-3 tets per cube); samples per hit ray = half the bounding-box diagonal
-    over the sample step (volume mode) or the steps (face mode). After a frame, :meth:`observe`
-    replaces these by the measured rays hit, steps / tets^(1/3) and samples per hit ray.
+    over the sample step (volume mode) or the steps (face mode).
+
+    :meth:`observe` keeps, per stored level, the last frame's share of rays that hit, steps per hit
+    ray and samples per hit ray (at the file's step). A level observed is estimated from its own
+    figures (steps scaled as tets^(1/3) for merges on the fly); one not observed from the observed
+    levels on either side, interpolated in log(tets) - the cube-root rule alone is far off between
+    a 6-tet and a 4,000-tet level, and a planner fed such guesses swings between them.
     """
 
     STEPS_PER_CUBE_ROOT = 1.5
@@ -200,9 +226,12 @@ class WorkEstimator:
         self.diagonal = float(np.linalg.norm(hi - lo)) or 1.0
         self.step = float(step) if step and step > 0 else self.diagonal / 100
         self.mode = mode
-        self.hit_fraction: float | None = None
-        self.steps_per_root: float | None = None  # steps / (hit rays * tets^(1/3))
-        self.samples_per_hit: float | None = None  # at the file's own sample step
+        self.seen: dict[int, tuple] = {}  # level -> (tets, hit fraction, steps per hit, samples per hit)
+
+    @property
+    def hit_fraction(self) -> float | None:
+        """Share of rays that hit in the latest observed frame (None before any)."""
+        return self._latest[1] if self.seen else None
 
     def coverage(self, fitted_camera) -> float:
         """Share of the image the bounding box covers (its projected rectangle, clipped)."""
@@ -217,34 +246,58 @@ class WorkEstimator:
         y0, y1 = np.clip([px[:, 1].min(), px[:, 1].max()], 0, h)
         return float(max(x1 - x0, 0) * max(y1 - y0, 0) / (w * h))
 
+    def _per_hit(self, level: int, tets: float):
+        """(hit fraction, steps per hit ray, samples per hit ray) for ``tets`` tets from ``level``, or None."""
+        if not self.seen:
+            return None
+        if level in self.seen:
+            t0, hit, steps, samples = self.seen[level]
+            return hit, steps * (tets / t0) ** (1 / 3), samples
+        obs = sorted(self.seen.values())  # by tets
+        below = [o for o in obs if o[0] <= tets]
+        above = [o for o in obs if o[0] > tets]
+        if below and above:
+            (ta, ha, sa, ma), (tb, hb, sb, mb) = below[-1], above[0]
+            f = math.log(tets / ta) / math.log(tb / ta) if tb > ta else 0.0
+            lerp = lambda a, b: math.exp((1 - f) * math.log(max(a, 1e-9)) + f * math.log(max(b, 1e-9)))  # noqa: E731
+            return lerp(ha, hb), lerp(sa, sb), lerp(ma, mb)
+        t0, hit, steps, samples = below[-1] if below else above[0]
+        return hit, steps * (tets / t0) ** (1 / 3), samples
+
     def estimate(self, start: LevelSize, merges: int, pixels: int, coverage: float = 1.0, *,
                  step_factor: float = 1.0, decoded: bool = False) -> Work:
         """Work of a frame from stored level ``start`` simplified to ``merges``, ``pixels`` rays, the
         sample step ``step_factor`` times the file's; ``decoded``: the level is already in memory."""
         tets = max(estimated_tets(self.levels, merges), 1.0)
-        hit = pixels * (self.hit_fraction if self.hit_fraction is not None else min(max(coverage, 0.0), 1.0))
-        per_root = self.steps_per_root if self.steps_per_root is not None else self.STEPS_PER_CUBE_ROOT
-        steps = hit * per_root * tets ** (1 / 3)
-        if self.mode == "face":
-            samples = steps
-        elif self.samples_per_hit is not None:
-            samples = hit * self.samples_per_hit / step_factor
+        known = self._per_hit(start.level, tets)
+        if known is None:
+            hit = pixels * min(max(coverage, 0.0), 1.0)
+            steps = hit * self.STEPS_PER_CUBE_ROOT * tets ** (1 / 3)
+            samples = steps if self.mode == "face" else hit * 0.5 * self.diagonal / (self.step * step_factor)
         else:
-            samples = hit * 0.5 * self.diagonal / (self.step * step_factor)
+            fraction, steps_per_hit, samples_per_hit = known
+            hit = pixels * fraction
+            steps = hit * steps_per_hit
+            samples = steps if self.mode == "face" else hit * samples_per_hit / step_factor
         filtering = merges > start.merges
         return Work(0.0 if decoded else float(start.tets), float(start.points) if filtering else 0.0, tets, steps,
                     samples, estimated_tets(self.levels, merges, "boundary_faces"), float(pixels))
 
     def observe(self, stats: dict, *, step_factor: float = 1.0) -> None:
-        """Learn this view's rays hit, steps and samples from a rendered frame's stats."""
+        """Learn this view's rays hit, steps and samples at the frame's level from its stats."""
         rays, hit = int(stats.get("rays", 0)), int(stats.get("rays_hit", 0))
-        tets = max(int(stats.get("tets_rendered", 0)), 1)
         if rays <= 0:
             return
-        self.hit_fraction = hit / rays
+        tets = max(int(stats.get("tets_rendered", 0)), 1)
+        level = int(stats.get("level", 0))
         if hit > 0:
-            self.steps_per_root = max(float(stats.get("steps", 0)), 1.0) / (hit * tets ** (1 / 3))
-            self.samples_per_hit = float(stats.get("samples", 0)) * step_factor / hit
+            entry = (float(tets), hit / rays, max(float(stats.get("steps", 0)), 1.0) / hit,
+                     max(float(stats.get("samples", 0)), 1.0) * step_factor / hit)
+        else:  # nothing in view: keep the counts per hit from before, if any
+            prev = self.seen.get(level, (float(tets), 0.0, self.STEPS_PER_CUBE_ROOT * tets ** (1 / 3), 1.0))
+            entry = (float(tets), 0.0, prev[2], prev[3])
+        self.seen[level] = entry
+        self._latest = entry
 
 
 # -- planning ----------------------------------------------------------------------------------------
@@ -363,7 +416,7 @@ class FramePlanner:
             px = max(int(round(fitted_camera.width * scale)), 1) * max(int(round(fitted_camera.height * scale)), 1)
             plan = plan_for_budget(
                 self.levels, lambda i, n: self.model.predict(self.estimate(self.levels[i].level, n, px, coverage,
-                                                                           step_factor)),
+                                                                           step_factor), key=self.levels[i].level),
                 float(budget_s), self.max_merges)
             plan = BudgetPlan(plan.level, plan.merges, plan.predicted_s, plan.feasible, scale, step_factor)
             if plan.feasible and plan.merges <= MAX_DRAG_RATIO * self.points:
@@ -398,7 +451,8 @@ class FramePlanner:
         decode_s = stats.get("decode_s", 0.0) + stats.get("filter_s", 0.0)
         render_s = stats.get("render_s", 0.0)
         other = max(total_s - decode_s - render_s - extra_s, 0.0)
-        self.model.observe(w, decode_s=decode_s, render_s=render_s, other_s=other, extra_s=extra_s)
+        self.model.observe(w, decode_s=decode_s, render_s=render_s, other_s=other, extra_s=extra_s,
+                           key=int(stats["level"]))
         self.estimator.observe(stats, step_factor=step_factor)
         return w
 

@@ -71,7 +71,7 @@ class FrameService:
         fitted = req.camera.fit(s.bbox_lo, s.bbox_hi)
         lv = planner.levels[0]
         return planner.model.predict(planner.estimate(lv.level, lv.merges, fitted.width * fitted.height,
-                                                      planner.estimator.coverage(fitted)))
+                                                      planner.estimator.coverage(fitted)), key=lv.level)
 
     def close(self):
         self.executor.shutdown(wait=False, cancel_futures=True)

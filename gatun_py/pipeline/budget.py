@@ -590,8 +590,8 @@ def plan_file_budget(path_or_reader, view, budget_s: float, *, reseed: bool = Fa
     The budget covers the whole command from opening the file to the PNG written: what the
     probe and the seeding (first use on a machine) took is taken off it before planning.
     """
-    if not (isinstance(budget_s, (int, float)) and math.isfinite(float(budget_s)) and budget_s > 0):
-        raise OptionError(f"--budget must be a positive number of seconds, got {budget_s}")
+    if not (isinstance(budget_s, (int, float)) and math.isfinite(float(budget_s)) and budget_s >= 0):
+        raise OptionError(f"--budget must be a number of seconds >= 0, got {budget_s}")
     t0 = time.perf_counter()
     reader = path_or_reader if isinstance(path_or_reader, TetcReader) else TetcReader(path_or_reader)
     costs, seeded = machine_costs(reseed=reseed)

@@ -409,7 +409,6 @@ class FramePlanner:
         """The finest frame predicted to fit ``budget_s``; ``drag``: also coarsen step and image."""
         if not (isinstance(budget_s, (int, float)) and math.isfinite(budget_s) and budget_s > 0):
             raise OptionError(f"the budget must be a positive number of seconds, got {budget_s!r}")
-        pixels = fitted_camera.width * fitted_camera.height
         coverage = self.estimator.coverage(fitted_camera)
         first = None
         for scale, step_factor in (DRAG_SETTINGS if drag else DRAG_SETTINGS[:1]):
@@ -596,8 +595,8 @@ def plan_file_budget(path_or_reader, view, budget_s: float, *, reseed: bool = Fa
     reader = path_or_reader if isinstance(path_or_reader, TetcReader) else TetcReader(path_or_reader)
     costs, seeded = machine_costs(reseed=reseed)
     lo, hi, _rng, step = file_render_defaults(reader)
-    planner = FramePlanner(reader, TimeModel(costs, per_pixel_extra=PNG_S_PER_PIXEL * costs.per_step / Costs().per_step),
-                           step=view.step or step, mode=view.mode)
+    png_s = PNG_S_PER_PIXEL * costs.per_step / Costs().per_step  # as much faster or slower as rendering
+    planner = FramePlanner(reader, TimeModel(costs, per_pixel_extra=png_s), step=view.step or step, mode=view.mode)
     planner.probe(reader, view)
     left = max(float(budget_s) - (time.perf_counter() - t0), 1e-3)
     plan = planner.plan(left, view.camera.fit(lo, hi))

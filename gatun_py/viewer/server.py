@@ -40,8 +40,8 @@ from ..errors import OptionError, TetcError
 from .session import FrameCancelled, ViewerSession, parse_request
 
 STATIC_FILES = {"viewer.js": "text/javascript", "viewer.css": "text/css"}
-PREVIEW_ABOVE_S = 0.5  # a still frame predicted to take longer than this gets a quick preview first
-PREVIEW_SHARE = 0.1  # the preview's budget, as a share of the full frame's predicted time
+PREVIEW_ABOVE_S = 1.5  # a still frame predicted to take longer than this gets a quick preview first
+PREVIEW_SHARE = 0.08  # the preview's budget, as a share of the full frame's predicted time
 
 
 def new_token() -> str:

@@ -217,9 +217,8 @@ class ViewerSession:
         return st.st_size, st.st_mtime_ns
 
     def _open(self):
-        from ..codec import TetcReader
-
-        self.signature = self._signature()
+        self.signature = None  # until the file has been read whole: a failed open is retried next frame
+        signature = self._signature()
         try:
             with open(self.path, "rb") as fh:  # read whole: the file may change under a long session
                 data = fh.read()
@@ -231,6 +230,7 @@ class ViewerSession:
         self.spread = collections.deque(maxlen=SPREAD_FRAMES)  # measured / predicted of budget frames
         self.model = TimeModel(self.costs)
         self._histogram = None
+        self.signature = signature
 
     def check_file(self) -> None:
         """Reopen the file if it changed on disk; raise TetcError if it vanished or is corrupt."""
@@ -310,7 +310,8 @@ class ViewerSession:
         step_factor = plan.step_factor if plan is not None else 1.0
         camera = req.camera
         if scale != 1.0:
-            camera = replace(camera, width=max(1, round(camera.width * scale)), height=max(1, round(camera.height * scale)))
+            camera = replace(camera, width=max(1, round(camera.width * scale)),
+                             height=max(1, round(camera.height * scale)))
         view = View(camera, req.tf, req.mode, self.step * step_factor if step_factor != 1.0 else None, False)
         decoded = self.reader.is_decoded(target.level)
         work = planner.estimate(target.level, target.merges, camera.width * camera.height,

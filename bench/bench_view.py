@@ -225,7 +225,7 @@ while dragging (the page scales it up) when levels alone cannot reach the budget
 A fresh `tetc render FILE --budget B --size {args.size} --azimuth 30 --elevation 20 --stats` per row
 (machine costs cached, nothing known about the file); total_s runs from opening the file to the PNG
 written (the probe render and the plan included). Target: ≤ 2 × the budget (before: 106 s of
-calibration on a 9.3 M-tet file, and 3-20 s on the samples).
+calibration on a 9.3 M-tet file; see the note below for the samples).
 
 {table(["file", "tets", "budget s", "level", "ratio", "predicted s", "total s", "total / budget", "≤ 2×"], cli_rows)}
 """

@@ -3,23 +3,26 @@
 A frame's time is modelled as the sum of its work, each kind at a cost per unit (Farias et al. adapt
 such costs per frame):
 
-* **decode**: per tet of the stored level decoded (and filtered), per vertex whose ancestor the
-  run-time filter computes (the forest section and the top-down pass);
-* **render**: per ray-tet step, per sample, per boundary face, per pixel (ray set-up, image);
-* a fixed part per frame (opening the file, the first batch).
+* **decode**: per tet of the stored level decoded (0 when the level is already in memory), per
+  vertex whose ancestor the run-time filter computes (the forest section and the top-down pass);
+* **render**: per frame, per tet rendered, per ray-tet step, per sample, per boundary face, per
+  pixel (ray set-up, boundary hits, image);
+* **other**: a fixed part per frame and, for the viewer, the image encoding per pixel.
 
-The costs are *seeded once per machine* by timing a few small renders of a synthetic grid (a few
-tenths of a second, cached in the user's cache directory, :func:`machine_costs`), then *corrected
-from every frame's measured stats* (:meth:`TimeModel.observe`: one multiplicative correction per
-stage, smoothed). The work of a frame that has not been rendered yet is estimated from the file's
+The costs are *seeded once per machine* (:func:`seed_costs`, about 0.2 s, cached in the user's cache
+directory, :func:`machine_costs`): the reference machine's costs scaled by how fast this machine
+decodes and renders a synthetic grid. They are then *corrected from every frame's measured stats*
+(:meth:`TimeModel.observe`: one multiplicative correction per stage, smoothed, and for rendering one
+per stored level). The work of a frame that has not been rendered yet is estimated from the file's
 metadata and the view (:class:`WorkEstimator`): tets and boundary faces per stored level are in the
-file, steps grow as tets^(1/3) per ray that hits, samples as the depth of the mesh over the sample
-step, and once a frame of this view has been drawn its measured counts replace the guesses.
+file; rays that hit, steps and samples per hit ray are learnt from the frames drawn (or from a tiny
+probe render, :meth:`FramePlanner.probe`), and guessed from the bounding box before that.
 
 Given a budget B, :func:`plan_for_budget` walks the stored levels from the finest: the first level
 whose own predicted time fits is taken as is; if it does not fit but can be simplified on the fly far
 enough before the next level starts, the finest such ratio is taken (starting from that level).
-``tetc render --budget`` and the viewer (``tetc view``) use the same model.
+``tetc render --budget`` and the viewer (``tetc view``) use the same model; the viewer may also
+coarsen the sample step and the image while the user drags (:data:`DRAG_SETTINGS`).
 """
 
 from __future__ import annotations
@@ -80,10 +83,12 @@ class Costs:
     """Seconds per unit of work (see the module docstring); ``render_fixed_s`` is per frame.
 
     The defaults are the reference machine's (2 cores, no GPU, where the project's figures are
-    measured): a non-negative least-squares fit, on relative error, of 130 renders of the four
-    samples (every few levels, 96² to 512², two sample steps) and of the seeding grid; it predicts
-    the render stage within -25 %/+25 % for 80 % of them. Boundary faces came out at zero: their
-    cost hides in the per-tet and per-step terms, so it gets only a small share here.
+    measured): a non-negative least-squares fit, on relative error, of 126 renders of the four
+    samples (five levels each, 96² to 512², two sample steps) and of the seeding grid. Predicted /
+    measured render time: median 0.97, 10th-90th percentile 0.39-1.23 (the low end: Combustion's
+    smallest frames, which took 20 ms whatever their size). Boundary faces came out at zero (their
+    cost hides in the per-tet and per-step terms) and the fixed part at 0.35 ms: both are given a
+    small non-zero value here; the forest pass is the seeding grid's measured figure.
     """
 
     fixed_s: float = 2e-3

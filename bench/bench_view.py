@@ -156,11 +156,13 @@ def still_rmse(path: Path, tf: str, camera: dict, png: bytes) -> tuple[float, fl
         return compare_files(mine, ref).rmse, json.loads(p.stdout)["total_s"]
 
 
-def cli_budget(path: Path, tf: str, budget: float, size: int) -> dict:
-    """`tetc render --budget` in a fresh process: total_s (file opened to PNG written) and the plan."""
+def cli_budget(path: Path, tf: str, budget: float, size: int, code: str | None = None) -> dict:
+    """`tetc render --budget` in a fresh process: total_s (file opened to PNG written) and the plan.
+    ``code``: run that checkout's gatun_py instead (PYTHONPATH), with an empty cache directory."""
     with tempfile.TemporaryDirectory() as tmp:
+        env = {"PYTHONPATH": code, "TETC_CACHE_DIR": str(Path(tmp) / "cache")} if code else None
         _, p = run_cli(["render", str(path), "-o", str(Path(tmp) / "b.png"), "--tf", tf, "--size", str(size),
-                        "--azimuth", "30", "--elevation", "20", "--budget", repr(budget), "--stats", "-q"])
+                        "--azimuth", "30", "--elevation", "20", "--budget", repr(budget), "--stats", "-q"], env=env)
         if p.returncode:
             raise SystemExit(p.stderr)
         return json.loads(p.stdout)
@@ -175,6 +177,8 @@ def main(argv=None) -> int:
     ap.add_argument("--size", type=int, default=512)
     ap.add_argument("--still-delay", type=float, default=0.2)
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--base", default=None, metavar="DIR",
+                    help="also time the first `tetc render --budget 0.1` of that checkout (the per-file calibration)")
     args = ap.parse_args(argv)
     os.environ.setdefault("NUMBA_NUM_THREADS", "2")
 
@@ -182,11 +186,16 @@ def main(argv=None) -> int:
     for spec in args.extra:
         f, _, tf = spec.rpartition(":")
         jobs.append((Path(f).stem, Path(f), tf))
-    rows, results, cli_rows = [], [], []
+    rows, results, cli_rows, base_rows = [], [], [], []
     for name, path, tf in jobs:
         from gatun_py.codec import TetcReader
 
         tets = int(TetcReader(path).meta["tets"])
+        if args.base:
+            old = cli_budget(path, tf, 0.1, args.size, code=args.base)
+            new = cli_budget(path, tf, 0.1, args.size)
+            base_rows.append([name, tets, old["total_s"], old["level"], new["total_s"], new["level"],
+                              f"{old['total_s'] / new['total_s']:.0f}×"])
         for budget in args.budgets:
             with Server(path) as srv:
                 r = asyncio.run(drive(srv.base, tf=tf, budget=budget, seconds=args.seconds, size=args.size,
@@ -225,9 +234,16 @@ while dragging (the page scales it up) when levels alone cannot reach the budget
 A fresh `tetc render FILE --budget B --size {args.size} --azimuth 30 --elevation 20 --stats` per row
 (machine costs cached, nothing known about the file); total_s runs from opening the file to the PNG
 written (the probe render and the plan included). Target: ≤ 2 × the budget (before: 106 s of
-calibration on a 9.3 M-tet file; see the note below for the samples).
+calibration on a 9.3 M-tet file).
 
 {table(["file", "tets", "budget s", "level", "ratio", "predicted s", "total s", "total / budget", "≤ 2×"], cli_rows)}
+"""
+    if base_rows:
+        text += f"""
+Against the per-file calibration it replaces (`{args.base}`, the same files, an empty cache, same run):
+first `tetc render --budget 0.1` total_s.
+
+{table(["file", "tets", "before s", "before level", "now s", "now level", "before / now"], base_rows)}
 """
     if not args.no_write:
         write_section("view", text)

@@ -158,11 +158,15 @@ def still_rmse(path: Path, tf: str, camera: dict, png: bytes) -> tuple[float, fl
 
 def cli_budget(path: Path, tf: str, budget: float, size: int, code: str | None = None) -> dict:
     """`tetc render --budget` in a fresh process: total_s (file opened to PNG written) and the plan.
-    ``code``: run that checkout's gatun_py instead (PYTHONPATH), with an empty cache directory."""
+    ``code``: run that checkout's gatun_py instead (PYTHONPATH, run from an empty folder so this
+    checkout is not on the path), with an empty cache directory."""
     with tempfile.TemporaryDirectory() as tmp:
-        env = {"PYTHONPATH": code, "TETC_CACHE_DIR": str(Path(tmp) / "cache")} if code else None
-        _, p = run_cli(["render", str(path), "-o", str(Path(tmp) / "b.png"), "--tf", tf, "--size", str(size),
-                        "--azimuth", "30", "--elevation", "20", "--budget", repr(budget), "--stats", "-q"], env=env)
+        env = dict(os.environ, **({"PYTHONPATH": code, "TETC_CACHE_DIR": str(Path(tmp) / "cache")} if code else {}))
+        launcher = "import sys; from gatun_py.cli.main import main; sys.exit(main())"
+        p = subprocess.run([sys.executable, "-c", launcher, "render", str(Path(path).resolve()), "-o",
+                            str(Path(tmp) / "b.png"), "--tf", tf, "--size", str(size), "--azimuth", "30",
+                            "--elevation", "20", "--budget", repr(budget), "--stats", "-q"],
+                           capture_output=True, text=True, env=env, cwd=tmp)
         if p.returncode:
             raise SystemExit(p.stderr)
         return json.loads(p.stdout)

@@ -131,6 +131,7 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
                 status(f"note: the budget of {budget:g} s cannot be met: rendering the coarsest level "
                        f"(predicted {plan.predicted_s:.3f} s)", quiet)
         n_tets = int(reader.level_meta(target.level)["tets"])
+        t_frame = time.perf_counter()
         with progress_bar("rendering", n_tets if n_tets >= 100_000 else 0, quiet) as update:
             result = render_tetc(reader, view, pipeline=pipeline, target=target, progress=update)
     else:
@@ -141,6 +142,10 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
         for note in result.stats.pop("notes", []):
             status(f"note: {note}", quiet)
     write_png(output, result.image, force=force)
+    if planned:  # the machine's costs learn from every budget render
+        from gatun_py.pipeline.budget import remember_frame
+
+        remember_frame(_planner, result.stats, total_s=time.perf_counter() - t_frame)
     st = result.stats
     st.pop("filter", None)
     st.update(planned)

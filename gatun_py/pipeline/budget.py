@@ -50,7 +50,8 @@ from ..simplify import ROOT_RANK, ancestors
 from ..simplify.levels import Target, forest_merges, stored_levels
 from .stream import file_render_defaults, render_tetc
 
-SEED_VERSION = 1  # bump when the seeding procedure changes: cached costs of older versions are re-seeded
+MIN_LEARN_S = 2e-3  # a stage predicted below this (its variable part) does not correct the model
+SEED_VERSION = 2  # bump when the seeding procedure changes: cached costs of older versions are re-seeded
 
 
 @dataclass(frozen=True)
@@ -100,19 +101,27 @@ class Costs:
     per_sample: float = 1.4e-8
     per_boundary_face: float = 2e-8
     per_pixel: float = 3.8e-8
+    decode_fixed_s: float = 2.3e-4  # opening the level's sections, the first batch
 
     def decode_s(self, w: Work) -> float:
+        return self.decode_fixed_s + self.decode_variable_s(w)
+
+    def decode_variable_s(self, w: Work) -> float:
         return self.per_tet_decoded * w.tets_decoded + self.per_forest_point * w.forest_points
 
     def render_s(self, w: Work) -> float:
-        return (self.render_fixed_s + self.per_tet_rendered * w.tets_rendered + self.per_step * w.steps
-                + self.per_sample * w.samples + self.per_boundary_face * w.boundary_faces + self.per_pixel * w.pixels)
+        return self.render_fixed_s + self.render_variable_s(w)
+
+    def render_variable_s(self, w: Work) -> float:
+        return (self.per_tet_rendered * w.tets_rendered + self.per_step * w.steps + self.per_sample * w.samples
+                + self.per_boundary_face * w.boundary_faces + self.per_pixel * w.pixels)
 
     def scaled(self, decode: float, render: float) -> "Costs":
         """These costs on a machine ``decode`` / ``render`` times as slow in each stage."""
         return Costs(self.fixed_s * render, self.per_tet_decoded * decode, self.per_forest_point * decode,
                      self.render_fixed_s * render, self.per_tet_rendered * render, self.per_step * render,
-                     self.per_sample * render, self.per_boundary_face * render, self.per_pixel * render)
+                     self.per_sample * render, self.per_boundary_face * render, self.per_pixel * render,
+                     self.decode_fixed_s * decode)
 
 
 @dataclass
@@ -126,7 +135,7 @@ class TimeModel:
 
     Examples
     --------
-    >>> m = TimeModel(replace(Costs(*[0.0] * 9), per_tet_decoded=1e-6))
+    >>> m = TimeModel(replace(Costs(*[0.0] * 10), per_tet_decoded=1e-6))
     >>> w = Work(tets_decoded=1e5)
     >>> round(m.predict(w), 3)
     0.1
@@ -157,6 +166,11 @@ class TimeModel:
     def predict(self, w: Work, key=None) -> float:
         return sum(self.predict_stages(w, key).values())
 
+    def corrected_costs(self) -> Costs:
+        """The costs with this session's overall corrections applied (to cache for the next one)."""
+        c = self.costs.scaled(self.decode_scale, self.render_scale)
+        return replace(c, fixed_s=self.costs.fixed_s if self.fixed_s is None else self.fixed_s)
+
     def render_scale_for(self, key=None) -> float:
         """The render correction of ``key``; for a key never observed, that of the nearest observed
         key below it (keys order kinds of frames from costly to cheap: a stored level is costlier than
@@ -174,17 +188,21 @@ class TimeModel:
                 key=None) -> None:
         """Correct the model with one frame's measured stage times (seconds)."""
 
-        def update(scale, measured, predicted):
-            if predicted <= 0 or not math.isfinite(measured) or measured <= 0:
+        def update(scale, measured, predicted, variable):
+            # A stage whose work is tiny measures mostly its fixed part and noise: nothing to learn.
+            if variable * scale < MIN_LEARN_S or not math.isfinite(measured) or measured <= 0:
                 return scale
             target = min(max(measured / predicted * scale, 1e-3), 1e3)
             return math.exp((1 - self.alpha) * math.log(scale) + self.alpha * math.log(target))
 
-        self.decode_scale = update(self.decode_scale, decode_s, self.decode_scale * self.costs.decode_s(w))
+        c = self.costs
+        self.decode_scale = update(self.decode_scale, decode_s, self.decode_scale * c.decode_s(w),
+                                   c.decode_variable_s(w))
         if key is not None:
             k = self.render_scale_for(key)
-            self.keyed_render_scale[key] = update(k, render_s, k * self.costs.render_s(w))
-        self.render_scale = update(self.render_scale, render_s, self.render_scale * self.costs.render_s(w))
+            self.keyed_render_scale[key] = update(k, render_s, k * c.render_s(w), c.render_variable_s(w))
+        self.render_scale = update(self.render_scale, render_s, self.render_scale * c.render_s(w),
+                                   c.render_variable_s(w))
         fixed = self.costs.fixed_s if self.fixed_s is None else self.fixed_s
         if math.isfinite(other_s) and other_s >= 0:
             self.fixed_s = (1 - self.alpha) * fixed + self.alpha * other_s
@@ -608,6 +626,17 @@ def plan_file_budget(path_or_reader, view, budget_s: float, *, reseed: bool = Fa
     return planner.target(plan), plan, planner, seeded
 
 
-__all__ = ["LevelSize", "Work", "Costs", "TimeModel", "WorkEstimator", "BudgetPlan", "plan_for_budget",
+def remember_frame(planner: FramePlanner, stats: dict, *, total_s: float) -> None:
+    """Correct the machine's cached costs with a frame just rendered by ``tetc render --budget``.
+
+    ``total_s``: from the start of the render to the PNG written. Each budget render moves the
+    cached costs part way toward what it measured, so a seed taken while the machine was busy (or
+    idle) does not mislead every later run.
+    """
+    planner.observe(stats, total_s=total_s)
+    save_costs(planner.model.corrected_costs())
+
+
+__all__ = ["remember_frame", "LevelSize", "Work", "Costs", "TimeModel", "WorkEstimator", "BudgetPlan", "plan_for_budget",
            "FramePlanner", "estimated_tets", "levels_of", "machine_costs", "seed_costs", "load_costs",
            "save_costs", "cache_dir", "plan_file_budget"]

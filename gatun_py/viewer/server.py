@@ -64,8 +64,12 @@ class FrameService:
             self.frames += 1
             return frame
 
-    def predict_full(self, req) -> float:
-        """Predicted seconds of the full-quality frame of ``req``."""
+    async def predict_full(self, req) -> float:
+        """Predicted seconds of the full-quality frame of ``req`` (on the render thread: it reads the
+        model that renders update)."""
+        return await asyncio.get_running_loop().run_in_executor(self.executor, lambda: self._predict_full(req))
+
+    def _predict_full(self, req) -> float:
         s = self.session
         planner = s.planner(req.mode)
         fitted = req.camera.fit(s.bbox_lo, s.bbox_hi)
@@ -238,7 +242,7 @@ class _Client:
     async def _still(self, rid, req):
         """Progressive refinement at rest: a quick preview if the full frame is slow, then full quality."""
         t0 = time.perf_counter()
-        full_s = self.service.predict_full(req)
+        full_s = await self.service.predict_full(req)
         if full_s > PREVIEW_ABOVE_S:
             preview = replace(req, budget_s=max(PREVIEW_SHARE * full_s, 0.05), fmt="jpeg")
             f = await self.service.render(preview, cancelled=self.superseded)

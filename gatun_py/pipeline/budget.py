@@ -409,20 +409,24 @@ class FramePlanner:
     def level_size(self, level: int) -> LevelSize:
         return next(lv for lv in self.levels if lv.level == level)
 
-    def probe(self, reader, view, *, pixels: int = PROBE_PIXELS) -> dict:
-        """Learn the view's rays hit, steps and samples from a tiny render (a few milliseconds).
+    def probe(self, reader, view, *, pixels: int = PROBE_PIXELS) -> list[dict]:
+        """Learn the view's rays hit, steps and samples from tiny renders (a few milliseconds).
 
-        The coarsest stored level with at least :data:`PROBE_TETS` tets (or level 0), at about
-        ``pixels`` rays with the image's aspect: its counts, scaled, stand in for the frame's until
-        frames of this view have been drawn. Returns the probe's stats.
+        Two levels, the coarsest and the coarsest with at least :data:`PROBE_TETS` tets, at about
+        ``pixels`` rays with the image's aspect: their counts, scaled, stand in for the frame's until
+        frames of this view have been drawn (in between and beyond, :class:`WorkEstimator`
+        interpolates). Returns the probes' stats.
         """
-        lv = next((x for x in reversed(self.levels) if x.tets >= PROBE_TETS), self.levels[0])
+        fine = next((x for x in reversed(self.levels) if x.tets >= PROBE_TETS), self.levels[0])
         cam = view.camera
         scale = min(1.0, math.sqrt(pixels / (cam.width * cam.height)))
         small = replace(cam, width=max(1, round(cam.width * scale)), height=max(1, round(cam.height * scale)))
-        stats = render_tetc(reader, replace(view, camera=small, lean=False), level=lv.level).stats
-        self.estimator.observe(stats, step_factor=1.0)
-        return stats
+        out = []
+        for lv in sorted({fine.level, self.levels[-1].level}):
+            stats = render_tetc(reader, replace(view, camera=small, lean=False), level=lv).stats
+            self.estimator.observe(stats, step_factor=1.0)
+            out.append(stats)
+        return out
 
     def estimate(self, level: int, merges: int, pixels: int, coverage: float, step_factor: float = 1.0) -> Work:
         return self.estimator.estimate(self.level_size(level), merges, pixels, coverage, step_factor=step_factor,

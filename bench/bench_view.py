@@ -186,6 +186,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     os.environ.setdefault("NUMBA_NUM_THREADS", "2")
 
+    load_before = os.getloadavg()[0]
     jobs = [(n, sample_tetc(n), SAMPLE_FILES[n][2]) for n in args.files]
     for spec in args.extra:
         f, _, tf = spec.rpartition(":")
@@ -229,7 +230,8 @@ per frame (plan, decode, filter, render, JPEG encode); frames/s = frames deliver
 Targets: ≥ 90 % of drag frames within 1.2 × the budget; ≥ 10 frames/s at 0.1 s; first frame
 ≤ 2 × the budget; release → full quality ≤ still delay + 1.2 × the full render's time; still
 RMSE ≤ 0.5 against `tetc render` of the same view. "image scale": the share of {args.size}² rendered
-while dragging (the page scales it up) when levels alone cannot reach the budget.
+while dragging (the page scales it up) when levels alone cannot reach the budget. Machine load
+(1-minute average, 2 cores): {load_before:.1f} at the start, {os.getloadavg()[0]:.1f} at the end.
 
 {table(header, rows)}
 

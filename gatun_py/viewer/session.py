@@ -31,9 +31,11 @@ DEFAULT_BUDGET_S = 0.1
 # Frames are planned to a share of the budget: the model predicts a typical frame, and the same work
 # takes longer now and then (other programs, the cache). The share starts at PLAN_SHARE and then
 # follows the spread of this session's frames: the target is 90 % of frames within 1.2 x the
-# budget, so frames are planned to 1.2 x budget / (the 90th percentile of measured / predicted).
+# budget, so frames are planned to 1.2 x budget / (the 90th percentile of measured / predicted),
+# never above PLAN_SHARE, so that the typical frame also leaves room for sending it (frames per
+# second = 1 / (frame + transfer)).
 PLAN_SHARE = 0.85
-PLAN_SHARE_RANGE = (0.3, 0.95)
+PLAN_SHARE_RANGE = (0.3, PLAN_SHARE)
 SPREAD_FRAMES = 40  # measured / predicted of the last frames this many
 HISTOGRAM_POINTS = 20_000
 COLORMAPS = ("viridis", "plasma", "inferno", "magma", "cividis", "coolwarm", "jet", "gray")

@@ -43,8 +43,9 @@ def view(input, port, host, no_browser, token, quiet):
     after the still delay. The page has a transfer-function editor and shows the level in use, the
     tets rendered, frames per second and where each frame's time went.
 
-    The server listens on 127.0.0.1 unless --host says otherwise, and the page, its websocket and its frame requests need
-    the random token in the printed URL. Scripts can ask for frames without a browser:
+    The server listens on 127.0.0.1 unless --host says otherwise, and the page, its websocket and
+    its frame requests need the random token in the printed URL. Scripts can ask for frames
+    without a browser:
     POST /api/frame?token=... with a JSON request (camera, tf, budget) returns the image and its
     stats (header X-Tetc-Stats); see the module gatun_py.viewer.server.
     """

@@ -30,7 +30,7 @@ from .codec.info import tetc_info
 from .errors import OptionError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.io import mesh_output_format
-from .pipeline.budget import load_costs, plan_file_budget
+from .pipeline.budget import load_costs, plan_file_budget, remember_frame
 from .pipeline.stream import PIPELINES, View, is_tetc, render_mesh_file, render_tetc
 from .render.camera import Camera
 from .render.image import add_colorbar, image_bytes, parse_colour, to_rgb8, write_image
@@ -509,7 +509,7 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
         if budget is not None:
             if load_costs() is None:
                 log("measuring this machine's rendering costs for the budget (once, under a second)...")
-            target, plan, _planner, _ = plan_file_budget(f.reader, view, budget)
+            target, plan, planner, _ = plan_file_budget(f.reader, view, budget)
             planned = {"predicted_s": plan.predicted_s, "budget_s": budget}
             if not plan.feasible:
                 log(f"note: the budget of {budget:g} s cannot be met: rendering the coarsest level "
@@ -517,7 +517,10 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
         total = int(f.reader.level_meta(target.level)["tets"])
         if scalar is not None or component is not None:
             view = dataclasses.replace(view, scalar=scalar or f.scalar_name, component=component)
+        t_frame = time.perf_counter()
         result = render_tetc(f.reader, view, pipeline=pipeline, target=target, progress=_counter(progress, total))
+        if budget is not None:  # the machine's costs learn from every budget render
+            remember_frame(planner, result.stats, total_s=time.perf_counter() - t_frame)
         name = f.scalar_name if view.scalar is None else view.scalar + ("" if component is None else f"[{component}]")
         rng = f.reader.array_range(view.scalar, view.component) or (0.0, 1.0)
     else:

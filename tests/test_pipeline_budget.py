@@ -46,7 +46,7 @@ def _predictor(levels, costs, pixels=256 * 256):
 
 
 costs_strategy = st.builds(Costs, *[st.floats(0.0, 1e-2)] + [st.floats(0.0, 1e-6)] * 2 + [st.floats(0.0, 1e-2)]
-                           + [st.floats(0.0, 1e-6)] * 5)
+                           + [st.floats(0.0, 1e-6)] * 5 + [st.floats(0.0, 1e-2)])
 
 
 @settings(max_examples=150, deadline=None)
@@ -103,6 +103,14 @@ def test_model_converges_to_a_slower_machine(k_decode, k_render, seed):
     assert model.predict_stages(w)["decode_s"] == pytest.approx(truth.decode_s(w), rel=1e-3)
     assert model.predict_stages(w)["render_s"] == pytest.approx(truth.render_s(w), rel=1e-3)
     assert model.predict_stages(w)["other_s"] == pytest.approx(0.004, rel=1e-3)
+
+
+def test_tiny_stages_teach_nothing():
+    """A 2-tet decode measures its fixed part: it must not blow up the cost per tet."""
+    model = TimeModel(Costs())
+    w = Work(tets_decoded=2, tets_rendered=2, steps=10, samples=10, boundary_faces=6, pixels=16)
+    model.observe(w, decode_s=0.005, render_s=0.004, other_s=0.0)
+    assert model.decode_scale == 1.0 and model.render_scale == 1.0
 
 
 def test_one_outlier_frame_moves_the_model_only_part_way():

@@ -48,7 +48,7 @@ def test_level_and_budget(post_tetc, tmp_path, monkeypatch):
     assert lv["level"] == 2
     b = _render(post_tetc, tmp_path / "b.png", "--budget", "5")
     assert b["budget_s"] == 5 and "predicted_s" in b
-    assert (tmp_path / "cache" / "costs.json").exists()  # the machine's costs, measured once and kept
+    assert (tmp_path / "cache" / "costs.json").exists()  # the machine's costs, kept for next time (not per file)
     assert b["level"] == 0  # a generous budget renders the full mesh
     res = run("render", post_tetc, "-o", tmp_path / "z.png", "--tf", "post", "--size", "40x32", "--budget", "1e-9",
               "--stats")

@@ -57,7 +57,7 @@ def server(tmp_path_factory):
     try:
         url = proc.stdout.readline().strip()
         assert url.startswith("http://127.0.0.1:"), (url, proc.stderr.read() if proc.poll() is not None else "")
-        yield url
+        yield url, path
     finally:
         proc.terminate()
         try:
@@ -101,14 +101,15 @@ def final_after(driver, frame_id, what):
 
 
 def test_page_needs_the_token(server, browser):
-    browser.get(server.replace(TOKEN, "wrong-token"))
+    url, _ = server
+    browser.get(url.replace(TOKEN, "wrong-token"))
     assert "invalid or missing token" in browser.find_element(By.TAG_NAME, "body").text
-    browser.get(server.split("?")[0])
+    browser.get(url.split("?")[0])
     assert "invalid or missing token" in browser.find_element(By.TAG_NAME, "body").text
 
 
 def test_drag_zoom_pan_and_edit_the_transfer_function(server, browser):
-    browser.get(server)
+    browser.get(server[0])
     first = final_after(browser, 0, "the first full-quality frame")
     assert first["level"] == 0 and first["full_quality"] and first["tets_rendered"] > 0
     for key in ("decode_s", "filter_s", "render_s", "encode_s", "transfer_s", "latency_s", "fps", "tets_rendered",
@@ -154,7 +155,7 @@ def test_drag_zoom_pan_and_edit_the_transfer_function(server, browser):
 
 
 def test_interactive_frames_respect_the_budget_setting(server, browser):
-    browser.get(server)
+    browser.get(server[0])
     first = final_after(browser, 0, "the first frame")
     budget = browser.find_element(By.ID, "budget")
     budget.clear()
@@ -174,3 +175,19 @@ def test_interactive_frames_respect_the_budget_setting(server, browser):
     ActionChains(browser).release().perform()
     final_after(browser, first["id"], "the still frame")
     assert seen and all(s["budget_s"] == 0.05 for s in seen)
+
+
+def test_a_vanished_file_shows_an_error_and_the_server_stays_up(server, browser, tmp_path):
+    url, path = server
+    browser.get(url)
+    first = final_after(browser, 0, "the first frame")
+    error = browser.find_element(By.ID, "error")
+    shutil.move(path, tmp_path / "away.tetc")
+    try:
+        browser.execute_script("window.tetcViewer.requestFrame(); window.tetcViewer.endInteraction();")
+        wait_for(browser, lambda d: error.is_displayed() and "gone" in error.text, what="the error in the page")
+    finally:
+        shutil.move(tmp_path / "away.tetc", path)
+    browser.execute_script("window.tetcViewer.requestFrame(); window.tetcViewer.endInteraction();")
+    final_after(browser, first["id"], "a frame once the file is back")
+    assert not error.is_displayed()

@@ -3,23 +3,26 @@
 A frame's time is modelled as the sum of its work, each kind at a cost per unit (Farias et al. adapt
 such costs per frame):
 
-* **decode**: per tet of the stored level decoded (and filtered), per vertex whose ancestor the
-  run-time filter computes (the forest section and the top-down pass);
-* **render**: per ray-tet step, per sample, per boundary face, per pixel (ray set-up, image);
-* a fixed part per frame (opening the file, the first batch).
+* **decode**: per tet of the stored level decoded (0 when the level is already in memory), per
+  vertex whose ancestor the run-time filter computes (the forest section and the top-down pass);
+* **render**: per frame, per tet rendered, per ray-tet step, per sample, per boundary face, per
+  pixel (ray set-up, boundary hits, image);
+* **other**: a fixed part per frame and, for the viewer, the image encoding per pixel.
 
-The costs are *seeded once per machine* by timing a few small renders of a synthetic grid (a few
-tenths of a second, cached in the user's cache directory, :func:`machine_costs`), then *corrected
-from every frame's measured stats* (:meth:`TimeModel.observe`: one multiplicative correction per
-stage, smoothed). The work of a frame that has not been rendered yet is estimated from the file's
+The costs are *seeded once per machine* (:func:`seed_costs`, about 0.2 s, cached in the user's cache
+directory, :func:`machine_costs`): the reference machine's costs scaled by how fast this machine
+decodes and renders a synthetic grid. They are then *corrected from every frame's measured stats*
+(:meth:`TimeModel.observe`: one multiplicative correction per stage, smoothed, and for rendering one
+per stored level). The work of a frame that has not been rendered yet is estimated from the file's
 metadata and the view (:class:`WorkEstimator`): tets and boundary faces per stored level are in the
-file, steps grow as tets^(1/3) per ray that hits, samples as the depth of the mesh over the sample
-step, and once a frame of this view has been drawn its measured counts replace the guesses.
+file; rays that hit, steps and samples per hit ray are learnt from the frames drawn (or from a tiny
+probe render, :meth:`FramePlanner.probe`), and guessed from the bounding box before that.
 
 Given a budget B, :func:`plan_for_budget` walks the stored levels from the finest: the first level
 whose own predicted time fits is taken as is; if it does not fit but can be simplified on the fly far
 enough before the next level starts, the finest such ratio is taken (starting from that level).
-``tetc render --budget`` and the viewer (``tetc view``) use the same model.
+``tetc render --budget`` and the viewer (``tetc view``) use the same model; the viewer may also
+coarsen the sample step and the image while the user drags (:data:`DRAG_SETTINGS`).
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ import time
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from .._version import __version__
@@ -48,7 +52,8 @@ from ..simplify import ROOT_RANK, ancestors
 from ..simplify.levels import Target, forest_merges, stored_levels
 from .stream import file_render_defaults, render_tetc
 
-SEED_VERSION = 1  # bump when the seeding procedure changes: cached costs of older versions are re-seeded
+MIN_LEARN_S = 2e-3  # a stage predicted below this (its variable part) does not correct the model
+SEED_VERSION = 2  # bump when the seeding procedure changes: cached costs of older versions are re-seeded
 
 
 @dataclass(frozen=True)
@@ -81,10 +86,12 @@ class Costs:
     """Seconds per unit of work (see the module docstring); ``render_fixed_s`` is per frame.
 
     The defaults are the reference machine's (2 cores, no GPU, where the project's figures are
-    measured): a non-negative least-squares fit, on relative error, of 130 renders of the four
-    samples (every few levels, 96² to 512², two sample steps) and of the seeding grid; it predicts
-    the render stage within -25 %/+25 % for 80 % of them. Boundary faces came out at zero: their
-    cost hides in the per-tet and per-step terms, so it gets only a small share here.
+    measured): a non-negative least-squares fit, on relative error, of 126 renders of the four
+    samples (five levels each, 96² to 512², two sample steps) and of the seeding grid. Predicted /
+    measured render time: median 0.97, 10th-90th percentile 0.39-1.23 (the low end: Combustion's
+    smallest frames, which took 20 ms whatever their size). Boundary faces came out at zero (their
+    cost hides in the per-tet and per-step terms) and the fixed part at 0.35 ms: both are given a
+    small non-zero value here; the forest pass is the seeding grid's measured figure.
     """
 
     fixed_s: float = 2e-3
@@ -96,19 +103,27 @@ class Costs:
     per_sample: float = 1.4e-8
     per_boundary_face: float = 2e-8
     per_pixel: float = 3.8e-8
+    decode_fixed_s: float = 2.3e-4  # opening the level's sections, the first batch
 
     def decode_s(self, w: Work) -> float:
+        return self.decode_fixed_s + self.decode_variable_s(w)
+
+    def decode_variable_s(self, w: Work) -> float:
         return self.per_tet_decoded * w.tets_decoded + self.per_forest_point * w.forest_points
 
     def render_s(self, w: Work) -> float:
-        return (self.render_fixed_s + self.per_tet_rendered * w.tets_rendered + self.per_step * w.steps
-                + self.per_sample * w.samples + self.per_boundary_face * w.boundary_faces + self.per_pixel * w.pixels)
+        return self.render_fixed_s + self.render_variable_s(w)
+
+    def render_variable_s(self, w: Work) -> float:
+        return (self.per_tet_rendered * w.tets_rendered + self.per_step * w.steps + self.per_sample * w.samples
+                + self.per_boundary_face * w.boundary_faces + self.per_pixel * w.pixels)
 
     def scaled(self, decode: float, render: float) -> "Costs":
         """These costs on a machine ``decode`` / ``render`` times as slow in each stage."""
         return Costs(self.fixed_s * render, self.per_tet_decoded * decode, self.per_forest_point * decode,
                      self.render_fixed_s * render, self.per_tet_rendered * render, self.per_step * render,
-                     self.per_sample * render, self.per_boundary_face * render, self.per_pixel * render)
+                     self.per_sample * render, self.per_boundary_face * render, self.per_pixel * render,
+                     self.decode_fixed_s * decode)
 
 
 @dataclass
@@ -122,7 +137,7 @@ class TimeModel:
 
     Examples
     --------
-    >>> m = TimeModel(replace(Costs(*[0.0] * 9), per_tet_decoded=1e-6))
+    >>> m = TimeModel(replace(Costs(*[0.0] * 10), per_tet_decoded=1e-6))
     >>> w = Work(tets_decoded=1e5)
     >>> round(m.predict(w), 3)
     0.1
@@ -139,27 +154,57 @@ class TimeModel:
     per_pixel_extra: float = 0.0  # seconds per pixel outside the pipeline (encode, transfer)
     alpha: float = 0.35
     frames: int = 0
+    # Render corrections per kind of frame (the viewer keys them by stored level): on a busy
+    # machine a long frame loses more than a short one, so one factor for all would swing between
+    # them. A kind never observed uses the overall factor.
+    keyed_render_scale: dict = field(default_factory=dict)
 
-    def predict_stages(self, w: Work) -> dict:
+    def predict_stages(self, w: Work, key=None) -> dict:
         fixed = self.costs.fixed_s if self.fixed_s is None else self.fixed_s
         return {"decode_s": self.decode_scale * self.costs.decode_s(w),
-                "render_s": self.render_scale * self.costs.render_s(w),
+                "render_s": self.render_scale_for(key) * self.costs.render_s(w),
                 "other_s": fixed + self.per_pixel_extra * w.pixels}
 
-    def predict(self, w: Work) -> float:
-        return sum(self.predict_stages(w).values())
+    def predict(self, w: Work, key=None) -> float:
+        return sum(self.predict_stages(w, key).values())
 
-    def observe(self, w: Work, *, decode_s: float, render_s: float, other_s: float, extra_s: float = 0.0) -> None:
+    def corrected_costs(self) -> Costs:
+        """The costs with this session's overall corrections applied (to cache for the next one)."""
+        c = self.costs.scaled(self.decode_scale, self.render_scale)
+        return replace(c, fixed_s=self.costs.fixed_s if self.fixed_s is None else self.fixed_s)
+
+    def render_scale_for(self, key=None) -> float:
+        """The render correction of ``key``; for a key never observed, that of the nearest observed
+        key below it (keys order kinds of frames from costly to cheap: a stored level is costlier than
+        the next one, and a costly frame's factor is the cautious guess), else above it, else the
+        overall factor."""
+        if key is None or not self.keyed_render_scale:
+            return self.render_scale
+        if key in self.keyed_render_scale:
+            return self.keyed_render_scale[key]
+        below = [k for k in self.keyed_render_scale if k < key]
+        near = max(below) if below else min(self.keyed_render_scale)
+        return max(self.keyed_render_scale[near], self.render_scale)
+
+    def observe(self, w: Work, *, decode_s: float, render_s: float, other_s: float, extra_s: float = 0.0,
+                key=None) -> None:
         """Correct the model with one frame's measured stage times (seconds)."""
 
-        def update(scale, measured, predicted):
-            if predicted <= 0 or not math.isfinite(measured) or measured <= 0:
+        def update(scale, measured, predicted, variable):
+            # A stage whose work is tiny measures mostly its fixed part and noise: nothing to learn.
+            if variable * scale < MIN_LEARN_S or not math.isfinite(measured) or measured <= 0:
                 return scale
             target = min(max(measured / predicted * scale, 1e-3), 1e3)
             return math.exp((1 - self.alpha) * math.log(scale) + self.alpha * math.log(target))
 
-        self.decode_scale = update(self.decode_scale, decode_s, self.decode_scale * self.costs.decode_s(w))
-        self.render_scale = update(self.render_scale, render_s, self.render_scale * self.costs.render_s(w))
+        c = self.costs
+        self.decode_scale = update(self.decode_scale, decode_s, self.decode_scale * c.decode_s(w),
+                                   c.decode_variable_s(w))
+        if key is not None:
+            k = self.render_scale_for(key)
+            self.keyed_render_scale[key] = update(k, render_s, k * c.render_s(w), c.render_variable_s(w))
+        self.render_scale = update(self.render_scale, render_s, self.render_scale * c.render_s(w),
+                                   c.render_variable_s(w))
         fixed = self.costs.fixed_s if self.fixed_s is None else self.fixed_s
         if math.isfinite(other_s) and other_s >= 0:
             self.fixed_s = (1 - self.alpha) * fixed + self.alpha * other_s
@@ -188,8 +233,13 @@ class WorkEstimator:
     Before any frame of the view: rays that hit = the projected bounding box's share of the image
     (a rectangle, an overestimate); steps per hit ray = 1.5 * tets^(1/3) (a grid of n tets is about
     (n/6)^(1/3) cubes deep, 2-3 tets per cube); samples per hit ray = half the bounding-box diagonal
-    over the sample step (volume mode) or the steps (face mode). After a frame, :meth:`observe`
-    replaces these by the measured rays hit, steps / tets^(1/3) and samples per hit ray.
+    over the sample step (volume mode) or the steps (face mode).
+
+    :meth:`observe` keeps, per stored level, the last frame's share of rays that hit, steps per hit
+    ray and samples per hit ray (at the file's step). A level observed is estimated from its own
+    figures (steps scaled as tets^(1/3) for merges on the fly); one not observed from the observed
+    levels on either side, interpolated in log(tets) - the cube-root rule alone is far off between
+    a 6-tet and a 4,000-tet level, and a planner fed such guesses swings between them.
     """
 
     STEPS_PER_CUBE_ROOT = 1.5
@@ -201,9 +251,12 @@ class WorkEstimator:
         self.diagonal = float(np.linalg.norm(hi - lo)) or 1.0
         self.step = float(step) if step and step > 0 else self.diagonal / 100
         self.mode = mode
-        self.hit_fraction: float | None = None
-        self.steps_per_root: float | None = None  # steps / (hit rays * tets^(1/3))
-        self.samples_per_hit: float | None = None  # at the file's own sample step
+        self.seen: dict[int, tuple] = {}  # level -> (tets, hit fraction, steps per hit, samples per hit)
+
+    @property
+    def hit_fraction(self) -> float | None:
+        """Share of rays that hit in the latest observed frame (None before any)."""
+        return self._latest[1] if self.seen else None
 
     def coverage(self, fitted_camera) -> float:
         """Share of the image the bounding box covers (its projected rectangle, clipped)."""
@@ -218,34 +271,58 @@ class WorkEstimator:
         y0, y1 = np.clip([px[:, 1].min(), px[:, 1].max()], 0, h)
         return float(max(x1 - x0, 0) * max(y1 - y0, 0) / (w * h))
 
+    def _per_hit(self, level: int, tets: float):
+        """(hit fraction, steps per hit ray, samples per hit ray) for ``tets`` tets from ``level``, or None."""
+        if not self.seen:
+            return None
+        if level in self.seen:
+            t0, hit, steps, samples = self.seen[level]
+            return hit, steps * (tets / t0) ** (1 / 3), samples
+        obs = sorted(self.seen.values())  # by tets
+        below = [o for o in obs if o[0] <= tets]
+        above = [o for o in obs if o[0] > tets]
+        if below and above:
+            (ta, ha, sa, ma), (tb, hb, sb, mb) = below[-1], above[0]
+            f = math.log(tets / ta) / math.log(tb / ta) if tb > ta else 0.0
+            lerp = lambda a, b: math.exp((1 - f) * math.log(max(a, 1e-9)) + f * math.log(max(b, 1e-9)))  # noqa: E731
+            return lerp(ha, hb), lerp(sa, sb), lerp(ma, mb)
+        t0, hit, steps, samples = below[-1] if below else above[0]
+        return hit, steps * (tets / t0) ** (1 / 3), samples
+
     def estimate(self, start: LevelSize, merges: int, pixels: int, coverage: float = 1.0, *,
                  step_factor: float = 1.0, decoded: bool = False) -> Work:
         """Work of a frame from stored level ``start`` simplified to ``merges``, ``pixels`` rays, the
         sample step ``step_factor`` times the file's; ``decoded``: the level is already in memory."""
         tets = max(estimated_tets(self.levels, merges), 1.0)
-        hit = pixels * (self.hit_fraction if self.hit_fraction is not None else min(max(coverage, 0.0), 1.0))
-        per_root = self.steps_per_root if self.steps_per_root is not None else self.STEPS_PER_CUBE_ROOT
-        steps = hit * per_root * tets ** (1 / 3)
-        if self.mode == "face":
-            samples = steps
-        elif self.samples_per_hit is not None:
-            samples = hit * self.samples_per_hit / step_factor
+        known = self._per_hit(start.level, tets)
+        if known is None:
+            hit = pixels * min(max(coverage, 0.0), 1.0)
+            steps = hit * self.STEPS_PER_CUBE_ROOT * tets ** (1 / 3)
+            samples = steps if self.mode == "face" else hit * 0.5 * self.diagonal / (self.step * step_factor)
         else:
-            samples = hit * 0.5 * self.diagonal / (self.step * step_factor)
+            fraction, steps_per_hit, samples_per_hit = known
+            hit = pixels * fraction
+            steps = hit * steps_per_hit
+            samples = steps if self.mode == "face" else hit * samples_per_hit / step_factor
         filtering = merges > start.merges
         return Work(0.0 if decoded else float(start.tets), float(start.points) if filtering else 0.0, tets, steps,
                     samples, estimated_tets(self.levels, merges, "boundary_faces"), float(pixels))
 
     def observe(self, stats: dict, *, step_factor: float = 1.0) -> None:
-        """Learn this view's rays hit, steps and samples from a rendered frame's stats."""
+        """Learn this view's rays hit, steps and samples at the frame's level from its stats."""
         rays, hit = int(stats.get("rays", 0)), int(stats.get("rays_hit", 0))
-        tets = max(int(stats.get("tets_rendered", 0)), 1)
         if rays <= 0:
             return
-        self.hit_fraction = hit / rays
+        tets = max(int(stats.get("tets_rendered", 0)), 1)
+        level = int(stats.get("level", 0))
         if hit > 0:
-            self.steps_per_root = max(float(stats.get("steps", 0)), 1.0) / (hit * tets ** (1 / 3))
-            self.samples_per_hit = float(stats.get("samples", 0)) * step_factor / hit
+            entry = (float(tets), hit / rays, max(float(stats.get("steps", 0)), 1.0) / hit,
+                     max(float(stats.get("samples", 0)), 1.0) * step_factor / hit)
+        else:  # nothing in view: keep the counts per hit from before, if any
+            prev = self.seen.get(level, (float(tets), 0.0, self.STEPS_PER_CUBE_ROOT * tets ** (1 / 3), 1.0))
+            entry = (float(tets), 0.0, prev[2], prev[3])
+        self.seen[level] = entry
+        self._latest = entry
 
 
 # -- planning ----------------------------------------------------------------------------------------
@@ -334,20 +411,31 @@ class FramePlanner:
     def level_size(self, level: int) -> LevelSize:
         return next(lv for lv in self.levels if lv.level == level)
 
-    def probe(self, reader, view, *, pixels: int = PROBE_PIXELS) -> dict:
-        """Learn the view's rays hit, steps and samples from a tiny render (a few milliseconds).
+    def probe(self, reader, view, *, pixels: int = PROBE_PIXELS) -> list[dict]:
+        """Learn the view's rays hit, steps and samples from tiny renders (a few milliseconds).
 
-        The coarsest stored level with at least :data:`PROBE_TETS` tets (or level 0), at about
-        ``pixels`` rays with the image's aspect: its counts, scaled, stand in for the frame's until
-        frames of this view have been drawn. Returns the probe's stats.
+        Two levels, the coarsest and the coarsest with at least :data:`PROBE_TETS` tets, at about
+        ``pixels`` rays with the image's aspect: their counts, scaled, stand in for the frame's until
+        frames of this view have been drawn (in between and beyond, :class:`WorkEstimator`
+        interpolates). Returns the probes' stats.
         """
-        lv = next((x for x in reversed(self.levels) if x.tets >= PROBE_TETS), self.levels[0])
+        fine = next((x for x in reversed(self.levels) if x.tets >= PROBE_TETS), self.levels[0])
         cam = view.camera
         scale = min(1.0, math.sqrt(pixels / (cam.width * cam.height)))
         small = replace(cam, width=max(1, round(cam.width * scale)), height=max(1, round(cam.height * scale)))
-        stats = render_tetc(reader, replace(view, camera=small, lean=False), level=lv.level).stats
-        self.estimator.observe(stats, step_factor=1.0)
-        return stats
+        out = []
+        threads = numba.get_num_threads()
+        # One thread: starting a parallel region costs more than these renders' work, and far more
+        # when the machine is busy (a 32² render: 1.5 ms on one thread, 40-60 ms on two under load).
+        numba.set_num_threads(1)
+        try:
+            for lv in sorted({fine.level, self.levels[-1].level}):
+                stats = render_tetc(reader, replace(view, camera=small, lean=False), level=lv).stats
+                self.estimator.observe(stats, step_factor=1.0)
+                out.append(stats)
+        finally:
+            numba.set_num_threads(threads)
+        return out
 
     def estimate(self, level: int, merges: int, pixels: int, coverage: float, step_factor: float = 1.0) -> Work:
         return self.estimator.estimate(self.level_size(level), merges, pixels, coverage, step_factor=step_factor,
@@ -357,14 +445,13 @@ class FramePlanner:
         """The finest frame predicted to fit ``budget_s``; ``drag``: also coarsen step and image."""
         if not (isinstance(budget_s, (int, float)) and math.isfinite(budget_s) and budget_s > 0):
             raise OptionError(f"the budget must be a positive number of seconds, got {budget_s!r}")
-        pixels = fitted_camera.width * fitted_camera.height
         coverage = self.estimator.coverage(fitted_camera)
         first = None
         for scale, step_factor in (DRAG_SETTINGS if drag else DRAG_SETTINGS[:1]):
             px = max(int(round(fitted_camera.width * scale)), 1) * max(int(round(fitted_camera.height * scale)), 1)
             plan = plan_for_budget(
                 self.levels, lambda i, n: self.model.predict(self.estimate(self.levels[i].level, n, px, coverage,
-                                                                           step_factor)),
+                                                                           step_factor), key=self.levels[i].level),
                 float(budget_s), self.max_merges)
             plan = BudgetPlan(plan.level, plan.merges, plan.predicted_s, plan.feasible, scale, step_factor)
             if plan.feasible and plan.merges <= MAX_DRAG_RATIO * self.points:
@@ -399,7 +486,8 @@ class FramePlanner:
         decode_s = stats.get("decode_s", 0.0) + stats.get("filter_s", 0.0)
         render_s = stats.get("render_s", 0.0)
         other = max(total_s - decode_s - render_s - extra_s, 0.0)
-        self.model.observe(w, decode_s=decode_s, render_s=render_s, other_s=other, extra_s=extra_s)
+        self.model.observe(w, decode_s=decode_s, render_s=render_s, other_s=other, extra_s=extra_s,
+                           key=int(stats["level"]))
         self.estimator.observe(stats, step_factor=step_factor)
         return w
 
@@ -537,20 +625,31 @@ def plan_file_budget(path_or_reader, view, budget_s: float, *, reseed: bool = Fa
     The budget covers the whole command from opening the file to the PNG written: what the
     probe and the seeding (first use on a machine) took is taken off it before planning.
     """
-    if not (isinstance(budget_s, (int, float)) and math.isfinite(float(budget_s)) and budget_s > 0):
-        raise OptionError(f"--budget must be a positive number of seconds, got {budget_s}")
+    if not (isinstance(budget_s, (int, float)) and math.isfinite(float(budget_s)) and budget_s >= 0):
+        raise OptionError(f"--budget must be a number of seconds >= 0, got {budget_s}")
     t0 = time.perf_counter()
     reader = path_or_reader if isinstance(path_or_reader, TetcReader) else TetcReader(path_or_reader)
     costs, seeded = machine_costs(reseed=reseed)
     lo, hi, _rng, step = file_render_defaults(reader)
-    planner = FramePlanner(reader, TimeModel(costs, per_pixel_extra=PNG_S_PER_PIXEL * costs.per_step / Costs().per_step),
-                           step=view.step or step, mode=view.mode)
+    png_s = PNG_S_PER_PIXEL * costs.per_step / Costs().per_step  # as much faster or slower as rendering
+    planner = FramePlanner(reader, TimeModel(costs, per_pixel_extra=png_s), step=view.step or step, mode=view.mode)
     planner.probe(reader, view)
     left = max(float(budget_s) - (time.perf_counter() - t0), 1e-3)
     plan = planner.plan(left, view.camera.fit(lo, hi))
     return planner.target(plan), plan, planner, seeded
 
 
-__all__ = ["LevelSize", "Work", "Costs", "TimeModel", "WorkEstimator", "BudgetPlan", "plan_for_budget",
+def remember_frame(planner: FramePlanner, stats: dict, *, total_s: float) -> None:
+    """Correct the machine's cached costs with a frame just rendered by ``tetc render --budget``.
+
+    ``total_s``: from the start of the render to the PNG written. Each budget render moves the
+    cached costs part way toward what it measured, so a seed taken while the machine was busy (or
+    idle) does not mislead every later run.
+    """
+    planner.observe(stats, total_s=total_s)
+    save_costs(planner.model.corrected_costs())
+
+
+__all__ = ["remember_frame", "LevelSize", "Work", "Costs", "TimeModel", "WorkEstimator", "BudgetPlan", "plan_for_budget",
            "FramePlanner", "estimated_tets", "levels_of", "machine_costs", "seed_costs", "load_costs",
            "save_costs", "cache_dir", "plan_file_budget"]

@@ -40,8 +40,8 @@ from ..errors import OptionError, TetcError
 from .session import FrameCancelled, ViewerSession, parse_request
 
 STATIC_FILES = {"viewer.js": "text/javascript", "viewer.css": "text/css"}
-PREVIEW_ABOVE_S = 0.5  # a still frame predicted to take longer than this gets a quick preview first
-PREVIEW_SHARE = 0.1  # the preview's budget, as a share of the full frame's predicted time
+PREVIEW_ABOVE_S = 1.5  # a still frame predicted to take longer than this gets a quick preview first
+PREVIEW_SHARE = 0.08  # the preview's budget, as a share of the full frame's predicted time
 
 
 def new_token() -> str:
@@ -64,14 +64,18 @@ class FrameService:
             self.frames += 1
             return frame
 
-    def predict_full(self, req) -> float:
-        """Predicted seconds of the full-quality frame of ``req``."""
+    async def predict_full(self, req) -> float:
+        """Predicted seconds of the full-quality frame of ``req`` (on the render thread: it reads the
+        model that renders update)."""
+        return await asyncio.get_running_loop().run_in_executor(self.executor, lambda: self._predict_full(req))
+
+    def _predict_full(self, req) -> float:
         s = self.session
         planner = s.planner(req.mode)
         fitted = req.camera.fit(s.bbox_lo, s.bbox_hi)
         lv = planner.levels[0]
         return planner.model.predict(planner.estimate(lv.level, lv.merges, fitted.width * fitted.height,
-                                                      planner.estimator.coverage(fitted)))
+                                                      planner.estimator.coverage(fitted)), key=lv.level)
 
     def close(self):
         self.executor.shutdown(wait=False, cancel_futures=True)
@@ -238,7 +242,7 @@ class _Client:
     async def _still(self, rid, req):
         """Progressive refinement at rest: a quick preview if the full frame is slow, then full quality."""
         t0 = time.perf_counter()
-        full_s = self.service.predict_full(req)
+        full_s = await self.service.predict_full(req)
         if full_s > PREVIEW_ABOVE_S:
             preview = replace(req, budget_s=max(PREVIEW_SHARE * full_s, 0.05), fmt="jpeg")
             f = await self.service.render(preview, cancelled=self.superseded)

@@ -8,6 +8,7 @@ pipeline on the file kept open, encodes it, and corrects the model from the fram
 
 from __future__ import annotations
 
+import collections
 import io
 import math
 import os
@@ -28,9 +29,15 @@ from ..simplify.levels import resolve_target
 FORMATS = {"jpeg": "image/jpeg", "png": "image/png", "webp": "image/webp"}
 MAX_VIEW_SIZE = 2048  # pixels per side the viewer renders
 DEFAULT_BUDGET_S = 0.1
-# Frames are planned to this share of the budget: the model predicts a typical frame, and a frame
-# time varies by +-15 % on a machine shared with other work; the rest is headroom for the target.
+# Frames are planned to a share of the budget: the model predicts a typical frame, and the same work
+# takes longer now and then (other programs, the cache). The share starts at PLAN_SHARE and then
+# follows the spread of this session's frames: the target is 90 % of frames within 1.2 x the
+# budget, so frames are planned to 1.2 x budget / (the 90th percentile of measured / predicted),
+# never above PLAN_SHARE, so that the typical frame also leaves room for sending it (frames per
+# second = 1 / (frame + transfer)).
 PLAN_SHARE = 0.85
+PLAN_SHARE_RANGE = (0.3, PLAN_SHARE)
+SPREAD_FRAMES = 40  # measured / predicted of the last frames this many
 HISTOGRAM_POINTS = 20_000
 COLORMAPS = ("viridis", "plasma", "inferno", "magma", "cividis", "coolwarm", "jet", "gray")
 
@@ -202,6 +209,8 @@ class ViewerSession:
         self.path = os.fspath(path)
         self.costs = costs if costs is not None else machine_costs()[0]
         self._open()
+        for fmt in FORMATS:  # Pillow loads each encoder on first use (~50 ms): not in the first frame
+            encode_image(np.zeros((8, 8, 3), np.uint8), fmt)
 
     def _signature(self):
         try:
@@ -211,7 +220,8 @@ class ViewerSession:
         return st.st_size, st.st_mtime_ns
 
     def _open(self):
-        self.signature = self._signature()
+        self.signature = None  # until the file has been read whole: a failed open is retried next frame
+        signature = self._signature()
         try:
             with open(self.path, "rb") as fh:  # read whole: the file may change under a long session
                 data = fh.read()
@@ -220,13 +230,22 @@ class ViewerSession:
         self.reader = CachingReader(data)
         self.bbox_lo, self.bbox_hi, self.scalar_range, self.step = file_render_defaults(self.reader)
         self.planners = {}  # by mode: each keeps its own view statistics, the costs are shared
+        self.spread = collections.deque(maxlen=SPREAD_FRAMES)  # measured / predicted of budget frames
         self.model = TimeModel(self.costs)
         self._histogram = None
+        self.signature = signature
 
     def check_file(self) -> None:
         """Reopen the file if it changed on disk; raise TetcError if it vanished or is corrupt."""
         if self._signature() != self.signature:
             self._open()
+
+    def plan_share(self) -> float:
+        """Share of the budget to plan frames to (see PLAN_SHARE)."""
+        if len(self.spread) < 5:
+            return PLAN_SHARE
+        lo, hi = PLAN_SHARE_RANGE
+        return min(max(1.2 / float(np.percentile(self.spread, 90)), lo), hi)
 
     def planner(self, mode: str) -> FramePlanner:
         if mode not in self.planners:
@@ -286,18 +305,19 @@ class ViewerSession:
         else:
             # Before the first frame of a view the work is guessed from the bounding box (an
             # overestimate: the first frame comes out coarse and fast); each frame then teaches it.
-            plan = planner.plan(PLAN_SHARE * req.budget_s, fitted, drag=True)
+            plan = planner.plan(self.plan_share() * req.budget_s, fitted, drag=True)
             target = planner.target(plan)
         scale = plan.scale if plan is not None else 1.0
         step_factor = plan.step_factor if plan is not None else 1.0
         camera = req.camera
         if scale != 1.0:
-            camera = replace(camera, width=max(1, round(camera.width * scale)), height=max(1, round(camera.height * scale)))
+            camera = replace(camera, width=max(1, round(camera.width * scale)),
+                             height=max(1, round(camera.height * scale)))
         view = View(camera, req.tf, req.mode, self.step * step_factor if step_factor != 1.0 else None, False)
         decoded = self.reader.is_decoded(target.level)
         work = planner.estimate(target.level, target.merges, camera.width * camera.height,
                                 planner.estimator.coverage(fitted), step_factor)
-        predicted = planner.model.predict(work)
+        predicted = planner.model.predict(work, key=target.level)
 
         def progress(_n):
             if cancelled is not None and cancelled():
@@ -312,6 +332,8 @@ class ViewerSession:
         st = res.stats
         encode_s = t_end - t_render
         planner.observe(st, total_s=t_end - t_plan, extra_s=encode_s, step_factor=step_factor, decoded=decoded)
+        if plan is not None and predicted > 0:
+            self.spread.append((t_end - t0) / predicted)
         stats = {
             "level": int(target.level), "merges": int(target.merges), "ratio": float(target.ratio),
             "cut": "uniform",

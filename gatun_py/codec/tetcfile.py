@@ -92,7 +92,8 @@ def encode_level(payload: LevelPayload) -> EncodedLevel:
     for j, (name, values) in enumerate(mesh.point_data.items()):
         if name == mesh.scalar_name and values.dtype == np.float32:
             continue  # the geometry section holds it exactly
-        sections[f"L{i}/array/{j}"] = encode_array(values[vo], refs, external=d32 if name == mesh.scalar_name else None)
+        sections[f"L{i}/array/{j}"] = encode_array(values[vo], refs, external=d32 if name == mesh.scalar_name else None,
+                                                   positions=p32)
     if payload.forest is not None:
         parent, rank = (np.asarray(a) for a in payload.forest)
         if parent.shape != (mesh.n_points,) or rank.shape != (mesh.n_points,):
@@ -418,7 +419,7 @@ class TetcReader:
             out = {}
             for key, dec in extra.items():
                 ext = pts if key == _POINTS else dens if key == self.scalar_name else None
-                out[key] = dec.decode(refs, ext)
+                out[key] = dec.decode(refs, ext, positions=geo.values)
             return out
 
         faces, nbv = conn.boundary()

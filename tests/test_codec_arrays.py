@@ -13,7 +13,7 @@ import gatun_py
 from conftest import load_sample
 from gatun_py.codec import LevelPayload, TetcReader, encode_tetc
 from gatun_py.codec import _array_kernels as K
-from gatun_py.codec.arrays import DTYPES, ArrayDecoder, _range_code, encode_array
+from gatun_py.codec.arrays import DTYPES, ArrayDecoder, _lin_state, _range_code, encode_array
 from gatun_py.codec.rangecoder import check_decoder, dec_init, dec_state, new_model
 from gatun_py.errors import CorruptFileError, MeshError, OptionError
 from gatun_py.mesh import TetMesh
@@ -31,11 +31,11 @@ def _refs(n, seed=0):
     return refs
 
 
-def _decode(data, values, refs, external=None, batch=97):
+def _decode(data, values, refs, external=None, batch=97, positions=None):
     k = 1 if values.ndim == 1 else values.shape[1]
     dec = ArrayDecoder(data, n_points=len(values), dtype=np.dtype(values.dtype).name, components=k)
     for s in range(0, len(values), batch):
-        dec.decode(refs[s:s + batch], None if external is None else external[s:s + batch])
+        dec.decode(refs[s:s + batch], None if external is None else external[s:s + batch], positions=positions)
     return dec.finish()
 
 
@@ -55,8 +55,11 @@ def test_any_array_round_trips_bit_exactly(data):
     else:
         values = data.draw(hnp.arrays(dt, shape))
     refs = _refs(n, data.draw(st.integers(0, 9)))
-    external = values.astype(np.float32) if dt.kind == "f" and data.draw(st.booleans()) else None
-    out = _decode(encode_array(values, refs, external=external), values, refs, external)
+    with np.errstate(over="ignore"):  # float64 beyond float32: inf, as the rounding says
+        external = values.astype(np.float32) if dt.kind == "f" and data.draw(st.booleans()) else None
+    pos = np.random.default_rng(n).normal(size=(n, 4)).astype(np.float32) if data.draw(st.booleans()) else None
+    out = _decode(encode_array(values, refs, external=external, positions=None if pos is None else pos[:, :3]),
+                  values, refs, external, positions=pos)
     assert out.dtype == dt and out.shape == ((n,) if k in (None, 1) else (n, k))  # (n, 1) is one component
     assert out.tobytes() == values.tobytes()
 
@@ -69,14 +72,16 @@ def test_every_predictor_round_trips():
     o = rng.integers(-2**62, 2**62, n)
     ext = o + rng.integers(-5, 5, n)
     lo, hi = -(1 << 63), (1 << 63) - 1
+    pos = rng.normal(size=(n, 4)).astype(np.float32)
     for kind in range(K.N_PREDICTORS):
         e = ext if kind == K.PRED_EXTERNAL else o[:0]
-        stream = np.frombuffer(_range_code(K.residuals(o, refs, kind, e, lo, hi), refs), np.uint8)
+        lin = _lin_state(np.dtype("int64"), 0, pos, np.zeros(n))
+        stream = np.frombuffer(_range_code(K.residuals(o, refs, kind, e, lo, hi, lin), refs), np.uint8)
         st = dec_state()
         dec_init(st, stream)
         back = np.zeros(n, np.int64)
         status = K.decode_component(st, stream, new_model(K.MODEL_SIZE), np.zeros(n, np.uint8), back, refs, 0, n,
-                                    kind, e, lo, hi)
+                                    kind, e, lo, hi, _lin_state(np.dtype("int64"), 0, pos, np.zeros(n)))
         assert status == K.OK and np.array_equal(back, o), kind
         check_decoder(st, stream)
 

@@ -22,7 +22,11 @@ PRED_FIRST = 2  # the first ref (a), else the previous vertex
 PRED_MEAN = 3  # mean of the face refs (a, b, c) that exist
 PRED_REFLECT = 4  # 2 * mean(face) - apex: the apex reflected through the face (linear field)
 PRED_EXTERNAL = 5  # a given prediction (the float32 rounding of the value)
-N_PREDICTORS = 6
+PRED_LINEAR = 6  # the linear field through the tet (a, b, c, apex) at the vertex's float32 position
+N_PREDICTORS = 7
+
+# value kinds of ``vinfo[0]`` (linear prediction works on values, not on their integer images)
+VALUE_INT, VALUE_F32, VALUE_F64 = 0, 1, 2
 
 OK = 0
 BAD_REF = 1
@@ -36,11 +40,101 @@ def _mean_floor(s_q, s_r, f):
 
 
 @njit(cache=True)
-def _predict(o, refs, row, k, kind, ext, lo, hi):
+def to_value(o, lin):
+    """The value (as float64) of a reduced ordered integer; ``lin`` as in :func:`_predict`."""
+    vinfo, i64, f64, i32, f32 = lin[2], lin[3], lin[4], lin[5], lin[6]
+    shift = vinfo[1]
+    if vinfo[0] == VALUE_INT:
+        return np.float64(o << shift)
+    m = o if o >= 0 else ~o
+    mag = m << shift
+    if vinfo[0] == VALUE_F64:
+        i64[0] = mag | (np.int64(1) << 63) if o < 0 else mag
+        return f64[0]
+    bits = mag | ((np.int64(1) << 31) if o < 0 else np.int64(0))
+    i32[0] = np.int32(bits - (np.int64(1) << 32)) if bits >= (np.int64(1) << 31) else np.int32(bits)
+    return np.float64(f32[0])
+
+
+@njit(cache=True)
+def _from_value(v, lin, lo, hi):
+    """(ok, reduced ordered integer) of a predicted value; not ok for NaN or inf."""
+    vinfo, i64, f64, i32, f32 = lin[2], lin[3], lin[4], lin[5], lin[6]
+    shift = vinfo[1]
+    if not np.isfinite(v):
+        return False, np.int64(0)
+    if vinfo[0] == VALUE_INT:
+        if v > 9.2e18:
+            v = 9.2e18
+        elif v < -9.2e18:
+            v = -9.2e18
+        p = np.int64(np.floor(v + 0.5)) >> shift
+    else:
+        if vinfo[0] == VALUE_F64:
+            f64[0] = v
+            bits = i64[0]
+            mag = bits & np.int64(0x7FFFFFFFFFFFFFFF)
+        else:
+            f32[0] = np.float32(v)
+            bits = np.int64(i32[0])
+            mag = bits & np.int64(0x7FFFFFFF)
+        m = mag >> shift
+        p = ~m if bits < 0 else m
+    if p < lo:
+        p = lo
+    elif p > hi:
+        p = hi
+    return True, p
+
+
+@njit(cache=True)
+def _linear(refs, row, k, lin):
+    """(ok, value) of the linear field through the ref tet at vertex k's position (float64, no fastmath)."""
+    pos, fv = lin[0], lin[1]
+    a, b, c, d = refs[row, 0], refs[row, 1], refs[row, 2], refs[row, 3]
+    if a < 0 or b < 0 or c < 0 or d < 0:
+        return False, 0.0
+    ax = np.float64(pos[a, 0]) - pos[d, 0]
+    ay = np.float64(pos[a, 1]) - pos[d, 1]
+    az = np.float64(pos[a, 2]) - pos[d, 2]
+    bx = np.float64(pos[b, 0]) - pos[d, 0]
+    by = np.float64(pos[b, 1]) - pos[d, 1]
+    bz = np.float64(pos[b, 2]) - pos[d, 2]
+    cx = np.float64(pos[c, 0]) - pos[d, 0]
+    cy = np.float64(pos[c, 1]) - pos[d, 1]
+    cz = np.float64(pos[c, 2]) - pos[d, 2]
+    px = np.float64(pos[k, 0]) - pos[d, 0]
+    py = np.float64(pos[k, 1]) - pos[d, 1]
+    pz = np.float64(pos[k, 2]) - pos[d, 2]
+    # Cramer's rule for p = la * a + lb * b + lc * c (all relative to d)
+    kx, ky, kz = by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx
+    det = ax * kx + ay * ky + az * kz
+    if det == 0.0:
+        return False, 0.0
+    la = (px * kx + py * ky + pz * kz) / det
+    lb = (ax * (py * cz - pz * cy) + ay * (pz * cx - px * cz) + az * (px * cy - py * cx)) / det
+    lc = (ax * (by * pz - bz * py) + ay * (bz * px - bx * pz) + az * (bx * py - by * px)) / det
+    if not (abs(la) + abs(lb) + abs(lc) <= 8.0):  # ill-conditioned (or NaN): not worth trusting
+        return False, 0.0
+    fd = fv[d]
+    return True, fd + la * (fv[a] - fd) + lb * (fv[b] - fd) + lc * (fv[c] - fd)
+
+
+@njit(cache=True)
+def _predict(o, refs, row, k, kind, ext, lo, hi, lin):
     """Prediction of ``o[k]`` (int64) from earlier entries of ``o``; ``ext`` for PRED_EXTERNAL.
 
     ``refs[row]`` and ``ext[row]`` belong to vertex k (a decoder passes one batch at a time).
+    ``lin = (positions (n, >=3) float32, values fv (n,) float64, vinfo (kind, shift), and four
+    one-element scratch views for bit casts)`` serves PRED_LINEAR; it falls back to PRED_REFLECT.
     """
+    if kind == PRED_LINEAR:
+        ok, v = _linear(refs, row, k, lin)
+        if ok:
+            ok, p = _from_value(v, lin, lo, hi)
+            if ok:
+                return p
+        kind = PRED_REFLECT
     if kind == PRED_ZERO:
         return np.int64(0)
     if kind == PRED_EXTERNAL:
@@ -79,12 +173,15 @@ def _predict(o, refs, row, k, kind, ext, lo, hi):
 
 
 @njit(cache=True)
-def residuals(o, refs, kind, ext, lo, hi):
+def residuals(o, refs, kind, ext, lo, hi, lin):
     """Zigzagged residuals (as int64 bit patterns of uint64) of every vertex for one predictor."""
     n = o.shape[0]
+    if kind == PRED_LINEAR:  # the values the decoder will have, from the same function
+        for k in range(n):
+            lin[1][k] = to_value(o[k], lin)
     out = np.empty(n, np.int64)
     for k in range(n):
-        r = o[k] - _predict(o, refs, k, k, kind, ext, lo, hi)
+        r = o[k] - _predict(o, refs, k, k, kind, ext, lo, hi, lin)
         out[k] = (r << 1) ^ (r >> 63)
     return out
 
@@ -156,7 +253,7 @@ def encode_residuals(st, out, zz, refs, probs, lens):
 
 
 @njit(cache=True, _nrt=False)
-def decode_component(st, data, probs, lens, o, refs, start, stop, kind, ext, lo, hi):
+def decode_component(st, data, probs, lens, o, refs, start, stop, kind, ext, lo, hi, lin):
     """Decode the residuals of vertices ``start:stop`` and rebuild their values ``o`` (refs checked)."""
     if not _refs_valid(refs, start, stop):
         return BAD_REF
@@ -184,17 +281,21 @@ def decode_component(st, data, probs, lens, o, refs, start, stop, kind, ext, lo,
             elif rest > 0:
                 z = (z << rest) | dec_raw(st, data, rest)
         r = ((z >> 1) & np.int64(0x7FFFFFFFFFFFFFFF)) ^ -(z & 1)
-        o[k] = _predict(o, refs, row, k, kind, ext, lo, hi) + r
+        o[k] = _predict(o, refs, row, k, kind, ext, lo, hi, lin) + r
+        if kind == PRED_LINEAR:
+            lin[1][k] = to_value(o[k], lin)
     return OK
 
 
 @njit(cache=True)
-def reconstruct(o, zz, refs, start, stop, kind, ext, lo, hi):
+def reconstruct(o, zz, refs, start, stop, kind, ext, lo, hi, lin):
     """Rebuild ``o[start:stop]`` from already decoded residuals ``zz`` (the LZMA coder); refs checked."""
     if not _refs_valid(refs, start, stop):
         return BAD_REF
     for k in range(start, stop):
         z = zz[k]
         r = ((z >> 1) & np.int64(0x7FFFFFFFFFFFFFFF)) ^ -(z & 1)
-        o[k] = _predict(o, refs, k - start, k, kind, ext, lo, hi) + r
+        o[k] = _predict(o, refs, k - start, k, kind, ext, lo, hi, lin) + r
+        if kind == PRED_LINEAR:
+            lin[1][k] = to_value(o[k], lin)
     return OK

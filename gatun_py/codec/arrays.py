@@ -9,8 +9,9 @@ Any (n,) or (n, k) array of float32, float64 or integers, in decode order, comes
    float32 values loses its 29 zero bits here);
 2. a predictor, chosen by the encoder per component, predicts each vertex from the vertices the
    connectivity coder put around it (the refs ``(a, b, c, apex)`` of :mod:`.geometry`: the face the
-   vertex closes and the apex behind it), from the previous vertex, or from the float32 rounding
-   that the geometry section already holds (coordinates, the default scalar);
+   vertex closes and the apex behind it), from the previous vertex, from the float32 rounding
+   that the geometry section already holds (coordinates, the default scalar), or as the linear
+   field through the ref tet at the vertex's float32 position (computed on values in float64);
 3. the residual modulo 2**64 is zigzagged and coded by one of two coders, whichever is smaller:
    *range*: range coded (:mod:`.rangecoder`), its bit length in a context (the bit length of the
    first ref's residual), three modelled bits below the leading one, the rest raw; *planes*: a
@@ -24,7 +25,7 @@ Layout (little endian)::
     u8  dtype code (DTYPES)
     u16 components k
     u32 n
-    k x (u8 predictor, u8 shift, u8 coder (0 range, 1 planes), u32 stream length)
+    k x (u8 predictor (0-6), u8 shift, u8 coder (0 range, 1 planes), u32 stream length)
     ... the k streams
 
 The decoder checks the header against what the metadata expects and the stream lengths against the
@@ -147,7 +148,18 @@ def _external(pred_values: np.ndarray, dt: np.dtype, shift: int, lo: int, hi: in
     return np.clip(v, lo, hi)
 
 
-def encode_array(values, refs, *, external=None) -> bytes:
+def _lin_state(dt: np.dtype, shift: int, positions, values: np.ndarray) -> tuple:
+    """The tuple the kernels' linear predictor works with (see ``_array_kernels._predict``):
+    positions (n, 4) float32, the vertices' values as float64 (filled by the kernels), the value
+    kind and shift, and scratch views for bit casts."""
+    kind = K.VALUE_INT if not _is_float(dt) else (K.VALUE_F64 if dt.itemsize == 8 else K.VALUE_F32)
+    i64 = np.zeros(1, np.int64)
+    i32 = np.zeros(1, np.int32)
+    pos = positions if positions is not None else np.zeros((0, 4), np.float32)
+    return (pos, values, np.array([kind, shift], np.int64), i64, i64.view(np.float64), i32, i32.view(np.float32))
+
+
+def encode_array(values, refs, *, external=None, positions=None) -> bytes:
     """Code a point array exactly, in decode order.
 
     Parameters
@@ -158,6 +170,8 @@ def encode_array(values, refs, *, external=None) -> bytes:
         The geometry refs of every vertex (decode ids ``< k`` or -1).
     external : array of the same shape, optional
         A prediction the decoder will have too (the float32 rounding held by the geometry section).
+    positions : (n, 3) float32, optional
+        The vertices' float32 coordinates (the geometry section's): enables the linear predictor.
 
     Returns
     -------
@@ -185,6 +199,10 @@ def encode_array(values, refs, *, external=None) -> bytes:
     if refs.shape != (n, 4):
         raise ValueError(f"refs must have shape ({n}, 4), got {refs.shape}")
     ext_cols = None if external is None else np.asarray(external).reshape(n, k)
+    pos4 = None
+    if positions is not None:
+        pos4 = np.zeros((n, 4), np.float32)
+        pos4[:, :3] = np.asarray(positions, np.float32).reshape(n, 3)
     header = [_HEADER.pack(FORMAT_VERSION, DTYPES.index(dtype_name(dt)), k, n)]
     streams = []
     for c in range(k):
@@ -194,10 +212,12 @@ def encode_array(values, refs, *, external=None) -> bytes:
         o = np.ascontiguousarray(_reduce(raw, dt, shift))
         ext = (np.ascontiguousarray(_external(ext_cols[:, c], dt, shift, lo, hi)) if ext_cols is not None
                else np.zeros(0, np.int64))
-        kinds = range(K.N_PREDICTORS) if ext_cols is not None else range(K.PRED_EXTERNAL)
+        kinds = [kind for kind in range(K.N_PREDICTORS) if (kind != K.PRED_EXTERNAL or ext_cols is not None)
+                 and (kind != K.PRED_LINEAR or pos4 is not None)]
+        lin = _lin_state(dt, shift, pos4, np.zeros(n if pos4 is not None else 0))
         best = None
         for kind in kinds:
-            zz = K.residuals(o, refs, kind, ext if kind == K.PRED_EXTERNAL else o[:0], lo, hi)
+            zz = K.residuals(o, refs, kind, ext if kind == K.PRED_EXTERNAL else o[:0], lo, hi, lin)
             stream = _range_code(zz, refs)
             if best is None or len(stream) < len(best[2]):
                 best = (kind, CODER_RANGE, stream, zz)
@@ -299,6 +319,7 @@ class ArrayDecoder:
         self.n_points, self.dtype, self.components = int(n), dt, int(k)
         buf = np.frombuffer(data, np.uint8)
         self._streams, self._st, self._probs, self._lens, self._o, self._bounds = [], [], [], [], [], []
+        self._fv = []
         for c in range(k):
             stream = buf[off:off + lengths[c]]
             off += lengths[c]
@@ -313,6 +334,7 @@ class ArrayDecoder:
             self._lens.append(np.zeros(n, np.uint8))
             self._o.append(np.zeros(n, np.int64))
             self._bounds.append(_bounds(dt, self.shifts[c]))
+            self._fv.append(np.zeros(n if self.kinds[c] == K.PRED_LINEAR else 0))
         self.values = np.empty((n,) if components == 1 else (n, k), dt)
         self.n_decoded = 0
 
@@ -320,11 +342,13 @@ class ArrayDecoder:
         """True when some component is predicted from the geometry's float32 rounding."""
         return K.PRED_EXTERNAL in self.kinds
 
-    def decode(self, refs, external=None) -> np.ndarray:
+    def decode(self, refs, external=None, positions=None) -> np.ndarray:
         """Decode the next ``len(refs)`` vertices (refs as decode ids); returns a view of :attr:`values`.
 
         ``external`` (same length, the float32 values of the geometry section) is required when
-        :meth:`needs_external`.
+        :meth:`needs_external`; ``positions`` ((n, 4) float32, every vertex's coordinates in
+        columns 0-2 at least up to the last one decoded: the geometry decoder's ``values``) when a
+        component uses the linear predictor.
         """
         refs = np.ascontiguousarray(refs, dtype=np.int32)
         start, stop = self.n_decoded, self.n_decoded + len(refs)
@@ -339,13 +363,20 @@ class ArrayDecoder:
                 if ext_cols is None:
                     raise CorruptFileError("corrupt array section: external prediction without a float32 channel")
                 ext = np.ascontiguousarray(_external(ext_cols[:, c], self.dtype, self.shifts[c], lo, hi))
+            pos = None
+            if kind == K.PRED_LINEAR:
+                pos = None if positions is None else np.asarray(positions)
+                if pos is None or pos.dtype != np.float32 or pos.ndim != 2 or pos.shape[1] < 3 or len(pos) < stop \
+                        or not pos.flags.c_contiguous:
+                    raise CorruptFileError("corrupt array section: linear prediction without the vertex positions")
+            lin = _lin_state(self.dtype, self.shifts[c], pos, self._fv[c])
             if self.coders[c] == CODER_RANGE:
                 status = K.decode_component(self._st[c], self._streams[c], self._probs[c], self._lens[c],
-                                            self._o[c], refs, start, stop, kind, ext, lo, hi)
+                                            self._o[c], refs, start, stop, kind, ext, lo, hi, lin)
                 if status != K.BAD_REF:
                     check_decoder(self._st[c], self._streams[c], "array section", complete=False)
             else:
-                status = K.reconstruct(self._o[c], self._streams[c], refs, start, stop, kind, ext, lo, hi)
+                status = K.reconstruct(self._o[c], self._streams[c], refs, start, stop, kind, ext, lo, hi, lin)
             if status == K.BAD_REF:
                 raise CorruptFileError("corrupt file: a vertex refers to one not yet decoded")
             if status != K.OK:

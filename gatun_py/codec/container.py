@@ -169,6 +169,14 @@ class Container:
     def has_section(self, name: str) -> bool:
         return name in self.index
 
+    def read_section_head(self, name: str, n: int) -> bytes:
+        """The first ``n`` bytes of section ``name``'s payload, not CRC-checked (for header checks that
+        come before allocating; :meth:`read_section` checks the whole payload)."""
+        if name not in self.index:
+            raise CorruptFileError(f"{self.name}: missing section {name!r}")
+        off, length, _ = self.index[name]
+        return self._read(off, min(int(n), length))
+
     def read_section(self, name: str) -> bytes:
         """The payload of section ``name``, CRC-checked (the record header is checked too)."""
         if name not in self.index:

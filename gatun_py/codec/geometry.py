@@ -229,12 +229,14 @@ def geometry_stream_sizes(data: bytes) -> dict:
     return sizes
 
 
-def check_geometry_header(data, n_points: int | None = None) -> tuple[int, int, list]:
+def check_geometry_header(data, n_points: int | None = None, *, total: int | None = None) -> tuple[int, int, list]:
     """Check a geometry block's header against its size (and the expected vertex count).
 
-    Returns ``(mode bits, vertices, stream lengths)``; raises :class:`CorruptFileError` before
-    anything is allocated when the counts cannot come from a block of this size.
+    ``data`` is the block, or only its header with the block's size in ``total``. Returns
+    ``(mode bits, vertices, stream lengths)``; raises :class:`CorruptFileError` before anything is
+    allocated when the counts cannot come from a block of this size.
     """
+    total = len(data) if total is None else int(total)
     if len(data) < HEADER_SIZE:
         raise CorruptFileError("corrupt geometry block: truncated header")
     version, mode_bits, n, *lengths = _HEADER.unpack_from(data)
@@ -244,10 +246,10 @@ def check_geometry_header(data, n_points: int | None = None) -> tuple[int, int, 
         raise CorruptFileError("corrupt geometry block: invalid channel modes")
     if n_points is not None and n != n_points:
         raise CorruptFileError(f"corrupt geometry block: {n} vertices, expected {n_points}")
-    if HEADER_SIZE + sum(lengths) != len(data):
+    if HEADER_SIZE + sum(lengths) != total:
         raise CorruptFileError("corrupt geometry block: stream lengths do not match the block size")
     if n > max_vertices(lengths):
-        raise CorruptFileError(f"corrupt geometry block: {n} vertices cannot fit in {len(data)} bytes")
+        raise CorruptFileError(f"corrupt geometry block: {n} vertices cannot fit in {total} bytes")
     return mode_bits, n, lengths
 
 

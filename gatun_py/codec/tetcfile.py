@@ -27,7 +27,7 @@ from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encod
 from .container import Container, build_container
 from .cutborder import ConnectivityDecoder, encode_connectivity
 from .forest import decode_forest, encode_forest, forest_header
-from .geometry import GeometryDecoder, check_geometry_header, encode_geometry
+from .geometry import HEADER_SIZE, GeometryDecoder, check_geometry_header, encode_geometry
 
 FORMAT_NAME = "tetc"
 DEFAULT_BATCH_TETS = 65536
@@ -92,7 +92,8 @@ def encode_level(payload: LevelPayload) -> EncodedLevel:
     for j, (name, values) in enumerate(mesh.point_data.items()):
         if name == mesh.scalar_name and values.dtype == np.float32:
             continue  # the geometry section holds it exactly
-        sections[f"L{i}/array/{j}"] = encode_array(values[vo], refs, external=d32 if name == mesh.scalar_name else None)
+        sections[f"L{i}/array/{j}"] = encode_array(values[vo], refs, external=d32 if name == mesh.scalar_name else None,
+                                                   positions=p32)
     if payload.forest is not None:
         parent, rank = (np.asarray(a) for a in payload.forest)
         if parent.shape != (mesh.n_points,) or rank.shape != (mesh.n_points,):
@@ -348,7 +349,9 @@ class TetcReader:
         """The level's vertex count, checked with its tet and face counts against the sizes of the
         sections that code them, before anything is allocated."""
         lv = self.level_meta(level)
-        check_geometry_header(self.read_section(f"L{level}/geometry"), lv["points"])
+        name = f"L{level}/geometry"
+        head = self.container.read_section_head(name, HEADER_SIZE)
+        check_geometry_header(head, lv["points"], total=self._size(name))
         m, nf = lv["tets"], lv["boundary_faces"]
         tlen, blen = (self._size(f"L{level}/{part}") for part in ("tets", "boundary"))
         if m > _MAX_TETS_PER_BYTE * (tlen + 8) or nf > _MAX_FACES_PER_BYTE * (blen + 8):
@@ -418,7 +421,7 @@ class TetcReader:
             out = {}
             for key, dec in extra.items():
                 ext = pts if key == _POINTS else dens if key == self.scalar_name else None
-                out[key] = dec.decode(refs, ext)
+                out[key] = dec.decode(refs, ext, positions=geo.values)
             return out
 
         faces, nbv = conn.boundary()

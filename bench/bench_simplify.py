@@ -356,7 +356,7 @@ def main(argv=None):
     # -- markdown -------------------------------------------------------------------------
     L = ["## Offline decimation, merge forest and pre-simplified levels (issue 4)", "",
          f"All figures from `{cmd}` in one run (2-core machine shared with other jobs: wall times are noisy; "
-         f"CPU time of the decimation is given beside; Blunt-fin and its VTK peer are the best of 3 "
+         f"CPU time of the decimation is given beside; Blunt-fin, Combustion and their VTK peers are the best of 3 "
          f"interleaved runs). Kernel load from the numba cache before timing: "
          f"{warm:.2f} s" + (f"; cold compile of the kernels (empty cache): {cold:.1f} s CPU." if cold else "."), "",
          "Method: greedy vertex merges a→b along edges with a lazily updated heap (one best merge per vertex, "
@@ -376,7 +376,10 @@ def main(argv=None):
          "tets may stay flat), boundary faces keep their orientation, boundary vertices only go into boundary "
          "vertices, and the link condition (with a virtual vertex for the boundary) holds, so every prefix is a "
          "manifold with a closed boundary. Decimation runs until no legal merge is left (a final sweep re-checks "
-         "every vertex).", "",
+         "every vertex). Search: the cheap terms of every candidate first, the interpolation and sampled terms "
+         "only while a lower bound (interpolation 0, sampled error at its most negative) can still win, the "
+         "choice of computing every error bit for bit; every vertex's first evaluation and the sweeps in "
+         "parallel, pushed in vertex order (forests independent of the thread count).", "",
          "### Whole forest: time and reach", "",
          "| sample | points | tets | forest wall s | forest CPU s | VTK quadric 99 % s | ours / VTK | VTK reached "
          "| max ratio (target ≥ 0.995) | volume at ratio 0.9 (target ±1 %) | forest bits/vertex (input order) | levels |",

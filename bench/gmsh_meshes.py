@@ -12,7 +12,8 @@ HXT Delaunay mesher under an analytic size field (finest near holes / the inner 
 
 The scalar is a smooth analytic field of the normalised coordinates (waves plus a Gaussian bump),
 stored as float32 point data ``density``. Sizes: ``50k`` (for tests), ``200k``, ``1m``, ``2m``,
-``5m``, ``10m`` tets, hit within about 10 % by calibrating the mesh size on a coarse mesh first.
+``5m``, ``10m`` tets nominal: the size is calibrated on two coarse meshes (tets ~ h^-3), and the
+counts come out 5 to 20 % under (flange: 47k, 172k, 810k, 1.60 M, 3.93 M, 7.80 M).
 
 ``mesh_path("flange-1m")`` returns the cached ``.vtu`` under ``bench/out/gmsh/`` (gitignored),
 generating it first when it is missing (needs the ``gmsh`` package, in the ``bench`` and ``test``
@@ -179,6 +180,7 @@ def generate(name: str, out: Path, *, threads: int | None = None, log=None) -> P
     os.close(fd)
     try:
         meshio.write(tmp, mesh, binary=True, compression=None)
+        os.chmod(tmp, 0o644)  # mkstemp's 0600 is not what a cache file should be
         os.replace(tmp, out)
     finally:
         if os.path.exists(tmp):

@@ -30,6 +30,20 @@ def _kernels_cached() -> bool:
     return any(any(d.glob(f"{src.stem}.*.nbc")) for d in dirs)
 
 
+def _component(text):
+    """--component: None, a component index, or "magnitude"."""
+    if text is None or text == "magnitude":
+        return text
+    try:
+        k = int(text)
+    except ValueError:
+        raise click.BadParameter(f"{text!r} is neither a component index nor 'magnitude'",
+                                 param_hint="'--component'") from None
+    if k < 0:
+        raise click.BadParameter(f"{k} is not a component index (0, 1, 2, ...)", param_hint="'--component'")
+    return k
+
+
 @click.command()
 @click.argument("input", type=click.Path(dir_okay=False))
 @output_option("Output image: .png, .jpg, .webp, .tif or .bmp (format from the extension).")
@@ -51,6 +65,9 @@ def _kernels_cached() -> bool:
 @click.option("--range", "scalar_range", type=(FiniteFloat(), FiniteFloat()), default=None, metavar="MIN MAX",
               help="Scalar range the transfer function is normalised to [default: the mesh's]. Fix it to "
                    "compare time steps or files.")
+@click.option("--component", default=None, metavar="K|magnitude",
+              help="For a vector point array (--scalar NAME): render component K (0-based) or its magnitude "
+                   "[default: component 0]. .tetc input.")
 @click.option("--background", type=Colour(), default="black", show_default=True,
               help="Background colour: a name, #rrggbb, or r,g,b in 0..1.")
 @click.option("--colorbar", is_flag=True, help="Add a colour bar with the scalar's name and range on the right.")
@@ -74,7 +91,7 @@ def _kernels_cached() -> bool:
 @mesh_input_options
 @force_option
 @quiet_option
-def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, elevation, zoom, scalar_range,
+def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, elevation, zoom, scalar_range, component,
            background, colorbar, ratio, level, budget, pipeline, lean, show_stats, scalar, q_file, q_var,
            cell_to_point, time_step, force, quiet):
     """Volume-render INPUT (a .tetc file or any mesh file) into an image.
@@ -105,6 +122,7 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
                                 ratio=ratio, level=level, budget=budget, mode=mode, step=step,
                                 scalar_range=scalar_range, opacity_model=opacity_model, background=background,
                                 colorbar=colorbar, lean=lean, pipeline=pipeline, progress=progress,
+                                component=_component(component),
                                 log=logger(quiet), **read_kwargs(scalar, q_file, q_var, cell_to_point, time_step))
     frame.save(output, force=force)
     st = frame.stats

@@ -207,6 +207,9 @@ def convert(source, output, *, refine: int = 1, force: bool = False, scalar: str
                                  cell_to_point=cell_to_point, time_step=time_step)
         for note in report.notes:
             log(f"note: {note}")
+        if report.cell_arrays:
+            log(f"note: cell data not written ({', '.join(map(repr, report.cell_arrays))}): only point data "
+                "follows the split into tets; average it to the points with cell-to-point")
     else:
         mesh = _as_mesh(source, dict(scalar=scalar, cell_to_point=cell_to_point), log)
     write_mesh(mesh, output, force=force)

@@ -464,6 +464,8 @@ def _rss_mb() -> float:
 def _open_stream(source, *, level, ratio_mesh, read_kwargs):
     """(batches, info) for any source; info has points, bbox_lo/hi, scalar_range and, for a
     simplified start, the boundary of the simplified mesh (see below)."""
+    if isinstance(getattr(source, "reader", None), TetcReader):  # an open gatun_py.TetcFile
+        source = source.reader
     if isinstance(source, TetMesh) or (not isinstance(source, TetcReader) and not _is_tetc(source)):
         if level is not None or ratio_mesh is not None:
             raise OptionError("level and ratio_mesh need a .tetc file (a mesh file has no merge forest)")

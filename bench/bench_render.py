@@ -700,7 +700,8 @@ def cold_start_section(load) -> list[str]:
             "| run | wall s | CPU s |", "|---|---|---|",
             f"| first (compiles the decoder and the renderer) | {med(w for w, _ in firsts):.1f} | "
             f"{med(c for _, c in firsts):.1f} |",
-            f"| second (kernels from the cache) | {med(w for w, _ in seconds):.2f} | {med(c for _, c in seconds):.2f} |",
+            f"| second (kernels from the cache) | {med(w for w, _ in seconds):.2f} | "
+            f"{med(c for _, c in seconds):.2f} |",
             "",
             "The first run's first line on stderr: " + (f"“{said[0]}”" if said else "(none)"), ""]
 

@@ -160,11 +160,11 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
 
     Stops when the next tet is missing (the subsegment stays parked on that face), when it
     reaches the other subsegment's face (segment done), or after ``max_steps`` steps in total
-    for the segment (stuck: it can only be looping on inconsistent geometry). Returns the segment's
-    state.
+    for the segment (stuck: it can only be looping on inconsistent geometry). Returns the
+    segment's state.
 
-    A counting table (``FT_COUNT`` column) loses one from the entry and the exit face of every tet stepped
-    through, where the crossing was a clean one (``SEG_CLEAN`` 1: all three edge sides agreed;
+    A counting table (``FT_COUNT`` column) loses one from the entry and the exit face of every
+    tet stepped through, where the crossing was a clean one (``SEG_CLEAN`` 1: all three edge sides agreed;
     ``NEVER_COUNTS`` for the segments of rays whose boundary crossings did not pair up: on a grid
     that overlaps itself such a ray can walk the same tets in two segments).
     """

@@ -28,6 +28,7 @@ import inspect
 # the attribute alone); both packages load their contents lazily.
 from . import isosurface as _isosurface_stage  # noqa: F401
 from . import render as _render_stage  # noqa: F401
+from ._lazy import attach
 from ._version import __version__
 from .errors import (CorruptFileError, FormatVersionError, MeshError, OptionError, OutputError,
                      OutputExistsError, ReadError, TetcError)
@@ -82,16 +83,7 @@ _LAZY = {"TetcFile": "api", "Frame": "api", "Surface": "isosurface.extract", "Te
          "write_mesh": "mesh"}
 
 
-def __getattr__(name):
-    if name in _LAZY:
-        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'gatun_py' has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(set(globals()) | set(_LAZY))
+__getattr__, __dir__, _ = attach(__name__, _LAZY)
 
 
 _register_meshio()

@@ -18,9 +18,7 @@ import numpy as np
 from .codec import LevelPayload, TetcReader, encode_tetc
 from .errors import TetcError
 from .mesh import mesh_batches
-from .mesh.plot3d import grid_hexes
-from .mesh.split import orient_positive, split_hexes_two_colour
-from .mesh.validate import validate_tets
+from .mesh.synthetic import jittered_grid
 from .pipeline.stream import View, render_tetc
 from .render._facetable import count_live, make_face_table, rehash
 from .render.camera import Camera
@@ -33,15 +31,7 @@ from .simplify.levels import Target
 
 def tiny_mesh():
     """A 4×4×3 jittered grid split into tets, with a smooth scalar."""
-    dims = (4, 4, 3)
-    k, j, i = np.meshgrid(*(np.arange(d) for d in dims[::-1]), indexing="ij")
-    pts = np.stack([i, j, k], -1).reshape(-1, 3).astype(np.float64)
-    pts += np.random.default_rng(0).uniform(-0.15, 0.15, pts.shape)
-    pts = pts.astype(np.float32)
-    hexes, colour = grid_hexes(dims)
-    tets = orient_positive(pts, split_hexes_two_colour(hexes, colour))
-    dens = (np.sin(pts[:, 0]) + 0.3 * pts[:, 1]).astype(np.float32)
-    return validate_tets(pts, dens, tets)[0]
+    return jittered_grid((4, 4, 3), jitter=0.15, scalar=(1.0, 0.3, 0.0))
 
 
 def _simplify_and_render() -> str:

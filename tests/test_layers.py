@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "gatun_py"
 CLI = ROOT / "cli"
 
-BASE = {"errors", "_atomic", "_resources", "_version"}
+BASE = {"errors", "_atomic", "_resources", "_version", "_lazy"}
 # stage -> the stages it may import (base always allowed)
 ALLOWED = {
     "mesh": {"mesh"},

@@ -17,13 +17,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from conftest import load_sample
-from gatun_py.codec import LevelPayload, TetcReader, write_tetc
+from gatun_py.codec import TetcReader
 from gatun_py.pipeline import budget as B
 from gatun_py.pipeline.budget import (BudgetPlan, Costs, FramePlanner, LevelSize, TimeModel, Work, WorkEstimator,
                                       estimated_tets, load_costs, plan_for_budget, save_costs)
 from gatun_py.pipeline.stream import View, render_tetc
 from gatun_py.render.camera import Camera
-from gatun_py.simplify import build_levels, decimate
 
 
 def _levels(n_points=4096, tets0=20000, k=8):
@@ -171,16 +170,6 @@ def test_seeded_costs_are_positive_and_cached(tmp_path, monkeypatch):
     ref = Costs()
     assert costs.per_step / costs.per_sample == pytest.approx(ref.per_step / ref.per_sample)
     assert B.machine_costs() == (costs, False)
-
-
-@pytest.fixture(scope="module")
-def post_tetc(tmp_path_factory):
-    mesh, _ = load_sample("post")
-    levels = build_levels(mesh, decimate(mesh))
-    path = tmp_path_factory.mktemp("budget") / "post.tetc"
-    write_tetc(path, [LevelPayload(lv.level, lv.ratio, lv.n_merges, lv.mesh, (lv.forest.parent, lv.forest.rank))
-                      for lv in levels])
-    return path
 
 
 def test_plan_file_budget_renders_the_planned_target(post_tetc, tmp_path, monkeypatch):

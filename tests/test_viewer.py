@@ -18,30 +18,17 @@ from aiohttp.test_utils import TestClient, TestServer  # noqa: E402
 from click.testing import CliRunner  # noqa: E402
 from PIL import Image  # noqa: E402
 
-from conftest import load_sample  # noqa: E402
 from gatun_py.cli.main import tetc  # noqa: E402
-from gatun_py.codec import LevelPayload, write_tetc  # noqa: E402
 from gatun_py.errors import OptionError, TetcError  # noqa: E402
 from gatun_py.pipeline.budget import Costs  # noqa: E402
 from gatun_py.pipeline.stream import View, render_tetc  # noqa: E402
 from gatun_py.render.camera import Camera  # noqa: E402
 from gatun_py.render.image import to_rgb8  # noqa: E402
 from gatun_py.render.transfer import load_transfer_function  # noqa: E402
-from gatun_py.simplify import build_levels, decimate  # noqa: E402
 from gatun_py.viewer import ViewerSession, parse_request  # noqa: E402
 from gatun_py.viewer.server import SERVICE, make_app  # noqa: E402
 
 TOKEN = "testtoken1234567890"
-
-
-@pytest.fixture(scope="module")
-def post_tetc(tmp_path_factory):
-    mesh, _ = load_sample("post")
-    levels = build_levels(mesh, decimate(mesh))
-    path = tmp_path_factory.mktemp("viewer") / "post.tetc"
-    write_tetc(path, [LevelPayload(lv.level, lv.ratio, lv.n_merges, lv.mesh, (lv.forest.parent, lv.forest.rank))
-                      for lv in levels])
-    return path
 
 
 @pytest.fixture

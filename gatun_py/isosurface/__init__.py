@@ -9,21 +9,9 @@ The names below load on first use (PEP 562): ``gatun_py.isosurface`` is also the
 verb, and importing this package must not load numba.
 """
 
-import importlib
+from .._lazy import attach
 
 _LAZY = {"isosurface": "extract", "Surface": "extract", "ImportanceFunction": "extract", "load_importance": "extract"}
 
 
-def __getattr__(name):
-    if name in _LAZY:
-        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(set(globals()) | set(_LAZY))
-
-
-__all__ = sorted(_LAZY)
+__getattr__, __dir__, __all__ = attach(__name__, _LAZY)

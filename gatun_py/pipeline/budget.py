@@ -42,11 +42,9 @@ import numpy as np
 from .._version import __version__
 from ..codec import LevelPayload, TetcReader, encode_tetc
 from ..errors import OptionError
-from ..mesh.plot3d import grid_hexes
-from ..mesh.split import orient_positive, split_hexes_two_colour
-from ..mesh.validate import validate_tets
-from ..render.camera import Camera
 from ..mesh import mesh_batches
+from ..mesh.synthetic import jittered_grid
+from ..render.camera import Camera
 from ..render.stream import render_batches
 from ..simplify import ROOT_RANK, ancestors
 from ..simplify.levels import Target, forest_merges, stored_levels
@@ -550,16 +548,7 @@ def save_costs(costs: Costs, key: str | None = None) -> None:
 
 def _seed_grid(n: int):
     """A jittered n x n x n grid split into tets, with a smooth scalar (the seeding mesh)."""
-
-    dims = (n, n, n)
-    k, j, i = np.meshgrid(*(np.arange(d) for d in dims[::-1]), indexing="ij")
-    pts = np.stack([i, j, k], -1).reshape(-1, 3).astype(np.float64)
-    pts += np.random.default_rng(0).uniform(-0.2, 0.2, pts.shape)
-    pts = pts.astype(np.float32)
-    hexes, colour = grid_hexes(dims)
-    tets = orient_positive(pts, split_hexes_two_colour(hexes, colour))
-    dens = (np.sin(pts[:, 0] * 0.7) + 0.2 * pts[:, 1] + 0.1 * pts[:, 2]).astype(np.float32)
-    return validate_tets(pts, dens, tets)[0]
+    return jittered_grid((n, n, n), jitter=0.2, scalar=(0.7, 0.2, 0.1))
 
 
 def seed_costs(*, repeats: int = 3) -> Costs:

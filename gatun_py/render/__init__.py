@@ -4,7 +4,7 @@ The names below load on first use (PEP 562), so importing the package, or one li
 (the camera, the transfer functions), does not load numba and the ray caster's kernels.
 """
 
-import importlib
+from .._lazy import attach
 
 # public name -> the submodule that defines it
 _LAZY = {
@@ -16,16 +16,4 @@ _LAZY = {
 }
 
 
-def __getattr__(name):
-    if name in _LAZY:
-        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(set(globals()) | set(_LAZY))
-
-
-__all__ = sorted(_LAZY)
+__getattr__, __dir__, __all__ = attach(__name__, _LAZY)

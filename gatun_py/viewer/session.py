@@ -16,6 +16,7 @@ import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from PIL import Image
 
 from ..codec import TetcReader
 from ..errors import OptionError, TetcError
@@ -140,8 +141,6 @@ def encode_image(rgb8: np.ndarray, fmt: str, quality: int = 85) -> bytes:
     """JPEG/WebP (Pillow, which scikit-image brings) or PNG bytes of an (H, W, 3) uint8 image."""
     if fmt == "png":
         return png_bytes(rgb8)
-    from PIL import Image
-
     buf = io.BytesIO()
     Image.fromarray(rgb8).save(buf, format=fmt.upper(), quality=quality)
     return buf.getvalue()

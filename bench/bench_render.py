@@ -26,14 +26,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))  # common.py
+from common import SAMPLE_FILES as SAMPLES  # noqa: E402  (the one table of samples, tests/samples.py)
 from common import code_state  # noqa: E402
 
-SAMPLES = {
-    "bluntfin": (ROOT / "sample_meshes/bluntfin/bluntfinxyz.bin", {}, "bluntfin"),
-    "combustion": (ROOT / "sample_meshes/combustion_chamber/combxyz.bin", {}, "combustion"),
-    "post": (ROOT / "sample_meshes/lox_post_tets/post.vtk", {}, "post"),
-    "fire": (ROOT / "sample_meshes/room_fire/fire_ug.vtu", {"scalar": "t"}, "fire"),
-}
 VIEWS = [(0.0, 0.0), (90.0, 20.0), (200.0, -45.0), (45.0, 70.0)]
 os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 

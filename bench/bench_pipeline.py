@@ -242,8 +242,7 @@ def ray_steps(path, v, level):
     class Counting(base):
         def finish(self):
             res = super().finish()
-            counters = getattr(self, "_seg_steps", None)
-            box["steps"] = int(counters.sum()) if counters is not None else -1
+            box["steps"] = int(res.stats.get("steps", -1))
             return res
 
     render_stream.StreamingRaycaster = Counting

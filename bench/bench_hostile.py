@@ -10,7 +10,6 @@ from __future__ import annotations
 import copy
 import json
 import os
-import resource
 import shutil
 import signal
 import subprocess
@@ -31,39 +30,29 @@ POST = SAMPLE_FILES["post"][0]
 
 
 def run(args, cwd, *, shell=False, timeout=120):
-    """(exit code, first error or note line of stderr, wall s, peak MB of this child alone)."""
+    """(exit code, first error or note line of stderr, wall s, peak MB of the command's own process).
+
+    The peak comes from GNU time (its child's ru_maxrss starts from a small process; a child forked
+    from this script would inherit this script's peak)."""
+    peak_file = Path(cwd) / ".peak"
+    if shell:
+        cmd = args
+    else:
+        cmd = ["/usr/bin/time", "-f", "%M", "-o", str(peak_file)] + [str(a) for a in args]
     t0 = time.perf_counter()
-    p = subprocess.Popen(args if shell else [str(a) for a in args], cwd=cwd, stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, shell=shell, executable="/bin/bash" if shell else None)
-    try:
-        _, err = p.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        p.kill()
-        _, err = p.communicate()
-    # wait4 on the reaped child is not possible; its rusage is the process's own when not a shell
+    p = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout, shell=shell,
+                       executable="/bin/bash" if shell else None)
     dt = time.perf_counter() - t0
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    msg = next((ln for ln in lines if "error" in ln or "note" in ln or "Error" in ln), lines[0] if lines else "")
-    return p.returncode, msg, dt, _PEAKS.pop(p.pid, float("nan"))
-
-
-_PEAKS: dict = {}
-
-
-class _Reaper(subprocess.Popen):
-    """Popen that reaps its child with wait4, keeping the child's own peak memory (ru_maxrss)."""
-
-    def _try_wait(self, wait_flags):
+    peak = float("nan")
+    if not shell and peak_file.exists():
         try:
-            pid, sts, usage = os.wait4(self.pid, wait_flags)
-        except ChildProcessError:
-            return self.pid, 0
-        if pid:
-            _PEAKS[pid] = usage.ru_maxrss / 1024.0
-        return pid, sts
-
-
-subprocess.Popen = _Reaper  # every child this script starts reports its own peak
+            peak = int(peak_file.read_text().split()[-1]) / 1024.0
+        except (ValueError, IndexError):
+            pass
+        peak_file.unlink()
+    lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
+    msg = next((ln for ln in lines if "error" in ln or "note" in ln or "Error" in ln), lines[0] if lines else "")
+    return p.returncode, msg, dt, peak
 
 
 def _with_meta(src, out, **changes):

@@ -16,18 +16,23 @@ from .options import (ANGLE, POSITIVE, RATIO, ZOOM, Colour, FiniteFloat, ImageSi
                       status)
 
 
-def _kernels_cached() -> bool:
-    """Whether numba has compiled the render kernels into its cache already."""
+def _kernels_cached(*, decoder: bool) -> bool:
+    """Whether numba has compiled the render kernels (and with ``decoder`` the decoder's) into its
+    cache already."""
     import numba  # start-up time: options are parsed, and usage errors reported, before numba loads
 
+    from gatun_py.codec import _cutborder_kernels
     from gatun_py.render import _walk
 
-    src = Path(_walk.__file__)
-    if numba.config.CACHE_DIR:  # NUMBA_CACHE_DIR: one folder per source folder, "<name>_<hash>"
-        dirs = list(Path(numba.config.CACHE_DIR).glob(f"{src.parent.name}_*"))
-    else:
-        dirs = [src.parent / "__pycache__"]
-    return any(any(d.glob(f"{src.stem}.*.nbc")) for d in dirs)
+    def cached(module) -> bool:
+        src = Path(module.__file__)
+        if numba.config.CACHE_DIR:  # NUMBA_CACHE_DIR: one folder per source folder, "<name>_<hash>"
+            dirs = list(Path(numba.config.CACHE_DIR).glob(f"{src.parent.name}_*"))
+        else:
+            dirs = [src.parent / "__pycache__"]
+        return any(any(d.glob(f"{src.stem}.*.nbc")) for d in dirs)
+
+    return cached(_walk) and (not decoder or cached(_cutborder_kernels))
 
 
 def _component(text):
@@ -100,7 +105,8 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     from both ends of each segment. The camera follows VTK: 30 degree perspective fitted to the
     bounding sphere, then --azimuth, --elevation, refit, --zoom.
     """
-    from gatun_py.render.image import image_format  # start-up time: see _kernels_cached
+    from gatun_py.pipeline.stream import is_tetc  # start-up time: see _kernels_cached
+    from gatun_py.render.image import image_format
     from gatun_py.warmup import compile_for_render, load_kernels
 
     t_start = time.perf_counter()
@@ -111,11 +117,12 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
                                  param_hint="'--range'")
     image_format(output)  # refuse what cannot be written before the work, not after
     check_output_path(output, force=force)
-    if not _kernels_cached():
-        status("compiling the decoder and the renderer on two cores (first run only, under a minute; "
-               "`make install` does it ahead)...", quiet)
-        compile_for_render()
-    startup_s = load_kernels(lean=lean) + (time.perf_counter() - t_start)
+    decoder = is_tetc(input)  # a mesh file is rendered without the decoder: no need to compile it
+    if not _kernels_cached(decoder=decoder):
+        what = "the decoder and the renderer on two cores" if decoder else "the renderer"
+        status(f"compiling {what} (first run only, under a minute; `make install` does it ahead)...", quiet)
+        compile_for_render(decoder=decoder)
+    startup_s = load_kernels(lean=lean, decoder=decoder) + (time.perf_counter() - t_start)
     t_start = time.perf_counter()  # total_s: from opening the input to the image written
     with progress_reporter("rendering", quiet) as progress, interruptible():
         frame = gatun_py.render(input, size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom,

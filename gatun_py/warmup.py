@@ -101,26 +101,35 @@ def _render_only() -> str:
     return "rendering"
 
 
-def compile_for_render() -> float:
-    """Compile what ``tetc render`` needs into numba's cache, decoder and renderer side by side
-    in two processes (the first run on a fresh install); returns the seconds it took."""
+def compile_for_render(*, decoder: bool = True) -> float:
+    """Compile what ``tetc render`` needs into numba's cache (the first run on a fresh install);
+    returns the seconds it took. With ``decoder`` (a ``.tetc`` input) the decoder and the renderer
+    compile side by side in two processes; a mesh file needs the renderer alone, compiled here."""
     t0 = time.perf_counter()
+    if not decoder:
+        _render_only()
+        return time.perf_counter() - t0
     with ProcessPoolExecutor(max_workers=2) as pool:
         for job in [pool.submit(_render_only), pool.submit(_decode_and_filter)]:
             job.result()
     return time.perf_counter() - t0
 
 
-def load_kernels(*, lean: bool = False) -> float:
+def load_kernels(*, lean: bool = False, decoder: bool = True) -> float:
     """Load the decode, filter and render kernels into this process (from numba's cache, or by
     compiling them) with a 4x4-pixel render of a tiny file; returns the seconds it took.
     ``lean``: the face-counting kernels of a lean render too (otherwise they load when first used).
+    ``decoder=False``: the render kernels only (a mesh file is rendered without the decoder).
 
     The CLI does this before it opens the user's file, so ``total_s`` measures the work on the
     file, not the one-off loading of compiled code (as VTK's timing excludes ``import vtk``).
     """
     t0 = time.perf_counter()
-    render_tetc(_tiny_tetc(), View(Camera(4, 4), tf="default", lean=lean), target=Target(0, 1, 0.0, 0))
+    if decoder:
+        render_tetc(_tiny_tetc(), View(Camera(4, 4), tf="default", lean=lean), target=Target(0, 1, 0.0, 0))
+    else:
+        mesh = tiny_mesh()
+        render_batches(mesh_batches(mesh), Camera(4, 4), "default", scalar_range=mesh.scalar_range, lean=lean)
     if lean:
         _purge_kernels()
     return time.perf_counter() - t0

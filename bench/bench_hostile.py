@@ -7,7 +7,6 @@ the decoder's own adversarial suite is ``tests/test_hostile_files.py``.
 
 from __future__ import annotations
 
-import copy
 import json
 import os
 import shutil
@@ -21,8 +20,7 @@ import numpy as np
 
 from common import ROOT, SAMPLE_FILES, WORK, table, write_section
 
-from gatun_py.codec import TetcReader
-from gatun_py.codec.container import build_container
+from gatun_py.codec.container import build_container, split_container
 
 TETC = Path(sys.executable).parent / "tetc"
 GOLDEN = ROOT / "tests" / "data" / "post_v1.tetc"
@@ -56,15 +54,13 @@ def run(args, cwd, *, shell=False, timeout=120):
 
 
 def _with_meta(src, out, **changes):
-    r = TetcReader(src)
-    meta = copy.deepcopy(r.meta)
-    meta.pop("sections", None)
+    meta, sections = split_container(src)
     for k, v in changes.items():
         if k == "level0":
             meta["levels"][0].update(v)
         else:
             meta[k] = v
-    out.write_bytes(build_container(meta, [(n, r.read_section(n)) for n in r.container.section_names()]))
+    out.write_bytes(build_container(meta, sections))
     return out
 
 

@@ -202,11 +202,9 @@ def worker(files):
 
 def _split(data: bytes):
     """(metadata dict, [(name, payload)]) of a valid file."""
-    from gatun_py.codec.container import Container
+    from gatun_py.codec.container import split_container
 
-    c = Container(data)
-    meta = {k: v for k, v in c.meta.items() if k != "sections"}
-    return meta, [(name, c.read_section(name)) for name in c.section_names()]
+    return split_container(data)
 
 
 def _build(meta, sections, major=None) -> bytes:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import copy
 from pathlib import Path
 
 import pytest
@@ -10,7 +9,7 @@ import pytest
 import gatun_py
 from cli_util import run
 from gatun_py.codec import TetcReader
-from gatun_py.codec.container import build_container
+from gatun_py.codec.container import build_container, split_container
 from gatun_py.pipeline.stream import MAX_SAMPLES_PER_DIAGONAL, bounded_step
 
 GOLDEN = Path(__file__).resolve().parent / "data" / "post_v1.tetc"
@@ -18,11 +17,8 @@ POST = Path(__file__).resolve().parents[1] / "sample_meshes" / "lox_post_tets" /
 
 
 def _with_meta(path, out, **changes):
-    r = TetcReader(path)
-    meta = copy.deepcopy(r.meta)
-    meta.pop("sections", None)
+    meta, sections = split_container(path)
     meta.update(changes)
-    sections = [(n, r.read_section(n)) for n in r.container.section_names()]
     out.write_bytes(build_container(meta, sections))
     return out
 

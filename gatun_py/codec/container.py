@@ -73,6 +73,21 @@ def build_container(meta: dict, sections: list[tuple[str, bytes]]) -> bytes:
     return pre + blob + b"".join(records)
 
 
+def split_container(source) -> tuple[dict, list[tuple[str, bytes]]]:
+    """The metadata (without its section index) and every ``(name, payload)`` of a file, in file
+    order: what :func:`build_container` takes, so a file can be rebuilt with changes.
+
+    Examples
+    --------
+    >>> data = build_container({"format": "x"}, [("a", b"12"), ("b", b"")])
+    >>> split_container(data)
+    ({'format': 'x'}, [('a', b'12'), ('b', b'')])
+    """
+    c = source if isinstance(source, Container) else Container(source)
+    meta = {k: v for k, v in c.meta.items() if k != "sections"}
+    return meta, [(name, c.read_section(name)) for name in c.section_names()]
+
+
 class Container:
     """Read access to a ``.tetc`` file (path or bytes).
 

@@ -23,6 +23,7 @@ from .._atomic import write_bytes_atomic
 from ..errors import CorruptFileError, MeshError, OptionError
 from ..mesh import TetBatch, TetMesh, default_step
 from ..mesh.model import scalar_of
+from ..mesh.validate import check_tet_ids
 from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
 from .container import Container, build_container
 from .cutborder import ConnectivityDecoder, encode_connectivity
@@ -130,17 +131,7 @@ def check_mesh(mesh) -> None:
     if n >= 2**31 - 1:
         raise MeshError(f"mesh too large for 32-bit ids ({n} points)")
     if t.size:
-        lo, hi = int(t.min()), int(t.max())
-        if lo < 0 or hi >= n:
-            bad = ((t < 0) | (t >= n)).any(axis=1)
-            i = int(np.flatnonzero(bad)[0])
-            raise MeshError(f"tet {i} refers to vertex {t[i].tolist()} but the mesh has {n} points "
-                            f"(valid ids 0..{n - 1}); {int(bad.sum())} tets affected")
-        s = np.sort(t, axis=1)
-        rep = (s[:, 1:] == s[:, :-1]).any(axis=1)
-        if rep.any():
-            i = int(np.flatnonzero(rep)[0])
-            raise MeshError(f"tet {i} repeats a vertex id {t[i].tolist()}; {int(rep.sum())} tets affected")
+        check_tet_ids(t, n)
         neg = mesh.signed_volumes() < 0
         if neg.any():
             i = int(np.flatnonzero(neg)[0])

@@ -39,6 +39,25 @@ def _plural(n: int, word: str) -> str:
     return f"{n} {word}{'' if n == 1 else 's'}"
 
 
+def check_tet_ids(tets: np.ndarray, n: int) -> np.ndarray:
+    """Every id of every tet in ``0 .. n-1`` (-1 included in the wrong ones) and no tet repeating a
+    vertex, or :class:`MeshError` naming the first offender and the count; returns the tets with
+    each row sorted (callers look for duplicates next)."""
+    t = np.asarray(tets)
+    bad = ((t < 0) | (t >= n)).any(axis=1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        v = int(t[i][(t[i] < 0) | (t[i] >= n)][0])
+        raise MeshError(f"tet {i} refers to vertex {v} but the mesh has {n} points (valid ids 0..{n - 1}); "
+                        f"{_plural(int(bad.sum()), 'tet')} affected")
+    s = np.sort(t, axis=1)
+    bad = (s[:, 1:] == s[:, :-1]).any(axis=1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise MeshError(f"tet {i} repeats a vertex id {t[i].tolist()}; {_plural(int(bad.sum()), 'tet')} affected")
+    return s
+
+
 def validate_tets(points: np.ndarray, density: np.ndarray | None, tets: np.ndarray, *, scalar_name: str = "density",
                   orient: bool = True, point_data: dict | None = None) -> tuple[TetMesh, MeshReport]:
     """Check a raw mesh, orient its tets positively, and return it with a report.
@@ -94,17 +113,7 @@ def validate_tets(points: np.ndarray, density: np.ndarray | None, tets: np.ndarr
     if m >= 2**31 or n >= 2**31:
         raise MeshError(f"mesh too large for 32-bit ids ({n} points, {m} tets)")
 
-    bad = ((t < 0) | (t >= n)).any(axis=1)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        v = int(t[i][(t[i] < 0) | (t[i] >= n)][0])
-        raise MeshError(f"tet {i} refers to vertex {v} but the mesh has {n} points (valid ids 0..{n - 1}); "
-                        f"{_plural(int(bad.sum()), 'tet')} affected")
-    s = np.sort(t, axis=1)
-    bad = (s[:, 1:] == s[:, :-1]).any(axis=1)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise MeshError(f"tet {i} repeats a vertex id {t[i].tolist()}; {_plural(int(bad.sum()), 'tet')} affected")
+    s = check_tet_ids(t, n)
 
     order = np.lexsort(s.T[::-1])
     ss = s[order]

@@ -134,9 +134,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     for name, w in (("w_density", w_density), ("w_geometry", w_geometry)):
         if not (isinstance(w, (int, float)) and math.isfinite(w) and w >= 0):
             raise OptionError(f"{name} must be a finite number >= 0, got {w!r}")
-    check_output_path(output, force=force)  # fail before the (long) work
-    if isinstance(source, (str, os.PathLike)) and _same_file(source, output):
-        raise OptionError(f"the output {output} is the input file")
+    _check_output(source, output, force=force)  # fail before the (long) work
     t0 = time.perf_counter()
     mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point,
                                  time_step=time_step), log, storing=True, drop_cell_data=drop_cell_data)
@@ -178,10 +176,7 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
 
     Returns the mesh written.
     """
-    mesh_output_format(output)  # refuse a format that cannot hold the mesh before decoding it
-    check_output_path(output, force=force)
-    if isinstance(source, (str, os.PathLike)) and _same_file(source, output):
-        raise OptionError(f"the output {output} is the input file")
+    _check_output(source, output, force=force, mesh_file=True)  # before decoding
     f = source if isinstance(source, TetcFile) else TetcFile(source)
     mesh = f.mesh(ratio=ratio, level=level)
     write_mesh(mesh, output, force=force)
@@ -198,10 +193,7 @@ def convert(source, output, *, refine: int = 1, force: bool = False, scalar: str
     log = log or _quiet
     if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)) or not 1 <= refine <= 16:
         raise OptionError(f"refine must be an integer in 1..16, got {refine!r}")
-    mesh_output_format(output)
-    check_output_path(output, force=force)
-    if isinstance(source, (str, os.PathLike)) and _same_file(source, output):
-        raise OptionError(f"the output {output} is the input file")
+    _check_output(source, output, force=force, mesh_file=True)
     if isinstance(source, (str, os.PathLike)):
         mesh, report = read_mesh(source, refine=int(refine), scalar=scalar, q_file=q_file, q_var=q_var,
                                  cell_to_point=cell_to_point, time_step=time_step)
@@ -238,6 +230,17 @@ def info(source, *, scalar: str | None = None, q_file=None, q_var: str = "densit
         "scalar_range": list(mesh.scalar_range),
         "notes": list(report.notes),
     }
+
+
+def _check_output(source, output, *, force: bool, mesh_file: bool = False) -> None:
+    """Refuse an output before any work: one that exists (unless ``force``), that is not a regular
+    file, that is the input itself (even with ``force``), or, for a ``mesh_file``, whose format
+    cannot hold tetrahedra."""
+    if mesh_file:
+        mesh_output_format(output)
+    check_output_path(output, force=force)
+    if isinstance(source, (str, os.PathLike)) and _same_file(source, output):
+        raise OptionError(f"the output {output} is the input file")
 
 
 def _same_file(a, b) -> bool:

@@ -18,39 +18,19 @@ from pathlib import Path
 
 import numpy as np
 
-from common import ROOT, SAMPLE_FILES, WORK, table, write_section
+from common import ROOT, SAMPLE_FILES, TETC, WORK, run_tetc, table, write_section
 
 from gatun_py.codec.container import build_container, split_container
 
-TETC = Path(sys.executable).parent / "tetc"
 GOLDEN = ROOT / "tests" / "data" / "post_v1.tetc"
 POST = SAMPLE_FILES["post"][0]
 
 
-def run(args, cwd, *, shell=False, timeout=120):
-    """(exit code, first error or note line of stderr, wall s, peak MB of the command's own process).
-
-    The peak comes from GNU time (its child's ru_maxrss starts from a small process; a child forked
-    from this script would inherit this script's peak)."""
-    peak_file = Path(cwd) / ".peak"
-    if shell:
-        cmd = args
-    else:
-        cmd = ["/usr/bin/time", "-f", "%M", "-o", str(peak_file)] + [str(a) for a in args]
-    t0 = time.perf_counter()
-    p = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout, shell=shell,
-                       executable="/bin/bash" if shell else None)
-    dt = time.perf_counter() - t0
-    peak = float("nan")
-    if not shell and peak_file.exists():
-        try:
-            peak = int(peak_file.read_text().split()[-1]) / 1024.0
-        except (ValueError, IndexError):
-            pass
-        peak_file.unlink()
-    lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
+def run(args, cwd):
+    """(exit code, first error or note line it printed, wall s, peak MB of the command's own process)."""
+    code, lines, dt, peak = run_tetc(args, cwd, timeout=120)
     msg = next((ln for ln in lines if "error" in ln or "note" in ln or "Error" in ln), lines[0] if lines else "")
-    return p.returncode, msg, dt, peak
+    return code, msg, dt, peak
 
 
 def _with_meta(src, out, **changes):
@@ -81,36 +61,39 @@ def main() -> int:
     fifo = work / "fifo.png"
     os.mkfifo(fifo)
     cases = [
-        ("crafted 90 KB-style file claiming 2^31 points, --ratio", [TETC, "render", bomb, "-o", "b.png", "--ratio", "0.5"]),
-        ("crafted file, decompress", [TETC, "decompress", bomb, "-o", "b.vtu"]),
-        ("--step 1e-9 at 64²", [TETC, "render", "post.vtk", "-o", "s.png", "--size", "64", "--step", "1e-9"]),
-        ("file whose stored render_step is 1e-12", [TETC, "render", tiny, "-o", "t.png", "--size", "64"]),
-        ("decompress to .stl", [TETC, "decompress", GOLDEN, "-o", "x.stl"]),
-        ("convert to .ply", [TETC, "convert", "post.vtk", "-o", "x.ply"]),
-        ("convert to .obj", [TETC, "convert", "post.vtk", "-o", "x.obj"]),
-        ("render -o x.jpg", [TETC, "render", GOLDEN, "-o", "x.jpg", "--size", "32"]),
-        ("render -o x.gif (no writer)", [TETC, "render", GOLDEN, "-o", "x.gif", "--size", "32"]),
-        ("compress a.vtk -o a.vtk -f", [TETC, "compress", "post.vtk", "-o", "post.vtk", "-f"]),
-        ("output /dev/null --force", [TETC, "convert", "post.vtk", "-o", "/dev/null", "--force"]),
-        ("output a named pipe --force", [TETC, "render", GOLDEN, "-o", fifo, "--force", "--size", "8"]),
-        ("ParaView TF, unit_distance 0", [TETC, "render", GOLDEN, "-o", "p0.png", "--tf", "pv_zero.json"]),
-        ("ParaView TF, unit_distance \"abc\"", [TETC, "render", GOLDEN, "-o", "p1.png", "--tf", "pv_abc.json"]),
-        ("ParaView TF, unit_distance \"nan\"", [TETC, "render", GOLDEN, "-o", "p2.png", "--tf", "pv_nan.json"]),
-        ("--size 0", [TETC, "render", GOLDEN, "-o", "z.png", "--size", "0"]),
-        ("--size 1000000", [TETC, "render", GOLDEN, "-o", "z.png", "--size", "1000000"]),
-        ("--step -1", [TETC, "render", GOLDEN, "-o", "z.png", "--step", "-1"]),
-        ("--zoom 0", [TETC, "render", GOLDEN, "-o", "z.png", "--zoom", "0"]),
-        ("--ratio 1.5", [TETC, "render", GOLDEN, "-o", "z.png", "--ratio", "1.5"]),
-        ("--budget -1", [TETC, "render", GOLDEN, "-o", "z.png", "--budget", "-1"]),
-        ("missing input", [TETC, "render", "nope.tetc", "-o", "z.png"]),
+        ("crafted 90 KB-style file claiming 2^31 points, --ratio", ["render", bomb, "-o", "b.png", "--ratio", "0.5"]),
+        ("crafted file, decompress", ["decompress", bomb, "-o", "b.vtu"]),
+        ("--step 1e-9 at 64²", ["render", "post.vtk", "-o", "s.png", "--size", "64", "--step", "1e-9"]),
+        ("file whose stored render_step is 1e-12", ["render", tiny, "-o", "t.png", "--size", "64"]),
+        ("decompress to .stl", ["decompress", GOLDEN, "-o", "x.stl"]),
+        ("convert to .ply", ["convert", "post.vtk", "-o", "x.ply"]),
+        ("convert to .obj", ["convert", "post.vtk", "-o", "x.obj"]),
+        ("render -o x.jpg", ["render", GOLDEN, "-o", "x.jpg", "--size", "32"]),
+        ("render -o x.gif (no writer)", ["render", GOLDEN, "-o", "x.gif", "--size", "32"]),
+        ("compress a.vtk -o a.vtk -f", ["compress", "post.vtk", "-o", "post.vtk", "-f"]),
+        ("output /dev/null --force", ["convert", "post.vtk", "-o", "/dev/null", "--force"]),
+        ("output a named pipe --force", ["render", GOLDEN, "-o", fifo, "--force", "--size", "8"]),
+        ("ParaView TF, unit_distance 0", ["render", GOLDEN, "-o", "p0.png", "--tf", "pv_zero.json"]),
+        ("ParaView TF, unit_distance \"abc\"", ["render", GOLDEN, "-o", "p1.png", "--tf", "pv_abc.json"]),
+        ("ParaView TF, unit_distance \"nan\"", ["render", GOLDEN, "-o", "p2.png", "--tf", "pv_nan.json"]),
+        ("--size 0", ["render", GOLDEN, "-o", "z.png", "--size", "0"]),
+        ("--size 1000000", ["render", GOLDEN, "-o", "z.png", "--size", "1000000"]),
+        ("--step -1", ["render", GOLDEN, "-o", "z.png", "--step", "-1"]),
+        ("--zoom 0", ["render", GOLDEN, "-o", "z.png", "--zoom", "0"]),
+        ("--ratio 1.5", ["render", GOLDEN, "-o", "z.png", "--ratio", "1.5"]),
+        ("--budget -1", ["render", GOLDEN, "-o", "z.png", "--budget", "-1"]),
+        ("missing input", ["render", "nope.tetc", "-o", "z.png"]),
     ]
     rows = []
     for label, args in cases:
         code, msg, dt, peak = run(args, work)
         rows.append([label, "`" + " ".join(Path(str(a)).name if str(a).startswith(str(ROOT)) else str(a)
-                                           for a in args[1:]) + "`", code, msg.replace("|", "/")[:150],
+                                           for a in args) + "`", code, msg.replace("|", "/")[:150],
                      f"{dt:.2f}", f"{peak:.0f}"])
-    code, msg, dt, peak = run(f"'{TETC}' compress post.vtk -o piped.tetc 2>&1 | head -1", work, shell=True)
+    t0 = time.perf_counter()
+    piped = subprocess.run(f"'{TETC}' compress post.vtk -o piped.tetc 2>&1 | head -1", cwd=work, shell=True,
+                           executable="/bin/bash", capture_output=True, timeout=120)
+    code, dt = piped.returncode, time.perf_counter() - t0
     rows.append(["closed stderr pipe (`2>&1 | head -1`)", "`tetc compress post.vtk -o piped.tetc`", code,
                  f"file written: {(work / 'piped.tetc').exists()}", f"{dt:.2f}", ""])
     jpg = (work / "x.jpg").read_bytes()[:3] == b"\xff\xd8\xff" if (work / "x.jpg").exists() else False

@@ -33,7 +33,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from common import ROOT, WORK, code_state, table, write_section  # noqa: E402
+from common import ROOT, WORK, code_state, run_tetc, table, write_section  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "tests"))
 
@@ -194,16 +194,9 @@ def hostile_figures() -> dict | None:
 
 
 def _cli(args, cwd) -> tuple[int, str, float, float]:
-    """(exit code, last line it printed, seconds, peak RSS MB) of one ``tetc`` run (GNU time's %M)."""
-    tetc = str(Path(sys.executable).with_name("tetc"))
-    t = time.perf_counter()
-    p = subprocess.run(["/usr/bin/time", "-f", "peak-kb %M", tetc, *map(str, args)], cwd=cwd, capture_output=True,
-                       text=True, timeout=600)
-    seconds = time.perf_counter() - t
-    lines = [ln for ln in (p.stderr + p.stdout).splitlines() if ln.strip()]
-    rss = next((int(ln.split()[1]) / 1024 for ln in lines if ln.startswith("peak-kb ")), float("nan"))
-    lines = [ln for ln in lines if not ln.startswith(("peak-kb ", "Command exited"))]
-    return p.returncode, lines[-1] if lines else "", seconds, rss
+    """(exit code, last line it printed, seconds, peak RSS MB) of one ``tetc`` run."""
+    code, lines, seconds, rss = run_tetc(args, cwd)
+    return code, lines[-1] if lines else "", seconds, rss
 
 
 def issue_cases() -> list:

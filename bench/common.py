@@ -11,8 +11,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
-from samples import SAMPLE_DIR as SAMPLES  # noqa: E402  (the one table of samples, shared with the tests)
-from samples import SAMPLES as SAMPLE_FILES  # noqa: E402,F401
+from samples import SAMPLES as SAMPLE_FILES  # noqa: E402,F401  (the one table of samples, shared with the tests)
 
 SECTIONS = ROOT / "bench" / "sections"
 FIGURES = ROOT / "bench" / "figures"
@@ -51,6 +50,30 @@ def run_cli(args: list[str], env: dict | None = None) -> tuple[float, subprocess
     launcher = "import sys; from gatun_py.cli.main import main; sys.exit(main())"
     p = subprocess.run([sys.executable, "-c", launcher, *args], capture_output=True, text=True, env=e)
     return time.perf_counter() - t0, p
+
+
+TETC = Path(sys.executable).with_name("tetc")
+
+
+def run_tetc(args, cwd, *, timeout: float = 600) -> tuple[int, list[str], float, float]:
+    """Run the installed ``tetc`` as a user would: (exit code, the non-empty lines it printed on
+    stderr then stdout, wall seconds, peak MB of its own process).
+
+    The peak comes from GNU time's %M: a child forked from this script would inherit this
+    script's peak in ru_maxrss; time's child starts small.
+    """
+    peak_file = Path(cwd) / ".tetc-peak"
+    t0 = time.perf_counter()
+    p = subprocess.run(["/usr/bin/time", "-f", "%M", "-o", str(peak_file), str(TETC), *map(str, args)], cwd=cwd,
+                       capture_output=True, text=True, timeout=timeout)
+    seconds = time.perf_counter() - t0
+    try:
+        peak = int(peak_file.read_text().split()[-1]) / 1024.0
+    except (OSError, ValueError, IndexError):
+        peak = float("nan")
+    peak_file.unlink(missing_ok=True)
+    lines = [ln for ln in (p.stderr + p.stdout).splitlines() if ln.strip()]
+    return p.returncode, lines, seconds, peak
 
 
 def table(header: list[str], rows: list[list]) -> str:

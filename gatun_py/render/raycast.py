@@ -200,12 +200,16 @@ class StreamingRaycaster:
         self._faces = []
         pts = self._points[: self._nv]
         cam = self.camera
-        if isinstance(cam, Camera):
+        tf = self.tf
+        if isinstance(cam, Camera) or tf.unit_relative:
+            # the mesh's extent: its boundary's vertices (known before the first tet)
             used = np.unique(faces) if len(faces) else np.arange(self._nv)
-            if len(used):
-                cam = cam.fit(pts[used].min(axis=0), pts[used].max(axis=0))
-            else:
-                cam = cam.fit(np.zeros(3), np.zeros(3))
+            lo, hi = (pts[used].min(axis=0), pts[used].max(axis=0)) if len(used) else (np.zeros(3), np.zeros(3))
+            if isinstance(cam, Camera):
+                cam = cam.fit(lo, hi)
+            # a relative unit distance is a fraction of the mesh's size, unless the caller resolved
+            # it already against the full mesh (levels must agree)
+            tf = tf.for_size(float(np.linalg.norm(hi - lo)) if len(used) else 1.0)
         self.fitted = cam
         self._eye = np.asarray(cam.position, dtype=np.float64)
         if self.step is None:
@@ -213,11 +217,7 @@ class StreamingRaycaster:
         if self.scalar_range is None:
             self.scalar_range = (float(self._dens[: self._nv].min()), float(self._dens[: self._nv].max())) \
                 if self._nv else (0.0, 1.0)
-        # a relative unit distance is a fraction of the mesh's size: the boundary's bounding box,
-        # unless the caller resolved it already against the full mesh (levels must agree)
-        used_pts = pts[np.unique(faces)] if len(faces) else pts
-        diag = float(np.linalg.norm(np.ptp(used_pts, axis=0))) if len(used_pts) else 1.0
-        tf = self.tf.for_size(diag).resolve(self.scalar_range)
+        tf = tf.resolve(self.scalar_range)
         tab, lo, inv = tf.table(self.scalar_range)
         if self.mode == "volume":  # opacity for a path of one step
             tab[:, 3] = 1.0 - np.power(1.0 - tab[:, 3], self.step / tf.unit_distance)

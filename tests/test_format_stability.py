@@ -1,5 +1,9 @@
 """Files written by earlier versions of the format still decode bit-exactly, and reference renders hold.
 
+``tests/data/post_v2.tetc`` (format 2, written by ``tests/data/make_golden.py 2``) holds float64
+coordinates and point arrays of four dtypes/shapes; ``post_v2.json`` the hashes of every level's
+decoded points, arrays, tets and forest.
+
 ``tests/data/post_v1.tetc`` was written by format 1 (commit 4545c9c) from ``post.vtk`` with every
 level and the merge forest; ``post_v1.json`` holds the SHA-256 of every level's decoded points,
 scalar, tets and forest as that version decoded them. A future reader must give the same bytes.
@@ -48,6 +52,47 @@ def test_format_1_decodes_bit_exactly(level):
     else:
         assert _sha(forest[0].astype(np.int32)) == want["forest_parent"]
         assert _sha(forest[1].astype(np.int32)) == want["forest_rank"]
+
+
+GOLDEN_V2 = DATA / "post_v2.tetc"
+EXPECTED_V2 = json.loads((DATA / "post_v2.json").read_text())
+
+
+def test_golden_v2_file_is_unchanged():
+    assert _sha(np.frombuffer(GOLDEN_V2.read_bytes(), np.uint8)) == EXPECTED_V2["file_sha256"]
+
+
+@pytest.mark.parametrize("level", sorted(EXPECTED_V2["levels"], key=int))
+def test_format_2_decodes_bit_exactly(level):
+    r = TetcReader(GOLDEN_V2)
+    want = EXPECTED_V2["levels"][level]
+    m = r.decode_mesh(int(level))
+    assert (m.n_points, m.n_tets) == (want["n_points"], want["n_tets"])
+    assert str(m.points.dtype) == want["points_dtype"]
+    assert _sha(m.points) == want["points"]
+    assert _sha(m.tets.astype(np.int32)) == want["tets"]
+    got = {name: [str(a.dtype), list(a.shape), _sha(a)] for name, a in m.point_data.items()}
+    assert got == want["arrays"]
+    forest = r.read_forest(int(level))
+    if want["forest_parent"] is None:
+        assert forest is None
+    else:
+        assert _sha(forest[0].astype(np.int32)) == want["forest_parent"]
+        assert _sha(forest[1].astype(np.int32)) == want["forest_rank"]
+
+
+def test_golden_v2_is_the_generated_mesh():
+    """Level 0 of the format-2 golden file is lossless against the mesh ``make_golden`` builds."""
+    import importlib.util  # the generator lives beside the data, not in an importable package
+    spec = importlib.util.spec_from_file_location("make_golden", DATA / "make_golden.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    src, dec = mod.golden_mesh(), TetcReader(GOLDEN_V2).decode_mesh(0)
+    order_src = np.lexsort(src.points.T[::-1])
+    order_dec = np.lexsort(dec.points.T[::-1])
+    np.testing.assert_array_equal(src.points[order_src].view(np.int64), dec.points[order_dec].view(np.int64))
+    for name, a in src.point_data.items():
+        np.testing.assert_array_equal(a[order_src], dec.point_data[name][order_dec])
 
 
 def test_golden_level_0_is_the_source_mesh():

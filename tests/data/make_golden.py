@@ -1,0 +1,73 @@
+"""Write a golden ``.tetc`` file of the current format and the hashes of what it decodes to.
+
+Run once per format version, when the version is introduced, and commit both files::
+
+    python tests/data/make_golden.py 2     # -> tests/data/post_v2.tetc, post_v2.json
+
+The mesh is ``post.vtk`` with float64 coordinates and point arrays of several dtypes and
+component counts, so every kind of section of the format is present. The test
+(``tests/test_format_stability.py``) then checks that every later reader decodes the same bytes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+
+import gatun_py  # noqa: E402
+from gatun_py.codec import TetcReader  # noqa: E402
+from gatun_py.mesh import TetMesh  # noqa: E402
+from samples import SAMPLES  # noqa: E402
+
+
+def sha(a) -> str:
+    return hashlib.sha256(np.ascontiguousarray(a).tobytes()).hexdigest()
+
+
+def golden_mesh() -> TetMesh:
+    path, kw, _ = SAMPLES["post"]
+    src, _ = gatun_py.read_mesh(path, **kw)
+    p = np.asarray(src.points, np.float64) * (1 + 1e-9)  # not float32-representable: points64 is stored
+    x, y, z = p.T
+    arrays = {
+        src.scalar_name: np.asarray(src.density, np.float32),
+        "wave64": np.sin(3 * x) * np.cos(2 * y) + z,                        # float64
+        "cell_id": (np.arange(len(p)) * 7 % 1000).astype(np.int32),          # integer
+        "velocity": np.stack([y, -x, 0.1 * z], axis=1).astype(np.float32),  # 3 components
+    }
+    return TetMesh(p, None, src.tets, src.scalar_name, point_data=arrays)
+
+
+def describe(path: Path) -> dict:
+    r = TetcReader(path)
+    levels = {}
+    for level in range(len(r.levels)):
+        m = r.decode_mesh(level)
+        forest = r.read_forest(level)
+        levels[str(level)] = {
+            "n_points": int(m.n_points), "n_tets": int(m.n_tets),
+            "points_dtype": str(m.points.dtype), "points": sha(m.points),
+            "tets": sha(m.tets.astype(np.int32)),
+            "arrays": {name: [str(a.dtype), list(a.shape), sha(a)] for name, a in m.point_data.items()},
+            "forest_parent": None if forest is None else sha(forest[0].astype(np.int32)),
+            "forest_rank": None if forest is None else sha(forest[1].astype(np.int32)),
+        }
+    return {"file_sha256": sha(np.frombuffer(path.read_bytes(), np.uint8)), "levels": levels}
+
+
+def main(version: int) -> None:
+    out = HERE / f"post_v{version}.tetc"
+    gatun_py.compress(golden_mesh(), out, force=True)
+    (HERE / f"post_v{version}.json").write_text(json.dumps(describe(out), indent=1) + "\n")
+    print(f"wrote {out} ({out.stat().st_size} bytes) and its hashes")
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[1]))

@@ -75,21 +75,24 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
       tetc isosurface big.tetc --value 0.3 --faces 50000 --stats -o iso.ply
     """
     from gatun_py.isosurface import isosurface as extract
-    from gatun_py.isosurface.io import check_surface_path, write_surface
+    from gatun_py.isosurface.io import check_surface_path
 
     if ratio is not None and faces is not None:
         raise click.UsageError("give either --ratio or --faces, not both")
     if level is not None and mesh_ratio is not None:
         raise click.UsageError("give either --level or --mesh-ratio, not both")
     check_surface_path(output, force=force)  # fail before the work, not after
-    camera = None
     if png is not None:
         from gatun_py._atomic import check_output_path
-        from gatun_py.render.camera import Camera
+        from gatun_py.render.image import image_format
+
+        from gatun_py.isosurface.extract import MAX_PREVIEW_PIXELS
 
         w, h = _size(size)
-        camera = Camera(w, h, azimuth, elevation, zoom)
+        if w * h > MAX_PREVIEW_PIXELS:
+            raise click.BadParameter(f"{w}x{h} is more than {MAX_PREVIEW_PIXELS} pixels", param_hint="--size")
         check_output_path(png, force=force)
+        image_format(png)
     total = _expected_tets(input)
     with progress_bar("extracting", total if total >= 200_000 else 0, quiet) as update:
         last = [0]
@@ -105,14 +108,9 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
     lo_s, hi_s = st["scalar_range"]
     for v in st["values_outside_range"]:
         status(f"note: isovalue {v:g} is outside the scalar range [{lo_s:g}, {hi_s:g}]: its surface is empty", quiet)
-    write_surface(surf, output, force=force)
+    surf.save(output, force=force)
     if png is not None:
-        from gatun_py.render.image import write_png
-        from gatun_py.render.surface import render_surface
-
-        scal = surf.point_data.get("scalar") if len(st["values"]) > 1 else None
-        write_png(png, render_surface(surf.points, surf.triangles, camera, scalar=scal,
-                                      bbox=(st["bbox"][0], st["bbox"][1])), force=force)
+        surf.save_preview(png, size=(w, h), azimuth=azimuth, elevation=elevation, zoom=zoom, force=force)
     st["peak_rss_mb"] = peak_rss_mb()
     st["output"] = str(output)
     if show_stats:

@@ -8,7 +8,7 @@ import meshio
 import numpy as np
 import pytest
 
-from cli_util import assert_error, run
+from cli_util import assert_error, assert_usage_error, run
 from conftest import SAMPLE_FILES, load_sample
 
 from gatun_py.render.image import read_png_rgb
@@ -101,3 +101,26 @@ def test_help_mentions_the_essentials():
     for word in ("--value", "--ratio", "--faces", "--batch-faces", "--importance-tf", "--png", "--stats"):
         assert word in res.output
     assert np.isfinite(_mid())
+
+
+def test_preview_options_are_checked_before_the_work(tmp_path, post_tetc):
+    """A preview nobody can write fails at once, and no surface is left behind."""
+    out = tmp_path / "iso.ply"
+    res = run("isosurface", post_tetc, "--value", _mid(), "-o", out, "--png", tmp_path / "iso.xyz")
+    assert_error(res, "choose one of")
+    res = run("isosurface", post_tetc, "--value", _mid(), "-o", out, "--png", tmp_path / "iso.png",
+              "--size", "100000x100000")
+    assert_usage_error(res, "pixels")
+    assert not out.exists()
+
+
+def test_surface_preview_matches_the_cli_png(tmp_path, post_tetc):
+    """The library's Surface.preview is what the CLI writes (one code path)."""
+    from gatun_py.isosurface import isosurface
+
+    png = tmp_path / "iso.png"
+    res = run("isosurface", post_tetc, "--value", _mid(), "-o", tmp_path / "iso.ply", "--png", png, "--size", "80x60",
+              "--elevation", 25, "--quiet")
+    assert res.exit_code == 0, res.output
+    want = isosurface(post_tetc, values=_mid()).preview(size=(80, 60), elevation=25)
+    np.testing.assert_array_equal(read_png_rgb(png), want)

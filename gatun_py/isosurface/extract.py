@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._atomic import check_output_path
 from .._resources import peak_rss_mb
 from ..codec import TetcReader
 from ..codec.container import MAGIC
@@ -28,9 +29,14 @@ from ..errors import CorruptFileError, OptionError, ReadError
 from ..mesh import TetMesh, mesh_batches, read_mesh
 from ..simplify.filter import SimplifyFilter
 from ..simplify.levels import resolve_target, target_ancestors
+from ..render.camera import Camera
+from ..render.image import png_bytes, to_rgb8, write_image
+from ..render.surface import render_surface
 from . import marching, qem
+from .io import write_surface
 
 DEFAULT_BATCH_FACES = 100_000
+MAX_PREVIEW_PIXELS = 1 << 26
 CHUNK_TETS = 8192  # tets per extraction step (rounds start between steps)
 #: keep at least this share of ``batch_faces`` modifiable faces between rounds (Hou & Chen's
 #: initial phase: early rounds must not over-decimate what little has been seen)
@@ -76,6 +82,49 @@ class Surface:
         if self.n_points == 0:
             return np.zeros(3), np.zeros(3)
         return self.points.min(axis=0), self.points.max(axis=0)
+
+    def save(self, path, *, force: bool = False) -> None:
+        """Write the surface; the format follows the extension (``.vtp``, ``.ply``, ``.obj``, ``.stl``, ...)."""
+        write_surface(self, path, force=force)
+
+    def preview(self, *, size=512, azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0) -> np.ndarray:
+        """A shaded picture of the surface: (H, W, 3) uint8, Lambert with a headlight.
+
+        The camera follows ``tetc render``'s conventions and is fitted to the box of the mesh the
+        surface was extracted from (``stats["bbox"]``), so the preview lines up with a volume
+        render of the same view. Several isovalues are coloured by value.
+
+        Examples
+        --------
+        >>> from gatun_py.mesh.synthetic import jittered_grid
+        >>> s = isosurface(jittered_grid((5, 5, 5), jitter=0.1), values=1.5)
+        >>> s.preview(size=(48, 32)).shape
+        (32, 48, 3)
+        """
+        w, h = (int(size), int(size)) if np.isscalar(size) else (int(size[0]), int(size[1]))
+        if w <= 0 or h <= 0 or w * h > MAX_PREVIEW_PIXELS:
+            raise OptionError(f"preview size {w}x{h}: each side must be >= 1 and the image at most "
+                              f"{MAX_PREVIEW_PIXELS} pixels")
+        for name, v in (("azimuth", azimuth), ("elevation", elevation), ("zoom", zoom)):
+            if not math.isfinite(v):
+                raise OptionError(f"{name} must be a finite number, got {v}")
+        if zoom <= 0:
+            raise OptionError(f"zoom must be > 0, got {zoom}")
+        box = self.stats.get("bbox")
+        bbox = (np.asarray(box[0], float), np.asarray(box[1], float)) if box is not None else None
+        scal = self.point_data.get("scalar") if len(self.stats.get("values", ())) > 1 else None
+        rgba = render_surface(self.points, self.triangles, Camera(w, h, azimuth, elevation, zoom), scalar=scal,
+                              bbox=bbox)
+        return to_rgb8(rgba)
+
+    def save_preview(self, path, *, size=512, azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0,
+                     force: bool = False) -> None:
+        """Write :meth:`preview` as an image (PNG, JPEG, WebP, TIFF or BMP from the extension), atomically."""
+        check_output_path(path, force=force)
+        write_image(path, self.preview(size=size, azimuth=azimuth, elevation=elevation, zoom=zoom), force=force)
+
+    def _repr_png_(self) -> bytes:
+        return png_bytes(self.preview(size=384, azimuth=30, elevation=20))
 
 
 # -- importance ------------------------------------------------------------------------------------

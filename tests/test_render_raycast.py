@@ -323,3 +323,32 @@ def test_face_table_holds_each_face_with_its_two_tets_across_rehash(mul):
             codes = table[slot, [FT.FT_TET0, FT.FT_TET1]]
             assert {int(x) >> 1 for x in codes if x >= 0} == fourth
         assert FT._hash_find(table, mul, 0, 0, 0) == -1
+
+
+@settings(max_examples=10, deadline=None)
+@given(mesh=mesh_strategy(), seed=st.integers(0, 1000), mode=st.sampled_from(["volume", "face"]),
+       n_batches=st.integers(2, 7))
+def test_snapshots_fill_in_toward_the_final_image(mesh, seed, mode, n_batches):
+    """Partial images of a streaming render only gain opacity, never exceed the final image's, the
+    pixels they call finished already hold their final colour, and taking them changes nothing."""
+    from gatun_py.mesh import mesh_batches
+    from gatun_py.render.stream import render_batches
+
+    cam = Camera(12, 10, azimuth=25.0, elevation=15.0)
+    order = np.random.default_rng(seed).permutation(mesh.n_tets)
+    batch = max(1, -(-mesh.n_tets // n_batches))
+    shots = []
+    res = render_batches(mesh_batches(mesh, batch_tets=batch, order=order), cam, TF, mode=mode,
+                         scalar_range=mesh.scalar_range, partial=lambda *shot: shots.append(shot),
+                         partial_every_s=0.0)
+    plain = render_batches(mesh_batches(mesh, batch_tets=batch, order=order), cam, TF, mode=mode,
+                           scalar_range=mesh.scalar_range)
+    assert np.array_equal(res.image, plain.image)
+    assert len(shots) == -(-mesh.n_tets // batch)
+    alphas = [image[..., 3] for image, _ in shots] + [res.image[..., 3]]
+    for a, b in zip(alphas, alphas[1:]):
+        assert np.all(a <= b + 1e-6)
+    for image, finished in shots:
+        np.testing.assert_array_equal(image[finished], res.image[finished])
+    assert shots[-1][1].sum() >= shots[0][1].sum()
+    np.testing.assert_allclose(shots[-1][0], res.image, atol=1e-5)

@@ -146,11 +146,14 @@ def test_a_vanished_or_corrupt_file_raises_and_recovers(own_copy, tmp_path):
 
 # -- the server ------------------------------------------------------------------------------------
 
-def _serve(path, coro):
+def _serve(path, coro, **session_attrs):
     """Run ``coro(client, app)`` against an in-process server of ``path``."""
 
     async def main():
-        app = make_app(ViewerSession(path, costs=Costs()), TOKEN)
+        session = ViewerSession(path, costs=Costs())
+        for k, v in session_attrs.items():
+            setattr(session, k, v)
+        app = make_app(session, TOKEN)
         async with TestClient(TestServer(app, host="127.0.0.1")) as client:
             return await coro(client, app)
 
@@ -214,9 +217,9 @@ def test_vanished_file_is_an_error_not_a_crash(own_copy, tmp_path):
 
 
 async def _frames(ws, n_final=1, timeout=120):
-    """Receive (header, image) pairs until ``n_final`` frames (non-preview) arrived."""
+    """Receive (header, image) pairs until ``n_final`` frames (neither preview nor partial) arrived."""
     out, header = [], None
-    while sum(1 for h, _ in out if not h.get("preview")) < n_final:
+    while sum(1 for h, _ in out if not (h.get("preview") or h.get("partial"))) < n_final:
         msg = await ws.receive(timeout=timeout)
         if msg.type == aiohttp.WSMsgType.TEXT:
             header = json.loads(msg.data)
@@ -246,12 +249,36 @@ def test_websocket_keeps_only_the_newest_request(post_tetc):
         assert app[SERVICE].frames == len(ids)
         # At rest: the still request gives the full-quality PNG, equal to tetc render's image.
         await ws.send_str(json.dumps({"type": "frame", "id": n + 1, "still": True, "tf": "post", "camera": CAM}))
-        (head, data), = [f for f in await _frames(ws) if not f[0].get("preview")]
+        (head, data), = [f for f in await _frames(ws) if not (f[0].get("preview") or f[0].get("partial"))]
         assert head["final"] and head["mime"] == "image/png"
         assert np.array_equal(_decode(data), _reference(post_tetc, CAM))
         await ws.close()
 
     _serve(post_tetc, check)
+
+
+def test_a_still_frame_fills_in_before_it_is_final(post_tetc):
+    """While the still frame streams, images of it filling in arrive first: opaque exactly where
+    the pixel is final (and then equal to the final image), transparent elsewhere."""
+    async def check(client, app):
+        ws = await client.ws_connect(f"/ws?token={TOKEN}")
+        cam = {**CAM, "width": 64, "height": 48}
+        await ws.send_str(json.dumps({"type": "frame", "id": 1, "still": True, "tf": "post", "camera": cam}))
+        got = await _frames(ws)
+        partials = [(h, d) for h, d in got if h.get("partial")]
+        assert partials and not partials[-1][0]["final"] and got[-1][0]["final"]
+        final = _decode(got[-1][1])
+        assert np.array_equal(final, _reference(post_tetc, cam))
+        for head, data in partials:
+            rgba = np.asarray(Image.open(io.BytesIO(data)).convert("RGBA"))
+            done = rgba[..., 3] == 255
+            assert set(np.unique(rgba[..., 3])) <= {0, 255}
+            assert abs(done.mean() - head["stats"]["finished_share"]) < 1e-9
+            # lossy WebP: the finished pixels are the final ones up to the codec's error
+            assert np.abs(rgba[..., :3][done].astype(int) - final[done]).mean() < 6
+        await ws.close()
+
+    _serve(post_tetc, check, partial_every_s=0.0)
 
 
 def test_two_clients_are_both_served(post_tetc):

@@ -107,7 +107,8 @@ def file_render_defaults(reader) -> tuple[np.ndarray, np.ndarray, tuple[float, f
 # -- running ------------------------------------------------------------------------------------
 
 def render_tetc(source, view: View, *, ratio: float | None = None, level: int | None = None,
-                pipeline: str = "streaming", target: Target | None = None, progress=None) -> PipelineResult:
+                pipeline: str = "streaming", target: Target | None = None, progress=None,
+                partial=None, partial_every_s: float = 0.25) -> PipelineResult:
     """Render a ``.tetc`` file at a ratio or stored level.
 
     Parameters
@@ -122,6 +123,9 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
         A target already resolved (e.g. by the time-budget planner).
     progress : callable, optional
         Called with the number of tets decoded so far.
+    partial, partial_every_s : optional
+        Streaming pipeline: ``partial(image, finished)`` is called with the image so far at most every
+        ``partial_every_s`` seconds (see :func:`gatun_py.render.stream.render_batches`).
 
     Returns
     -------
@@ -151,7 +155,8 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
     anc = target_ancestors(reader, target, times=forest_times)
     lv = reader.level_meta(target.level)
     if pipeline == "streaming":
-        res, fstats = _run_streaming(reader, target, anc, camera, view, rng, step, times, progress)
+        res, fstats = _run_streaming(reader, target, anc, camera, view, rng, step, times, progress,
+                                     (partial, partial_every_s))
     else:
         res, fstats = _run_generic(reader, target, anc, camera, view, rng, step, times)
     times["decode_s"] += forest_times["forest_decode_s"]
@@ -167,7 +172,7 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
     return PipelineResult(res.image, stats)
 
 
-def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress):
+def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress, partial=(None, 0.25)):
     lv = reader.level_meta(target.level)
     # A lean render holds about one batch of tets in flight: smaller batches, less memory.
     batches = reader.iter_decode(target.level, scalar=view.scalar, component=view.component,
@@ -177,7 +182,8 @@ def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress
         filt = SimplifyFilter(anc)
         batches = filt.filter(batches)
     res = render_batches(batches, camera, view.tf, mode=view.mode, step=step, scalar_range=rng,
-                         expected_tets=int(lv["tets"]), lean=view.lean, progress=progress)
+                         expected_tets=int(lv["tets"]), lean=view.lean, progress=progress, partial=partial[0],
+                         partial_every_s=partial[1])
     # render_batches times the wait for each batch: the decoder, plus the filter when there is one.
     times["decode_s"] = res.stats["decode_s"]
     if filt is not None:

@@ -25,7 +25,7 @@ from ._boundary import find_segments
 from ._facetable import (FT_INFO, FT_NODES, FT_PARKED, FT_TABLE, INFO_FACES, INFO_MUL, INFO_NODES, count_crossings,
                          count_live, insert_tets, make_face_table, park, rehash, with_nodes, with_table)
 from ._segments import (FOLD_END, SEG_FACE, SEG_FROM, SEG_RAY, SEG_SAMPLES, SEG_STATE, SEG_STEPS, STATE_ACTIVE,
-                        STATE_STUCK)
+                        STATE_DONE, STATE_STUCK)
 from ._walk import MODE_FACE, MODE_VOLUME, advance, compose, make_sampling, settle
 from .camera import Camera, FittedCamera
 from .transfer import TransferFunction, load_transfer_function
@@ -186,6 +186,33 @@ class StreamingRaycaster:
         unfinished, hidden = compose(self._seg, image)
         self._t_render += time.perf_counter() - t0
         return self._result(image, unfinished, hidden)
+
+    def snapshot(self) -> tuple[np.ndarray, np.ndarray]:
+        """The image of what has arrived so far, and which of its pixels are final.
+
+        Returns
+        -------
+        image : (H, W, 4) float32
+            Premultiplied RGBA: every segment contributes its two subsegments as far as they have
+            walked (the gap between their marks counts as empty), so the picture fills in as the
+            stream arrives and its opacity never exceeds the final image's.
+        finished : (H, W) bool
+            Pixels whose every segment is done (or that hit nothing): they already hold their
+            final colour.
+
+        Cheap (one pass over the segments); the render goes on unchanged.
+        """
+        t0 = time.perf_counter()
+        cam = self.fitted if self._started else self.camera  # nothing arrived yet: a blank image
+        image = np.zeros((cam.width * cam.height, 4), dtype=np.float64)
+        finished = np.zeros(cam.width * cam.height, dtype=np.bool_)
+        if self._started:
+            finished[:] = True
+            if self._nseg:
+                compose(self._seg, image)
+                finished[self._seg[SEG_RAY][self._seg[SEG_STATE] != STATE_DONE]] = False
+        self._t_render += time.perf_counter() - t0
+        return image.reshape(cam.height, cam.width, 4).astype(np.float32), finished.reshape(cam.height, cam.width)
 
     # -- internals ------------------------------------------------------------------------------
     def _check_ids(self, ids, what):

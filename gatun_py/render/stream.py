@@ -8,7 +8,8 @@ from .raycast import RenderResult, StreamingRaycaster
 
 
 def render_batches(batches, camera, tf, *, mode: str = "volume", step: float | None = None, scalar_range=None,
-                   expected_tets: int | None = None, lean: bool = False, progress=None) -> RenderResult:
+                   expected_tets: int | None = None, lean: bool = False, progress=None, partial=None,
+                   partial_every_s: float = 0.25) -> RenderResult:
     """Stream-render ``batches`` (objects with ``points``, ``density``, ``boundary``, ``tets``).
 
     Parameters
@@ -19,6 +20,11 @@ def render_batches(batches, camera, tf, *, mode: str = "volume", step: float | N
         As for :class:`StreamingRaycaster`.
     progress : callable, optional
         Called with the number of tets of every batch once it is rendered.
+    partial : callable, optional
+        Called as ``partial(image, finished)`` with :meth:`StreamingRaycaster.snapshot` (the image so
+        far and its pixels that are final) between batches, at most
+        every ``partial_every_s`` seconds: a viewer shows the frame
+        filling in while a long render streams.
 
     Returns
     -------
@@ -29,6 +35,7 @@ def render_batches(batches, camera, tf, *, mode: str = "volume", step: float | N
                             expected_tets=expected_tets, lean=lean)
     decode_s = 0.0
     n_batches = 0
+    last_partial = time.perf_counter()
     it = iter(batches)
     while True:
         t0 = time.perf_counter()
@@ -47,6 +54,9 @@ def render_batches(batches, camera, tf, *, mode: str = "volume", step: float | N
             rc.add_tets(b.tets)
             if progress is not None:
                 progress(len(b.tets))
+            if partial is not None and time.perf_counter() - last_partial >= partial_every_s:
+                partial(*rc.snapshot())
+                last_partial = time.perf_counter()
     res = rc.finish()
     res.stats["decode_s"] = decode_s
     res.stats["batches"] = n_batches

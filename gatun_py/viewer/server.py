@@ -17,7 +17,8 @@ One render runs at a time, whoever asks (a single worker thread behind a lock); 
 keeps only its newest request, so a client that sends faster than frames come back never queues
 old views. A still request (``"still": true``) is rendered at full quality as a PNG (lossless: it equals
 ``tetc render`` of the same view), preceded by a quick
-preview when the full frame is predicted to take long, and abandoned between batches as soon as a
+preview when the full frame is predicted to take long and by JPEG images of it filling in while it
+streams (``"partial": true``, at most four a second), and abandoned between batches as soon as a
 newer request of the same client arrives; a drag frame is abandoned likewise when a still request
 follows it (its image would be replaced at once).
 """
@@ -57,10 +58,17 @@ class FrameService:
         self.lock = asyncio.Lock()
         self.frames = 0
 
-    async def render(self, req, cancelled=None):
+    async def render(self, req, cancelled=None, partial=None):
+        """Render ``req`` on the render thread; ``partial`` (a coroutine function taking ``data, mime,
+        stats``) is scheduled on the event loop for every image of the frame filling in."""
         async with self.lock:
             loop = asyncio.get_running_loop()
-            frame = await loop.run_in_executor(self.executor, lambda: self.session.render(req, cancelled=cancelled))
+            on_partial = None
+            if partial is not None:
+                def on_partial(data, mime, stats):
+                    asyncio.run_coroutine_threadsafe(partial(data, mime, stats), loop)
+            frame = await loop.run_in_executor(
+                self.executor, lambda: self.session.render(req, cancelled=cancelled, partial=on_partial))
             self.frames += 1
             return frame
 
@@ -250,7 +258,12 @@ class _Client:
                              "stats": f.stats}, f.data)
             if self.superseded():
                 return
-        f = await self.service.render(req, cancelled=self.superseded)
+        async def show_partial(data, mime, stats):
+            if not self.superseded():
+                await self.send({"type": "frame", "id": rid, "final": False, "partial": True, "mime": mime,
+                                 "stats": stats}, data)
+
+        f = await self.service.render(req, cancelled=self.superseded, partial=show_partial)
         f.stats["still_s"] = time.perf_counter() - t0
         await self.send({"type": "frame", "id": rid, "final": True, "mime": f.mime, "stats": f.stats}, f.data)
 

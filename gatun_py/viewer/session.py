@@ -30,6 +30,7 @@ from ..simplify.levels import resolve_target
 FORMATS = {"jpeg": "image/jpeg", "png": "image/png", "webp": "image/webp"}
 MAX_VIEW_SIZE = 2048  # pixels per side the viewer renders
 DEFAULT_BUDGET_S = 0.1
+PARTIAL_QUALITY = 80  # WebP quality of the images a still frame shows while it streams
 # Frames are planned to a share of the budget: the model predicts a typical frame, and the same work
 # takes longer now and then (other programs, the cache). The share starts at PLAN_SHARE and then
 # follows the spread of this session's frames: the target is 90 % of frames within 1.2 x the
@@ -204,6 +205,9 @@ class ViewerSession:
     with a clear message (the server shows it and keeps serving).
     """
 
+    #: seconds between the images of a still frame filling in (see :meth:`render`)
+    partial_every_s = 0.25
+
     def __init__(self, path, *, costs=None):
         self.path = os.fspath(path)
         self.costs = costs if costs is not None else machine_costs()[0]
@@ -285,8 +289,12 @@ class ViewerSession:
 
     # -- frames ---------------------------------------------------------------------------------
 
-    def render(self, req: FrameRequest, *, cancelled=None) -> Frame:
+    def render(self, req: FrameRequest, *, cancelled=None, partial=None) -> Frame:
         """Plan, render, encode one frame; ``cancelled()`` returning True aborts it between batches.
+
+        ``partial(data, mime, stats)``, when given, receives the frame as it fills in while a long
+        frame streams (at most every ``partial_every_s`` seconds, between batches): a WebP whose
+        opaque pixels are final and the rest transparent.
 
         With a budget, the planner picks the level and merges (and, when levels alone cannot make it,
         a coarser sample step and a smaller image, which the page scales up) predicted to fit;
@@ -322,8 +330,23 @@ class ViewerSession:
             if cancelled is not None and cancelled():
                 raise FrameCancelled()
 
+        on_image = None
+        if partial is not None:
+            def on_image(image, finished):
+                if cancelled is not None and cancelled():
+                    raise FrameCancelled()
+                # only the pixels that are final: drawn over the preview on the page, the frame
+                # fills in with its full-quality pixels instead of flashing the unwalked ones black
+                rgba8 = np.concatenate([to_rgb8(image), (finished * np.uint8(255))[..., None]], axis=2)
+                buf = io.BytesIO()
+                Image.fromarray(rgba8, "RGBA").save(buf, format="WEBP", quality=PARTIAL_QUALITY)
+                partial(buf.getvalue(), FORMATS["webp"], {"partial": True, "server_s": time.perf_counter() - t0,
+                                                          "finished_share": float(finished.mean()),
+                                                          "width": camera.width, "height": camera.height})
+
         t_plan = time.perf_counter()
-        res = render_tetc(self.reader, view, target=target, progress=progress)
+        res = render_tetc(self.reader, view, target=target, progress=progress, partial=on_image,
+                          partial_every_s=self.partial_every_s)
         t_render = time.perf_counter()
         rgb8 = to_rgb8(res.image)
         data = encode_image(rgb8, req.fmt, req.quality)

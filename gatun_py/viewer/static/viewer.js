@@ -99,9 +99,23 @@
     const sentAt = state.sent.get(head.id);
     for (const id of state.sent.keys()) if (id < head.id) state.sent.delete(id);
     if (head.id < state.shownId) return; // an older view than the one on screen: never snap back
+    if (head.partial && state.finalId === head.id) return; // the full frame is already on screen
     const bitmap = await createImageBitmap(ev.data);
-    const blend = head.final || head.preview;
-    draw(bitmap, blend);
+    if (head.partial) {
+      // the still frame filling in: its finished pixels are opaque, the rest transparent, so the
+      // preview underneath shows until the full-quality pixels arrive
+      if (blendAnim) { cancelAnimationFrame(blendAnim); blendAnim = null; }
+      ctx.globalAlpha = 1;
+      ctx.drawImage(bitmap, 0, 0, view.width, view.height);
+      // the last frame's figures stay; only the progress of the fill changes
+      window.tetcStats = { ...(window.tetcStats || {}), partial: true, finished_share: head.stats.finished_share,
+                           partial_s: head.stats.server_s };
+      showStats(window.tetcStats);
+      return;
+    } else {
+      draw(bitmap, head.final || head.preview);
+    }
+    if (head.final) state.finalId = head.id;
     state.shownId = head.id;
     hideError();
     state.frames += 1;
@@ -110,7 +124,7 @@
     const latency = sentAt !== undefined ? (now - sentAt) / 1000 : null;
     const s = head.stats;
     window.tetcStats = {
-      ...s, id: head.id, final: !!head.final, preview: !!head.preview,
+      ...s, id: head.id, final: !!head.final, preview: !!head.preview, partial: false,
       latency_s: latency, transfer_s: latency !== null ? Math.max(latency - s.server_s, 0) : null,
       fps: state.received.length, frames: state.frames,
       camera: { ...state.camera }, received_at: now,
@@ -141,7 +155,8 @@
   function fmtMs(s) { return s === null || s === undefined ? "–" : (1000 * s).toFixed(1) + " ms"; }
   function showStats(s) {
     const rows = [
-      ["quality", s.final ? "full" : s.preview ? "preview" : "interactive"],
+      ["quality", s.partial ? `filling in ${Math.round(100 * (s.finished_share || 0))} %`
+        : s.final ? "full" : s.preview ? "preview" : "interactive"],
       ["level / cut", `level ${s.level}, ${s.merges} merges (ratio ${s.ratio.toFixed(4)}), ${s.cut}`],
       ["tets rendered", s.tets_rendered.toLocaleString()],
       ["image", `${s.width}×${s.height}` + (s.step_factor !== 1 ? `, step ×${s.step_factor}` : "")],

@@ -33,7 +33,7 @@ from .mesh.io import mesh_output_format
 from .pipeline.budget import load_costs, plan_file_budget, remember_frame
 from .pipeline.stream import PIPELINES, View, is_tetc, render_mesh_file, render_tetc
 from .render.camera import Camera
-from .render.image import add_colorbar, image_bytes, parse_colour, to_rgb8, write_image
+from .render.image import add_colorbar, image_bytes, parse_colour, to_rgb8, upscale_rgb8, write_image
 from .render.raycast import MODES
 from .render.transfer import load_transfer_function
 from .simplify import build_levels, decimate, storage_forests
@@ -516,7 +516,12 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
             if load_costs() is None:
                 log("measuring this machine's rendering costs for the budget (once, under a second)...")
             target, plan, planner, _ = plan_file_budget(f.reader, view, budget)
-            planned = {"predicted_s": plan.predicted_s, "budget_s": budget}
+            planned = {"predicted_s": plan.predicted_s, "budget_s": budget, "image_scale": plan.scale}
+            if plan.scale != 1.0:
+                view = dataclasses.replace(view, camera=dataclasses.replace(
+                    view.camera, width=max(1, round(width * plan.scale)), height=max(1, round(height * plan.scale))))
+                log(f"note: no level renders {width}x{height} within {budget:g} s: rendering "
+                    f"{view.camera.width}x{view.camera.height} and scaling it up")
             if not plan.feasible:
                 log(f"note: the budget of {budget:g} s cannot be met: rendering the coarsest level "
                     f"(predicted {plan.predicted_s:.3f} s)")
@@ -544,6 +549,8 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
     st.update(planned)
     rng = scalar_range if scalar_range is not None else tuple(float(v) for v in rng)
     rgb = to_rgb8(result.image, bg)
+    if rgb.shape[:2] != (height, width):  # a budget render drawn smaller
+        rgb = upscale_rgb8(rgb, width, height)
     if colorbar:
         table = tf.table(rng)[0]
         rgb = add_colorbar(rgb, table, rng, name, bg)

@@ -199,6 +199,23 @@ def test_frame_planner_learns_from_a_frame(post_tetc, tmp_path, monkeypatch):
     assert planner.model.frames == 1
 
 
+def test_still_plans_shrink_the_image_only_when_no_level_fits(post_tetc):
+    """``rescale``: full size at any level first; a smaller image only when even the coarsest level
+    cannot make it at full size; the step is never coarsened for a still."""
+    reader = TetcReader(post_tetc)
+    planner = FramePlanner(reader, TimeModel(Costs()), step=float(reader.meta["render_step"]))
+    fitted = Camera(512, 512).fit(*[np.asarray(x) for x in reader.meta["bbox"]])
+    coarsest_full = planner.plan(1e-9, fitted)
+    for budget in (100.0, 0.5 * coarsest_full.predicted_s, 1.01 * coarsest_full.predicted_s):
+        plan = planner.plan(budget, fitted, rescale=True)
+        assert plan.step_factor == 1.0
+        if plan.scale < 1.0:
+            assert budget < coarsest_full.predicted_s and plan.feasible  # no level fits at full size
+        else:
+            assert plan.feasible and (plan.level, plan.merges) == (lambda p: (p.level, p.merges))(
+                planner.plan(budget, fitted))
+
+
 @pytest.mark.parametrize("drag", [False, True])
 def test_drag_plans_coarsen_step_and_size_only_when_levels_cannot(post_tetc, drag):
     reader = TetcReader(post_tetc)

@@ -53,9 +53,11 @@ def test_level_and_budget(post_tetc, tmp_path, monkeypatch):
     res = run("render", post_tetc, "-o", tmp_path / "z.png", "--tf", "post", "--size", "40x32", "--budget", "1e-9",
               "--stats")
     assert res.exit_code == 0
-    assert "cannot be met" in res.stderr
+    assert "cannot be met" in res.stderr and "scaling it up" in res.stderr
     coarsest = max(int(lv["level"]) for lv in TetcReader(post_tetc).levels)
-    assert json.loads(res.stdout)["level"] == coarsest
+    st = json.loads(res.stdout)
+    assert st["level"] == coarsest and st["image_scale"] < 1
+    assert read_rgb(tmp_path / "z.png").shape == (32, 40, 3)  # the size asked for, scaled up
 
 
 def test_bad_combinations(post_tetc, tmp_path):

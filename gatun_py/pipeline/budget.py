@@ -380,6 +380,10 @@ PROBE_TETS = 2000
 
 DRAG_SETTINGS = ((1.0, 1.0), (1.0, 2.0), (1.0, 4.0), (0.75, 4.0), (0.5, 4.0), (0.35, 4.0), (0.25, 4.0))
 MAX_DRAG_RATIO = 1 - 1 / 2 ** 9
+# A still render with a budget (``tetc render --budget``) keeps the file's step and takes the
+# finest level that fits at full size; only when even the coarsest level cannot, it renders a
+# smaller image and scales it up, as the viewer does while dragging.
+STILL_SETTINGS = ((1.0, 1.0), (0.75, 1.0), (0.5, 1.0), (0.35, 1.0), (0.25, 1.0))
 
 
 class FramePlanner:
@@ -439,20 +443,22 @@ class FramePlanner:
         return self.estimator.estimate(self.level_size(level), merges, pixels, coverage, step_factor=step_factor,
                                        decoded=self.decoded(level))
 
-    def plan(self, budget_s: float, fitted_camera, *, drag: bool = False) -> BudgetPlan:
-        """The finest frame predicted to fit ``budget_s``; ``drag``: also coarsen step and image."""
+    def plan(self, budget_s: float, fitted_camera, *, drag: bool = False, rescale: bool = False) -> BudgetPlan:
+        """The finest frame predicted to fit ``budget_s``; ``drag``: also coarsen step and image
+        (:data:`DRAG_SETTINGS`); ``rescale``: also shrink the image when no level fits at full size
+        (:data:`STILL_SETTINGS`)."""
         if not (isinstance(budget_s, (int, float)) and math.isfinite(budget_s) and budget_s > 0):
             raise OptionError(f"the budget must be a positive number of seconds, got {budget_s!r}")
         coverage = self.estimator.coverage(fitted_camera)
         first = None
-        for scale, step_factor in (DRAG_SETTINGS if drag else DRAG_SETTINGS[:1]):
+        for scale, step_factor in (DRAG_SETTINGS if drag else STILL_SETTINGS if rescale else DRAG_SETTINGS[:1]):
             px = max(int(round(fitted_camera.width * scale)), 1) * max(int(round(fitted_camera.height * scale)), 1)
             plan = plan_for_budget(
                 self.levels, lambda i, n: self.model.predict(self.estimate(self.levels[i].level, n, px, coverage,
                                                                            step_factor), key=self.levels[i].level),
                 float(budget_s), self.max_merges)
             plan = BudgetPlan(plan.level, plan.merges, plan.predicted_s, plan.feasible, scale, step_factor)
-            if plan.feasible and plan.merges <= MAX_DRAG_RATIO * self.points:
+            if plan.feasible and (not drag or plan.merges <= MAX_DRAG_RATIO * self.points):
                 return plan
             if first is None or (plan.feasible and not first.feasible):
                 first = plan
@@ -612,7 +618,9 @@ def plan_file_budget(path_or_reader, view, budget_s: float, *, reseed: bool = Fa
     """(Target, BudgetPlan, FramePlanner, seeded_now) for rendering a file within ``budget_s``.
 
     The budget covers the whole command from opening the file to the PNG written: what the
-    probe and the seeding (first use on a machine) took is taken off it before planning.
+    probe and the seeding (first use on a machine) took is taken off it before planning. When
+    even the coarsest level cannot make it at the requested size, ``plan.scale < 1`` asks for a
+    smaller image, to be scaled up.
     """
     if not (isinstance(budget_s, (int, float)) and math.isfinite(float(budget_s)) and budget_s >= 0):
         raise OptionError(f"--budget must be a number of seconds >= 0, got {budget_s}")
@@ -624,7 +632,7 @@ def plan_file_budget(path_or_reader, view, budget_s: float, *, reseed: bool = Fa
     planner = FramePlanner(reader, TimeModel(costs, per_pixel_extra=png_s), step=view.step or step, mode=view.mode)
     planner.probe(reader, view)
     left = max(float(budget_s) - (time.perf_counter() - t0), 1e-3)
-    plan = planner.plan(left, view.camera.fit(lo, hi))
+    plan = planner.plan(left, view.camera.fit(lo, hi), rescale=True)
     return planner.target(plan), plan, planner, seeded
 
 

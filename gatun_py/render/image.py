@@ -42,6 +42,19 @@ def to_rgb8(image, background=(0.0, 0.0, 0.0)) -> np.ndarray:
     return np.clip(np.rint(rgb * 255.0), 0, 255).astype(np.uint8)
 
 
+def upscale_rgb8(rgb8: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(height, width, 3) uint8: ``rgb8`` resized with bilinear filtering (a budget render drawn small).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> upscale_rgb8(np.full((2, 3, 3), 200, np.uint8), 6, 4).shape
+    (4, 6, 3)
+    """
+    img = Image.fromarray(np.ascontiguousarray(rgb8, dtype=np.uint8))
+    return np.asarray(img.resize((int(width), int(height)), Image.BILINEAR))
+
+
 def parse_colour(text) -> tuple[float, float, float]:
     """A colour as RGB in 0..1 from a name (``white``), ``#rrggbb`` or ``r,g,b`` in 0..1.
 

@@ -36,6 +36,15 @@ def test_golden_file_is_unchanged():
     assert hashlib.sha256(GOLDEN.read_bytes()).hexdigest() == EXPECTED["file_sha256"]
 
 
+def _check_forest(reader, level, want):
+    forest = reader.read_forest(int(level))
+    if want["forest_parent"] is None:
+        assert forest is None
+    else:
+        assert _sha(forest[0].astype(np.int32)) == want["forest_parent"]
+        assert _sha(forest[1].astype(np.int32)) == want["forest_rank"]
+
+
 @pytest.mark.parametrize("level", sorted(EXPECTED["levels"], key=int))
 def test_format_1_decodes_bit_exactly(level):
     r = TetcReader(GOLDEN)
@@ -46,12 +55,7 @@ def test_format_1_decodes_bit_exactly(level):
     assert _sha(m.points) == want["points"]
     assert _sha(m.density) == want["density"]
     assert _sha(m.tets.astype(np.int32)) == want["tets"]
-    forest = r.read_forest(int(level))
-    if want["forest_parent"] is None:
-        assert forest is None
-    else:
-        assert _sha(forest[0].astype(np.int32)) == want["forest_parent"]
-        assert _sha(forest[1].astype(np.int32)) == want["forest_rank"]
+    _check_forest(r, level, want)
 
 
 GOLDEN_V2 = DATA / "post_v2.tetc"
@@ -73,12 +77,7 @@ def test_format_2_decodes_bit_exactly(level):
     assert _sha(m.tets.astype(np.int32)) == want["tets"]
     got = {name: [str(a.dtype), list(a.shape), _sha(a)] for name, a in m.point_data.items()}
     assert got == want["arrays"]
-    forest = r.read_forest(int(level))
-    if want["forest_parent"] is None:
-        assert forest is None
-    else:
-        assert _sha(forest[0].astype(np.int32)) == want["forest_parent"]
-        assert _sha(forest[1].astype(np.int32)) == want["forest_rank"]
+    _check_forest(r, level, want)
 
 
 def test_golden_v2_is_the_generated_mesh():

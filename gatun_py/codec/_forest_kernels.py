@@ -51,7 +51,8 @@ def adjacency(tets, n):
     out = 0
     row_start = np.zeros(n + 1, np.int64)
     for v in range(n):
-        row = np.sort(nbrs[start[v]:start[v + 1]])
+        row = nbrs[start[v]:start[v + 1]]
+        _sort_small(row, row.shape[0])
         row_start[v] = out
         prev = -1
         for x in row:
@@ -154,12 +155,29 @@ def _find(uf, x):
 
 
 @njit(cache=True, nogil=True)
-def _candidates(start, nbrs, uf, v, tier, first_child, next_sibling, exclude, out):
-    """Candidate parents of v's merge, sorted by id, written to ``out``; returns their number.
+def _sort_small(a, m):
+    """Sort ``a[:m]`` in place (insertion sort: the rows are a few dozen values, and np.sort
+    would allocate a copy per call)."""
+    if m > 64:  # a vertex that absorbed many others: avoid the quadratic sort
+        a[:m] = np.sort(a[:m])
+        return
+    for i in range(1, m):
+        x = a[i]
+        j = i - 1
+        while j >= 0 and a[j] > x:
+            a[j + 1] = a[j]
+            j -= 1
+        a[j + 1] = x
+
+
+@njit(cache=True, nogil=True)
+def _candidates(start, nbrs, uf, v, tier, first_child, next_sibling, exclude, out, count):
+    """Candidate parents of v's merge, written to ``out``; returns their number.
 
     Tier 0: the live representatives of v's neighbours. Tier 1: those of the neighbours of v's
-    children (vertices merged into v before), minus tier 0's (``exclude[:]`` holds tier 0 then).
-    v itself is never a candidate.
+    children (vertices merged into v before), minus tier 0's (``exclude[:]`` marks tier 0's then).
+    v itself is never a candidate. Order: by how many of the listed neighbours lead to the
+    candidate (most first: the merge target usually shares the most of v's star), then by id.
     """
     m = 0
     if tier == 0:
@@ -170,19 +188,33 @@ def _candidates(start, nbrs, uf, v, tier, first_child, next_sibling, exclude, ou
         c = first_child[v]
         while c >= 0:
             for i in range(start[c], start[c + 1]):
-                if m == out.shape[0]:
-                    break  # cannot happen: out is sized for every neighbour of every vertex
-                out[m] = _find(uf, nbrs[i])
+                out[m] = _find(uf, nbrs[i])  # out holds every neighbour of every vertex: no overflow
                 m += 1
             c = next_sibling[c]
-    row = np.sort(out[:m])
+    _sort_small(out, m)
     k = 0
-    prev = -1
-    for x in row:
-        if x != prev and x != v and not (tier == 1 and exclude[x]):
+    i = 0
+    while i < m:
+        x = out[i]
+        j = i
+        while j < m and out[j] == x:
+            j += 1
+        if x != v and not (tier == 1 and exclude[x]):
             out[k] = x
+            count[k] = j - i
             k += 1
-        prev = x
+        i = j
+    # stable insertion sort by count, descending
+    for i in range(1, k):
+        x = out[i]
+        c = count[i]
+        j = i - 1
+        while j >= 0 and count[j] < c:
+            out[j + 1] = out[j]
+            count[j + 1] = count[j]
+            j -= 1
+        out[j + 1] = x
+        count[j + 1] = c
     return k
 
 
@@ -239,12 +271,13 @@ def encode_forest_kernel(st, out, start, nbrs, parent, rank, k):
     next_sibling = np.full(n, -1, np.int64)
     exclude = np.zeros(n, np.bool_)
     cand = np.empty(max(1, nbrs.shape[0]), np.int64)
+    cand_count = np.empty(max(1, nbrs.shape[0]), np.int64)
     for r in range(k):
         v = of_rank[r]
         p = parent[v]
         found = False
         for tier in range(2):
-            m = _candidates(start, nbrs, uf, v, tier, first_child, next_sibling, exclude, cand)
+            m = _candidates(start, nbrs, uf, v, tier, first_child, next_sibling, exclude, cand, cand_count)
             if tier == 0:
                 for i in range(m):
                     exclude[cand[i]] = True
@@ -318,11 +351,12 @@ def decode_forest_kernel(st, data, start, nbrs, k, parent, rank):
     next_sibling = np.full(n, -1, np.int64)
     exclude = np.zeros(n, np.bool_)
     cand = np.empty(max(1, nbrs.shape[0]), np.int64)
+    cand_count = np.empty(max(1, nbrs.shape[0]), np.int64)
     for r in range(k):
         v = of_rank[r]
         p = -1
         for tier in range(2):
-            m = _candidates(start, nbrs, uf, v, tier, first_child, next_sibling, exclude, cand)
+            m = _candidates(start, nbrs, uf, v, tier, first_child, next_sibling, exclude, cand, cand_count)
             if tier == 0:
                 for i in range(m):
                     exclude[cand[i]] = True

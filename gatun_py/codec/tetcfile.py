@@ -27,7 +27,7 @@ from ..mesh.validate import check_tet_ids
 from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
 from .container import Container, build_container
 from .cutborder import ConnectivityDecoder, encode_connectivity
-from .forest import decode_forest, encode_forest, forest_header
+from .forest import decode_forest, decode_forest_on_mesh, encode_forest_on_mesh, forest_header
 from .geometry import HEADER_SIZE, GeometryDecoder, check_geometry_header, encode_geometry
 
 FORMAT_NAME = "tetc"
@@ -99,9 +99,7 @@ def encode_level(payload: LevelPayload) -> EncodedLevel:
         parent, rank = (np.asarray(a) for a in payload.forest)
         if parent.shape != (mesh.n_points,) or rank.shape != (mesh.n_points,):
             raise OptionError(f"level {i}: forest does not match the mesh ({mesh.n_points} points)")
-        dec_of = np.empty(mesh.n_points, np.int64)
-        dec_of[vo] = np.arange(mesh.n_points)
-        sections[f"L{i}/forest"] = encode_forest(dec_of[parent[vo]].astype(np.int32), rank[vo])
+        sections[f"L{i}/forest"] = _encode_level_forest(mesh, vo, parent, rank)
     lo, hi = mesh.bbox
     meta = {
         "level": i,
@@ -117,6 +115,14 @@ def encode_level(payload: LevelPayload) -> EncodedLevel:
         "has_forest": payload.forest is not None,
     }
     return EncodedLevel(i, sections, meta, vo, conn.peak_border)
+
+
+def _encode_level_forest(mesh, vertex_order, parent, rank) -> bytes:
+    """The ``L{i}/forest`` section: the forest renumbered to decode order, coded after the level's
+    mesh (format 3)."""
+    dec_of = np.empty(mesh.n_points, np.int64)
+    dec_of[vertex_order] = np.arange(mesh.n_points)
+    return encode_forest_on_mesh(dec_of[parent[vertex_order]], rank[vertex_order], dec_of[mesh.tets])
 
 
 def check_mesh(mesh) -> None:
@@ -363,7 +369,21 @@ class TetcReader:
         n, _ = forest_header(data)
         if n != lv["points"]:
             raise CorruptFileError(f"{name}: covers {n} vertices, the level has {lv['points']}")
-        return decode_forest(data, self._checked_points(level))
+        n = self._checked_points(level)
+        if self.container.major < 3:
+            return decode_forest(data, n)
+        return decode_forest_on_mesh(data, self._level_tets(level), n)
+
+    def _level_tets(self, level: int) -> np.ndarray:
+        """The tets of ``level`` in decode order, from its connectivity sections alone (what the
+        format-3 forest is coded after)."""
+        lv = self.level_meta(level)
+        conn = ConnectivityDecoder(self.read_section(f"L{level}/boundary"), self.read_section(f"L{level}/tets"),
+                                   n_points=lv["points"], n_tets=lv["tets"], n_boundary_faces=lv["boundary_faces"],
+                                   n_referenced=lv["referenced_points"])
+        conn.boundary()
+        conn.start_tets()
+        return conn.next_tets(lv["tets"]) if lv["tets"] else np.zeros((0, 4), np.int32)
 
     def forest_merges(self) -> int:
         """Merges the file's full forest holds (0 when it stores none), from the section header only."""

@@ -235,6 +235,14 @@ def _index_base(tier, size):
     return _INDEX_BASE + (tier * (SMALL_LIST + 1) + size) * SMALL_LIST
 
 
+@njit(cache=True, nogil=True)
+def _replay_state(n, n_nbrs):
+    """Scratch of the rank-order replay: union-find parents, children lists (first child, next
+    sibling), tier-0 marks, candidate ids and their counts (room for every adjacency entry)."""
+    return (np.arange(n), np.full(n, -1, np.int64), np.full(n, -1, np.int64), np.zeros(n, np.bool_),
+            np.empty(max(1, n_nbrs), np.int64), np.empty(max(1, n_nbrs), np.int64))
+
+
 @njit(cache=True)
 def encode_forest_kernel(st, out, start, nbrs, parent, rank, k):
     """Code a forest (decode order; roots have rank >= k) after the level's adjacency."""
@@ -266,12 +274,7 @@ def encode_forest_kernel(st, out, start, nbrs, parent, rank, k):
     for v in range(n):
         if rank[v] < k:
             of_rank[rank[v]] = v
-    uf = np.arange(n)
-    first_child = np.full(n, -1, np.int64)
-    next_sibling = np.full(n, -1, np.int64)
-    exclude = np.zeros(n, np.bool_)
-    cand = np.empty(max(1, nbrs.shape[0]), np.int64)
-    cand_count = np.empty(max(1, nbrs.shape[0]), np.int64)
+    uf, first_child, next_sibling, exclude, cand, cand_count = _replay_state(n, nbrs.shape[0])
     for r in range(k):
         v = of_rank[r]
         p = parent[v]
@@ -346,12 +349,7 @@ def decode_forest_kernel(st, data, start, nbrs, k, parent, rank):
     for r in range(k):
         if of_rank[r] < 0:
             return False  # fewer merges than the header says
-    uf = np.arange(n)
-    first_child = np.full(n, -1, np.int64)
-    next_sibling = np.full(n, -1, np.int64)
-    exclude = np.zeros(n, np.bool_)
-    cand = np.empty(max(1, nbrs.shape[0]), np.int64)
-    cand_count = np.empty(max(1, nbrs.shape[0]), np.int64)
+    uf, first_child, next_sibling, exclude, cand, cand_count = _replay_state(n, nbrs.shape[0])
     for r in range(k):
         v = of_rank[r]
         p = -1

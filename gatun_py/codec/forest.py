@@ -115,6 +115,18 @@ def encode_forest(parent: np.ndarray, rank: np.ndarray) -> bytes:
     return _HEADER.pack(_MAGIC, n, k) + body
 
 
+def _checked_header(data: bytes, magic: bytes, n: int) -> int:
+    """The merge count of a section that must start with ``magic`` and cover ``n`` vertices."""
+    if len(data) < _HEADER.size:
+        raise CorruptFileError("merge forest: truncated header")
+    found, n_stored, k = _HEADER.unpack_from(data)
+    if found != magic:
+        raise CorruptFileError("merge forest: bad magic")
+    if n_stored != n:
+        raise CorruptFileError(f"merge forest: covers {n_stored} vertices, the mesh has {n}")
+    return k
+
+
 def forest_header(data: bytes) -> tuple[int, int]:
     """(vertices, merges) of a coded forest, read from its header only."""
     data = bytes(data[: _HEADER.size])
@@ -145,13 +157,7 @@ def decode_forest(data: bytes, n: int) -> tuple[np.ndarray, np.ndarray]:
         On any inconsistency (wrong size, bad ids, a cycle, ...).
     """
     data = bytes(data)
-    if len(data) < _HEADER.size:
-        raise CorruptFileError("merge forest: truncated header")
-    magic, n_stored, k = _HEADER.unpack_from(data)
-    if magic != _MAGIC:
-        raise CorruptFileError("merge forest: bad magic")
-    if n_stored != n:
-        raise CorruptFileError(f"merge forest: covers {n_stored} vertices, the mesh has {n}")
+    k = _checked_header(data, _MAGIC, n)
     if k > n:
         raise CorruptFileError("merge forest: more merges than vertices")
     parent = np.arange(n, dtype=np.int64)
@@ -253,13 +259,7 @@ def decode_forest_on_mesh(data: bytes, tets: np.ndarray, n: int) -> tuple[np.nda
         invalid forest. Every index the kernel computes is checked before use.
     """
     data = bytes(data)
-    if len(data) < _HEADER.size:
-        raise CorruptFileError("merge forest: truncated header")
-    magic, n_stored, k = _HEADER.unpack_from(data)
-    if magic != _MAGIC_ON_MESH:
-        raise CorruptFileError("merge forest: bad magic")
-    if n_stored != n:
-        raise CorruptFileError(f"merge forest: covers {n_stored} vertices, the mesh has {n}")
+    k = _checked_header(data, _MAGIC_ON_MESH, n)
     if n and k >= n:
         raise CorruptFileError("merge forest: as many merges as vertices")
     if k == 0:

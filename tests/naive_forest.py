@@ -12,7 +12,7 @@ import struct
 
 from naive_codec import NaiveRangeEncoder
 
-ROOT_SYMBOL, CAP, SMALL, FLAG_CONTEXTS = 63, 6, 32, 16
+ROOT_SYMBOL, CAP, SMALL, FLAG_CONTEXTS, DEGREE_CLASSES = 63, 6, 32, 16, 7
 ROOT_RANK = 2**31 - 1
 
 
@@ -36,7 +36,7 @@ def _bounds(n, k):
     return b
 
 
-def naive_encode_forest_on_mesh(parent, rank, tets) -> bytes:
+def naive_encode_forest_on_mesh(parent, rank, tets, boundary) -> bytes:
     parent, rank = [int(x) for x in parent], [int(x) for x in rank]
     n = len(parent)
     k = sum(r != ROOT_RANK for r in rank)
@@ -56,8 +56,9 @@ def naive_encode_forest_on_mesh(parent, rank, tets) -> bytes:
     free = set(range(k))
     symbol = []
     for v in range(n):
-        seen = sorted(min(symbol[u], CAP) for u in nbrs[v] if u < v)
-        ctx = 0 if not seen else 1 + seen[0] * (CAP + 1) + seen[len(seen) // 2]
+        seen = [symbol[u] for u in nbrs[v] if u < v]
+        own = int(bool(boundary[v])) * DEGREE_CLASSES + min(len(nbrs[v]) // 4, DEGREE_CLASSES - 1)
+        ctx = own * (CAP + 2) + (1 + min(min(seen), CAP) if seen else 0)
         r = rank[v]
         s = ROOT_SYMBOL if r == ROOT_RANK else next(j for j in range(len(b) - 1) if b[j] <= r < b[j + 1])
         enc.sym(bucket_model.setdefault(ctx, [1 << 14] * 64), 0, 6, s)

@@ -36,10 +36,20 @@ def _random_forest(n: int, seed: int, roots: int = 1):
     return parent, rank
 
 
+def _boundary(tets, n):
+    """Boundary-vertex mask (faces used by one tet)."""
+    faces = np.sort(np.asarray(tets).reshape(-1, 4)[:, [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]]].reshape(-1, 3), axis=1)
+    uniq, count = np.unique(faces, axis=0, return_counts=True)
+    mask = np.zeros(n, bool)
+    mask[uniq[count == 1].ravel()] = True
+    return mask
+
+
 def _round_trip(parent, rank, tets, n):
-    data = encode_forest_on_mesh(parent, rank, tets)
-    assert data == naive_encode_forest_on_mesh(parent, rank, tets)
-    p, r = decode_forest_on_mesh(data, tets, n)
+    b = _boundary(tets, n)
+    data = encode_forest_on_mesh(parent, rank, tets, boundary=b)
+    assert data == naive_encode_forest_on_mesh(parent, rank, tets, b)
+    p, r = decode_forest_on_mesh(data, tets, n, boundary=b)
     assert np.array_equal(p, parent) and np.array_equal(r, rank)
     assert p.dtype == np.int32 and r.dtype == np.int32
     return data
@@ -79,7 +89,7 @@ def test_roots_only_and_empty():
 def test_fewer_bits_than_the_old_coding_on_a_real_level():
     mesh = grid_mesh(12, 12, 10, jitter=0.2, seed=3)
     f = decimate(mesh)
-    new = encode_forest_on_mesh(f.parent, f.rank, mesh.tets)
+    new = encode_forest_on_mesh(f.parent, f.rank, mesh.tets, boundary=_boundary(mesh.tets, mesh.n_points))
     old = encode_forest(f.parent, f.rank)
     assert len(new) < 0.8 * len(old)
     rank_bound = np.log2(np.arange(1, f.n_merges + 1)).sum() / 8  # log2(k!) bits: an arbitrary order
@@ -92,21 +102,26 @@ def test_bad_bytes_raise_typed_errors_never_out_of_bounds():
     mesh = grid_mesh(5, 5, 4, jitter=0.1, seed=5)
     f = decimate(mesh)
     n, tets = mesh.n_points, mesh.tets
-    data = encode_forest_on_mesh(f.parent, f.rank, tets)
+    bnd = _boundary(tets, n)
+    data = encode_forest_on_mesh(f.parent, f.rank, tets, boundary=bnd)
+    try:  # another boundary than the encoder's: an error or some other valid forest, never a crash
+        check_forest(*decode_forest_on_mesh(data, tets, n, boundary=~bnd))
+    except CorruptFileError:
+        pass
     with pytest.raises(CorruptFileError):
-        decode_forest_on_mesh(data, tets, n + 1)
+        decode_forest_on_mesh(data, tets, n + 1, boundary=np.zeros(n + 1, bool))
     for cut in (0, 5, 11, 12, 13, len(data) // 2, len(data) - 1):
         with pytest.raises(CorruptFileError):
-            decode_forest_on_mesh(data[:cut], tets, n)
+            decode_forest_on_mesh(data[:cut], tets, n, boundary=bnd)
     with pytest.raises(CorruptFileError):
-        decode_forest_on_mesh(data + b"x", tets, n)
+        decode_forest_on_mesh(data + b"x", tets, n, boundary=bnd)
     with pytest.raises(CorruptFileError):
-        decode_forest_on_mesh(encode_forest(f.parent, f.rank), tets, n)  # the old coding's magic
+        decode_forest_on_mesh(encode_forest(f.parent, f.rank), tets, n, boundary=bnd)  # the old coding's magic
     for k in (n, n + 1, 2**32 - 1):  # absurd merge counts
         with pytest.raises(CorruptFileError):
-            decode_forest_on_mesh(struct.pack("<4sII", b"GFR3", n, k) + data[12:], tets, n)
+            decode_forest_on_mesh(struct.pack("<4sII", b"GFR3", n, k) + data[12:], tets, n, boundary=bnd)
     with pytest.raises(CorruptFileError):
-        decode_forest_on_mesh(data, np.full((2, 4), n, np.int32), n)  # tets beyond the vertices
+        decode_forest_on_mesh(data, np.full((2, 4), n, np.int32), n, boundary=bnd)  # tets beyond the vertices
     rng = np.random.default_rng(0)
     for _ in range(300):
         b = bytearray(data)
@@ -114,14 +129,14 @@ def test_bad_bytes_raise_typed_errors_never_out_of_bounds():
             i = int(rng.integers(12, len(b)))
             b[i] ^= 1 << int(rng.integers(0, 8))
         try:
-            p, r = decode_forest_on_mesh(bytes(b), tets, n)
+            p, r = decode_forest_on_mesh(bytes(b), tets, n, boundary=bnd)
         except CorruptFileError:
             continue
         check_forest(p, r)  # whatever decodes is a valid forest (the file's CRC catches the rest)
     for _ in range(100):  # random garbage after a valid header
         body = rng.integers(0, 256, int(rng.integers(0, 64)), dtype=np.uint8).tobytes()
         try:
-            check_forest(*decode_forest_on_mesh(data[:12] + body, tets, n))
+            check_forest(*decode_forest_on_mesh(data[:12] + body, tets, n, boundary=bnd))
         except CorruptFileError:
             pass
 

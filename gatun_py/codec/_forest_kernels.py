@@ -17,7 +17,8 @@ from .rangecoder import dec_below, dec_bit, dec_failed, dec_init, dec_sym, enc_b
 ROOT_SYMBOL = 63  # bucket symbol of a vertex that is never merged
 BUCKET_BITS = 6
 CONTEXT_CAP = 6  # bucket symbols above this (and roots) look alike to the context
-N_BUCKET_CONTEXTS = 1 + (CONTEXT_CAP + 1) * (CONTEXT_CAP + 1)
+DEGREE_CLASSES = 7  # neighbour count // 4, capped: well-connected vertices merge later
+N_BUCKET_CONTEXTS = (CONTEXT_CAP + 2) * 2 * DEGREE_CLASSES
 SMALL_LIST = 32  # candidate lists up to this long code the index with a model, longer ones uniformly
 FLAG_CONTEXTS = 16
 # model layout: bucket symbols | "parent is in the list" flags | index symbols, per tier (2)
@@ -78,28 +79,20 @@ def bucket_bounds(n, k):
 
 
 @njit(cache=True, nogil=True)
-def _bucket_context(start, nbrs, v, symbol, scratch):
-    """Context of v's bucket symbol: (min, median) of its decoded (smaller-id) neighbours'
-    symbols, capped; 0 when it has none."""
-    m = 0
+def _bucket_context(start, nbrs, boundary, v, symbol):
+    """Context of v's bucket symbol: whether v is on the boundary, its degree class, and the
+    smallest bucket symbol among its decoded (smaller-id) neighbours, capped (0: none)."""
+    lowest = CONTEXT_CAP + 1
     for i in range(start[v], start[v + 1]):
         u = nbrs[i]
         if u >= v:
             break  # rows are sorted
-        s = symbol[u]
-        scratch[m] = s if s < CONTEXT_CAP else CONTEXT_CAP
-        m += 1
-    if m == 0:
-        return 0
-    # insertion sort of a handful of small values
-    for i in range(1, m):
-        x = scratch[i]
-        j = i - 1
-        while j >= 0 and scratch[j] > x:
-            scratch[j + 1] = scratch[j]
-            j -= 1
-        scratch[j + 1] = x
-    return 1 + scratch[0] * (CONTEXT_CAP + 1) + scratch[m // 2]
+        if symbol[u] < lowest:
+            lowest = symbol[u]
+    seen = 0 if start[v] == start[v + 1] or nbrs[start[v]] >= v else 1 + min(lowest, CONTEXT_CAP)
+    degree = start[v + 1] - start[v]
+    own = (1 if boundary[v] else 0) * DEGREE_CLASSES + min(degree >> 2, DEGREE_CLASSES - 1)
+    return own * (CONTEXT_CAP + 2) + seen
 
 
 @njit(cache=True, nogil=True)
@@ -244,13 +237,12 @@ def _replay_state(n, n_nbrs):
 
 
 @njit(cache=True)
-def encode_forest_kernel(st, out, start, nbrs, parent, rank, k):
+def encode_forest_kernel(st, out, start, nbrs, boundary, parent, rank, k):
     """Code a forest (decode order; roots have rank >= k) after the level's adjacency."""
     n = parent.shape[0]
     probs = np.full(MODEL_SIZE, 1 << 14, np.uint16)
     bounds = bucket_bounds(n, k)
     symbol = np.empty(n, np.int64)
-    scratch = np.empty(max(1, nbrs.shape[0]), np.int64)
     tree, _ = _free_ranks(k)
     # pass 1, decode order: each vertex's rank bucket, then its place among the bucket's free ranks
     for v in range(n):
@@ -261,7 +253,7 @@ def encode_forest_kernel(st, out, start, nbrs, parent, rank, k):
             s = 0
             while bounds[s + 1] <= r:
                 s += 1
-        ctx = _bucket_context(start, nbrs, v, symbol, scratch)
+        ctx = _bucket_context(start, nbrs, boundary, v, symbol)
         enc_sym(st, out, probs, ctx << BUCKET_BITS, BUCKET_BITS, s)
         symbol[v] = s
         if s != ROOT_SYMBOL:
@@ -309,7 +301,7 @@ def encode_forest_kernel(st, out, start, nbrs, parent, rank, k):
 
 
 @njit(cache=True, nogil=True)
-def decode_forest_kernel(st, data, start, nbrs, k, parent, rank):
+def decode_forest_kernel(st, data, start, nbrs, boundary, k, parent, rank):
     """Inverse of :func:`encode_forest_kernel`: fills ``parent`` and ``rank`` (roots: ``rank = k``).
 
     Returns False on a damaged stream (then the arrays are garbage but every index stayed in
@@ -321,11 +313,10 @@ def decode_forest_kernel(st, data, start, nbrs, k, parent, rank):
     bounds = bucket_bounds(n, k)
     n_buckets = bounds.shape[0] - 1
     symbol = np.empty(n, np.int64)
-    scratch = np.empty(max(1, nbrs.shape[0]), np.int64)
     tree, high = _free_ranks(k)
     of_rank = np.full(max(k, 1), -1, np.int64)
     for v in range(n):
-        ctx = _bucket_context(start, nbrs, v, symbol, scratch)
+        ctx = _bucket_context(start, nbrs, boundary, v, symbol)
         s = dec_sym(st, data, probs, ctx << BUCKET_BITS, BUCKET_BITS)
         if dec_failed(st):
             return False

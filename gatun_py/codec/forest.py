@@ -192,16 +192,23 @@ def _mesh_adjacency(tets, n: int):
     return FK.adjacency(tets, n)
 
 
-def encode_forest_on_mesh(parent: np.ndarray, rank: np.ndarray, tets: np.ndarray) -> bytes:
+def _boundary_mask(boundary, n: int) -> np.ndarray:
+    mask = np.ascontiguousarray(boundary, dtype=np.bool_)
+    if mask.shape != (n,):
+        raise ValueError(f"boundary mask of shape {mask.shape} for {n} vertices")
+    return mask
+
+
+def encode_forest_on_mesh(parent: np.ndarray, rank: np.ndarray, tets: np.ndarray, *, boundary) -> bytes:
     """Code a merge forest knowing the mesh it belongs to (the format-3 ``L{i}/forest`` section).
 
     Each merge's parent is almost always a live neighbour of the merged vertex at the time of the
     merge (the representative of one of its mesh neighbours, or of a neighbour of a vertex merged
     into it earlier): it is coded as an index into that short list, with an escape to the plain id.
-    Ranks are coded per vertex as their 1 - 1/2^i bucket, context-modelled on the buckets of the
-    neighbours decoded before, then as the position among the ranks of the bucket still free
-    (uniform: the order inside a bucket follows the decimator's error, which the decoder cannot
-    predict).
+    Ranks are coded per vertex as their 1 - 1/2^i bucket, context-modelled on the vertex's degree,
+    whether it lies on the boundary and the buckets of the neighbours decoded before, then as the
+    position among the ranks of the bucket still free (uniform: the order inside a bucket follows
+    the decimator's error, which the decoder cannot predict).
 
     Parameters
     ----------
@@ -210,6 +217,9 @@ def encode_forest_on_mesh(parent: np.ndarray, rank: np.ndarray, tets: np.ndarray
     tets : (m, 4) int
         The mesh the forest applies to (its vertex adjacency is all the coder uses, so the tets'
         order and orientation do not matter).
+    boundary : (n,) bool
+        Which vertices lie on the mesh's boundary surface (in decode order: the first
+        ``boundary_vertices`` ones).
 
     Returns
     -------
@@ -220,7 +230,9 @@ def encode_forest_on_mesh(parent: np.ndarray, rank: np.ndarray, tets: np.ndarray
     >>> import numpy as np
     >>> tets = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])
     >>> parent, rank = np.array([1, 2, 2, 2, 3]), np.array([0, 2, ROOT_RANK, 3, 1])
-    >>> p, r = decode_forest_on_mesh(encode_forest_on_mesh(parent, rank, tets), tets, 5)
+    >>> on_boundary = np.ones(5, bool)
+    >>> data = encode_forest_on_mesh(parent, rank, tets, boundary=on_boundary)
+    >>> p, r = decode_forest_on_mesh(data, tets, 5, boundary=on_boundary)
     >>> p.tolist(), r.tolist() == rank.tolist()
     ([1, 2, 2, 2, 3], True)
     """
@@ -233,11 +245,11 @@ def encode_forest_on_mesh(parent: np.ndarray, rank: np.ndarray, tets: np.ndarray
         return head
     start, nbrs = _mesh_adjacency(tets, n)
     ranks = np.where(rank == ROOT_RANK, k, rank)
-    return head + run_encoder(FK.encode_forest_kernel, start, nbrs, parent, ranks, k,
+    return head + run_encoder(FK.encode_forest_kernel, start, nbrs, _boundary_mask(boundary, n), parent, ranks, k,
                               capacity=capacity_hint(16 * n))
 
 
-def decode_forest_on_mesh(data: bytes, tets: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+def decode_forest_on_mesh(data: bytes, tets: np.ndarray, n: int, *, boundary) -> tuple[np.ndarray, np.ndarray]:
     """Inverse of :func:`encode_forest_on_mesh`, given the same mesh's tets (decode order).
 
     Parameters
@@ -247,6 +259,8 @@ def decode_forest_on_mesh(data: bytes, tets: np.ndarray, n: int) -> tuple[np.nda
         The level's tets, ids in ``[0, n)`` (as the connectivity decoder returns them).
     n : int
         The level's vertex count.
+    boundary : (n,) bool
+        The boundary vertices, as given to the encoder.
 
     Returns
     -------
@@ -274,7 +288,7 @@ def decode_forest_on_mesh(data: bytes, tets: np.ndarray, n: int) -> tuple[np.nda
     parent = np.empty(n, np.int64)
     rank = np.empty(n, np.int64)
     st = dec_state()
-    ok = FK.decode_forest_kernel(st, body, start, nbrs, k, parent, rank)
+    ok = FK.decode_forest_kernel(st, body, start, nbrs, _boundary_mask(boundary, n), k, parent, rank)
     if not ok:
         raise CorruptFileError("merge forest: the coded data is damaged or truncated")
     check_decoder(st, body, "merge forest")

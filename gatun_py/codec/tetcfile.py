@@ -99,7 +99,7 @@ def encode_level(payload: LevelPayload) -> EncodedLevel:
         parent, rank = (np.asarray(a) for a in payload.forest)
         if parent.shape != (mesh.n_points,) or rank.shape != (mesh.n_points,):
             raise OptionError(f"level {i}: forest does not match the mesh ({mesh.n_points} points)")
-        sections[f"L{i}/forest"] = _encode_level_forest(mesh, vo, parent, rank)
+        sections[f"L{i}/forest"] = _encode_level_forest(mesh, vo, parent, rank, conn.n_boundary_vertices)
     lo, hi = mesh.bbox
     meta = {
         "level": i,
@@ -117,12 +117,13 @@ def encode_level(payload: LevelPayload) -> EncodedLevel:
     return EncodedLevel(i, sections, meta, vo, conn.peak_border)
 
 
-def _encode_level_forest(mesh, vertex_order, parent, rank) -> bytes:
+def _encode_level_forest(mesh, vertex_order, parent, rank, n_boundary_vertices) -> bytes:
     """The ``L{i}/forest`` section: the forest renumbered to decode order, coded after the level's
-    mesh (format 3)."""
+    mesh (format 3; in decode order the boundary vertices come first)."""
     dec_of = np.empty(mesh.n_points, np.int64)
     dec_of[vertex_order] = np.arange(mesh.n_points)
-    return encode_forest_on_mesh(dec_of[parent[vertex_order]], rank[vertex_order], dec_of[mesh.tets])
+    return encode_forest_on_mesh(dec_of[parent[vertex_order]], rank[vertex_order], dec_of[mesh.tets],
+                                 boundary=np.arange(mesh.n_points) < n_boundary_vertices)
 
 
 def check_mesh(mesh) -> None:
@@ -372,7 +373,8 @@ class TetcReader:
         n = self._checked_points(level)
         if self.container.major < 3:
             return decode_forest(data, n)
-        return decode_forest_on_mesh(data, self._level_tets(level), n)
+        return decode_forest_on_mesh(data, self._level_tets(level), n,
+                                     boundary=np.arange(n) < lv["boundary_vertices"])
 
     def _level_tets(self, level: int) -> np.ndarray:
         """The tets of ``level`` in decode order, from its connectivity sections alone (what the

@@ -158,3 +158,23 @@ def test_files_are_format_3_and_store_the_new_coding():
     orig = np.array([key[tuple(x)] for x in mesh0.points.tolist()])
     assert np.array_equal(rank, f.rank[orig])
     assert np.array_equal(orig[p], f.parent[orig])
+
+
+def test_the_stream_after_the_forest_reuses_its_connectivity_and_equals_a_fresh_decode():
+    mesh = grid_mesh(9, 8, 7, jitter=0.15, seed=11)
+    f = decimate(mesh)
+    data = encode_tetc([LevelPayload(0, 0.0, 0, mesh, (f.parent, f.rank))])
+    fresh = list(TetcReader(data).iter_decode(0, batch_tets=97))
+    r = TetcReader(data)
+    r.read_forest(0)
+    assert r._decoded is not None
+    replayed = list(r.iter_decode(0, batch_tets=97))
+    assert r._decoded is None  # handed over once
+    assert len(fresh) == len(replayed)
+    for a, b in zip(fresh, replayed):
+        assert a.first == b.first
+        assert np.array_equal(a.tets, b.tets) and np.array_equal(a.points, b.points)
+        assert np.array_equal(a.density, b.density)
+    r.read_forest(0)
+    m1, m2 = r.decode_mesh(0), TetcReader(data).decode_mesh(0)
+    assert np.array_equal(m1.tets, m2.tets) and np.array_equal(m1.points, m2.points)

@@ -27,6 +27,7 @@ from ..mesh.validate import check_tet_ids
 from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
 from .container import Container, build_container
 from .cutborder import ConnectivityDecoder, encode_connectivity
+from .decoded_connectivity import DecodedConnectivity
 from .forest import decode_forest, decode_forest_on_mesh, encode_forest_on_mesh, forest_header
 from .geometry import HEADER_SIZE, GeometryDecoder, check_geometry_header, encode_geometry
 
@@ -378,14 +379,25 @@ class TetcReader:
 
     def _level_tets(self, level: int) -> np.ndarray:
         """The tets of ``level`` in decode order, from its connectivity sections alone (what the
-        format-3 forest is coded after)."""
+        format-3 forest is coded after). The decoded connectivity is kept for the next decode of
+        the level (:meth:`_connectivity`), which a render at a ratio runs right after."""
+        self._decoded = (level, DecodedConnectivity(self._connectivity_decoder(level)))
+        return self._decoded[1].tets
+
+    def _connectivity_decoder(self, level: int) -> ConnectivityDecoder:
         lv = self.level_meta(level)
-        conn = ConnectivityDecoder(self.read_section(f"L{level}/boundary"), self.read_section(f"L{level}/tets"),
+        return ConnectivityDecoder(self.read_section(f"L{level}/boundary"), self.read_section(f"L{level}/tets"),
                                    n_points=lv["points"], n_tets=lv["tets"], n_boundary_faces=lv["boundary_faces"],
                                    n_referenced=lv["referenced_points"])
-        conn.boundary()
-        conn.start_tets()
-        return conn.next_tets(lv["tets"]) if lv["tets"] else np.zeros((0, 4), np.int32)
+
+    def _connectivity(self, level: int):
+        """The level's connectivity for one decode: the one :meth:`_level_tets` kept (handed over
+        once, then dropped), else a fresh decoder."""
+        kept = getattr(self, "_decoded", None)
+        self._decoded = None
+        if kept is not None and kept[0] == level:
+            return kept[1]
+        return self._connectivity_decoder(level)
 
     def forest_merges(self) -> int:
         """Merges the file's full forest holds (0 when it stores none), from the section header only."""
@@ -424,11 +436,8 @@ class TetcReader:
         lv = self.level_meta(level)
         n, m, nf = lv["points"], lv["tets"], lv["boundary_faces"]
         self._checked_points(level)
-        bcode = self.read_section(f"L{level}/boundary")
-        tcode = self.read_section(f"L{level}/tets")
         geo = GeometryDecoder(self.read_section(f"L{level}/geometry"), n_points=n)
-        conn = ConnectivityDecoder(bcode, tcode, n_points=n, n_tets=m, n_boundary_faces=nf,
-                                   n_referenced=lv["referenced_points"])
+        conn = self._connectivity(level)
 
         def exact(refs, pts, dens):
             out = {}

@@ -30,7 +30,7 @@ import gmsh_meshes  # noqa: E402
 from common import table  # noqa: E402
 from conftest import SAMPLE_FILES, load_sample  # noqa: E402
 
-from gatun_py.codec.forest import ROOT_RANK, encode_forest  # noqa: E402
+from gatun_py.codec.forest import ROOT_RANK, decode_forest, encode_forest, encode_forest_on_mesh  # noqa: E402
 from gatun_py.codec.tetcfile import LevelPayload, TetcReader, encode_level, encode_tetc  # noqa: E402
 from gatun_py.mesh import read_mesh  # noqa: E402
 from gatun_py.simplify import MergeForest, build_levels, decimate, storage_forests  # noqa: E402
@@ -58,6 +58,16 @@ def forest_of(name, mesh):
     return f
 
 
+def cpu_best(fn, repeat: int = 3) -> float:
+    """Best process CPU time of ``fn()`` (single-threaded work: robust to a loaded machine)."""
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = time.process_time()
+        fn()
+        best = min(best, time.process_time() - t0)
+    return best
+
+
 def rank_bound_bits(n, k):
     """log2 of the orders inside the 1 - 1/2^i buckets: what any coding pays that cannot predict them."""
     bits, b = 0.0, 0
@@ -70,6 +80,7 @@ def rank_bound_bits(n, k):
 
 def measure(name):
     mesh = load(name)
+    n = mesh.n_points
     t0 = time.perf_counter()
     forest = forest_of(name, mesh)
     t_forest = time.perf_counter() - t0
@@ -95,29 +106,23 @@ def measure(name):
             old_f.append(0)
         if p.level == 0:
             enc_s = dt
-    # encode time of level 0's forest alone, and decode time through the reader
-    from gatun_py.codec.forest import encode_forest_on_mesh
-
-    t0 = time.perf_counter()
-    encode_forest_on_mesh(forest.parent, forest.rank, mesh.tets)
-    enc_forest_s = time.perf_counter() - t0
+    # encode time of level 0's forest alone, decode time through the reader, and the old coding's decode
+    on_boundary = np.zeros(mesh.n_points, bool)
+    on_boundary[mesh.boundary_faces().ravel()] = True
+    enc_forest_s = cpu_best(lambda: encode_forest_on_mesh(forest.parent, forest.rank, mesh.tets, boundary=on_boundary))
     reader = TetcReader(encode_tetc(payloads[:1]))
-    dec = []
-    for _ in range(3):
-        t0 = time.perf_counter()
-        reader.read_forest(0)
-        dec.append(time.perf_counter() - t0)
-    t0 = time.perf_counter()
-    reader._level_tets(0)
-    conn_s = time.perf_counter() - t0
-    n, k = mesh.n_points, forest.n_merges
+    dec_s = cpu_best(lambda: reader.read_forest(0))
+    conn_s = cpu_best(lambda: reader._level_tets(0))
+    old_bytes = encode_forest(*reader.read_forest(0))
+    old_dec_s = cpu_best(lambda: decode_forest(old_bytes, n))
+    k = forest.n_merges
     lvl0_new = mesh_bytes[0] + new_f[0]
     lvl0_old = mesh_bytes[0] + old_f[0]
     return dict(name=NAMES.get(name, name), points=n, tets=mesh.n_tets, levels=len(levels),
                 new_bpv=8 * new_f[0] / n, old_bpv=8 * old_f[0] / n, bound=(rank_bound_bits(n, k)) / n,
                 ratio_new=(sum(mesh_bytes) + sum(new_f)) / lvl0_new, ratio_old=(sum(mesh_bytes) + sum(old_f)) / lvl0_old,
                 mesh_ratio=sum(mesh_bytes) / mesh_bytes[0], forests_new=sum(new_f), forests_old=sum(old_f),
-                lvl0_new=lvl0_new, all_new=sum(mesh_bytes) + sum(new_f), enc=enc_forest_s, dec=min(dec), conn=conn_s,
+                lvl0_new=lvl0_new, all_new=sum(mesh_bytes) + sum(new_f), enc=enc_forest_s, dec=dec_s, conn=conn_s, old_dec=old_dec_s,
                 t_forest=t_forest, level_bytes=list(zip(mesh_bytes, new_f, old_f)))
 
 
@@ -141,19 +146,23 @@ def main(argv=None):
         "LZMA-coded as before. *bound* = log2 of the orders inside the buckets per vertex: what any coding pays "
         "that cannot predict the decimator's order inside a bucket (so ≤ 12 bits/vertex is out of reach for an exact "
         "greedy order once log2(n) is above about 15). Decode = `TetcReader.read_forest(0)` (decodes the level's "
-        "connectivity, then the forest; best of 3); *connectivity* = that first part alone. Targets: ≤ 12 bits/vertex, "
+        "connectivity, then the forest), *connectivity* = that first part alone (a render at a ratio then reuses it for the stream instead of decoding it again), *format 2 decode* = `decode_forest` of the LZMA coding; encode = `encode_forest_on_mesh`; all best of 3, process CPU seconds (single-threaded). Targets: ≤ 12 bits/vertex, "
         "all levels ≤ 2.0 × level 0.", "",
         table(["mesh", "points", "tets", "levels", "level-0 forest bits/vertex, format 3", "format 2", "rank bound",
                "all / level 0, format 3", "format 2", "meshes alone: all / level 0", "forests bytes, format 3",
-               "format 2", "encode s", "decode s", "of which connectivity s"],
+               "format 2", "encode CPU s", "decode CPU s", "of which connectivity", "format 2 decode CPU s"],
               [[r["name"], r["points"], r["tets"], r["levels"], f"{r['new_bpv']:.2f}", f"{r['old_bpv']:.2f}",
                 f"{r['bound']:.2f}", f"{r['ratio_new']:.3f}", f"{r['ratio_old']:.3f}", f"{r['mesh_ratio']:.3f}",
-                r["forests_new"], r["forests_old"], f"{r['enc']:.3f}", f"{r['dec']:.3f}", f"{r['conn']:.3f}"]
+                r["forests_new"], r["forests_old"], f"{r['enc']:.3f}", f"{r['dec']:.3f}", f"{r['conn']:.3f}", f"{r['old_dec']:.3f}"]
                for r in rows]), "",
-        "Reading: the forests shrink by a third, but *all / level 0* moves the wrong way: the pre-simplified "
-        "levels' meshes alone already cost 1.5–1.6 × level 0's mesh (irregular decimated meshes code at more bits "
-        "per tet than the grids), and a smaller level-0 forest makes the denominator smaller. With level 0's forest at "
-        "12 bits/vertex, 2.0 × would need the levels' meshes to shrink, not their forests.", "",
+        "Reading: the forests shrink by 35–38 %, but *all / level 0* moves the wrong way, because a smaller "
+        "level-0 forest shrinks the denominator: (all) ≤ 2 × (level 0) needs level 0's forest to exceed the other "
+        "levels' forests by (meshes alone − 2) × level 0's mesh bytes. Where the meshes alone are above 2.0 × "
+        "(Blunt-fin 2.52, Combustion 2.39, LOX post 2.68, Room fire 2.16, gmsh block 2.16) no forest coding reaches "
+        "the target, and a better one moves further away from it; the levels' meshes have to shrink (decimated "
+        "meshes code at more bits per tet than the grids they come from). The 12 bits/vertex target is below the "
+        "*rank bound* plus any parent coding on every mesh above ~10 k vertices: the exact greedy order costs about "
+        "log2(n) − 3.4 bits per vertex by itself.", "",
     ]
     r0 = rows[0]
     lines += [f"Per level ({r0['name']}): bytes of the mesh, of the forest in format 3 and in format 2.", "",

@@ -178,3 +178,15 @@ def test_the_stream_after_the_forest_reuses_its_connectivity_and_equals_a_fresh_
     r.read_forest(0)
     m1, m2 = r.decode_mesh(0), TetcReader(data).decode_mesh(0)
     assert np.array_equal(m1.tets, m2.tets) and np.array_equal(m1.points, m2.points)
+
+
+def test_decode_kernels_release_the_gil():
+    """Bricks decode on threads: every kernel the decoder calls from Python runs without the GIL."""
+    from gatun_py.codec import _array_kernels, _cutborder_kernels, _forest_kernels, _geometry_kernels
+
+    kernels = [_cutborder_kernels.decode_boundary, _cutborder_kernels.decode_tets, _cutborder_kernels.add_faces,
+               _geometry_kernels.decode_tables_kernel, _geometry_kernels.decode_vertices,
+               _array_kernels.decode_component, _array_kernels.reconstruct,
+               _forest_kernels.adjacency, _forest_kernels.decode_forest_kernel]
+    assert all(k.targetoptions.get("nogil") for k in kernels), [k.__name__ for k in kernels
+                                                               if not k.targetoptions.get("nogil")]

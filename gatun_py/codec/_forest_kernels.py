@@ -48,19 +48,20 @@ def adjacency(tets, n):
                 if j != i:
                     nbrs[fill[a]] = tets[t, j]
                     fill[a] += 1
-    # sort and deduplicate every row, compacting in place
+    # deduplicate every row (a vertex is listed once per tet it shares), then sort the short
+    # unique row, compacting in place
     out = 0
     row_start = np.zeros(n + 1, np.int64)
+    seen_by = np.full(n, -1, np.int64)
     for v in range(n):
-        row = nbrs[start[v]:start[v + 1]]
-        _sort_small(row, row.shape[0])
         row_start[v] = out
-        prev = -1
-        for x in row:
-            if x != prev:
+        for i in range(start[v], start[v + 1]):
+            x = nbrs[i]
+            if seen_by[x] != v:
+                seen_by[x] = v
                 nbrs[out] = x
                 out += 1
-                prev = x
+        _sort_small(nbrs[row_start[v]:out], out - row_start[v])
     row_start[n] = out
     return row_start, nbrs[:out].copy()
 

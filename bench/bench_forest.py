@@ -1,6 +1,6 @@
 """Benchmark of the merge forest's coding (issue 12): bits per vertex and the size of all levels.
 
-Run as ``python bench/bench_forest.py [names...]``; writes ``bench/sections/forest.md``.
+Run as ``python bench/bench_forest.py [--quick] [names...]``; writes ``bench/sections/forest.md``.
 
 For each mesh (samples, then the gmsh meshes of ``bench/gmsh_meshes.py``): the forest is built
 once with ``decimate`` (cached in ``bench/out/forests/``, never committed) and its levels with
@@ -128,8 +128,11 @@ def measure(name):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("names", nargs="*", default=["bluntfin", "combustion", "fire", "post", "block-50k", "flange-1m"])
+    ap.add_argument("names", nargs="*", help="meshes (default: the samples, gmsh block-50k and flange-1m)")
+    ap.add_argument("--quick", action="store_true", help="the samples only")
     args = ap.parse_args(argv)
+    if not args.names:
+        args.names = ["bluntfin", "combustion", "fire", "post"] + ([] if args.quick else ["block-50k", "flange-1m"])
     rows = []
     for name in args.names:
         r = measure(name)

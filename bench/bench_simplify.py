@@ -35,7 +35,7 @@ from conftest import SAMPLE_FILES, load_sample  # noqa: E402
 sys.path.insert(0, str(ROOT / "bench"))
 import gmsh_meshes  # noqa: E402
 
-from gatun_py.codec.forest import encode_forest  # noqa: E402
+from gatun_py.codec.forest import encode_forest_on_mesh  # noqa: E402
 from gatun_py.simplify import available_levels, build_levels, decimate, simplified_mesh  # noqa: E402
 
 NAMES = {"bluntfin": "Blunt-fin", "combustion": "Combustion", "post": "LOX post", "fire": "Room fire",
@@ -283,7 +283,7 @@ def main(argv=None):
                 vtk_best = min(vtk_best, dt)
         vol0 = mesh.signed_volumes().sum()
         vol9 = simplified_mesh(mesh, forest, int(0.9 * mesh.n_points)).signed_volumes().sum()
-        fb = len(encode_forest(forest.parent, forest.rank))
+        fb = len(encode_forest_on_mesh(forest.parent, forest.rank, mesh.tets))
         row = dict(name=name, points=mesh.n_points, tets=mesh.n_tets, wall=wall, cpu=cpu,
                    ratio=forest.max_ratio, vol9=vol9 / vol0, forest_bpv=8 * fb / mesh.n_points,
                    levels=len(available_levels(forest)) - 1)

@@ -567,7 +567,7 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
     return nv, 0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
     """Inverse of :func:`encode_boundary`; returns (number of vertices, status)."""
     probs = np.full(SM_SIZE, rc.PROB_INIT, np.uint16)
@@ -727,7 +727,7 @@ def boundary_from_neighbours(tets, nbr, faces, owner):
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def add_faces(B, faces, apex):
     """Put faces on the border in order (apex -1: the original boundary); returns the slots."""
     slots = np.empty(faces.shape[0], np.int64)
@@ -865,7 +865,7 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
     return nv, 0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
     """Resumable inverse of :func:`encode_tets`.
 

@@ -5,10 +5,17 @@ a root) and ``rank[v]``, the 0-based execution order of v's merge (``ROOT_RANK``
 first N merges are those with rank < N; a parent always outranks its children (it was still alive
 when they were merged into it). The simplify stage builds forests; this module only stores them.
 
-Section layout (format 1, magic ``GFR1``): ``<4sII`` header (magic, vertices n, merges k), then,
+Section layout in files of format 1 and 2 (magic ``GFR1``): ``<4sII`` header (magic, vertices n, merges k), then,
 when k > 0, one LZMA (xz) stream of 8n bytes: every vertex's rank (roots as k) as uint32, then its
 parent as a zigzagged delta from the vertex, each array byte-planed (all low bytes, ..., all high
 bytes). Decoding stops at 8n + 1 bytes of output whatever the stream claims.
+
+Files of format 3 code the forest after the level's mesh (magic ``GFR3``,
+:func:`encode_forest_on_mesh`): the decoder knows the level's tets when it reads the forest, so a
+merge's parent is coded as an index among the live neighbours of the merged vertex, and its rank
+as a bucket (the 1 - 1/2^i level it falls in, context-modelled from the neighbours' buckets) plus
+its place among the bucket's free ranks. ``<4sII`` header (magic, vertices n, merges k), then,
+when k > 0, one range-coded stream (:mod:`._forest_kernels`, ``docs/format.md``).
 """
 
 from __future__ import annotations
@@ -19,8 +26,11 @@ import struct
 import numpy as np
 
 from ..errors import CorruptFileError
+from . import _forest_kernels as FK
+from .rangecoder import capacity_hint, check_decoder, dec_state, run_encoder
 
-__all__ = ["ROOT_RANK", "check_forest", "encode_forest", "decode_forest", "forest_header"]
+__all__ = ["ROOT_RANK", "check_forest", "encode_forest", "decode_forest", "forest_header",
+           "encode_forest_on_mesh", "decode_forest_on_mesh"]
 
 ROOT_RANK = 2**31 - 1  # the rank of a vertex that is never merged
 
@@ -55,6 +65,7 @@ def check_forest(parent: np.ndarray, rank: np.ndarray) -> int:
 
 
 _MAGIC = b"GFR1"
+_MAGIC_ON_MESH = b"GFR3"
 _HEADER = struct.Struct("<4sII")
 
 
@@ -104,13 +115,25 @@ def encode_forest(parent: np.ndarray, rank: np.ndarray) -> bytes:
     return _HEADER.pack(_MAGIC, n, k) + body
 
 
+def _checked_header(data: bytes, magic: bytes, n: int) -> int:
+    """The merge count of a section that must start with ``magic`` and cover ``n`` vertices."""
+    if len(data) < _HEADER.size:
+        raise CorruptFileError("merge forest: truncated header")
+    found, n_stored, k = _HEADER.unpack_from(data)
+    if found != magic:
+        raise CorruptFileError("merge forest: bad magic")
+    if n_stored != n:
+        raise CorruptFileError(f"merge forest: covers {n_stored} vertices, the mesh has {n}")
+    return k
+
+
 def forest_header(data: bytes) -> tuple[int, int]:
     """(vertices, merges) of a coded forest, read from its header only."""
     data = bytes(data[: _HEADER.size])
     if len(data) < _HEADER.size:
         raise CorruptFileError("merge forest: truncated header")
     magic, n, k = _HEADER.unpack(data)
-    if magic != _MAGIC or k > n:
+    if magic not in (_MAGIC, _MAGIC_ON_MESH) or k > n:
         raise CorruptFileError("merge forest: bad header")
     return int(n), int(k)
 
@@ -134,13 +157,7 @@ def decode_forest(data: bytes, n: int) -> tuple[np.ndarray, np.ndarray]:
         On any inconsistency (wrong size, bad ids, a cycle, ...).
     """
     data = bytes(data)
-    if len(data) < _HEADER.size:
-        raise CorruptFileError("merge forest: truncated header")
-    magic, n_stored, k = _HEADER.unpack_from(data)
-    if magic != _MAGIC:
-        raise CorruptFileError("merge forest: bad magic")
-    if n_stored != n:
-        raise CorruptFileError(f"merge forest: covers {n_stored} vertices, the mesh has {n}")
+    k = _checked_header(data, _MAGIC, n)
     if k > n:
         raise CorruptFileError("merge forest: more merges than vertices")
     parent = np.arange(n, dtype=np.int64)
@@ -164,5 +181,118 @@ def decode_forest(data: bytes, n: int) -> tuple[np.ndarray, np.ndarray]:
         raise CorruptFileError("merge forest: trailing bytes")
     parent = parent.astype(np.int32)
     rank = rank.astype(np.int32)
+    check_forest(parent, rank)
+    return parent, rank
+
+
+def _mesh_adjacency(tets, n: int):
+    tets = np.ascontiguousarray(tets, dtype=np.int32).reshape(-1, 4)
+    if tets.size and (tets.min() < 0 or tets.max() >= n):
+        raise ValueError("tet ids out of range")
+    return FK.adjacency(tets, n)
+
+
+def _boundary_mask(boundary, n: int) -> np.ndarray:
+    mask = np.ascontiguousarray(boundary, dtype=np.bool_)
+    if mask.shape != (n,):
+        raise ValueError(f"boundary mask of shape {mask.shape} for {n} vertices")
+    return mask
+
+
+def encode_forest_on_mesh(parent: np.ndarray, rank: np.ndarray, tets: np.ndarray, *, boundary) -> bytes:
+    """Code a merge forest knowing the mesh it belongs to (the format-3 ``L{i}/forest`` section).
+
+    Each merge's parent is almost always a live neighbour of the merged vertex at the time of the
+    merge (the representative of one of its mesh neighbours, or of a neighbour of a vertex merged
+    into it earlier): it is coded as an index into that short list, with an escape to the plain id.
+    Ranks are coded per vertex as their 1 - 1/2^i bucket, context-modelled on the vertex's degree,
+    whether it lies on the boundary and the buckets of the neighbours decoded before, then as the
+    position among the ranks of the bucket still free (uniform: the order inside a bucket follows
+    the decimator's error, which the decoder cannot predict).
+
+    Parameters
+    ----------
+    parent, rank : (n,) int
+        A valid forest (see :func:`check_forest`), in the numbering of ``tets``.
+    tets : (m, 4) int
+        The mesh the forest applies to (its vertex adjacency is all the coder uses, so the tets'
+        order and orientation do not matter).
+    boundary : (n,) bool
+        Which vertices lie on the mesh's boundary surface (in decode order: the first
+        ``boundary_vertices`` ones).
+
+    Returns
+    -------
+    bytes
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> tets = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])
+    >>> parent, rank = np.array([1, 2, 2, 2, 3]), np.array([0, 2, ROOT_RANK, 3, 1])
+    >>> on_boundary = np.ones(5, bool)
+    >>> data = encode_forest_on_mesh(parent, rank, tets, boundary=on_boundary)
+    >>> p, r = decode_forest_on_mesh(data, tets, 5, boundary=on_boundary)
+    >>> p.tolist(), r.tolist() == rank.tolist()
+    ([1, 2, 2, 2, 3], True)
+    """
+    parent = np.asarray(parent, np.int64)
+    rank = np.asarray(rank, np.int64)
+    k = check_forest(parent, rank)
+    n = parent.shape[0]
+    head = _HEADER.pack(_MAGIC_ON_MESH, n, k)
+    if k == 0:
+        return head
+    start, nbrs = _mesh_adjacency(tets, n)
+    ranks = np.where(rank == ROOT_RANK, k, rank)
+    return head + run_encoder(FK.encode_forest_kernel, start, nbrs, _boundary_mask(boundary, n), parent, ranks, k,
+                              capacity=capacity_hint(16 * n))
+
+
+def decode_forest_on_mesh(data: bytes, tets: np.ndarray, n: int, *, boundary) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of :func:`encode_forest_on_mesh`, given the same mesh's tets (decode order).
+
+    Parameters
+    ----------
+    data : bytes
+    tets : (m, 4) int
+        The level's tets, ids in ``[0, n)`` (as the connectivity decoder returns them).
+    n : int
+        The level's vertex count.
+    boundary : (n,) bool
+        The boundary vertices, as given to the encoder.
+
+    Returns
+    -------
+    parent, rank : (n,) int32
+
+    Raises
+    ------
+    CorruptFileError
+        On any inconsistency: wrong header, a damaged or truncated stream, trailing bytes, an
+        invalid forest. Every index the kernel computes is checked before use.
+    """
+    data = bytes(data)
+    k = _checked_header(data, _MAGIC_ON_MESH, n)
+    if n and k >= n:
+        raise CorruptFileError("merge forest: as many merges as vertices")
+    if k == 0:
+        if len(data) != _HEADER.size:
+            raise CorruptFileError("merge forest: trailing bytes")
+        return np.arange(n, dtype=np.int32), np.full(n, ROOT_RANK, np.int32)
+    try:
+        start, nbrs = _mesh_adjacency(tets, n)
+    except ValueError:
+        raise CorruptFileError("merge forest: the mesh's tet ids are out of range") from None
+    body = np.frombuffer(data, np.uint8, offset=_HEADER.size)
+    parent = np.empty(n, np.int64)
+    rank = np.empty(n, np.int64)
+    st = dec_state()
+    ok = FK.decode_forest_kernel(st, body, start, nbrs, _boundary_mask(boundary, n), k, parent, rank)
+    if not ok:
+        raise CorruptFileError("merge forest: the coded data is damaged or truncated")
+    check_decoder(st, body, "merge forest")
+    rank = np.where(rank == k, ROOT_RANK, rank).astype(np.int32)
+    parent = parent.astype(np.int32)
     check_forest(parent, rank)
     return parent, rank

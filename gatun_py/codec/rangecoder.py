@@ -33,8 +33,12 @@ encoder (all ``@njit``)                                decoder (all ``@njit``)
 ``enc_sym(st, out, probs, base, nbits, sym)``          ``dec_sym(st, data, probs, base, nbits) -> int``
 ``enc_uint(st, out, probs, base, value)``  (< 2**40)   ``dec_uint(st, data, probs, base) -> int``
 ``enc_sint(st, out, probs, base, value)``  (|v|<2**40) ``dec_sint(st, data, probs, base) -> int``
+``enc_below(st, out, value, m)``  (m <= 2**32)        ``dec_below(st, data, m) -> int``
 ``enc_finish(st, out) -> n_bytes``                     ``dec_init(st, data)``, ``dec_ok(st, data)``
 =====================================================  ==================================================
+
+``enc_below`` codes ``0 <= value < m`` at probability 1/m each (no model: for an index that is
+equally likely anywhere, such as the position of a rank among the ranks still free).
 
 ``enc_sym`` codes ``sym`` in ``[0, 2**nbits)`` and uses ``probs[base : base + 2**nbits]``.
 ``enc_uint``/``enc_sint`` use ``probs[base : base + INT_MODEL_SIZE]`` (``new_int_model(k)`` makes
@@ -216,6 +220,28 @@ def enc_sint(st, out, probs, base, value):
 
 
 @njit(cache=True)
+def _enc_below16(st, out, value, m):
+    r = st[ENC_RANGE] // m
+    st[ENC_LOW] += value * r
+    st[ENC_RANGE] = r
+    while st[ENC_RANGE] < TOP:
+        st[ENC_RANGE] <<= 8
+        _shift_low(st, out)
+
+
+@njit(cache=True)
+def enc_below(st, out, value, m):
+    """Code ``0 <= value < m`` uniformly (``m <= 2**32``; above 2**16 as a high and a low part)."""
+    if m <= 65536:
+        _enc_below16(st, out, value, m)
+    else:
+        hi = value >> 16
+        _enc_below16(st, out, hi, ((m - 1) >> 16) + 1)
+        rest = m - (hi << 16)
+        _enc_below16(st, out, value & 0xFFFF, rest if rest < 65536 else 65536)
+
+
+@njit(cache=True)
 def enc_finish(st, out):
     """Flush the encoder; returns the number of bytes written (may exceed ``len(out)`` on overflow)."""
     for _ in range(5):
@@ -359,6 +385,33 @@ def dec_sint(st, data, probs, base):
     if mag != 0 and dec_bit(st, data, probs, base + _INT_SIGN_BASE) == 1:
         return -mag
     return mag
+
+
+@njit(cache=True, _nrt=False)
+def _dec_below16(st, data, m):
+    rng = st[DEC_RANGE] // m
+    code = st[DEC_CODE]
+    q = code // rng
+    if q >= m:  # only a damaged stream gets here
+        st[DEC_ERROR] = 1
+        q = m - 1
+    code -= q * rng
+    while rng < TOP:
+        rng <<= 8
+        code = ((code << 8) | _get_byte(st, data)) & MASK32
+    st[DEC_RANGE] = rng
+    st[DEC_CODE] = code
+    return q
+
+
+@njit(cache=True, _nrt=False)
+def dec_below(st, data, m):
+    """Decode a value coded by :func:`enc_below` with the same ``m``."""
+    if m <= 65536:
+        return _dec_below16(st, data, m)
+    hi = _dec_below16(st, data, ((m - 1) >> 16) + 1)
+    rest = m - (hi << 16)
+    return (hi << 16) | _dec_below16(st, data, rest if rest < 65536 else 65536)
 
 
 @njit(cache=True)

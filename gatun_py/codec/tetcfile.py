@@ -27,7 +27,8 @@ from ..mesh.validate import check_tet_ids
 from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
 from .container import Container, build_container
 from .cutborder import ConnectivityDecoder, encode_connectivity
-from .forest import decode_forest, encode_forest, forest_header
+from .decoded_connectivity import DecodedConnectivity
+from .forest import decode_forest, decode_forest_on_mesh, encode_forest_on_mesh, forest_header
 from .geometry import HEADER_SIZE, GeometryDecoder, check_geometry_header, encode_geometry
 
 FORMAT_NAME = "tetc"
@@ -99,9 +100,7 @@ def encode_level(payload: LevelPayload) -> EncodedLevel:
         parent, rank = (np.asarray(a) for a in payload.forest)
         if parent.shape != (mesh.n_points,) or rank.shape != (mesh.n_points,):
             raise OptionError(f"level {i}: forest does not match the mesh ({mesh.n_points} points)")
-        dec_of = np.empty(mesh.n_points, np.int64)
-        dec_of[vo] = np.arange(mesh.n_points)
-        sections[f"L{i}/forest"] = encode_forest(dec_of[parent[vo]].astype(np.int32), rank[vo])
+        sections[f"L{i}/forest"] = _encode_level_forest(mesh, vo, parent, rank, conn.n_boundary_vertices)
     lo, hi = mesh.bbox
     meta = {
         "level": i,
@@ -117,6 +116,15 @@ def encode_level(payload: LevelPayload) -> EncodedLevel:
         "has_forest": payload.forest is not None,
     }
     return EncodedLevel(i, sections, meta, vo, conn.peak_border)
+
+
+def _encode_level_forest(mesh, vertex_order, parent, rank, n_boundary_vertices) -> bytes:
+    """The ``L{i}/forest`` section: the forest renumbered to decode order, coded after the level's
+    mesh (format 3; in decode order the boundary vertices come first)."""
+    dec_of = np.empty(mesh.n_points, np.int64)
+    dec_of[vertex_order] = np.arange(mesh.n_points)
+    return encode_forest_on_mesh(dec_of[parent[vertex_order]], rank[vertex_order], dec_of[mesh.tets],
+                                 boundary=np.arange(mesh.n_points) < n_boundary_vertices)
 
 
 def check_mesh(mesh) -> None:
@@ -363,7 +371,33 @@ class TetcReader:
         n, _ = forest_header(data)
         if n != lv["points"]:
             raise CorruptFileError(f"{name}: covers {n} vertices, the level has {lv['points']}")
-        return decode_forest(data, self._checked_points(level))
+        n = self._checked_points(level)
+        if self.container.major < 3:
+            return decode_forest(data, n)
+        return decode_forest_on_mesh(data, self._level_tets(level), n,
+                                     boundary=np.arange(n) < lv["boundary_vertices"])
+
+    def _level_tets(self, level: int) -> np.ndarray:
+        """The tets of ``level`` in decode order, from its connectivity sections alone (what the
+        format-3 forest is coded after). The decoded connectivity is kept for the next decode of
+        the level (:meth:`_connectivity`), which a render at a ratio runs right after."""
+        self._decoded = (level, DecodedConnectivity(self._connectivity_decoder(level)))
+        return self._decoded[1].tets
+
+    def _connectivity_decoder(self, level: int) -> ConnectivityDecoder:
+        lv = self.level_meta(level)
+        return ConnectivityDecoder(self.read_section(f"L{level}/boundary"), self.read_section(f"L{level}/tets"),
+                                   n_points=lv["points"], n_tets=lv["tets"], n_boundary_faces=lv["boundary_faces"],
+                                   n_referenced=lv["referenced_points"])
+
+    def _connectivity(self, level: int):
+        """The level's connectivity for one decode: the one :meth:`_level_tets` kept (handed over
+        once, then dropped), else a fresh decoder."""
+        kept = getattr(self, "_decoded", None)
+        self._decoded = None
+        if kept is not None and kept[0] == level:
+            return kept[1]
+        return self._connectivity_decoder(level)
 
     def forest_merges(self) -> int:
         """Merges the file's full forest holds (0 when it stores none), from the section header only."""
@@ -402,11 +436,8 @@ class TetcReader:
         lv = self.level_meta(level)
         n, m, nf = lv["points"], lv["tets"], lv["boundary_faces"]
         self._checked_points(level)
-        bcode = self.read_section(f"L{level}/boundary")
-        tcode = self.read_section(f"L{level}/tets")
         geo = GeometryDecoder(self.read_section(f"L{level}/geometry"), n_points=n)
-        conn = ConnectivityDecoder(bcode, tcode, n_points=n, n_tets=m, n_boundary_faces=nf,
-                                   n_referenced=lv["referenced_points"])
+        conn = self._connectivity(level)
 
         def exact(refs, pts, dens):
             out = {}

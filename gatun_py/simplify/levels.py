@@ -253,6 +253,6 @@ def read_simplified(source, *, ratio: float | None = None, level: int | None = N
     """
     reader = source if isinstance(source, TetcReader) else TetcReader(source)
     target = resolve_target(reader, ratio=ratio, level=level)
+    anc = target_ancestors(reader, target)  # first: the level's decode then reuses the forest's connectivity
     mesh = reader.decode_mesh(target.level)
-    anc = target_ancestors(reader, target)
     return mesh if anc is None else mesh_from_ancestors(mesh, anc)[0]

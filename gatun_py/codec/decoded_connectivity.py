@@ -1,0 +1,60 @@
+"""A level's connectivity decoded once and replayed: the format-3 forest needs the level's tets
+before the mesh is streamed, and the stream then reuses them instead of decoding them again."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .cutborder import ConnectivityDecoder
+
+
+class DecodedConnectivity:
+    """The whole output of a :class:`~gatun_py.codec.cutborder.ConnectivityDecoder` (boundary
+    faces, tets, geometry predictors, peak border), served through the same interface, in batches
+    of any size.
+
+    Parameters
+    ----------
+    decoder : ConnectivityDecoder
+        A fresh decoder; it is run to the end here (raising what it raises on damage).
+    """
+
+    def __init__(self, decoder: ConnectivityDecoder):
+        self._faces, self._nbv = decoder.boundary()
+        decoder.start_tets()
+        self.n_tets = decoder.n_tets
+        self.tets = decoder.next_tets(decoder.n_tets) if decoder.n_tets else np.zeros((0, 4), np.int32)
+        self.predictors = decoder.predictors
+        self.peak_border = decoder.peak_border
+        self._known_end = decoder.vertices_known
+        self._done = 0
+        self._known = self._nbv
+
+    def __repr__(self) -> str:
+        return f"DecodedConnectivity(tets={self.n_tets}, boundary_faces={len(self._faces)}, served={self._done})"
+
+    def boundary(self):
+        return self._faces, self._nbv
+
+    def start_tets(self):
+        self._done = 0
+        self._known = self._nbv
+
+    @property
+    def tets_done(self) -> int:
+        return self._done
+
+    @property
+    def vertices_known(self) -> int:
+        return self._known
+
+    def next_tets(self, max_tets: int) -> np.ndarray:
+        """The next up to ``max_tets`` tets; the vertices they introduce are the next ids in order
+        (the decoder numbers new vertices as they appear), so the count known is the largest id + 1."""
+        out = self.tets[self._done:self._done + max_tets]
+        self._done += len(out)
+        if len(out):
+            self._known = max(self._known, int(out.max()) + 1)
+        if self._done == self.n_tets:
+            self._known = self._known_end
+        return out

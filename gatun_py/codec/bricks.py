@@ -1,0 +1,296 @@
+"""Bricked ``.tetc`` files: K bricks coded independently in one file, decoded in parallel, stitched.
+
+A brick is a complete mesh (see :func:`gatun_py.mesh.partition.split_bricks`): it holds every
+vertex its tets use, so a vertex on a cut between bricks (a *cut vertex*) is stored once in every
+brick that uses it. Brick k is coded exactly as a one-brick file's content (every level with its
+connectivity, geometry, point arrays and forest) under the section prefix ``B{k}/``, plus per level
+a section ``B{k}/L{i}/cut`` listing which of the level's vertices (decode ids) are cut vertices and
+the file-wide id of each (0 .. ``cut_points`` - 1), so that the bricks stitch back into one mesh
+with each shared vertex once. Cut vertices are locked in every brick's decimation, so they survive
+in every level and at every ratio, and bricks never crack.
+
+The cut section::
+
+    4 bytes  b"CUT1"
+    u32      vertices of the level (must match the level's "points")
+    u32      c, cut vertices listed
+    u32      cut vertices of the whole file (the ids' bound)
+    rest     LZMA (raw, FORMAT_XZ) of 2c little-endian u32: the gaps between the sorted decode ids
+             (first id, then next - previous - 1), then the file-wide ids in the same order
+
+Decoding uses threads: the decode kernels release the GIL (``nogil=True``), so K bricks decode
+on all cores in one process, and the result does not depend on the number of threads.
+"""
+
+from __future__ import annotations
+
+import lzma
+import os
+import struct
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import CorruptFileError, OptionError
+from ..mesh import TetMesh, default_step
+from .arrays import dtype_name
+from .brickindex import BRICKS_KEY, brick_prefix
+from .container import build_container
+from .tetcfile import FORMAT_NAME, LevelPayload, TetcReader, _arrays_meta, check_mesh, encode_level
+
+__all__ = ["BrickLevels", "EncodedBrick", "encode_brick", "encode_bricked", "read_cut", "stitch_bricks",
+           "decode_bricked", "map_bricks", "default_jobs"]
+
+_CUT_HEAD = struct.Struct("<4sIII")
+_CUT_MAGIC = b"CUT1"
+_LZMA_FILTERS = [{"id": lzma.FILTER_DELTA, "dist": 4}, {"id": lzma.FILTER_LZMA2, "preset": 6}]
+
+
+def default_jobs() -> int:
+    """All cores this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def check_jobs(jobs) -> int:
+    """``jobs`` as a positive int (None: all cores)."""
+    if jobs is None:
+        return default_jobs()
+    if isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1:
+        raise OptionError(f"jobs must be a positive integer, got {jobs!r}")
+    return int(jobs)
+
+
+# -- the cut section ------------------------------------------------------------------------------
+
+def encode_cut(cut_ids_decode_order: np.ndarray, n_cut_total: int) -> bytes:
+    """The cut section of one level of a brick: ``cut_ids_decode_order[v]`` is the file-wide cut id
+    of decode vertex v, or -1 when v belongs to this brick alone."""
+    ids = np.asarray(cut_ids_decode_order, np.int64)
+    pos = np.flatnonzero(ids >= 0)
+    gaps = np.diff(pos, prepend=-1) - 1
+    body = np.concatenate([gaps, ids[pos]]).astype("<u4").tobytes()
+    return _CUT_HEAD.pack(_CUT_MAGIC, ids.size, pos.size, int(n_cut_total)) + lzma.compress(
+        body, format=lzma.FORMAT_RAW, filters=_LZMA_FILTERS)
+
+
+def decode_cut(data: bytes, n_points: int, n_cut_total: int) -> tuple[np.ndarray, np.ndarray]:
+    """(decode ids, file-wide cut ids) of a cut section, checked: ids inside the level and the
+    file's cut count, decode ids strictly increasing, no cut id twice."""
+    if len(data) < _CUT_HEAD.size:
+        raise CorruptFileError("corrupt cut section: truncated header")
+    magic, n, c, total = _CUT_HEAD.unpack_from(data)
+    if magic != _CUT_MAGIC or n != n_points or total != n_cut_total or c > n:
+        raise CorruptFileError("corrupt cut section: its header disagrees with the brick index")
+    try:
+        dec = lzma.LZMADecompressor(format=lzma.FORMAT_RAW, filters=_LZMA_FILTERS)
+        body = dec.decompress(data[_CUT_HEAD.size:], max_length=8 * c + 1)
+    except lzma.LZMAError:
+        raise CorruptFileError("corrupt cut section: bad compressed data") from None
+    if len(body) != 8 * c or not dec.eof or dec.unused_data:
+        raise CorruptFileError("corrupt cut section: wrong length")
+    v = np.frombuffer(body, "<u4").astype(np.int64)
+    pos = np.cumsum(v[:c] + 1) - 1
+    ids = v[c:]
+    if c and (pos[-1] >= n or ids.max() >= total):
+        raise CorruptFileError("corrupt cut section: a vertex or cut id out of range")
+    if np.unique(ids).size != c:
+        raise CorruptFileError("corrupt cut section: a cut vertex is listed twice in one brick")
+    return pos, ids
+
+
+# -- writing --------------------------------------------------------------------------------------
+
+@dataclass
+class BrickLevels:
+    """What to store for one brick.
+
+    Attributes
+    ----------
+    levels : list of LevelPayload
+        The brick's levels (level 0 first), as for a one-brick file.
+    cut_ids : list of (n_i,) int64 arrays
+        Per level, the file-wide cut id of every vertex of that level's mesh (its own numbering),
+        -1 for a vertex of this brick alone.
+    """
+
+    levels: list
+    cut_ids: list
+
+
+@dataclass
+class EncodedBrick:
+    """Sections (names without the brick prefix) and index entry of one encoded brick."""
+
+    sections: dict
+    entry: dict
+
+
+def encode_brick(brick: BrickLevels, n_cut_total: int) -> EncodedBrick:
+    """Compress one brick: every level as :func:`~gatun_py.codec.tetcfile.encode_level` does, and
+    its cut section. Runs in a worker process (only plain data in and out)."""
+    if len(brick.levels) != len(brick.cut_ids) or not brick.levels:
+        raise OptionError("a brick needs one cut-id array per level")
+    sections, metas = {}, []
+    for lv, cut in zip(brick.levels, brick.cut_ids):
+        cut = np.asarray(cut, np.int64)
+        if cut.shape != (lv.mesh.n_points,):
+            raise OptionError(f"level {lv.level}: cut ids do not match the mesh ({lv.mesh.n_points} points)")
+        enc = encode_level(lv)
+        sections.update(enc.sections)
+        sections[f"L{lv.level}/cut"] = encode_cut(cut[enc.vertex_order], n_cut_total)
+        metas.append(enc.meta)
+    m0 = brick.levels[0].mesh
+    lo, hi = m0.bbox
+    entry = {"bounds": [lo.tolist(), hi.tolist()], "points": int(m0.n_points), "tets": int(m0.n_tets),
+             "boundary_faces": metas[0]["boundary_faces"], "cut_points": int((np.asarray(brick.cut_ids[0]) >= 0).sum()),
+             "levels": metas}
+    return EncodedBrick(sections, entry)
+
+
+def encode_bricked(mesh: TetMesh, bricks: list[EncodedBrick], n_cut_total: int, *, source: str = "") -> bytes:
+    """A whole bricked file: the metadata of ``mesh`` (the unsplit mesh: counts, bounds, arrays,
+    ranges, render step) with the brick index, then every brick's sections under ``B{k}/``."""
+    if len(bricks) < 2:
+        raise OptionError("a bricked file has two bricks or more (one brick is a plain file)")
+    check_mesh(mesh)
+    lo, hi = mesh.bbox
+    faces = mesh.boundary_faces()
+    meta = {
+        "format": FORMAT_NAME,
+        "points": int(mesh.n_points),
+        "tets": int(mesh.n_tets),
+        "boundary_faces": int(len(faces)),
+        "bbox": [lo.tolist(), hi.tolist()],
+        "scalar": str(mesh.scalar_name),
+        "points_dtype": dtype_name(mesh.points.dtype),
+        "arrays": _arrays_meta(mesh, ranges=True),
+        "scalar_range": [float(x) for x in mesh.scalar_range],
+        "source": os.path.basename(str(source)),
+        "render_step": float(default_step(mesh.points32, faces)),
+        "cut_points": int(n_cut_total),
+        BRICKS_KEY: [b.entry for b in bricks],
+    }
+    sections = [(brick_prefix(k) + name, data) for k, b in enumerate(bricks) for name, data in b.sections.items()]
+    return build_container(meta, sections)
+
+
+# -- reading --------------------------------------------------------------------------------------
+
+def read_cut(reader: TetcReader, k: int, level: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(decode ids, file-wide cut ids) of the cut vertices of brick ``k`` at ``level``."""
+    b = reader.brick(k)
+    n = int(b.level_meta(level)["points"])
+    return decode_cut(b.read_section(f"L{level}/cut"), n, int(reader.meta.get("cut_points", 0)))
+
+
+def map_bricks(fn, n_bricks: int, jobs: int | None = None, progress=None) -> list:
+    """``[fn(k) for k in range(n_bricks)]`` on ``jobs`` threads (results in brick order, whatever
+    the thread count); ``progress(1)`` after each brick."""
+    jobs = min(check_jobs(jobs), n_bricks)
+
+    def one(k):
+        out = fn(k)
+        if progress is not None:
+            progress(1)
+        return out
+
+    if jobs <= 1:
+        return [one(k) for k in range(n_bricks)]
+    with ThreadPoolExecutor(jobs, thread_name_prefix="tetc-brick") as pool:
+        return list(pool.map(one, range(n_bricks)))
+
+
+def stitch_bricks(meshes: list[TetMesh], cuts: list[tuple[np.ndarray, np.ndarray]], n_cut_total: int,
+                  *, n_points: int | None = None) -> TetMesh:
+    """One mesh from its bricks: each cut vertex once, the others in brick order.
+
+    Parameters
+    ----------
+    meshes : list of TetMesh
+        The bricks, in order.
+    cuts : list of (vertex ids, cut ids)
+        Per brick, its cut vertices (ids in its mesh) and their file-wide ids.
+    n_cut_total : int
+    n_points : int, optional
+        The expected vertex count of the result (checked).
+
+    Raises
+    ------
+    CorruptFileError
+        A cut vertex whose coordinates or values differ between two bricks, or counts that do
+        not add up.
+    """
+    first = np.full(n_cut_total, -1, np.int64)  # output id of every cut vertex, once placed
+    maps, placed, total = [], [], 0
+    for k, (m, (pos, ids)) in enumerate(zip(meshes, cuts)):
+        seen = first[ids] >= 0
+        new = np.ones(m.n_points, bool)
+        new[pos[seen]] = False
+        out_id = np.empty(m.n_points, np.int64)
+        n_new = int(new.sum())
+        out_id[new] = total + np.arange(n_new)
+        out_id[pos[seen]] = first[ids[seen]]
+        first[ids[~seen]] = out_id[pos[~seen]]
+        placed.append((new, pos[seen], first[ids[seen]]))
+        maps.append(out_id)
+        total += n_new
+    if n_points is not None and total != n_points:
+        raise CorruptFileError(f"corrupt file: the bricks stitch into {total} vertices, the metadata says {n_points}")
+    if (first < 0).any():
+        raise CorruptFileError("corrupt file: a cut vertex of the index belongs to no brick")
+    m0 = meshes[0]
+    points = np.empty((total, 3), m0.points.dtype)
+    data = {name: np.empty((total,) + a.shape[1:], a.dtype) for name, a in m0.point_data.items()}
+    for out_id, m, (new, shared, dest) in zip(maps, meshes, placed):
+        # every brick carries the file's arrays (its metadata is the file's): only values can differ
+        for out, a in [(points, m.points)] + [(data[name], m.point_data[name]) for name in data]:
+            out[out_id[new]] = a[new]
+            if shared.size and not np.array_equal(_bits(out[dest]), _bits(a[shared])):
+                raise CorruptFileError("corrupt file: a cut vertex differs between two bricks")
+    tets = np.concatenate([mp[m.tets] for mp, m in zip(maps, meshes)]).astype(np.int32, copy=False)
+    try:
+        return TetMesh(points, None, tets, m0.scalar_name, point_data=data)
+    except Exception as e:  # a stitched mesh that fails its invariants can only come from damage
+        raise CorruptFileError(f"corrupt file: the stitched mesh is invalid ({e})") from None
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    """The raw bytes of every row (so that NaN payloads and -0.0 compare bit for bit)."""
+    a = np.ascontiguousarray(a)
+    return a.view(np.uint8).reshape(a.shape[0], -1)
+
+
+def decode_bricked(source, level: int = 0, *, jobs: int | None = None, progress=None) -> TetMesh:
+    """Decode ``level`` of every brick on ``jobs`` threads (default: all cores) and stitch them.
+
+    The result is the same whatever ``jobs`` is: vertices of brick 0 in its decode order, then
+    each next brick's vertices that no earlier brick holds; tets in brick order. For a file of
+    one brick, the plain :meth:`TetcReader.decode_mesh`.
+
+    Examples
+    --------
+    >>> import gatun_py, tempfile, os
+    >>> from gatun_py.warmup import tiny_mesh
+    >>> out = os.path.join(tempfile.mkdtemp(), "tiny.tetc")
+    >>> f = gatun_py.compress(tiny_mesh(), out, bricks=2, mesh_only=True, jobs=1)
+    >>> decode_bricked(out, jobs=2).n_tets
+    90
+    """
+    reader = source if isinstance(source, TetcReader) else TetcReader(source)
+    if reader.n_bricks == 1:
+        return reader.decode_mesh(level)
+    missing = [k for k in range(reader.n_bricks) if level not in {lv["level"] for lv in reader.brick(k).levels}]
+    if missing:
+        raise OptionError(f"level {level} is not stored in every brick (missing in brick {missing[0]}); "
+                          f"stored in all: {[lv['level'] for lv in reader.levels]}")
+
+    def one(k):
+        return reader.brick(k).decode_mesh(level), read_cut(reader, k, level)
+
+    parts = map_bricks(one, reader.n_bricks, jobs, progress)
+    n = int(reader.meta["points"]) if level == 0 else None
+    return stitch_bricks([p[0] for p in parts], [p[1] for p in parts], int(reader.meta["cut_points"]), n_points=n)

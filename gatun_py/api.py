@@ -149,7 +149,9 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
                                  time_step=time_step), log, storing=True, drop_cell_data=drop_cell_data)
     name = Path(source).name if isinstance(source, (str, os.PathLike)) else ""
     log(f"read {name or 'mesh'}: {mesh.n_points} points, {mesh.n_tets} tets")
-    if bricks > 1:
+    if bricks > 1 and mesh.n_tets == 0:
+        log("note: a mesh without tets is stored as one brick")
+    if bricks > 1 and mesh.n_tets > 0:
         data = compress_bricks(mesh, int(bricks), jobs=jobs, mesh_only=mesh_only, levels=levels,
                                w_density=w_density, w_geometry=w_geometry, source=name, progress=progress, log=log)
         write_bytes_atomic(output, data, force=force)

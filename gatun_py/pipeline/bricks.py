@@ -27,7 +27,7 @@ from .._resources import peak_rss_mb
 from ..errors import CorruptFileError, OptionError
 from ..mesh import TetMesh, mesh_batches
 from ..render.stream import render_batches
-from ..mesh.partition import partition_tets, split_bricks
+from ..mesh.partition import Brick, partition_tets, split_bricks
 from ..simplify import build_levels, decimate, storage_forests
 from ..simplify.forest import mesh_from_ancestors
 from ..simplify.levels import read_simplified, resolve_target, target_ancestors
@@ -45,6 +45,21 @@ def _brick_payload(mesh: TetMesh, cut_ids: np.ndarray, options: dict) -> BrickLe
     payloads = [LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
                 for x, f in zip(lv, storage_forests(lv))]
     return BrickLevels(payloads, [cut_ids[x.vertex_ids] for x in lv])
+
+
+def _with_loose_points(brick: Brick, mesh: TetMesh) -> Brick:
+    """``brick`` plus the vertices no tet uses (no brick of the partition holds them), so that the
+    file keeps every input vertex."""
+    used = np.zeros(mesh.n_points, bool)
+    used[mesh.tets.ravel()] = True
+    loose = np.flatnonzero(~used)
+    if loose.size == 0:
+        return brick
+    m = brick.mesh
+    ids = np.concatenate([brick.vertex_ids, loose])
+    sub = TetMesh(mesh.points[ids], None, m.tets, mesh.scalar_name,
+                  point_data={name: a[ids] for name, a in mesh.point_data.items()})
+    return Brick(brick.index, sub, ids, brick.tet_ids, np.concatenate([brick.cut, np.zeros(loose.size, bool)]))
 
 
 def _brick_job(mesh: TetMesh, cut_ids: np.ndarray, n_cut: int, options: dict, threads: int):
@@ -69,6 +84,9 @@ def compress_bricks(mesh: TetMesh, n_bricks: int, *, jobs: int | None = None, me
     """
     jobs = check_jobs(jobs)
     bricks = split_bricks(mesh, partition_tets(mesh, n_bricks))
+    if len(bricks) < 2:
+        raise OptionError(f"a mesh of {mesh.n_tets} tets cannot be split into bricks")
+    bricks[0] = _with_loose_points(bricks[0], mesh)
     # file-wide id of every cut vertex: its rank among the cut vertices' input ids
     is_cut = np.zeros(mesh.n_points, bool)
     for b in bricks:

@@ -6,7 +6,9 @@ brick that uses it. Brick k is coded exactly as a one-brick file's content (ever
 connectivity, geometry, point arrays and forest) under the section prefix ``B{k}/``, plus per level
 a section ``B{k}/L{i}/cut`` listing which of the level's vertices (decode ids) are cut vertices and
 the file-wide id of each (0 .. ``cut_points`` - 1), so that the bricks stitch back into one mesh
-with each shared vertex once. Cut vertices are locked in every brick's decimation, so they survive
+with each shared vertex once. File-wide ids are numbered in the order cut vertices first appear in
+level 0's decode order, brick after brick: a brick's level-0 list then mostly counts up by one
+(its new cut vertices) and codes in a few bits per vertex. Cut vertices are locked in every brick's decimation, so they survive
 in every level and at every ratio, and bricks never crack.
 
 The cut section::
@@ -15,8 +17,10 @@ The cut section::
     u32      vertices of the level (must match the level's "points")
     u32      c, cut vertices listed
     u32      cut vertices of the whole file (the ids' bound)
-    rest     LZMA (raw, FORMAT_XZ) of 2c little-endian u32: the gaps between the sorted decode ids
-             (first id, then next - previous - 1), then the file-wide ids in the same order
+    u32      s, the id the list's deltas start from
+    rest     raw LZMA2 of 2c little-endian u32: the gaps between the sorted decode ids (first id,
+             then next - previous - 1), then per vertex in that order the zigzag-coded difference
+             of its file-wide id and (the previous one's, or s - 1 for the first) + 1
 
 Decoding uses threads: the decode kernels release the GIL (``nogil=True``), so K bricks decode
 on all cores in one process, and the result does not depend on the number of threads.
@@ -42,9 +46,9 @@ from .tetcfile import FORMAT_NAME, LevelPayload, TetcReader, _arrays_meta, check
 __all__ = ["BrickLevels", "EncodedBrick", "encode_brick", "encode_bricked", "read_cut", "stitch_bricks",
            "decode_bricked", "map_bricks", "default_jobs"]
 
-_CUT_HEAD = struct.Struct("<4sIII")
+_CUT_HEAD = struct.Struct("<4sIIII")
 _CUT_MAGIC = b"CUT1"
-_LZMA_FILTERS = [{"id": lzma.FILTER_DELTA, "dist": 4}, {"id": lzma.FILTER_LZMA2, "preset": 6}]
+_LZMA_FILTERS = [{"id": lzma.FILTER_LZMA2, "preset": 6}]
 
 
 def default_jobs() -> int:
@@ -66,14 +70,17 @@ def check_jobs(jobs) -> int:
 
 # -- the cut section ------------------------------------------------------------------------------
 
-def encode_cut(cut_ids_decode_order: np.ndarray, n_cut_total: int) -> bytes:
+def encode_cut(cut_ids_decode_order: np.ndarray, n_cut_total: int, start: int = 0) -> bytes:
     """The cut section of one level of a brick: ``cut_ids_decode_order[v]`` is the file-wide cut id
-    of decode vertex v, or -1 when v belongs to this brick alone."""
+    of decode vertex v, or -1 when v belongs to this brick alone; ``start``: the id the brick's new
+    cut vertices are numbered from (its first listed id is coded against it)."""
     ids = np.asarray(cut_ids_decode_order, np.int64)
     pos = np.flatnonzero(ids >= 0)
     gaps = np.diff(pos, prepend=-1) - 1
-    body = np.concatenate([gaps, ids[pos]]).astype("<u4").tobytes()
-    return _CUT_HEAD.pack(_CUT_MAGIC, ids.size, pos.size, int(n_cut_total)) + lzma.compress(
+    d = np.diff(ids[pos], prepend=int(start) - 1) - 1
+    zz = np.where(d >= 0, 2 * d, -2 * d - 1)
+    body = np.concatenate([gaps, zz]).astype("<u4").tobytes()
+    return _CUT_HEAD.pack(_CUT_MAGIC, ids.size, pos.size, int(n_cut_total), int(start)) + lzma.compress(
         body, format=lzma.FORMAT_RAW, filters=_LZMA_FILTERS)
 
 
@@ -82,8 +89,8 @@ def decode_cut(data: bytes, n_points: int, n_cut_total: int) -> tuple[np.ndarray
     file's cut count, decode ids strictly increasing, no cut id twice."""
     if len(data) < _CUT_HEAD.size:
         raise CorruptFileError("corrupt cut section: truncated header")
-    magic, n, c, total = _CUT_HEAD.unpack_from(data)
-    if magic != _CUT_MAGIC or n != n_points or total != n_cut_total or c > n:
+    magic, n, c, total, start = _CUT_HEAD.unpack_from(data)
+    if magic != _CUT_MAGIC or n != n_points or total != n_cut_total or c > n or start > total:
         raise CorruptFileError("corrupt cut section: its header disagrees with the brick index")
     try:
         dec = lzma.LZMADecompressor(format=lzma.FORMAT_RAW, filters=_LZMA_FILTERS)
@@ -94,8 +101,9 @@ def decode_cut(data: bytes, n_points: int, n_cut_total: int) -> tuple[np.ndarray
         raise CorruptFileError("corrupt cut section: wrong length")
     v = np.frombuffer(body, "<u4").astype(np.int64)
     pos = np.cumsum(v[:c] + 1) - 1
-    ids = v[c:]
-    if c and (pos[-1] >= n or ids.max() >= total):
+    zz = v[c:]
+    ids = start + np.cumsum(np.where(zz & 1, -(zz + 1) // 2, zz // 2) + 1) - 1
+    if c and (pos[-1] >= n or ids.min() < 0 or ids.max() >= total):
         raise CorruptFileError("corrupt cut section: a vertex or cut id out of range")
     if np.unique(ids).size != c:
         raise CorruptFileError("corrupt cut section: a cut vertex is listed twice in one brick")
@@ -113,8 +121,9 @@ class BrickLevels:
     levels : list of LevelPayload
         The brick's levels (level 0 first), as for a one-brick file.
     cut_ids : list of (n_i,) int64 arrays
-        Per level, the file-wide cut id of every vertex of that level's mesh (its own numbering),
-        -1 for a vertex of this brick alone.
+        Per level, an id of every vertex of that level's mesh (its own numbering) that is shared
+        with other bricks, the same in every brick that holds it (any numbering: the file's is
+        assigned by :func:`encode_bricked`), -1 for a vertex of this brick alone.
     """
 
     levels: list
@@ -123,32 +132,59 @@ class BrickLevels:
 
 @dataclass
 class EncodedBrick:
-    """Sections (names without the brick prefix) and index entry of one encoded brick."""
+    """Sections (names without the brick prefix), index entry and per level the cut ids of the
+    vertices in decode order (the cut sections are written with the whole file) of one brick."""
 
     sections: dict
     entry: dict
+    cut_decode: list
 
 
-def encode_brick(brick: BrickLevels, n_cut_total: int) -> EncodedBrick:
-    """Compress one brick: every level as :func:`~gatun_py.codec.tetcfile.encode_level` does, and
-    its cut section. Runs in a worker process (only plain data in and out)."""
+def encode_brick(brick: BrickLevels) -> EncodedBrick:
+    """Compress one brick: every level as :func:`~gatun_py.codec.tetcfile.encode_level` does.
+    Runs in a worker process (only plain data in and out)."""
     if len(brick.levels) != len(brick.cut_ids) or not brick.levels:
         raise OptionError("a brick needs one cut-id array per level")
-    sections, metas = {}, []
+    sections, metas, cut_decode = {}, [], []
     for lv, cut in zip(brick.levels, brick.cut_ids):
         cut = np.asarray(cut, np.int64)
         if cut.shape != (lv.mesh.n_points,):
             raise OptionError(f"level {lv.level}: cut ids do not match the mesh ({lv.mesh.n_points} points)")
         enc = encode_level(lv)
         sections.update(enc.sections)
-        sections[f"L{lv.level}/cut"] = encode_cut(cut[enc.vertex_order], n_cut_total)
+        cut_decode.append(cut[enc.vertex_order])
         metas.append(enc.meta)
     m0 = brick.levels[0].mesh
     lo, hi = m0.bbox
     entry = {"bounds": [lo.tolist(), hi.tolist()], "points": int(m0.n_points), "tets": int(m0.n_tets),
              "boundary_faces": metas[0]["boundary_faces"], "cut_points": int((np.asarray(brick.cut_ids[0]) >= 0).sum()),
              "levels": metas}
-    return EncodedBrick(sections, entry)
+    return EncodedBrick(sections, entry, cut_decode)
+
+
+def _cut_sections(bricks: list[EncodedBrick], n_cut_total: int) -> list[dict]:
+    """Per brick, its cut sections: cut vertices renumbered in order of first appearance in level
+    0's decode order, brick after brick (so each brick's new ones count up from its ``start``)."""
+    file_id = np.full(n_cut_total, -1, np.int64)
+    nxt = 0
+    out = []
+    for b in bricks:
+        seq = b.cut_decode[0]
+        seq = seq[seq >= 0]
+        new = seq[file_id[seq] < 0]
+        start = nxt
+        file_id[new] = nxt + np.arange(new.size)
+        nxt += new.size
+        sec = {}
+        for lv, cd in zip(b.entry["levels"], b.cut_decode):
+            if (file_id[cd[cd >= 0]] < 0).any():
+                raise OptionError(f"level {lv['level']} of a brick has cut vertices its level 0 does not")
+            ids = np.where(cd >= 0, file_id[np.maximum(cd, 0)], -1)
+            sec[f"L{lv['level']}/cut"] = encode_cut(ids, n_cut_total, start if lv["level"] == b.entry["levels"][0]["level"] else 0)
+        out.append(sec)
+    if nxt != n_cut_total:
+        raise OptionError(f"{n_cut_total} cut vertices announced, the bricks hold {nxt}")
+    return out
 
 
 def encode_bricked(mesh: TetMesh, bricks: list[EncodedBrick], n_cut_total: int, *, source: str = "") -> bytes:
@@ -174,7 +210,9 @@ def encode_bricked(mesh: TetMesh, bricks: list[EncodedBrick], n_cut_total: int, 
         "cut_points": int(n_cut_total),
         BRICKS_KEY: [b.entry for b in bricks],
     }
-    sections = [(brick_prefix(k) + name, data) for k, b in enumerate(bricks) for name, data in b.sections.items()]
+    cuts = _cut_sections(bricks, int(n_cut_total))
+    sections = [(brick_prefix(k) + name, data) for k, b in enumerate(bricks)
+                for name, data in list(b.sections.items()) + list(cuts[k].items())]
     return build_container(meta, sections)
 
 

@@ -62,10 +62,10 @@ def _with_loose_points(brick: Brick, mesh: TetMesh) -> Brick:
     return Brick(brick.index, sub, ids, brick.tet_ids, np.concatenate([brick.cut, np.zeros(loose.size, bool)]))
 
 
-def _brick_job(mesh: TetMesh, cut_ids: np.ndarray, n_cut: int, options: dict, threads: int):
+def _brick_job(mesh: TetMesh, cut_ids: np.ndarray, options: dict, threads: int):
     """One brick, in a worker process: decimate, build the levels, encode (plain data back)."""
     numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
-    return encode_brick(_brick_payload(mesh, cut_ids, options), n_cut)
+    return encode_brick(_brick_payload(mesh, cut_ids, options))
 
 
 def compress_bricks(mesh: TetMesh, n_bricks: int, *, jobs: int | None = None, mesh_only: bool = False,
@@ -104,7 +104,7 @@ def compress_bricks(mesh: TetMesh, n_bricks: int, *, jobs: int | None = None, me
     jobs = min(jobs, len(bricks))
     if jobs == 1:
         for b in bricks:
-            encoded[b.index] = encode_brick(_brick_payload(b.mesh, cut_index[b.vertex_ids], options), n_cut)
+            encoded[b.index] = encode_brick(_brick_payload(b.mesh, cut_index[b.vertex_ids], options))
             done += b.mesh.n_points
             if progress is not None:
                 progress(done, total)
@@ -112,7 +112,7 @@ def compress_bricks(mesh: TetMesh, n_bricks: int, *, jobs: int | None = None, me
         threads = max(1, numba.config.NUMBA_NUM_THREADS // jobs)
         with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
             order = sorted(bricks, key=lambda b: -b.mesh.n_tets)  # largest first: the pool drains evenly
-            futures = {pool.submit(_brick_job, b.mesh, cut_index[b.vertex_ids], n_cut, options, threads): b
+            futures = {pool.submit(_brick_job, b.mesh, cut_index[b.vertex_ids], options, threads): b
                        for b in order}
             del order, bricks  # the workers have their own copies
             for fut in as_completed(futures):

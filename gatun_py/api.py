@@ -39,7 +39,7 @@ from .render.raycast import MODES
 from .render.transfer import load_transfer_function
 from .simplify import build_levels, decimate, storage_forests
 from .simplify.filter import SimplifyFilter
-from .simplify.levels import read_simplified, resolve_target, target_ancestors
+from .simplify.levels import resolve_target, target_ancestors
 
 __all__ = ["compress", "decompress", "convert", "info", "open", "render", "TetcFile", "Frame"]
 

@@ -67,7 +67,7 @@ def test_samples_round_trip_with_bricks(sample):
     assert_same_mesh(out, m)
 
 
-@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(n=st.integers(12, 60), seed=st.integers(0, 1000), k=st.integers(2, 9), f64=st.booleans())
 def test_random_meshes_round_trip(n, seed, k, f64):
     m = delaunay_mesh(n, seed)
@@ -321,3 +321,23 @@ def test_cut_section_checks():
         decode_cut(data, 6, 7)  # the file's cut count disagrees
     with pytest.raises(CorruptFileError, match="twice"):
         decode_cut(encode_cut(np.array([1, 1, -1]), 4), 3, 4)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(k=st.integers(0, 2), key=st.sampled_from(["points", "tets", "cut_points", "boundary_faces"]),
+       level_key=st.sampled_from([None, "points", "tets", "boundary_faces", "boundary_vertices", "referenced_points"]),
+       value=st.one_of(st.integers(-3, 3), st.integers(0, 2**40), st.just(None), st.just("7"), st.just(1.5)))
+def test_any_edited_brick_count_is_read_or_rejected(bricked, k, key, level_key, value):
+    def edit(meta):
+        entry = meta["bricks"][k]
+        if level_key is None:
+            entry[key] = value if not isinstance(value, int) or value > 3 else entry[key] + value
+        else:
+            lv = entry["levels"][0]
+            lv[level_key] = value if not isinstance(value, int) or value > 3 else lv[level_key] + value
+    data = _rebuild(bricked, edit_meta=edit)
+    try:
+        out = _read_all(data)
+    except CorruptFileError:
+        return
+    assert out.n_tets == TetcReader(bricked).meta["tets"]

@@ -37,11 +37,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CorruptFileError, OptionError
-from ..mesh import TetMesh, default_step
-from .arrays import dtype_name
+from ..mesh import TetMesh
 from .brickindex import BRICKS_KEY, brick_prefix
 from .container import build_container
-from .tetcfile import FORMAT_NAME, LevelPayload, TetcReader, _arrays_meta, check_mesh, encode_level
+from .tetcfile import TetcReader, check_mesh, encode_level, file_meta
 
 __all__ = ["BrickLevels", "EncodedBrick", "encode_brick", "encode_bricked", "read_cut", "stitch_bricks",
            "decode_bricked", "map_bricks", "default_jobs"]
@@ -193,23 +192,9 @@ def encode_bricked(mesh: TetMesh, bricks: list[EncodedBrick], n_cut_total: int, 
     if len(bricks) < 2:
         raise OptionError("a bricked file has two bricks or more (one brick is a plain file)")
     check_mesh(mesh)
-    lo, hi = mesh.bbox
-    faces = mesh.boundary_faces()
-    meta = {
-        "format": FORMAT_NAME,
-        "points": int(mesh.n_points),
-        "tets": int(mesh.n_tets),
-        "boundary_faces": int(len(faces)),
-        "bbox": [lo.tolist(), hi.tolist()],
-        "scalar": str(mesh.scalar_name),
-        "points_dtype": dtype_name(mesh.points.dtype),
-        "arrays": _arrays_meta(mesh, ranges=True),
-        "scalar_range": [float(x) for x in mesh.scalar_range],
-        "source": os.path.basename(str(source)),
-        "render_step": float(default_step(mesh.points32, faces)),
-        "cut_points": int(n_cut_total),
-        BRICKS_KEY: [b.entry for b in bricks],
-    }
+    meta = file_meta(mesh, len(mesh.boundary_faces()), source)
+    meta["cut_points"] = int(n_cut_total)
+    meta[BRICKS_KEY] = [b.entry for b in bricks]
     cuts = _cut_sections(bricks, int(n_cut_total))
     sections = [(brick_prefix(k) + name, data) for k, b in enumerate(bricks)
                 for name, data in list(b.sections.items()) + list(cuts[k].items())]

@@ -173,6 +173,26 @@ def _arrays_meta(mesh, *, ranges: bool = False) -> list:
     return out
 
 
+def file_meta(mesh0, n_boundary_faces: int, source: str = "") -> dict:
+    """The metadata that describes the whole mesh (counts, bounds, arrays and their ranges, render
+    step), before the levels or the bricks that hold it."""
+    lo, hi = mesh0.bbox
+    return {
+        "format": FORMAT_NAME,
+        "points": int(mesh0.n_points),
+        "tets": int(mesh0.n_tets),
+        "boundary_faces": int(n_boundary_faces),
+        "bbox": [lo.tolist(), hi.tolist()],
+        "scalar": str(mesh0.scalar_name),
+        "points_dtype": dtype_name(mesh0.points.dtype),
+        "arrays": _arrays_meta(mesh0, ranges=True),
+        "scalar_range": [float(x) for x in mesh0.scalar_range],
+        "source": os.path.basename(str(source)),
+        # The full mesh's volume-mode sample step, so that every level and ratio samples alike.
+        "render_step": float(default_step(mesh0.points32, mesh0.boundary_faces())),
+    }
+
+
 def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None) -> bytes:
     """Build a whole ``.tetc`` file from levels (level 0 first).
 
@@ -196,22 +216,8 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None) 
         encoded.append(encode_level(lv))
         if progress is not None:
             progress(lv.level)
-    lo, hi = mesh0.bbox
-    meta = {
-        "format": FORMAT_NAME,
-        "points": int(mesh0.n_points),
-        "tets": int(mesh0.n_tets),
-        "boundary_faces": encoded[0].meta["boundary_faces"],
-        "bbox": [lo.tolist(), hi.tolist()],
-        "scalar": str(mesh0.scalar_name),
-        "points_dtype": dtype_name(mesh0.points.dtype),
-        "arrays": _arrays_meta(mesh0, ranges=True),
-        "scalar_range": [float(x) for x in mesh0.scalar_range],
-        "source": os.path.basename(str(source)),
-        # The full mesh's volume-mode sample step, so that every level and ratio samples alike.
-        "render_step": float(default_step(mesh0.points32, mesh0.boundary_faces())),
-        "levels": [e.meta for e in encoded],
-    }
+    meta = file_meta(mesh0, encoded[0].meta["boundary_faces"], source)
+    meta["levels"] = [e.meta for e in encoded]
     sections = [(name, data) for e in encoded for name, data in e.sections.items()]
     return build_container(meta, sections)
 

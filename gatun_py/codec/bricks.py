@@ -227,9 +227,96 @@ def map_bricks(fn, n_bricks: int, jobs: int | None = None, progress=None) -> lis
         return list(pool.map(one, range(n_bricks)))
 
 
+@dataclass
+class StitchPlan:
+    """Where every vertex and tet of every brick goes in the stitched mesh.
+
+    Attributes
+    ----------
+    out_id : list of (n_k,) int32
+        Output id of every vertex of brick k.
+    placed : list of (n_k,) bool
+        The vertices brick k writes (its own, and the cut vertices no earlier brick holds).
+    shared : list of ((s,) int64, (s,) int64)
+        Brick k's cut vertices an earlier brick placed, and their output ids (must be equal there).
+    tet_start : (K + 1,) int64
+        First output tet of every brick.
+    n_points : int
+    """
+
+    out_id: list
+    placed: list
+    shared: list
+    tet_start: np.ndarray
+    n_points: int
+
+
+def plan_stitch(n_points: list[int], n_tets: list[int], cuts: list[tuple[np.ndarray, np.ndarray]],
+                n_cut_total: int) -> StitchPlan:
+    """The stitch of bricks of these sizes and cut lists: the vertices of brick 0 in order, then each
+    next brick's vertices but the cut vertices already placed; tets in brick order. Raises
+    :class:`CorruptFileError` when a cut id of the file is in no brick."""
+    first = np.full(n_cut_total, -1, np.int64)  # output id of every cut vertex, once placed
+    out_ids, placed, shared, total = [], [], [], 0
+    for n, (pos, ids) in zip(n_points, cuts):
+        seen = first[ids] >= 0
+        new = np.ones(n, bool)
+        new[pos[seen]] = False
+        out_id = np.empty(n, np.int32)
+        n_new = int(new.sum())
+        out_id[new] = total + np.arange(n_new)
+        out_id[pos[seen]] = first[ids[seen]]
+        first[ids[~seen]] = out_id[pos[~seen]]
+        out_ids.append(out_id)
+        placed.append(new)
+        shared.append((pos[seen], first[ids[seen]]))
+        total += n_new
+    if (first < 0).any():
+        raise CorruptFileError("corrupt file: a cut vertex of the index belongs to no brick")
+    return StitchPlan(out_ids, placed, shared, np.concatenate([[0], np.cumsum(n_tets)]).astype(np.int64), total)
+
+
+class _Stitched:
+    """The output arrays of a stitch, filled brick by brick (from any thread: bricks write disjoint rows)."""
+
+    def __init__(self, plan: StitchPlan, points_dtype, arrays: list, scalar_name: str):
+        self.plan = plan
+        self.scalar_name = scalar_name
+        self.points = np.empty((plan.n_points, 3), points_dtype)
+        self.data = {name: np.empty((plan.n_points,) if k == 1 else (plan.n_points, k), dt) for name, dt, k in arrays}
+        self.tets = np.empty((int(plan.tet_start[-1]), 4), np.int32)
+        self.checks = [None] * len(plan.out_id)
+
+    def put(self, k: int, mesh: TetMesh) -> None:
+        """Write brick k; keep its shared vertices' values to check once every brick is in."""
+        p = self.plan
+        if mesh.n_points != p.out_id[k].shape[0] or mesh.n_tets != p.tet_start[k + 1] - p.tet_start[k]:
+            raise CorruptFileError(f"corrupt file: brick {k} decodes to other counts than its index says")
+        if sorted(mesh.point_data) != sorted(self.data) or mesh.points.dtype != self.points.dtype:
+            raise CorruptFileError(f"corrupt file: brick {k} holds other arrays than the file")
+        new, (pos, _) = p.placed[k], p.shared[k]
+        dest = p.out_id[k][new]
+        pairs = [(self.points, mesh.points)] + [(self.data[name], mesh.point_data[name]) for name in self.data]
+        for out, a in pairs:
+            out[dest] = a[new]
+        self.tets[p.tet_start[k]:p.tet_start[k + 1]] = p.out_id[k][mesh.tets]
+        self.checks[k] = [_bits(a[pos]) for _, a in pairs]
+
+    def mesh(self) -> TetMesh:
+        """The stitched mesh, after checking that every shared vertex is the same in every brick."""
+        for k, (_, dest) in enumerate(self.plan.shared):
+            outs = [self.points] + list(self.data.values())
+            if any(not np.array_equal(_bits(out[dest]), got) for out, got in zip(outs, self.checks[k])):
+                raise CorruptFileError(f"corrupt file: a cut vertex differs between brick {k} and an earlier brick")
+        try:
+            return TetMesh(self.points, None, self.tets, self.scalar_name, point_data=self.data)
+        except Exception as e:  # a stitched mesh that fails its invariants can only come from damage
+            raise CorruptFileError(f"corrupt file: the stitched mesh is invalid ({e})") from None
+
+
 def stitch_bricks(meshes: list[TetMesh], cuts: list[tuple[np.ndarray, np.ndarray]], n_cut_total: int,
                   *, n_points: int | None = None) -> TetMesh:
-    """One mesh from its bricks: each cut vertex once, the others in brick order.
+    """One mesh from its bricks (see :func:`plan_stitch`).
 
     Parameters
     ----------
@@ -247,52 +334,30 @@ def stitch_bricks(meshes: list[TetMesh], cuts: list[tuple[np.ndarray, np.ndarray
         A cut vertex whose coordinates or values differ between two bricks, or counts that do
         not add up.
     """
-    first = np.full(n_cut_total, -1, np.int64)  # output id of every cut vertex, once placed
-    maps, placed, total = [], [], 0
-    for k, (m, (pos, ids)) in enumerate(zip(meshes, cuts)):
-        seen = first[ids] >= 0
-        new = np.ones(m.n_points, bool)
-        new[pos[seen]] = False
-        out_id = np.empty(m.n_points, np.int64)
-        n_new = int(new.sum())
-        out_id[new] = total + np.arange(n_new)
-        out_id[pos[seen]] = first[ids[seen]]
-        first[ids[~seen]] = out_id[pos[~seen]]
-        placed.append((new, pos[seen], first[ids[seen]]))
-        maps.append(out_id)
-        total += n_new
-    if n_points is not None and total != n_points:
-        raise CorruptFileError(f"corrupt file: the bricks stitch into {total} vertices, the metadata says {n_points}")
-    if (first < 0).any():
-        raise CorruptFileError("corrupt file: a cut vertex of the index belongs to no brick")
+    plan = plan_stitch([m.n_points for m in meshes], [m.n_tets for m in meshes], cuts, n_cut_total)
+    if n_points is not None and plan.n_points != n_points:
+        raise CorruptFileError(f"corrupt file: the bricks stitch into {plan.n_points} vertices, "
+                               f"the metadata says {n_points}")
     m0 = meshes[0]
-    points = np.empty((total, 3), m0.points.dtype)
-    data = {name: np.empty((total,) + a.shape[1:], a.dtype) for name, a in m0.point_data.items()}
-    for out_id, m, (new, shared, dest) in zip(maps, meshes, placed):
-        # every brick carries the file's arrays (its metadata is the file's): only values can differ
-        for out, a in [(points, m.points)] + [(data[name], m.point_data[name]) for name in data]:
-            out[out_id[new]] = a[new]
-            if shared.size and not np.array_equal(_bits(out[dest]), _bits(a[shared])):
-                raise CorruptFileError("corrupt file: a cut vertex differs between two bricks")
-    tets = np.concatenate([mp[m.tets] for mp, m in zip(maps, meshes)]).astype(np.int32, copy=False)
-    try:
-        return TetMesh(points, None, tets, m0.scalar_name, point_data=data)
-    except Exception as e:  # a stitched mesh that fails its invariants can only come from damage
-        raise CorruptFileError(f"corrupt file: the stitched mesh is invalid ({e})") from None
+    out = _Stitched(plan, m0.points.dtype, m0.arrays, m0.scalar_name)
+    for k, m in enumerate(meshes):
+        out.put(k, m)
+    return out.mesh()
 
 
 def _bits(a: np.ndarray) -> np.ndarray:
     """The raw bytes of every row (so that NaN payloads and -0.0 compare bit for bit)."""
     a = np.ascontiguousarray(a)
-    return a.view(np.uint8).reshape(a.shape[0], -1)
+    return a.view(np.uint8).reshape(a.shape[0], a.itemsize * int(np.prod(a.shape[1:])))
 
 
 def decode_bricked(source, level: int = 0, *, jobs: int | None = None, progress=None) -> TetMesh:
     """Decode ``level`` of every brick on ``jobs`` threads (default: all cores) and stitch them.
 
-    The result is the same whatever ``jobs`` is: vertices of brick 0 in its decode order, then
-    each next brick's vertices that no earlier brick holds; tets in brick order. For a file of
-    one brick, the plain :meth:`TetcReader.decode_mesh`.
+    The stitch is planned from the cut sections before anything is decoded, so that every thread
+    writes its brick straight into the output; the result is the same whatever ``jobs`` is:
+    vertices of brick 0 in its decode order, then each next brick's vertices that no earlier brick
+    holds; tets in brick order. For a file of one brick, the plain :meth:`TetcReader.decode_mesh`.
 
     Examples
     --------
@@ -306,14 +371,18 @@ def decode_bricked(source, level: int = 0, *, jobs: int | None = None, progress=
     reader = source if isinstance(source, TetcReader) else TetcReader(source)
     if reader.n_bricks == 1:
         return reader.decode_mesh(level)
-    missing = [k for k in range(reader.n_bricks) if level not in {lv["level"] for lv in reader.brick(k).levels}]
+    bricks = [reader.brick(k) for k in range(reader.n_bricks)]
+    missing = [k for k, b in enumerate(bricks) if level not in {lv["level"] for lv in b.levels}]
     if missing:
         raise OptionError(f"level {level} is not stored in every brick (missing in brick {missing[0]}); "
                           f"stored in all: {[lv['level'] for lv in reader.levels]}")
-
-    def one(k):
-        return reader.brick(k).decode_mesh(level), read_cut(reader, k, level)
-
-    parts = map_bricks(one, reader.n_bricks, jobs, progress)
-    n = int(reader.meta["points"]) if level == 0 else None
-    return stitch_bricks([p[0] for p in parts], [p[1] for p in parts], int(reader.meta["cut_points"]), n_points=n)
+    metas = [b.level_meta(level) for b in bricks]
+    cuts = map_bricks(lambda k: read_cut(reader, k, level), len(bricks), jobs)
+    plan = plan_stitch([lv["points"] for lv in metas], [lv["tets"] for lv in metas], cuts,
+                       int(reader.meta["cut_points"]))
+    if level == 0 and plan.n_points != reader.meta["points"]:
+        raise CorruptFileError(f"corrupt file: the bricks stitch into {plan.n_points} vertices, "
+                               f"the metadata says {reader.meta['points']}")
+    out = _Stitched(plan, reader.points_dtype, reader.arrays, reader.scalar_name)
+    map_bricks(lambda k: out.put(k, bricks[k].decode_mesh(level)), len(bricks), jobs, progress)
+    return out.mesh()

@@ -50,11 +50,14 @@ def bricked_bytes(mesh, k, **kw):
 
 # -- round trips ----------------------------------------------------------------------------------
 
+@pytest.mark.parametrize("cut_ids", [None, True])
 @pytest.mark.parametrize("k", [2, 3, 8])
-def test_bricked_file_decodes_to_the_input_up_to_permutation(k):
+def test_bricked_file_decodes_to_the_input_up_to_permutation(k, cut_ids):
     m = jittered_grid((7, 6, 5), jitter=0.25, seed=3)
-    data = bricked_bytes(m, k)
+    data = bricked_bytes(m, k, cut_ids=cut_ids)
     r = TetcReader(data)
+    magic = {r.brick(i).read_section("L0/cut")[:4] for i in range(k)}
+    assert magic == ({b"CUT1"} if cut_ids else {b"CUTP"})  # distinct coordinates: no ids unless asked
     assert r.n_bricks == k and r.container.major == 3
     assert sum(r.brick(i).meta["tets"] for i in range(k)) == m.n_tets
     assert_same_mesh(decode_bricked(r, jobs=1), m)
@@ -214,10 +217,18 @@ def test_render_of_a_bricked_file_equals_the_plain_file(tmp_path):
 
 # -- hostile brick indexes ------------------------------------------------------------------------
 
-@pytest.fixture(scope="module")
-def bricked():
+@pytest.fixture(scope="module", params=[None, True], ids=["matched-by-points", "cut-ids"])
+def bricked(request):
     m = jittered_grid((6, 5, 5), jitter=0.25, seed=9)
-    return bricked_bytes(m, 3)
+    return bricked_bytes(m, 3, cut_ids=request.param)
+
+
+def test_distinct_points():
+    from gatun_py.codec.bricks import distinct_points
+
+    p = np.array([[0, 0, 0], [1, 0, 0], [0.0, 0, 0]], np.float32)
+    assert not distinct_points(p) and distinct_points(p[:2])
+    assert distinct_points(np.array([[0.0, 0, 0], [-0.0, 0, 0]]))  # bits, not values
 
 
 def _rebuild(data, edit_meta=None, edit_sections=None):
@@ -281,27 +292,37 @@ def _swap_cut(data, k, fn):
     n = r.brick(k).level_meta(0)["points"]
     total = r.meta["cut_points"]
     pos, ids = read_cut(r, k, 0)
+    with_ids = ids is not None
     full = np.full(n, -1, np.int64)
-    new_pos, new_ids = fn(pos.copy(), ids.copy())
+    new_pos, new_ids = fn(pos.copy(), ids.copy() if with_ids else np.arange(pos.size))
     full[new_pos] = new_ids
-    return _rebuild(data, edit_sections=lambda s: [(name, encode_cut(full, total) if name == f"B{k}/L0/cut" else p)
-                                                   for name, p in s])
+    return _rebuild(data, edit_sections=lambda s: [(name, encode_cut(full, total, ids=with_ids)
+                                                    if name == f"B{k}/L0/cut" else p) for name, p in s])
 
 
 def test_overlapping_and_inconsistent_cut_ids(bricked):
-    # two cut vertices of brick 1 swap ids: the shared vertices no longer agree between bricks
-    def swap(pos, ids):
-        ids[[0, 1]] = ids[[1, 0]]
-        return pos, ids
-    with pytest.raises(CorruptFileError, match="differs"):
-        _read_all(_swap_cut(bricked, 1, swap))
+    if TetcReader(bricked).brick(1).read_section("L0/cut")[:4] == b"CUT1":
+        # two cut vertices of brick 1 swap ids: the shared vertices no longer agree between bricks
+        def swap(pos, ids):
+            ids[[0, 1]] = ids[[1, 0]]
+            return pos, ids
+        with pytest.raises(CorruptFileError, match="differs"):
+            _read_all(_swap_cut(bricked, 1, swap))
 
-    # a cut vertex claims the id of another brick's vertex that it does not share
-    def steal(pos, ids):
-        ids[0] = (ids.max() + 1) % TetcReader(bricked).meta["cut_points"]
-        return pos, ids
+    # a vertex of brick 1 alone is listed as a cut vertex: its position matches no other brick's
+    def extra(pos, ids):
+        v = np.setdiff1d(np.arange(pos.max() + 2), pos)[0]
+        return np.append(pos, v), np.append(ids, (ids.max() + 1) % TetcReader(bricked).meta["cut_points"])
     with pytest.raises(CorruptFileError):
-        _read_all(_swap_cut(bricked, 0, steal))
+        _read_all(_swap_cut(bricked, 1, extra))
+
+    if TetcReader(bricked).brick(0).read_section("L0/cut")[:4] == b"CUT1":
+        # a cut vertex claims the id of another brick's vertex that it does not share
+        def steal(pos, ids):
+            ids[0] = (ids.max() + 1) % TetcReader(bricked).meta["cut_points"]
+            return pos, ids
+        with pytest.raises(CorruptFileError):
+            _read_all(_swap_cut(bricked, 0, steal))
 
     # a brick drops one of its cut vertices: the counts no longer add up
     with pytest.raises(CorruptFileError):

@@ -22,6 +22,11 @@ The cut section::
              then next - previous - 1), then per vertex in that order the zigzag-coded difference
              of its file-wide id and (the previous one's, or s - 1 for the first) + 1
 
+or, when no two cut vertices of the file have the same coordinates (the usual case), ``b"CUTP"``,
+the same header with s = 0, and only the c gaps: the stitcher then matches a brick's cut vertices
+to the other bricks' by their coordinates' bits (file-wide id = rank of the coordinates among the
+distinct ones), which costs nothing in the file.
+
 Decoding uses threads: the decode kernels release the GIL (``nogil=True``), so K bricks decode
 on all cores in one process, and the result does not depend on the number of threads.
 """
@@ -46,7 +51,8 @@ __all__ = ["BrickLevels", "EncodedBrick", "encode_brick", "encode_bricked", "rea
            "decode_bricked", "map_bricks", "default_jobs"]
 
 _CUT_HEAD = struct.Struct("<4sIIII")
-_CUT_MAGIC = b"CUT1"
+_CUT_MAGIC = b"CUT1"  # positions and file-wide ids
+_CUT_POINTS_MAGIC = b"CUTP"  # positions only: shared vertices are matched by their coordinates
 _LZMA_FILTERS = [{"id": lzma.FILTER_LZMA2, "preset": 6}]
 
 
@@ -69,37 +75,48 @@ def check_jobs(jobs) -> int:
 
 # -- the cut section ------------------------------------------------------------------------------
 
-def encode_cut(cut_ids_decode_order: np.ndarray, n_cut_total: int, start: int = 0) -> bytes:
+def encode_cut(cut_ids_decode_order: np.ndarray, n_cut_total: int, start: int = 0, *, ids: bool = True) -> bytes:
     """The cut section of one level of a brick: ``cut_ids_decode_order[v]`` is the file-wide cut id
     of decode vertex v, or -1 when v belongs to this brick alone; ``start``: the id the brick's new
-    cut vertices are numbered from (its first listed id is coded against it)."""
-    ids = np.asarray(cut_ids_decode_order, np.int64)
-    pos = np.flatnonzero(ids >= 0)
+    cut vertices are numbered from (its first listed id is coded against it). Without ``ids``,
+    only which vertices are cut (the file's cut vertices have distinct coordinates: the
+    coordinates say which is which)."""
+    cut = np.asarray(cut_ids_decode_order, np.int64)
+    pos = np.flatnonzero(cut >= 0)
     gaps = np.diff(pos, prepend=-1) - 1
-    d = np.diff(ids[pos], prepend=int(start) - 1) - 1
-    zz = np.where(d >= 0, 2 * d, -2 * d - 1)
-    body = np.concatenate([gaps, zz]).astype("<u4").tobytes()
-    return _CUT_HEAD.pack(_CUT_MAGIC, ids.size, pos.size, int(n_cut_total), int(start)) + lzma.compress(
+    parts = [gaps]
+    if ids:
+        d = np.diff(cut[pos], prepend=int(start) - 1) - 1
+        parts.append(np.where(d >= 0, 2 * d, -2 * d - 1))
+    body = np.concatenate(parts).astype("<u4").tobytes()
+    magic = _CUT_MAGIC if ids else _CUT_POINTS_MAGIC
+    return _CUT_HEAD.pack(magic, cut.size, pos.size, int(n_cut_total), int(start) if ids else 0) + lzma.compress(
         body, format=lzma.FORMAT_RAW, filters=_LZMA_FILTERS)
 
 
-def decode_cut(data: bytes, n_points: int, n_cut_total: int) -> tuple[np.ndarray, np.ndarray]:
-    """(decode ids, file-wide cut ids) of a cut section, checked: ids inside the level and the
-    file's cut count, decode ids strictly increasing, no cut id twice."""
+def decode_cut(data: bytes, n_points: int, n_cut_total: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """(decode ids, file-wide cut ids or None for a positions-only section) of a cut section,
+    checked: ids inside the level and the file's cut count, decode ids strictly increasing, no cut
+    id twice."""
     if len(data) < _CUT_HEAD.size:
         raise CorruptFileError("corrupt cut section: truncated header")
     magic, n, c, total, start = _CUT_HEAD.unpack_from(data)
-    if magic != _CUT_MAGIC or n != n_points or total != n_cut_total or c > n or start > total:
+    if magic not in (_CUT_MAGIC, _CUT_POINTS_MAGIC) or n != n_points or total != n_cut_total or c > n or start > total:
         raise CorruptFileError("corrupt cut section: its header disagrees with the brick index")
+    width = 8 if magic == _CUT_MAGIC else 4
     try:
         dec = lzma.LZMADecompressor(format=lzma.FORMAT_RAW, filters=_LZMA_FILTERS)
-        body = dec.decompress(data[_CUT_HEAD.size:], max_length=8 * c + 1)
+        body = dec.decompress(data[_CUT_HEAD.size:], max_length=width * c + 1)
     except lzma.LZMAError:
         raise CorruptFileError("corrupt cut section: bad compressed data") from None
-    if len(body) != 8 * c or not dec.eof or dec.unused_data:
+    if len(body) != width * c or not dec.eof or dec.unused_data:
         raise CorruptFileError("corrupt cut section: wrong length")
     v = np.frombuffer(body, "<u4").astype(np.int64)
     pos = np.cumsum(v[:c] + 1) - 1
+    if c and pos[-1] >= n:
+        raise CorruptFileError("corrupt cut section: a vertex out of range")
+    if magic == _CUT_POINTS_MAGIC:
+        return pos, None
     zz = v[c:]
     ids = start + np.cumsum(np.where(zz & 1, -(zz + 1) // 2, zz // 2) + 1) - 1
     if c and (pos[-1] >= n or ids.min() < 0 or ids.max() >= total):
@@ -161,7 +178,7 @@ def encode_brick(brick: BrickLevels) -> EncodedBrick:
     return EncodedBrick(sections, entry, cut_decode)
 
 
-def _cut_sections(bricks: list[EncodedBrick], n_cut_total: int) -> list[dict]:
+def _cut_sections(bricks: list[EncodedBrick], n_cut_total: int, ids: bool) -> list[dict]:
     """Per brick, its cut sections: cut vertices renumbered in order of first appearance in level
     0's decode order, brick after brick (so each brick's new ones count up from its ``start``)."""
     file_id = np.full(n_cut_total, -1, np.int64)
@@ -178,27 +195,44 @@ def _cut_sections(bricks: list[EncodedBrick], n_cut_total: int) -> list[dict]:
         for lv, cd in zip(b.entry["levels"], b.cut_decode):
             if (file_id[cd[cd >= 0]] < 0).any():
                 raise OptionError(f"level {lv['level']} of a brick has cut vertices its level 0 does not")
-            ids = np.where(cd >= 0, file_id[np.maximum(cd, 0)], -1)
-            sec[f"L{lv['level']}/cut"] = encode_cut(ids, n_cut_total, start if lv["level"] == b.entry["levels"][0]["level"] else 0)
+            first = lv["level"] == b.entry["levels"][0]["level"]
+            sec[f"L{lv['level']}/cut"] = encode_cut(np.where(cd >= 0, file_id[np.maximum(cd, 0)], -1), n_cut_total,
+                                                     start if first else 0, ids=ids)
         out.append(sec)
     if nxt != n_cut_total:
         raise OptionError(f"{n_cut_total} cut vertices announced, the bricks hold {nxt}")
     return out
 
 
-def encode_bricked(mesh: TetMesh, bricks: list[EncodedBrick], n_cut_total: int, *, source: str = "") -> bytes:
+def encode_bricked(mesh: TetMesh, bricks: list[EncodedBrick], n_cut_total: int, *, source: str = "",
+                   cut_ids: bool = True) -> bytes:
     """A whole bricked file: the metadata of ``mesh`` (the unsplit mesh: counts, bounds, arrays,
-    ranges, render step) with the brick index, then every brick's sections under ``B{k}/``."""
+    ranges, render step) with the brick index, then every brick's sections under ``B{k}/``.
+
+    ``cut_ids``: store the cut vertices' file-wide ids; False only when no two cut vertices have
+    the same coordinates (:func:`distinct_points`): then the coordinates match them up.
+    """
     if len(bricks) < 2:
         raise OptionError("a bricked file has two bricks or more (one brick is a plain file)")
     check_mesh(mesh)
     meta = file_meta(mesh, len(mesh.boundary_faces()), source)
     meta["cut_points"] = int(n_cut_total)
     meta[BRICKS_KEY] = [b.entry for b in bricks]
-    cuts = _cut_sections(bricks, int(n_cut_total))
+    cuts = _cut_sections(bricks, int(n_cut_total), bool(cut_ids))
     sections = [(brick_prefix(k) + name, data) for k, b in enumerate(bricks)
                 for name, data in list(b.sections.items()) + list(cuts[k].items())]
     return build_container(meta, sections)
+
+
+def distinct_points(points: np.ndarray) -> bool:
+    """No two rows have the same bits."""
+    return np.unique(_keys(points)).size == points.shape[0]
+
+
+def _keys(rows: np.ndarray) -> np.ndarray:
+    """Every row's bits as one void scalar (sortable, comparable)."""
+    b = _bits(rows)
+    return np.ascontiguousarray(b).view(f"V{max(1, b.shape[1])}").ravel() if b.shape[1] else np.zeros(len(b), "V1")
 
 
 # -- reading --------------------------------------------------------------------------------------
@@ -314,16 +348,17 @@ class _Stitched:
             raise CorruptFileError(f"corrupt file: the stitched mesh is invalid ({e})") from None
 
 
-def stitch_bricks(meshes: list[TetMesh], cuts: list[tuple[np.ndarray, np.ndarray]], n_cut_total: int,
-                  *, n_points: int | None = None) -> TetMesh:
-    """One mesh from its bricks (see :func:`plan_stitch`).
+def stitch_bricks(meshes: list[TetMesh], cuts: list[tuple[np.ndarray, np.ndarray | None]], n_cut_total: int,
+                  *, n_points: int | None = None, jobs: int | None = 1) -> TetMesh:
+    """One mesh from its bricks (see :func:`plan_stitch`), written by ``jobs`` threads.
 
     Parameters
     ----------
     meshes : list of TetMesh
-        The bricks, in order.
-    cuts : list of (vertex ids, cut ids)
-        Per brick, its cut vertices (ids in its mesh) and their file-wide ids.
+        The bricks, in order (the list is emptied as they are written).
+    cuts : list of (vertex ids, cut ids or None)
+        Per brick, its cut vertices (ids in its mesh) and their file-wide ids; None (every brick
+        alike): the cut vertices are told apart by their coordinates.
     n_cut_total : int
     n_points : int, optional
         The expected vertex count of the result (checked).
@@ -334,15 +369,43 @@ def stitch_bricks(meshes: list[TetMesh], cuts: list[tuple[np.ndarray, np.ndarray
         A cut vertex whose coordinates or values differ between two bricks, or counts that do
         not add up.
     """
+    cuts = _ids_from_points(meshes, cuts, n_cut_total)
     plan = plan_stitch([m.n_points for m in meshes], [m.n_tets for m in meshes], cuts, n_cut_total)
     if n_points is not None and plan.n_points != n_points:
         raise CorruptFileError(f"corrupt file: the bricks stitch into {plan.n_points} vertices, "
                                f"the metadata says {n_points}")
     m0 = meshes[0]
     out = _Stitched(plan, m0.points.dtype, m0.arrays, m0.scalar_name)
-    for k, m in enumerate(meshes):
-        out.put(k, m)
+
+    def put(k):
+        out.put(k, meshes[k])
+        meshes[k] = None  # its memory goes as soon as it is written
+
+    map_bricks(put, len(meshes), jobs)
     return out.mesh()
+
+
+def _ids_from_points(meshes, cuts, n_cut_total: int) -> list:
+    """``cuts`` with file-wide ids: as stored, or (positions-only sections) the rank of each cut
+    vertex's coordinates among the distinct ones of all bricks."""
+    kinds = {ids is None for _, ids in cuts}
+    if kinds == {False}:
+        return cuts
+    if kinds != {True}:
+        raise CorruptFileError("corrupt file: some cut sections list ids, others do not")
+    keys = [_keys(m.points[pos]) for m, (pos, _) in zip(meshes, cuts)]
+    uniq, inverse = np.unique(np.concatenate(keys), return_inverse=True)
+    if uniq.size != n_cut_total:
+        raise CorruptFileError(f"corrupt file: the bricks' cut vertices have {uniq.size} distinct positions, "
+                               f"the file has {n_cut_total} cut vertices")
+    bounds = np.cumsum([0] + [len(k) for k in keys])
+    out = []
+    for k, (pos, _) in enumerate(cuts):
+        ids = inverse.ravel()[bounds[k]:bounds[k + 1]].astype(np.int64)
+        if np.unique(ids).size != ids.size:
+            raise CorruptFileError(f"corrupt file: two cut vertices of brick {k} have the same position")
+        out.append((pos, ids))
+    return out
 
 
 def _bits(a: np.ndarray) -> np.ndarray:
@@ -354,8 +417,8 @@ def _bits(a: np.ndarray) -> np.ndarray:
 def decode_bricked(source, level: int = 0, *, jobs: int | None = None, progress=None) -> TetMesh:
     """Decode ``level`` of every brick on ``jobs`` threads (default: all cores) and stitch them.
 
-    The stitch is planned from the cut sections before anything is decoded, so that every thread
-    writes its brick straight into the output; the result is the same whatever ``jobs`` is:
+    Bricks decode on threads, then (on threads too) each writes its rows of the stitched mesh;
+    the result is the same whatever ``jobs`` is:
     vertices of brick 0 in its decode order, then each next brick's vertices that no earlier brick
     holds; tets in brick order. For a file of one brick, the plain :meth:`TetcReader.decode_mesh`.
 
@@ -376,13 +439,7 @@ def decode_bricked(source, level: int = 0, *, jobs: int | None = None, progress=
     if missing:
         raise OptionError(f"level {level} is not stored in every brick (missing in brick {missing[0]}); "
                           f"stored in all: {[lv['level'] for lv in reader.levels]}")
-    metas = [b.level_meta(level) for b in bricks]
-    cuts = map_bricks(lambda k: read_cut(reader, k, level), len(bricks), jobs)
-    plan = plan_stitch([lv["points"] for lv in metas], [lv["tets"] for lv in metas], cuts,
-                       int(reader.meta["cut_points"]))
-    if level == 0 and plan.n_points != reader.meta["points"]:
-        raise CorruptFileError(f"corrupt file: the bricks stitch into {plan.n_points} vertices, "
-                               f"the metadata says {reader.meta['points']}")
-    out = _Stitched(plan, reader.points_dtype, reader.arrays, reader.scalar_name)
-    map_bricks(lambda k: out.put(k, bricks[k].decode_mesh(level)), len(bricks), jobs, progress)
-    return out.mesh()
+    cuts = [read_cut(reader, k, level) for k in range(len(bricks))]  # checked before the long work
+    meshes = map_bricks(lambda k: bricks[k].decode_mesh(level), len(bricks), jobs, progress)
+    return stitch_bricks(meshes, cuts, int(reader.meta["cut_points"]), jobs=jobs,
+                         n_points=int(reader.meta["points"]) if level == 0 else None)

@@ -21,8 +21,8 @@ import numba
 import numpy as np
 
 from ..codec import LevelPayload, TetcReader
-from ..codec.bricks import (BrickLevels, check_jobs, decode_bricked, encode_brick, encode_bricked, map_bricks,
-                            read_cut, stitch_bricks)
+from ..codec.bricks import (BrickLevels, check_jobs, decode_bricked, distinct_points, encode_brick, encode_bricked,
+                            map_bricks, read_cut, stitch_bricks)
 from .._resources import peak_rss_mb
 from ..errors import CorruptFileError, OptionError
 from ..mesh import TetMesh, mesh_batches
@@ -70,13 +70,16 @@ def _brick_job(mesh: TetMesh, cut_ids: np.ndarray, options: dict, threads: int):
 
 def compress_bricks(mesh: TetMesh, n_bricks: int, *, jobs: int | None = None, mesh_only: bool = False,
                     levels=None, w_density: float = 1.0, w_geometry: float = 1.0, source: str = "",
-                    progress=None, log=None) -> bytes:
+                    cut_ids: bool | None = None, progress=None, log=None) -> bytes:
     """The bytes of a bricked ``.tetc`` file of ``mesh`` split into ``n_bricks`` (>= 2) bricks.
 
     Parameters
     ----------
     jobs : int, optional
         Worker processes (default: all cores); 1 works in this process.
+    cut_ids : bool, optional
+        Store the file-wide ids of the shared vertices (default: only when two of them have the
+        same coordinates; otherwise the coordinates match them up).
     progress : callable, optional
         ``progress(done, total)`` in vertices of finished bricks.
     log : callable, optional
@@ -121,7 +124,10 @@ def compress_bricks(mesh: TetMesh, n_bricks: int, *, jobs: int | None = None, me
                 done += b.mesh.n_points
                 if progress is not None:
                     progress(done, total)
-    return encode_bricked(mesh, encoded, n_cut, source=source)
+    # shared vertices are matched by their coordinates when these tell them apart (no ids stored)
+    if cut_ids is None:
+        cut_ids = not distinct_points(mesh.points[is_cut])
+    return encode_bricked(mesh, encoded, n_cut, source=source, cut_ids=cut_ids)
 
 
 def read_bricked(reader: TetcReader, *, ratio: float | None = None, level: int | None = None,

@@ -372,3 +372,23 @@ def test_decode_kernels_release_the_gil():
                    _geometry_kernels.decode_tables_kernel, _geometry_kernels.decode_vertices,
                    _array_kernels.decode_component, _array_kernels.reconstruct):
         assert kernel.targetoptions.get("nogil") is True, kernel.__name__
+
+
+def test_one_brick_renders_through_the_plain_pipeline(tmp_path):
+    # what the compositor builds on: a brick's reader goes through render_tetc unchanged (its
+    # stream, levels and forest), with the file's scalar range and step in its metadata
+    from gatun_py.pipeline.stream import View, file_view, render_tetc
+    from gatun_py.render.camera import Camera
+    from gatun_py.render.raycast import render_mesh
+
+    m = jittered_grid((6, 6, 5), jitter=0.2, seed=11)
+    f = gatun_py.compress(m, tmp_path / "b.tetc", bricks=3, jobs=1)
+    view = View(Camera(48, 48, 30.0, 20.0, 1.0), "default", "volume", None, False, None)
+    b = f.reader.brick(1)
+    res = render_tetc(b, view, ratio=0.3)
+    assert res.stats["tets_decoded"] == b.level_meta(res.stats["level"])["tets"] and res.image.shape[:2] == (48, 48)
+    streamed = render_tetc(b, view, level=0).image
+    v, camera, rng, step, _ = file_view(b, view)
+    ref = render_mesh(b.decode_mesh(0), camera, v.tf, mode="volume", step=step, scalar_range=rng).image
+    assert np.abs(streamed - ref).max() < 1e-5 and ref.max() > 0
+    assert rng == tuple(f.reader.meta["scalar_range"]) and step == f.reader.meta["render_step"]

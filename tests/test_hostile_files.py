@@ -42,13 +42,15 @@ def _exercise(data: bytes) -> None:
     r = TetcReader(data)
     tetc_info(r)
     r.forest_merges()
-    for lv in r.levels:
-        r.decode_mesh(lv["level"])
-        r.read_forest(lv["level"])
-    for name, _, k in r.arrays:
-        for _ in r.iter_decode(0, scalar=name, component=None if k == 1 else "magnitude"):
-            pass
+    for b in (r.brick(k) for k in range(r.n_bricks)):  # a one-brick file is its own brick 0
+        for lv in b.levels:
+            b.decode_mesh(lv["level"])
+            b.read_forest(lv["level"])
+        for name, _, k in b.arrays:
+            for _ in b.iter_decode(0, scalar=name, component=None if k == 1 else "magnitude"):
+                pass
     f = gatun_py.open(data)
+    f.mesh(jobs=2)
     if f.max_ratio > 0:
         f.mesh(ratio=min(0.5, f.max_ratio))
 
@@ -157,12 +159,14 @@ def check(worker, data, what=""):
 
 @pytest.fixture(scope="module")
 def files():
-    """(post with forest and levels, a float64 mesh with several arrays) as bytes."""
+    """(post with forest and levels, a float64 mesh with several arrays, post in 3 bricks with
+    forests and levels) as bytes."""
     from conftest import load_sample
     from gatun_py.codec import LevelPayload, encode_tetc
     from gatun_py.mesh.validate import validate_tets
     from gatun_py.simplify import build_levels, decimate
     from gatun_py.simplify.levels import storage_forests
+    from gatun_py.pipeline.bricks import compress_bricks
 
     mesh = load_sample("post")[0]
     forest = decimate(mesh)
@@ -174,7 +178,8 @@ def files():
     pd = {"p": mesh.points[:, 0].astype(np.float64) * np.pi, "rho": mesh.density.astype(np.float64),
           "id": np.arange(n, dtype=np.int32), "u": rng.normal(size=(n, 3))}
     arrays, _ = validate_tets(mesh.points.astype(np.float64) * 1.1, None, mesh.tets, scalar_name="p", point_data=pd)
-    return _Files(with_forest, encode_tetc([LevelPayload(0, 0.0, 0, arrays)]))
+    bricked = compress_bricks(mesh, 3, jobs=1, levels=2)
+    return _Files(with_forest, encode_tetc([LevelPayload(0, 0.0, 0, arrays)]), bricked)
 
 
 class _Files(tuple):
@@ -331,7 +336,7 @@ HYPO = settings(max_examples=150, deadline=None, suppress_health_check=list(Heal
 @HYPO
 @given(st.data())
 def test_bit_flips_and_truncations(worker, files, data):
-    blob = bytearray(files[data.draw(st.integers(0, 1))])
+    blob = bytearray(files[data.draw(st.integers(0, len(files) - 1))])
     for _ in range(data.draw(st.integers(1, 4))):
         pos = data.draw(st.integers(0, len(blob) - 1))
         blob[pos] ^= 1 << data.draw(st.integers(0, 7))
@@ -349,11 +354,14 @@ _VALUES = st.one_of(st.integers(-2**63, 2**64), st.sampled_from([0, -1, 1, 2**31
 @given(st.data())
 def test_rewritten_metadata(worker, files, data):
     """Any value of any metadata key (top level, a level, an array entry) with a valid CRC."""
-    meta, sections = _split(files[data.draw(st.integers(0, 1))])
-    where = data.draw(st.sampled_from(["top", "level", "array"]))
+    meta, sections = _split(files[data.draw(st.integers(0, len(files) - 1))])
+    where = data.draw(st.sampled_from(["top", "level", "array", "brick"]))
     target = meta
+    bricks = meta.get("bricks") or [meta]  # a bricked file keeps its levels per brick
     if where == "level":
-        target = data.draw(st.sampled_from(meta["levels"]))
+        target = data.draw(st.sampled_from(data.draw(st.sampled_from(bricks))["levels"]))
+    elif where == "brick":
+        target = data.draw(st.sampled_from(bricks))
     elif where == "array" and "arrays" in meta:
         target = data.draw(st.sampled_from(meta["arrays"]))
     key = data.draw(st.sampled_from(sorted(target)))
@@ -365,7 +373,7 @@ def test_rewritten_metadata(worker, files, data):
 @given(st.data())
 def test_rewritten_section_bytes(worker, files, data):
     """Section payloads changed behind a valid CRC: header fields, truncation, random bytes."""
-    meta, sections = _split(files[data.draw(st.integers(0, 1))])
+    meta, sections = _split(files[data.draw(st.integers(0, len(files) - 1))])
     i = data.draw(st.integers(0, len(sections) - 1))
     name, payload = sections[i]
     p = bytearray(payload)

@@ -19,12 +19,12 @@ from naive_composite import naive_composite
 from samples import SAMPLES
 
 
-def _random_fragments(rng, width, height, n, *, disjoint=True):
+def _random_fragments(rng, width, height, n, *, disjoint=True, part=0, parts=1):
     ray = rng.integers(0, width * height, n).astype(np.int32)
     a = rng.uniform(0, 1, n)
     rgb = rng.uniform(0, 1, (n, 3)) * a[:, None]
     if disjoint:  # a partition's fragments: disjoint depth intervals per pixel
-        t0 = rng.permutation(n).astype(np.float64) * 2.0
+        t0 = (rng.permutation(n) * parts + part).astype(np.float64) * 2.0
         depth = np.stack([t0, t0 + 1.0], axis=1)
     else:
         t0 = rng.integers(0, 3, n).astype(np.float64)
@@ -36,7 +36,7 @@ def _random_fragments(rng, width, height, n, *, disjoint=True):
 @given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.integers(1, 5), st.integers(0, 60), st.booleans())
 def test_composite_kernel_equals_naive_reference(seed, width, height, n, disjoint):
     rng = np.random.default_rng(seed)
-    parts = [_random_fragments(rng, width, height, n, disjoint=disjoint) for _ in range(3)]
+    parts = [_random_fragments(rng, width, height, n, disjoint=disjoint, part=k, parts=3) for k in range(3)]
     stats = {}
     fast = composite(merge_fragments(*parts), stats=stats)
     slow = naive_composite(parts)
@@ -48,7 +48,7 @@ def test_composite_kernel_equals_naive_reference(seed, width, height, n, disjoin
 
 def test_merge_order_does_not_matter():
     rng = np.random.default_rng(3)
-    parts = [_random_fragments(rng, 7, 5, 40) for _ in range(4)]
+    parts = [_random_fragments(rng, 7, 5, 40, part=k, parts=4) for k in range(4)]
     a = composite(merge_fragments(*parts))
     b = composite(merge_fragments(merge_fragments(parts[3], parts[1]), merge_fragments(parts[2], parts[0])))
     assert np.array_equal(a, b)

@@ -27,7 +27,8 @@ from ..codec import TetcReader
 from ..errors import OptionError
 from ..mesh import TetMesh, default_step
 from ..mesh.partition import partition_tets, split_bricks
-from ..render.camera import FittedCamera
+from ..mesh.synthetic import jittered_grid
+from ..render.camera import Camera, FittedCamera
 from ..render.composite import Fragments, composite, merge_fragments
 from ..render.raycast import render_mesh
 from ..render.transfer import TransferFunction, load_transfer_function
@@ -35,7 +36,7 @@ from ..simplify.levels import resolve_target, target_ancestors
 from .stream import PipelineResult, View, _run_streaming, bounded_step, file_render_defaults
 
 __all__ = ["MeshExtent", "FrameSetup", "BrickRef", "frame_setup", "split_for_render", "render_brick",
-           "render_bricks", "brick_tets", "open_brick"]
+           "render_bricks", "brick_tets", "open_brick", "load_brick_kernels", "balance"]
 
 
 @dataclass(frozen=True)
@@ -279,6 +280,17 @@ def render_bricks(sources, view: View, extent: MeshExtent, *, ratio: float | Non
     res = composite_frame(parts, per_brick)
     res.stats.update(notes=notes, step=setup.step, mode=setup.mode, peak_rss_mb=peak_rss_mb())
     return res
+
+
+def load_brick_kernels() -> float:
+    """Load what rendering a brick needs (the render, fragment and compositing kernels) into this
+    process from numba's cache; returns the seconds it took. A cluster's workers call it when they
+    join, so the first frame does not pay for it."""
+    t0 = time.perf_counter()
+    mesh = jittered_grid((3, 3, 3), jitter=0.1)
+    for mode in ("volume", "face"):
+        composite(render_mesh(mesh, Camera(4, 4), "default", mode=mode, fragments=True).fragments)
+    return time.perf_counter() - t0
 
 
 def balance(sizes, n_bins: int) -> list[list[int]]:

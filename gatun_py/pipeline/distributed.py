@@ -32,7 +32,8 @@ from ..codec import TetcReader
 from ..errors import OptionError, TetcError
 from ..mesh import TetMesh
 from ..render.composite import merge_fragments
-from .bricks import BrickRef, FrameSetup, balance, brick_tets, composite_frame, frame_setup, open_brick, render_brick
+from .bricks import (BrickRef, FrameSetup, balance, brick_tets, composite_frame, frame_setup, load_brick_kernels,
+                     open_brick, render_brick)
 
 __all__ = ["BrickCluster", "ClusterError", "FrameOutcome"]
 
@@ -155,6 +156,9 @@ class BrickCluster:
             where = scheduler or "a local cluster"
             raise ClusterError(f"cannot reach {where} within {timeout:g} s: {e}") from None
         self.timeout = float(timeout)
+        # every worker loads the kernels from numba's cache now, not in the first frame (and a
+        # worker joining later loads them with its first brick)
+        self.client.run(load_brick_kernels)
 
     # -- lifetime ----------------------------------------------------------------------------------
     def close(self) -> None:

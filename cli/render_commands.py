@@ -129,6 +129,8 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     if scalar_range is not None and not scalar_range[0] < scalar_range[1]:
         raise click.BadParameter(f"MIN must be below MAX, got {scalar_range[0]:g} {scalar_range[1]:g}",
                                  param_hint="'--range'")
+    if n_bricks is not None and workers is None and scheduler is None:
+        raise click.UsageError("--bricks is for rendering on a cluster (--workers or --scheduler)")
     if workers is not None or scheduler is not None or orbit > 1:
         _check_series_options(workers, scheduler, n_bricks, ratio, budget, colorbar, lean, pipeline, component)
     if workers is not None or scheduler is not None:
@@ -173,8 +175,6 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
 def _check_series_options(workers, scheduler, n_bricks, ratio, budget, colorbar, lean, pipeline, component):
     if workers is not None and scheduler is not None:
         raise click.UsageError("give either --workers (a local cluster) or --scheduler (a running one), not both")
-    if n_bricks is not None and workers is None and scheduler is None:
-        raise click.UsageError("--bricks is for rendering on a cluster (--workers or --scheduler)")
     unsupported = [name for name, given in (("--ratio", ratio is not None), ("--budget", budget is not None),
                                             ("--colorbar", colorbar), ("--lean", lean),
                                             ("--pipeline generic", pipeline != "streaming"),

@@ -9,6 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from conftest import load_sample
+from gatun_py.errors import OptionError
 from gatun_py.mesh.synthetic import jittered_grid
 from gatun_py.pipeline.bricks import MeshExtent, frame_setup, render_bricks, split_for_render
 from gatun_py.pipeline.stream import View, render_mesh_file
@@ -124,3 +125,45 @@ def test_bricks_share_the_whole_mesh_frame():
     # a brick's own boundary (with its cut faces) would give another step: it must not be used
     assert any(MeshExtent.of_mesh(b).step != extent.step for b in bricks)
     assert render_bricks(bricks, View(Camera(16, 16)), extent).stats["step"] == extent.step
+
+
+@pytest.fixture(scope="module")
+def post_brick_files(tmp_path_factory):
+    """post.vtk cut into 4 bricks, each compressed to its own .tetc (with its forest and levels)."""
+    import gatun_py
+
+    mesh = load_sample("post")[0]
+    bricks, extent = split_for_render(mesh, 4)
+    folder = tmp_path_factory.mktemp("post_bricks")
+    paths = []
+    for k, b in enumerate(bricks):
+        paths.append(folder / f"b{k}.tetc")
+        gatun_py.compress(b, paths[-1])
+    return mesh, paths, extent
+
+
+def test_tetc_bricks_render_the_whole_mesh(post_brick_files):
+    """Bricks decoded from their own files (the cut-border coder renumbers their vertices) still
+    composite to the whole mesh's image."""
+    mesh, paths, extent = post_brick_files
+    for mode in ("volume", "face"):
+        view = View(Camera(64, 64, 30, 20), "post", mode)
+        whole = render_mesh_file(mesh, view)
+        bricked = render_bricks([str(p) for p in paths], view, extent)
+        max8, _ = _diff(bricked.image, whole.image)
+        assert max8 <= 1 and float(np.abs(bricked.image - whole.image).max()) < 1e-6
+        assert bricked.stats["brick_levels"] == [0, 0, 0, 0]
+
+
+def test_budget_with_bricks_picks_a_level_per_brick(post_brick_files, tmp_path, monkeypatch):
+    monkeypatch.setenv("TETC_CACHE_DIR", str(tmp_path))
+    mesh, paths, extent = post_brick_files
+    view = View(Camera(48, 48, 30, 20), "post")
+    srcs = [str(p) for p in paths]
+    generous = render_bricks(srcs, view, extent, budget=60.0)
+    assert generous.stats["brick_levels"] == [0, 0, 0, 0]  # a minute: the full mesh everywhere
+    tight = render_bricks(srcs, view, extent, budget=1e-4)
+    assert all(lv > 0 for lv in tight.stats["brick_levels"])  # nothing fits: every brick coarsens
+    assert tight.stats["tets_rendered"] < generous.stats["tets_rendered"] == mesh.n_tets
+    with pytest.raises(OptionError, match="at most one"):
+        render_bricks(srcs, view, extent, budget=1.0, level=1)

@@ -32,11 +32,12 @@ from ..render.camera import Camera, FittedCamera
 from ..render.composite import Fragments, composite, merge_fragments
 from ..render.raycast import render_mesh
 from ..render.transfer import TransferFunction, load_transfer_function
-from ..simplify.levels import resolve_target, target_ancestors
+from ..simplify.levels import Target, resolve_target, target_ancestors
+from .budget import plan_file_budget
 from .stream import PipelineResult, View, _run_streaming, bounded_step, file_render_defaults
 
 __all__ = ["MeshExtent", "FrameSetup", "BrickRef", "frame_setup", "split_for_render", "render_brick",
-           "render_bricks", "brick_tets", "open_brick", "load_brick_kernels", "balance"]
+           "render_bricks", "brick_tets", "open_brick", "plan_brick_budgets", "load_brick_kernels", "balance"]
 
 
 @dataclass(frozen=True)
@@ -165,7 +166,7 @@ def brick_tets(source) -> int:
 
 
 def render_brick(source, setup: FrameSetup, *, ratio: float | None = None, level: int | None = None,
-                 progress=None) -> tuple[Fragments, dict]:
+                 target: Target | None = None, progress=None) -> tuple[Fragments, dict]:
     """Ray-cast one brick into fragments.
 
     Parameters
@@ -174,6 +175,9 @@ def render_brick(source, setup: FrameSetup, *, ratio: float | None = None, level
         A mesh is rendered whole; a ``.tetc`` brick is decoded, simplified (``ratio``, ``level``)
         and rendered in one streaming pass.
     setup : FrameSetup
+    ratio, level, target : optional
+        ``.tetc`` bricks: what to draw (default the full mesh; ``target`` a resolved one, e.g. by
+        :func:`plan_brick_budgets`).
 
     Returns
     -------
@@ -183,8 +187,8 @@ def render_brick(source, setup: FrameSetup, *, ratio: float | None = None, level
     t0 = time.perf_counter()
     cam = setup.camera
     if isinstance(source, TetMesh):
-        if ratio is not None or level is not None:
-            raise OptionError("ratio and level need .tetc bricks")
+        if ratio is not None or level is not None or target is not None:
+            raise OptionError("ratio, level and budget need .tetc bricks")
         if source.n_tets == 0:
             return Fragments.empty(cam.width, cam.height), {"tets_rendered": 0, "render_s": 0.0}
         res = render_mesh(source, cam, setup.tf, mode=setup.mode, step=setup.step, scalar_range=setup.scalar_range,
@@ -197,7 +201,8 @@ def render_brick(source, setup: FrameSetup, *, ratio: float | None = None, level
                 level = source.level
         else:
             reader = source if isinstance(source, TetcReader) else TetcReader(source)
-        target = resolve_target(reader, ratio=ratio, level=level)
+        if target is None:
+            target = resolve_target(reader, ratio=ratio, level=level)
         times = {"decode_s": 0.0, "filter_s": 0.0}
         anc = target_ancestors(reader, target)
         view = View(None, setup.tf, setup.mode, setup.step, False, setup.scalar_range, setup.scalar,
@@ -219,6 +224,7 @@ def combine_stats(per_brick: list[dict]) -> dict:
     """One frame's stats from its bricks': counts and times summed, the slowest brick's time."""
     out = {k: sum(s.get(k, 0) for s in per_brick) for k in _SUMMED if any(k in s for s in per_brick)}
     out["bricks"] = len(per_brick)
+    out["brick_levels"] = [s.get("level", 0) for s in per_brick]
     out["slowest_brick_s"] = max((s.get("brick_s", 0.0) for s in per_brick), default=0.0)
     return out
 
@@ -236,8 +242,28 @@ def composite_frame(parts: list[Fragments], per_brick: list[dict]) -> PipelineRe
     return PipelineResult(image, stats)
 
 
+def plan_brick_budgets(sources, view: View, budget_s: float, *, groups=None) -> list[Target]:
+    """A target for every ``.tetc`` brick so that one frame fits ``budget_s`` seconds.
+
+    Each brick picks its own level and ratio (the time-budget planner on its own file,
+    :func:`~gatun_py.pipeline.budget.plan_file_budget`) for its share of the frame: the budget
+    split in proportion to the tets among the bricks that run one after another (``groups``: the
+    bricks of each worker, which run side by side; default one group, one process).
+    """
+    readers = [open_brick(s) if isinstance(s, BrickRef) else s if isinstance(s, TetcReader) else TetcReader(s)
+               for s in sources]
+    tets = [int(r.level_meta(0)["tets"]) for r in readers]
+    groups = groups or [list(range(len(readers)))]
+    share = [0.0] * len(readers)
+    for g in groups:
+        total = max(sum(tets[i] for i in g), 1)
+        for i in g:
+            share[i] = budget_s * tets[i] / total
+    return [plan_file_budget(r, view, max(share[i], 1e-3))[0] for i, r in enumerate(readers)]
+
+
 def render_bricks(sources, view: View, extent: MeshExtent, *, ratio: float | None = None, level: int | None = None,
-                  progress=None) -> PipelineResult:
+                  budget: float | None = None, progress=None) -> PipelineResult:
     """Render every brick of ``sources`` in turn, one process, and composite: the whole mesh's image.
 
     Parameters
@@ -249,6 +275,9 @@ def render_bricks(sources, view: View, extent: MeshExtent, *, ratio: float | Non
         The whole mesh's (:func:`split_for_render` gives it with the bricks).
     ratio, level : optional
         ``.tetc`` bricks: each brick simplified to this ratio or stored level.
+    budget : float, optional
+        ``.tetc`` bricks: seconds for the frame; each brick picks its level and ratio for its
+        share (:func:`plan_brick_budgets`).
     progress : callable, optional
         Called with the number of tets of each brick once it is rendered.
 
@@ -269,10 +298,13 @@ def render_bricks(sources, view: View, extent: MeshExtent, *, ratio: float | Non
     """
     if not sources:
         raise OptionError("no bricks to render")
+    if budget is not None and (ratio is not None or level is not None):
+        raise OptionError("give at most one of ratio, level and budget")
     setup, notes = frame_setup(view, extent)
+    targets = plan_brick_budgets(sources, view, budget) if budget is not None else [None] * len(sources)
     parts, per_brick = [], []
-    for src in sources:
-        frags, st = render_brick(src, setup, ratio=ratio, level=level)
+    for src, target in zip(sources, targets):
+        frags, st = render_brick(src, setup, ratio=ratio, level=level, target=target)
         parts.append(frags)
         per_brick.append(st)
         if progress is not None:

@@ -18,6 +18,7 @@ Writes ``bench/sections/composite.md``:
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import time
@@ -79,7 +80,7 @@ def scaling(mesh, tf, *, size, frames, n_bricks, log=print):
     parts, extent = split_for_render(mesh, n_bricks)
     tets = [p.n_tets for p in parts]
     views = [View(Camera(size, size, 360.0 * i / frames, 20.0), tf) for i in range(frames + 1)]
-    out = {}
+    out = {"load": " / ".join(f"{x:.1f}" for x in os.getloadavg())}
     clusters = {"1 worker × 1 thread": BrickCluster(workers=1, threads_per_worker=1, timeout=60),
                 "2 workers × 1 thread": BrickCluster(workers=2, threads_per_worker=1, timeout=60)}
     try:
@@ -115,8 +116,7 @@ def scaling(mesh, tf, *, size, frames, n_bricks, log=print):
         out["1 worker × 2 threads"] = {"frames_s": ts[1:]}
     finally:
         c2.close()
-    log({k: (statistics.median(v["frames_s"]) if isinstance(v, dict) else statistics.median(v))
-         for k, v in out.items()})
+    log({k: (statistics.median(v["frames_s"]) if isinstance(v, dict) else v) for k, v in out.items() if k != "ratios"})
     return out
 
 
@@ -127,7 +127,7 @@ def main(argv=None):
     ap.add_argument("--big", default=None, help="a larger gmsh mesh for the equality table (e.g. flange-10m)")
     ap.add_argument("--size", type=int, default=512)
     ap.add_argument("--frames", type=int, default=5)
-    ap.add_argument("--bricks", type=int, default=8, help="bricks for the worker scaling")
+    ap.add_argument("--bricks", type=int, default=16, help="bricks for the worker scaling")
     args = ap.parse_args(argv)
     t_start = time.perf_counter()
     sample_views = [(0.0, 0.0), (90.0, 20.0), (45.0, 70.0)]
@@ -167,6 +167,8 @@ def main(argv=None):
             "",
             f"### 1 vs 2 workers ({args.mesh}, {big.n_tets:,} tets, {args.bricks} bricks, {args.size}², "
             f"{args.frames} frames of an orbit after one warm-up frame)",
+            "",
+            f"Load average when the scaling started: {sc['load']} (1 / 5 / 15 min) on 2 cores.",
             "",
             "Both clusters are up at once and render one frame each in turn, so each ratio compares frames taken "
             "under the same load (the machine's 2 cores are shared with other work). Target: 2 workers >= 1.6x "

@@ -46,9 +46,10 @@ class MeshExtent:
 
     Examples
     --------
-    >>> from gatun_py.warmup import tiny_mesh
-    >>> MeshExtent.of_mesh(tiny_mesh()).scalar_range
-    (0.0, 1.0)
+    >>> from gatun_py.mesh.synthetic import jittered_grid
+    >>> extent = MeshExtent.of_mesh(jittered_grid((3, 3, 3), jitter=0.0))
+    >>> extent.lo, extent.hi
+    ((0.0, 0.0, 0.0), (2.0, 2.0, 2.0))
     """
 
     lo: tuple

@@ -2,8 +2,8 @@
 
 :class:`BrickCluster` connects to a scheduler (``tcp://HOST:PORT``) or starts a ``LocalCluster`` of
 worker processes, then :meth:`BrickCluster.load` puts every brick on one worker (balanced by tets)
-where it stays, decoded, for every frame that follows. A frame is one small task per brick (render
-its fragments where the brick lives), a binary tree of merge tasks between workers, and one
+where it stays, decoded, for every frame that follows. A frame is one task per worker (render the
+fragments of the bricks it holds), a binary tree of merge tasks between workers, and one
 composite task at the root; the client receives only the image. A series of frames (views of an
 orbit, or time steps) is submitted a few frames ahead and each frame is handed back as soon as it
 is complete, in order.
@@ -66,8 +66,10 @@ def _load_brick(source):
     return TetcReader(source).decode_mesh(0)
 
 
-def _render_on_worker(mesh, setup: FrameSetup):
-    return render_brick(mesh, setup)
+def _render_on_worker(setup: FrameSetup, *meshes):
+    """Every brick a worker holds, rendered in turn; their fragments in one (one message to send)."""
+    parts = [render_brick(m, setup) for m in meshes]
+    return merge_fragments(*[p[0] for p in parts]), [p[1] for p in parts]
 
 
 def _merge_on_worker(*parts):
@@ -214,9 +216,13 @@ class BrickCluster:
     # -- frames ------------------------------------------------------------------------------------
     def _submit_frame(self, setup: FrameSetup):
         c = self.client
-        level = [c.submit(_render_on_worker, b, setup, workers=[w], allow_other_workers=True, pure=False)
-                 for b, w in zip(self._bricks, self._brick_worker)]
-        # a binary tree of merges: log2(bricks) rounds of fragment traffic between workers
+        # one task per worker over the bricks it holds: a frame is a few large tasks, not one per brick
+        by_worker = {}
+        for b, w in zip(self._bricks, self._brick_worker):
+            by_worker.setdefault(w, []).append(b)
+        level = [c.submit(_render_on_worker, setup, *bricks, workers=[w], allow_other_workers=True, pure=False)
+                 for w, bricks in by_worker.items()]
+        # a binary tree of merges: log2(workers) rounds of fragment traffic between workers
         while len(level) > 1:
             nxt = [c.submit(_merge_on_worker, level[i], level[i + 1], pure=False) for i in range(0, len(level) - 1, 2)]
             if len(level) % 2:

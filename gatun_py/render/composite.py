@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from ._boundary import group_by_ray
 from ._segments import ACC_A, ACC_B, ACC_G, ACC_R, BACK, FRONT, SEG_ACC, SEG_FACE, SEG_RAY, SEG_TS, TS_T
 
 # columns of Fragments.depth
@@ -153,17 +154,7 @@ def _composite(ray, rgba, depth, n_rays, image):
     (insertion sort: pixels have few fragments), then blend front to back (equation 4) into
     ``image``. Returns the number of pixels where two fragments overlap in depth by more than
     ``OVERLAP_TOLERANCE`` (0 for the fragments of a partition: a check, not a failure)."""
-    n = ray.shape[0]
-    start = np.zeros(n_rays + 1, np.int64)
-    for i in range(n):
-        start[ray[i] + 1] += 1
-    for r in range(n_rays):
-        start[r + 1] += start[r]
-    order = np.empty(n, np.int64)
-    pos = start[:-1].copy()
-    for i in range(n):
-        order[pos[ray[i]]] = i
-        pos[ray[i]] += 1
+    start, order = group_by_ray(ray, n_rays)
     overlaps = 0
     for r in range(n_rays):
         lo, hi = start[r], start[r + 1]

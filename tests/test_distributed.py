@@ -157,10 +157,3 @@ def test_cluster_usage_errors(tmp_path):
     assert_usage_error(run("render", src, "-o", out, "--orbit", "3"), "--orbit")
     assert_usage_error(run("render", src, "-o", out, "--workers", "0"), "--workers")
     assert not out.exists()
-
-
-def test_dask_is_not_imported_by_the_library():
-    code = ("import sys, gatun_py, gatun_py.api, gatun_py.pipeline.distributed; "
-            "print('dask' in sys.modules or 'distributed' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "False"

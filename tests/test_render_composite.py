@@ -167,3 +167,13 @@ def test_budget_with_bricks_picks_a_level_per_brick(post_brick_files, tmp_path, 
     assert tight.stats["tets_rendered"] < generous.stats["tets_rendered"] == mesh.n_tets
     with pytest.raises(OptionError, match="at most one"):
         render_bricks(srcs, view, extent, budget=1.0, level=1)
+
+
+def test_cluster_without_dask_says_how_to_install_it(monkeypatch):
+    import sys
+
+    from gatun_py.pipeline.distributed import BrickCluster
+
+    monkeypatch.setitem(sys.modules, "distributed", None)  # as if not installed: import raises ImportError
+    with pytest.raises(OptionError, match=r"gatun_py\[dask\]"):
+        BrickCluster(workers=1)

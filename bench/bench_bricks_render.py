@@ -34,7 +34,7 @@ from gmsh_meshes import mesh_path  # noqa: E402
 
 from gatun_py._resources import peak_rss_mb  # noqa: E402
 from gatun_py.mesh import read_mesh  # noqa: E402
-from gatun_py.pipeline.bricks import split_for_render, render_bricks  # noqa: E402
+from gatun_py.pipeline.sortlast import split_for_render, render_bricks  # noqa: E402
 from gatun_py.pipeline.stream import View, render_mesh_file  # noqa: E402
 from gatun_py.render.camera import Camera  # noqa: E402
 from gatun_py.render.image import to_rgb8  # noqa: E402

@@ -30,7 +30,7 @@ from .codec.info import tetc_info
 from .errors import OptionError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.io import mesh_output_format
-from .pipeline.bricks import BrickRef, MeshExtent, split_for_render
+from .pipeline.sortlast import BrickRef, MeshExtent, split_for_render
 from .pipeline.budget import load_costs, plan_file_budget, remember_frame
 from .pipeline.distributed import BrickCluster
 from .pipeline.stream import PIPELINES, View, is_tetc, render_mesh_file, render_tetc

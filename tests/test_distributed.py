@@ -17,7 +17,7 @@ import pytest
 
 from cli_util import assert_error, assert_usage_error, run
 from conftest import SAMPLE_FILES, load_sample
-from gatun_py.pipeline.bricks import render_bricks, split_for_render
+from gatun_py.pipeline.sortlast import render_bricks, split_for_render
 from gatun_py.pipeline.stream import View, render_mesh_file
 from gatun_py.render import Camera
 from gatun_py.render.image import to_rgb8

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from conftest import load_sample
 from gatun_py.errors import OptionError
 from gatun_py.mesh.synthetic import jittered_grid
-from gatun_py.pipeline.bricks import MeshExtent, frame_setup, render_bricks, split_for_render
+from gatun_py.pipeline.sortlast import MeshExtent, frame_setup, render_bricks, split_for_render
 from gatun_py.pipeline.stream import View, render_mesh_file
 from gatun_py.render import Camera, render_mesh
 from gatun_py.render.composite import Fragments, composite, merge_fragments

@@ -32,7 +32,7 @@ from ..codec import TetcReader
 from ..errors import OptionError, TetcError
 from ..mesh import TetMesh
 from ..render.composite import merge_fragments
-from .bricks import (BrickRef, FrameSetup, balance, brick_tets, composite_frame, frame_setup, load_brick_kernels,
+from .sortlast import (BrickRef, FrameSetup, balance, brick_tets, composite_frame, frame_setup, load_brick_kernels,
                      open_brick, render_brick)
 
 __all__ = ["BrickCluster", "ClusterError", "FrameOutcome"]
@@ -115,7 +115,7 @@ class BrickCluster:
     The whole round trip (skipped where Dask is not installed):
 
     >>> from gatun_py.mesh.synthetic import jittered_grid
-    >>> from gatun_py.pipeline.bricks import split_for_render
+    >>> from gatun_py.pipeline.sortlast import split_for_render
     >>> from gatun_py.pipeline.stream import View
     >>> from gatun_py.render.camera import Camera
     >>> bricks, extent = split_for_render(jittered_grid((5, 5, 5), jitter=0.2), 4)

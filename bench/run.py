@@ -15,7 +15,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ORDER = ["mesh", "codec", "geometry", "lossless", "simplify", "render", "composite", "pipeline", "isosurface", "view",
-         "hostile"]
+         "hostile", "bricks"]
 SCRIPTS = {"composite": "bench_bricks_render.py"}  # areas whose script is not bench_<area>.py
 
 

@@ -6,7 +6,8 @@ import click
 
 import gatun_py
 
-from .options import (RATIO, echo_json, force_option, json_option, logger, mesh_input_options, output_option,
+from .options import (RATIO, echo_json, force_option, jobs_option, json_option, logger, mesh_input_options,
+                      output_option,
                       progress_reporter, quiet_option, read_kwargs, status)
 
 
@@ -61,14 +62,18 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
               help="Decimation: weight of the density (mass) error.")
 @click.option("--w-geometry", type=click.FloatRange(min=0), default=1.0, show_default=True,
               help="Decimation: weight of the boundary geometry error.")
+@click.option("--bricks", "n_bricks", type=click.IntRange(min=1, max=4096), default=1, show_default=True, metavar="K",
+              help="Split the tets into K bricks (k-d tree, balanced by tets), each coded with its own forest "
+                   "and levels, to decode on several cores and render apart; 1 = one stream.")
+@jobs_option
 @mesh_input_options
 @click.option("--drop-cell-data", is_flag=True,
               help="Leave out cell arrays (a .tetc file stores point arrays only; without this flag or "
                    "--cell-to-point a mesh with cell data is refused).")
 @force_option
 @quiet_option
-def compress(input, output, n_levels, mesh_only, w_density, w_geometry, scalar, q_file, q_var, cell_to_point,
-             time_step, drop_cell_data, force, quiet):
+def compress(input, output, n_levels, mesh_only, w_density, w_geometry, n_bricks, jobs, scalar, q_file, q_var,
+             cell_to_point, time_step, drop_cell_data, force, quiet):
     """Compress INPUT (any readable mesh or PLOT3D grid) losslessly into a .tetc file.
 
     Connectivity is cut-border coded; coordinates (float32 or float64) and every point array, in its
@@ -76,11 +81,13 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, scalar, 
     (vertices and tets in another order). --scalar names the default array (rendered, decimated).
     Unless --mesh-only, the mesh is also decimated (Van Gelder) into a merge forest stored with it,
     plus pre-simplified levels, for `tetc decompress --ratio` and time-critical rendering.
+    With --bricks K, each brick is decimated and coded on its own (on --jobs processes), its
+    vertices shared with other bricks locked so simplified bricks still meet.
     """
     with progress_reporter("decimating", quiet, min_total=1) as progress:
         gatun_py.compress(input, output, levels=n_levels, mesh_only=mesh_only, force=force, w_density=w_density,
                           w_geometry=w_geometry, progress=progress, log=logger(quiet),
-                          drop_cell_data=drop_cell_data,
+                          drop_cell_data=drop_cell_data, bricks=n_bricks, jobs=jobs,
                           **read_kwargs(scalar, q_file, q_var, cell_to_point, time_step))
 
 
@@ -92,11 +99,16 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, scalar, 
 @click.option("--ratio", default=None, type=RATIO,
               help="Simplify to this ratio (merged / all vertices, 0..1) with the stored merge forest, "
                    "starting from the most simplified stored level that is still finer.")
+@jobs_option
 @force_option
 @quiet_option
-def decompress(input, output, level, ratio, force, quiet):
-    """Decompress a .tetc file into any mesh format meshio writes that holds tets."""
+def decompress(input, output, level, ratio, jobs, force, quiet):
+    """Decompress a .tetc file into any mesh format meshio writes that holds tets.
+
+    The bricks of a bricked file decode in parallel (--jobs) and are stitched into one mesh, each
+    shared vertex once; the output is the same whatever --jobs is.
+    """
     if level is not None and ratio is not None:
         raise click.UsageError("--level and --ratio are exclusive")
-    mesh = gatun_py.decompress(input, output, ratio=ratio, level=level, force=force)
+    mesh = gatun_py.decompress(input, output, ratio=ratio, level=level, force=force, jobs=jobs)
     status(f"wrote {output}: {mesh.n_points} points, {mesh.n_tets} tets", quiet)

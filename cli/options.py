@@ -108,6 +108,8 @@ def output_option(help_text: str):
 
 
 force_option = click.option("--force", "-f", is_flag=True, help="Overwrite the output file if it exists.")
+jobs_option = click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, metavar="N",
+                           help="Cores to use on the bricks of a bricked file [default: all].")
 quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress output on stderr.")
 json_option = click.option("--json", "as_json", is_flag=True, help="Print one JSON object on stdout.")
 

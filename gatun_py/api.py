@@ -23,13 +23,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ._atomic import check_output_path
+from ._atomic import check_output_path, write_bytes_atomic
 from ._resources import peak_rss_mb
 from .codec import LevelPayload, TetcReader, write_tetc
 from .codec.info import tetc_info
 from .errors import OptionError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.io import mesh_output_format
+from .pipeline.bricks import compress_bricks, read_bricked, render_bricked
 from .pipeline.sortlast import BrickRef, MeshExtent, split_for_render
 from .pipeline.budget import load_costs, plan_file_budget, remember_frame
 from .pipeline.distributed import BrickCluster
@@ -40,7 +41,7 @@ from .render.raycast import MODES
 from .render.transfer import load_transfer_function
 from .simplify import build_levels, decimate, storage_forests
 from .simplify.filter import SimplifyFilter
-from .simplify.levels import read_simplified, resolve_target, target_ancestors
+from .simplify.levels import resolve_target, target_ancestors
 
 __all__ = ["compress", "decompress", "convert", "info", "open", "render", "render_frames", "TetcFile", "Frame"]
 
@@ -87,7 +88,7 @@ def _quiet(_msg: str) -> None:
 def compress(source, output, *, levels: int | None = None, mesh_only: bool = False, force: bool = False,
              w_density: float = 1.0, w_geometry: float = 1.0, scalar: str | None = None, q_file=None,
              q_var: str = "density", cell_to_point: bool = False, time_step: int | None = None,
-             drop_cell_data: bool = False, progress=None,
+             drop_cell_data: bool = False, bricks: int = 1, jobs: int | None = None, progress=None,
              log=None) -> "TetcFile":
     """Compress a mesh losslessly into a ``.tetc`` file, with its merge forest and levels.
 
@@ -111,6 +112,12 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     drop_cell_data : bool
         Compress a mesh whose cell arrays were not averaged to the points (``cell_to_point``),
         leaving them out; without it such a mesh is refused.
+    bricks : int
+        Split the tets into this many bricks (k-d tree over the tet centroids, balanced by tet
+        count), each coded on its own with its own forest and levels (its vertices shared with other
+        bricks locked), so that they decode in parallel and render apart. 1: one plain stream.
+    jobs : int, optional
+        Processes that decimate and encode bricks (default: all cores).
     progress : callable, optional
         ``progress(done, total)``: vertices the decimation has processed so far, of ``total``.
     log : callable, optional
@@ -136,13 +143,22 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     for name, w in (("w_density", w_density), ("w_geometry", w_geometry)):
         if not (isinstance(w, (int, float)) and math.isfinite(w) and w >= 0):
             raise OptionError(f"{name} must be a finite number >= 0, got {w!r}")
+    if isinstance(bricks, bool) or not isinstance(bricks, (int, np.integer)) or bricks < 1:
+        raise OptionError(f"bricks must be a positive integer, got {bricks!r}")
     _check_output(source, output, force=force)  # fail before the (long) work
     t0 = time.perf_counter()
     mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point,
                                  time_step=time_step), log, storing=True, drop_cell_data=drop_cell_data)
     name = Path(source).name if isinstance(source, (str, os.PathLike)) else ""
     log(f"read {name or 'mesh'}: {mesh.n_points} points, {mesh.n_tets} tets")
-    if mesh_only:
+    if bricks > 1 and mesh.n_tets == 0:
+        log("note: a mesh without tets is stored as one brick")
+    if bricks > 1 and mesh.n_tets > 0:
+        data = compress_bricks(mesh, int(bricks), jobs=jobs, mesh_only=mesh_only, levels=levels,
+                               w_density=w_density, w_geometry=w_geometry, source=name, progress=progress, log=log)
+        write_bytes_atomic(output, data, force=force)
+        payload = None
+    elif mesh_only:
         payload = mesh
     else:
         forest = decimate(mesh, w_density=w_density, w_geometry=w_geometry, progress=_counter(progress, mesh.n_points))
@@ -151,7 +167,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
             f"levels {', '.join(str(x.level) for x in lv)}")
         payload = [LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
                    for x, f in zip(lv, storage_forests(lv))]
-    n = write_tetc(output, payload, source=name, force=force)
+    n = len(data) if payload is None else write_tetc(output, payload, source=name, force=force)
     out = TetcFile(output)
     info = out.info
     log(f"wrote {output}: {n} bytes ({8.0 * n / max(mesh.n_tets, 1):.2f} bits/tet overall, "
@@ -173,14 +189,16 @@ def _counter(progress, total: int):
     return update
 
 
-def decompress(source, output, *, ratio: float | None = None, level: int | None = None, force: bool = False) -> TetMesh:
+def decompress(source, output, *, ratio: float | None = None, level: int | None = None, force: bool = False,
+               jobs: int | None = None) -> TetMesh:
     """Decode a ``.tetc`` file (optionally simplified) and write it in any meshio format.
 
-    Returns the mesh written.
+    ``jobs``: threads decoding the bricks of a bricked file (default: all cores). Returns the mesh
+    written.
     """
     _check_output(source, output, force=force, mesh_file=True)  # before decoding
     f = source if isinstance(source, TetcFile) else TetcFile(source)
-    mesh = f.mesh(ratio=ratio, level=level)
+    mesh = f.mesh(ratio=ratio, level=level, jobs=jobs)
     write_mesh(mesh, output, force=force)
     return mesh
 
@@ -279,7 +297,8 @@ class TetcFile:
     """
 
     def __init__(self, path):
-        self.reader = path.reader if isinstance(path, TetcFile) else TetcReader(path)
+        self.reader = (path.reader if isinstance(path, TetcFile) else path if isinstance(path, TetcReader)
+                       else TetcReader(path))
         self.path = self.reader.container.name
 
     def __repr__(self) -> str:
@@ -324,19 +343,38 @@ class TetcFile:
 
     @property
     def max_ratio(self) -> float:
-        """The largest simplification ratio the stored forest reaches (0 without one)."""
+        """The largest simplification ratio the stored forest reaches (0 without one); of a bricked
+        file, the largest every brick reaches."""
+        if self.n_bricks > 1:
+            return min(self.brick(k).max_ratio for k in range(self.n_bricks))
         return self.reader.forest_merges() / self.n_points if self.n_points else 0.0
 
-    def mesh(self, ratio: float | None = None, *, level: int | None = None) -> TetMesh:
-        """The mesh at a simplification ratio (merged / all vertices) or a stored level; default the full mesh."""
+    @property
+    def n_bricks(self) -> int:
+        """Bricks the file is split into (1: one plain stream)."""
+        return self.reader.n_bricks
+
+    def brick(self, k: int) -> "TetcFile":
+        """Brick ``k`` as a file of its own (its levels, forest, stream); bounds in ``.info["bbox"]``."""
+        return TetcFile(self.reader.brick(k))
+
+    def mesh(self, ratio: float | None = None, *, level: int | None = None, jobs: int | None = None) -> TetMesh:
+        """The mesh at a simplification ratio (merged / all vertices) or a stored level; default the full mesh.
+
+        A bricked file decodes its bricks on ``jobs`` threads (default: all cores) and stitches them
+        (every brick at ``ratio`` of its own vertices); the result does not depend on ``jobs``.
+        """
         if ratio is not None and level is not None:
             raise OptionError("give a ratio or a level, not both")
-        return read_simplified(self.reader, ratio=ratio, level=level)
+        return read_bricked(self.reader, ratio=ratio, level=level, jobs=jobs)
 
     def batches(self, *, ratio: float | None = None, level: int | None = None, batch_tets: int = 65536):
         """The decoded stream (:class:`~gatun_py.mesh.TetBatch`), simplified on the fly to ``ratio``."""
         if not (isinstance(batch_tets, (int, np.integer)) and batch_tets > 0):
             raise OptionError(f"batch_tets must be a positive integer, got {batch_tets!r}")
+        if self.n_bricks > 1:
+            raise OptionError(f"{self.path} is split into {self.n_bricks} bricks: stream one with "
+                              ".brick(k).batches(), or decode the whole mesh with .mesh()")
         target = resolve_target(self.reader, ratio=ratio, level=level)
         stream = self.reader.iter_decode(target.level, batch_tets=int(batch_tets))
         anc = target_ancestors(self.reader, target)
@@ -511,8 +549,21 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
 
     t0 = time.perf_counter()
     planned = {}
+    bricked = None
     if isinstance(source, TetcFile) or (isinstance(source, (str, os.PathLike)) and is_tetc(source)):
         f = source if isinstance(source, TetcFile) else TetcFile(source)
+        if f.n_bricks > 1:
+            if budget is not None:
+                raise OptionError("a time budget needs the brick compositor; render this bricked file at a ratio "
+                                  "or a level")
+            if scalar is not None or component is not None:
+                view = dataclasses.replace(view, scalar=scalar or f.scalar_name, component=component)
+            bricked = render_bricked(f.reader, view, ratio=ratio, level=level, progress=_counter(progress, f.n_tets))
+            name = f.scalar_name if view.scalar is None else view.scalar + ("" if component is None else f"[{component}]")
+            rng = f.reader.array_range(view.scalar, view.component) or (0.0, 1.0)
+    if bricked is not None:
+        result = bricked
+    elif isinstance(source, TetcFile) or (isinstance(source, (str, os.PathLike)) and is_tetc(source)):
         target = resolve_target(f.reader, ratio=ratio, level=level)
         if budget is not None:
             if load_costs() is None:

@@ -141,7 +141,7 @@ def test_mesh_with_every_kind_of_array_round_trips():
     m = _mesh64()
     data = encode_tetc([LevelPayload(0, 0.0, 0, m)])
     r = TetcReader(data)
-    assert r.container.major == 2 and r.points_dtype == np.float64
+    assert r.container.major == 3 and r.points_dtype == np.float64
     assert [(n, dt.name, k) for n, dt, k in r.arrays] == [
         ("p", "float64", 1), ("T", "float32", 1), ("id", "int64", 1), ("flag", "uint8", 1), ("u", "float64", 3),
         ("small", "int8", 2)]

@@ -252,7 +252,7 @@ def encode_residuals(st, out, zz, refs, probs, lens):
     return enc_finish(st, out)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, nogil=True)
 def decode_component(st, data, probs, lens, o, refs, start, stop, kind, ext, lo, hi, lin):
     """Decode the residuals of vertices ``start:stop`` and rebuild their values ``o`` (refs checked)."""
     if not _refs_valid(refs, start, stop):
@@ -287,7 +287,7 @@ def decode_component(st, data, probs, lens, o, refs, start, stop, kind, ext, lo,
     return OK
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def reconstruct(o, zz, refs, start, stop, kind, ext, lo, hi, lin):
     """Rebuild ``o[start:stop]`` from already decoded residuals ``zz`` (the LZMA coder); refs checked."""
     if not _refs_valid(refs, start, stop):

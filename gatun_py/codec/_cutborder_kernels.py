@@ -567,7 +567,7 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
     return nv, 0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
     """Inverse of :func:`encode_boundary`; returns (number of vertices, status)."""
     probs = np.full(SM_SIZE, rc.PROB_INIT, np.uint16)
@@ -865,7 +865,7 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
     return nv, 0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
     """Resumable inverse of :func:`encode_tets`.
 

@@ -619,7 +619,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, trace):
 # ------------------------------------------------------------------------------------ decoder
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def decode_tables_kernel(st, buf, offs, probs, modes, n_points, tables, tab_offs):
     """Start the four channel decoders and read the value tables of the table-mode channels.
 
@@ -706,7 +706,7 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
     return sym if is_eq else FLAG_PREDICTED
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, hvals, modes, tables, tab_offs, refs,
                     vf, start, count):
     """Decode vertices ``start .. start+count-1`` into ``vf`` (n, 4) float32.

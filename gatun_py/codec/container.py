@@ -26,7 +26,7 @@ import zlib
 from ..errors import CorruptFileError, FormatVersionError, ReadError
 
 MAGIC = b"TETC\x89\r\n\x1a"
-VERSION_MAJOR = 2  # 2: float64 coordinates and every point array (points64, array/j)
+VERSION_MAJOR = 3  # 2: float64 coordinates and every point array (points64, array/j); 3: bricks (B{k}/...)
 VERSION_MINOR = 0
 _PREAMBLE = struct.Struct("<8sHHII")
 PREAMBLE_SIZE = _PREAMBLE.size
@@ -34,7 +34,7 @@ _REC_NAME = struct.Struct("<H")
 _REC_LEN = struct.Struct("<QI")
 
 MAX_METADATA_BYTES = 16 << 20
-MAX_SECTIONS = 4096
+MAX_SECTIONS = 1 << 16  # 64 bricks x 13 levels x 5 sections already pass 4096
 MAX_NAME_BYTES = 256
 
 

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import re
+
 from .tetcfile import TetcReader
+
+_BRICK = re.compile(r"^B\d+/")
 
 
 def tetc_info(source) -> dict:
@@ -26,10 +30,15 @@ def tetc_info(source) -> dict:
     r = source if isinstance(source, TetcReader) else TetcReader(source)
     c = r.container
     sizes = {name: c.section_size(name) for name in c.section_names()}
+    # a bricked file's figures are its bricks' together (sections named B{k}/L{i}/...)
+    plain = {}
+    for name, v in sizes.items():
+        key = _BRICK.sub("", name)
+        plain[key] = plain.get(key, 0) + v
     lv0 = r.levels[0]
     i0 = lv0["level"]
-    conn = sizes.get(f"L{i0}/boundary", 0) + sizes.get(f"L{i0}/tets", 0)
-    geo = sizes.get(f"L{i0}/geometry", 0)
+    conn = plain.get(f"L{i0}/boundary", 0) + plain.get(f"L{i0}/tets", 0)
+    geo = plain.get(f"L{i0}/geometry", 0)
     levels = []
     for lv in r.levels:
         i = lv["level"]
@@ -38,7 +47,7 @@ def tetc_info(source) -> dict:
             "ratio": lv.get("ratio", 0.0),
             "points": lv["points"],
             "tets": lv["tets"],
-            "bytes": sum(v for k, v in sizes.items() if k.startswith(f"L{i}/")),
+            "bytes": sum(v for k, v in plain.items() if k.startswith(f"L{i}/")),
         })
     return {
         "points": r.meta.get("points"),
@@ -54,11 +63,25 @@ def tetc_info(source) -> dict:
         "sections": sizes,
         "format_version": c.major,
         "points_dtype": r.points_dtype.name,
-        "arrays": [{"name": name, "dtype": dt.name, "components": k, "bytes": sizes.get(f"L{i0}/array/{j}", 0)}
+        "arrays": [{"name": name, "dtype": dt.name, "components": k, "bytes": plain.get(f"L{i0}/array/{j}", 0)}
                    for j, (name, dt, k) in enumerate(r.arrays)],
         "levels": levels,
         "forest": _forest_info(r, sizes),
+        "bricks": _bricks_info(r, sizes),
     }
+
+
+def _bricks_info(reader, sizes) -> list:
+    """Per brick (none for a one-brick file): bounds, points, tets, cut vertices, bytes."""
+    if reader.n_bricks == 1:
+        return []
+    out = []
+    for k in range(reader.n_bricks):
+        m = reader.brick(k).meta
+        out.append({"brick": k, "bounds": m["brick_bounds"], "points": m["points"], "tets": m["tets"],
+                    "cut_points": m["brick_cut_points"],
+                    "bytes": sum(v for name, v in sizes.items() if name.startswith(f"B{k}/"))})
+    return out
 
 
 def _forest_info(reader, sizes) -> dict:

@@ -24,6 +24,7 @@ from ..errors import CorruptFileError, MeshError, OptionError
 from ..mesh import TetBatch, TetMesh, default_step
 from ..mesh.model import scalar_of
 from ..mesh.validate import check_tet_ids
+from .brickindex import BrickView, brick_levels_summary, parse_brick_index
 from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
 from .container import Container, build_container
 from .cutborder import ConnectivityDecoder, encode_connectivity
@@ -172,6 +173,26 @@ def _arrays_meta(mesh, *, ranges: bool = False) -> list:
     return out
 
 
+def file_meta(mesh0, n_boundary_faces: int, source: str = "") -> dict:
+    """The metadata that describes the whole mesh (counts, bounds, arrays and their ranges, render
+    step), before the levels or the bricks that hold it."""
+    lo, hi = mesh0.bbox
+    return {
+        "format": FORMAT_NAME,
+        "points": int(mesh0.n_points),
+        "tets": int(mesh0.n_tets),
+        "boundary_faces": int(n_boundary_faces),
+        "bbox": [lo.tolist(), hi.tolist()],
+        "scalar": str(mesh0.scalar_name),
+        "points_dtype": dtype_name(mesh0.points.dtype),
+        "arrays": _arrays_meta(mesh0, ranges=True),
+        "scalar_range": [float(x) for x in mesh0.scalar_range],
+        "source": os.path.basename(str(source)),
+        # The full mesh's volume-mode sample step, so that every level and ratio samples alike.
+        "render_step": float(default_step(mesh0.points32, mesh0.boundary_faces())),
+    }
+
+
 def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None) -> bytes:
     """Build a whole ``.tetc`` file from levels (level 0 first).
 
@@ -195,22 +216,8 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None) 
         encoded.append(encode_level(lv))
         if progress is not None:
             progress(lv.level)
-    lo, hi = mesh0.bbox
-    meta = {
-        "format": FORMAT_NAME,
-        "points": int(mesh0.n_points),
-        "tets": int(mesh0.n_tets),
-        "boundary_faces": encoded[0].meta["boundary_faces"],
-        "bbox": [lo.tolist(), hi.tolist()],
-        "scalar": str(mesh0.scalar_name),
-        "points_dtype": dtype_name(mesh0.points.dtype),
-        "arrays": _arrays_meta(mesh0, ranges=True),
-        "scalar_range": [float(x) for x in mesh0.scalar_range],
-        "source": os.path.basename(str(source)),
-        # The full mesh's volume-mode sample step, so that every level and ratio samples alike.
-        "render_step": float(default_step(mesh0.points32, mesh0.boundary_faces())),
-        "levels": [e.meta for e in encoded],
-    }
+    meta = file_meta(mesh0, encoded[0].meta["boundary_faces"], source)
+    meta["levels"] = [e.meta for e in encoded]
     sections = [(name, data) for e in encoded for name, data in e.sections.items()]
     return build_container(meta, sections)
 
@@ -246,11 +253,12 @@ class TetcReader:
     """
 
     def __init__(self, source):
-        self.container = Container(source)
+        self.container = source if isinstance(source, BrickView) else Container(source)
         self.meta = self.container.meta
         if self.meta.get("format") != FORMAT_NAME:
             raise CorruptFileError(f"{self.container.name}: metadata does not describe a tetc mesh")
-        levels = self.meta.get("levels")
+        self._brick_metas = parse_brick_index(self.meta, self.container)  # [] for a file of one brick
+        levels = brick_levels_summary(self._brick_metas) if self._brick_metas else self.meta.get("levels")
         if not isinstance(levels, list) or not levels:
             raise CorruptFileError(f"{self.container.name}: no levels in the metadata")
         self.levels = []
@@ -304,6 +312,30 @@ class TetcReader:
         name = self.meta.get("scalar", "density")
         return name if isinstance(name, str) else "density"
 
+    @property
+    def n_bricks(self) -> int:
+        """K, the bricks the file is split into (1 for a file written without ``bricks``)."""
+        return max(1, len(self._brick_metas))
+
+    def brick(self, k: int) -> "TetcReader":
+        """A reader of brick ``k`` alone, as of a one-brick file (levels, forest, decoders); the
+        reader itself for a file of one brick."""
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k < self.n_bricks:
+            raise OptionError(f"brick {k!r} does not exist: the file has {self.n_bricks} brick(s)")
+        if not self._brick_metas:
+            return self
+        return TetcReader(BrickView(self.container, int(k), self._brick_metas[int(k)]))
+
+    def brick_bounds(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) of brick ``k``'s points, from the index (nothing decoded)."""
+        lo, hi = self.brick(k).meta["bbox"]
+        return np.array(lo, np.float64), np.array(hi, np.float64)
+
+    def _one_stream(self) -> None:
+        if self._brick_metas:
+            raise OptionError(f"{self.container.name} is split into {self.n_bricks} bricks: decode them with "
+                              "reader.brick(k) or the whole mesh with gatun_py.codec.bricks.decode_bricked")
+
     def level_meta(self, level: int = 0) -> dict:
         for lv in self.levels:
             if lv["level"] == level:
@@ -339,6 +371,7 @@ class TetcReader:
     def _checked_points(self, level: int) -> int:
         """The level's vertex count, checked with its tet and face counts against the sizes of the
         sections that code them, before anything is allocated."""
+        self._one_stream()
         lv = self.level_meta(level)
         name = f"L{level}/geometry"
         head = self.container.read_section_head(name, HEADER_SIZE)
@@ -367,6 +400,8 @@ class TetcReader:
 
     def forest_merges(self) -> int:
         """Merges the file's full forest holds (0 when it stores none), from the section header only."""
+        if self._brick_metas:  # the bricks' forests together
+            return sum(self.brick(k).forest_merges() for k in range(self.n_bricks))
         lv0 = min(self.levels, key=lambda lv: lv["level"])
         name = f"L{lv0['level']}/forest"
         if not self.container.has_section(name):

@@ -104,6 +104,23 @@ def file_render_defaults(reader) -> tuple[np.ndarray, np.ndarray, tuple[float, f
     return lo, hi, rng, float(step)
 
 
+def file_view(reader, view: View):
+    """(view, camera, scalar range, step, notes) of a frame of a ``.tetc`` file: everything fitted
+    to the full mesh (its bounds, its scalar's range, its step), whatever level or brick is drawn."""
+    lo, hi, rng, step = file_render_defaults(reader)
+    if view.scalar is not None:  # another point array: its range is in the metadata (format 2)
+        rng = reader.array_range(view.scalar, view.component) or rng
+    rng = view.scalar_range if view.scalar_range is not None else rng
+    # a relative opacity unit is a fraction of the full mesh's size, whatever level is drawn
+    view = replace(view, tf=load_transfer_function(view.tf).for_size(float(np.linalg.norm(hi - lo))))
+    camera = view.camera.fit(lo, hi)
+    if view.step is not None:
+        step, notes = bounded_step(view.step, lo, hi)
+    else:
+        step, notes = bounded_step(step, lo, hi, "the file's step")
+    return view, camera, rng, step, notes
+
+
 # -- running ------------------------------------------------------------------------------------
 
 def render_tetc(source, view: View, *, ratio: float | None = None, level: int | None = None,
@@ -134,17 +151,7 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
     reader = source if isinstance(source, TetcReader) else TetcReader(source)
     if target is None:
         target = resolve_target(reader, ratio=ratio, level=level)
-    lo, hi, rng, step = file_render_defaults(reader)
-    if view.scalar is not None:  # another point array: its range is in the metadata (format 2)
-        rng = reader.array_range(view.scalar, view.component) or rng
-    rng = view.scalar_range if view.scalar_range is not None else rng
-    # a relative opacity unit is a fraction of the full mesh's size, whatever level is drawn
-    view = replace(view, tf=load_transfer_function(view.tf).for_size(float(np.linalg.norm(hi - lo))))
-    camera = view.camera.fit(lo, hi)
-    if view.step is not None:
-        step, notes = bounded_step(view.step, lo, hi)
-    else:
-        step, notes = bounded_step(step, lo, hi, "the file's step")
+    view, camera, rng, step, notes = file_view(reader, view)
     times = {"decode_s": 0.0, "filter_s": 0.0}
     # Decoding the forest section is decompression; the top-down pass is part of the filter.
     forest_times = {"forest_decode_s": 0.0, "ancestors_s": 0.0}

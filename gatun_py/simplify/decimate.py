@@ -301,7 +301,7 @@ class DecimationState:
 
 
 def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry: float = DEFAULT_W_GEOMETRY,
-             progress=None, max_merges: int | None = None) -> MergeForest:
+             progress=None, max_merges: int | None = None, locked=None) -> MergeForest:
     """Greedy Van Gelder decimation of a tetrahedral mesh into a merge forest.
 
     Parameters
@@ -315,6 +315,10 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
         Called as ``progress(k)`` with the number of merges done since the previous call.
     max_merges : int, optional
         Stop after this many merges (default: until no legal merge is left).
+    locked : (n_points,) bool array, optional
+        Vertices that must keep their place in every prefix of the forest (a brick's cut vertices,
+        so that simplified bricks still meet): added to the decimator's own pinned vertices, which
+        are never merged away and never a merge target.
 
     Returns
     -------
@@ -326,6 +330,12 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
         if not np.isfinite(w) or w < 0:
             raise OptionError(f"{name} must be a finite number >= 0, got {w}")
     state = DecimationState(mesh, float(w_density), float(w_geometry))
+    if locked is not None:
+        locked = np.asarray(locked)
+        if locked.shape != (mesh.n_points,) or locked.dtype != np.bool_:
+            raise OptionError(f"locked must be a bool array of one value per point ({mesh.n_points}), "
+                              f"got {locked.dtype} {locked.shape}")
+        state.pinned |= locked
     limit = mesh.n_points if max_merges is None else max(0, min(int(max_merges), mesh.n_points))
     state.start()
     done = 0

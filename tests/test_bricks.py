@@ -1,0 +1,343 @@
+"""Bricked files: lossless round trips, one-brick layout, parallel decode, crack-free levels, hostile indexes."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import gatun_py
+from gatun_py.codec import LevelPayload, TetcReader, encode_tetc
+from gatun_py.codec.bricks import decode_bricked, decode_cut, encode_cut, read_cut
+from gatun_py.codec.container import build_container, split_container
+from gatun_py.errors import CorruptFileError, OptionError
+from gatun_py.mesh import TetMesh
+from gatun_py.mesh.synthetic import jittered_grid
+from gatun_py.pipeline.bricks import compress_bricks
+from gatun_py.simplify import decimate
+from meshgen import delaunay_mesh, with_unreferenced
+
+
+def canonical(mesh: TetMesh):
+    """The mesh up to a permutation of vertices and tets: every tet as its four vertices' bits
+    (coordinates and every point array) in a sorted order, the tets sorted."""
+    cols = [mesh.points.view(np.uint8).reshape(mesh.n_points, -1)]
+    for name in sorted(mesh.point_data):
+        a = np.ascontiguousarray(mesh.point_data[name])
+        cols.append(a.view(np.uint8).reshape(mesh.n_points, -1))
+    rows = np.concatenate(cols, axis=1)
+    vkey = np.unique(rows, axis=0, return_inverse=True)[1].ravel()
+    t = np.sort(vkey[mesh.tets], axis=1)
+    return np.unique(rows, axis=0), t[np.lexsort(t.T[::-1])]
+
+
+def assert_same_mesh(a: TetMesh, b: TetMesh):
+    assert (a.n_points, a.n_tets) == (b.n_points, b.n_tets)
+    assert a.points.dtype == b.points.dtype and sorted(a.point_data) == sorted(b.point_data)
+    ra, ta = canonical(a)
+    rb, tb = canonical(b)
+    np.testing.assert_array_equal(ra, rb)
+    np.testing.assert_array_equal(ta, tb)
+
+
+def bricked_bytes(mesh, k, **kw):
+    kw.setdefault("mesh_only", True)
+    return compress_bricks(mesh, k, jobs=1, **kw)
+
+
+# -- round trips ----------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("k", [2, 3, 8])
+def test_bricked_file_decodes_to_the_input_up_to_permutation(k):
+    m = jittered_grid((7, 6, 5), jitter=0.25, seed=3)
+    data = bricked_bytes(m, k)
+    r = TetcReader(data)
+    assert r.n_bricks == k and r.container.major == 3
+    assert sum(r.brick(i).meta["tets"] for i in range(k)) == m.n_tets
+    assert_same_mesh(decode_bricked(r, jobs=1), m)
+
+
+def test_samples_round_trip_with_bricks(sample):
+    name, m = sample
+    data = bricked_bytes(m, 8)
+    out = decode_bricked(TetcReader(data), jobs=2)
+    assert_same_mesh(out, m)
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(n=st.integers(12, 60), seed=st.integers(0, 1000), k=st.integers(2, 9), f64=st.booleans())
+def test_random_meshes_round_trip(n, seed, k, f64):
+    m = delaunay_mesh(n, seed)
+    extra = {"ids": np.arange(m.n_points, dtype=np.int32), "vec": np.random.default_rng(seed).normal(size=(m.n_points, 3))}
+    pts = m.points.astype(np.float64) + (1e-9 if f64 else 0.0)
+    m = TetMesh(pts if f64 else m.points, m.density, m.tets, point_data={"density": m.density, **extra})
+    k = min(k, m.n_tets)
+    if k < 2:
+        return
+    assert_same_mesh(decode_bricked(TetcReader(bricked_bytes(m, k)), jobs=2), m)
+
+
+@pytest.mark.parametrize("mesh_only", [True, False])
+def test_unreferenced_points_are_kept(mesh_only):
+    # a vertex no tet uses belongs to no brick of the partition: brick 0 keeps it
+    m = with_unreferenced(jittered_grid((4, 4, 4), jitter=0.2), extra=3)
+    assert_same_mesh(decode_bricked(TetcReader(bricked_bytes(m, 3, mesh_only=mesh_only)), jobs=1), m)
+
+
+def test_output_does_not_depend_on_jobs():
+    m = jittered_grid((8, 7, 6), jitter=0.25, seed=1)
+    data = bricked_bytes(m, 5)
+    a, b = decode_bricked(TetcReader(data), jobs=1), decode_bricked(TetcReader(data), jobs=3)
+    np.testing.assert_array_equal(a.points, b.points)
+    np.testing.assert_array_equal(a.tets, b.tets)
+    np.testing.assert_array_equal(a.density, b.density)
+
+
+def test_compress_is_the_same_bytes_with_any_job_count():
+    m = jittered_grid((6, 5, 5), jitter=0.25, seed=2)
+    assert bricked_bytes(m, 4, mesh_only=False) == compress_bricks(m, 4, jobs=2, mesh_only=False)
+
+
+def test_one_brick_is_todays_layout(tmp_path):
+    m = jittered_grid((5, 5, 4), jitter=0.2)
+    a = gatun_py.compress(m, tmp_path / "a.tetc", mesh_only=True)
+    b = gatun_py.compress(m, tmp_path / "b.tetc", mesh_only=True, bricks=1)
+    assert (tmp_path / "a.tetc").read_bytes() == (tmp_path / "b.tetc").read_bytes()
+    r = b.reader
+    assert r.n_bricks == 1 and "bricks" not in r.meta and r.brick(0) is r
+    assert not any(n.startswith("B") for n in r.container.section_names())
+    assert (tmp_path / "a.tetc").read_bytes() == encode_tetc([LevelPayload(0, 0.0, 0, m)])
+    with pytest.raises(OptionError):
+        r.brick(1)
+
+
+# -- a brick reads as a file ----------------------------------------------------------------------
+
+def test_brick_reader_is_a_one_brick_file(tmp_path):
+    m = jittered_grid((7, 7, 6), jitter=0.25, seed=4)
+    f = gatun_py.compress(m, tmp_path / "b.tetc", bricks=4, jobs=1)
+    r = f.reader
+    for k in range(4):
+        b = r.brick(k)
+        lo, hi = r.brick_bounds(k)
+        mk = b.decode_mesh(0)
+        np.testing.assert_array_equal(mk.bbox[0], lo.astype(mk.points.dtype))
+        np.testing.assert_array_equal(mk.bbox[1], hi.astype(mk.points.dtype))
+        assert mk.n_tets == b.meta["tets"] and b.n_bricks == 1
+        assert sum(len(x.tets) for x in b.iter_decode(0)) == mk.n_tets
+        # its levels and forest, as the one-brick pipeline reads them
+        fb = f.brick(k)
+        assert fb.levels == [lv["level"] for lv in b.levels] and fb.max_ratio > 0
+        assert sum(len(x.tets) for x in fb.batches(ratio=fb.max_ratio / 2)) == fb.mesh(ratio=fb.max_ratio / 2).n_tets
+    with pytest.raises(OptionError, match="bricks"):
+        r.decode_mesh(0)
+    with pytest.raises(OptionError, match="bricks"):
+        next(iter(f))
+
+
+def _faces(tets):
+    f = np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 3, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 1]]])
+    return np.sort(f, axis=1)
+
+
+def test_simplified_bricks_never_crack(tmp_path):
+    m = jittered_grid((9, 8, 7), jitter=0.25, seed=5)
+    f = gatun_py.compress(m, tmp_path / "b.tetc", bricks=6, jobs=1)
+    whole = f.mesh()
+    outer = {tuple(x) for x in _faces(whole.tets)[np.unique(_faces(whole.tets), axis=0, return_counts=True)[1][
+        np.unique(_faces(whole.tets), axis=0, return_inverse=True)[1].ravel()] == 1]}
+    outer_pts = {tuple(p) for p in whole.points[np.array(sorted(outer)).ravel()].tolist()}
+    for ratio in (None, 0.2, f.max_ratio / 2, f.max_ratio):
+        s = f.mesh(ratio=ratio, jobs=2)
+        faces, counts = np.unique(_faces(s.tets), axis=0, return_counts=True)
+        assert counts.max() <= 2  # conforming
+        # every boundary face of the stitched mesh lies on the input's boundary: a crack between
+        # two bricks would leave faces inside the volume open
+        bnd = faces[counts == 1]
+        assert all(tuple(p) in outer_pts for p in s.points[bnd.ravel()].tolist())
+        assert (s.signed_volumes() >= 0).all()
+    for lv in f.levels:
+        assert f.mesh(level=lv).n_tets == sum(f.brick(k).reader.level_meta(lv)["tets"] for k in range(6))
+
+
+def test_decimate_keeps_locked_vertices():
+    m = jittered_grid((6, 6, 6), jitter=0.2, seed=0)
+    locked = np.zeros(m.n_points, bool)
+    locked[::3] = True
+    forest = decimate(m, locked=locked)
+    assert forest.n_merges > 0
+    assert np.all(forest.parent[locked] == np.flatnonzero(locked))  # never merged away
+    with pytest.raises(OptionError):
+        decimate(m, locked=locked[:-1])
+
+
+# -- the API and the command line -----------------------------------------------------------------
+
+def test_api_and_cli(tmp_path):
+    from cli_util import run
+
+    m = jittered_grid((6, 6, 5), jitter=0.2, seed=7)
+    src = tmp_path / "m.vtu"
+    gatun_py.write_mesh(m, src)
+    out = tmp_path / "m.tetc"
+    res = run("compress", src, "-o", out, "--bricks", "3", "--jobs", "2", "--mesh-only")
+    assert res.exit_code == 0, res.output
+    f = gatun_py.open(out)
+    assert f.n_bricks == 3 and len(f.info["bricks"]) == 3
+    assert_same_mesh(f.mesh(jobs=2), m)
+    res = run("decompress", out, "-o", tmp_path / "d.vtu", "--jobs", "2")
+    assert res.exit_code == 0, res.output
+    back, _ = gatun_py.read_mesh(tmp_path / "d.vtu")
+    assert back.n_tets == m.n_tets and back.n_points == m.n_points
+    assert run("compress", src, "-o", tmp_path / "x.tetc", "--bricks", "0").exit_code == 2
+    assert run("compress", src, "-o", tmp_path / "x.tetc", "--bricks", "100000").exit_code == 2
+    res = run("compress", src, "-o", tmp_path / "x.tetc", "--bricks", str(m.n_tets + 1), "--mesh-only")
+    assert res.exit_code == 1 and "at most one brick per tet" in res.output
+    res = run("info", out, "--json")
+    assert res.exit_code == 0 and len(json.loads(res.output)["bricks"]) == 3
+
+
+def test_render_of_a_bricked_file_equals_the_plain_file(tmp_path):
+    m = jittered_grid((7, 6, 6), jitter=0.2, seed=8)
+    plain = gatun_py.compress(m, tmp_path / "p.tetc", mesh_only=True)
+    bricked = gatun_py.compress(m, tmp_path / "b.tetc", mesh_only=True, bricks=4, jobs=1)
+    for mode in ("volume", "face"):
+        a = gatun_py.render(plain, size=64, azimuth=30, elevation=20, mode=mode)
+        b = gatun_py.render(bricked, size=64, azimuth=30, elevation=20, mode=mode)
+        assert np.abs(a.rgb.astype(int) - b.rgb.astype(int)).max() <= 1
+    with pytest.raises(OptionError, match="budget"):
+        gatun_py.render(bricked, size=32, budget=1.0)
+
+
+# -- hostile brick indexes ------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def bricked():
+    m = jittered_grid((6, 5, 5), jitter=0.25, seed=9)
+    return bricked_bytes(m, 3)
+
+
+def _rebuild(data, edit_meta=None, edit_sections=None):
+    meta, sections = split_container(data)
+    if edit_meta:
+        edit_meta(meta)
+    if edit_sections:
+        sections = edit_sections(sections)
+    return build_container(meta, sections)
+
+
+def _read_all(data):
+    r = TetcReader(data)
+    return decode_bricked(r, jobs=2)
+
+
+def _set(path, value):
+    def edit(meta):
+        node = meta
+        for key in path[:-1]:
+            node = node[key]
+        node[path[-1]] = value(node[path[-1]]) if callable(value) else value
+    return edit
+
+
+HOSTILE_META = {
+    "tets of a brick": _set(["bricks", 1, "tets"], lambda v: v + 1),
+    "points of a brick": _set(["bricks", 0, "points"], lambda v: v + 5),
+    "cut points of the file": _set(["cut_points"], lambda v: v + 1),
+    "cut points of a brick": _set(["bricks", 2, "cut_points"], -1),
+    "bounds": _set(["bricks", 0, "bounds"], [[1, 1, 1], [0, 0, 0]]),
+    "bounds not numbers": _set(["bricks", 0, "bounds"], [["a", 1, 1], [0, 0, 0]]),
+    "one brick": _set(["bricks"], lambda v: v[:1]),
+    "not a list": _set(["bricks"], {"0": 1}),
+    "brick not an object": _set(["bricks", 1], 7),
+    "no levels": _set(["bricks", 1, "levels"], []),
+    "level of a brick claims more tets": _set(["bricks", 1, "levels", 0, "tets"], lambda v: v + 3),
+    "levels at the top too": _set(["levels"], [{"level": 0}]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(HOSTILE_META))
+def test_hostile_brick_index(bricked, case):
+    with pytest.raises(CorruptFileError):
+        _read_all(_rebuild(bricked, edit_meta=HOSTILE_META[case]))
+
+
+def test_missing_and_stray_brick_sections(bricked):
+    with pytest.raises(CorruptFileError, match="missing"):
+        TetcReader(_rebuild(bricked, edit_sections=lambda s: [x for x in s if x[0] != "B1/L0/tets"]))
+    with pytest.raises(CorruptFileError, match="missing"):
+        TetcReader(_rebuild(bricked, edit_sections=lambda s: [x for x in s if x[0] != "B2/L0/cut"]))
+    with pytest.raises(CorruptFileError, match="no brick"):
+        TetcReader(_rebuild(bricked, edit_sections=lambda s: s + [("B3/L0/tets", b"x")]))
+    with pytest.raises(CorruptFileError, match="no brick"):
+        TetcReader(_rebuild(bricked, edit_sections=lambda s: s + [("L0/tets", b"x")]))
+
+
+def _swap_cut(data, k, fn):
+    r = TetcReader(data)
+    n = r.brick(k).level_meta(0)["points"]
+    total = r.meta["cut_points"]
+    pos, ids = read_cut(r, k, 0)
+    full = np.full(n, -1, np.int64)
+    new_pos, new_ids = fn(pos.copy(), ids.copy())
+    full[new_pos] = new_ids
+    return _rebuild(data, edit_sections=lambda s: [(name, encode_cut(full, total) if name == f"B{k}/L0/cut" else p)
+                                                   for name, p in s])
+
+
+def test_overlapping_and_inconsistent_cut_ids(bricked):
+    # two cut vertices of brick 1 swap ids: the shared vertices no longer agree between bricks
+    def swap(pos, ids):
+        ids[[0, 1]] = ids[[1, 0]]
+        return pos, ids
+    with pytest.raises(CorruptFileError, match="differs"):
+        _read_all(_swap_cut(bricked, 1, swap))
+
+    # a cut vertex claims the id of another brick's vertex that it does not share
+    def steal(pos, ids):
+        ids[0] = (ids.max() + 1) % TetcReader(bricked).meta["cut_points"]
+        return pos, ids
+    with pytest.raises(CorruptFileError):
+        _read_all(_swap_cut(bricked, 0, steal))
+
+    # a brick drops one of its cut vertices: the counts no longer add up
+    with pytest.raises(CorruptFileError):
+        _read_all(_swap_cut(bricked, 2, lambda pos, ids: (pos[1:], ids[1:])))
+
+
+def test_cut_section_checks():
+    ids = np.array([-1, 3, -1, 0, 7, -1])
+    data = encode_cut(ids, 8)
+    pos, got = decode_cut(data, 6, 8)
+    np.testing.assert_array_equal(pos, [1, 3, 4])
+    np.testing.assert_array_equal(got, [3, 0, 7])
+    for bad in (data[:10], data[:-2], data + b"\0", data[:4] + b"\x07" + data[5:]):
+        with pytest.raises(CorruptFileError):
+            decode_cut(bad, 6, 8)
+    with pytest.raises(CorruptFileError):
+        decode_cut(data, 6, 7)  # the file's cut count disagrees
+    with pytest.raises(CorruptFileError, match="twice"):
+        decode_cut(encode_cut(np.array([1, 1, -1]), 4), 3, 4)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(k=st.integers(0, 2), key=st.sampled_from(["points", "tets", "cut_points", "boundary_faces"]),
+       level_key=st.sampled_from([None, "points", "tets", "boundary_faces", "boundary_vertices", "referenced_points"]),
+       value=st.one_of(st.integers(-3, 3), st.integers(0, 2**40), st.just(None), st.just("7"), st.just(1.5)))
+def test_any_edited_brick_count_is_read_or_rejected(bricked, k, key, level_key, value):
+    def edit(meta):
+        entry = meta["bricks"][k]
+        if level_key is None:
+            entry[key] = value if not isinstance(value, int) or value > 3 else entry[key] + value
+        else:
+            lv = entry["levels"][0]
+            lv[level_key] = value if not isinstance(value, int) or value > 3 else lv[level_key] + value
+    data = _rebuild(bricked, edit_meta=edit)
+    try:
+        out = _read_all(data)
+    except CorruptFileError:
+        return
+    assert out.n_tets == TetcReader(bricked).meta["tets"]

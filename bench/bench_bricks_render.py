@@ -46,6 +46,10 @@ def _diff(a, b):
         int(np.count_nonzero(np.any(a8 != b8, axis=2)))
 
 
+HEADER = ["mesh", "tets", "K", "mode", "image × views", "max diff 0-255", "pixels ≠ (float)", "pixels ≠ (8-bit)",
+          "overlaps", "whole s/frame", "bricked s/frame (one process)", "split s"]
+
+
 def equality_rows(name, mesh, tf, *, size, views, bricks=(8, 64), modes=("volume", "face"), log=print):
     rows = []
     for k in bricks:
@@ -128,8 +132,20 @@ def main(argv=None):
     ap.add_argument("--size", type=int, default=512)
     ap.add_argument("--frames", type=int, default=5)
     ap.add_argument("--bricks", type=int, default=16, help="bricks for the worker scaling")
+    ap.add_argument("--append-big", default=None, metavar="NAME",
+                    help="only the equality rows of gmsh mesh NAME (e.g. flange-10m), appended to the section")
     args = ap.parse_args(argv)
     t_start = time.perf_counter()
+    if args.append_big:
+        huge = read_mesh(mesh_path(args.append_big))[0]
+        rows = equality_rows(args.append_big, huge, "default", size=args.size, views=[(30.0, 20.0)])
+        section = ROOT / "bench" / "sections" / "composite.md"
+        old = section.read_text() if section.exists() else ""
+        write_section("composite", old + "\n".join([
+            "", f"### Bricked == whole on {args.append_big}",
+            "", f"`python bench/bench_bricks_render.py --append-big {args.append_big}` ({code_state()}), same columns.",
+            "", table(HEADER, rows), "", f"Wall time {time.perf_counter() - t_start:.0f} s."]))
+        return
     sample_views = [(0.0, 0.0), (90.0, 20.0), (45.0, 70.0)]
     rows = []
     for name, (_path, _kw, tf) in SAMPLE_FILES.items():
@@ -157,8 +173,7 @@ def main(argv=None):
         "whose float RGBA differs at all; *overlaps*: pixels with fragments overlapping in depth beyond 1e-12 "
         "relative (folded grids' one-ended segments).",
         "",
-        table(["mesh", "tets", "K", "mode", "image × views", "max diff 0-255", "pixels ≠ (float)",
-               "pixels ≠ (8-bit)", "overlaps", "whole s/frame", "bricked s/frame (one process)", "split s"], rows),
+        table(HEADER, rows),
     ]
     if big is not None:
         sc = scaling(big, "default", size=args.size, frames=args.frames, n_bricks=args.bricks)

@@ -94,7 +94,8 @@ def _component(text):
                    "--pipeline streaming only.")
 @click.option("--workers", type=click.IntRange(min=1), default=None, metavar="N",
               help="Render on a local Dask cluster of N worker processes: the mesh is cut into bricks that stay on "
-                   "the workers, and their ray fragments are composited exactly (same image as without). "
+                   "the workers, and their ray fragments are composited exactly (same image as without). INPUT "
+                   "may then be a glob ('steps/*.tetc', quoted): time steps, rendered file after file. "
                    "Needs pip install 'gatun_py[dask]'.")
 @click.option("--scheduler", default=None, metavar="tcp://HOST:PORT",
               help="Render on a running Dask cluster (workers started with `dask worker`, NUMBA_CACHE_DIR on a "

@@ -14,6 +14,7 @@ the command does::
 from __future__ import annotations
 
 import dataclasses
+import glob
 
 import math
 import os
@@ -649,9 +650,10 @@ def render_frames(source, output, *, workers: int | None = None, scheduler: str 
 
     Parameters
     ----------
-    source : path-like or TetMesh
+    source : path-like, TetMesh, or a list of them
         A ``.tetc`` file (a bricked file's own bricks; otherwise its level is decoded once and cut
-        into ``bricks``) or any mesh file.
+        into ``bricks``) or any mesh file. A list (time steps) renders file after file, each with
+        every view; a path with ``*``, ``?`` or ``[`` is a glob, expanded in sorted order.
     output : path-like
         The image; with several frames ``{frame}`` in the name is the frame number, else
         ``_0000``... is added before the extension.
@@ -698,7 +700,8 @@ def render_frames(source, output, *, workers: int | None = None, scheduler: str 
         scalar_range = tuple(_check_number("scalar_range", v, allow_none=False) for v in scalar_range)
         if not scalar_range[1] > scalar_range[0]:
             raise OptionError(f"scalar_range must be (min, max) with min < max, got {scalar_range}")
-    paths = frame_paths(output, orbit)
+    inputs = _frame_inputs(source)
+    paths = frame_paths(output, orbit * len(inputs))
     for p in paths:
         image_format(p)  # refuse what cannot be written before the work, not after
         check_output_path(p, force=force)
@@ -712,32 +715,51 @@ def render_frames(source, output, *, workers: int | None = None, scheduler: str 
                       log=log) as cluster:
         n_workers = len(cluster.workers)
         k = bricks or 4 * n_workers
-        if isinstance(source, (str, os.PathLike)) and is_tetc(source):
-            reader = TetcReader(source)
-            extent = MeshExtent.of_reader(reader)
-            lv = resolve_target(reader, level=level).level
-            n_file = getattr(reader, "n_bricks", 1)
-            if n_file > 1:
-                sources = [BrickRef(os.fspath(source), b, lv) for b in range(n_file)]
-            else:
-                log(f"decoding level {lv} and cutting it into {k} bricks...")
-                sources, _ = split_for_render(reader.decode_mesh(lv), k)
-        else:
-            if level is not None:
-                raise OptionError("level needs a .tetc file")
-            mesh = _as_mesh(source, read_options or {}, log)
-            sources, extent = split_for_render(mesh, k)
-        log(f"placing {len(sources)} bricks on {n_workers} workers...")
-        cluster.load(sources)
         out = []
-        for i, res in enumerate(cluster.render_series(views, extent)):
-            for note in res.stats.pop("notes", []):
-                log(f"note: {note}")
-            write_image(paths[i], to_rgb8(res.image, bg), force=force)
-            st = res.stats
-            st["output"] = str(paths[i])
-            st["azimuth"] = views[i].camera.azimuth
-            out.append(st)
-            if progress is not None:
-                progress(i + 1, len(views))
+        for src in inputs:  # time steps: one file's bricks on the workers at a time
+            sources, extent = _cluster_bricks(src, k, level, read_options, log)
+            log(f"placing {len(sources)} bricks on {n_workers} workers...")
+            cluster.load(sources)
+            for res, view in zip(cluster.render_series(views, extent), views):
+                i = len(out)
+                for note in res.stats.pop("notes", []):
+                    log(f"note: {note}")
+                write_image(paths[i], to_rgb8(res.image, bg), force=force)
+                st = res.stats
+                st.update(output=str(paths[i]), azimuth=view.camera.azimuth,
+                          input=str(src) if isinstance(src, (str, os.PathLike)) else "<mesh>")
+                out.append(st)
+                if progress is not None:
+                    progress(i + 1, len(paths))
     return out
+
+
+def _frame_inputs(source) -> list:
+    """The inputs of a series: a list as it is, a glob pattern expanded (sorted), else the one source."""
+    if isinstance(source, (list, tuple)):
+        if not source:
+            raise OptionError("no input files")
+        return list(source)
+    if isinstance(source, (str, os.PathLike)) and any(c in os.fspath(source) for c in "*?[") \
+            and not os.path.exists(source):
+        found = sorted(glob.glob(os.fspath(source)))
+        if not found:
+            raise OptionError(f"no file matches {os.fspath(source)!r}")
+        return found
+    return [source]
+
+
+def _cluster_bricks(source, n_bricks: int, level, read_options, log):
+    """(brick sources, whole-mesh extent) of one input: a bricked file's own bricks, else its mesh
+    (a .tetc level, a mesh file or a TetMesh) cut into ``n_bricks``."""
+    if isinstance(source, (str, os.PathLike)) and is_tetc(source):
+        reader = TetcReader(source)
+        extent = MeshExtent.of_reader(reader)
+        lv = resolve_target(reader, level=level).level
+        if reader.n_bricks > 1:
+            return [BrickRef(os.fspath(source), b, lv) for b in range(reader.n_bricks)], extent
+        log(f"decoding level {lv} and cutting it into {n_bricks} bricks...")
+        return split_for_render(reader.decode_mesh(lv), n_bricks)[0], extent
+    if level is not None:
+        raise OptionError("level needs a .tetc file")
+    return split_for_render(_as_mesh(source, read_options or {}, log), n_bricks)

@@ -157,3 +157,18 @@ def test_cluster_usage_errors(tmp_path):
     assert_usage_error(run("render", src, "-o", out, "--orbit", "3"), "--orbit")
     assert_usage_error(run("render", src, "-o", out, "--workers", "0"), "--workers")
     assert not out.exists()
+
+
+def test_a_glob_of_time_steps_renders_file_after_file(tmp_path):
+    import shutil
+
+    for i in range(2):
+        shutil.copy(SAMPLE_FILES["post"][0], tmp_path / f"step{i}.vtk")
+    out = tmp_path / "out"
+    out.mkdir()
+    res = run("render", tmp_path / "step*.vtk", "-o", out / "t{frame}.png", "--workers", "1", "--orbit", "2",
+              "--tf", "post", "--size", "24", "-q")
+    assert res.exit_code == 0, res.output
+    assert sorted(p.name for p in out.iterdir()) == ["t0.png", "t1.png", "t2.png", "t3.png"]
+    assert (out / "t0.png").read_bytes() == (out / "t2.png").read_bytes()  # same data, same view
+    assert_error(run("render", tmp_path / "none*.vtk", "-o", out / "x.png", "--workers", "1"), "no file matches")

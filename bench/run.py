@@ -14,8 +14,9 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-ORDER = ["mesh", "codec", "geometry", "lossless", "simplify", "forest", "render", "pipeline", "isosurface", "view", "hostile",
-         "bricks"]
+ORDER = ["mesh", "codec", "geometry", "lossless", "simplify", "forest", "render", "composite", "pipeline", "isosurface",
+         "view", "hostile", "bricks"]
+SCRIPTS = {"composite": "bench_bricks_render.py"}  # areas whose script is not bench_<area>.py
 
 
 def main(argv: list[str]) -> int:
@@ -23,7 +24,7 @@ def main(argv: list[str]) -> int:
     only = [a for a in argv if not a.startswith("-")]
     failed = []
     for area in ORDER:
-        script = HERE / f"bench_{area}.py"
+        script = HERE / SCRIPTS.get(area, f"bench_{area}.py")
         if not script.exists() or (only and area not in only):
             continue
         print(f"== bench {area}", flush=True)

@@ -92,13 +92,28 @@ def _component(text):
                    "whole mesh (5 M tets at 512²: 450 MB instead of 1.2 GB; renders 1.5-2x slower). "
                    "Off by default for the time it costs; pays off above ~1 M tets. .tetc, "
                    "--pipeline streaming only.")
+@click.option("--workers", type=click.IntRange(min=1), default=None, metavar="N",
+              help="Render on a local Dask cluster of N worker processes: the mesh is cut into bricks that stay on "
+                   "the workers, and their ray fragments are composited exactly (same image as without). INPUT "
+                   "may then be a glob ('steps/*.tetc', quoted): time steps, rendered file after file. "
+                   "Needs pip install 'gatun_py[dask]'.")
+@click.option("--scheduler", default=None, metavar="tcp://HOST:PORT",
+              help="Render on a running Dask cluster (workers started with `dask worker`, NUMBA_CACHE_DIR on a "
+                   "shared folder so they compile nothing). The input must be readable by the client.")
+@click.option("--bricks", "n_bricks", type=click.IntRange(1, 4096), default=None, metavar="K",
+              help="With --workers/--scheduler: cut an unbricked input into K bricks [default: 4 per worker].")
+@click.option("--orbit", type=click.IntRange(min=1), default=1, show_default=True, metavar="N",
+              help="Render N frames around the mesh (azimuth + 360 k / N), each written as it completes: to "
+                   "OUTPUT with {frame} replaced by the frame number, or with _0000, _0001, ... added.")
+@click.option("--timeout", type=POSITIVE, default=10.0, show_default=True, metavar="SECONDS",
+              help="With --scheduler: how long to wait for it.")
 @click.option("--stats", "show_stats", is_flag=True, help="Print one JSON object with timings and counts on stdout.")
 @mesh_input_options
 @force_option
 @quiet_option
 def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, elevation, zoom, scalar_range, component,
-           background, colorbar, ratio, level, budget, pipeline, lean, show_stats, scalar, q_file, q_var,
-           cell_to_point, time_step, force, quiet):
+           background, colorbar, ratio, level, budget, pipeline, lean, workers, scheduler, n_bricks, orbit, timeout,
+           show_stats, scalar, q_file, q_var, cell_to_point, time_step, force, quiet):
     """Volume-render INPUT (a .tetc file or any mesh file) into an image.
 
     Tets are rendered as they are decoded: rays start on the boundary surface and walk inward
@@ -115,6 +130,20 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     if scalar_range is not None and not scalar_range[0] < scalar_range[1]:
         raise click.BadParameter(f"MIN must be below MAX, got {scalar_range[0]:g} {scalar_range[1]:g}",
                                  param_hint="'--range'")
+    if n_bricks is not None and workers is None and scheduler is None:
+        raise click.UsageError("--bricks is for rendering on a cluster (--workers or --scheduler)")
+    if workers is not None or scheduler is not None or orbit > 1:
+        _check_series_options(workers, scheduler, n_bricks, ratio, budget, colorbar, lean, pipeline, component)
+    if workers is not None or scheduler is not None:
+        _render_on_cluster(input, output, workers=workers, scheduler=scheduler, bricks=n_bricks, orbit=orbit,
+                           size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom, level=level, mode=mode,
+                           step=step, scalar_range=scalar_range, opacity_model=opacity_model, background=background,
+                           force=force, timeout=timeout, read_options=read_kwargs(scalar, q_file, q_var, cell_to_point,
+                                                                                   time_step),
+                           show_stats=show_stats, quiet=quiet)
+        return
+    if orbit > 1:
+        raise click.UsageError("--orbit renders a series on a cluster: give --workers N (a local one) or --scheduler")
     image_format(output)  # refuse what cannot be written before the work, not after
     check_output_path(output, force=force)
     decoder = is_tetc(input)  # a mesh file is rendered without the decoder: no need to compile it
@@ -142,3 +171,33 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     else:
         w, h = st["size"]
         status(f"wrote {output} ({w}x{h}, {st['tets_rendered']} tets, {st['total_s']:.2f} s)", quiet)
+
+
+def _check_series_options(workers, scheduler, n_bricks, ratio, budget, colorbar, lean, pipeline, component):
+    if workers is not None and scheduler is not None:
+        raise click.UsageError("give either --workers (a local cluster) or --scheduler (a running one), not both")
+    unsupported = [name for name, given in (("--ratio", ratio is not None), ("--budget", budget is not None),
+                                            ("--colorbar", colorbar), ("--lean", lean),
+                                            ("--pipeline generic", pipeline != "streaming"),
+                                            ("--component", component is not None)) if given]
+    if unsupported:
+        raise click.UsageError(f"{', '.join(unsupported)} cannot be used with --workers, --scheduler or --orbit")
+
+
+def _render_on_cluster(input, output, *, show_stats, quiet, **options):
+    from gatun_py.api import render_frames  # start-up time: see _kernels_cached
+
+    t0 = time.perf_counter()
+    done = {"n": 0}
+
+    def progress(n, total):
+        done["n"] = n
+        status(f"frame {n}/{total} written ({time.perf_counter() - t0:.1f} s)", quiet)
+
+    frames = render_frames(input, output, progress=progress, log=logger(quiet), **options)
+    if show_stats:
+        echo_json({"frames": frames, "total_s": time.perf_counter() - t0, "peak_rss_mb": peak_rss_mb()})
+    elif len(frames) == 1:
+        st = frames[0]
+        status(f"wrote {st['output']} ({st['tets_rendered']} tets, {st['bricks']} bricks on {st['workers']} workers, "
+               f"{time.perf_counter() - t0:.2f} s)", quiet)

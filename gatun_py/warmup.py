@@ -22,6 +22,7 @@ from .mesh.synthetic import jittered_grid
 from .pipeline.stream import View, render_tetc
 from .render._facetable import count_live, make_face_table, rehash
 from .render.camera import Camera
+from .render.composite import composite
 from .render.raycast import render_mesh
 from .render.stream import render_batches
 from .simplify import ROOT_RANK, ancestors, build_levels, decimate
@@ -82,7 +83,7 @@ def _render_kernels(*, lean: bool) -> None:
     mesh = tiny_mesh()
     cam = Camera(16, 16, 30, 20)
     for mode in ("volume", "face"):
-        render_mesh(mesh, cam, "default", mode=mode)
+        composite(render_mesh(mesh, cam, "default", mode=mode, fragments=True).fragments)
         render_batches(mesh_batches(mesh, batch_tets=7), cam, "default", mode=mode, scalar_range=mesh.scalar_range,
                        lean=lean)
     if lean:

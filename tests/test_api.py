@@ -143,6 +143,11 @@ def test_import_is_light_and_the_verbs_document_themselves():
     code = "import sys, gatun_py; print('numba' in sys.modules, 'gatun_py.api' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.stdout.split() == ["False", "False"], out
+    # the verbs and the cluster code load Dask only when a cluster is made
+    code = ("import sys, gatun_py.api, gatun_py.pipeline.distributed; "
+            "print('dask' in sys.modules, 'distributed' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.stdout.split() == ["False", "False"], out
     text = pydoc.render_doc(gatun_py.render, renderer=pydoc.plaintext)
     assert "Volume-render a mesh" in text and "render(source, *, size=256" in text
     assert callable(gatun_py.open) and gatun_py.TetcFile.__name__ == "TetcFile"

@@ -179,7 +179,8 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
     return PipelineResult(res.image, stats)
 
 
-def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress, partial=(None, 0.25)):
+def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress, partial=(None, 0.25), *,
+                   fragments=False):
     lv = reader.level_meta(target.level)
     # A lean render holds about one batch of tets in flight: smaller batches, less memory.
     batches = reader.iter_decode(target.level, scalar=view.scalar, component=view.component,
@@ -189,8 +190,8 @@ def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress
         filt = SimplifyFilter(anc)
         batches = filt.filter(batches)
     res = render_batches(batches, camera, view.tf, mode=view.mode, step=step, scalar_range=rng,
-                         expected_tets=int(lv["tets"]), lean=view.lean, progress=progress, partial=partial[0],
-                         partial_every_s=partial[1])
+                         expected_tets=int(lv["tets"]), lean=view.lean, fragments=fragments, progress=progress,
+                         partial=partial[0], partial_every_s=partial[1])
     # render_batches times the wait for each batch: the decoder, plus the filter when there is one.
     times["decode_s"] = res.stats["decode_s"]
     if filt is not None:

@@ -160,19 +160,28 @@ def _face_hits(P, dens, dirs, width, height, faces, f, fwd, right, up, xs, ys, t
 
 
 @njit(cache=True)
-def _pair_hits(n_rays, hit_ray, hit_t, hit_face, hit_enter):
-    """Sort each ray's boundary crossings by t and pair them into (entry, exit) segments."""
-    m = hit_ray.shape[0]
+def group_by_ray(ray, n_rays):
+    """A stable counting sort by ray: ``order`` lists the items ray by ray, ray r's are
+    ``order[start[r]:start[r + 1]]`` (boundary crossings here, fragments in ``composite``)."""
+    m = ray.shape[0]
     start = np.zeros(n_rays + 1, dtype=np.int64)
     for i in range(m):
-        start[hit_ray[i] + 1] += 1
+        start[ray[i] + 1] += 1
     for r in range(n_rays):
         start[r + 1] += start[r]
     order = np.empty(m, dtype=np.int64)
     pos = start[:-1].copy()
     for i in range(m):
-        order[pos[hit_ray[i]]] = i
-        pos[hit_ray[i]] += 1
+        order[pos[ray[i]]] = i
+        pos[ray[i]] += 1
+    return start, order
+
+
+@njit(cache=True)
+def _pair_hits(n_rays, hit_ray, hit_t, hit_face, hit_enter):
+    """Sort each ray's boundary crossings by t and pair them into (entry, exit) segments."""
+    m = hit_ray.shape[0]
+    start, order = group_by_ray(hit_ray, n_rays)
     seg_ray = np.empty(m + 1, dtype=np.int64)
     seg_in = np.empty(m + 1, dtype=np.int64)
     seg_out = np.empty(m + 1, dtype=np.int64)

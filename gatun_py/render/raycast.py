@@ -24,10 +24,11 @@ from ..mesh.model import default_step
 from ._boundary import find_segments
 from ._facetable import (FT_INFO, FT_NODES, FT_PARKED, FT_TABLE, INFO_FACES, INFO_MUL, INFO_NODES, count_crossings,
                          count_live, insert_tets, make_face_table, park, rehash, with_nodes, with_table)
-from ._segments import (FOLD_END, SEG_FACE, SEG_FROM, SEG_RAY, SEG_SAMPLES, SEG_STATE, SEG_STEPS, STATE_ACTIVE,
-                        STATE_DONE, STATE_STUCK)
+from ._segments import (FOLD_END, SEG_FACE, SEG_FROM, SEG_RAY, SEG_SAMPLES, SEG_STATE, SEG_STEPS, SEG_TS,
+                        STATE_ACTIVE, STATE_DONE, STATE_STUCK, TS_T)
 from ._walk import MODE_FACE, MODE_VOLUME, advance, compose, make_sampling, settle
 from .camera import Camera, FittedCamera
+from .composite import Fragments, segment_fragments
 from .transfer import TransferFunction, load_transfer_function
 
 MODES = ("volume", "face")
@@ -48,10 +49,14 @@ class RenderResult:
         threshold); ``segments_behind_opaque`` the incomplete segments behind it, which change
         their pixel by at most 0.01; ``subsegments_folded`` the subsegments that ended where a
         grid folds over itself (the tet behind a face lies on the ray's side of it).
+    fragments : Fragments or None
+        Every segment's composited colour and depth interval (asked for with ``fragments=True``),
+        what :func:`~gatun_py.render.composite.composite` sorts and blends with other bricks'.
     """
 
     image: np.ndarray
     stats: dict = field(default_factory=dict)
+    fragments: Fragments | None = None
 
 
 class StreamingRaycaster:
@@ -79,6 +84,9 @@ class StreamingRaycaster:
         memory saving; the render takes 1.5-2x as long). Off by default: on grids that fold over
         themselves a walk can leave the ray's path, and although the faces around such places are
         kept, one refined Blunt-fin view (1.5 M tets, 512², az 45 el 70) still lost one ray.
+    fragments : bool
+        Also return every segment as a fragment (``RenderResult.fragments``): a brick of a
+        partition rendered this way composites exactly with the other bricks' fragments.
 
     Notes
     -----
@@ -88,7 +96,7 @@ class StreamingRaycaster:
     """
 
     def __init__(self, camera, tf, *, mode: str = "volume", step: float | None = None, scalar_range=None,
-                 expected_tets: int | None = None, lean: bool = False):
+                 expected_tets: int | None = None, lean: bool = False, fragments: bool = False):
         if mode not in MODES:
             raise OptionError(f"unknown render mode {mode!r} (choose from {', '.join(MODES)})")
         if step is not None and not (np.isfinite(step) and step > 0):
@@ -115,6 +123,8 @@ class StreamingRaycaster:
         # lean: count the rays still to cross each face and drop the faces no ray needs any more
         self._counting = bool(lean)
         self._table_peak = 0
+        self._want_fragments = bool(fragments)
+        self._entry_t = None  # fragments: each segment's boundary depths, before the walks move them
 
     # -- input ----------------------------------------------------------------------------------
     def add_vertices(self, points, density) -> None:
@@ -185,7 +195,14 @@ class StreamingRaycaster:
         settle(self._seg, self._boundary_keys)
         unfinished, hidden = compose(self._seg, image)
         self._t_render += time.perf_counter() - t0
-        return self._result(image, unfinished, hidden)
+        return self._take_fragments(self._result(image, unfinished, hidden))
+
+    def _take_fragments(self, res: RenderResult) -> RenderResult:
+        if self._want_fragments:
+            cam = self.fitted
+            res.fragments = segment_fragments(self._seg, self._entry_t, cam.width, cam.height)
+            res.stats["fragments"] = len(res.fragments)
+        return res
 
     def snapshot(self) -> tuple[np.ndarray, np.ndarray]:
         """The image of what has arrived so far, and which of its pixels are final.
@@ -261,6 +278,8 @@ class StreamingRaycaster:
         self._seg, self._odd_pixels, self._anomalies, self._boundary_hits = find_segments(
             P, self._dens, self._dirs, cam.width, cam.height, faces, *_ray_grid(cam))
         nseg = self._nseg = len(self._seg[SEG_RAY])
+        if self._want_fragments:
+            self._entry_t = self._seg[SEG_TS][:, :, TS_T].copy()
         self._active = np.arange(nseg, dtype=np.int64)
         if self._counting:  # grows with the tets in flight
             cap = 1 << int(np.ceil(np.log2(max(1024, 4 * len(faces)))))
@@ -449,7 +468,7 @@ def _ray_grid(cam):
 
 
 def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = None,
-                scalar_range=None) -> RenderResult:
+                scalar_range=None, fragments: bool = False) -> RenderResult:
     """Render a whole in-memory mesh (the generic decompress-then-render baseline).
 
     All tets enter the face table first, then every segment walks front to back from its entry
@@ -466,6 +485,8 @@ def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = 
         Default half the median boundary edge length.
     scalar_range : (float, float), optional
         Default the mesh's scalar range.
+    fragments : bool
+        Also return the segments as fragments (see :class:`StreamingRaycaster`).
 
     Returns
     -------
@@ -474,7 +495,8 @@ def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = 
     t0 = time.perf_counter()
     rc = StreamingRaycaster(camera, tf, mode=mode, step=step,
                             scalar_range=mesh.scalar_range if scalar_range is None else scalar_range,
-                            expected_tets=mesh.n_tets, lean=False)  # the whole mesh is in the table anyway
+                            expected_tets=mesh.n_tets, lean=False,  # the whole mesh is in the table anyway
+                            fragments=fragments)
     rc.add_vertices(mesh.points, mesh.density)
     rc.set_boundary(mesh.boundary_faces())
     rc._start()
@@ -488,7 +510,7 @@ def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = 
     settle(rc._seg, rc._boundary_keys)
     unfinished, hidden = compose(rc._seg, image)
     rc._t_render = time.perf_counter() - t0
-    return rc._result(image, unfinished, hidden)
+    return rc._take_fragments(rc._result(image, unfinished, hidden))
 
 
 __all__ = ["RenderResult", "StreamingRaycaster", "render_mesh", "MODES", "TransferFunction"]

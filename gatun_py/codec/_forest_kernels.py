@@ -150,18 +150,22 @@ def _find(uf, x):
 
 @njit(cache=True, nogil=True)
 def _sort_small(a, m):
-    """Sort ``a[:m]`` in place (insertion sort: the rows are a few dozen values, and np.sort
-    would allocate a copy per call)."""
-    if m > 64:  # a vertex that absorbed many others: avoid the quadratic sort
-        a[:m] = np.sort(a[:m])
-        return
-    for i in range(1, m):
-        x = a[i]
-        j = i - 1
-        while j >= 0 and a[j] > x:
-            a[j + 1] = a[j]
-            j -= 1
-        a[j + 1] = x
+    """Sort ``a[:m]`` in place (np.sort would allocate a copy per call)."""
+    # Shell sort (gaps 1, 4, 13, ...): insertion sort for the usual rows, and no quadratic blow-up
+    # for the long lists of a vertex that absorbed many others (np.sort would cost seconds of
+    # compilation on a cold first run)
+    gap = 1
+    while gap < m // 3:
+        gap = 3 * gap + 1
+    while gap > 0:
+        for i in range(gap, m):
+            x = a[i]
+            j = i - gap
+            while j >= 0 and a[j] > x:
+                a[j + gap] = a[j]
+                j -= gap
+            a[j + gap] = x
+        gap //= 3
 
 
 @njit(cache=True, nogil=True)

@@ -37,6 +37,7 @@ from .render.image import add_colorbar, image_bytes, parse_colour, to_rgb8, writ
 from .render.raycast import MODES
 from .render.transfer import load_transfer_function
 from .simplify import build_levels, decimate, storage_forests
+from .simplify.dependencies import merge_dependencies
 from .simplify.filter import SimplifyFilter
 from .simplify.levels import read_simplified, resolve_target, target_ancestors
 
@@ -140,6 +141,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
                                  time_step=time_step), log, storing=True, drop_cell_data=drop_cell_data)
     name = Path(source).name if isinstance(source, (str, os.PathLike)) else ""
     log(f"read {name or 'mesh'}: {mesh.n_points} points, {mesh.n_tets} tets")
+    deps = None
     if mesh_only:
         payload = mesh
     else:
@@ -149,7 +151,10 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
             f"levels {', '.join(str(x.level) for x in lv)}")
         payload = [LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
                    for x, f in zip(lv, storage_forests(lv))]
-    n = write_tetc(output, payload, source=name, force=force)
+        deps = merge_dependencies(mesh, forest)
+        log(f"merge dependencies: {deps.idx.size} ({deps.idx.size / max(deps.n_merges, 1):.1f} per merge)")
+        deps = (deps.ptr, deps.idx, deps.removed)
+    n = write_tetc(output, payload, source=name, force=force, dependencies=deps)
     out = TetcFile(output)
     info = out.info
     log(f"wrote {output}: {n} bytes ({8.0 * n / max(mesh.n_tets, 1):.2f} bits/tet overall, "

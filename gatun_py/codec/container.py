@@ -26,7 +26,7 @@ import zlib
 from ..errors import CorruptFileError, FormatVersionError, ReadError
 
 MAGIC = b"TETC\x89\r\n\x1a"
-VERSION_MAJOR = 2  # 2: float64 coordinates and every point array (points64, array/j)
+VERSION_MAJOR = 3  # 2: float64 coordinates and every point array (points64, array/j); 3: merge dependencies (deps)
 VERSION_MINOR = 0
 _PREAMBLE = struct.Struct("<8sHHII")
 PREAMBLE_SIZE = _PREAMBLE.size

@@ -1,0 +1,52 @@
+"""Slow, obviously correct reference of the merge dependencies (and of a cut's ancestors).
+
+Recomputes every tet's image from scratch at every prefix state with :func:`ancestors_naive`:
+``last[T]`` is the last merge after which T's image differed from before it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from naive_simplify import ancestors_naive
+
+
+def dependencies_naive(tets, parent, rank):
+    """(list of sorted dependency lists, list of removal counts), by rank."""
+    tets = np.asarray(tets, np.int64)
+    k = int(sum(1 for r in rank if r < 2**31 - 1))
+    by_rank = {int(r): v for v, r in enumerate(rank) if r < 2**31 - 1}
+    last = [-1] * len(tets)
+    image = ancestors_naive(parent, rank, 0)[tets]
+    deps, removed = [], []
+    for i in range(k):
+        a, b = by_rank[i], int(parent[by_rank[i]])
+        live = [len(set(q.tolist())) == 4 for q in image]
+        star = [t for t in range(len(tets)) if live[t] and (a in image[t] or b in image[t])]
+        deps.append(sorted({last[t] for t in star if last[t] >= 0}))
+        removed.append(sum(1 for t in star if a in image[t] and b in image[t]))
+        nxt = ancestors_naive(parent, rank, i + 1)[tets]
+        for t in range(len(tets)):
+            if live[t] and not np.array_equal(nxt[t], image[t]):
+                last[t] = i
+        image = nxt
+    return deps, removed
+
+
+def cut_ancestors_naive(parent, rank, applied):
+    """Follow the parent while that vertex's merge is applied."""
+    out = []
+    for v in range(len(parent)):
+        while rank[v] < len(applied) and applied[rank[v]]:
+            v = parent[v]
+        out.append(v)
+    return np.array(out, np.int64)
+
+
+def closure_naive(deps, applied):
+    """The smallest closed cut containing ``applied``."""
+    out = np.array(applied, bool)
+    for i in range(len(out) - 1, -1, -1):  # dependencies have lower ranks: one backward pass
+        if out[i]:
+            for j in deps[i]:
+                out[j] = True
+    return out

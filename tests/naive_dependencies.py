@@ -1,7 +1,7 @@
 """Slow, obviously correct reference of the merge dependencies (and of a cut's ancestors).
 
 Recomputes every tet's image from scratch at every prefix state with :func:`ancestors_naive`:
-``last[T]`` is the last merge after which T's image differed from before it.
+``last[T]`` is the last merge after which T's image differed from before it (dead or alive).
 """
 
 from __future__ import annotations
@@ -21,12 +21,13 @@ def dependencies_naive(tets, parent, rank):
     for i in range(k):
         a, b = by_rank[i], int(parent[by_rank[i]])
         live = [len(set(q.tolist())) == 4 for q in image]
-        star = [t for t in range(len(tets)) if live[t] and (a in image[t] or b in image[t])]
-        deps.append(sorted({last[t] for t in star if last[t] >= 0}))
-        removed.append(sum(1 for t in star if a in image[t] and b in image[t]))
+        # dead tets too: one left alive by a cut that skips its killer is around a and b there
+        near = [t for t in range(len(tets)) if a in image[t] or b in image[t]]
+        deps.append(sorted({last[t] for t in near if last[t] >= 0}))
+        removed.append(sum(1 for t in near if live[t] and a in image[t] and b in image[t]))
         nxt = ancestors_naive(parent, rank, i + 1)[tets]
         for t in range(len(tets)):
-            if live[t] and not np.array_equal(nxt[t], image[t]):
+            if not np.array_equal(nxt[t], image[t]):
                 last[t] = i
         image = nxt
     return deps, removed

@@ -2,8 +2,8 @@
 
 The mesh state while the merges are replayed in rank order is the decimator's
 (:mod:`gatun_py.simplify._decimate_kernels`): ``T`` (m, 4) the current image of every input tet,
-``alive`` (m,), per-vertex slot lists ``head`` / ``nxt`` (slot = 4*t + corner), spliced on a merge
-and tidied lazily. On top of it, ``last[t]`` = the rank of the last merge that changed tet t
+``alive`` (m,), per-vertex slot lists ``head`` / ``nxt`` (slot = 4*t + corner), spliced on a merge.
+Unlike the decimator's, the lists keep dead tets. On top of it, ``last[t]`` = the rank of the last merge that changed tet t
 (-1: never changed).
 """
 
@@ -26,23 +26,6 @@ def _incidence(T, n):
 
 
 @njit(cache=True)
-def _tidy(v, head, nxt, T, alive):
-    """Unlink from v's list the slots of dead tets and of tets that no longer hold v there."""
-    prev = -1
-    s = head[v]
-    while s >= 0:
-        ns = nxt[s]
-        t = s >> 2
-        if alive[t] and T[t, s & 3] == v:
-            prev = s
-        elif prev < 0:
-            head[v] = ns
-        else:
-            nxt[prev] = ns
-        s = ns
-
-
-@njit(cache=True)
 def _push(buf, n, value):
     """Append ``value`` at ``buf[n]``, doubling ``buf`` when full; returns the (possibly new) buffer."""
     if n >= buf.shape[0]:
@@ -59,9 +42,11 @@ def _dependencies(tets, by_rank, parent):
     when merge r is not an edge collapse of the current mesh (a forest that does not belong to
     this mesh).
 
-    ``idx[ptr[i]:ptr[i+1]]`` = D(i), ascending: the last changers of the tets in the stars of
-    v_i and t_i just before merge i. ``removed[i]`` = tets with both v_i and t_i (merge i deletes
-    them).
+    Every vertex's list holds every input tet whose image contains it, dead ones included (their
+    images keep following the merges): a tet killed by a merge r that a cut leaves out is alive in
+    that cut, so a merge near it must depend on r. ``idx[ptr[i]:ptr[i+1]]`` = D(i), ascending:
+    the last changers of the images of the tets whose image contains v_i or t_i just before merge
+    i (the killer of a dead tet is reached through the merges that moved it since). ``removed[i]`` = live tets with both v_i and t_i (merge i deletes them).
     """
     m = tets.shape[0]
     k = by_rank.shape[0]
@@ -78,8 +63,6 @@ def _dependencies(tets, by_rank, parent):
     for i in range(k):
         a = by_rank[i]
         b = parent[a]
-        _tidy(a, head, nxt, T, alive)
-        _tidy(b, head, nxt, T, alive)
         start = nd
         for end in range(2):
             v = a if end == 0 else b
@@ -91,17 +74,16 @@ def _dependencies(tets, by_rank, parent):
                     idx = _push(idx, nd, j)
                     nd += 1
                 s = nxt[s]
-        # apply: tets of edge ab die, the rest of a's star is relabelled
+        # apply: live tets of edge ab die, every tet holding a now holds b
         shared = 0
         s = head[a]
         while s >= 0:
             t = s >> 2
             last[t] = i
-            if T[t, 0] == b or T[t, 1] == b or T[t, 2] == b or T[t, 3] == b:
+            if alive[t] and (T[t, 0] == b or T[t, 1] == b or T[t, 2] == b or T[t, 3] == b):
                 alive[t] = False
                 shared += 1
-            else:
-                T[t, s & 3] = b
+            T[t, s & 3] = b
             s = nxt[s]
         if shared == 0:
             ptr[0] = -1 - i
@@ -165,3 +147,51 @@ def _cut_ancestors(parent, rank, applied):
         if v >= 0 and applied[r]:
             anc[v] = anc[parent[v]]
     return anc
+
+
+@njit(cache=True)
+def _reduce(ptr, idx, budget):
+    """Close to the transitive reduction of the dependency DAG: per merge, only the dependencies
+    that no other dependency of it reaches. The closure (hence every closed cut) is unchanged.
+
+    Merge by merge in rank order, its dependencies from the highest rank down: one already reached
+    is dropped, one kept marks what it reaches (a depth-first search over the reduced lists of
+    earlier merges, pruned below the merge's lowest dependency, which nothing below can cover, and
+    stopped after ``budget`` marks: what it did not reach is kept, which is redundant but correct).
+    """
+    k = ptr.shape[0] - 1
+    rptr = np.zeros(k + 1, np.int64)
+    ridx = np.empty(idx.shape[0], np.int32)
+    mark = np.full(k, -1, np.int64)
+    stack = np.empty(16, np.int64)
+    nr = 0
+    for i in range(k):
+        lo = ptr[i]
+        hi = ptr[i + 1]
+        start = nr
+        if hi > lo:
+            floor = idx[lo]  # ascending: the lowest dependency
+            for p in range(hi - 1, lo - 1, -1):
+                x = idx[p]
+                if mark[x] == i:
+                    continue
+                ridx[nr] = x
+                nr += 1
+                mark[x] = i
+                top = 0
+                stack = _push(stack, top, x)
+                top += 1
+                work = 0
+                while top > 0 and work < budget:
+                    top -= 1
+                    y = stack[top]
+                    for q in range(rptr[y], rptr[y + 1]):
+                        z = ridx[q]
+                        if z >= floor and mark[z] != i:
+                            mark[z] = i
+                            work += 1
+                            stack = _push(stack, top, z)
+                            top += 1
+            ridx[start:nr] = np.sort(ridx[start:nr])
+        rptr[i + 1] = nr
+    return rptr, ridx[:nr].copy()

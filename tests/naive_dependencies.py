@@ -51,3 +51,35 @@ def closure_naive(deps, applied):
             for j in deps[i]:
                 out[j] = True
     return out
+
+
+def merge_volume_changes(mesh, parent, rank):
+    """Enclosed-volume change of every merge in its prefix state, by replaying the merges with
+    Python sets (each merge: volume of its star after minus before)."""
+    pts = np.asarray(mesh.points, np.float64)
+    T = np.array(mesh.tets, np.int64)
+    alive = np.ones(len(T), bool)
+    around = [set() for _ in range(len(pts))]
+    for t, q in enumerate(T.tolist()):
+        for v in q:
+            around[v].add(t)
+
+    def vol(ts):
+        q = T[ts]
+        a = pts[q[:, 0]]
+        return float(np.einsum("ij,ij->i", pts[q[:, 1]] - a, np.cross(pts[q[:, 2]] - a, pts[q[:, 3]] - a)).sum()) / 6
+
+    by_rank = sorted((int(r), v) for v, r in enumerate(rank) if r < 2**31 - 1)
+    out = []
+    for _, a in by_rank:
+        b = int(parent[a])
+        star = np.array(sorted(t for t in around[a] if alive[t]), np.int64)
+        before = vol(star)
+        for t in around[a]:
+            T[t][T[t] == a] = b
+        around[b] |= around[a]
+        around[a] = set()
+        star_alive = np.array([t for t in star if len(set(T[t].tolist())) == 4], np.int64)
+        alive[star[~np.isin(star, star_alive)]] = False
+        out.append(vol(star_alive) - before)
+    return np.array(out)

@@ -9,7 +9,7 @@ from conftest import load_sample
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from meshgen import delaunay_mesh, grid_mesh, mesh_strategy
-from naive_dependencies import closure_naive, cut_ancestors_naive, dependencies_naive
+from naive_dependencies import closure_naive, cut_ancestors_naive, dependencies_naive, merge_volume_changes
 from naive_simplify import check_valid
 
 from gatun_py.errors import OptionError
@@ -43,17 +43,10 @@ def _random_cuts(deps, rng, n_cuts):
     return out
 
 
-def _merge_volume_changes(mesh, forest):
-    """Enclosed-volume change of every merge in its prefix state (slow: one mesh per merge)."""
-    vols = [float(mesh_from_ancestors(mesh, ancestors(forest.parent, forest.rank, n))[0].signed_volumes().sum())
-            for n in range(forest.n_merges + 1)]
-    return np.diff(vols)
-
-
-def _check_cuts(mesh, forest, deps, cuts, label, *, changes=None, rel_tol=0.01):
+def _check_cuts(mesh, forest, deps, cuts, label, *, changes):
     """Every cut: a valid mesh, T0 - sum(removed) tets, and its enclosed volume = the input's plus
     the changes of its merges (each merge sees the star it was validated in, so it changes the
-    volume by exactly what it did in its prefix state); without ``changes``, within ``rel_tol``."""
+    volume by exactly what it did in its prefix state: interior merges by nothing)."""
     n_flat = int((mesh.signed_volumes() == 0).sum())
     vol0 = float(mesh.signed_volumes().sum())
     manifold = _manifold(mesh)
@@ -64,24 +57,29 @@ def _check_cuts(mesh, forest, deps, cuts, label, *, changes=None, rel_tol=0.01):
         check_valid(out, n_flat, f"{label} cut {c}", manifold=manifold)
         assert out.n_tets == deps.cut_tets(mesh.n_tets, cut), f"{label} cut {c}: tet count"
         vol = float(out.signed_volumes().sum())
-        if changes is not None:
-            want = vol0 + float(changes[cut].sum())
-            assert abs(vol - want) <= 1e-9 * abs(vol0), f"{label} cut {c}: volume {vol} vs {want}"
-        else:
-            assert abs(vol / vol0 - 1) < rel_tol, f"{label} cut {c}: volume {vol} vs {vol0}"
+        want = vol0 + float(changes[cut].sum())
+        assert abs(vol - want) <= 1e-9 * abs(vol0), f"{label} cut {c}: volume {vol} vs {want}"
 
 
 @settings(max_examples=40, deadline=None)
 @given(mesh_strategy())
 def test_kernel_matches_naive(mesh):
     forest = decimate(mesh)
-    deps = merge_dependencies(mesh, forest)
+    deps = merge_dependencies(mesh, forest, reduce=False)
     ref, removed = dependencies_naive(mesh.tets, forest.parent, forest.rank)
     assert deps.n_merges == forest.n_merges
     for i in range(forest.n_merges):
         assert deps.of(i).tolist() == ref[i], f"merge {i}"
         assert all(j < i for j in ref[i])
     assert deps.removed.tolist() == removed
+    # the reduction keeps the closure of every merge (and of random sets of merges)
+    red = merge_dependencies(mesh, forest)
+    assert np.array_equal(red.removed, deps.removed)
+    assert red.idx.size <= deps.idx.size
+    rng = np.random.default_rng(0)
+    k = deps.n_merges
+    for cut in [np.eye(k, dtype=bool)[i] for i in range(k)] + [rng.random(k) < 0.2 for _ in range(5)]:
+        assert np.array_equal(closure_naive(ref, cut), closure_naive([red.of(i) for i in range(k)], cut))
 
 
 @settings(max_examples=30, deadline=None)
@@ -90,7 +88,7 @@ def test_random_closed_cuts_are_valid(mesh, seed):
     forest = decimate(mesh)
     deps = merge_dependencies(mesh, forest)
     _check_cuts(mesh, forest, deps, _random_cuts(deps, np.random.default_rng(seed), 4), "random",
-                changes=_merge_volume_changes(mesh, forest))
+                changes=merge_volume_changes(mesh, forest.parent, forest.rank))
 
 
 @settings(max_examples=10, deadline=None)
@@ -100,7 +98,7 @@ def test_closed_cuts_on_jittered_grids(a, b, c, seed):
     forest = decimate(mesh)
     deps = merge_dependencies(mesh, forest)
     _check_cuts(mesh, forest, deps, _random_cuts(deps, np.random.default_rng(seed), 4), "grid",
-                changes=_merge_volume_changes(mesh, forest))
+                changes=merge_volume_changes(mesh, forest.parent, forest.rank))
 
 
 @settings(max_examples=20, deadline=None)
@@ -176,4 +174,5 @@ def test_samples_random_closed_cuts(name):
     deps = merge_dependencies(mesh, forest)
     assert deps.cut_tets(mesh.n_tets, prefix_cut(deps.n_merges, deps.n_merges)) == \
         mesh_from_ancestors(mesh, ancestors(forest.parent, forest.rank, deps.n_merges))[0].n_tets
-    _check_cuts(mesh, forest, deps, _random_cuts(deps, np.random.default_rng(7), 2), name)
+    _check_cuts(mesh, forest, deps, _random_cuts(deps, np.random.default_rng(7), 2), name,
+                changes=merge_volume_changes(mesh, forest.parent, forest.rank))

@@ -6,8 +6,9 @@ import click
 
 import gatun_py
 
-from .options import (RATIO, echo_json, force_option, json_option, logger, mesh_input_options, output_option,
-                      progress_reporter, quiet_option, read_kwargs, status)
+from .options import (ANGLE, RATIO, ZOOM, FiniteFloat, ImageSize, echo_json, force_option, json_option, logger,
+                      mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
+                      selective_options, status)
 
 
 @click.command()
@@ -92,11 +93,33 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, scalar, 
 @click.option("--ratio", default=None, type=RATIO,
               help="Simplify to this ratio (merged / all vertices, 0..1) with the stored merge forest, "
                    "starting from the most simplified stored level that is still finer.")
+@selective_options
+@click.option("--size", type=ImageSize(), default="256", show_default=True,
+              help="With --selective: the image size the cut is chosen for.")
+@click.option("--tf", "tf_spec", default="default", show_default=True, metavar="NAME|FILE",
+              help="With --selective: the transfer function the cut is chosen for (as `tetc render --tf`).")
+@click.option("--azimuth", type=ANGLE, default=0.0, show_default=True, help="With --selective: the view's azimuth.")
+@click.option("--elevation", type=ANGLE, default=0.0, show_default=True,
+              help="With --selective: the view's elevation.")
+@click.option("--zoom", type=ZOOM, default=1.0, show_default=True, help="With --selective: the view's zoom.")
+@click.option("--range", "scalar_range", type=(FiniteFloat(), FiniteFloat()), default=None, metavar="MIN MAX",
+              help="With --selective: the scalar range the transfer function is normalised to.")
 @force_option
 @quiet_option
-def decompress(input, output, level, ratio, force, quiet):
-    """Decompress a .tetc file into any mesh format meshio writes that holds tets."""
-    if level is not None and ratio is not None:
-        raise click.UsageError("--level and --ratio are exclusive")
-    mesh = gatun_py.decompress(input, output, ratio=ratio, level=level, force=force)
+def decompress(input, output, level, ratio, selective, tets, size, tf_spec, azimuth, elevation, zoom, scalar_range,
+               force, quiet):
+    """Decompress a .tetc file into any mesh format meshio writes that holds tets.
+
+    With --selective, write the mesh `tetc render --selective` draws for that view and transfer
+    function (same options), e.g. to check it or use it elsewhere.
+    """
+    if sum(x is not None for x in (level, ratio, tets)) > 1:
+        raise click.UsageError("give at most one of --level, --ratio and --tets")
+    if tets is not None and not selective:
+        raise click.UsageError("--tets needs --selective")
+    if selective and level is not None:
+        raise click.UsageError("--selective takes --ratio or --tets, not --level")
+    mesh = gatun_py.decompress(input, output, ratio=ratio, level=level, force=force, selective=selective, tets=tets,
+                               size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom,
+                               scalar_range=scalar_range, log=logger(quiet))
     status(f"wrote {output}: {mesh.n_points} points, {mesh.n_tets} tets", quiet)

@@ -31,6 +31,7 @@ from .errors import OptionError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.io import mesh_output_format
 from .pipeline.budget import load_costs, plan_file_budget, remember_frame
+from .pipeline.selective import budget_tets, render_selective, selective_mesh
 from .pipeline.stream import PIPELINES, View, is_tetc, render_mesh_file, render_tetc
 from .render.camera import Camera
 from .render.image import add_colorbar, image_bytes, parse_colour, to_rgb8, write_image
@@ -176,14 +177,42 @@ def _counter(progress, total: int):
     return update
 
 
-def decompress(source, output, *, ratio: float | None = None, level: int | None = None, force: bool = False) -> TetMesh:
+def decompress(source, output, *, ratio: float | None = None, level: int | None = None, force: bool = False,
+               selective: bool = False, tets: int | None = None, size=256, tf="default", azimuth: float = 0.0,
+               elevation: float = 0.0, zoom: float = 1.0, scalar_range=None, log=None) -> TetMesh:
     """Decode a ``.tetc`` file (optionally simplified) and write it in any meshio format.
+
+    With ``selective``, the mesh a selective render of that view and transfer function (``size``,
+    ``tf``, ``azimuth``, ``elevation``, ``zoom``, ``scalar_range``, see :func:`render`) would draw,
+    at ``ratio`` or ``tets``: so it can be checked and used elsewhere. A file without merge
+    dependencies gives the uniform mesh, with a note through ``log``.
 
     Returns the mesh written.
     """
+    log = log or _quiet
+    if tets is not None and not selective:
+        raise OptionError("tets needs selective=True")
+    if selective and level is not None:
+        raise OptionError("selective refinement takes a ratio or tets, not a stored level")
     _check_output(source, output, force=force, mesh_file=True)  # before decoding
     f = source if isinstance(source, TetcFile) else TetcFile(source)
-    mesh = f.mesh(ratio=ratio, level=level)
+    mesh = None
+    if selective:
+        w, h = _size(size)
+        view = View(Camera(w, h, _check_number("azimuth", azimuth, allow_none=False),
+                           _check_number("elevation", elevation, allow_none=False),
+                           _check_number("zoom", zoom, lo=0.0, lo_open=True, allow_none=False)),
+                    load_transfer_function(tf), scalar_range=None if scalar_range is None else tuple(scalar_range))
+        if ratio is None and tets is None:
+            ratio = 0.5
+        mesh, cut = selective_mesh(f.reader, view, ratio=ratio, tets=tets)
+        if mesh is None:
+            log("note: this file stores no merge dependencies (written before format 3): decoding uniformly")
+            ratio = ratio if tets is None else None
+        else:
+            log(f"selective cut: {cut.n_merges} merges, {cut.n_tets} tets, chosen in {cut.select_s:.3f} s")
+    if mesh is None:
+        mesh = f.mesh(ratio=ratio, level=level)
     write_mesh(mesh, output, force=force)
     return mesh
 
@@ -403,6 +432,27 @@ class Frame:
         return image_bytes(self.rgb, "PNG")
 
 
+def _render_selective(reader, view, *, ratio, tets, budget, pipeline, progress, log):
+    """(PipelineResult, planned stats) of a selective render; without ratio, tets or budget: ratio
+    0.5 (half the vertices merged where they matter least)."""
+    planned = {}
+    if budget is not None:
+        if reader.has_dependencies():
+            if load_costs() is None:
+                log("measuring this machine's rendering costs for the budget (once, under a second)...")
+            _, plan, planner, _ = plan_file_budget(reader, view, budget)
+            tets = budget_tets(reader, view, planner, budget)
+            planned = {"budget_s": budget}
+        else:
+            ratio = 0.0
+    elif ratio is None and tets is None:
+        ratio = 0.5 if reader.has_dependencies() else 0.0
+    total = int(reader.level_meta(0)["tets"])
+    result = render_selective(reader, view, ratio=ratio, tets=tets, pipeline=pipeline,
+                              progress=_counter(progress, total), log=log)
+    return result, planned
+
+
 def _check_number(name, v, *, lo=None, lo_open=False, hi=None, allow_none=True):
     if v is None and allow_none:
         return None
@@ -428,7 +478,8 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
            step: float | None = None, scalar_range=None, opacity_model: str | None = None,
            background="black", colorbar: bool = False, lean: bool = False, pipeline: str = "streaming",
            scalar: str | None = None, q_file=None, q_var: str = "density", cell_to_point: bool = False,
-           time_step: int | None = None, component=None, progress=None, log=None) -> Frame:
+           time_step: int | None = None, component=None, selective: bool = False, tets: int | None = None,
+           progress=None, log=None) -> Frame:
     """Volume-render a mesh: decode, simplify and ray-cast in one streaming pass.
 
     Parameters
@@ -470,6 +521,13 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
         names the stored point array to render (default: the file's default scalar).
     component : None, int or "magnitude"
         ``.tetc``: for a vector array, the component to render or its magnitude.
+    selective : bool
+        ``.tetc``: simplify where this view and transfer function say it matters least (a closed
+        cut of the merge forest, never a flipped tet; :mod:`gatun_py.pipeline.selective`), to
+        ``ratio``, ``tets`` or ``budget``. A file without merge dependencies renders uniformly,
+        with a note.
+    tets : int, optional
+        With ``selective``: render at most this many tets (above the mesh's count: the full mesh).
     progress : callable, optional
         ``progress(done, total)``: tets rendered so far, of ``total``.
     log : callable, optional
@@ -499,8 +557,15 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
         raise OptionError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
     if pipeline not in PIPELINES:
         raise OptionError(f"pipeline must be one of {', '.join(PIPELINES)}, got {pipeline!r}")
-    if sum(x is not None for x in (ratio, level, budget)) > 1:
-        raise OptionError("give at most one of ratio, level and budget")
+    if sum(x is not None for x in (ratio, level, budget, tets)) > 1:
+        raise OptionError("give at most one of ratio, level, budget and tets")
+    if tets is not None:
+        if isinstance(tets, bool) or not isinstance(tets, (int, np.integer)) or tets < 1:
+            raise OptionError(f"tets must be a whole number >= 1, got {tets!r}")
+        if not selective:
+            raise OptionError("tets needs selective=True (a uniform render takes a ratio or a level)")
+    if selective and level is not None:
+        raise OptionError("selective refinement takes a ratio, tets or a budget, not a stored level")
     if scalar_range is not None:
         lo, hi = (_check_number("scalar_range", v, allow_none=False) for v in scalar_range)
         if not hi > lo:
@@ -516,27 +581,31 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
     planned = {}
     if isinstance(source, TetcFile) or (isinstance(source, (str, os.PathLike)) and is_tetc(source)):
         f = source if isinstance(source, TetcFile) else TetcFile(source)
-        target = resolve_target(f.reader, ratio=ratio, level=level)
-        if budget is not None:
-            if load_costs() is None:
-                log("measuring this machine's rendering costs for the budget (once, under a second)...")
-            target, plan, planner, _ = plan_file_budget(f.reader, view, budget)
-            planned = {"predicted_s": plan.predicted_s, "budget_s": budget}
-            if not plan.feasible:
-                log(f"note: the budget of {budget:g} s cannot be met: rendering the coarsest level "
-                    f"(predicted {plan.predicted_s:.3f} s)")
-        total = int(f.reader.level_meta(target.level)["tets"])
         if scalar is not None or component is not None:
             view = dataclasses.replace(view, scalar=scalar or f.scalar_name, component=component)
-        t_frame = time.perf_counter()
-        result = render_tetc(f.reader, view, pipeline=pipeline, target=target, progress=_counter(progress, total))
-        if budget is not None:  # the machine's costs learn from every budget render
-            remember_frame(planner, result.stats, total_s=time.perf_counter() - t_frame)
+        if selective:
+            result, planned = _render_selective(f.reader, view, ratio=ratio, tets=tets, budget=budget,
+                                                pipeline=pipeline, progress=progress, log=log)
+        else:
+            target = resolve_target(f.reader, ratio=ratio, level=level)
+            if budget is not None:
+                if load_costs() is None:
+                    log("measuring this machine's rendering costs for the budget (once, under a second)...")
+                target, plan, planner, _ = plan_file_budget(f.reader, view, budget)
+                planned = {"predicted_s": plan.predicted_s, "budget_s": budget}
+                if not plan.feasible:
+                    log(f"note: the budget of {budget:g} s cannot be met: rendering the coarsest level "
+                        f"(predicted {plan.predicted_s:.3f} s)")
+            total = int(f.reader.level_meta(target.level)["tets"])
+            t_frame = time.perf_counter()
+            result = render_tetc(f.reader, view, pipeline=pipeline, target=target, progress=_counter(progress, total))
+            if budget is not None:  # the machine's costs learn from every budget render
+                remember_frame(planner, result.stats, total_s=time.perf_counter() - t_frame)
         name = f.scalar_name if view.scalar is None else view.scalar + ("" if component is None else f"[{component}]")
         rng = f.reader.array_range(view.scalar, view.component) or (0.0, 1.0)
     else:
-        if ratio is not None or level is not None or budget is not None:
-            raise OptionError("ratio, level and budget need a .tetc file with a merge forest "
+        if ratio is not None or level is not None or budget is not None or selective:
+            raise OptionError("ratio, level, budget and selective need a .tetc file with a merge forest "
                               "(make one with gatun_py.compress or `tetc compress`)")
         mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point,
                               time_step=time_step), log)

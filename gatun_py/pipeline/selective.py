@@ -1,0 +1,395 @@
+"""Selective refinement: a view- and transfer-function-dependent cut of the merge forest.
+
+A uniform render applies the first N merges. A selective render applies the merges that matter
+least for the current view and transfer function (Okuyan et al.'s view-dependent refinement, Peng
+et al.'s TF importance), and only *closed* cuts (:mod:`gatun_py.simplify.dependencies`), so no tet
+ever flips. The cut's ancestors go to the same on-the-fly filter and ray caster as a uniform
+render.
+
+Importance of merge i (v_i into t_i, both kept in level 0's numbering) for a view and a transfer
+function, the product of four factors (a factor left out of ``factors`` is 1)::
+
+    imp(i) = colour(i) * light(i) * size(i) * forest(i)
+
+* ``colour``: Okuyan's colour error over the merged region, in Peng's spirit zero where the
+  transfer function is transparent: the largest change of the premultiplied colour and opacity
+  (r a, g a, b a, a) between s(v_i) and any of 8 values on [s(v_i), s(t_i)], plus 5 % of the
+  largest opacity there (an opaque region changes shape even where its colour is flat).
+  *Buys*: merges in transparent or flat-coloured regions go first.
+* ``light``: the transmittance from the camera to v_i, exp(-integral of the extinction
+  -ln(1 - a(s)) / unit_distance), marched through a 32^3 grid of the vertices' mean extinction
+  (an object-space coarse render, a few ms). *Buys*: what is hidden behind opaque matter goes first.
+* ``size``: the merge's projected size squared, (|v_i t_i| / depth / pixel angle)^2 in pixels,
+  0 behind the camera or off the image. *Buys*: small and far regions go first.
+* ``forest``: (i + 1) / k, the forest's own error order (the decimator's error grows with rank).
+  *Buys*: keeps the decimator's geometric judgement as a tie-breaker of equal colour.
+
+Effective importance e(i) = max(imp(i), max over D(i) of e(j)); merges sorted by (e, rank) give
+closed prefixes, so a cut for N tets is a sort and a cumulative sum of the removal counts:
+O(k log k) per frame. The render starts from the most simplified stored level whose merges the cut
+all applies and whose stored forest holds every merge the cut adds (level 0 otherwise).
+
+Examples
+--------
+>>> import gatun_py, tempfile, os
+>>> from gatun_py.warmup import tiny_mesh
+>>> path = os.path.join(tempfile.mkdtemp(), "tiny.tetc")
+>>> f = gatun_py.compress(tiny_mesh(), path)
+>>> frame = gatun_py.render(path, size=32, selective=True, tets=40)
+>>> frame.stats["cut_tets"] <= 40, frame.stats["flipped_tets"]
+(True, 0)
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..codec import TetcReader
+from ..errors import OptionError
+from ..render.transfer import load_transfer_function
+from ..simplify.dependencies import MergeDependencies, closed_cut_order, cut_ancestors
+from ..simplify.forest import ROOT_RANK, mesh_from_ancestors
+from ..simplify.levels import Target, stored_levels
+from . import _importance_kernels as K
+from .stream import View, file_render_defaults, render_tetc
+
+__all__ = ["FACTORS", "SelectiveSource", "selective_source", "merge_importance", "Cut", "choose_cut", "uniform_cut",
+           "plan_cut", "selective_mesh", "render_selective", "flipped_tets", "FlipCounter"]
+
+FACTORS = ("colour", "light", "size", "forest")
+GRID = 32  # voxels per axis of the extinction grid
+COLOUR_SAMPLES = 8
+OPAQUE_SHARE = 0.05
+
+
+@dataclass(frozen=True, eq=False)
+class SelectiveSource:
+    """What selective refinement reads from a file, once per reader and scalar (a TF or view
+    change reuses it: nothing else is read again).
+
+    Attributes
+    ----------
+    deps : MergeDependencies
+    parent, rank : (n,) int32
+        Level 0's forest (decode order).
+    vertex, target : (k,) int64
+        v_i and t_i of every merge, by rank, in level 0's numbering.
+    points : (n, 3) float64
+        Level 0's vertex positions (float32 values).
+    scalars : (n,) float64
+        The rendered scalar at level 0's vertices.
+    n_tets : int
+        Level 0's tets.
+    """
+
+    deps: MergeDependencies
+    parent: np.ndarray
+    rank: np.ndarray
+    vertex: np.ndarray
+    target: np.ndarray
+    points: np.ndarray
+    scalars: np.ndarray
+    n_tets: int
+
+    @property
+    def n_merges(self) -> int:
+        return self.deps.n_merges
+
+    def __repr__(self) -> str:
+        return f"<SelectiveSource: {self.points.shape[0]} vertices, {self.n_tets} tets, {self.n_merges} merges>"
+
+
+def selective_source(reader: TetcReader, scalar: str | None = None, component=None) -> SelectiveSource | None:
+    """The file's dependencies, forest and level-0 geometry (cached on the reader), or None when
+    the file stores no dependencies (written before format 3, or without a forest)."""
+    cache = reader.__dict__.setdefault("_selective_cache", {})
+    key = (scalar, component)
+    if key in cache:
+        return cache[key]
+    raw = reader.read_dependencies()
+    if raw is None:
+        cache[key] = None
+        return None
+    deps = MergeDependencies(*raw)
+    parent, rank = reader.read_forest(0)
+    n = parent.shape[0]
+    k = deps.n_merges
+    vertex = np.empty(k, np.int64)
+    merged = rank != ROOT_RANK
+    vertex[rank[merged]] = np.flatnonzero(merged)
+    points = np.empty((n, 3), np.float64)
+    scalars = np.empty(n, np.float64)
+    for b in reader.iter_decode(0, scalar=scalar, component=component):
+        points[b.first:b.first + len(b.points)] = b.points
+        scalars[b.first:b.first + len(b.points)] = b.density
+    src = SelectiveSource(deps, parent, rank, vertex, parent[vertex].astype(np.int64), points, scalars,
+                          int(reader.level_meta(0)["tets"]))
+    cache[key] = src
+    return src
+
+
+def merge_importance(src: SelectiveSource, camera, tf, *, lo, hi, factors=FACTORS) -> np.ndarray:
+    """imp(i) of every merge for a fitted camera and an absolute transfer function (see the module
+    docstring); ``factors`` picks which of :data:`FACTORS` take part."""
+    bad = set(factors) - set(FACTORS)
+    if bad:
+        raise OptionError(f"unknown importance factor {sorted(bad)[0]!r} (choose from {', '.join(FACTORS)})")
+    k = src.n_merges
+    imp = np.ones(k)
+    if k == 0:
+        return imp
+    pv = src.points[src.vertex]
+    lo = np.asarray(lo, np.float64)
+    hi = np.asarray(hi, np.float64)
+    if "colour" in factors:
+        sv = src.scalars[src.vertex]
+        st = src.scalars[src.target]
+        u = np.linspace(0.0, 1.0, COLOUR_SAMPLES)
+        rgb, a = tf.evaluate(sv[:, None] + (st - sv)[:, None] * u[None, :])
+        a = np.clip(a, 0.0, 1.0)
+        pre = np.concatenate([rgb * a[..., None], a[..., None]], axis=-1)
+        change = np.abs(pre - pre[:, :1]).sum(axis=-1).max(axis=1) / 4.0
+        imp *= change + OPAQUE_SHARE * a.max(axis=1)
+    if "light" in factors:
+        _, a = tf.evaluate(src.scalars)
+        sigma = -np.log1p(-np.clip(a, 0.0, 0.999)) / tf.unit_distance
+        grid = K._extinction_grid(src.points, sigma, lo, hi, GRID)
+        imp *= K._transmittance(grid, lo, hi, np.asarray(camera.position, np.float64), pv, 2 * GRID)
+    if "size" in factors:
+        fwd, _, _ = camera.basis()
+        depth = (pv - camera.position) @ fwd
+        length = np.linalg.norm(src.points[src.target] - pv, axis=1)
+        pixel = 2.0 * np.tan(np.radians(camera.view_angle) / 2.0) / camera.height
+        with np.errstate(divide="ignore", invalid="ignore"):
+            px = np.where(depth > 0, length / (np.maximum(depth, 1e-300) * pixel), 0.0)
+            xy = camera.project(pv)
+        on = (depth > 0) & (xy[:, 0] >= -px) & (xy[:, 0] <= camera.width + px) & \
+             (xy[:, 1] >= -px) & (xy[:, 1] <= camera.height + px)
+        imp *= np.where(on, px * px, 0.0)
+    if "forest" in factors:
+        imp *= (np.arange(k) + 1.0) / k
+    return imp
+
+
+@dataclass(frozen=True, eq=False)
+class Cut:
+    """A closed cut and where to render it from.
+
+    Attributes
+    ----------
+    applied : (k,) bool
+        Merge r is applied.
+    n_tets : int
+        Tets of the cut's mesh (T0 - removed merges' counts; exact for a closed cut).
+    level, level_merges : int
+        The stored level it starts from and that level's N_i.
+    ancestors : (n_level,) int32 or None
+        Ancestor of every vertex of that level (None: the level as it is).
+    select_s : float
+        Seconds spent choosing it (importance, sort, ancestors).
+    """
+
+    applied: np.ndarray
+    n_tets: int
+    level: int
+    level_merges: int
+    ancestors: np.ndarray | None
+    select_s: float = 0.0
+
+    @property
+    def n_merges(self) -> int:
+        return int(self.applied.sum())
+
+    def __repr__(self) -> str:
+        return (f"<Cut: {self.n_merges} merges, {self.n_tets} tets, from level {self.level}, "
+                f"chosen in {self.select_s * 1e3:.1f} ms>")
+
+    def target(self, n_points: int) -> Target:
+        return Target(self.level, self.n_merges, self.n_merges / n_points if n_points else 0.0, self.level_merges)
+
+
+def _prefix_count(removed_in_order, n_tets: int, *, merges=None, tets=None) -> int:
+    """How many merges of an order to apply: ``merges`` of them, or the fewest that bring the
+    mesh to at most ``tets`` tets (none when it has that few already)."""
+    k = removed_in_order.shape[0]
+    if merges is not None:
+        return max(0, min(int(merges), k))
+    left = n_tets - np.cumsum(removed_in_order, dtype=np.int64)
+    if tets >= n_tets:
+        return 0
+    hit = np.flatnonzero(left <= tets)
+    return int(hit[0]) + 1 if hit.size else k
+
+
+def choose_cut(src: SelectiveSource, importance, *, merges=None, tets=None) -> np.ndarray:
+    """The closed cut (bool per rank) of the least important merges: ``merges`` of them, or as
+    many as it takes to get to ``tets`` tets (all merges if the forest cannot)."""
+    order = closed_cut_order(src.deps, importance)
+    n = _prefix_count(src.deps.removed[order], src.n_tets, merges=merges, tets=tets)
+    applied = np.zeros(src.n_merges, np.bool_)
+    applied[order[:n]] = True
+    return applied
+
+
+def uniform_cut(src: SelectiveSource, *, merges=None, tets=None) -> np.ndarray:
+    """The uniform cut (the first N merges) with ``merges`` merges or at most ``tets`` tets."""
+    n = _prefix_count(src.deps.removed, src.n_tets, merges=merges, tets=tets)
+    applied = np.zeros(src.n_merges, np.bool_)
+    applied[:n] = True
+    return applied
+
+
+def _start(reader, src: SelectiveSource, applied) -> Cut:
+    """The most simplified stored level a cut can start from, and the ancestors there."""
+    levels = stored_levels(reader)
+    best = levels[0]
+    total = int(applied.sum())
+    for j, lv in enumerate(levels):
+        n = int(lv.get("merges_before", 0))
+        # level 0 and the last level keep every merge after them, the others those up to the next
+        upto = src.n_merges if j in (0, len(levels) - 1) else int(levels[j + 1].get("merges_before", 0))
+        if applied[:n].all() and not applied[upto:].any() and (lv.get("has_forest") or total == n):
+            best = lv
+    level, n = int(best["level"]), int(best.get("merges_before", 0))
+    cache = reader.__dict__.setdefault("_selective_forests", {0: (src.parent, src.rank)})
+    if level not in cache:
+        cache[level] = reader.read_forest(level)
+    rest = applied[n:]
+    anc = None
+    if rest.any():
+        parent, rank = cache[level]
+        anc = cut_ancestors(parent, rank, rest)
+    return Cut(applied, src.deps.cut_tets(src.n_tets, applied), level, n, anc)
+
+
+def plan_cut(reader, view: View, *, ratio=None, tets=None, merges=None, factors=FACTORS,
+             uniform: bool = False) -> Cut | None:
+    """The cut of a selective render of ``reader`` for a view: ``ratio`` (merges = floor(ratio *
+    points)), ``tets`` (at most that many; above the mesh's count: the full mesh) or ``merges``.
+    None when the file has no dependencies. ``uniform`` gives the prefix cut instead (for
+    comparisons)."""
+    if sum(x is not None for x in (ratio, tets, merges)) != 1:
+        raise OptionError("a selective cut needs exactly one of ratio, tets and merges")
+    if tets is not None and (isinstance(tets, bool) or not isinstance(tets, (int, np.integer)) or tets < 1):
+        raise OptionError(f"tets must be a whole number >= 1, got {tets!r}")
+    src = selective_source(reader, view.scalar, view.component)  # read once per reader: not selection time
+    if src is None:
+        return None
+    t0 = time.perf_counter()
+    if ratio is not None:
+        if not 0.0 <= ratio <= 1.0:
+            raise OptionError(f"ratio {ratio} is outside [0, 1]")
+        merges = int(np.floor(ratio * src.points.shape[0]))
+        if merges > src.n_merges:
+            raise OptionError(f"ratio {ratio} needs {merges} merges but the forest holds {src.n_merges} "
+                              f"(maximum ratio {src.n_merges / src.points.shape[0]:.6f})")
+    if uniform:
+        applied = uniform_cut(src, merges=merges, tets=tets)
+    else:
+        lo, hi, rng, _ = file_render_defaults(reader)
+        if view.scalar is not None:
+            rng = reader.array_range(view.scalar, view.component) or rng
+        rng = view.scalar_range if view.scalar_range is not None else rng
+        tf = load_transfer_function(view.tf).for_size(float(np.linalg.norm(hi - lo))).resolve(rng)
+        imp = merge_importance(src, view.camera.fit(lo, hi), tf, lo=lo, hi=hi, factors=factors)
+        applied = choose_cut(src, imp, merges=merges, tets=tets)
+    cut = _start(reader, src, applied)
+    return replace(cut, select_s=time.perf_counter() - t0)
+
+
+def selective_mesh(reader, view: View, **kw):
+    """The mesh of a selective cut (see :func:`plan_cut`), vertices in its start level's decode
+    order; (mesh, cut), or (None, None) when the file has no dependencies."""
+    cut = plan_cut(reader, view, **kw)
+    if cut is None:
+        return None, None
+    mesh = reader.decode_mesh(cut.level)
+    if cut.ancestors is not None:
+        mesh = mesh_from_ancestors(mesh, cut.ancestors)[0]
+    return mesh, cut
+
+
+def flipped_tets(points, tets) -> int:
+    """Tets with negative signed volume (inverted), counted on the coordinates given."""
+    if len(tets) == 0:
+        return 0
+    p = np.asarray(points, np.float64)
+    t = np.asarray(tets)
+    a = p[t[:, 0]]
+    vol = np.einsum("ij,ij->i", p[t[:, 1]] - a, np.cross(p[t[:, 2]] - a, p[t[:, 3]] - a))
+    return int((vol < 0).sum())
+
+
+class FlipCounter:
+    """Wraps a stream of filtered batches and counts the inverted tets it carries (every tet's
+    vertices have arrived by the time the filter forwards it)."""
+
+    def __init__(self, n_points: int):
+        self.points = np.zeros((n_points, 3), np.float64)
+        self.flipped = 0
+
+    def __call__(self, batches):
+        for b in batches:
+            self.points[b.first:b.first + len(b.points)] = b.points
+            self.flipped += flipped_tets(self.points, b.tets)
+            yield b
+
+
+def render_selective(reader, view: View, *, ratio=None, tets=None, merges=None, pipeline: str = "streaming",
+                     progress=None, factors=FACTORS, uniform: bool = False, log=None):
+    """Render a selective cut (see :func:`plan_cut`) through the usual filter and ray caster.
+
+    Returns a :class:`~gatun_py.pipeline.stream.PipelineResult` whose stats add ``selective``
+    (True, or False when the file has no dependencies and the render fell back to uniform),
+    ``cut_tets``, ``cut_merges``, ``selection_s`` and ``flipped_tets`` (inverted tets counted on
+    the rendered stream). Without dependencies: a uniform render at the same ratio (for ``tets``:
+    the stored level with the fewest tets still at least that many), noted once through ``log``.
+    """
+    cut = plan_cut(reader, view, ratio=ratio, tets=tets, merges=merges, factors=factors, uniform=uniform)
+    if cut is None:
+        if log is not None:
+            log("note: this file stores no merge dependencies (written before format 3): rendering uniformly")
+        if tets is not None:
+            levels = [lv for lv in stored_levels(reader) if int(lv["tets"]) >= tets] or stored_levels(reader)[:1]
+            result = render_tetc(reader, view, level=int(min(levels, key=lambda lv: int(lv["tets"]))["level"]),
+                                 pipeline=pipeline, progress=progress)
+        else:
+            result = render_tetc(reader, view, ratio=ratio, pipeline=pipeline, progress=progress)
+        result.stats.update(selective=False)
+        return result
+    lv = reader.level_meta(cut.level)
+    counter = FlipCounter(int(lv["points"]))
+    n0 = int(reader.level_meta(0)["points"])
+    result = render_tetc(reader, view, pipeline=pipeline, target=cut.target(n0), ancestors=cut.ancestors,
+                         watch=counter, progress=progress)
+    result.stats.update(selective=not uniform, cut_tets=cut.n_tets, cut_merges=cut.n_merges,
+                        selection_s=cut.select_s, flipped_tets=counter.flipped)
+    return result
+
+
+def budget_tets(reader, view: View, planner, budget_s: float) -> int:
+    """Tets a selective frame may render within ``budget_s``: the uniform cut's tets at the most
+    merges-light N the time model predicts to fit when decoding level 0 (where a selective cut
+    usually starts), with the same model as ``--budget`` (:mod:`gatun_py.pipeline.budget`)."""
+    src = selective_source(reader, view.scalar, view.component)
+    lo, hi, _, _ = file_render_defaults(reader)
+    cam = view.camera.fit(lo, hi)
+    coverage = planner.estimator.coverage(cam)
+    px = cam.width * cam.height
+
+    def predict(m: int) -> float:
+        return planner.model.predict(planner.estimate(0, m, px, coverage), key=0)
+
+    lo_m, hi_m = 0, src.n_merges
+    if predict(0) <= budget_s:
+        return src.n_tets
+    while lo_m < hi_m:  # the fewest merges predicted to fit (time falls as merges grow)
+        mid = (lo_m + hi_m) // 2
+        if predict(mid) <= budget_s:
+            hi_m = mid
+        else:
+            lo_m = mid + 1
+    return max(1, src.deps.cut_tets(src.n_tets, uniform_cut(src, merges=lo_m)))

@@ -74,3 +74,47 @@ def _transmittance(grid, lo, hi, eye, targets, n_steps):
             tau *= dt * length
         out[r] = math.exp(-tau)
     return out
+
+
+@njit(cache=True)
+def _lookup(table, lo, inv, s, out):
+    """(r, g, b, a) at scalar s, linear between the table's entries, clamped at its ends."""
+    x = (s - lo) * inv
+    n = table.shape[0]
+    if not x > 0.0:
+        x = 0.0
+    if x > n - 1:
+        x = n - 1.0
+    i = min(int(x), n - 2)
+    f = x - i
+    for c in range(4):
+        out[c] = table[i, c] + f * (table[i + 1, c] - table[i, c])
+
+
+@njit(cache=True)
+def _colour_change(table, lo, inv, sv, st, n_samples, opaque_share):
+    """Per merge: the largest change of premultiplied (r a, g a, b a, a) between s(v) and the
+    values on [s(v), s(t)] (mean over the four channels), plus ``opaque_share`` x the largest
+    opacity there."""
+    k = sv.shape[0]
+    out = np.empty(k)
+    c0 = np.empty(4)
+    c = np.empty(4)
+    for i in range(k):
+        _lookup(table, lo, inv, sv[i], c0)
+        a0 = min(max(c0[3], 0.0), 1.0)
+        best = 0.0
+        amax = a0
+        for j in range(1, n_samples):
+            s = sv[i] + (st[i] - sv[i]) * j / (n_samples - 1)
+            _lookup(table, lo, inv, s, c)
+            a = min(max(c[3], 0.0), 1.0)
+            d = abs(a - a0)
+            for ch in range(3):
+                d += abs(c[ch] * a - c0[ch] * a0)
+            if d > best:
+                best = d
+            if a > amax:
+                amax = a
+        out[i] = best / 4.0 + opaque_share * amax
+    return out

@@ -13,7 +13,7 @@ function, the product of four factors (a factor left out of ``factors`` is 1)::
 
 * ``colour``: Okuyan's colour error over the merged region, in Peng's spirit zero where the
   transfer function is transparent: the largest change of the premultiplied colour and opacity
-  (r a, g a, b a, a) between s(v_i) and any of 8 values on [s(v_i), s(t_i)], plus 5 % of the
+  (r a, g a, b a, a, mean of the four) between s(v_i) and any of 8 values on [s(v_i), s(t_i)], plus 5 % of the
   largest opacity there (an opaque region changes shape even where its colour is flat).
   *Buys*: merges in transparent or flat-coloured regions go first.
 * ``light``: the transmittance from the camera to v_i, exp(-integral of the extinction
@@ -131,9 +131,10 @@ def selective_source(reader: TetcReader, scalar: str | None = None, component=No
     return src
 
 
-def merge_importance(src: SelectiveSource, camera, tf, *, lo, hi, factors=FACTORS) -> np.ndarray:
-    """imp(i) of every merge for a fitted camera and an absolute transfer function (see the module
-    docstring); ``factors`` picks which of :data:`FACTORS` take part."""
+def merge_importance(src: SelectiveSource, camera, tf, *, lo, hi, scalar_range, factors=FACTORS) -> np.ndarray:
+    """imp(i) of every merge for a fitted camera and a transfer function (with its unit distance
+    in the mesh's units) normalised to ``scalar_range`` (see the module docstring); ``factors``
+    picks which of :data:`FACTORS` take part."""
     bad = set(factors) - set(FACTORS)
     if bad:
         raise OptionError(f"unknown importance factor {sorted(bad)[0]!r} (choose from {', '.join(FACTORS)})")
@@ -145,16 +146,11 @@ def merge_importance(src: SelectiveSource, camera, tf, *, lo, hi, factors=FACTOR
     lo = np.asarray(lo, np.float64)
     hi = np.asarray(hi, np.float64)
     if "colour" in factors:
-        sv = src.scalars[src.vertex]
-        st = src.scalars[src.target]
-        u = np.linspace(0.0, 1.0, COLOUR_SAMPLES)
-        rgb, a = tf.evaluate(sv[:, None] + (st - sv)[:, None] * u[None, :])
-        a = np.clip(a, 0.0, 1.0)
-        pre = np.concatenate([rgb * a[..., None], a[..., None]], axis=-1)
-        change = np.abs(pre - pre[:, :1]).sum(axis=-1).max(axis=1) / 4.0
-        imp *= change + OPAQUE_SHARE * a.max(axis=1)
+        table, t_lo, t_inv = tf.table(scalar_range)
+        imp *= K._colour_change(table, t_lo, t_inv, src.scalars[src.vertex], src.scalars[src.target],
+                                COLOUR_SAMPLES, OPAQUE_SHARE)
     if "light" in factors:
-        _, a = tf.evaluate(src.scalars)
+        _, a = tf.resolve(scalar_range).evaluate(src.scalars)
         sigma = -np.log1p(-np.clip(a, 0.0, 0.999)) / tf.unit_distance
         grid = K._extinction_grid(src.points, sigma, lo, hi, GRID)
         imp *= K._transmittance(grid, lo, hi, np.asarray(camera.position, np.float64), pv, 2 * GRID)
@@ -293,8 +289,8 @@ def plan_cut(reader, view: View, *, ratio=None, tets=None, merges=None, factors=
         if view.scalar is not None:
             rng = reader.array_range(view.scalar, view.component) or rng
         rng = view.scalar_range if view.scalar_range is not None else rng
-        tf = load_transfer_function(view.tf).for_size(float(np.linalg.norm(hi - lo))).resolve(rng)
-        imp = merge_importance(src, view.camera.fit(lo, hi), tf, lo=lo, hi=hi, factors=factors)
+        tf = load_transfer_function(view.tf).for_size(float(np.linalg.norm(hi - lo)))
+        imp = merge_importance(src, view.camera.fit(lo, hi), tf, lo=lo, hi=hi, scalar_range=rng, factors=factors)
         applied = choose_cut(src, imp, merges=merges, tets=tets)
     cut = _start(reader, src, applied)
     return replace(cut, select_s=time.perf_counter() - t0)

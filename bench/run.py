@@ -14,7 +14,8 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-ORDER = ["mesh", "codec", "geometry", "lossless", "simplify", "render", "pipeline", "isosurface", "view", "hostile"]
+ORDER = ["mesh", "codec", "geometry", "lossless", "simplify", "render", "pipeline", "selective", "isosurface", "view",
+         "hostile"]
 
 
 def main(argv: list[str]) -> int:

@@ -16,8 +16,8 @@ from gatun_py.codec import TetcReader
 from gatun_py.codec.dependencies import decode_dependencies, encode_dependencies
 from gatun_py.errors import CorruptFileError, OptionError
 from gatun_py.mesh import read_mesh
-from gatun_py.pipeline.selective import (FACTORS, merge_importance, plan_cut, render_selective, selective_mesh,
-                                         selective_source)
+from gatun_py.pipeline.selective import (EPS, FACTORS, choose_cut, merge_importance, plan_cut, render_selective,
+                                         selective_mesh, selective_source, uniform_cut)
 from gatun_py.pipeline.stream import View, file_render_defaults
 from gatun_py.render.camera import Camera
 from gatun_py.render.raycast import render_mesh
@@ -121,10 +121,14 @@ def test_importance_factors(reader):
                                  "opacity": [{"x": 0, "a": 0}, {"x": 0.5, "a": 0}, {"x": 1, "a": 0.5}]})
     tf = tf.for_size(float(np.linalg.norm(hi - lo)))
     imp = merge_importance(src, cam, tf, lo=lo, hi=hi, scalar_range=rng, factors=("colour",))
-    # transparent over the whole merged range: importance 0 (Peng); opaque somewhere: > 0
+    # transparent over the whole merged range: only EPS is left (Peng); opaque somewhere: more
     top = np.maximum(src.scalars[src.vertex], src.scalars[src.target])
     x = (top - rng[0]) / (rng[1] - rng[0])
-    assert np.all(imp[x < 0.49] == 0) and np.all(imp[x > 0.51] > 0)
+    assert np.all(imp[x < 0.49] == EPS) and np.all(imp[x > 0.51] > EPS)
+    # the forest factor alone is the rank order: the uniform cut
+    rank_only = merge_importance(src, cam, tf, lo=lo, hi=hi, scalar_range=rng, factors=("forest",))
+    assert np.all(np.diff(rank_only) > 0)
+    assert np.array_equal(choose_cut(src, rank_only, tets=900), uniform_cut(src, tets=900))
     assert np.all(merge_importance(src, cam, tf, lo=lo, hi=hi, scalar_range=rng, factors=()) == 1)
     full = merge_importance(src, cam, tf, lo=lo, hi=hi, scalar_range=rng)
     assert full.shape == (src.n_merges,) and np.all(np.isfinite(full)) and np.all(full >= 0)

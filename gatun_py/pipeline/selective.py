@@ -7,22 +7,24 @@ ever flips. The cut's ancestors go to the same on-the-fly filter and ray caster 
 render.
 
 Importance of merge i (v_i into t_i, both kept in level 0's numbering) for a view and a transfer
-function, the product of four factors (a factor left out of ``factors`` is 1)::
+function: the forest's own error order, modulated by what the view and the transfer function make
+of the region (a factor left out of ``factors`` is 1)::
 
-    imp(i) = colour(i) * light(i) * size(i) * forest(i)
+    imp(i) = forest(i) * (EPS + light(i) * colour(i)) * sqrt(size(i))
 
-* ``colour``: Okuyan's colour error over the merged region, in Peng's spirit zero where the
-  transfer function is transparent: the largest change of the premultiplied colour and opacity
-  (r a, g a, b a, a, mean of the four) between s(v_i) and any of 8 values on [s(v_i), s(t_i)], plus 5 % of the
-  largest opacity there (an opaque region changes shape even where its colour is flat).
-  *Buys*: merges in transparent or flat-coloured regions go first.
+* ``forest``: (i + 1) / k, the decimator's error order (its error grows with rank): with the other
+  factors at 1 the cut is the uniform one. *Buys*: the decimator's judgement of density and
+  geometry error where the view has nothing to add.
+* ``colour``: Okuyan's colour error over the merged region, zero where the transfer function is
+  transparent (Peng): the largest opacity on [s(v_i), s(t_i)] (8 values) plus the largest change
+  of the premultiplied colour and opacity (r a, g a, b a, a; mean of the four) from s(v_i) to any
+  of them. *Buys*: merges in transparent regions go first (down to EPS = 0.01 of their rank).
 * ``light``: the transmittance from the camera to v_i, exp(-integral of the extinction
   -ln(1 - a(s)) / unit_distance), marched through a 32^3 grid of the vertices' mean extinction
   (an object-space coarse render, a few ms). *Buys*: what is hidden behind opaque matter goes first.
-* ``size``: the merge's projected size squared, (|v_i t_i| / depth / pixel angle)^2 in pixels,
-  0 behind the camera or off the image. *Buys*: small and far regions go first.
-* ``forest``: (i + 1) / k, the forest's own error order (the decimator's error grows with rank).
-  *Buys*: keeps the decimator's geometric judgement as a tie-breaker of equal colour.
+* ``size``: the merge's projected size, |v_i t_i| / depth / pixel angle in pixels (its square root:
+  error in an image grows with the area but the rank already grows with the edge), 0 behind the
+  camera or off the image. *Buys*: small, far and off-screen regions go first.
 
 Effective importance e(i) = max(imp(i), max over D(i) of e(j)); merges sorted by (e, rank) give
 closed prefixes, so a cut for N tets is a sort and a cumulative sum of the removal counts:
@@ -62,7 +64,8 @@ __all__ = ["FACTORS", "SelectiveSource", "selective_source", "merge_importance",
 FACTORS = ("colour", "light", "size", "forest")
 GRID = 32  # voxels per axis of the extinction grid
 COLOUR_SAMPLES = 8
-OPAQUE_SHARE = 0.05
+OPAQUE_SHARE = 1.0  # weight of the largest opacity beside the colour change
+EPS = 0.01  # what a transparent or hidden merge keeps of its rank
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,21 +142,21 @@ def merge_importance(src: SelectiveSource, camera, tf, *, lo, hi, scalar_range, 
     if bad:
         raise OptionError(f"unknown importance factor {sorted(bad)[0]!r} (choose from {', '.join(FACTORS)})")
     k = src.n_merges
-    imp = np.ones(k)
     if k == 0:
-        return imp
+        return np.ones(0)
     pv = src.points[src.vertex]
     lo = np.asarray(lo, np.float64)
     hi = np.asarray(hi, np.float64)
+    colour = light = size = forest = 1.0
     if "colour" in factors:
         table, t_lo, t_inv = tf.table(scalar_range)
-        imp *= K._colour_change(table, t_lo, t_inv, src.scalars[src.vertex], src.scalars[src.target],
-                                COLOUR_SAMPLES, OPAQUE_SHARE)
+        colour = K._colour_change(table, t_lo, t_inv, src.scalars[src.vertex], src.scalars[src.target],
+                                  COLOUR_SAMPLES, OPAQUE_SHARE)
     if "light" in factors:
         _, a = tf.resolve(scalar_range).evaluate(src.scalars)
         sigma = -np.log1p(-np.clip(a, 0.0, 0.999)) / tf.unit_distance
         grid = K._extinction_grid(src.points, sigma, lo, hi, GRID)
-        imp *= K._transmittance(grid, lo, hi, np.asarray(camera.position, np.float64), pv, 2 * GRID)
+        light = K._transmittance(grid, lo, hi, np.asarray(camera.position, np.float64), pv, 2 * GRID)
     if "size" in factors:
         fwd, _, _ = camera.basis()
         depth = (pv - camera.position) @ fwd
@@ -164,10 +167,11 @@ def merge_importance(src: SelectiveSource, camera, tf, *, lo, hi, scalar_range, 
             xy = camera.project(pv)
         on = (depth > 0) & (xy[:, 0] >= -px) & (xy[:, 0] <= camera.width + px) & \
              (xy[:, 1] >= -px) & (xy[:, 1] <= camera.height + px)
-        imp *= np.where(on, px * px, 0.0)
+        size = np.sqrt(np.where(on, px, 0.0))
     if "forest" in factors:
-        imp *= (np.arange(k) + 1.0) / k
-    return imp
+        forest = (np.arange(k) + 1.0) / k
+    modulation = EPS + light * colour if ("colour" in factors or "light" in factors) else 1.0
+    return np.broadcast_to(forest * modulation * size, (k,)).astype(np.float64)
 
 
 @dataclass(frozen=True, eq=False)

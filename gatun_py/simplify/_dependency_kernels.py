@@ -12,17 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-
-@njit(cache=True)
-def _incidence(T, n):
-    """(head, nxt): every vertex's list of slots 4*t + c."""
-    head = np.full(n, -1, np.int64)
-    nxt = np.full(4 * T.shape[0], -1, np.int64)
-    for s in range(4 * T.shape[0] - 1, -1, -1):
-        v = T[s >> 2, s & 3]
-        nxt[s] = head[v]
-        head[v] = s
-    return head, nxt
+from ._decimate_kernels import _incidence  # the decimator's slot lists, built the same way
 
 
 @njit(cache=True)

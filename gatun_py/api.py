@@ -31,7 +31,7 @@ from .errors import OptionError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.io import mesh_output_format
 from .pipeline.budget import load_costs, plan_file_budget, remember_frame
-from .pipeline.selective import budget_tets, render_selective, selective_mesh
+from .pipeline.selective import SELECTION_ALLOWANCE_S, budget_tets, render_selective, selective_mesh, selective_source
 from .pipeline.stream import PIPELINES, View, is_tetc, render_mesh_file, render_tetc
 from .render.camera import Camera
 from .render.image import add_colorbar, image_bytes, parse_colour, to_rgb8, write_image
@@ -438,10 +438,15 @@ def _render_selective(reader, view, *, ratio, tets, budget, pipeline, progress, 
     planned = {}
     if budget is not None:
         if reader.has_dependencies():
+            t0 = time.perf_counter()
+            # level 0 (the geometry the importance needs) is decoded first and kept for the frame
+            selective_source(reader, view.scalar, view.component, keep_batches=not view.lean)
             if load_costs() is None:
                 log("measuring this machine's rendering costs for the budget (once, under a second)...")
-            _, plan, planner, _ = plan_file_budget(reader, view, budget)
-            tets = budget_tets(reader, view, planner, budget)
+            left = budget - (time.perf_counter() - t0) - SELECTION_ALLOWANCE_S
+            _, plan, planner, _ = plan_file_budget(reader, view, max(left, 1e-3))
+            tets = budget_tets(reader, view, planner, max(budget - (time.perf_counter() - t0) - SELECTION_ALLOWANCE_S,
+                                                          1e-3))
             planned = {"budget_s": budget}
         else:
             ratio = 0.0

@@ -182,3 +182,13 @@ def test_cli_file_without_dependencies_renders_uniformly(tmp_path):
     assert st["selective"] is False and st["merges"] == int(0.5 * TetcReader(old).meta["points"])
     res = run("decompress", old, "-o", tmp_path / "a.vtu", "--selective", "--ratio", 0.5)
     assert res.exit_code == 0 and res.stderr.count("no merge dependencies") == 1
+
+
+def test_first_frame_from_the_kept_stream_equals_a_decoded_one(post_tetc):
+    """The first selective frame renders level 0 from the stream decoded for the geometry; the
+    next decodes it again: the same image, bit for bit."""
+    r = TetcReader(post_tetc)
+    first = render_selective(r, VIEW, tets=1500)
+    assert "_selective_batches" in r.__dict__ and not r.__dict__["_selective_batches"]  # used up
+    second = render_selective(r, VIEW, tets=1500)
+    assert np.array_equal(first.image, second.image) and first.stats["cut_tets"] == second.stats["cut_tets"]

@@ -59,7 +59,8 @@ from . import _importance_kernels as K
 from .stream import View, file_render_defaults, render_tetc
 
 __all__ = ["FACTORS", "SelectiveSource", "selective_source", "merge_importance", "Cut", "choose_cut", "uniform_cut",
-           "plan_cut", "selective_mesh", "render_selective", "flipped_tets", "FlipCounter"]
+           "plan_cut", "selective_mesh", "render_selective", "flipped_tets", "FlipCounter", "budget_tets",
+           "take_batches", "SELECTION_ALLOWANCE_S"]
 
 FACTORS = ("colour", "light", "size", "forest")
 GRID = 32  # voxels per axis of the extinction grid
@@ -105,9 +106,14 @@ class SelectiveSource:
         return f"<SelectiveSource: {self.points.shape[0]} vertices, {self.n_tets} tets, {self.n_merges} merges>"
 
 
-def selective_source(reader: TetcReader, scalar: str | None = None, component=None) -> SelectiveSource | None:
+def selective_source(reader: TetcReader, scalar: str | None = None, component=None, *,
+                     keep_batches: bool = False) -> SelectiveSource | None:
     """The file's dependencies, forest and level-0 geometry (cached on the reader), or None when
-    the file stores no dependencies (written before format 3, or without a forest)."""
+    the file stores no dependencies (written before format 3, or without a forest).
+
+    ``keep_batches``: also keep level 0's decoded stream (once, for :func:`take_batches`), so the
+    first frame, which had to decode level 0 for the geometry, does not decode it twice.
+    """
     cache = reader.__dict__.setdefault("_selective_cache", {})
     key = (scalar, component)
     if key in cache:
@@ -125,13 +131,23 @@ def selective_source(reader: TetcReader, scalar: str | None = None, component=No
     vertex[rank[merged]] = np.flatnonzero(merged)
     points = np.empty((n, 3), np.float64)
     scalars = np.empty(n, np.float64)
+    kept = []
     for b in reader.iter_decode(0, scalar=scalar, component=component):
         points[b.first:b.first + len(b.points)] = b.points
         scalars[b.first:b.first + len(b.points)] = b.density
+        if keep_batches:
+            kept.append(b)
+    if keep_batches:
+        reader.__dict__.setdefault("_selective_batches", {})[key] = kept
     src = SelectiveSource(deps, parent, rank, vertex, parent[vertex].astype(np.int64), points, scalars,
                           int(reader.level_meta(0)["tets"]))
     cache[key] = src
     return src
+
+
+def take_batches(reader, scalar=None, component=None):
+    """Level 0's decoded stream kept by :func:`selective_source` (then forgotten), or None."""
+    return reader.__dict__.get("_selective_batches", {}).pop((scalar, component), None)
 
 
 def merge_importance(src: SelectiveSource, camera, tf, *, lo, hi, scalar_range, factors=FACTORS) -> np.ndarray:
@@ -348,6 +364,7 @@ def render_selective(reader, view: View, *, ratio=None, tets=None, merges=None, 
     the rendered stream). Without dependencies: a uniform render at the same ratio (for ``tets``:
     the stored level with the fewest tets still at least that many), noted once through ``log``.
     """
+    selective_source(reader, view.scalar, view.component, keep_batches=not view.lean)  # first frame: decode once
     cut = plan_cut(reader, view, ratio=ratio, tets=tets, merges=merges, factors=factors, uniform=uniform)
     if cut is None:
         if log is not None:
@@ -363,18 +380,21 @@ def render_selective(reader, view: View, *, ratio=None, tets=None, merges=None, 
     lv = reader.level_meta(cut.level)
     counter = FlipCounter(int(lv["points"]))
     n0 = int(reader.level_meta(0)["points"])
+    kept = take_batches(reader, view.scalar, view.component)
+    decoded = kept if cut.level == 0 and pipeline == "streaming" else None
     result = render_tetc(reader, view, pipeline=pipeline, target=cut.target(n0), ancestors=cut.ancestors,
-                         watch=counter, progress=progress)
+                         watch=counter, progress=progress, decoded=decoded)
     result.stats.update(selective=not uniform, cut_tets=cut.n_tets, cut_merges=cut.n_merges,
                         selection_s=cut.select_s, flipped_tets=counter.flipped)
     return result
 
 
 def budget_tets(reader, view: View, planner, budget_s: float) -> int:
-    """Tets a selective frame may render within ``budget_s``: the uniform cut's tets at the most
-    merges-light N the time model predicts to fit when decoding level 0 (where a selective cut
-    usually starts), with the same model as ``--budget`` (:mod:`gatun_py.pipeline.budget`)."""
-    src = selective_source(reader, view.scalar, view.component)
+    """Tets a selective frame may render within ``budget_s`` (what is left of the frame's budget
+    once level 0 is in memory): the uniform cut's tets at the fewest merges the time model predicts
+    to fit when rendering from level 0 without decoding it (:mod:`gatun_py.pipeline.budget`)."""
+    src = selective_source(reader, view.scalar, view.component, keep_batches=not view.lean)
+    planner.decoded = lambda level: level == 0
     lo, hi, _, _ = file_render_defaults(reader)
     cam = view.camera.fit(lo, hi)
     coverage = planner.estimator.coverage(cam)
@@ -393,3 +413,6 @@ def budget_tets(reader, view: View, planner, budget_s: float) -> int:
         else:
             lo_m = mid + 1
     return max(1, src.deps.cut_tets(src.n_tets, uniform_cut(src, merges=lo_m)))
+
+
+SELECTION_ALLOWANCE_S = 0.05  # kept from a selective frame's budget for choosing the cut

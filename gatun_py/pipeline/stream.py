@@ -108,7 +108,7 @@ def file_render_defaults(reader) -> tuple[np.ndarray, np.ndarray, tuple[float, f
 
 def render_tetc(source, view: View, *, ratio: float | None = None, level: int | None = None,
                 pipeline: str = "streaming", target: Target | None = None, progress=None, ancestors=None,
-                watch=None) -> PipelineResult:
+                watch=None, decoded=None) -> PipelineResult:
     """Render a ``.tetc`` file at a ratio or stored level.
 
     Parameters
@@ -128,6 +128,8 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
         the first ``target.merges`` merges' (a selective cut, :mod:`gatun_py.pipeline.selective`).
     watch : callable, optional
         Wraps the filtered stream of batches (e.g. to count what goes to the renderer).
+    decoded : iterable of TetBatch, optional
+        The target level's stream, already decoded (streaming pipeline): used instead of decoding.
 
     Returns
     -------
@@ -157,7 +159,7 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
     anc = target_ancestors(reader, target, times=forest_times) if ancestors is None else ancestors
     lv = reader.level_meta(target.level)
     if pipeline == "streaming":
-        res, fstats = _run_streaming(reader, target, anc, camera, view, rng, step, times, progress, watch)
+        res, fstats = _run_streaming(reader, target, anc, camera, view, rng, step, times, progress, watch, decoded)
     else:
         res, fstats = _run_generic(reader, target, anc, camera, view, rng, step, times, watch)
     times["decode_s"] += forest_times["forest_decode_s"]
@@ -173,11 +175,12 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
     return PipelineResult(res.image, stats)
 
 
-def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress, watch=None):
+def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress, watch=None, decoded=None):
     lv = reader.level_meta(target.level)
     # A lean render holds about one batch of tets in flight: smaller batches, less memory.
-    batches = reader.iter_decode(target.level, scalar=view.scalar, component=view.component,
-                                 **({"batch_tets": LEAN_BATCH_TETS} if view.lean else {}))
+    batches = iter(decoded) if decoded is not None else reader.iter_decode(
+        target.level, scalar=view.scalar, component=view.component,
+        **({"batch_tets": LEAN_BATCH_TETS} if view.lean else {}))
     filt = None
     if anc is not None:
         filt = SimplifyFilter(anc)

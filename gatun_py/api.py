@@ -31,7 +31,7 @@ from .errors import OptionError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.io import mesh_output_format
 from .pipeline.budget import load_costs, plan_file_budget, remember_frame
-from .pipeline.selective import SELECTION_ALLOWANCE_S, budget_tets, render_selective, selective_mesh, selective_source
+from .pipeline.selective import SELECTION_ALLOWANCE_S, budget_tets, render_selective, selective_mesh
 from .pipeline.stream import PIPELINES, View, is_tetc, render_mesh_file, render_tetc
 from .render.camera import Camera
 from .render.image import add_colorbar, image_bytes, parse_colour, to_rgb8, write_image
@@ -433,27 +433,21 @@ class Frame:
 
 
 def _render_selective(reader, view, *, ratio, tets, budget, pipeline, progress, log):
-    """(PipelineResult, planned stats) of a selective render; without ratio, tets or budget: ratio
-    0.5 (half the vertices merged where they matter least)."""
+    """(PipelineResult, planned stats) of a selective render of a file with merge dependencies;
+    without ratio, tets or budget: ratio 0.5 (half the vertices merged where they matter least)."""
     planned = {}
+    level = 0
     if budget is not None:
-        if reader.has_dependencies():
-            t0 = time.perf_counter()
-            # level 0 (the geometry the importance needs) is decoded first and kept for the frame
-            selective_source(reader, view.scalar, view.component, keep_batches=not view.lean)
-            if load_costs() is None:
-                log("measuring this machine's rendering costs for the budget (once, under a second)...")
-            left = budget - (time.perf_counter() - t0) - SELECTION_ALLOWANCE_S
-            _, plan, planner, _ = plan_file_budget(reader, view, max(left, 1e-3))
-            tets = budget_tets(reader, view, planner, max(budget - (time.perf_counter() - t0) - SELECTION_ALLOWANCE_S,
-                                                          1e-3))
-            planned = {"budget_s": budget}
-        else:
-            ratio = 0.0
+        if load_costs() is None:
+            log("measuring this machine's rendering costs for the budget (once, under a second)...")
+        # the uniform plan's level and tets, chosen selectively within that level's forest
+        target, plan, _, _ = plan_file_budget(reader, view, max(budget - SELECTION_ALLOWANCE_S, 1e-3))
+        level, tets = target.level, budget_tets(reader, view, target)
+        planned = {"predicted_s": plan.predicted_s, "budget_s": budget}
     elif ratio is None and tets is None:
-        ratio = 0.5 if reader.has_dependencies() else 0.0
+        ratio = 0.5
     total = int(reader.level_meta(0)["tets"])
-    result = render_selective(reader, view, ratio=ratio, tets=tets, pipeline=pipeline,
+    result = render_selective(reader, view, ratio=ratio, tets=tets, pipeline=pipeline, level=level,
                               progress=_counter(progress, total), log=log)
     return result, planned
 
@@ -588,6 +582,12 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
         f = source if isinstance(source, TetcFile) else TetcFile(source)
         if scalar is not None or component is not None:
             view = dataclasses.replace(view, scalar=scalar or f.scalar_name, component=component)
+        if selective and not f.reader.has_dependencies():
+            log("note: this file stores no merge dependencies (written before format 3): rendering uniformly")
+            selective, planned["selective"] = False, False
+            if tets is not None:  # the stored level with the fewest tets still at least that many
+                lvs = [lv for lv in f.reader.levels if int(lv["tets"]) >= tets] or f.reader.levels[:1]
+                level, tets = int(min(lvs, key=lambda lv: int(lv["tets"]))["level"]), None
         if selective:
             result, planned = _render_selective(f.reader, view, ratio=ratio, tets=tets, budget=budget,
                                                 pipeline=pipeline, progress=progress, log=log)
@@ -597,7 +597,7 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
                 if load_costs() is None:
                     log("measuring this machine's rendering costs for the budget (once, under a second)...")
                 target, plan, planner, _ = plan_file_budget(f.reader, view, budget)
-                planned = {"predicted_s": plan.predicted_s, "budget_s": budget}
+                planned.update(predicted_s=plan.predicted_s, budget_s=budget)
                 if not plan.feasible:
                     log(f"note: the budget of {budget:g} s cannot be met: rendering the coarsest level "
                         f"(predicted {plan.predicted_s:.3f} s)")

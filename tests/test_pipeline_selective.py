@@ -192,3 +192,34 @@ def test_first_frame_from_the_kept_stream_equals_a_decoded_one(post_tetc):
     assert "_selective_batches" in r.__dict__ and not r.__dict__["_selective_batches"]  # used up
     second = render_selective(r, VIEW, tets=1500)
     assert np.array_equal(first.image, second.image) and first.stats["cut_tets"] == second.stats["cut_tets"]
+
+
+@pytest.mark.parametrize("level", [1, 3])
+def test_cut_within_a_stored_level(reader, level):
+    """A cut chosen among a stored level's merges (as --budget does) is a closed cut of the whole
+    forest: the same mesh as from level 0, valid, with the counted tets."""
+    from gatun_py.simplify.dependencies import MergeDependencies, cut_ancestors
+    from gatun_py.simplify.forest import mesh_from_ancestors
+
+    src = selective_source(reader, level=level)
+    tets = int(0.6 * src.n_tets)
+    mesh, cut = selective_mesh(reader, VIEW, tets=tets, level=level)
+    assert cut.level == level and mesh.n_tets == cut.n_tets <= tets
+    check_valid(mesh, 0, f"level {level} cut")
+    full = np.zeros(reader.forest_merges(), bool)
+    full[:src.first] = True
+    full[src.first:src.first + src.n_merges] = cut.applied
+    deps = MergeDependencies(*reader.read_dependencies())
+    assert deps.is_closed(full)
+    parent, rank = reader.read_forest(0)
+    ref = mesh_from_ancestors(reader.decode_mesh(0), cut_ancestors(parent, rank, full))[0]
+    key = lambda m: sorted(map(tuple, np.sort(m.points[m.tets].reshape(-1, 12), axis=1).tolist()))
+    assert key(mesh) == key(ref)
+    res = render_selective(reader, VIEW, tets=tets, level=level)
+    assert res.stats["cut_tets"] == cut.n_tets and res.stats["flipped_tets"] == 0 and res.stats["level"] == level
+
+
+def test_selective_budget(post_tetc):
+    f = gatun_py.open(post_tetc)
+    fr = gatun_py.render(f, size=48, selective=True, budget=0.3)
+    assert fr.stats["flipped_tets"] == 0 and fr.stats["budget_s"] == 0.3 and fr.stats["selective"]

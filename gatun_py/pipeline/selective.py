@@ -50,7 +50,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..codec import TetcReader
-from ..errors import OptionError
+from ..errors import CorruptFileError, OptionError
 from ..render.transfer import load_transfer_function
 from ..simplify.dependencies import MergeDependencies, closed_cut_order, cut_ancestors
 from ..simplify.forest import ROOT_RANK, mesh_from_ancestors
@@ -87,6 +87,9 @@ class SelectiveSource:
         The rendered scalar at level 0's vertices.
     n_tets : int
         Level 0's tets.
+    level, first : int
+        The stored level all of this is of (0 above; another level: its forest, numbering, vertices
+        and tets, and the merges its forest holds, ranks renumbered by ``-first`` = -N_level).
     """
 
     deps: MergeDependencies
@@ -97,6 +100,8 @@ class SelectiveSource:
     points: np.ndarray
     scalars: np.ndarray
     n_tets: int
+    level: int = 0
+    first: int = 0
 
     @property
     def n_merges(self) -> int:
@@ -107,32 +112,42 @@ class SelectiveSource:
 
 
 def selective_source(reader: TetcReader, scalar: str | None = None, component=None, *,
-                     keep_batches: bool = False) -> SelectiveSource | None:
+                     keep_batches: bool = False, level: int = 0) -> SelectiveSource | None:
     """The file's dependencies, forest and level-0 geometry (cached on the reader), or None when
     the file stores no dependencies (written before format 3, or without a forest).
 
-    ``keep_batches``: also keep level 0's decoded stream (once, for :func:`take_batches`), so the
-    first frame, which had to decode level 0 for the geometry, does not decode it twice.
+    ``keep_batches``: also keep the level's decoded stream (once, for :func:`take_batches`), so the
+    first frame, which had to decode the level for the geometry, does not decode it twice.
+    ``level``: the same for a stored level (only the merges its forest holds, renumbered).
     """
     cache = reader.__dict__.setdefault("_selective_cache", {})
-    key = (scalar, component)
+    key = (scalar, component, level)
     if key in cache:
         return cache[key]
-    raw = reader.read_dependencies()
-    if raw is None:
+    if "deps" not in cache:
+        raw = reader.read_dependencies()
+        cache["deps"] = None if raw is None else MergeDependencies(*raw)
+    deps = cache["deps"]
+    if deps is None:
         cache[key] = None
         return None
-    deps = MergeDependencies(*raw)
-    parent, rank = reader.read_forest(0)
+    lv = reader.level_meta(level)
+    first = int(lv.get("merges_before", 0))
+    forest = reader.read_forest(level)
+    if forest is None:  # a level with nothing left to merge
+        forest = (np.arange(int(lv["points"]), dtype=np.int32), np.full(int(lv["points"]), ROOT_RANK, np.int32))
+    parent, rank = forest
     n = parent.shape[0]
-    k = deps.n_merges
-    vertex = np.empty(k, np.int64)
     merged = rank != ROOT_RANK
+    k = int(merged.sum())
+    if level:
+        deps = _window(deps, first, k)
+    vertex = np.empty(k, np.int64)
     vertex[rank[merged]] = np.flatnonzero(merged)
     points = np.empty((n, 3), np.float64)
     scalars = np.empty(n, np.float64)
     kept = []
-    for b in reader.iter_decode(0, scalar=scalar, component=component):
+    for b in reader.iter_decode(level, scalar=scalar, component=component):
         points[b.first:b.first + len(b.points)] = b.points
         scalars[b.first:b.first + len(b.points)] = b.density
         if keep_batches:
@@ -140,14 +155,27 @@ def selective_source(reader: TetcReader, scalar: str | None = None, component=No
     if keep_batches:
         reader.__dict__.setdefault("_selective_batches", {})[key] = kept
     src = SelectiveSource(deps, parent, rank, vertex, parent[vertex].astype(np.int64), points, scalars,
-                          int(reader.level_meta(0)["tets"]))
+                          int(lv["tets"]), level, first)
     cache[key] = src
     return src
 
 
-def take_batches(reader, scalar=None, component=None):
-    """Level 0's decoded stream kept by :func:`selective_source` (then forgotten), or None."""
-    return reader.__dict__.get("_selective_batches", {}).pop((scalar, component), None)
+def _window(deps: MergeDependencies, first: int, k: int) -> MergeDependencies:
+    """The DAG of merges ``first .. first + k - 1`` renumbered by ``-first``; dependencies below
+    ``first`` dropped (a level after ``first`` merges has them applied)."""
+    if first + k > deps.n_merges:
+        raise CorruptFileError("a level's forest holds merges beyond the file's dependencies")
+    lo, hi = int(deps.ptr[first]), int(deps.ptr[first + k])
+    rows = np.repeat(np.arange(k), np.diff(deps.ptr[first:first + k + 1]))
+    idx = deps.idx[lo:hi].astype(np.int64) - first
+    keep = idx >= 0
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=k))]).astype(np.int64)
+    return MergeDependencies(ptr, idx[keep].astype(np.int32), deps.removed[first:first + k].copy())
+
+
+def take_batches(reader, scalar=None, component=None, level: int = 0):
+    """A level's decoded stream kept by :func:`selective_source` (then forgotten), or None."""
+    return reader.__dict__.get("_selective_batches", {}).pop((scalar, component, level), None)
 
 
 def merge_importance(src: SelectiveSource, camera, tf, *, lo, hi, scalar_range, factors=FACTORS) -> np.ndarray:
@@ -223,8 +251,10 @@ class Cut:
         return (f"<Cut: {self.n_merges} merges, {self.n_tets} tets, from level {self.level}, "
                 f"chosen in {self.select_s * 1e3:.1f} ms>")
 
-    def target(self, n_points: int) -> Target:
-        return Target(self.level, self.n_merges, self.n_merges / n_points if n_points else 0.0, self.level_merges)
+    def target(self, n_points: int, first: int = 0) -> Target:
+        """The render target (``first``: merges already applied in the cut's own numbering)."""
+        m = first + self.n_merges
+        return Target(self.level, m, m / n_points if n_points else 0.0, self.level_merges)
 
 
 def _prefix_count(removed_in_order, n_tets: int, *, merges=None, tets=None) -> int:
@@ -259,7 +289,11 @@ def uniform_cut(src: SelectiveSource, *, merges=None, tets=None) -> np.ndarray:
 
 
 def _start(reader, src: SelectiveSource, applied) -> Cut:
-    """The most simplified stored level a cut can start from, and the ancestors there."""
+    """The most simplified stored level a cut can start from, and the ancestors there (a source of
+    another level than 0 starts from its own level)."""
+    if src.level:
+        anc = cut_ancestors(src.parent, src.rank, applied) if applied.any() else None
+        return Cut(applied, src.deps.cut_tets(src.n_tets, applied), src.level, src.first, anc)
     levels = stored_levels(reader)
     best = levels[0]
     total = int(applied.sum())
@@ -282,26 +316,30 @@ def _start(reader, src: SelectiveSource, applied) -> Cut:
 
 
 def plan_cut(reader, view: View, *, ratio=None, tets=None, merges=None, factors=FACTORS,
-             uniform: bool = False) -> Cut | None:
+             uniform: bool = False, level: int = 0) -> Cut | None:
     """The cut of a selective render of ``reader`` for a view: ``ratio`` (merges = floor(ratio *
-    points)), ``tets`` (at most that many; above the mesh's count: the full mesh) or ``merges``.
+    points)), ``tets`` (at most that many; above the mesh's count: the full mesh) or ``merges``
+    (counted from ``level``: the cut chooses among the merges that stored level's forest holds,
+    the ones before it applied; 0: the whole forest).
     None when the file has no dependencies. ``uniform`` gives the prefix cut instead (for
     comparisons)."""
     if sum(x is not None for x in (ratio, tets, merges)) != 1:
         raise OptionError("a selective cut needs exactly one of ratio, tets and merges")
     if tets is not None and (isinstance(tets, bool) or not isinstance(tets, (int, np.integer)) or tets < 1):
         raise OptionError(f"tets must be a whole number >= 1, got {tets!r}")
-    src = selective_source(reader, view.scalar, view.component)  # read once per reader: not selection time
+    src = selective_source(reader, view.scalar, view.component, level=level)  # read once: not selection time
     if src is None:
         return None
     t0 = time.perf_counter()
     if ratio is not None:
         if not 0.0 <= ratio <= 1.0:
             raise OptionError(f"ratio {ratio} is outside [0, 1]")
-        merges = int(np.floor(ratio * src.points.shape[0]))
-        if merges > src.n_merges:
-            raise OptionError(f"ratio {ratio} needs {merges} merges but the forest holds {src.n_merges} "
-                              f"(maximum ratio {src.n_merges / src.points.shape[0]:.6f})")
+        n0 = int(reader.level_meta(0)["points"])
+        merges = int(np.floor(ratio * n0)) - src.first
+        if not 0 <= merges <= src.n_merges:
+            raise OptionError(f"ratio {ratio} needs {merges + src.first} merges; from level {src.level} this "
+                              f"file reaches {src.first}..{src.first + src.n_merges} (maximum ratio "
+                              f"{(src.first + src.n_merges) / n0:.6f})")
     if uniform:
         applied = uniform_cut(src, merges=merges, tets=tets)
     else:
@@ -355,7 +393,7 @@ class FlipCounter:
 
 
 def render_selective(reader, view: View, *, ratio=None, tets=None, merges=None, pipeline: str = "streaming",
-                     progress=None, factors=FACTORS, uniform: bool = False, log=None):
+                     progress=None, factors=FACTORS, uniform: bool = False, level: int = 0, log=None):
     """Render a selective cut (see :func:`plan_cut`) through the usual filter and ray caster.
 
     Returns a :class:`~gatun_py.pipeline.stream.PipelineResult` whose stats add ``selective``
@@ -364,8 +402,10 @@ def render_selective(reader, view: View, *, ratio=None, tets=None, merges=None, 
     the rendered stream). Without dependencies: a uniform render at the same ratio (for ``tets``:
     the stored level with the fewest tets still at least that many), noted once through ``log``.
     """
-    selective_source(reader, view.scalar, view.component, keep_batches=not view.lean)  # first frame: decode once
-    cut = plan_cut(reader, view, ratio=ratio, tets=tets, merges=merges, factors=factors, uniform=uniform)
+    # the first frame decodes the level once
+    src = selective_source(reader, view.scalar, view.component, keep_batches=not view.lean, level=level)
+    cut = plan_cut(reader, view, ratio=ratio, tets=tets, merges=merges, factors=factors, uniform=uniform,
+                   level=level)
     if cut is None:
         if log is not None:
             log("note: this file stores no merge dependencies (written before format 3): rendering uniformly")
@@ -380,39 +420,21 @@ def render_selective(reader, view: View, *, ratio=None, tets=None, merges=None, 
     lv = reader.level_meta(cut.level)
     counter = FlipCounter(int(lv["points"]))
     n0 = int(reader.level_meta(0)["points"])
-    kept = take_batches(reader, view.scalar, view.component)
-    decoded = kept if cut.level == 0 and pipeline == "streaming" else None
-    result = render_tetc(reader, view, pipeline=pipeline, target=cut.target(n0), ancestors=cut.ancestors,
+    kept = take_batches(reader, view.scalar, view.component, level)
+    decoded = kept if cut.level == level and pipeline == "streaming" else None
+    result = render_tetc(reader, view, pipeline=pipeline, target=cut.target(n0, src.first), ancestors=cut.ancestors,
                          watch=counter, progress=progress, decoded=decoded)
     result.stats.update(selective=not uniform, cut_tets=cut.n_tets, cut_merges=cut.n_merges,
                         selection_s=cut.select_s, flipped_tets=counter.flipped)
     return result
 
 
-def budget_tets(reader, view: View, planner, budget_s: float) -> int:
-    """Tets a selective frame may render within ``budget_s`` (what is left of the frame's budget
-    once level 0 is in memory): the uniform cut's tets at the fewest merges the time model predicts
-    to fit when rendering from level 0 without decoding it (:mod:`gatun_py.pipeline.budget`)."""
-    src = selective_source(reader, view.scalar, view.component, keep_batches=not view.lean)
-    planner.decoded = lambda level: level == 0
-    lo, hi, _, _ = file_render_defaults(reader)
-    cam = view.camera.fit(lo, hi)
-    coverage = planner.estimator.coverage(cam)
-    px = cam.width * cam.height
-
-    def predict(m: int) -> float:
-        return planner.model.predict(planner.estimate(0, m, px, coverage), key=0)
-
-    lo_m, hi_m = 0, src.n_merges
-    if predict(0) <= budget_s:
-        return src.n_tets
-    while lo_m < hi_m:  # the fewest merges predicted to fit (time falls as merges grow)
-        mid = (lo_m + hi_m) // 2
-        if predict(mid) <= budget_s:
-            hi_m = mid
-        else:
-            lo_m = mid + 1
-    return max(1, src.deps.cut_tets(src.n_tets, uniform_cut(src, merges=lo_m)))
+def budget_tets(reader, view: View, target) -> int:
+    """Tets a selective frame may render for a budget: those of the uniform cut the budget planner
+    chose (``target``, :mod:`gatun_py.pipeline.budget`), from the same stored level, so the frame
+    decodes and renders as much as the uniform one would."""
+    src = selective_source(reader, view.scalar, view.component, keep_batches=not view.lean, level=target.level)
+    return max(1, src.deps.cut_tets(src.n_tets, uniform_cut(src, merges=target.merges - src.first)))
 
 
 SELECTION_ALLOWANCE_S = 0.05  # kept from a selective frame's budget for choosing the cut

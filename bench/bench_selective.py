@@ -222,7 +222,9 @@ Median selective / uniform RMSE: **{np.median(ratios):.3f}** (target <= 0.5; bes
 
 {table(["uniform tets", "uniform PSNR", "selective tets", "selective PSNR"], c)}
 
-Equal quality: {table(["uniform tets", "PSNR", "selective tets for that PSNR", "selective / uniform"], equal_quality(c))
+Equal quality:
+
+{table(["uniform tets", "PSNR", "selective tets for that PSNR", "selective / uniform"], equal_quality(c))
                 if equal_quality(c) else "no overlap of the PSNR ranges"}""" for name, c in curves.items()) + f"""
 
 ## Time budget (view (30, 20), the sample's TF; a fresh reader per frame, as one `tetc render` command)

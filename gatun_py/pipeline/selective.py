@@ -208,7 +208,7 @@ def merge_importance(src: SelectiveSource, camera, tf, *, lo, hi, scalar_range, 
         _, a = tf.resolve(scalar_range).evaluate(src.scalars)
         sigma = -np.log1p(-np.clip(a, 0.0, 0.999)) / tf.unit_distance
         grid = K._extinction_grid(src.points, sigma, lo, hi, GRID)
-        light = K._transmittance(grid, lo, hi, np.asarray(camera.position, np.float64), pv, 2 * GRID)
+        light = K._transmittance(grid, lo, hi, np.asarray(camera.position, np.float64), pv, GRID)
     if "size" in factors:
         fwd, _, _ = camera.basis()
         depth = (pv - camera.position) @ fwd

@@ -173,7 +173,7 @@ def closed_cut_order(deps: MergeDependencies, importance) -> np.ndarray:
     order (least important first) until the target is met.
     """
     e = deps.effective_importance(importance)
-    return np.lexsort((np.arange(deps.n_merges), e))
+    return np.argsort(e, kind="stable")  # ties keep rank order
 
 
 def cut_ancestors(parent, rank, applied) -> np.ndarray:

@@ -114,7 +114,7 @@ def decompress(input, output, level, ratio, selective, tets, size, tf_spec, azim
     function (same options), e.g. to check it or use it elsewhere.
     """
     if sum(x is not None for x in (level, ratio, tets)) > 1:
-        raise click.UsageError("give at most one of --level, --ratio and --tets")
+        raise click.UsageError("--level, --ratio and --tets are exclusive")
     if tets is not None and not selective:
         raise click.UsageError("--tets needs --selective")
     if selective and level is not None:

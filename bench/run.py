@@ -14,8 +14,8 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-ORDER = ["mesh", "codec", "geometry", "lossless", "simplify", "forest", "render", "composite", "pipeline", "isosurface",
-         "view", "hostile", "bricks"]
+ORDER = ["mesh", "codec", "geometry", "lossless", "simplify", "forest", "render", "composite", "pipeline", "selective",
+         "isosurface", "view", "hostile", "bricks"]
 SCRIPTS = {"composite": "bench_bricks_render.py"}  # areas whose script is not bench_<area>.py
 
 

@@ -6,9 +6,9 @@ import click
 
 import gatun_py
 
-from .options import (RATIO, echo_json, force_option, jobs_option, json_option, logger, mesh_input_options,
-                      output_option,
-                      progress_reporter, quiet_option, read_kwargs, status)
+from .options import (ANGLE, RATIO, ZOOM, FiniteFloat, ImageSize, echo_json, force_option, jobs_option, json_option,
+                      logger, mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
+                      selective_options, status)
 
 
 @click.command()
@@ -66,14 +66,17 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
               help="Split the tets into K bricks (k-d tree, balanced by tets), each coded with its own forest "
                    "and levels, to decode on several cores and render apart; 1 = one stream.")
 @jobs_option
+@click.option("--dependencies", is_flag=True,
+              help="Also store the merge dependencies `render --selective` needs (every cut closed under "
+                   "them is flip-free); about 20-30 % more bytes, so off by default.")
 @mesh_input_options
 @click.option("--drop-cell-data", is_flag=True,
               help="Leave out cell arrays (a .tetc file stores point arrays only; without this flag or "
                    "--cell-to-point a mesh with cell data is refused).")
 @force_option
 @quiet_option
-def compress(input, output, n_levels, mesh_only, w_density, w_geometry, n_bricks, jobs, scalar, q_file, q_var,
-             cell_to_point, time_step, drop_cell_data, force, quiet):
+def compress(input, output, n_levels, mesh_only, w_density, w_geometry, n_bricks, jobs, dependencies, scalar, q_file,
+             q_var, cell_to_point, time_step, drop_cell_data, force, quiet):
     """Compress INPUT (any readable mesh or PLOT3D grid) losslessly into a .tetc file.
 
     Connectivity is cut-border coded; coordinates (float32 or float64) and every point array, in its
@@ -87,7 +90,7 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, n_bricks
     with progress_reporter("decimating", quiet, min_total=1) as progress:
         gatun_py.compress(input, output, levels=n_levels, mesh_only=mesh_only, force=force, w_density=w_density,
                           w_geometry=w_geometry, progress=progress, log=logger(quiet),
-                          drop_cell_data=drop_cell_data, bricks=n_bricks, jobs=jobs,
+                          drop_cell_data=drop_cell_data, bricks=n_bricks, jobs=jobs, dependencies=dependencies,
                           **read_kwargs(scalar, q_file, q_var, cell_to_point, time_step))
 
 
@@ -99,16 +102,36 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, n_bricks
 @click.option("--ratio", default=None, type=RATIO,
               help="Simplify to this ratio (merged / all vertices, 0..1) with the stored merge forest, "
                    "starting from the most simplified stored level that is still finer.")
+@selective_options
+@click.option("--size", type=ImageSize(), default="256", show_default=True,
+              help="With --selective: the image size the cut is chosen for.")
+@click.option("--tf", "tf_spec", default="default", show_default=True, metavar="NAME|FILE",
+              help="With --selective: the transfer function the cut is chosen for (as `tetc render --tf`).")
+@click.option("--azimuth", type=ANGLE, default=0.0, show_default=True, help="With --selective: the view's azimuth.")
+@click.option("--elevation", type=ANGLE, default=0.0, show_default=True,
+              help="With --selective: the view's elevation.")
+@click.option("--zoom", type=ZOOM, default=1.0, show_default=True, help="With --selective: the view's zoom.")
+@click.option("--range", "scalar_range", type=(FiniteFloat(), FiniteFloat()), default=None, metavar="MIN MAX",
+              help="With --selective: the scalar range the transfer function is normalised to.")
 @jobs_option
 @force_option
 @quiet_option
-def decompress(input, output, level, ratio, jobs, force, quiet):
+def decompress(input, output, level, ratio, selective, tets, size, tf_spec, azimuth, elevation, zoom, scalar_range,
+               jobs, force, quiet):
     """Decompress a .tetc file into any mesh format meshio writes that holds tets.
 
     The bricks of a bricked file decode in parallel (--jobs) and are stitched into one mesh, each
-    shared vertex once; the output is the same whatever --jobs is.
+    shared vertex once; the output is the same whatever --jobs is. With --selective, write the
+    mesh `tetc render --selective` draws for that view and transfer function (same options), e.g.
+    to check it or use it elsewhere.
     """
-    if level is not None and ratio is not None:
-        raise click.UsageError("--level and --ratio are exclusive")
-    mesh = gatun_py.decompress(input, output, ratio=ratio, level=level, force=force, jobs=jobs)
+    if sum(x is not None for x in (level, ratio, tets)) > 1:
+        raise click.UsageError("--level, --ratio and --tets are exclusive")
+    if tets is not None and not selective:
+        raise click.UsageError("--tets needs --selective")
+    if selective and level is not None:
+        raise click.UsageError("--selective takes --ratio or --tets, not --level")
+    mesh = gatun_py.decompress(input, output, ratio=ratio, level=level, force=force, jobs=jobs, selective=selective,
+                               tets=tets, size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom,
+                               scalar_range=scalar_range, log=logger(quiet))
     status(f"wrote {output}: {mesh.n_points} points, {mesh.n_tets} tets", quiet)

@@ -99,6 +99,17 @@ def mesh_input_options(f):
     return f
 
 
+def selective_options(f):
+    """--selective and --tets N: a view- and transfer-function-dependent cut of the merge forest."""
+    f = click.option("--tets", type=click.IntRange(min=1), default=None, metavar="N",
+                     help="With --selective: at most N tets (above the mesh's count: the full mesh).")(f)
+    f = click.option("--selective", is_flag=True,
+                     help="Simplify where the view and transfer function say it matters least (hidden, "
+                          "transparent, small on screen), never flipping a tet; with --ratio, --tets or "
+                          "--budget. A file compressed without --dependencies is simplified uniformly, with a note.")(f)
+    return f
+
+
 def read_kwargs(scalar, q_file, q_var, cell_to_point, time_step=None) -> dict:
     return dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point, time_step=time_step)
 

@@ -13,7 +13,7 @@ from gatun_py._resources import peak_rss_mb
 
 from .options import (ANGLE, POSITIVE, RATIO, ZOOM, Colour, FiniteFloat, ImageSize, echo_json, force_option,
                       interruptible, logger, mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
-                      status)
+                      selective_options, status)
 
 
 def _kernels_cached(*, decoder: bool) -> bool:
@@ -108,12 +108,13 @@ def _component(text):
 @click.option("--timeout", type=POSITIVE, default=10.0, show_default=True, metavar="SECONDS",
               help="With --scheduler: how long to wait for it.")
 @click.option("--stats", "show_stats", is_flag=True, help="Print one JSON object with timings and counts on stdout.")
+@selective_options
 @mesh_input_options
 @force_option
 @quiet_option
 def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, elevation, zoom, scalar_range, component,
            background, colorbar, ratio, level, budget, pipeline, lean, workers, scheduler, n_bricks, orbit, timeout,
-           show_stats, scalar, q_file, q_var, cell_to_point, time_step, force, quiet):
+           show_stats, selective, tets, scalar, q_file, q_var, cell_to_point, time_step, force, quiet):
     """Volume-render INPUT (a .tetc file or any mesh file) into an image.
 
     Tets are rendered as they are decoded: rays start on the boundary surface and walk inward
@@ -125,8 +126,12 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     from gatun_py.warmup import compile_for_render, load_kernels
 
     t_start = time.perf_counter()
-    if sum(x is not None for x in (ratio, level, budget)) > 1:
-        raise click.UsageError("give at most one of --ratio, --level and --budget")
+    if sum(x is not None for x in (ratio, level, budget, tets)) > 1:
+        raise click.UsageError("give at most one of --ratio, --level, --budget and --tets")
+    if tets is not None and not selective:
+        raise click.UsageError("--tets needs --selective")
+    if selective and level is not None:
+        raise click.UsageError("--selective takes --ratio, --tets or --budget, not --level")
     if scalar_range is not None and not scalar_range[0] < scalar_range[1]:
         raise click.BadParameter(f"MIN must be below MAX, got {scalar_range[0]:g} {scalar_range[1]:g}",
                                  param_hint="'--range'")
@@ -158,7 +163,7 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
                                 ratio=ratio, level=level, budget=budget, mode=mode, step=step,
                                 scalar_range=scalar_range, opacity_model=opacity_model, background=background,
                                 colorbar=colorbar, lean=lean, pipeline=pipeline, progress=progress,
-                                component=_component(component),
+                                component=_component(component), selective=selective, tets=tets,
                                 log=logger(quiet), **read_kwargs(scalar, q_file, q_var, cell_to_point, time_step))
     frame.save(output, force=force)
     st = frame.stats

@@ -35,12 +35,14 @@ from .pipeline.bricks import compress_bricks, read_bricked, render_bricked
 from .pipeline.sortlast import BrickRef, MeshExtent, split_for_render
 from .pipeline.budget import load_costs, plan_file_budget, remember_frame
 from .pipeline.distributed import BrickCluster
+from .pipeline.selective import SELECTION_ALLOWANCE_S, budget_tets, render_selective, selective_mesh
 from .pipeline.stream import PIPELINES, View, is_tetc, render_mesh_file, render_tetc
 from .render.camera import Camera
 from .render.image import add_colorbar, image_bytes, image_format, parse_colour, to_rgb8, upscale_rgb8, write_image
 from .render.raycast import MODES
 from .render.transfer import load_transfer_function
 from .simplify import build_levels, decimate, storage_forests
+from .simplify.dependencies import merge_dependencies
 from .simplify.filter import SimplifyFilter
 from .simplify.levels import resolve_target, target_ancestors
 
@@ -89,8 +91,8 @@ def _quiet(_msg: str) -> None:
 def compress(source, output, *, levels: int | None = None, mesh_only: bool = False, force: bool = False,
              w_density: float = 1.0, w_geometry: float = 1.0, scalar: str | None = None, q_file=None,
              q_var: str = "density", cell_to_point: bool = False, time_step: int | None = None,
-             drop_cell_data: bool = False, bricks: int = 1, jobs: int | None = None, progress=None,
-             log=None) -> "TetcFile":
+             drop_cell_data: bool = False, bricks: int = 1, jobs: int | None = None, dependencies: bool = False,
+             progress=None, log=None) -> "TetcFile":
     """Compress a mesh losslessly into a ``.tetc`` file, with its merge forest and levels.
 
     Parameters
@@ -119,6 +121,10 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
         bricks locked), so that they decode in parallel and render apart. 1: one plain stream.
     jobs : int, optional
         Processes that decimate and encode bricks (default: all cores).
+    dependencies : bool
+        Also store the merge dependencies that selective refinement needs (``render(...,
+        selective=True)``): every cut closed under them is flip-free. They cost 20-30 % of the file
+        on the samples, so they are stored only when asked for.
     progress : callable, optional
         ``progress(done, total)``: vertices the decimation has processed so far, of ``total``.
     log : callable, optional
@@ -152,6 +158,9 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
                                  time_step=time_step), log, storing=True, drop_cell_data=drop_cell_data)
     name = Path(source).name if isinstance(source, (str, os.PathLike)) else ""
     log(f"read {name or 'mesh'}: {mesh.n_points} points, {mesh.n_tets} tets")
+    if dependencies and (mesh_only or bricks > 1):
+        raise OptionError("merge dependencies need a merge forest of one plain stream: not with mesh_only or bricks")
+    deps = None
     if bricks > 1 and mesh.n_tets == 0:
         log("note: a mesh without tets is stored as one brick")
     if bricks > 1 and mesh.n_tets > 0:
@@ -168,7 +177,11 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
             f"levels {', '.join(str(x.level) for x in lv)}")
         payload = [LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
                    for x, f in zip(lv, storage_forests(lv))]
-    n = len(data) if payload is None else write_tetc(output, payload, source=name, force=force)
+        if dependencies:
+            deps = merge_dependencies(mesh, forest)
+            log(f"merge dependencies: {deps.idx.size} ({deps.idx.size / max(deps.n_merges, 1):.1f} per merge)")
+            deps = (deps.ptr, deps.idx, deps.removed)
+    n = len(data) if payload is None else write_tetc(output, payload, source=name, force=force, dependencies=deps)
     out = TetcFile(output)
     info = out.info
     log(f"wrote {output}: {n} bytes ({8.0 * n / max(mesh.n_tets, 1):.2f} bits/tet overall, "
@@ -191,15 +204,43 @@ def _counter(progress, total: int):
 
 
 def decompress(source, output, *, ratio: float | None = None, level: int | None = None, force: bool = False,
-               jobs: int | None = None) -> TetMesh:
+               jobs: int | None = None, selective: bool = False, tets: int | None = None, size=256,
+               tf="default", azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0, scalar_range=None,
+               log=None) -> TetMesh:
     """Decode a ``.tetc`` file (optionally simplified) and write it in any meshio format.
 
-    ``jobs``: threads decoding the bricks of a bricked file (default: all cores). Returns the mesh
-    written.
+    ``jobs``: threads decoding the bricks of a bricked file (default: all cores). With
+    ``selective``, the mesh a selective render of that view and transfer function (``size``,
+    ``tf``, ``azimuth``, ``elevation``, ``zoom``, ``scalar_range``, see :func:`render`) would draw,
+    at ``ratio`` or ``tets``: so it can be checked and used elsewhere. A file without merge
+    dependencies gives the uniform mesh, with a note through ``log``.
+
+    Returns the mesh written.
     """
+    log = log or _quiet
+    if tets is not None and not selective:
+        raise OptionError("tets needs selective=True")
+    if selective and level is not None:
+        raise OptionError("selective refinement takes a ratio or tets, not a stored level")
     _check_output(source, output, force=force, mesh_file=True)  # before decoding
     f = source if isinstance(source, TetcFile) else TetcFile(source)
-    mesh = f.mesh(ratio=ratio, level=level, jobs=jobs)
+    mesh = None
+    if selective:
+        w, h = _size(size)
+        view = View(Camera(w, h, _check_number("azimuth", azimuth, allow_none=False),
+                           _check_number("elevation", elevation, allow_none=False),
+                           _check_number("zoom", zoom, lo=0.0, lo_open=True, allow_none=False)),
+                    load_transfer_function(tf), scalar_range=None if scalar_range is None else tuple(scalar_range))
+        if ratio is None and tets is None:
+            ratio = 0.5
+        mesh, cut = selective_mesh(f.reader, view, ratio=ratio, tets=tets)
+        if mesh is None:
+            log("note: this file stores no merge dependencies (it was compressed without them): decoding uniformly")
+            ratio = ratio if tets is None else None
+        else:
+            log(f"selective cut: {cut.n_merges} merges, {cut.n_tets} tets, chosen in {cut.select_s:.3f} s")
+    if mesh is None:
+        mesh = f.mesh(ratio=ratio, level=level, jobs=jobs)
     write_mesh(mesh, output, force=force)
     return mesh
 
@@ -439,6 +480,26 @@ class Frame:
         return image_bytes(self.rgb, "PNG")
 
 
+def _render_selective(reader, view, *, ratio, tets, budget, pipeline, progress, log):
+    """(PipelineResult, planned stats) of a selective render of a file with merge dependencies;
+    without ratio, tets or budget: ratio 0.5 (half the vertices merged where they matter least)."""
+    planned = {}
+    level = 0
+    if budget is not None:
+        if load_costs() is None:
+            log("measuring this machine's rendering costs for the budget (once, under a second)...")
+        # the uniform plan's level and tets, chosen selectively within that level's forest
+        target, plan, _, _ = plan_file_budget(reader, view, max(budget - SELECTION_ALLOWANCE_S, 1e-3))
+        level, tets = target.level, budget_tets(reader, view, target)
+        planned = {"predicted_s": plan.predicted_s, "budget_s": budget}
+    elif ratio is None and tets is None:
+        ratio = 0.5
+    total = int(reader.level_meta(0)["tets"])
+    result = render_selective(reader, view, ratio=ratio, tets=tets, pipeline=pipeline, level=level,
+                              progress=_counter(progress, total), log=log)
+    return result, planned
+
+
 def _check_number(name, v, *, lo=None, lo_open=False, hi=None, allow_none=True):
     if v is None and allow_none:
         return None
@@ -464,7 +525,8 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
            step: float | None = None, scalar_range=None, opacity_model: str | None = None,
            background="black", colorbar: bool = False, lean: bool = False, pipeline: str = "streaming",
            scalar: str | None = None, q_file=None, q_var: str = "density", cell_to_point: bool = False,
-           time_step: int | None = None, component=None, progress=None, log=None) -> Frame:
+           time_step: int | None = None, component=None, selective: bool = False, tets: int | None = None,
+           progress=None, log=None) -> Frame:
     """Volume-render a mesh: decode, simplify and ray-cast in one streaming pass.
 
     Parameters
@@ -506,6 +568,13 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
         names the stored point array to render (default: the file's default scalar).
     component : None, int or "magnitude"
         ``.tetc``: for a vector array, the component to render or its magnitude.
+    selective : bool
+        ``.tetc``: simplify where this view and transfer function say it matters least (a closed
+        cut of the merge forest, never a flipped tet; :mod:`gatun_py.pipeline.selective`), to
+        ``ratio``, ``tets`` or ``budget``. A file without merge dependencies renders uniformly,
+        with a note.
+    tets : int, optional
+        With ``selective``: render at most this many tets (above the mesh's count: the full mesh).
     progress : callable, optional
         ``progress(done, total)``: tets rendered so far, of ``total``.
     log : callable, optional
@@ -535,8 +604,15 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
         raise OptionError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
     if pipeline not in PIPELINES:
         raise OptionError(f"pipeline must be one of {', '.join(PIPELINES)}, got {pipeline!r}")
-    if sum(x is not None for x in (ratio, level, budget)) > 1:
-        raise OptionError("give at most one of ratio, level and budget")
+    if sum(x is not None for x in (ratio, level, budget, tets)) > 1:
+        raise OptionError("give at most one of ratio, level, budget and tets")
+    if tets is not None:
+        if isinstance(tets, bool) or not isinstance(tets, (int, np.integer)) or tets < 1:
+            raise OptionError(f"tets must be a whole number >= 1, got {tets!r}")
+        if not selective:
+            raise OptionError("tets needs selective=True (a uniform render takes a ratio or a level)")
+    if selective and level is not None:
+        raise OptionError("selective refinement takes a ratio, tets or a budget, not a stored level")
     if scalar_range is not None:
         lo, hi = (_check_number("scalar_range", v, allow_none=False) for v in scalar_range)
         if not hi > lo:
@@ -557,6 +633,8 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
             if budget is not None:
                 raise OptionError("a time budget needs the brick compositor; render this bricked file at a ratio "
                                   "or a level")
+            if selective:
+                raise OptionError("selective refinement needs a file of one plain stream, not a bricked one")
             if scalar is not None or component is not None:
                 view = dataclasses.replace(view, scalar=scalar or f.scalar_name, component=component)
             bricked = render_bricked(f.reader, view, ratio=ratio, level=level, progress=_counter(progress, f.n_tets))
@@ -565,32 +643,43 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
     if bricked is not None:
         result = bricked
     elif isinstance(source, TetcFile) or (isinstance(source, (str, os.PathLike)) and is_tetc(source)):
-        target = resolve_target(f.reader, ratio=ratio, level=level)
-        if budget is not None:
-            if load_costs() is None:
-                log("measuring this machine's rendering costs for the budget (once, under a second)...")
-            target, plan, planner, _ = plan_file_budget(f.reader, view, budget)
-            planned = {"predicted_s": plan.predicted_s, "budget_s": budget, "image_scale": plan.scale}
-            if plan.scale != 1.0:
-                view = dataclasses.replace(view, camera=dataclasses.replace(
-                    view.camera, width=max(1, round(width * plan.scale)), height=max(1, round(height * plan.scale))))
-                log(f"note: no level renders {width}x{height} within {budget:g} s: rendering "
-                    f"{view.camera.width}x{view.camera.height} and scaling it up")
-            if not plan.feasible:
-                log(f"note: the budget of {budget:g} s cannot be met: rendering the coarsest level "
-                    f"(predicted {plan.predicted_s:.3f} s)")
-        total = int(f.reader.level_meta(target.level)["tets"])
         if scalar is not None or component is not None:
             view = dataclasses.replace(view, scalar=scalar or f.scalar_name, component=component)
-        t_frame = time.perf_counter()
-        result = render_tetc(f.reader, view, pipeline=pipeline, target=target, progress=_counter(progress, total))
-        if budget is not None:  # the machine's costs learn from every budget render
-            remember_frame(planner, result.stats, total_s=time.perf_counter() - t_frame)
+        if selective and not f.reader.has_dependencies():
+            log("note: this file stores no merge dependencies (it was compressed without them): rendering uniformly")
+            selective, planned["selective"] = False, False
+            if tets is not None:  # the stored level with the fewest tets still at least that many
+                lvs = [lv for lv in f.reader.levels if int(lv["tets"]) >= tets] or f.reader.levels[:1]
+                level, tets = int(min(lvs, key=lambda lv: int(lv["tets"]))["level"]), None
+        if selective:
+            result, planned = _render_selective(f.reader, view, ratio=ratio, tets=tets, budget=budget,
+                                                pipeline=pipeline, progress=progress, log=log)
+        else:
+            target = resolve_target(f.reader, ratio=ratio, level=level)
+            if budget is not None:
+                if load_costs() is None:
+                    log("measuring this machine's rendering costs for the budget (once, under a second)...")
+                target, plan, planner, _ = plan_file_budget(f.reader, view, budget)
+                planned.update(predicted_s=plan.predicted_s, budget_s=budget, image_scale=plan.scale)
+                if plan.scale != 1.0:
+                    view = dataclasses.replace(view, camera=dataclasses.replace(
+                        view.camera, width=max(1, round(width * plan.scale)),
+                        height=max(1, round(height * plan.scale))))
+                    log(f"note: no level renders {width}x{height} within {budget:g} s: rendering "
+                        f"{view.camera.width}x{view.camera.height} and scaling it up")
+                if not plan.feasible:
+                    log(f"note: the budget of {budget:g} s cannot be met: rendering the coarsest level "
+                        f"(predicted {plan.predicted_s:.3f} s)")
+            total = int(f.reader.level_meta(target.level)["tets"])
+            t_frame = time.perf_counter()
+            result = render_tetc(f.reader, view, pipeline=pipeline, target=target, progress=_counter(progress, total))
+            if budget is not None:  # the machine's costs learn from every budget render
+                remember_frame(planner, result.stats, total_s=time.perf_counter() - t_frame)
         name = f.scalar_name if view.scalar is None else view.scalar + ("" if component is None else f"[{component}]")
         rng = f.reader.array_range(view.scalar, view.component) or (0.0, 1.0)
     else:
-        if ratio is not None or level is not None or budget is not None:
-            raise OptionError("ratio, level and budget need a .tetc file with a merge forest "
+        if ratio is not None or level is not None or budget is not None or selective:
+            raise OptionError("ratio, level, budget and selective need a .tetc file with a merge forest "
                               "(make one with gatun_py.compress or `tetc compress`)")
         mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point,
                               time_step=time_step), log)

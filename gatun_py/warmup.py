@@ -27,6 +27,8 @@ from .render.composite import composite
 from .render.raycast import render_mesh
 from .render.stream import render_batches
 from .simplify import ROOT_RANK, ancestors, build_levels, decimate
+from .pipeline import _importance_kernels as IK
+from .simplify.dependencies import closed_cut_order, cut_ancestors, merge_dependencies
 from .simplify.filter import SimplifyFilter
 from .simplify.levels import Target
 
@@ -38,9 +40,25 @@ def tiny_mesh():
 
 def _simplify_and_render() -> str:
     mesh = tiny_mesh()
-    levels = build_levels(mesh, decimate(mesh))
+    forest = decimate(mesh)
+    levels = build_levels(mesh, forest)
+    _selective_kernels(mesh, forest)
     _render_kernels(lean=True)
-    return f"decimation and rendering ({len(levels)} levels)"
+    return f"decimation, merge dependencies and rendering ({len(levels)} levels)"
+
+
+def _selective_kernels(mesh, forest) -> None:
+    """The merge dependencies (compression) and a selective cut's importance (rendering)."""
+    deps = merge_dependencies(mesh, forest)
+    cut = np.zeros(deps.n_merges, np.bool_)
+    cut[closed_cut_order(deps, np.ones(deps.n_merges))[: deps.n_merges // 2]] = True
+    cut_ancestors(forest.parent, forest.rank, cut)
+    pts = np.asarray(mesh.points, np.float64)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    grid = IK._extinction_grid(pts, np.ones(len(pts)), lo, hi, 4)
+    IK._transmittance(grid, lo, hi, hi + 1.0, pts, 4)
+    s = np.asarray(mesh.density, np.float64)
+    IK._colour_change(np.ones((8, 4)), 0.0, 1.0, s, s[::-1].copy(), 4, 1.0)
 
 
 def _codec_and_filter() -> str:

@@ -44,6 +44,17 @@ def small_sample():
 
 
 @pytest.fixture(scope="session")
+def post_deps_tetc(tmp_path_factory):
+    """post.vtk compressed once per session with its merge dependencies (`--dependencies`)."""
+    from cli_util import run
+
+    out = tmp_path_factory.mktemp("post_deps") / "post.tetc"
+    res = run("compress", SAMPLE_FILES["post"][0], "-o", out, "--dependencies", "--quiet")
+    assert res.exit_code == 0, res.output
+    return out
+
+
+@pytest.fixture(scope="session")
 def post_tetc(tmp_path_factory):
     """post.vtk compressed once per session by `tetc compress` (all levels, merge forest)."""
     from cli_util import run

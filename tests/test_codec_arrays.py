@@ -11,6 +11,7 @@ from hypothesis.extra import numpy as hnp
 
 import gatun_py
 from conftest import load_sample
+from gatun_py.codec.container import VERSION_MAJOR
 from gatun_py.codec import LevelPayload, TetcReader, encode_tetc
 from gatun_py.codec import _array_kernels as K
 from gatun_py.codec.arrays import DTYPES, ArrayDecoder, _lin_state, _range_code, encode_array
@@ -141,7 +142,7 @@ def test_mesh_with_every_kind_of_array_round_trips():
     m = _mesh64()
     data = encode_tetc([LevelPayload(0, 0.0, 0, m)])
     r = TetcReader(data)
-    assert r.container.major == 3 and r.points_dtype == np.float64
+    assert r.container.major == VERSION_MAJOR and r.points_dtype == np.float64
     assert [(n, dt.name, k) for n, dt, k in r.arrays] == [
         ("p", "float64", 1), ("T", "float32", 1), ("id", "int64", 1), ("flag", "uint8", 1), ("u", "float64", 3),
         ("small", "int8", 2)]

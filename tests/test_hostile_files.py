@@ -42,6 +42,7 @@ def _exercise(data: bytes) -> None:
     r = TetcReader(data)
     tetc_info(r)
     r.forest_merges()
+    r.read_dependencies()
     for b in (r.brick(k) for k in range(r.n_bricks)):  # a one-brick file is its own brick 0
         for lv in b.levels:
             b.decode_mesh(lv["level"])
@@ -165,14 +166,17 @@ def files():
     from gatun_py.codec import LevelPayload, encode_tetc
     from gatun_py.mesh.validate import validate_tets
     from gatun_py.simplify import build_levels, decimate
+    from gatun_py.simplify.dependencies import merge_dependencies
     from gatun_py.simplify.levels import storage_forests
     from gatun_py.pipeline.bricks import compress_bricks
 
     mesh = load_sample("post")[0]
     forest = decimate(mesh)
     levels = build_levels(mesh, forest, 3)
+    deps = merge_dependencies(mesh, forest)
     with_forest = encode_tetc([LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
-                               for x, f in zip(levels, storage_forests(levels))])
+                               for x, f in zip(levels, storage_forests(levels))],
+                              dependencies=(deps.ptr, deps.idx, deps.removed))
     rng = np.random.default_rng(5)
     n = mesh.n_points
     pd = {"p": mesh.points[:, 0].astype(np.float64) * np.pi, "rho": mesh.density.astype(np.float64),
@@ -226,6 +230,42 @@ def _build(meta, sections, major=None) -> bytes:
 def test_valid_files_decode(worker, files):
     for data in files:
         assert check(worker, data)[0] == "ok"
+
+
+def test_dependency_bombs(worker, files):
+    """The deps section lies about its counts, or is an LZMA bomb, or rebuilds bad ranks: rejected
+    before anything large is allocated."""
+    import lzma
+
+    from gatun_py.codec.dependencies import _HEADER, _MAGIC
+
+    meta, sections = _split(files[0])
+    names = [n for n, _ in sections]
+    assert "deps" in names
+    i = names.index("deps")
+    _, k, _, nnz = _HEADER.unpack_from(sections[i][1])
+    body = sections[i][1][_HEADER.size:]
+    bomb = lzma.compress(bytes(1 << 26), preset=9)
+    raw = lzma.decompress(body)
+    bad_rank = bytearray(raw)
+    bad_rank[8 * k:8 * k + 4] = bytes([255] * 4)  # the first gaps (low-byte plane) reach below rank 0
+    cases = {
+        "nnz huge": _HEADER.pack(_MAGIC, k, 0, 2**40) + body,
+        "nnz at the cap": _HEADER.pack(_MAGIC, k, 0, 4096 * k) + bomb,
+        "merges wrong": _HEADER.pack(_MAGIC, k + 1, 0, nnz) + body,
+        "truncated": sections[i][1][: len(sections[i][1]) // 2],
+        "bad magic": b"XXXX" + sections[i][1][4:],
+        "gap out of range": _HEADER.pack(_MAGIC, k, 0, nnz) + lzma.compress(bytes(bad_rank)),
+    }
+    for what, payload in cases.items():
+        secs = list(sections)
+        secs[i] = ("deps", payload)
+        m = json.loads(json.dumps(meta))
+        if what == "merges wrong":
+            m["dependencies"]["merges"] = k + 1
+        assert check(worker, _build(m, secs), what)[0] == "rejected", what
+    # metadata says there are dependencies, the section is gone
+    assert check(worker, _build(meta, [x for x in sections if x[0] != "deps"]), "no deps")[0] == "rejected"
 
 
 def test_forest_bomb(worker, files):

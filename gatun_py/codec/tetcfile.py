@@ -29,7 +29,8 @@ from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encod
 from .container import Container, build_container
 from .cutborder import ConnectivityDecoder, encode_connectivity
 from .decoded_connectivity import DecodedConnectivity
-from .forest import decode_forest, decode_forest_on_mesh, encode_forest_on_mesh, forest_header
+from .dependencies import decode_dependencies, dependencies_header, encode_dependencies
+from .forest import ROOT_RANK, decode_forest, decode_forest_on_mesh, encode_forest_on_mesh, forest_header
 from .geometry import HEADER_SIZE, GeometryDecoder, check_geometry_header, encode_geometry
 
 FORMAT_NAME = "tetc"
@@ -201,7 +202,7 @@ def file_meta(mesh0, n_boundary_faces: int, source: str = "") -> dict:
     }
 
 
-def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None) -> bytes:
+def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, dependencies=None) -> bytes:
     """Build a whole ``.tetc`` file from levels (level 0 first).
 
     Parameters
@@ -211,6 +212,9 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None) 
         Source file name, recorded in the metadata.
     progress : callable, optional
         Called with each finished level number.
+    dependencies : (ptr, idx, removed), optional
+        The full forest's merge dependencies (:mod:`gatun_py.simplify.dependencies`), stored as
+        the section ``deps`` for selective refinement.
     """
     if not levels:
         raise OptionError("nothing to write: no levels")
@@ -227,13 +231,27 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None) 
     meta = file_meta(mesh0, encoded[0].meta["boundary_faces"], source)
     meta["levels"] = [e.meta for e in encoded]
     sections = [(name, data) for e in encoded for name, data in e.sections.items()]
+    if dependencies is not None:
+        meta["dependencies"], deps = _dependency_section(dependencies, levels[0])
+        sections.append(("deps", deps))
     return build_container(meta, sections)
 
 
-def write_tetc(path, mesh_or_levels, *, source: str = "", force: bool = False, progress=None) -> int:
+def _dependency_section(dependencies, level0: LevelPayload) -> tuple[dict, bytes]:
+    """(metadata entry, ``deps`` section) of the full forest's merge dependencies."""
+    ptr, idx, removed = dependencies
+    k = 0 if level0.forest is None else int((np.asarray(level0.forest[1]) != ROOT_RANK).sum())
+    if len(removed) != k:
+        raise OptionError(f"the dependencies cover {len(removed)} merges, the forest {k}")
+    data = encode_dependencies(ptr, idx, removed)
+    return {"merges": k, "entries": int(len(idx))}, data
+
+
+def write_tetc(path, mesh_or_levels, *, source: str = "", force: bool = False, progress=None,
+               dependencies=None) -> int:
     """Compress a mesh (or a list of :class:`LevelPayload`) into ``path`` atomically; returns bytes written."""
     levels = mesh_or_levels if isinstance(mesh_or_levels, list) else [LevelPayload(0, 0.0, 0, mesh_or_levels)]
-    data = encode_tetc(levels, source=source, progress=progress)
+    data = encode_tetc(levels, source=source, progress=progress, dependencies=dependencies)
     write_bytes_atomic(path, data, force=force)
     return len(data)
 
@@ -444,6 +462,24 @@ class TetcReader:
         if n != lv0["points"]:
             raise CorruptFileError(f"{name}: covers {n} vertices, the level has {lv0['points']}")
         return k
+
+    def has_dependencies(self) -> bool:
+        """Whether the file stores merge dependencies (format 3 with a forest): selective refinement."""
+        return self.container.has_section("deps")
+
+    def read_dependencies(self):
+        """The full forest's merge dependencies as (ptr, idx, removed) by rank, or None when the
+        file stores none (written before format 3, or without a forest)."""
+        if not self.container.has_section("deps"):
+            if "dependencies" in self.meta:
+                raise CorruptFileError("missing section 'deps'")
+            return None
+        data = self.read_section("deps")
+        k, _ = dependencies_header(data)
+        entry = self.meta.get("dependencies")
+        if not isinstance(entry, dict) or entry.get("merges") != k:
+            raise CorruptFileError("corrupt metadata: bad 'dependencies' entry")
+        return decode_dependencies(data, self.forest_merges(), int(self.meta["tets"]))
 
     def _array_decoder(self, level: int, j: int, n: int):
         """Decoder of array j of ``level`` (None for a float32 default scalar: the geometry holds it)."""

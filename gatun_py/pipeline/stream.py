@@ -124,8 +124,8 @@ def file_view(reader, view: View):
 # -- running ------------------------------------------------------------------------------------
 
 def render_tetc(source, view: View, *, ratio: float | None = None, level: int | None = None,
-                pipeline: str = "streaming", target: Target | None = None, progress=None,
-                partial=None, partial_every_s: float = 0.25) -> PipelineResult:
+                pipeline: str = "streaming", target: Target | None = None, progress=None, ancestors=None,
+                watch=None, decoded=None, partial=None, partial_every_s: float = 0.25) -> PipelineResult:
     """Render a ``.tetc`` file at a ratio or stored level.
 
     Parameters
@@ -140,6 +140,13 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
         A target already resolved (e.g. by the time-budget planner).
     progress : callable, optional
         Called with the number of tets decoded so far.
+    ancestors : (n,) int array, optional
+        With ``target``: the ancestors of the target level's vertices to filter with, instead of
+        the first ``target.merges`` merges' (a selective cut, :mod:`gatun_py.pipeline.selective`).
+    watch : callable, optional
+        Wraps the filtered stream of batches (e.g. to count what goes to the renderer).
+    decoded : iterable of TetBatch, optional
+        The target level's stream, already decoded (streaming pipeline): used instead of decoding.
     partial, partial_every_s : optional
         Streaming pipeline: ``partial(image, finished)`` is called with the image so far at most every
         ``partial_every_s`` seconds (see :func:`gatun_py.render.stream.render_batches`).
@@ -159,13 +166,13 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
     times = {"decode_s": 0.0, "filter_s": 0.0}
     # Decoding the forest section is decompression; the top-down pass is part of the filter.
     forest_times = {"forest_decode_s": 0.0, "ancestors_s": 0.0}
-    anc = target_ancestors(reader, target, times=forest_times)
+    anc = target_ancestors(reader, target, times=forest_times) if ancestors is None else ancestors
     lv = reader.level_meta(target.level)
     if pipeline == "streaming":
-        res, fstats = _run_streaming(reader, target, anc, camera, view, rng, step, times, progress,
-                                     (partial, partial_every_s))
+        res, fstats = _run_streaming(reader, target, anc, camera, view, rng, step, times, progress, watch, decoded,
+                                     partial=partial, partial_every_s=partial_every_s)
     else:
-        res, fstats = _run_generic(reader, target, anc, camera, view, rng, step, times)
+        res, fstats = _run_generic(reader, target, anc, camera, view, rng, step, times, watch)
     times["decode_s"] += forest_times["forest_decode_s"]
     times["filter_s"] += forest_times["ancestors_s"]
     stats = dict(res.stats)
@@ -179,19 +186,22 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
     return PipelineResult(res.image, stats)
 
 
-def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress, partial=(None, 0.25), *,
-                   fragments=False):
+def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress, watch=None, decoded=None, *,
+                   partial=None, partial_every_s=0.25, fragments=False):
     lv = reader.level_meta(target.level)
     # A lean render holds about one batch of tets in flight: smaller batches, less memory.
-    batches = reader.iter_decode(target.level, scalar=view.scalar, component=view.component,
-                                 **({"batch_tets": LEAN_BATCH_TETS} if view.lean else {}))
+    batches = iter(decoded) if decoded is not None else reader.iter_decode(
+        target.level, scalar=view.scalar, component=view.component,
+        **({"batch_tets": LEAN_BATCH_TETS} if view.lean else {}))
     filt = None
     if anc is not None:
         filt = SimplifyFilter(anc)
         batches = filt.filter(batches)
+    if watch is not None:
+        batches = watch(batches)
     res = render_batches(batches, camera, view.tf, mode=view.mode, step=step, scalar_range=rng,
                          expected_tets=int(lv["tets"]), lean=view.lean, fragments=fragments, progress=progress,
-                         partial=partial[0], partial_every_s=partial[1])
+                         partial=partial, partial_every_s=partial_every_s)
     # render_batches times the wait for each batch: the decoder, plus the filter when there is one.
     times["decode_s"] = res.stats["decode_s"]
     if filt is not None:
@@ -200,7 +210,7 @@ def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress
     return res, (filt.stats if filt is not None else None)
 
 
-def _run_generic(reader, target, anc, camera, view, rng, step, times):
+def _run_generic(reader, target, anc, camera, view, rng, step, times, watch=None):
     t0 = time.perf_counter()
     mesh = reader.decode_mesh(target.level)
     if view.scalar is not None:
@@ -215,6 +225,9 @@ def _run_generic(reader, target, anc, camera, view, rng, step, times):
         mesh = mesh_from_ancestors(mesh, anc)[0]
         times["filter_s"] = time.perf_counter() - t0
         fstats = {"tets_out": mesh.n_tets}
+    if watch is not None:
+        for _ in watch(mesh_batches(mesh)):
+            pass
     res = render_mesh(mesh, camera, view.tf, mode=view.mode, step=step, scalar_range=rng)
     return res, fstats
 

@@ -1,0 +1,243 @@
+"""Selective refinement (issue 13) against uniform refinement, in the same run.
+
+* the issue's target table: Blunt-fin and Combustion, each with its transfer function and a more
+  transparent one (opacities x 0.3), three views, 95 % and 99 % of the vertices merged; RMSE
+  (0-255) against the full-resolution render of the same view at equal tet counts;
+* PSNR over tets for both (Combustion, figure) and the tets each needs for equal quality;
+* ``--budget`` runs (0.05-0.5 s at 256²): selective vs uniform, PSNR and measured frame time;
+* selection cost against the frame time, the importance ablation, the ``deps`` section's size.
+
+Run: ``python bench/bench_selective.py [--quick]`` → ``bench/sections/selective.md`` + ``bench/figures/``.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+
+import numpy as np
+
+from common import FIGURES, SAMPLE_FILES, WORK, code_state, table, write_section
+
+QUICK = "--quick" in sys.argv
+DATASETS = ["bluntfin", "combustion"]
+VIEWS = [(30.0, 20.0), (120.0, -30.0), (200.0, 60.0)]
+RATIOS = [0.95, 0.99]
+SIZE = 256
+BUDGETS = [0.05, 0.1, 0.2, 0.5]
+
+
+def tetc_file(name):
+    import gatun_py
+
+    WORK.mkdir(parents=True, exist_ok=True)
+    path = WORK / f"{name}_selective.tetc"
+    if not path.exists():
+        src, kw, _ = SAMPLE_FILES[name]
+        t0 = time.perf_counter()
+        gatun_py.compress(src, path, dependencies=True, **kw)
+        print(f"compressed {name} in {time.perf_counter() - t0:.1f} s", flush=True)
+    return path
+
+
+def transfer_functions(name):
+    """(label, spec): the sample's preset and the same with every opacity x 0.3."""
+    return [(name, name), (f"{name} x0.3", _transparent(name))]
+
+
+def _transparent(name):
+    from importlib.resources import files
+
+    spec = json.loads(files("gatun_py.render.presets").joinpath(f"{name}.json").read_text())
+    spec.pop("comment", None)
+    spec["opacity"] = [dict(p, a=p["a"] * 0.3) for p in spec["opacity"]]
+    return spec
+
+
+def rgb(res):
+    from gatun_py.render.image import to_rgb8
+
+    return to_rgb8(res.image, (0.0, 0.0, 0.0))
+
+
+def quality(full, res):
+    from gatun_py.pipeline.quality import compare_images
+
+    d = compare_images(full, rgb(res))
+    return d.rmse, d.psnr
+
+
+def target_table(reader, name, rows, ablation):
+    from gatun_py.pipeline.selective import FACTORS, render_selective
+    from gatun_py.pipeline.stream import View, render_tetc
+    from gatun_py.render.camera import Camera
+
+    n = int(reader.meta["points"])
+    for label, tf in transfer_functions(name):
+        for az, el in (VIEWS[:1] if QUICK else VIEWS):
+            view = View(Camera(SIZE, SIZE, az, el), tf=tf)
+            full = rgb(render_tetc(reader, view))
+            for ratio in RATIOS:
+                u = render_selective(reader, view, merges=int(ratio * n), uniform=True)
+                s = render_selective(reader, view, tets=u.stats["cut_tets"])
+                ru, _ = quality(full, u)
+                rs, _ = quality(full, s)
+                rows.append([name, label, f"({az:g}, {el:g})", f"{ratio:.0%}", u.stats["cut_tets"], s.stats["cut_tets"],
+                             ru, rs, rs / ru if ru else float("nan"), s.stats["flipped_tets"],
+                             s.stats["selection_s"] * 1e3, s.stats["render_s"] + s.stats["decode_s"] + s.stats["filter_s"]])
+                print(rows[-1], flush=True)
+                if ratio == RATIOS[0] and (az, el) == VIEWS[0] and label == name:
+                    abl = [name, rs]
+                    for drop in FACTORS:
+                        a = render_selective(reader, view, tets=u.stats["cut_tets"],
+                                             factors=tuple(f for f in FACTORS if f != drop))
+                        abl.append(quality(full, a)[0])
+                    abl.append(ru)
+                    ablation.append(abl)
+
+
+def psnr_curve(reader, name):
+    """(tets, uniform PSNR, selective PSNR) over a geometric series of tet counts."""
+    from gatun_py.pipeline.selective import render_selective
+    from gatun_py.pipeline.stream import View, render_tetc
+    from gatun_py.render.camera import Camera
+
+    view = View(Camera(SIZE, SIZE, *VIEWS[0]), tf=name)
+    full = rgb(render_tetc(reader, view))
+    t0 = int(reader.meta["tets"])
+    out = []
+    for frac in (np.geomspace(0.005, 0.7, 5 if QUICK else 10)):
+        u = render_selective(reader, view, tets=int(frac * t0), uniform=True)
+        s = render_selective(reader, view, tets=int(frac * t0))
+        out.append((u.stats["cut_tets"], quality(full, u)[1], s.stats["cut_tets"], quality(full, s)[1]))
+        print(name, out[-1], flush=True)
+    return out
+
+
+def equal_quality(curve):
+    """For each uniform point: the selective tets reaching its PSNR (interpolated), and the ratio."""
+    st = np.array([c[2] for c in curve], float)
+    sp = np.array([c[3] for c in curve], float)
+    order = np.argsort(sp)
+    rows = []
+    for ut, up, _, _ in curve:
+        if sp.min() <= up <= sp.max():
+            need = float(np.interp(up, sp[order], st[order]))
+            rows.append([ut, up, need, need / ut])
+    return rows
+
+
+def budget_runs(path, name):
+    import gatun_py
+
+    from gatun_py.pipeline.stream import View, render_tetc
+    from gatun_py.render.camera import Camera
+
+    f = gatun_py.open(path)
+    full = rgb(render_tetc(f.reader, View(Camera(SIZE, SIZE, *VIEWS[0]), tf=name)))
+    rows = []
+    for b in (BUDGETS[:2] if QUICK else BUDGETS):
+        row = [name, b]
+        for sel in (False, True):
+            g = gatun_py.open(path)  # a fresh reader: one frame of a one-shot command
+            t0 = time.perf_counter()
+            fr = gatun_py.render(g, size=SIZE, tf=name, azimuth=VIEWS[0][0], elevation=VIEWS[0][1], budget=b,
+                                 selective=sel)
+            wall = time.perf_counter() - t0
+            from gatun_py.pipeline.quality import compare_images
+
+            d = compare_images(full, fr.rgb)
+            row += [fr.stats["tets_rendered"], wall, d.psnr]
+        row.append(row[7] - row[4])
+        rows.append(row)
+        print(rows[-1], flush=True)
+    return rows
+
+
+def plot(curves):
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return None
+    FIGURES.mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for name, c in curves.items():
+        ax.semilogx([x[0] for x in c], [x[1] for x in c], "o-", label=f"{name} uniform")
+        ax.semilogx([x[2] for x in c], [x[3] for x in c], "s--", label=f"{name} selective")
+    ax.set_xlabel("tets rendered")
+    ax.set_ylabel("PSNR vs full resolution (dB)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    out = FIGURES / "selective_psnr.png"
+    fig.savefig(out, dpi=110)
+    return out
+
+
+def main():
+    from gatun_py.codec import TetcReader
+
+    rows, ablation, curves, budgets, sizes = [], [], {}, [], []
+    for name in DATASETS:
+        path = tetc_file(name)
+        reader = TetcReader(path)
+        deps = reader.container.section_size("deps")
+        sizes.append([name, reader.meta["tets"], reader.meta["dependencies"]["entries"],
+                      reader.meta["dependencies"]["entries"] / reader.meta["dependencies"]["merges"],
+                      deps, path.stat().st_size, 100.0 * deps / path.stat().st_size, 8.0 * deps / reader.meta["tets"]])
+        target_table(reader, name, rows, ablation)
+        curves[name] = psnr_curve(reader, name)
+        budgets += budget_runs(path, name)
+    fig = plot(curves)
+    ratios = [r[8] for r in rows]
+    sel_share = [r[10] / 1e3 / r[11] for r in rows]
+    text = f"""# Selective refinement (issue 13)
+
+Code: {code_state()}. {SIZE}², volume mode, in-process, warm JIT. Uniform = the first N merges;
+selective = the closed cut of the least important merges with the same number of tets (or fewer).
+RMSE on 0-255 against the full-resolution render of the same view and transfer function.
+
+## Target: RMSE selective / uniform <= 0.5 at equal tets
+
+{table(["data", "TF", "view (az, el)", "merged", "uniform tets", "selective tets", "RMSE uniform", "RMSE selective",
+        "selective / uniform", "flipped", "selection ms", "frame s"], rows)}
+
+Median selective / uniform RMSE: **{np.median(ratios):.3f}** (target <= 0.5; best {min(ratios):.3f}, worst
+{max(ratios):.3f}). Flipped tets over all cuts: {sum(r[9] for r in rows)}. Selection cost: median
+{100 * np.median(sel_share):.1f} % of the frame (target <= 5 %).
+
+## Importance ablation (RMSE at 95 %, view (30, 20), each factor left out)
+
+{table(["data", "all factors", "no colour", "no light", "no size", "no forest", "uniform"], ablation)}
+
+## PSNR over tets (view (30, 20), the sample's TF)
+
+{"![PSNR over tets](../figures/selective_psnr.png)" if fig else "(matplotlib not installed: no figure)"}
+
+""" + "\n\n".join(f"""### {name}
+
+{table(["uniform tets", "uniform PSNR", "selective tets", "selective PSNR"], c)}
+
+Equal quality:
+
+{table(["uniform tets", "PSNR", "selective tets for that PSNR", "selective / uniform"], equal_quality(c))
+                if equal_quality(c) else "no overlap of the PSNR ranges"}""" for name, c in curves.items()) + f"""
+
+## Time budget (view (30, 20), the sample's TF; a fresh reader per frame, as one `tetc render` command)
+
+{table(["data", "budget s", "uniform tets", "uniform s", "uniform PSNR", "selective tets", "selective s",
+        "selective PSNR", "PSNR gain dB"], budgets)}
+
+## Size of the `deps` section
+
+{table(["data", "tets", "dependencies", "per merge", "deps bytes", "file bytes", "% of file", "bits/tet"], sizes)}
+"""
+    write_section("selective", text)
+
+
+if __name__ == "__main__":
+    main()

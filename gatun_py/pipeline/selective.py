@@ -44,7 +44,7 @@ Examples
 >>> import gatun_py, tempfile, os
 >>> from gatun_py.warmup import tiny_mesh
 >>> path = os.path.join(tempfile.mkdtemp(), "tiny.tetc")
->>> f = gatun_py.compress(tiny_mesh(), path)
+>>> f = gatun_py.compress(tiny_mesh(), path, dependencies=True)
 >>> frame = gatun_py.render(path, size=32, selective=True, tets=40)
 >>> frame.stats["cut_tets"] <= 40, frame.stats["flipped_tets"]
 (True, 0)

@@ -14,6 +14,7 @@ on 2 cores >= 1.8 x faster than on 1.
 
 from __future__ import annotations
 
+import os
 import statistics
 import sys
 import tempfile
@@ -86,6 +87,7 @@ def main(argv: list[str]) -> int:
         if "--big" in argv or (CACHE / "flange-10m.vtu").exists():
             meshes.append(("gmsh flange 10M", mesh_path("flange-10m"), {}))
     rounds = 1 if quick else 3
+    load_before = os.getloadavg()[0]
     rows = []
     with tempfile.TemporaryDirectory(dir=CACHE.parent) as d:
         for label, src, kw in meshes:
@@ -98,7 +100,9 @@ are decimated and coded on a pool of all cores); cost = bytes over the K = 1 fil
 Cut vertices: vertices shared by two bricks or more (stored once in each), % of the mesh's points.
 Decode: the whole mesh of the K = 8 file, decoded and stitched on 1 / 2 threads (median of
 {rounds} alternating runs in one process, kernels warm), speed-up and whether both runs gave the
-same arrays. The machine is shared: wall times carry its load.
+same arrays. The machine is shared: wall times carry its load (1-minute load average
+{load_before:.1f} at the start, {os.getloadavg()[0]:.1f} at the end, on {os.cpu_count()} cores; above the core
+count, the 2-thread decode cannot get its second core and its speed-up means nothing).
 
 Targets: cost <= 5 % at K = 8 and <= 15 % at K = 64 on the ~10 M-tet mesh; decode 2 cores >= 1.8 x 1 core.
 

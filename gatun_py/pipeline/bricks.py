@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 
 import time
 
@@ -24,7 +25,7 @@ from ..codec import LevelPayload, TetcReader
 from ..codec.bricks import (BrickLevels, check_jobs, decode_bricked, distinct_points, encode_brick, encode_bricked,
                             map_bricks, read_cut, stitch_bricks)
 from .._resources import peak_rss_mb
-from ..errors import CorruptFileError, OptionError
+from ..errors import CorruptFileError, OptionError, TetcError
 from ..mesh import TetMesh, mesh_batches
 from ..render.stream import render_batches
 from ..mesh.partition import Brick, partition_tets, split_bricks
@@ -115,13 +116,17 @@ def compress_bricks(mesh: TetMesh, n_bricks: int, *, jobs: int | None = None, me
         threads = max(1, numba.config.NUMBA_NUM_THREADS // jobs)
         with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
             order = sorted(bricks, key=lambda b: -b.mesh.n_tets)  # largest first: the pool drains evenly
-            futures = {pool.submit(_brick_job, b.mesh, cut_index[b.vertex_ids], options, threads): b
-                       for b in order}
-            del order, bricks  # the workers have their own copies
+            futures = {pool.submit(_brick_job, b.mesh, cut_index[b.vertex_ids], options, threads):
+                       (b.index, b.mesh.n_points) for b in order}
+            del order, bricks, b  # the workers have their own copies
             for fut in as_completed(futures):
-                b = futures[fut]
-                encoded[b.index] = fut.result()
-                done += b.mesh.n_points
+                k, n = futures[fut]
+                try:
+                    encoded[k] = fut.result()
+                except BrokenProcessPool:
+                    raise TetcError(f"a worker process died while compressing brick {k} (out of memory?); "
+                                    "fewer jobs need less memory") from None
+                done += n
                 if progress is not None:
                     progress(done, total)
     # shared vertices are matched by their coordinates when these tell them apart (no ids stored)

@@ -31,8 +31,8 @@ from .codec.info import tetc_info
 from .errors import OptionError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.io import mesh_output_format
-from .pipeline.bricks import compress_bricks, read_bricked, render_bricked
-from .pipeline.sortlast import BrickRef, MeshExtent, split_for_render
+from .pipeline.bricks import compress_bricks, read_bricked
+from .pipeline.sortlast import BrickRef, MeshExtent, render_bricks, split_for_render
 from .pipeline.budget import load_costs, plan_file_budget, remember_frame
 from .pipeline.distributed import BrickCluster
 from .pipeline.selective import SELECTION_ALLOWANCE_S, budget_tets, render_selective, selective_mesh
@@ -630,14 +630,17 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
     if isinstance(source, TetcFile) or (isinstance(source, (str, os.PathLike)) and is_tetc(source)):
         f = source if isinstance(source, TetcFile) else TetcFile(source)
         if f.n_bricks > 1:
-            if budget is not None:
-                raise OptionError("a time budget needs the brick compositor; render this bricked file at a ratio "
-                                  "or a level")
             if selective:
                 raise OptionError("selective refinement needs a file of one plain stream, not a bricked one")
             if scalar is not None or component is not None:
                 view = dataclasses.replace(view, scalar=scalar or f.scalar_name, component=component)
-            bricked = render_bricked(f.reader, view, ratio=ratio, level=level, progress=_counter(progress, f.n_tets))
+            # each brick streams on its own into fragments, composited by depth: nothing is stitched,
+            # and under a budget each brick picks its own level
+            bricked = render_bricks([f.reader.brick(k) for k in range(f.n_bricks)], view,
+                                    MeshExtent.of_reader(f.reader), ratio=ratio, level=level, budget=budget,
+                                    progress=_counter(progress, f.n_tets))
+            if budget is not None:
+                planned = {"budget_s": budget}
             name = f.scalar_name if view.scalar is None else view.scalar + ("" if component is None else f"[{component}]")
             rng = f.reader.array_range(view.scalar, view.component) or (0.0, 1.0)
     if bricked is not None:

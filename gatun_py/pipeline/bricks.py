@@ -16,25 +16,20 @@ import multiprocessing
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 
-import time
-
 import numba
 import numpy as np
 
 from ..codec import LevelPayload, TetcReader
 from ..codec.bricks import (BrickLevels, check_jobs, decode_bricked, distinct_points, encode_brick, encode_bricked,
                             map_bricks, read_cut, stitch_bricks)
-from .._resources import peak_rss_mb
 from ..errors import CorruptFileError, OptionError, TetcError
-from ..mesh import TetMesh, mesh_batches
-from ..render.stream import render_batches
+from ..mesh import TetMesh
 from ..mesh.partition import Brick, partition_tets, split_bricks
 from ..simplify import build_levels, decimate, storage_forests
 from ..simplify.forest import mesh_from_ancestors
 from ..simplify.levels import read_simplified, resolve_target, target_ancestors
-from .stream import PipelineResult, View, file_view
 
-__all__ = ["compress_bricks", "read_bricked", "render_bricked"]
+__all__ = ["compress_bricks", "read_bricked"]
 
 
 def _brick_payload(mesh: TetMesh, cut_ids: np.ndarray, options: dict) -> BrickLevels:
@@ -166,25 +161,3 @@ def read_bricked(reader: TetcReader, *, ratio: float | None = None, level: int |
 
 
 
-def render_bricked(reader: TetcReader, view: View, *, ratio: float | None = None, level: int | None = None,
-                   jobs: int | None = None, progress=None) -> PipelineResult:
-    """Render a bricked file whole: its bricks decoded in parallel and stitched, then ray cast as
-    one mesh with the file's camera fit, scalar range and step (what an unbricked file of the same
-    mesh renders with). The sort-last compositor renders bricks apart instead."""
-    t0 = time.perf_counter()
-    mesh = read_bricked(reader, ratio=ratio, level=level, jobs=jobs)
-    if view.scalar is not None:
-        try:
-            mesh = mesh.with_scalar(view.scalar, view.component)
-        except (KeyError, ValueError) as e:
-            raise OptionError(str(e).strip("'\"")) from None
-    decode_s = time.perf_counter() - t0
-    view, camera, rng, step, notes = file_view(reader, view)
-    res = render_batches(mesh_batches(mesh), camera, view.tf, mode=view.mode, step=step, scalar_range=rng,
-                         expected_tets=mesh.n_tets, lean=False, progress=progress)
-    stats = dict(res.stats)
-    stats.update(decode_s=decode_s + stats.get("decode_s", 0.0), filter_s=0.0, pipeline="bricks-stitched",
-                 level=0 if level is None else int(level), ratio=0.0 if ratio is None else float(ratio),
-                 bricks=reader.n_bricks, tets_decoded=int(reader.meta.get("tets", 0)), notes=notes,
-                 peak_rss_mb=peak_rss_mb())
-    return PipelineResult(res.image, stats)

@@ -15,14 +15,13 @@ validates the input and drives the loop. The mesh state during decimation:
 ``quad`` (n, 15) float64, ``u4`` (n, 4) float64
     every vertex's error quadric (A's upper triangle, b, c; see :func:`_quadric_at`) and its
     (x, y, z, s) point; merging a into b adds a's quadric to b's.
-``pw``, ``p_err`` (n + m,) float64, ``tp_head``, ``tp_count`` (m,) int32, ``p_next`` (n + m,) int32
+``pw`` (n + m,) float64, ``tp_head``, ``tp_count`` (m,) int32, ``p_next`` (n + m,) int32
     sample points of the original field (ids 0..n-1: the vertices, once merged away; n + t: the
     centroid of input tet t; positions and values in rows n.. of ``pts`` and ``dens``, which
     tets never index): every one is listed in the live tet that holds it (``tp_count[t]`` of them,
     ``tp_head[t]`` ->
-    ``p_next`` chain), with weight ``pw`` (its share of the original volume) and its squared error
-    ``p_err`` against that tet's interpolant; a merge a -> b hands a and the points of a's star to
-    the tets of the new star.
+    ``p_next`` chain), with weight ``pw`` (its share of the original volume); a merge a -> b hands
+    a and the points of a's star to the tets of the new star.
 
 A merge a -> b is legal when every surviving tet of a's star stays positive, every boundary face
 around a keeps its orientation, a boundary vertex only goes into a boundary vertex, and the link
@@ -502,20 +501,27 @@ def _star_sample_count(st, tp_count):
 
 
 @njit(cache=True)
-def _star_samples(st, pw, tp_head, p_next, p_err, stride, p_id, p_k):
+def _star_samples(st, T, pts, dens, pw, tp_head, tp_count, p_next, stride, p_id, p_k, lam, val, q):
     """Every stride-th sample point of the star (``p_id``) with its star tet (``p_k``); returns the
-    sum of their weighted squared errors against the current interpolant (``p_err``: each point's
-    squared error in the tet that lists it, kept by :func:`_reassign_points`; 0 in a flat tet)."""
+    sum of their weighted squared errors against the current interpolant (``lam``, ``val``: scratch)."""
     e_old = 0.0
     npt = 0
     seen = 0
     for i in range(st.shape[0]):
-        p = tp_head[st[i] >> 2]
+        t = st[i] >> 2
+        p = tp_head[t]
+        if p < 0:
+            continue
+        for j in range(4):
+            q[j] = T[t, j]
+        flat = not _tet_planes(pts, dens, q, lam, val)
         while p >= 0:
             if seen % stride == 0:
                 p_id[npt] = p
                 p_k[npt] = i
-                e_old += pw[p] * p_err[p]
+                if not flat:
+                    f = val[0] * pts[p, 0] + val[1] * pts[p, 1] + val[2] * pts[p, 2] + val[3]
+                    e_old += pw[p] * (dens[p] - f) ** 2
                 npt += 1
             seen += 1
             p = p_next[p]
@@ -676,7 +682,7 @@ def _total_error(dm_w, di, ge_w, swept_w, qe_w, se, n_col, power):
 
 
 @njit(cache=True)
-def _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next, p_err):
+def _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next):
     """Everything about a's star that every candidate merge of a shares, and the scratch arrays of
     one evaluation, as one tuple (see the names unpacked in :func:`_candidate_terms`)."""
     ns = st.shape[0]
@@ -707,7 +713,7 @@ def _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, 
     q = np.empty(4, np.int64)
     e_old = 0.0
     if npt > 0:
-        e_old = _star_samples(st, pw, tp_head, p_next, p_err, stride, p_id, p_k)
+        e_old = _star_samples(st, T, pts, dens, pw, tp_head, tp_count, p_next, stride, p_id, p_k, s_lam[0], s_val[0], q)
     return (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
             stride, e_old, np.empty(ns), np.empty(2), q, np.empty(3), np.empty(bf.shape[0]), s_ok, s_lam, s_val)
 
@@ -782,13 +788,13 @@ def _candidate_exact(a, b, terms, st, T, pts, dens, params, pw, ctx):
 
 @njit(cache=True)
 def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, mark, counters, cand_out, err_out,
-                      pw, tp_head, tp_count, p_next, p_err):
+                      pw, tp_head, tp_count, p_next):
     """Error of every geometrically legal merge a -> b (b a neighbour of a): fills the outputs.
 
     Returns the number of candidates. Legality here covers volumes, boundary orientation and the
     boundary-into-interior rule; the link condition is checked by the caller, best first.
     """
-    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next, p_err)
+    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next)
     terms = np.empty((cand_out.shape[0], 5))
     return _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mark, counters, ctx, cand_out,
                             err_out, terms, True)
@@ -796,7 +802,7 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, m
 
 @njit(cache=True)
 def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab, counters,
-              pw, tp_head, tp_count, p_next, p_err):
+              pw, tp_head, tp_count, p_next):
     """Best legal merge of a: (target, error), or (-1, 0) when a has none.
 
     The best is the smallest (error, target id) among the candidates that pass the link
@@ -812,7 +818,7 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
     cand = np.empty(cap, np.int64)
     low = np.empty(cap)
     terms = np.empty((cap, 5))
-    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next, p_err)
+    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next)
     nc = _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mark, counters, ctx, cand, low,
                           terms, False)
     if nc == 0:
@@ -958,7 +964,7 @@ def _apply_merge(a, b, st_a, T, alive, nbr, head, nxt):
 
 
 @njit(cache=True)
-def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next, p_err):
+def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next):
     """After merging a: a and every point listed in a's former star go to the first live tet of
     the new star (star order) that contains them, else the one they are nearest to (largest
     smallest barycentric coordinate of :func:`_value_at`, the first of equals; as :func:`_new_value`).
@@ -1037,13 +1043,13 @@ def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next, p_
                 continue
             t = st_a[i] >> 2
             if low > margin[i]:
-                best = i
+                best = t
                 break
             for j in range(4):
                 q[j] = T[t, j]
             _value_at(pts, dens, q, v6s[i], x, y, z, vout)
             if vout[0] >= 0.0:
-                best = i
+                best = t
                 break
         if best < 0:
             # outside every tet: the nearest, by the determinants
@@ -1057,107 +1063,33 @@ def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next, p_
                 _value_at(pts, dens, q, v6s[i], x, y, z, vout)
                 if vout[0] > best_lo:
                     best_lo = vout[0]
-                    best = i
+                    best = t
         if best >= 0:  # else no tet of a's star is left (or all are flat): the point is dropped
-            t = st_a[best] >> 2
-            p_next[p] = tp_head[t]
-            tp_head[t] = p
-            tp_count[t] += 1
-            # its squared error in its new tet (usable: alive and positive), as _star_samples sums it
-            f = val[best, 0] * x + val[best, 1] * y + val[best, 2] * z + val[best, 3]
-            p_err[p] = (dens[p] - f) ** 2
+            p_next[p] = tp_head[best]
+            tp_head[best] = p
+            tp_count[best] += 1
 
 
 @njit(cache=True, parallel=True)
 def _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4,
-                   marks, marks_b, marks_ab, tcount, pw, tp_head, tp_count, p_next, p_err):
+                   marks, marks_b, marks_ab, tcount, pw, tp_head, tp_count, p_next):
     """:func:`_evaluate` of ``todo[:n_todo]`` in parallel: every evaluation only reads the mesh
     (each thread stamps its own mark rows), so the results cannot depend on the scheduling."""
     for i in prange(n_todo):
         tid = get_thread_id()
         b, e = _evaluate(todo[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks[tid],
-                         marks_b[tid], marks_ab[tid], tcount[tid], pw, tp_head, tp_count, p_next, p_err)
+                         marks_b[tid], marks_ab[tid], tcount[tid], pw, tp_head, tp_count, p_next)
         out_b[i] = b
         out_e[i] = e
 
 
 @njit(cache=True)
-def _spec_valid(v, at, head, nxt, T, alive, touched):
-    """True when no merge since the ``at``-th has touched v or a vertex of its star: an evaluation
-    of v made after ``at`` merges reads only v's star, its neighbours' stars and lists, the sample
-    points of its tets and its quadric, all of which a merge only changes for the vertices it
-    touches (the merged vertex, its target and the vertices of the merged vertex's star)."""
-    if touched[v] >= at:
-        return False
-    s = head[v]
-    while s >= 0:
-        t = s >> 2
-        if alive[t] and T[t, s & 3] == v:
-            for j in range(4):
-                if touched[T[t, j]] >= at:
-                    return False
-        s = nxt[s]
-    return True
-
-
-@njit(cache=True)
-def _lazy_evaluate(a, todo, out_b, out_e, batch, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4,
-                   marks, marks_b, marks_ab, tcount, counters, ver, h_err, h_v, h_b, h_ver, parent, pw, tp_head,
-                   tp_count, p_next, p_err, touched, spec_at, spec_ver, spec_b, spec_e):
-    """a's best merge into ``todo[0]``, ``out_b[0]``, ``out_e[0]``: from the speculative results when
-    still valid, else evaluated now, together (in parallel) with up to ``batch - 1`` further stale
-    entries found in the first ``4 * batch`` slots of the heap's array (its top levels; the heap is
-    only read)."""
-    todo[0] = a
-    m = counters[C_MERGES]
-    if spec_at[a] >= 0 and spec_ver[a] == ver[a] and _spec_valid(a, spec_at[a], head, nxt, T, alive, touched):
-        out_b[0] = spec_b[a]
-        out_e[0] = spec_e[a]
-        spec_at[a] = -1
-        return
-    n_todo = 1
-    if batch > 1:
-        # the first slots of the heap's array: its top levels, where the next entries to come up are
-        look = min(4 * batch, counters[C_HEAP])
-        for i in range(look):
-            v = h_v[i]
-            if n_todo >= batch:
-                break
-            if (h_b[i] < 0 and h_ver[i] == ver[v] and parent[v] == v and v != a
-                    and not (spec_at[v] >= 0 and spec_ver[v] == ver[v]
-                             and _spec_valid(v, spec_at[v], head, nxt, T, alive, touched))):
-                todo[n_todo] = v
-                n_todo += 1
-    if n_todo == 1:
-        out_b[0], out_e[0] = _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4,
-                                       marks[0], marks_b[0], marks_ab[0], tcount[0], pw, tp_head, tp_count, p_next, p_err)
-        return
-    _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4,
-                   marks, marks_b, marks_ab, tcount, pw, tp_head, tp_count, p_next, p_err)
-    for i in range(1, n_todo):
-        v = todo[i]
-        spec_at[v] = m
-        spec_ver[v] = ver[v]
-        spec_b[v] = out_b[i]
-        spec_e[v] = out_e[i]
-
-
-@njit(cache=True)
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks, marks_b, marks_ab, tcount,
-         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pw, tp_head, tp_count, p_next, p_err,
-         touched, spec_at, spec_ver, spec_b, spec_e, batch):
+         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pw, tp_head, tp_count, p_next):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left.
 
     ``marks*`` and ``tcount`` have one row per thread (stamps, evaluation counts); the sequential
     steps use row 0.
-
-    A vertex whose neighbourhood changed is re-evaluated when its heap entry comes up (lazily).
-    With ``batch`` > 1, the first such re-evaluation also evaluates, in parallel, the next stale
-    entries among the top of the heap (speculatively, against the current mesh); the result of one
-    is used when its entry comes up only if no merge since has touched its closed 1-ring
-    (``touched``: the last merge that changed a vertex's star, its lists or its quadric; see
-    :func:`_spec_valid`), i.e. when evaluating it then would read exactly the same state. The merge
-    sequence is therefore the sequential one, whatever the batch size or the thread count.
     """
     n = head.shape[0]
     mark = marks[0]
@@ -1178,14 +1110,12 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         n_todo = n
     while True:
         found = False
-        if n_todo < 0:
-            n_todo = 1  # one lazy re-evaluation, already in todo[0], out_b[0], out_e[0]
-        elif n_todo == 1:
+        if n_todo == 1:
             out_b[0], out_e[0] = _evaluate(todo[0], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
-                                           u4, mark, mark_b, mark_ab, tc, pw, tp_head, tp_count, p_next, p_err)
+                                           u4, mark, mark_b, mark_ab, tc, pw, tp_head, tp_count, p_next)
         elif n_todo > 1:
             _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params,
-                           quad, u4, marks, marks_b, marks_ab, tcount, pw, tp_head, tp_count, p_next, p_err)
+                           quad, u4, marks, marks_b, marks_ab, tcount, pw, tp_head, tp_count, p_next)
         # pushed in todo order, as evaluated one by one
         for i in range(n_todo):
             v = todo[i]
@@ -1217,10 +1147,8 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         if b < 0:
             # a's neighbourhood changed since its last evaluation: evaluate now (lazily, so a vertex
             # touched by several merges before its turn is evaluated once)
-            _lazy_evaluate(a, todo, out_b, out_e, batch, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params,
-                           quad, u4, marks, marks_b, marks_ab, tcount, counters, ver, h_err, h_v, h_b, h_ver, parent,
-                           pw, tp_head, tp_count, p_next, p_err, touched, spec_at, spec_ver, spec_b, spec_e)
-            n_todo = -1
+            todo[0] = a
+            n_todo = 1
             continue
         if parent[b] != b:
             continue
@@ -1228,10 +1156,8 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         # a's star is unchanged since the entry was made (that would have bumped its version),
         # but b's may have changed: check the link condition again
         if not _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, tc):
-            _lazy_evaluate(a, todo, out_b, out_e, batch, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params,
-                           quad, u4, marks, marks_b, marks_ab, tcount, counters, ver, h_err, h_v, h_b, h_ver, parent,
-                           pw, tp_head, tp_count, p_next, p_err, touched, spec_at, spec_ver, spec_b, spec_e)
-            n_todo = -1
+            todo[0] = a
+            n_todo = 1
             continue
         # the neighbourhood whose stars change: b and every vertex of a's star
         stamp = _next_stamp(tc)
@@ -1245,12 +1171,9 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
                     mark[w] = stamp
                     nb[k] = w
                     k += 1
-        _merge(a, b, st_a, nb[:k], T, alive, nbr, head, nxt, pts, dens, params, quad, tp_head, tp_count, p_next, p_err)
+        _merge(a, b, st_a, nb[:k], T, alive, nbr, head, nxt, pts, dens, params, quad, tp_head, tp_count, p_next)
         parent[a] = b
         rank[a] = counters[C_MERGES]
-        touched[a] = counters[C_MERGES]
-        for i in range(k):
-            touched[nb[i]] = counters[C_MERGES]
         counters[C_MERGES] += 1
         ver[a] += 1
         for i in range(k):
@@ -1261,14 +1184,14 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
 
 
 @njit(cache=True)
-def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, tp_head, tp_count, p_next, p_err):
+def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, tp_head, tp_count, p_next):
     """Everything a merge a -> b changes: the tets, the lists of the vertices around it (``nb``:
     the vertices of a's star but a), the sample points and b's quadric."""
     _apply_merge(a, b, st_a, T, alive, nbr, head, nxt)
     for i in range(nb.shape[0]):
         _tidy(nb[i], head, nxt, T, alive)
     if params[P_WS] > 0.0:
-        _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next, p_err)
+        _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next)
     for j in range(quad.shape[1]):
         quad[b, j] += quad[a, j]
 
@@ -1396,25 +1319,6 @@ def _sample_points(pts, dens, T, tet_w, centroid_weight):
             p[n + t, k] = (((pts[T[t, 0], k] + pts[T[t, 1], k]) + pts[T[t, 2], k]) + pts[T[t, 3], k]) / 4.0
         d[n + t] = (((dens[T[t, 0]] + dens[T[t, 1]]) + dens[T[t, 2]]) + dens[T[t, 3]]) / 4.0
     return pw, p, d
-
-
-@njit(cache=True)
-def _centroid_errors(pts, dens, T, n):
-    """Squared error of every tet's centroid (sample point n + t) against its tet's interpolant, as
-    :func:`_star_samples` sums it (0 in a flat tet); the vertices' rows are set once merged."""
-    m = T.shape[0]
-    p_err = np.zeros(n + m)
-    lam = np.empty((4, 4))
-    val = np.empty(4)
-    q = np.empty(4, np.int64)
-    for t in range(m):
-        for j in range(4):
-            q[j] = T[t, j]
-        if _tet_planes(pts, dens, q, lam, val):
-            p = n + t
-            f = val[0] * pts[p, 0] + val[1] * pts[p, 1] + val[2] * pts[p, 2] + val[3]
-            p_err[p] = (dens[p] - f) ** 2
-    return p_err
 
 
 @njit(cache=True)

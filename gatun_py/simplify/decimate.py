@@ -134,8 +134,6 @@ COLLAPSE_POWER = 1.5
 MAX_SAMPLES = 256
 # Weight of the input tets' centroids among the sample points (the merged vertices have 1).
 CENTROID_WEIGHT = 1.0
-# Stale heap entries evaluated together per thread when one comes up (speculatively: see K._run).
-SPECULATION_BATCH = 8
 # Tets per chunk of the vectorised set-up (bounds its temporaries).
 _CHUNK = 1 << 16
 
@@ -231,7 +229,6 @@ class DecimationState:
         # every vertex once merged away (weight a quarter of its tets' volume fraction). Their
         # positions and values follow the vertices' in pts and dens: tets only index the first n.
         self.pw, self.pts, self.dens = K._sample_points(self.pts, self.dens, self.T, tet_w, CENTROID_WEIGHT)
-        self.p_err = K._centroid_errors(self.pts, self.dens, self.T, n)
         self.p_next = np.full(n + m, -1, np.int32)
         self.tp_head = np.arange(n, n + m, dtype=np.int32)
         self.tp_count = np.ones(m, np.int32)
@@ -251,26 +248,13 @@ class DecimationState:
         self.h_ver = np.zeros(cap, np.int32)
         self.parent = np.arange(n, dtype=np.int32)
         self.rank = np.full(n, K.ROOT_RANK, np.int32)
-        # speculative re-evaluations (see K._run): the last merge that touched each vertex, and per
-        # vertex the merge count, version, target and error of its latest speculative evaluation
-        self.touched = np.full(n, -1, np.int32)
-        self.spec_at = np.full(n, -1, np.int32)
-        self.spec_ver = np.zeros(n, np.int32)
-        self.spec_b = np.zeros(n, np.int32)
-        self.spec_e = np.zeros(n)
 
     def _mesh_args(self):
         return (self.T, self.alive, self.nbr, self.head, self.nxt, self.pts, self.dens, self.isb, self.pinned,
                 self.params, self.quad, self.u4)
 
     def _sample_args(self):
-        return (self.pw, self.tp_head, self.tp_count, self.p_next, self.p_err)
-
-    def _spec_args(self):
-        # evaluations per parallel batch of stale entries; 1 (no speculation) on one thread
-        threads = numba.get_num_threads()
-        batch = 1 if threads == 1 else min(SPECULATION_BATCH * threads, max(1, self.n))
-        return (self.touched, self.spec_at, self.spec_ver, self.spec_b, self.spec_e, np.int64(batch))
+        return (self.pw, self.tp_head, self.tp_count, self.p_next)
 
     def _heap_args(self):
         return (self.ver, self.h_err, self.h_v, self.h_b, self.h_ver, self.last_err)
@@ -282,8 +266,7 @@ class DecimationState:
     def run(self, max_merges: int) -> bool:
         """Merge until ``max_merges`` in total; True when no legal merge is left."""
         return bool(K._run(*self._mesh_args(), self.marks, self.marks_b, self.marks_ab, self.tcount, self.counters,
-                           *self._heap_args(), self.parent, self.rank, np.int64(max_merges), *self._sample_args(),
-                           *self._spec_args()))
+                           *self._heap_args(), self.parent, self.rank, np.int64(max_merges), *self._sample_args()))
 
     def evaluate(self, a: int, b: int):
         """(legal, error) of merging a into b in the current state (for tests against the reference)."""
@@ -304,7 +287,7 @@ class DecimationState:
         st = K._star(a, self.head, self.nxt, self.T, self.alive)
         nb = np.unique(self.T[st >> 2])
         K._merge(a, b, st, nb[nb != a].astype(np.int64), self.T, self.alive, self.nbr, self.head, self.nxt, self.pts,
-                 self.dens, self.params, self.quad, self.tp_head, self.tp_count, self.p_next, self.p_err)
+                 self.dens, self.params, self.quad, self.tp_head, self.tp_count, self.p_next)
         self.parent[a] = b
         self.rank[a] = self.counters[K.C_MERGES]
         self.counters[K.C_MERGES] += 1

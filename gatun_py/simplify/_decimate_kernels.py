@@ -823,35 +823,29 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
                           terms, False)
     if nc == 0:
         return -1, 0.0
-    # by bound, ties by target id, so the result does not depend on list order
-    order = np.argsort(low[:nc], kind="mergesort")
+    # by bound, ties by target id, so the result does not depend on list order: an insertion sort
+    # on (bound, target) (a dozen candidates: np.argsort's allocation costs more than the sort)
+    order = np.empty(nc, np.int64)
+    for x in range(nc):
+        y = x
+        while y > 0 and (low[order[y - 1]] > low[x] or (low[order[y - 1]] == low[x] and cand[order[y - 1]] > cand[x])):
+            order[y] = order[y - 1]
+            y -= 1
+        order[y] = x
     best_b = -1
     best_e = 0.0
-    i = 0
-    while i < nc:
-        # candidates of equal bound in target-id order
-        j = i + 1
-        while j < nc and low[order[j]] == low[order[i]]:
-            j += 1
-        if j - i > 1:
-            for x in range(i + 1, j):
-                y = x
-                while y > i and cand[order[y]] < cand[order[y - 1]]:
-                    order[y], order[y - 1] = order[y - 1], order[y]
-                    y -= 1
-        for x in range(i, j):
-            k = order[x]
-            b = cand[k]
-            if best_b >= 0 and (low[k] > best_e or (low[k] == best_e and b > best_b)):
-                return best_b, best_e
-            counters[C_EXACT] += 1
-            e = _candidate_exact(a, b, terms[k], st, T, pts, dens, params, pw, ctx)
-            if best_b >= 0 and (e > best_e or (e == best_e and b > best_b)):
-                continue
-            if _link_ok(a, b, st, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
-                best_b = b
-                best_e = e
-        i = j
+    for x in range(nc):
+        k = order[x]
+        b = cand[k]
+        if best_b >= 0 and (low[k] > best_e or (low[k] == best_e and b > best_b)):
+            return best_b, best_e
+        counters[C_EXACT] += 1
+        e = _candidate_exact(a, b, terms[k], st, T, pts, dens, params, pw, ctx)
+        if best_b >= 0 and (e > best_e or (e == best_e and b > best_b)):
+            continue
+        if _link_ok(a, b, st, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
+            best_b = b
+            best_e = e
     return best_b, best_e
 
 

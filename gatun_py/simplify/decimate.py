@@ -241,7 +241,8 @@ class DecimationState:
         self.counters = np.zeros(8, np.int64)
         self.ver = np.zeros(n, np.int32)
         self.last_err = np.full(n, -1.0)
-        cap = 4 * n + 1024
+        # at most one live entry per vertex: a full heap compacts to <= n and has n free slots again
+        cap = 2 * n + 1024
         self.h_err = np.zeros(cap)
         self.h_v = np.zeros(cap, np.int32)
         self.h_b = np.zeros(cap, np.int32)

@@ -513,16 +513,21 @@ def scaling_section(names) -> str:
                      f"{(r['peak'] - r['before']) * 2**20 / r['tets']:.0f}"])
     head = ["mesh", "tets", "points", "forest wall s", "forest CPU s", "CPU ns / (tets × log₂ tets)",
             "peak RSS MB", "peak − RSS before MB", "bytes / tet"]
-    lines = [SCALING_HEAD, "",
-             f"Command: `python bench/bench_simplify.py --only scaling` (also part of the full run), "
+    return _timed_table(SCALING_HEAD, "--only scaling` (also part of the full run)",
+                        "gmsh meshes of the flange (`bench/gmsh_meshes.py`; sizes are nominal, the counts are gmsh's), "
+                        "each in a fresh process that reads the mesh, loads the kernels, resets its peak resident set "
+                        "(`/proc/self/clear_refs`) and builds the whole forest with `decimate(mesh)`. *peak RSS* is the "
+                        "process's VmHWM during the build (the mesh itself included), *RSS before* its resident set "
+                        "just before; *bytes / tet* = their difference per input tet. Target: O(n log n) time (a flat "
+                        "ns / (n log n) column) and near-linear memory (a flat bytes / tet column).", head, rows)
+
+
+def _timed_table(title: str, command: str, note: str, head: list[str], rows: list[list]) -> str:
+    """A measured table: its heading, the command, date and machine load, the note, the rows."""
+    lines = [title, "",
+             f"Command: `python bench/bench_simplify.py {command}, "
              f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load average "
-             + ", ".join(f"{x:.2f}" for x in os.getloadavg()) + " (1 / 5 / 15 min, 2 cores, shared). gmsh meshes "
-             "of the flange (`bench/gmsh_meshes.py`; sizes are nominal, the counts are gmsh's), each in a fresh "
-             "process that reads the mesh, loads the kernels, resets its peak resident set "
-             "(`/proc/self/clear_refs`) and builds the whole forest with `decimate(mesh)`. *peak RSS* is the "
-             "process's VmHWM during the build (the mesh itself included), *RSS before* its resident set just "
-             "before; *bytes / tet* = their difference per input tet. Target: O(n log n) time (a flat "
-             "ns / (n log n) column) and near-linear memory (a flat bytes / tet column).", "",
+             + ", ".join(f"{x:.2f}" for x in os.getloadavg()) + f" (1 / 5 / 15 min, 2 cores, shared). {note}", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
     return "\n".join(lines) + "\n"
@@ -548,16 +553,11 @@ def compress_section(names) -> str:
                 rows.append([name, f"{mesh.n_tets:,}", label, str(code), f"{wall:.1f}", f"{peak:.0f}",
                              f"{peak * 2**20 / mesh.n_tets:.0f}", f"{size / 2**20:.1f}"])
     head = ["mesh", "tets", "mode", "exit", "wall s", "peak RSS MB", "peak bytes / tet", "file MB"]
-    lines = [COMPRESS_HEAD, "",
-             f"Command: `python bench/bench_simplify.py --only compress-scale`, "
-             f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load average "
-             + ", ".join(f"{x:.2f}" for x in os.getloadavg()) + " (1 / 5 / 15 min, 2 cores, shared). The installed "
-             "`tetc compress MESH.vtu -o out.tetc --quiet [--mesh-only]` under GNU time (its own peak resident set, "
-             "wall from start to exit, warm numba cache). Target (issue 12): with all levels <= 4 min and <= 4 GB, "
-             "mesh-only <= 60 s and <= 3 GB, on a ~10 M-tet unstructured mesh.", "",
-             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(lines) + "\n"
+    return _timed_table(COMPRESS_HEAD, "--only compress-scale`",
+                        "The installed `tetc compress MESH.vtu -o out.tetc --quiet [--mesh-only]` under GNU time (its "
+                        "own peak resident set, wall from start to exit, warm numba cache). Target (issue 12): with all "
+                        "levels <= 4 min and <= 4 GB, mesh-only <= 60 s and <= 3 GB, on a ~10 M-tet unstructured mesh.",
+                        head, rows)
 
 
 def only_section(head: str, new: str) -> int:

@@ -322,8 +322,47 @@ def boundary_faces(tets: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(faces[once], dtype=np.int32)
 
 
+# Vertex ids below this fit three to an int64 key (21 bits each): face_multiplicity packs them.
+_KEY_BITS = 21
+
+
+def _packed_face_keys(tets: np.ndarray) -> np.ndarray:
+    """Every face of every tet as one int64 key a << 42 | b << 21 | c of its sorted ids (a < b < c),
+    built face by face: ordering the keys orders the triples lexicographically. 8 bytes per face
+    and (m,)-sized temporaries, where (4m, 3) int64 triples and their lexsort take 40 + 24."""
+    t = np.asarray(tets)
+    m = t.shape[0]
+    keys = np.empty((4, m), np.int64)
+    for k in range(4):
+        x, y, z = (t[:, TET_FACES[k, j]].astype(np.int64) for j in range(3))
+        lo = np.minimum(np.minimum(x, y), z)
+        hi = np.maximum(np.maximum(x, y), z)
+        mid = x + y + z - lo - hi
+        np.left_shift(lo, 2 * _KEY_BITS, out=keys[k])
+        keys[k] |= mid << _KEY_BITS
+        keys[k] |= hi
+    return keys.reshape(-1)
+
+
 def face_multiplicity(tets: np.ndarray):
-    """For validation: (number of distinct faces, rows of faces shared by > 2 tets as sorted triples)."""
+    """For validation: (how many tets share each distinct face, in the lexicographic order of its
+    sorted ids; rows of the faces shared by > 2 tets as sorted triples, in that order)."""
+    t = np.asarray(tets)
+    if t.shape[0] and int(t.max()) < (1 << _KEY_BITS) and int(t.min()) >= 0:
+        # bounded memory (a 10 M-tet mesh: 0.5 GB instead of 3.9 GB): one sorted int64 key per face
+        keys = _packed_face_keys(t)
+        keys.sort()
+        starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]])
+        counts = np.diff(np.r_[starts, keys.shape[0]])
+        bad = keys[starts[counts > 2]]
+        mask = (1 << _KEY_BITS) - 1
+        over = np.stack([bad >> (2 * _KEY_BITS), (bad >> _KEY_BITS) & mask, bad & mask], axis=1)
+        return counts, over
+    return _face_multiplicity_triples(t)
+
+
+def _face_multiplicity_triples(tets: np.ndarray):
+    """:func:`face_multiplicity` for any ids, by lexsorting the (4m, 3) sorted triples."""
     sorted_faces, _ = face_keys(tets)
     order, gid, counts = _unique_face_counts(sorted_faces)
     bad = counts > 2

@@ -274,6 +274,10 @@ def default_step(points, boundary_faces) -> float:
     return float(np.median(lengths)) * 0.5 if len(lengths) else 1.0
 
 
+# Tets per chunk of signed_volumes.
+_VOLUME_CHUNK = 1 << 16
+
+
 def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     """The signed volume of each tet, computed in float64.
 
@@ -281,14 +285,16 @@ def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     coplanar on a grid line reports exactly 0.
     """
     p = np.asarray(points, dtype=np.float64)
-    t = np.asarray(tets, dtype=np.int64)
-    if t.shape[0] == 0:
-        return np.zeros(0)
-    a = p[t[:, 0]]
-    u = p[t[:, 1]] - a
-    v = p[t[:, 2]] - a
-    w = p[t[:, 3]] - a
-    return np.einsum("ij,ij->i", u, np.cross(v, w)) / 6.0
+    t = np.asarray(tets)
+    out = np.empty(t.shape[0])
+    for lo in range(0, t.shape[0], _VOLUME_CHUNK):  # bounded temporaries (150 bytes per tet at once)
+        c = t[lo:lo + _VOLUME_CHUNK].astype(np.int64)
+        a = p[c[:, 0]]
+        u = p[c[:, 1]] - a
+        v = p[c[:, 2]] - a
+        w = p[c[:, 3]] - a
+        out[lo:lo + c.shape[0]] = np.einsum("ij,ij->i", u, np.cross(v, w)) / 6.0
+    return out
 
 
 def face_keys(tets: np.ndarray):

@@ -1316,14 +1316,27 @@ def _sample_points(pts, dens, T, tet_w, centroid_weight):
 
 
 @njit(cache=True)
-def _accumulate_quadrics(T, q, out):
-    """out[v] += q[t] for every corner v of every tet t, corner by corner (the order of a bincount
-    over the corner-major index list)."""
+def _accumulate_quadrics(T, planes, out):
+    """out[v] += the weighted quadric of tet t for every corner v of every tet t, corner by corner
+    (the order of a bincount over the corner-major index list). ``planes[t]`` = (unit normal n (4),
+    offset d, weight w); the terms are formed as ``(n_i * n_j) * w`` (i <= j, row by row),
+    ``(n_i * d) * w`` and ``(d * d) * w``, the products numpy's vectorised form computes."""
+    q = np.empty(15)
     for c in range(4):
         for t in range(T.shape[0]):
             v = T[t, c]
-            for j in range(q.shape[1]):
-                out[v, j] += q[t, j]
+            w = planes[t, 5]
+            d = planes[t, 4]
+            k = 0
+            for i in range(4):
+                for j in range(i, 4):
+                    q[k] = (planes[t, i] * planes[t, j]) * w
+                    k += 1
+            for i in range(4):
+                q[10 + i] = (planes[t, i] * d) * w
+            q[14] = (d * d) * w
+            for j in range(15):
+                out[v, j] += q[j]
 
 
 @njit(cache=True)

@@ -160,8 +160,9 @@ def tet_quadrics(u4: np.ndarray, tets: np.ndarray, weight: np.ndarray) -> np.nda
     m = tets.shape[0]
     if m == 0:
         return out
-    q = np.empty((m, 15))
-    iu = np.triu_indices(4)
+    # per tet its unit normal, offset and weight (48 bytes; its 15 quadric terms would be 120, the
+    # largest temporary of a decimation's set-up): the kernel forms the terms as numpy would
+    planes = np.empty((m, 6))
     for lo in range(0, m, _CHUNK):  # bounded temporaries
         hi = min(m, lo + _CHUNK)
         P = u4[tets[lo:hi]]  # (k, 4, 4)
@@ -176,10 +177,10 @@ def tet_quadrics(u4: np.ndarray, tets: np.ndarray, weight: np.ndarray) -> np.nda
         ok = (ln > 0) & (w > 0)
         nrm[ok] /= ln[ok, None]
         nrm[~ok] = 0.0
-        d = -np.einsum("mk,mk->m", nrm, P[:, 0, :])
-        A = (nrm[:, :, None] * nrm[:, None, :])[:, iu[0], iu[1]]  # (k, 10)
-        q[lo:hi] = np.concatenate([A, nrm * d[:, None], (d * d)[:, None]], axis=1) * np.where(ok, w, 0.0)[:, None]
-    K._accumulate_quadrics(tets, q, out)
+        planes[lo:hi, :4] = nrm
+        planes[lo:hi, 4] = -np.einsum("mk,mk->m", nrm, P[:, 0, :])
+        planes[lo:hi, 5] = np.where(ok, w, 0.0)
+    K._accumulate_quadrics(tets, planes, out)
     return out
 
 

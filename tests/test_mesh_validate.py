@@ -118,3 +118,31 @@ def test_orient_false_rejects_negative():
     t[0] = t[0][[1, 0, 2, 3]]
     with pytest.raises(MeshError, match="negatively oriented"):
         validate_tets(p, d, t, orient=False)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 60), st.integers(0, 2**32 - 1), st.booleans())
+def test_packed_face_multiplicity_equals_the_triples(m, seed, high_ids):
+    """The packed-key face count (one int64 per face) against the lexsort of (4m, 3) triples:
+    the same counts and the same over-shared faces in the same order, including ids at the top of
+    the packed range and faces shared by three or more tets."""
+    from gatun_py.mesh.model import _KEY_BITS, _face_multiplicity_triples, face_multiplicity
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(4, 12))  # few vertices: faces repeat, some in three or more tets
+    tets = np.stack([rng.choice(n, 4, replace=False) for _ in range(m)])
+    if high_ids:
+        tets = tets + ((1 << _KEY_BITS) - n)  # the largest ids that still pack
+    counts, over = face_multiplicity(tets)
+    ref_counts, ref_over = _face_multiplicity_triples(tets)
+    np.testing.assert_array_equal(counts, ref_counts)
+    np.testing.assert_array_equal(over.reshape(-1, 3), ref_over.reshape(-1, 3))
+    assert counts.sum() == 4 * m
+
+
+def test_face_multiplicity_beyond_the_packed_range_uses_the_triples():
+    from gatun_py.mesh.model import _KEY_BITS, face_multiplicity
+
+    tets = np.array([[0, 1, 2, 3], [0, 1, 2, 4], [0, 1, 2, 5]]) + (1 << _KEY_BITS)
+    counts, over = face_multiplicity(tets)
+    assert counts.sum() == 12 and over.tolist() == [[tets[0, 0], tets[0, 1], tets[0, 2]]]

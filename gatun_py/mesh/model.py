@@ -274,6 +274,10 @@ def default_step(points, boundary_faces) -> float:
     return float(np.median(lengths)) * 0.5 if len(lengths) else 1.0
 
 
+# Tets per chunk of signed_volumes.
+_VOLUME_CHUNK = 1 << 16
+
+
 def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     """The signed volume of each tet, computed in float64.
 
@@ -281,14 +285,16 @@ def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     coplanar on a grid line reports exactly 0.
     """
     p = np.asarray(points, dtype=np.float64)
-    t = np.asarray(tets, dtype=np.int64)
-    if t.shape[0] == 0:
-        return np.zeros(0)
-    a = p[t[:, 0]]
-    u = p[t[:, 1]] - a
-    v = p[t[:, 2]] - a
-    w = p[t[:, 3]] - a
-    return np.einsum("ij,ij->i", u, np.cross(v, w)) / 6.0
+    t = np.asarray(tets)
+    out = np.empty(t.shape[0])
+    for lo in range(0, t.shape[0], _VOLUME_CHUNK):  # bounded temporaries (150 bytes per tet at once)
+        c = t[lo:lo + _VOLUME_CHUNK].astype(np.int64)
+        a = p[c[:, 0]]
+        u = p[c[:, 1]] - a
+        v = p[c[:, 2]] - a
+        w = p[c[:, 3]] - a
+        out[lo:lo + c.shape[0]] = np.einsum("ij,ij->i", u, np.cross(v, w)) / 6.0
+    return out
 
 
 def face_keys(tets: np.ndarray):
@@ -322,8 +328,47 @@ def boundary_faces(tets: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(faces[once], dtype=np.int32)
 
 
+# Vertex ids below this fit three to an int64 key (21 bits each): face_multiplicity packs them.
+_KEY_BITS = 21
+
+
+def _packed_face_keys(tets: np.ndarray) -> np.ndarray:
+    """Every face of every tet as one int64 key a << 42 | b << 21 | c of its sorted ids (a < b < c),
+    built face by face: ordering the keys orders the triples lexicographically. 8 bytes per face
+    and (m,)-sized temporaries, where (4m, 3) int64 triples and their lexsort take 40 + 24."""
+    t = np.asarray(tets)
+    m = t.shape[0]
+    keys = np.empty((4, m), np.int64)
+    for k in range(4):
+        x, y, z = (t[:, TET_FACES[k, j]].astype(np.int64) for j in range(3))
+        lo = np.minimum(np.minimum(x, y), z)
+        hi = np.maximum(np.maximum(x, y), z)
+        mid = x + y + z - lo - hi
+        np.left_shift(lo, 2 * _KEY_BITS, out=keys[k])
+        keys[k] |= mid << _KEY_BITS
+        keys[k] |= hi
+    return keys.reshape(-1)
+
+
 def face_multiplicity(tets: np.ndarray):
-    """For validation: (number of distinct faces, rows of faces shared by > 2 tets as sorted triples)."""
+    """For validation: (how many tets share each distinct face, in the lexicographic order of its
+    sorted ids; rows of the faces shared by > 2 tets as sorted triples, in that order)."""
+    t = np.asarray(tets)
+    if t.shape[0] and int(t.max()) < (1 << _KEY_BITS) and int(t.min()) >= 0:
+        # bounded memory (a 10 M-tet mesh: 0.5 GB instead of 3.9 GB): one sorted int64 key per face
+        keys = _packed_face_keys(t)
+        keys.sort()
+        starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]])
+        counts = np.diff(np.r_[starts, keys.shape[0]])
+        bad = keys[starts[counts > 2]]
+        mask = (1 << _KEY_BITS) - 1
+        over = np.stack([bad >> (2 * _KEY_BITS), (bad >> _KEY_BITS) & mask, bad & mask], axis=1)
+        return counts, over
+    return _face_multiplicity_triples(t)
+
+
+def _face_multiplicity_triples(tets: np.ndarray):
+    """:func:`face_multiplicity` for any ids, by lexsorting the (4m, 3) sorted triples."""
     sorted_faces, _ = face_keys(tets)
     order, gid, counts = _unique_face_counts(sorted_faces)
     bad = counts > 2

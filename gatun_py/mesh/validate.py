@@ -123,6 +123,7 @@ def validate_tets(points: np.ndarray, density: np.ndarray | None, tets: np.ndarr
         i = int(np.flatnonzero(dup)[0])
         twin = int(order[np.flatnonzero(order == i)[0] - 1])
         raise MeshError(f"tet {i} {t[i].tolist()} duplicates tet {twin}; {_plural(int(dup.sum()), 'duplicate tet')}")
+    del order, ss, dup  # 72 bytes per tet, not held through the face count (the peak of a large read)
 
     counts, over = face_multiplicity(t)
     if len(over):

@@ -823,35 +823,29 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
                           terms, False)
     if nc == 0:
         return -1, 0.0
-    # by bound, ties by target id, so the result does not depend on list order
-    order = np.argsort(low[:nc], kind="mergesort")
+    # by bound, ties by target id, so the result does not depend on list order: an insertion sort
+    # on (bound, target) (a dozen candidates: np.argsort's allocation costs more than the sort)
+    order = np.empty(nc, np.int64)
+    for x in range(nc):
+        y = x
+        while y > 0 and (low[order[y - 1]] > low[x] or (low[order[y - 1]] == low[x] and cand[order[y - 1]] > cand[x])):
+            order[y] = order[y - 1]
+            y -= 1
+        order[y] = x
     best_b = -1
     best_e = 0.0
-    i = 0
-    while i < nc:
-        # candidates of equal bound in target-id order
-        j = i + 1
-        while j < nc and low[order[j]] == low[order[i]]:
-            j += 1
-        if j - i > 1:
-            for x in range(i + 1, j):
-                y = x
-                while y > i and cand[order[y]] < cand[order[y - 1]]:
-                    order[y], order[y - 1] = order[y - 1], order[y]
-                    y -= 1
-        for x in range(i, j):
-            k = order[x]
-            b = cand[k]
-            if best_b >= 0 and (low[k] > best_e or (low[k] == best_e and b > best_b)):
-                return best_b, best_e
-            counters[C_EXACT] += 1
-            e = _candidate_exact(a, b, terms[k], st, T, pts, dens, params, pw, ctx)
-            if best_b >= 0 and (e > best_e or (e == best_e and b > best_b)):
-                continue
-            if _link_ok(a, b, st, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
-                best_b = b
-                best_e = e
-        i = j
+    for x in range(nc):
+        k = order[x]
+        b = cand[k]
+        if best_b >= 0 and (low[k] > best_e or (low[k] == best_e and b > best_b)):
+            return best_b, best_e
+        counters[C_EXACT] += 1
+        e = _candidate_exact(a, b, terms[k], st, T, pts, dens, params, pw, ctx)
+        if best_b >= 0 and (e > best_e or (e == best_e and b > best_b)):
+            continue
+        if _link_ok(a, b, st, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
+            best_b = b
+            best_e = e
     return best_b, best_e
 
 
@@ -1322,14 +1316,27 @@ def _sample_points(pts, dens, T, tet_w, centroid_weight):
 
 
 @njit(cache=True)
-def _accumulate_quadrics(T, q, out):
-    """out[v] += q[t] for every corner v of every tet t, corner by corner (the order of a bincount
-    over the corner-major index list)."""
+def _accumulate_quadrics(T, planes, out):
+    """out[v] += the weighted quadric of tet t for every corner v of every tet t, corner by corner
+    (the order of a bincount over the corner-major index list). ``planes[t]`` = (unit normal n (4),
+    offset d, weight w); the terms are formed as ``(n_i * n_j) * w`` (i <= j, row by row),
+    ``(n_i * d) * w`` and ``(d * d) * w``, the products numpy's vectorised form computes."""
+    q = np.empty(15)
     for c in range(4):
         for t in range(T.shape[0]):
             v = T[t, c]
-            for j in range(q.shape[1]):
-                out[v, j] += q[t, j]
+            w = planes[t, 5]
+            d = planes[t, 4]
+            k = 0
+            for i in range(4):
+                for j in range(i, 4):
+                    q[k] = (planes[t, i] * planes[t, j]) * w
+                    k += 1
+            for i in range(4):
+                q[10 + i] = (planes[t, i] * d) * w
+            q[14] = (d * d) * w
+            for j in range(15):
+                out[v, j] += q[j]
 
 
 @njit(cache=True)

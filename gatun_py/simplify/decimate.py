@@ -160,8 +160,9 @@ def tet_quadrics(u4: np.ndarray, tets: np.ndarray, weight: np.ndarray) -> np.nda
     m = tets.shape[0]
     if m == 0:
         return out
-    q = np.empty((m, 15))
-    iu = np.triu_indices(4)
+    # per tet its unit normal, offset and weight (48 bytes; its 15 quadric terms would be 120, the
+    # largest temporary of a decimation's set-up): the kernel forms the terms as numpy would
+    planes = np.empty((m, 6))
     for lo in range(0, m, _CHUNK):  # bounded temporaries
         hi = min(m, lo + _CHUNK)
         P = u4[tets[lo:hi]]  # (k, 4, 4)
@@ -176,10 +177,10 @@ def tet_quadrics(u4: np.ndarray, tets: np.ndarray, weight: np.ndarray) -> np.nda
         ok = (ln > 0) & (w > 0)
         nrm[ok] /= ln[ok, None]
         nrm[~ok] = 0.0
-        d = -np.einsum("mk,mk->m", nrm, P[:, 0, :])
-        A = (nrm[:, :, None] * nrm[:, None, :])[:, iu[0], iu[1]]  # (k, 10)
-        q[lo:hi] = np.concatenate([A, nrm * d[:, None], (d * d)[:, None]], axis=1) * np.where(ok, w, 0.0)[:, None]
-    K._accumulate_quadrics(tets, q, out)
+        planes[lo:hi, :4] = nrm
+        planes[lo:hi, 4] = -np.einsum("mk,mk->m", nrm, P[:, 0, :])
+        planes[lo:hi, 5] = np.where(ok, w, 0.0)
+    K._accumulate_quadrics(tets, planes, out)
     return out
 
 
@@ -241,7 +242,8 @@ class DecimationState:
         self.counters = np.zeros(8, np.int64)
         self.ver = np.zeros(n, np.int32)
         self.last_err = np.full(n, -1.0)
-        cap = 4 * n + 1024
+        # at most one live entry per vertex: a full heap compacts to <= n and has n free slots again
+        cap = 2 * n + 1024
         self.h_err = np.zeros(cap)
         self.h_v = np.zeros(cap, np.int32)
         self.h_b = np.zeros(cap, np.int32)

@@ -178,6 +178,23 @@ def group_by_ray(ray, n_rays):
 
 
 @njit(cache=True)
+def sort_run(order, lo, hi, key, tie):
+    """Insertion sort of ``order[lo:hi]`` by ``(key[i], tie[i])`` ascending, stable: for the few
+    items one ray has (boundary crossings by (t, exits first), fragments by (front, back) depth)."""
+    for i in range(lo + 1, hi):
+        x = order[i]
+        j = i - 1
+        while j >= lo:
+            y = order[j]
+            if key[y] > key[x] or (key[y] == key[x] and tie[y] > tie[x]):
+                order[j + 1] = y
+                j -= 1
+            else:
+                break
+        order[j + 1] = x
+
+
+@njit(cache=True)
 def _pair_hits(n_rays, hit_ray, hit_t, hit_face, hit_enter):
     """Sort each ray's boundary crossings by t and pair them into (entry, exit) segments."""
     m = hit_ray.shape[0]
@@ -189,18 +206,7 @@ def _pair_hits(n_rays, hit_ray, hit_t, hit_face, hit_enter):
     anomalies = 0
     for r in range(n_rays):
         lo, hi = start[r], start[r + 1]
-        # insertion sort by (t, exits first): rays cross few boundary faces
-        for i in range(lo + 1, hi):
-            x = order[i]
-            j = i - 1
-            while j >= lo:
-                y = order[j]
-                if hit_t[y] > hit_t[x] or (hit_t[y] == hit_t[x] and hit_enter[y] and not hit_enter[x]):
-                    order[j + 1] = y
-                    j -= 1
-                else:
-                    break
-            order[j + 1] = x
+        sort_run(order, lo, hi, hit_t, hit_enter)  # by (t, exits first): rays cross few boundary faces
         # an entry a rounding error ahead of an exit at the same place (seams, touching parts)
         for i in range(lo, hi - 1):
             x, y = order[i], order[i + 1]

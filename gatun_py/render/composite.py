@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ._boundary import group_by_ray
+from ._boundary import group_by_ray, sort_run
 from ._segments import ACC_A, ACC_B, ACC_G, ACC_R, BACK, FRONT, SEG_ACC, SEG_FACE, SEG_RAY, SEG_TS, TS_T
 
 # columns of Fragments.depth
@@ -158,17 +158,7 @@ def _composite(ray, rgba, depth, n_rays, image):
     overlaps = 0
     for r in range(n_rays):
         lo, hi = start[r], start[r + 1]
-        for i in range(lo + 1, hi):
-            x = order[i]
-            j = i - 1
-            while j >= lo:
-                y = order[j]
-                if depth[y, 0] > depth[x, 0] or (depth[y, 0] == depth[x, 0] and depth[y, 1] > depth[x, 1]):
-                    order[j + 1] = y
-                    j -= 1
-                else:
-                    break
-            order[j + 1] = x
+        sort_run(order, lo, hi, depth[:, 0], depth[:, 1])
         bad = False
         for i in range(lo, hi):
             f = order[i]

@@ -6,9 +6,9 @@ import click
 
 import gatun_py
 
-from .options import (ANGLE, RATIO, ZOOM, FiniteFloat, ImageSize, echo_json, force_option, jobs_option, json_option,
-                      logger, mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
-                      selective_options, status)
+from .options import (RATIO, camera_options, echo_json, force_option, jobs_option, json_option, logger,
+                      mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
+                      selective_options, status, transfer_function_options)
 
 
 @click.command()
@@ -103,16 +103,8 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, n_bricks
               help="Simplify to this ratio (merged / all vertices, 0..1) with the stored merge forest, "
                    "starting from the most simplified stored level that is still finer.")
 @selective_options
-@click.option("--size", type=ImageSize(), default="256", show_default=True,
-              help="With --selective: the image size the cut is chosen for.")
-@click.option("--tf", "tf_spec", default="default", show_default=True, metavar="NAME|FILE",
-              help="With --selective: the transfer function the cut is chosen for (as `tetc render --tf`).")
-@click.option("--azimuth", type=ANGLE, default=0.0, show_default=True, help="With --selective: the view's azimuth.")
-@click.option("--elevation", type=ANGLE, default=0.0, show_default=True,
-              help="With --selective: the view's elevation.")
-@click.option("--zoom", type=ZOOM, default=1.0, show_default=True, help="With --selective: the view's zoom.")
-@click.option("--range", "scalar_range", type=(FiniteFloat(), FiniteFloat()), default=None, metavar="MIN MAX",
-              help="With --selective: the scalar range the transfer function is normalised to.")
+@camera_options("With --selective", size_help="the image size the cut is chosen for.")
+@transfer_function_options("With --selective")
 @jobs_option
 @force_option
 @quiet_option

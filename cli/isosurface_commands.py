@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import math
-import re
 
 import click
 
 from gatun_py._resources import peak_rss_mb
-from .options import echo_json, force_option, mesh_input_options, progress_bar, quiet_option, read_kwargs, status
+from .options import camera_options, echo_json, force_option, mesh_input_options, progress_bar, quiet_option, read_kwargs, status
 
 
 def _finite(ctx, param, values):
@@ -16,14 +15,6 @@ def _finite(ctx, param, values):
         if not math.isfinite(v):
             raise click.BadParameter(f"{v} is not a finite number")
     return values
-
-
-def _size(text: str) -> tuple[int, int]:
-    m = re.fullmatch(r"\s*(\d+)\s*(?:[xX*]\s*(\d+)\s*)?", str(text))
-    if not m or int(m.group(1)) <= 0 or (m.group(2) is not None and int(m.group(2)) <= 0):
-        raise click.BadParameter(f"must be W or WxH in pixels, got {text!r}", param_hint="--size")
-    w = int(m.group(1))
-    return w, int(m.group(2)) if m.group(2) is not None else w
 
 
 @click.command("isosurface")
@@ -51,10 +42,7 @@ def _size(text: str) -> tuple[int, int]:
                    "keep their detail until their error is W times larger.")
 @click.option("--png", type=click.Path(dir_okay=False), default=None,
               help="Also write a shaded preview (Lambert, headlight) with the camera options below.")
-@click.option("--size", default="512", show_default=True, metavar="W[xH]", help="Preview size in pixels.")
-@click.option("--azimuth", type=float, default=0.0, show_default=True, help="Preview: degrees about the view-up axis.")
-@click.option("--elevation", type=float, default=0.0, show_default=True, help="Preview: degrees up about the focal point.")
-@click.option("--zoom", type=float, default=1.0, show_default=True, help="Preview: zoom factor (VTK's Camera.Zoom).")
+@camera_options("Preview", size_default="512", size_help="size in pixels.")
 @click.option("--stats", "show_stats", is_flag=True,
               help="Print one JSON object on stdout: timings, counts, peak memory and the locked band per batch.")
 @mesh_input_options
@@ -88,7 +76,7 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
 
         from gatun_py.isosurface.extract import MAX_PREVIEW_PIXELS
 
-        w, h = _size(size)
+        w, h = size
         if w * h > MAX_PREVIEW_PIXELS:
             raise click.BadParameter(f"{w}x{h} is more than {MAX_PREVIEW_PIXELS} pixels", param_hint="--size")
         check_output_path(png, force=force)

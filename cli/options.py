@@ -110,6 +110,48 @@ def selective_options(f):
     return f
 
 
+def _helper(prefix: str, text: str) -> str:
+    return f"{prefix}: {text}" if prefix else text[0].upper() + text[1:]
+
+
+def camera_options(prefix: str = "", *, size_default: str = "256", size_help: str = "image size in pixels."):
+    """--size, --azimuth, --elevation, --zoom: the camera, as ``tetc render`` takes it.
+
+    ``prefix`` starts each help text where the options only matter with another one, e.g.
+    "With --selective" or "Preview".
+    """
+
+    def decorate(f):
+        f = click.option("--zoom", type=ZOOM, default=1.0, show_default=True,
+                         help=_helper(prefix, "zoom factor (VTK's Camera.Zoom)."))(f)
+        f = click.option("--elevation", type=ANGLE, default=0.0, show_default=True,
+                         help=_helper(prefix, "degrees up about the focal point."))(f)
+        f = click.option("--azimuth", type=ANGLE, default=0.0, show_default=True,
+                         help=_helper(prefix, "degrees about the view-up axis."))(f)
+        f = click.option("--size", type=ImageSize(), default=size_default, show_default=True,
+                         help=_helper(prefix, size_help))(f)
+        return f
+
+    return decorate
+
+
+def transfer_function_options(prefix: str = ""):
+    """--tf and --range: the transfer function and the scalar range it is normalised to."""
+
+    def decorate(f):
+        f = click.option("--range", "scalar_range", type=(FiniteFloat(), FiniteFloat()), default=None,
+                         metavar="MIN MAX",
+                         help=_helper(prefix, "scalar range the transfer function is normalised to [default: the "
+                                              "mesh's]. Fix it to compare time steps or files."))(f)
+        f = click.option("--tf", "tf_spec", default="default", show_default=True, metavar="NAME|FILE",
+                         help=_helper(prefix, "transfer function: a preset (default, bluntfin, combustion, post, "
+                                              "fire), a JSON file (project or ParaView format) or a matplotlib "
+                                              "colormap name."))(f)
+        return f
+
+    return decorate
+
+
 def read_kwargs(scalar, q_file, q_var, cell_to_point, time_step=None) -> dict:
     return dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point, time_step=time_step)
 

@@ -11,9 +11,9 @@ import gatun_py
 from gatun_py._atomic import check_output_path
 from gatun_py._resources import peak_rss_mb
 
-from .options import (ANGLE, POSITIVE, RATIO, ZOOM, Colour, FiniteFloat, ImageSize, echo_json, force_option,
-                      interruptible, logger, mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
-                      selective_options, status)
+from .options import (POSITIVE, RATIO, Colour, camera_options, echo_json, force_option, interruptible, logger,
+                      mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
+                      selective_options, status, transfer_function_options)
 
 
 def _kernels_cached(*, decoder: bool) -> bool:
@@ -52,9 +52,7 @@ def _component(text):
 @click.command()
 @click.argument("input", type=click.Path(dir_okay=False))
 @output_option("Output image: .png, .jpg, .webp, .tif or .bmp (format from the extension).")
-@click.option("--tf", "tf_spec", default="default", show_default=True, metavar="NAME|FILE",
-              help="Transfer function: a preset (default, bluntfin, combustion, post, fire), a JSON file "
-                   "(project or ParaView format) or a matplotlib colormap name.")
+@transfer_function_options()
 @click.option("--opacity-model", type=click.Choice(["gatun", "vtk"]), default=None,
               help="gatun: opacity a holds for a path of unit_distance, 1-(1-a)^(d/u) [the default, unless the "
                    "TF file says otherwise]; vtk: as VTK's unstructured-grid ray caster, attenuation a/u "
@@ -63,13 +61,7 @@ def _component(text):
               help="volume: uniform samples every --step; face: one sample per tet (at its faces).")
 @click.option("--step", type=POSITIVE, default=None,
               help="Sample spacing for --mode volume [default: half the median boundary edge].")
-@click.option("--size", type=ImageSize(), default="256", show_default=True, help="Image size in pixels.")
-@click.option("--azimuth", type=ANGLE, default=0.0, show_default=True, help="Degrees about the view-up axis.")
-@click.option("--elevation", type=ANGLE, default=0.0, show_default=True, help="Degrees up about the focal point.")
-@click.option("--zoom", type=ZOOM, default=1.0, show_default=True, help="Zoom factor (VTK's Camera.Zoom).")
-@click.option("--range", "scalar_range", type=(FiniteFloat(), FiniteFloat()), default=None, metavar="MIN MAX",
-              help="Scalar range the transfer function is normalised to [default: the mesh's]. Fix it to "
-                   "compare time steps or files.")
+@camera_options()
 @click.option("--component", default=None, metavar="K|magnitude",
               help="For a vector point array (--scalar NAME): render component K (0-based) or its magnitude "
                    "[default: component 0]. .tetc input.")

@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import os
 import re
 import signal
 import sys
@@ -17,6 +18,7 @@ import threading
 import click
 import numpy as np
 
+from gatun_py.errors import ReadError
 from gatun_py.mesh.plot3d import Q_VARIABLES
 
 MAX_IMAGE_SIDE = 8192
@@ -150,6 +152,12 @@ def transfer_function_options(prefix: str = ""):
         return f
 
     return decorate
+
+
+def require_file(path) -> None:
+    """Refuse a missing input before anything slow (compiling kernels, starting a cluster) runs."""
+    if not os.path.isfile(path):
+        raise ReadError(f"{path}: no such file")
 
 
 def read_kwargs(scalar, q_file, q_var, cell_to_point, time_step=None) -> dict:

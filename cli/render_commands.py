@@ -13,7 +13,7 @@ from gatun_py._resources import peak_rss_mb
 
 from .options import (POSITIVE, RATIO, Colour, camera_options, echo_json, force_option, interruptible, logger,
                       mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
-                      selective_options, status, transfer_function_options)
+                      require_file, selective_options, status, transfer_function_options)
 
 
 def _kernels_cached(*, decoder: bool) -> bool:
@@ -143,6 +143,7 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
         raise click.UsageError("--orbit renders a series on a cluster: give --workers N (a local one) or --scheduler")
     image_format(output)  # refuse what cannot be written before the work, not after
     check_output_path(output, force=force)
+    require_file(input)
     decoder = is_tetc(input)  # a mesh file is rendered without the decoder: no need to compile it
     if not _kernels_cached(decoder=decoder):
         what = "the decoder and the renderer on two cores" if decoder else "the renderer"

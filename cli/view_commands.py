@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import ipaddress
-import os
 import time
 
 import click
 
-from gatun_py.errors import OptionError, ReadError, TetcError
+from gatun_py.errors import OptionError, TetcError
 
-from .options import quiet_option, status
+from .options import quiet_option, require_file, status
 
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
 
@@ -54,8 +53,7 @@ def view(input, port, host, no_browser, token, quiet):
 
     if token is not None and (len(token) < 8 or not token.isalnum()):
         raise OptionError("--token must be at least 8 letters or digits")
-    if not os.path.isfile(input):
-        raise ReadError(f"{input}: no such file")
+    require_file(input)
     if not is_tetc(input):
         raise OptionError(f"{input}: tetc view needs a .tetc file (make one with: tetc compress {input} -o FILE.tetc)")
     server = require_web()

@@ -95,3 +95,20 @@ def test_malformed_tf_json(mesh_file, tmp_path):
     tf.write_text('{"color": [}')
     res = CliRunner().invoke(tetc, ["render", str(path), "-o", str(tmp_path / "x.png"), "--tf", str(tf)])
     assert res.exit_code == 1 and "malformed JSON" in res.output
+
+
+def test_missing_input_fails_before_any_compiling(tmp_path, monkeypatch):
+    """With an empty numba cache a missing input must not first cost a minute of compiling."""
+    import gatun_py.cli.render_commands as rc
+    import gatun_py.warmup as warmup
+
+    def refuse(**_):
+        raise AssertionError("compiled or loaded kernels for a missing input")
+
+    monkeypatch.setattr(rc, "_kernels_cached", lambda **_: False)
+    monkeypatch.setattr(warmup, "compile_for_render", refuse)
+    monkeypatch.setattr(warmup, "load_kernels", refuse)
+    res = run("render", tmp_path / "none.tetc", "-o", tmp_path / "o.png")
+    assert res.exit_code == 1
+    assert "no such file" in res.output
+    assert not (tmp_path / "o.png").exists()

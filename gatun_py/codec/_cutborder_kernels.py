@@ -19,7 +19,8 @@ multiplication by a constant (a 2-D array's row stride is a run-time value: one 
 the list walks' chain of dependent loads): vertices (+ apex data) in columns 0-3, sequence number
 (``E_SEQ``, -1: free slot), incidence-list links per corner (``E_NEXT``, ``E_PREV``; node id =
 4 * slot + corner, taken apart with a shift and a mask rather than a floor division by 3),
-free-list link (``E_FREE``); ``vhead (nv) int32`` list heads;
+free-list link (``E_FREE``; slots never used are handed out in order past ``BS_BUMP``, so the
+table needs no initialisation); ``vhead (nv) int32`` list heads;
 ``Q (qcap, 2) int64`` FIFO ring of (slot, sequence); ``bs int64`` scalars (see ``BS_*``).
 """
 
@@ -30,7 +31,7 @@ from numba import njit
 
 from . import rangecoder as rc
 
-BS_NFREE, BS_QHEAD, BS_QTAIL, BS_SEQ, BS_LIVE, BS_PEAK, BS_FREE_HEAD = 0, 1, 2, 3, 4, 5, 6
+BS_NFREE, BS_QHEAD, BS_QTAIL, BS_SEQ, BS_LIVE, BS_PEAK, BS_FREE_HEAD, BS_BUMP = 0, 1, 2, 3, 4, 5, 6, 7
 # columns of the element table E: vertices/apex 0-3, sequence, list links per corner, free list
 E_SEQ, E_NEXT, E_PREV, E_FREE, E_COLS = 4, 5, 8, 11, 12
 MAX_SLOTS = 1 << 29  # node ids 4 * slot + corner are int32
@@ -71,14 +72,12 @@ def new_border(n_vertices: int, cap: int, qcap: int):
     """Allocate an empty border for ``n_vertices`` vertices."""
     cap = max(int(cap), 16)
     qcap = max(int(qcap), 16)
-    E = np.full((cap, E_COLS), -1, np.int32)
-    E[:, E_FREE] = np.arange(1, cap + 1)  # free list through the slots
-    E[cap - 1, E_FREE] = -1
+    E = np.empty((cap, E_COLS), np.int32)
     vhead = np.full(max(int(n_vertices), 1), -1, np.int32)
     Q = np.zeros((qcap, 2), np.int64)
     bs = np.zeros(8, np.int64)
     bs[BS_NFREE] = cap
-    bs[BS_FREE_HEAD] = 0
+    bs[BS_FREE_HEAD] = -1  # freed slots; the never used ones start at BS_BUMP = 0
     return (E.reshape(-1), vhead, Q, bs)
 
 
@@ -91,11 +90,9 @@ def grow_border(B, need_slots: int, need_queue: int):
     nfree = int(bs[BS_NFREE])
     if nfree < need_slots:
         new_cap = min(max(2 * cap, cap + need_slots), MAX_SLOTS - 1)  # the caller checks cap + need_slots
-        extra = np.full((new_cap - cap, E_COLS), -1, np.int32)
-        extra[:, E_FREE] = np.arange(cap + 1, new_cap + 1)
-        extra[-1, E_FREE] = bs[BS_FREE_HEAD]  # new slots first, then the old free list
-        E = np.concatenate([E, extra])
-        bs[BS_FREE_HEAD] = cap
+        grown = np.empty((new_cap, E_COLS), np.int32)  # slots past BS_BUMP are written when handed out
+        grown[:cap] = E
+        E = grown
         bs[BS_NFREE] = nfree + new_cap - cap
     qcap = Q.shape[0]
     used = int(bs[BS_QTAIL] - bs[BS_QHEAD])
@@ -125,7 +122,11 @@ def _add(B, k, v0, v1, v2, v3):
     of the triangle or tet that created it, for the geometry coder); returns its slot."""
     E, vhead, Q, bs = B
     s = bs[BS_FREE_HEAD]
-    bs[BS_FREE_HEAD] = E[s * E_COLS + E_FREE]
+    if s != -1:
+        bs[BS_FREE_HEAD] = E[s * E_COLS + E_FREE]
+    else:
+        s = bs[BS_BUMP]
+        bs[BS_BUMP] = s + 1
     bs[BS_NFREE] -= 1
     E[s * E_COLS + 0] = v0
     E[s * E_COLS + 1] = v1

@@ -138,3 +138,45 @@ def test_damaged_streams_raise_or_decode_consistently(seed, which, n_flips):
     assert len(tets) == e.n_tets and len(faces) == e.n_boundary_faces
     naive_traversal_check(faces, tets)
     assert tets.max() < e.n_points
+
+
+def test_border_beyond_the_slot_limit_is_refused(monkeypatch):
+    """Border node ids are 4 * slot + corner in int32: the encoder refuses a mesh whose border could
+    outgrow the slot limit and the decoder refuses to grow past it (a clear error, not a wrapped id)."""
+    from gatun_py.codec import _cutborder_kernels as K
+    from gatun_py.errors import MeshError
+
+    mesh = grid_mesh(6, 6, 6)
+    e = encode_connectivity(mesh.n_points, mesh.tets)
+    d = _decoder(e)
+    d.boundary()
+    # a tet phase that starts with the boundary faces and no room to spare must grow its border
+    tight = K.new_border
+    monkeypatch.setattr(K, "new_border", lambda n, cap, qcap: tight(n, e.n_boundary_faces + 4, qcap))
+    d.start_tets()
+    start_rows = len(d._B[0]) // K.E_COLS
+    monkeypatch.setattr(K, "MAX_SLOTS", start_rows + 64)
+    with pytest.raises(CorruptFileError, match="cut border"):
+        while d.tets_done < d.n_tets:
+            d.next_tets(1 << 20)
+    monkeypatch.setattr(K, "MAX_SLOTS", 2 * mesh.n_tets)
+    with pytest.raises(MeshError, match="too large"):
+        encode_connectivity(mesh.n_points, mesh.tets)
+
+
+def test_decoder_border_grows_from_a_tight_start(monkeypatch):
+    """A border that must grow many times (new rows unused until handed out) decodes the same tets."""
+    from gatun_py.codec import _cutborder_kernels as K
+
+    mesh = load_sample("post")[0]
+    e = encode_connectivity(mesh.n_points, mesh.tets)
+    d = _decoder(e)
+    d.boundary()
+    tight = K.new_border
+    monkeypatch.setattr(K, "new_border", lambda n, cap, qcap: tight(n, e.n_boundary_faces + 4, e.n_boundary_faces + 4))
+    d.start_tets()
+    parts = []
+    while d.tets_done < d.n_tets:
+        parts.append(d.next_tets(101))
+    assert np.array_equal(np.concatenate(parts), e.tets)
+    assert len(d._B[0]) // K.E_COLS > e.n_boundary_faces + 4  # it did grow

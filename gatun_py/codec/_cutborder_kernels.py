@@ -14,9 +14,13 @@ with an error code instead of touching memory out of bounds.
 
 Border arrays, passed as a tuple ``B = (E, vhead, Q, bs)`` (few arrays: every array passed to a
 kernel costs reference-count updates on each call, which dominated the per-tet cost before):
-``E (cap, 12) int32`` one row per slot: vertices (+ apex data) in columns 0-3, sequence number
+``E (cap * E_COLS,) int32`` one row of ``E_COLS`` per slot, flat so that a row's offset is a
+multiplication by a constant (a 2-D array's row stride is a run-time value: one more multiply on
+the list walks' chain of dependent loads): vertices (+ apex data) in columns 0-3, sequence number
 (``E_SEQ``, -1: free slot), incidence-list links per corner (``E_NEXT``, ``E_PREV``; node id =
-3 * slot + corner), free-list link (``E_FREE``); ``vhead (nv) int32`` list heads;
+4 * slot + corner, taken apart with a shift and a mask rather than a floor division by 3),
+free-list link (``E_FREE``; slots never used are handed out in order past ``BS_BUMP``, so the
+table needs no initialisation); ``vhead (nv) int32`` list heads;
 ``Q (qcap, 2) int64`` FIFO ring of (slot, sequence); ``bs int64`` scalars (see ``BS_*``).
 """
 
@@ -27,9 +31,10 @@ from numba import njit
 
 from . import rangecoder as rc
 
-BS_NFREE, BS_QHEAD, BS_QTAIL, BS_SEQ, BS_LIVE, BS_PEAK, BS_FREE_HEAD = 0, 1, 2, 3, 4, 5, 6
+BS_NFREE, BS_QHEAD, BS_QTAIL, BS_SEQ, BS_LIVE, BS_PEAK, BS_FREE_HEAD, BS_BUMP = 0, 1, 2, 3, 4, 5, 6, 7
 # columns of the element table E: vertices/apex 0-3, sequence, list links per corner, free list
 E_SEQ, E_NEXT, E_PREV, E_FREE, E_COLS = 4, 5, 8, 11, 12
+MAX_SLOTS = 1 << 29  # node ids 4 * slot + corner are int32
 
 MAX_C1 = 15  # coded edge-adjacent candidates (symbol 15 = escape)
 MAX_C2 = 64  # vertex-adjacent candidates
@@ -67,30 +72,27 @@ def new_border(n_vertices: int, cap: int, qcap: int):
     """Allocate an empty border for ``n_vertices`` vertices."""
     cap = max(int(cap), 16)
     qcap = max(int(qcap), 16)
-    E = np.full((cap, E_COLS), -1, np.int32)
-    E[:, E_FREE] = np.arange(1, cap + 1)  # free list through the slots
-    E[cap - 1, E_FREE] = -1
+    E = np.empty((cap, E_COLS), np.int32)
     vhead = np.full(max(int(n_vertices), 1), -1, np.int32)
     Q = np.zeros((qcap, 2), np.int64)
     bs = np.zeros(8, np.int64)
     bs[BS_NFREE] = cap
-    bs[BS_FREE_HEAD] = 0
-    return (E, vhead, Q, bs)
+    bs[BS_FREE_HEAD] = -1  # freed slots; the never used ones start at BS_BUMP = 0
+    return (E.reshape(-1), vhead, Q, bs)
 
 
 def grow_border(B, need_slots: int, need_queue: int):
     """A copy of border ``B`` with room for at least ``need_slots`` more elements and queue entries."""
     E, vhead, Q, bs = B
+    E = E.reshape(-1, E_COLS)
     bs = bs.copy()
     cap = E.shape[0]
     nfree = int(bs[BS_NFREE])
     if nfree < need_slots:
-        new_cap = max(2 * cap, cap + need_slots)
-        extra = np.full((new_cap - cap, E_COLS), -1, np.int32)
-        extra[:, E_FREE] = np.arange(cap + 1, new_cap + 1)
-        extra[-1, E_FREE] = bs[BS_FREE_HEAD]  # new slots first, then the old free list
-        E = np.concatenate([E, extra])
-        bs[BS_FREE_HEAD] = cap
+        new_cap = min(max(2 * cap, cap + need_slots), MAX_SLOTS - 1)  # the caller checks cap + need_slots
+        grown = np.empty((new_cap, E_COLS), np.int32)  # slots past BS_BUMP are written when handed out
+        grown[:cap] = E
+        E = grown
         bs[BS_NFREE] = nfree + new_cap - cap
     qcap = Q.shape[0]
     used = int(bs[BS_QTAIL] - bs[BS_QHEAD])
@@ -102,7 +104,7 @@ def grow_border(B, need_slots: int, need_queue: int):
         Q = nq
         bs[BS_QHEAD] = 0
         bs[BS_QTAIL] = used
-    return (E, vhead, Q, bs)
+    return (E.reshape(-1), vhead, Q, bs)
 
 
 # The border helpers below are compiled with ``_nrt=False``: they never allocate, and without the
@@ -120,23 +122,27 @@ def _add(B, k, v0, v1, v2, v3):
     of the triangle or tet that created it, for the geometry coder); returns its slot."""
     E, vhead, Q, bs = B
     s = bs[BS_FREE_HEAD]
-    bs[BS_FREE_HEAD] = E[s, E_FREE]
+    if s != -1:
+        bs[BS_FREE_HEAD] = E[s * E_COLS + E_FREE]
+    else:
+        s = bs[BS_BUMP]
+        bs[BS_BUMP] = s + 1
     bs[BS_NFREE] -= 1
-    E[s, 0] = v0
-    E[s, 1] = v1
-    E[s, 2] = v2
-    E[s, 3] = v3
+    E[s * E_COLS + 0] = v0
+    E[s * E_COLS + 1] = v1
+    E[s * E_COLS + 2] = v2
+    E[s * E_COLS + 3] = v3
     seq = bs[BS_SEQ]
     bs[BS_SEQ] = seq + 1
-    E[s, E_SEQ] = seq
+    E[s * E_COLS + E_SEQ] = seq
     for c in range(k):
-        v = E[s, c]
-        node = 3 * s + c
+        v = E[s * E_COLS + c]
+        node = 4 * s + c
         h = vhead[v]
-        E[s, E_NEXT + c] = h
-        E[s, E_PREV + c] = -1
+        E[s * E_COLS + E_NEXT + c] = h
+        E[s * E_COLS + E_PREV + c] = -1
         if h != -1:
-            E[h // 3, E_PREV + h % 3] = node
+            E[(h >> 2) * E_COLS + E_PREV + (h & 3)] = node
         vhead[v] = node
     t = bs[BS_QTAIL] % Q.shape[0]
     Q[t, 0] = s
@@ -152,16 +158,16 @@ def _add(B, k, v0, v1, v2, v3):
 def _remove(B, k, s):
     E, vhead, Q, bs = B
     for c in range(k):
-        p = E[s, E_PREV + c]
-        n = E[s, E_NEXT + c]
+        p = E[s * E_COLS + E_PREV + c]
+        n = E[s * E_COLS + E_NEXT + c]
         if p != -1:
-            E[p // 3, E_NEXT + p % 3] = n
+            E[(p >> 2) * E_COLS + E_NEXT + (p & 3)] = n
         else:
-            vhead[E[s, c]] = n
+            vhead[E[s * E_COLS + c]] = n
         if n != -1:
-            E[n // 3, E_PREV + n % 3] = p
-    E[s, E_SEQ] = -1
-    E[s, E_FREE] = bs[BS_FREE_HEAD]
+            E[(n >> 2) * E_COLS + E_PREV + (n & 3)] = p
+    E[s * E_COLS + E_SEQ] = -1
+    E[s * E_COLS + E_FREE] = bs[BS_FREE_HEAD]
     bs[BS_FREE_HEAD] = s
     bs[BS_NFREE] += 1
     bs[BS_LIVE] -= 1
@@ -176,7 +182,7 @@ def _pop(B):
         h = bs[BS_QHEAD] % qcap
         bs[BS_QHEAD] += 1
         s = Q[h, 0]
-        if E[s, E_SEQ] == Q[h, 1]:
+        if E[s * E_COLS + E_SEQ] == Q[h, 1]:
             return s
     return -1
 
@@ -189,13 +195,13 @@ def _find_edge(B, p, r):
     best = -1
     best_seq = np.int64(-1)
     while node != -1:
-        s = node // 3
-        c = node - 3 * s
-        if c < 2 and E[s, 1 - c] == r:
-            if best == -1 or E[s, E_SEQ] < best_seq:
+        s = node >> 2
+        c = node & 3
+        if c < 2 and E[s * E_COLS + 1 - c] == r:
+            if best == -1 or E[s * E_COLS + E_SEQ] < best_seq:
                 best = s
-                best_seq = E[s, E_SEQ]
-        node = E[node // 3, E_NEXT + node % 3]
+                best_seq = E[s * E_COLS + E_SEQ]
+        node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
     return best
 
 
@@ -238,22 +244,22 @@ def _gather_face(B, s, cand, cscore, cseq):
     apexes of faces of T adjacent to an edge of ``s``, sorted by score (how many of the face's
     edges they are adjacent across) and then by traversal order. Returns their number."""
     E, vhead, Q, bs = B
-    a = np.int64(E[s, 0])
-    b = np.int64(E[s, 1])
-    c = np.int64(E[s, 2])
+    a = np.int64(E[s * E_COLS + 0])
+    b = np.int64(E[s * E_COLS + 1])
+    c = np.int64(E[s * E_COLS + 2])
     n1 = 0
     # faces on edges (a, b) and (a, c) are all in a's list; those on (b, c) in b's list
     for k in range(2):
         u = a if k == 0 else b
         node = vhead[u]
         while node != -1:
-            g = node // 3
-            node = E[node // 3, E_NEXT + node % 3]
+            g = node >> 2
+            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
             if g == s:
                 continue
-            g0 = np.int64(E[g, 0])
-            g1 = np.int64(E[g, 1])
-            g2 = np.int64(E[g, 2])
+            g0 = np.int64(E[g * E_COLS + 0])
+            g1 = np.int64(E[g * E_COLS + 1])
+            g2 = np.int64(E[g * E_COLS + 2])
             has_a = g0 == a or g1 == a or g2 == a
             has_b = g0 == b or g1 == b or g2 == b
             has_c = g0 == c or g1 == c or g2 == c
@@ -268,7 +274,7 @@ def _gather_face(B, s, cand, cscore, cseq):
                 x = g1
             else:
                 x = g2
-            n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g, E_SEQ])
+            n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g * E_COLS + E_SEQ])
     _sort_candidates(cand, cscore, cseq, n1)
     return n1
 
@@ -284,17 +290,17 @@ def _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq):
         u = a if k == 0 else (b if k == 1 else c)
         node = vhead[u]
         while node != -1:
-            g = node // 3
-            node = E[node // 3, E_NEXT + node % 3]
+            g = node >> 2
+            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
             shared = 0
             for cj in range(3):
-                w = E[g, cj]
+                w = E[g * E_COLS + cj]
                 if w == a or w == b or w == c:
                     shared += 1
             if shared != 1:
                 continue
             for cj in range(3):
-                w = np.int64(E[g, cj])
+                w = np.int64(E[g * E_COLS + cj])
                 if w == a or w == b or w == c:
                     continue
                 skip = False
@@ -308,12 +314,12 @@ def _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq):
                 for i in range(n2):
                     if c2[i] == w:
                         dup = True
-                        if E[g, E_SEQ] < c2seq[i]:
-                            c2seq[i] = E[g, E_SEQ]
+                        if E[g * E_COLS + E_SEQ] < c2seq[i]:
+                            c2seq[i] = E[g * E_COLS + E_SEQ]
                         break
                 if not dup and n2 < c2.shape[0]:
                     c2[n2] = w
-                    c2seq[n2] = E[g, E_SEQ]
+                    c2seq[n2] = E[g * E_COLS + E_SEQ]
                     n2 += 1
     # stable insertion sort by sequence
     for i in range(1, n2):
@@ -356,11 +362,11 @@ def _apply_tet(B, t0, t1, t2, t3):
     f2 = -1
     node = vhead[t3]
     while node != -1:
-        g = node // 3
-        c0 = node - 3 * g
-        node = E[node // 3, E_NEXT + node % 3]
-        x = E[g, 0 if c0 == 2 else c0 + 1]
-        y = E[g, 2 if c0 == 0 else c0 - 1]
+        g = node >> 2
+        c0 = node & 3
+        node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+        x = E[g * E_COLS + (0 if c0 == 2 else c0 + 1)]
+        y = E[g * E_COLS + (2 if c0 == 0 else c0 - 1)]
         if (x == t1 and y == t2) or (x == t2 and y == t1):
             f0 = g
         elif (x == t2 and y == t0) or (x == t0 and y == t2):
@@ -403,21 +409,21 @@ def _gather_edge(B, s, cand, cscore, cseq):
     """Candidates for the apex of the unvisited triangle on border edge s = {p, r}: apexes x
     that would close border edges {r, x} or {x, p}. Returns n1 (sorted like the tet phase)."""
     E, vhead, Q, bs = B
-    p = np.int64(E[s, 0])
-    r = np.int64(E[s, 1])
+    p = np.int64(E[s * E_COLS + 0])
+    r = np.int64(E[s * E_COLS + 1])
     n1 = 0
     for k in range(2):
         u = r if k == 0 else p
         other = p if k == 0 else r
         node = vhead[u]
         while node != -1:
-            g = node // 3
-            c = node - 3 * g
+            g = node >> 2
+            c = node & 3
             if c < 2 and g != s:
-                x = np.int64(E[g, 1 - c])
+                x = np.int64(E[g * E_COLS + 1 - c])
                 if x != other:
-                    n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g, E_SEQ])
-            node = E[node // 3, E_NEXT + node % 3]
+                    n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g * E_COLS + E_SEQ])
+            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
     _sort_candidates(cand, cscore, cseq, n1)
     return n1
 
@@ -507,8 +513,8 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
             _apply_triangle(B, tri[0], tri[1], tri[2], -1, -1)
             continue
         E = B[0]
-        p = np.int64(E[s, 0])
-        r = np.int64(E[s, 1])
+        p = np.int64(E[s * E_COLS + 0])
+        r = np.int64(E[s * E_COLS + 1])
         n1 = _gather_edge(B, s, cand, cscore, cseq)
         _remove(B, 2, s)
         po = order[p]
@@ -542,7 +548,7 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
                 order[nv] = xo
                 pred[nv, 0] = p
                 pred[nv, 1] = r
-                pred[nv, 3] = E[s, 2]
+                pred[nv, 3] = E[s * E_COLS + 2]
                 nv += 1
                 prev_new = 1
             else:
@@ -609,9 +615,9 @@ def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
             _apply_triangle(B, tri[0], tri[1], tri[2], -1, -1)
             continue
         E = B[0]
-        p = np.int64(E[s, 0])
-        r = np.int64(E[s, 1])
-        apex = np.int64(E[s, 2])
+        p = np.int64(E[s * E_COLS + 0])
+        r = np.int64(E[s * E_COLS + 1])
+        apex = np.int64(E[s * E_COLS + 2])
         n1 = _gather_edge(B, s, cand, cscore, cseq)
         _remove(B, 2, s)
         ctx = _score_context(n1, cscore, prev_new, 2)
@@ -763,15 +769,15 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
         while bs[BS_QHEAD] < bs[BS_QTAIL]:
             h = bs[BS_QHEAD] % qcap
             bs[BS_QHEAD] += 1
-            if E[Q[h, 0], E_SEQ] == Q[h, 1]:
+            if E[Q[h, 0] * E_COLS + E_SEQ] == Q[h, 1]:
                 s = Q[h, 0]
                 break
         if s == -1:
             return nv, 1
-        a = np.int64(E[s, 0])
-        b = np.int64(E[s, 1])
-        c = np.int64(E[s, 2])
-        behind = np.int64(E[s, 3])
+        a = np.int64(E[s * E_COLS + 0])
+        b = np.int64(E[s * E_COLS + 1])
+        c = np.int64(E[s * E_COLS + 2])
+        behind = np.int64(E[s * E_COLS + 3])
         ao = order[a]
         bo = order[b]
         co = order[c]
@@ -902,16 +908,16 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         while bs[BS_QHEAD] < bs[BS_QTAIL]:
             h = bs[BS_QHEAD] % qcap
             bs[BS_QHEAD] += 1
-            if E[Q[h, 0], E_SEQ] == Q[h, 1]:
+            if E[Q[h, 0] * E_COLS + E_SEQ] == Q[h, 1]:
                 s = Q[h, 0]
                 break
         if s == -1:
             status = ST_ERROR
             break
-        a = np.int64(E[s, 0])
-        b = np.int64(E[s, 1])
-        c = np.int64(E[s, 2])
-        behind = np.int64(E[s, 3])
+        a = np.int64(E[s * E_COLS + 0])
+        b = np.int64(E[s * E_COLS + 1])
+        c = np.int64(E[s * E_COLS + 2])
+        behind = np.int64(E[s * E_COLS + 3])
         n1 = _gather_face(B, s, cand, cscore, cseq)
         _remove(B, 3, s)
         ctx = _score_context(n1, cscore, prev_esc, 3)

@@ -88,6 +88,9 @@ RANK_BASE = RES_BASE + N_RES_CONTEXTS * INT_MODEL_SIZE
 TABLE_BASE = RANK_BASE + N_RES_CONTEXTS * INT_MODEL_SIZE
 MODEL_SIZE = TABLE_BASE + 2 * INT_MODEL_SIZE
 
+# what _gather fills
+WANT_REPEATS, WANT_BOTH, WANT_PREDICTIONS = 0, 1, 2
+
 SCORE_SHIFT = 4  # predictor scores: exponentially decayed bit lengths, window ~16 vertices
 
 # decoder status codes
@@ -320,8 +323,10 @@ def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_
 
     ``r0, r1, r2`` are the face refs and ``r3`` the apex (each ``-1`` or a checked id ``< k``).
     Fills ``cand_o[:N_CANDS[pattern]]`` (ordered ints of the predictions) and ``eq_o[:m]`` (the
-    distinct ordered ints of the refs' values, in ref order); returns ``(pattern, m)``. Without
-    ``need_cands`` only the repetition candidates are filled (a repeated value needs no prediction).
+    distinct ordered ints of the refs' values, in ref order); returns ``(pattern, m)``. ``need_cands``:
+    ``WANT_REPEATS`` fills only the repetition candidates (a repeated value needs no prediction),
+    ``WANT_BOTH`` both, ``WANT_PREDICTIONS`` only the predictions (m is then 0: the caller kept the
+    repetition candidates of its first call, which are the same).
     """
     face0 = -1
     face1 = -1
@@ -348,7 +353,7 @@ def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_
             face0 = k - 1
             nf = 1
     m = 0
-    for j in range(4):
+    for j in range(4 if need_cands != WANT_PREDICTIONS else 0):
         r = face0 if j == 0 else (face1 if j == 1 else (face2 if j == 2 else apex))
         if r < 0:
             continue
@@ -366,7 +371,7 @@ def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_
     if nf == 1:
         cand_o[0] = ordered_int(vi[face0, ch])
         return PAT_ONE, m
-    if not need_cands:
+    if need_cands == WANT_REPEATS:
         if nf == 2:
             return (PAT_EDGE_APEX if apex >= 0 else PAT_EDGE), m
         return (PAT_FACE_APEX if apex >= 0 else PAT_FACE), m
@@ -551,7 +556,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, trace):
             # not coded in this pass, but the next channel's contexts need its repeat symbols
             for k in range(n):
                 pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
-                                 vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, False)
+                                 vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS)
                 m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m)
                 o = ordered_int(vi[k, ch])
                 sym = FLAG_PREDICTED
@@ -572,7 +577,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, trace):
         big = 0
         for k in range(n):
             pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
-                             vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, False)
+                             vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS)
             m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m)
             o = ordered_int(vi[k, ch])
             is_eq = 0
@@ -590,7 +595,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, trace):
                 is_eq = 1 if sym < m else 0
             if is_eq == 0:
                 pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
-                                 vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, True)
+                                 vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_BOTH)
                 best = _best_cand(scores, ch, pat)
                 ctx = _res_context(pat, big, eq_o, m)
                 if mode == MODE_TABLE:
@@ -661,8 +666,8 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
     """Decode channel ``ch`` of vertex ``k`` (see :func:`decode_vertices`); ``flag`` is the
     repetition context left by the previous channel. Returns the context for the next channel,
     or minus an error status."""
-    pat, m = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, False)
-    m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m)
+    pat, m_refs = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS)
+    m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m_refs)
     is_eq = 0
     o = np.int64(0)
     sym = 0
@@ -674,10 +679,11 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
         elif sym > m:
             return -ERR_STREAM
     if is_eq == 0:
-        pat, m = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, True)
+        # the repetition candidates of the refs (eq_o[:m_refs]) are still those of the first call
+        pat, _ = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_PREDICTIONS)
         mode = modes[ch]
         best = _best_cand(scores, ch, pat)
-        ctx = _res_context(pat, flags[N_CHANNELS + ch], eq_o, m)
+        ctx = _res_context(pat, flags[N_CHANNELS + ch], eq_o, m_refs)
         if mode == MODE_TABLE:
             lo = tab_offs[ch]
             hi = tab_offs[ch + 1]

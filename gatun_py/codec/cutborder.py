@@ -132,6 +132,8 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> E
     faces = np.empty((int(np.count_nonzero(nbr == -1)), 3), np.int64)
     owner = np.empty(len(faces), np.int64)
     nf = K.boundary_from_neighbours(tets, nbr, faces, owner)
+    if nf + 2 * m + 8 >= K.MAX_SLOTS:  # the cut border of the tet phase holds up to nf + 2 m faces
+        raise MeshError(f"mesh too large for one .tetc stream ({m} tets, {nf} boundary faces): split it into bricks")
 
     dec_of = np.full(max(n, 1), -1, np.int64)
     order = np.full(max(n, 1), -1, np.int64)
@@ -163,7 +165,8 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> E
         dec_of[:] = dec_b
         order[:] = order_b
         pred[:] = pred_b
-        B = K.new_border(n, nf + 3 * m + 8, nf + 3 * m + 8)
+        # each tet takes its face off the border and adds at most three: at most nf + 2 m live
+        B = K.new_border(n, nf + 2 * m + 8, nf + 3 * m + 8)
         tgt = np.full(nf + 3 * m + 8, -1, np.int64)
         tgt[K.add_faces(B, out_faces, -1)] = bowner
         res = K.encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nbv, out_tets, symbols)
@@ -267,6 +270,8 @@ class ConnectivityDecoder:
                                       self._B, self.predictors, self._tstate, out[filled:])
             filled += n
             if status == K.ST_GROW:
+                if len(self._B[0]) // K.E_COLS + 64 >= K.MAX_SLOTS:
+                    raise CorruptFileError("corrupt tet section: the cut border grows beyond any mesh's")
                 self._B = K.grow_border(self._B, 64, 64)
             elif status == K.ST_ERROR:
                 raise CorruptFileError("corrupt tet section: the connectivity code is inconsistent")

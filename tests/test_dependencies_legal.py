@@ -1,0 +1,131 @@
+"""Legal cuts (a runtime legality check instead of the stored closure): whatever the order of the
+merges, the cut mesh is valid (conforming, no flat or inverted tet, a closed manifold boundary),
+has the tet count the kernel reports, and does not overlap itself (its tets' volume is the volume
+its boundary encloses); interior merges keep the input's volume exactly."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import load_sample
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from meshgen import grid_mesh, mesh_strategy
+from naive_simplify import check_valid
+
+from gatun_py.errors import OptionError
+from gatun_py.mesh.synthetic import jittered_grid
+from gatun_py.simplify import decimate
+from gatun_py.simplify.dependencies import cut_ancestors, legal_cut, legal_cut_base
+from gatun_py.simplify.forest import ancestors, mesh_from_ancestors
+
+
+def _enclosed_volume(mesh) -> float:
+    """Volume inside the boundary surface (divergence theorem over the outward faces)."""
+    bf = mesh.boundary_faces().astype(np.int64)
+    p = mesh.points.astype(np.float64)
+    return float(np.einsum("ij,ij->i", p[bf[:, 0]], np.cross(p[bf[:, 1]], p[bf[:, 2]])).sum()) / 6.0
+
+
+def _manifold(mesh) -> bool:
+    bf = mesh.boundary_faces().astype(np.int64)
+    if not bf.shape[0]:
+        return True
+    e = np.sort(bf[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    return bool(np.all(np.unique(e, axis=0, return_counts=True)[1] == 2))
+
+
+def _check_legal_cuts(mesh, forest, orders, goals, label):
+    base = legal_cut_base(mesh.tets, mesh.points, forest.parent, forest.rank)
+    n_flat = int((mesh.signed_volumes() == 0).sum())
+    manifold = _manifold(mesh)
+    vol0 = float(mesh.signed_volumes().astype(np.float64).sum())
+    scale = float(np.abs(mesh.signed_volumes()).sum())
+    boundary_merges = base.boundary[base.vertex]
+    for c, (order, goal) in enumerate(zip(orders, goals)):
+        applied, n_tets, _ = legal_cut(base, order, tets=goal)
+        out = mesh_from_ancestors(mesh, cut_ancestors(forest.parent, forest.rank, applied))[0]
+        check_valid(out, n_flat, f"{label} cut {c}", manifold=manifold)
+        assert out.n_tets == n_tets, f"{label} cut {c}: tet count {out.n_tets} vs {n_tets}"
+        vol = float(out.signed_volumes().astype(np.float64).sum())
+        assert abs(vol - _enclosed_volume(out)) <= 1e-9 * scale, f"{label} cut {c}: overlapping tets"
+        if not (applied & boundary_merges).any():
+            assert abs(vol - vol0) <= 1e-9 * scale, f"{label} cut {c}: interior merges changed the volume"
+
+
+def _orders(k, rng, n):
+    """Random orders, the reversed rank order (late merges first: the hardest for legality) and
+    the rank order itself; random goals."""
+    orders = [rng.permutation(k) for _ in range(n)] + [np.arange(k)[::-1], np.arange(k)]
+    return orders
+
+
+@settings(max_examples=40, deadline=None)
+@given(mesh_strategy(), st.integers(0, 2**32 - 1))
+def test_random_legal_cuts_are_valid(mesh, seed):
+    forest = decimate(mesh)
+    rng = np.random.default_rng(seed)
+    orders = _orders(forest.n_merges, rng, 3)
+    goals = [int(rng.integers(1, mesh.n_tets + 1)) for _ in orders]
+    _check_legal_cuts(mesh, forest, orders, goals, "random")
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.integers(3, 7), st.integers(3, 6), st.integers(3, 5), st.integers(0, 10_000))
+def test_legal_cuts_on_jittered_grids(a, b, c, seed):
+    mesh = jittered_grid((a, b, c), jitter=0.3, seed=seed)
+    forest = decimate(mesh)
+    rng = np.random.default_rng(seed)
+    orders = _orders(forest.n_merges, rng, 2)
+    _check_legal_cuts(mesh, forest, orders, [1] * len(orders), "grid")
+
+
+def test_rank_order_gives_the_prefix():
+    """In rank order every merge sees its prefix state, which the decimator validated: the legal
+    cut is the uniform one for every goal."""
+    mesh = grid_mesh(6, 5, 4, jitter=0.2, seed=3)
+    forest = decimate(mesh)
+    base = legal_cut_base(mesh.tets, mesh.points, forest.parent, forest.rank)
+    for n in (0, 1, forest.n_merges // 3, forest.n_merges - 1, forest.n_merges):
+        goal = mesh_from_ancestors(mesh, ancestors(forest.parent, forest.rank, n))[0].n_tets
+        applied, n_tets, rejected = legal_cut(base, np.arange(forest.n_merges), tets=goal)
+        assert rejected == 0
+        first = int(np.argmin(applied)) if not applied.all() else forest.n_merges
+        assert not applied[first:].any() and n_tets == goal
+        # the fewest merges that reach the goal (the prefix may reach it before merge n)
+        assert first <= n
+
+
+def test_late_merges_first_are_refused_where_illegal():
+    """Applying the last merges first is what a closed cut forbids; the legal cut applies what is
+    legal and refuses the rest, and some are refused on the first pass (the check is not vacuous)."""
+    refused = 0
+    for seed in range(4):
+        mesh = grid_mesh(5, 5, 4, jitter=0.2, seed=seed)
+        forest = decimate(mesh)
+        base = legal_cut_base(mesh.tets, mesh.points, forest.parent, forest.rank)
+        refused += legal_cut(base, np.arange(forest.n_merges)[::-1], tets=1)[2]
+    assert refused > 0
+
+
+def test_bad_order_is_refused():
+    mesh = grid_mesh(4, 4, 4, jitter=0.1, seed=1)
+    forest = decimate(mesh)
+    base = legal_cut_base(mesh.tets, mesh.points, forest.parent, forest.rank)
+    with pytest.raises(OptionError):
+        legal_cut(base, [forest.n_merges], tets=1)
+    with pytest.raises(OptionError):
+        legal_cut_base(mesh.tets, mesh.points, forest.parent[:-1], forest.rank[:-1])
+
+
+@pytest.mark.parametrize("name", ["post", "fire", "bluntfin", "combustion"])
+def test_samples_random_legal_cuts(name):
+    from test_simplify_forest import _forest
+
+    mesh = load_sample(name)[0]
+    forest = _forest(name)
+    rng = np.random.default_rng(11)
+    k = forest.n_merges
+    # importance-like orders: random, and late-first (the cuts furthest from any prefix)
+    orders = [rng.permutation(k), np.argsort(-np.arange(k) + rng.normal(0, k / 10, k))]
+    _check_legal_cuts(mesh, forest, orders, [mesh.n_tets // 20, mesh.n_tets // 100], name)

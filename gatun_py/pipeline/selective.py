@@ -52,6 +52,8 @@ Examples
 
 from __future__ import annotations
 
+import json
+import os
 import time
 from dataclasses import dataclass, replace
 
@@ -59,6 +61,7 @@ import numpy as np
 
 from ..codec import TetcReader
 from ..errors import CorruptFileError, OptionError
+from ..mesh.model import boundary_faces
 from ..render.transfer import load_transfer_function
 from ..simplify.dependencies import MergeDependencies, closed_cut_order, cut_ancestors
 from ..simplify.forest import ROOT_RANK, mesh_from_ancestors
@@ -71,6 +74,7 @@ __all__ = ["FACTORS", "SelectiveSource", "selective_source", "merge_importance",
            "take_batches", "SELECTION_ALLOWANCE_S"]
 
 FACTORS = ("colour", "light", "size", "forest")
+REGION_FACTORS = ("colour", "light", "area")
 GRID = 32  # voxels per axis of the extinction grid
 COLOUR_SAMPLES = 8
 OPAQUE_SHARE = 1.0  # weight of the largest opacity beside the colour change
@@ -95,6 +99,10 @@ class SelectiveSource:
         The rendered scalar at level 0's vertices.
     n_tets : int
         Level 0's tets.
+    tets : (n_tets, 4) int64
+        Level 0's tets (decode order).
+    boundary : (n,) bool
+        Level 0's boundary vertices.
     level, first : int
         The stored level all of this is of (0 above; another level: its forest, numbering, vertices
         and tets, and the merges its forest holds, ranks renumbered by ``-first`` = -N_level).
@@ -110,6 +118,8 @@ class SelectiveSource:
     n_tets: int
     level: int = 0
     first: int = 0
+    tets: np.ndarray | None = None
+    boundary: np.ndarray | None = None
 
     @property
     def n_merges(self) -> int:
@@ -155,15 +165,20 @@ def selective_source(reader: TetcReader, scalar: str | None = None, component=No
     points = np.empty((n, 3), np.float64)
     scalars = np.empty(n, np.float64)
     kept = []
+    tets = []
     for b in reader.iter_decode(level, scalar=scalar, component=component):
         points[b.first:b.first + len(b.points)] = b.points
         scalars[b.first:b.first + len(b.points)] = b.density
+        tets.append(np.asarray(b.tets, np.int64))
         if keep_batches:
             kept.append(b)
+    tets = np.concatenate(tets) if tets else np.zeros((0, 4), np.int64)
+    boundary = np.zeros(n, np.bool_)
+    boundary[boundary_faces(tets).ravel()] = True
     if keep_batches:
         reader.__dict__.setdefault("_selective_batches", {})[key] = kept
     src = SelectiveSource(deps, parent, rank, vertex, parent[vertex].astype(np.int64), points, scalars,
-                          int(lv["tets"]), level, first)
+                          int(lv["tets"]), level, first, tets, boundary)
     cache[key] = src
     return src
 
@@ -196,34 +211,108 @@ def merge_importance(src: SelectiveSource, camera, tf, *, lo, hi, scalar_range, 
     k = src.n_merges
     if k == 0:
         return np.ones(0)
-    pv = src.points[src.vertex]
+    cache = src.__dict__.setdefault("_importance", {})
+    if "pv" not in cache:  # view- and TF-independent: once per source
+        cache["pv"] = np.ascontiguousarray(src.points[src.vertex])
+        cache["length"] = np.linalg.norm(src.points[src.target] - cache["pv"], axis=1)
+    pv = cache["pv"]
     lo = np.asarray(lo, np.float64)
     hi = np.asarray(hi, np.float64)
     colour = light = size = forest = 1.0
-    if "colour" in factors:
+    tf_key = None
+    if "colour" in factors or "light" in factors:  # TF-dependent, view-independent: once per TF
         table, t_lo, t_inv = tf.table(scalar_range)
-        colour = K._colour_change(table, t_lo, t_inv, src.scalars[src.vertex], src.scalars[src.target],
-                                  COLOUR_SAMPLES, OPAQUE_SHARE)
-    if "light" in factors:
-        _, a = tf.resolve(scalar_range).evaluate(src.scalars)
-        sigma = -np.log1p(-np.clip(a, 0.0, 0.999)) / tf.unit_distance
-        grid = K._extinction_grid(src.points, sigma, lo, hi, GRID)
-        light = K._transmittance(grid, lo, hi, np.asarray(camera.position, np.float64), pv, GRID)
+        tf_key = (table.tobytes(), t_lo, t_inv, float(tf.unit_distance), lo.tobytes(), hi.tobytes())
+        if cache.get("tf_key") != tf_key:
+            _, a = tf.resolve(scalar_range).evaluate(src.scalars)
+            sigma = -np.log1p(-np.clip(a, 0.0, 0.999)) / tf.unit_distance
+            cache.update(tf_key=tf_key, grid=K._extinction_grid(src.points, sigma, lo, hi, GRID),
+                         colour=K._colour_change(table, t_lo, t_inv, src.scalars[src.vertex],
+                                                 src.scalars[src.target], COLOUR_SAMPLES, OPAQUE_SHARE))
+    if "colour" in factors:
+        colour = cache["colour"]
     if "size" in factors:
-        fwd, _, _ = camera.basis()
-        depth = (pv - camera.position) @ fwd
-        length = np.linalg.norm(src.points[src.target] - pv, axis=1)
-        pixel = 2.0 * np.tan(np.radians(camera.view_angle) / 2.0) / camera.height
-        with np.errstate(divide="ignore", invalid="ignore"):
-            px = np.where(depth > 0, length / (np.maximum(depth, 1e-300) * pixel), 0.0)
-            xy = camera.project(pv)
-        on = (depth > 0) & (xy[:, 0] >= -px) & (xy[:, 0] <= camera.width + px) & \
-             (xy[:, 1] >= -px) & (xy[:, 1] <= camera.height + px)
-        size = np.sqrt(np.where(on, px, 0.0))
+        fwd, right, up = camera.basis()
+        size = np.sqrt(K._projected_size(pv, cache["length"], np.asarray(camera.position, np.float64), fwd, right,
+                                         up, float(np.tan(np.radians(camera.view_angle) / 2.0)),
+                                         float(camera.width), float(camera.height)))
+    if "light" in factors:
+        # light only counts through light * colour, and not at all off the image
+        need = np.ones(k, np.bool_) if "colour" not in factors else cache["colour"] != 0.0
+        if "size" in factors:
+            need &= size != 0.0
+        light = K._transmittance_where(cache["grid"], lo, hi, np.asarray(camera.position, np.float64), pv, GRID,
+                                        need)
     if "forest" in factors:
         forest = (np.arange(k) + 1.0) / k
     modulation = EPS + light * colour if ("colour" in factors or "light" in factors) else 1.0
     return np.broadcast_to(forest * modulation * size, (k,)).astype(np.float64)
+
+
+def merge_regions(src: SelectiveSource):
+    """(radius, scalar lo, scalar hi) of the region every merge changes in its prefix state (its
+    subtree of the forest moving onto t_i), computed once per source."""
+    cache = src.__dict__.setdefault("_regions", {})
+    if "r" not in cache:
+        cache["r"] = K._merge_regions(src.vertex, src.target, src.points, src.scalars)
+    return cache["r"]
+
+
+def boundary_merges(src: SelectiveSource) -> np.ndarray:
+    """Merges of a boundary vertex (bool by rank), from the level's tets (once per source)."""
+    cache = src.__dict__.setdefault("_regions", {})
+    if "b" not in cache:
+        cache["b"] = src.boundary[src.vertex]
+    return cache["b"]
+
+
+def region_error(src: SelectiveSource, camera, tf, *, lo, hi, scalar_range, factors=REGION_FACTORS) -> np.ndarray:
+    """Predicted image error of every merge in its prefix state, for a fitted camera and a
+    transfer function (unit distance in the mesh's units)::
+
+        err(i) = colour(i) * light(i) * area(i)
+
+    * ``colour``: the largest change of premultiplied colour and opacity between t_i's value and
+      any value of the region (the subtree's scalar range), the opacity taken over a path through
+      the region (so a thin faint region counts little, a thick one as much as it shows);
+    * ``light``: transmittance from the camera to t_i (as in :func:`merge_importance`);
+    * ``area``: the region's projected area in pixels, (radius / depth / pixel angle)^2, 0 off the
+      image.
+
+    A region's error includes its whole subtree's, so err grows up the forest (a merge's error is
+    at least roughly its children's): a cut by err is close to closed by itself.
+    """
+    bad = set(factors) - set(REGION_FACTORS)
+    if bad:
+        raise OptionError(f"unknown error factor {sorted(bad)[0]!r} (choose from {', '.join(REGION_FACTORS)})")
+    k = src.n_merges
+    if k == 0:
+        return np.ones(0)
+    radius, s_lo, s_hi = merge_regions(src)
+    pt = src.points[src.target]
+    lo = np.asarray(lo, np.float64)
+    hi = np.asarray(hi, np.float64)
+    colour = light = area = 1.0
+    if "colour" in factors:
+        table, t_lo, t_inv = tf.table(scalar_range)
+        colour = K._region_colour_error(table, t_lo, t_inv, s_lo, s_hi, src.scalars[src.target], radius,
+                                        boundary_merges(src), float(tf.unit_distance), COLOUR_SAMPLES)
+    if "light" in factors:
+        _, a = tf.resolve(scalar_range).evaluate(src.scalars)
+        sigma = -np.log1p(-np.clip(a, 0.0, 0.999)) / tf.unit_distance
+        grid = K._extinction_grid(src.points, sigma, lo, hi, GRID)
+        light = K._transmittance(grid, lo, hi, np.asarray(camera.position, np.float64), pt, GRID)
+    if "area" in factors:
+        fwd, _, _ = camera.basis()
+        depth = (pt - camera.position) @ fwd
+        pixel = 2.0 * np.tan(np.radians(camera.view_angle) / 2.0) / camera.height
+        with np.errstate(divide="ignore", invalid="ignore"):
+            px = np.where(depth > 0, radius / (np.maximum(depth, 1e-300) * pixel), 0.0)
+            xy = camera.project(pt)
+        on = (depth > 0) & (xy[:, 0] >= -px) & (xy[:, 0] <= camera.width + px) & \
+             (xy[:, 1] >= -px) & (xy[:, 1] <= camera.height + px)
+        area = np.where(on, np.pi * px * px, 0.0)
+    return np.broadcast_to(colour * light * area, (k,)).astype(np.float64)
 
 
 @dataclass(frozen=True, eq=False)
@@ -323,6 +412,21 @@ def _start(reader, src: SelectiveSource, applied) -> Cut:
     return Cut(applied, src.deps.cut_tets(src.n_tets, applied), level, n, anc)
 
 
+def _transfer_function(reader, spec, diagonal: float):
+    """The view's transfer function, parsed once per reader and spec (a frame of the same TF reuses
+    it; a file is read again when it changes)."""
+    if not isinstance(spec, (str, os.PathLike, dict, list)):
+        return load_transfer_function(spec).for_size(diagonal)
+    stamp = os.stat(spec).st_mtime_ns if isinstance(spec, (str, os.PathLike)) and os.path.isfile(spec) else None
+    key = (json.dumps(spec, sort_keys=True, default=str), stamp, diagonal)
+    cache = reader.__dict__.setdefault("_selective_tfs", {})
+    if key not in cache:
+        if len(cache) > 16:
+            cache.clear()
+        cache[key] = load_transfer_function(spec).for_size(diagonal)
+    return cache[key]
+
+
 def plan_cut(reader, view: View, *, ratio=None, tets=None, merges=None, factors=FACTORS,
              uniform: bool = False, level: int = 0) -> Cut | None:
     """The cut of a selective render of ``reader`` for a view: ``ratio`` (merges = floor(ratio *
@@ -355,7 +459,7 @@ def plan_cut(reader, view: View, *, ratio=None, tets=None, merges=None, factors=
         if view.scalar is not None:
             rng = reader.array_range(view.scalar, view.component) or rng
         rng = view.scalar_range if view.scalar_range is not None else rng
-        tf = load_transfer_function(view.tf).for_size(float(np.linalg.norm(hi - lo)))
+        tf = _transfer_function(reader, view.tf, float(np.linalg.norm(hi - lo)))
         imp = merge_importance(src, view.camera.fit(lo, hi), tf, lo=lo, hi=hi, scalar_range=rng, factors=factors)
         applied = choose_cut(src, imp, merges=merges, tets=tets)
     cut = _start(reader, src, applied)

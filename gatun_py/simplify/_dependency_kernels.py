@@ -241,8 +241,9 @@ def _volumes_ok(a, b, st, T, pts, q):
 
 @njit(cache=True)
 def _legal_greedy(order, vertex, target, T, nbr, isb, pts, n_tets, goal, max_passes):
-    """Apply merges ``order[0], order[1], ...`` (merge i: vertex[i] into the current representative
-    of target[i]) when legal on the current mesh, until it has at most ``goal`` tets; merges found
+    """Apply merges ``order[0], order[1], ...`` (merge i: vertex[i] into target[i], only while
+    target[i]'s own merge is not applied, so every applied merge is an edge of the forest and the
+    ancestors are the cut's) when legal on the current mesh, until it has at most ``goal`` tets; merges found
     illegal are tried again in later passes (up to ``max_passes``) as the mesh around them changes.
 
     ``T`` and ``nbr`` are consumed (the start mesh's tets and face neighbours, copies). Returns
@@ -275,8 +276,8 @@ def _legal_greedy(order, vertex, target, T, nbr, isb, pts, n_tets, goal, max_pas
                 continue
             i = todo[j]
             a = vertex[i]
-            b = _find(jump, target[i])
-            ok = a != b and (isb[b] or not isb[a])
+            b = target[i]
+            ok = jump[b] == b and (isb[b] or not isb[a])
             st = _star(a, head, nxt, T, alive)
             n_col = -1
             if ok:

@@ -240,11 +240,15 @@ def _volumes_ok(a, b, st, T, pts, q):
 
 
 @njit(cache=True)
-def _legal_greedy(order, vertex, target, T, nbr, isb, pts, n_tets, goal, max_passes):
+def _legal_greedy(order, vertex, target, T, nbr, isb, pts, n_tets, goal, max_passes, children_first):
     """Apply merges ``order[0], order[1], ...`` (merge i: vertex[i] into target[i], only while
     target[i]'s own merge is not applied, so every applied merge is an edge of the forest and the
     ancestors are the cut's) when legal on the current mesh, until it has at most ``goal`` tets; merges found
     illegal are tried again in later passes (up to ``max_passes``) as the mesh around them changes.
+
+    ``children_first``: a merge waits (to a later pass) until every merge into its vertex is
+    applied, so the cut is a union of whole subtrees of the forest (each applied merge moves the
+    region it moved in its prefix state).
 
     ``T`` and ``nbr`` are consumed (the start mesh's tets and face neighbours, copies). Returns
     (applied (k,) bool by merge, tets left, merges rejected at least once).
@@ -262,6 +266,10 @@ def _legal_greedy(order, vertex, target, T, nbr, isb, pts, n_tets, goal, max_pas
     q = np.empty(4, np.int64)
     n_new = np.empty(3)
     tets = n_tets
+    pending = np.zeros(n, np.int64)  # merges into each vertex not applied yet
+    if children_first:
+        for i in range(k):
+            pending[target[i]] += 1
     todo = order.copy()
     n_todo = todo.shape[0]
     rejected = 0
@@ -277,6 +285,10 @@ def _legal_greedy(order, vertex, target, T, nbr, isb, pts, n_tets, goal, max_pas
             i = todo[j]
             a = vertex[i]
             b = target[i]
+            if pending[a] > 0:  # a child still to come (children_first)
+                todo[left] = i
+                left += 1
+                continue
             ok = jump[b] == b and (isb[b] or not isb[a])
             st = _star(a, head, nxt, T, alive)
             n_col = -1
@@ -296,6 +308,8 @@ def _legal_greedy(order, vertex, target, T, nbr, isb, pts, n_tets, goal, max_pas
                 _apply_merge(a, b, st, T, alive, nbr, head, nxt)
                 jump[a] = b
                 applied[i] = True
+                if children_first:
+                    pending[b] -= 1
                 tets -= n_col
             else:
                 if p == 0:

@@ -264,9 +264,12 @@ def legal_cut_base(tets, points, parent, rank) -> LegalCutBase:
     return LegalCutBase(T, nbr, isb, pts, vertex, parent[vertex])
 
 
-def legal_cut(base: LegalCutBase, order, *, tets: int, passes: int = LEGAL_PASSES):
+def legal_cut(base: LegalCutBase, order, *, tets: int, passes: int = LEGAL_PASSES, children_first: bool = False):
     """A legal cut: the merges of ``order`` (least important first) that are legal on the cut mesh
-    when their turn comes, until it has at most ``tets`` tets.
+    when their turn comes, until it has at most ``tets`` tets. A merge moves its vertex onto its
+    own parent only (never onto an ancestor further up, which is not an edge the decimator saw);
+    ``children_first``: a merge waits until every merge into its vertex is applied (the cut is a
+    union of whole subtrees of the forest), tried again on the next of ``passes`` passes.
 
     Returns
     -------
@@ -293,5 +296,5 @@ def legal_cut(base: LegalCutBase, order, *, tets: int, passes: int = LEGAL_PASSE
         raise OptionError(f"a cut order lists merges 0..{k - 1}")
     applied, n_tets, rejected = K._legal_greedy(order, base.vertex, base.target, base.tets.copy(),
                                                 base.neighbours.copy(), base.boundary, base.points,
-                                                base.tets.shape[0], int(tets), int(passes))
+                                                base.tets.shape[0], int(tets), int(passes), bool(children_first))
     return applied, int(n_tets), int(rejected)

@@ -12,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from meshgen import grid_mesh, mesh_strategy
 from naive_simplify import check_valid
+from test_simplify_dependencies import _manifold
 
 from gatun_py.errors import OptionError
 from gatun_py.mesh.synthetic import jittered_grid
@@ -37,14 +38,6 @@ def _max_coverage(mesh, n_random: int = 400, seed: int = 0) -> int:
     lam = np.einsum("mij,pmj->pmi", inv, q[:, None, :] - p0[None])
     inside = (lam > 1e-9).all(axis=2) & (lam.sum(axis=2) < 1.0 - 1e-9)
     return int(inside.sum(axis=1).max())
-
-
-def _manifold(mesh) -> bool:
-    bf = mesh.boundary_faces().astype(np.int64)
-    if not bf.shape[0]:
-        return True
-    e = np.sort(bf[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    return bool(np.all(np.unique(e, axis=0, return_counts=True)[1] == 2))
 
 
 def _check_legal_cuts(mesh, forest, orders, goals, label, *, children_first=False):

@@ -37,7 +37,19 @@ no more than the uniform one.
 Why a selective cut gains little at 95-99 % merged: the dependency closure of a late merge covers
 most earlier merges (on Blunt-fin, 94 % of them for a merge at rank 95 %), so a closed cut that
 applies 95 % of the merges is nearly the prefix whatever the importance says; the freedom is in the
-middle ranks (a merge at rank 80 % needs 3 % of the earlier ones).
+middle ranks (a merge at rank 80 % needs 3 % of the earlier ones). But the closure is not what
+binds (``bench/sections/selective.md``, "What limits the selective cut"): without it, the same
+importance order is 3-45x *worse* than uniform (overlapping tets: the *unsafe* cut), and with a
+run-time legality check instead (:func:`gatun_py.simplify.dependencies.legal_cut`: flip-free, no
+overlaps) still 2-14x worse, and it cannot reach the tet goal. Even the uniform order itself with
+0.1 % noise (sigma = 41 ranks on Blunt-fin) gives legal cuts 4-14x worse, while closed cuts of the
+same noisy order stay within 1.0-1.14x of uniform: a merge is only as good as the decimator made it
+in the state it was evaluated in, and only a closed cut reproduces that state. Per merge, the
+image change a merge makes in its prefix state is zero for 40-80 % of merges and is predicted about
+as well by the rank as by the view- and TF-dependent importance or the region error
+(:func:`region_error`; Spearman 0.55-0.71 for each). So the importance has nothing to exploit that
+the forest order does not already encode, and the closed cut, the only one that keeps the forest's
+quality, cannot move far from the prefix.
 
 Examples
 --------
@@ -201,13 +213,43 @@ def take_batches(reader, scalar=None, component=None, level: int = 0):
     return reader.__dict__.get("_selective_batches", {}).pop((scalar, component, level), None)
 
 
+def _check_factors(factors, allowed, what: str) -> None:
+    bad = set(factors) - set(allowed)
+    if bad:
+        raise OptionError(f"unknown {what} factor {sorted(bad)[0]!r} (choose from {', '.join(allowed)})")
+
+
+def _tf_state(src: SelectiveSource, tf, scalar_range, lo, hi) -> dict:
+    """What a transfer function gives every frame (cached on the source until the TF changes): the
+    extinction grid and the shipped importance's colour change."""
+    lo = np.asarray(lo, np.float64)
+    hi = np.asarray(hi, np.float64)
+    table, t_lo, t_inv = tf.table(scalar_range)
+    key = (table.tobytes(), t_lo, t_inv, float(tf.unit_distance), lo.tobytes(), hi.tobytes())
+    cache = src.__dict__.setdefault("_importance", {})
+    if cache.get("tf_key") != key:
+        _, a = tf.resolve(scalar_range).evaluate(src.scalars)
+        sigma = -np.log1p(-np.clip(a, 0.0, 0.999)) / tf.unit_distance
+        cache.update(tf_key=key, lo=lo, hi=hi, grid=K._extinction_grid(src.points, sigma, lo, hi, GRID),
+                     colour=K._colour_change(table, t_lo, t_inv, src.scalars[src.vertex], src.scalars[src.target],
+                                             COLOUR_SAMPLES, OPAQUE_SHARE))
+    return cache
+
+
+def _pixels(camera, points, extent) -> np.ndarray:
+    """``extent`` at each point seen from the camera, in pixels (0 behind it or off the image)."""
+    fwd, right, up = camera.basis()
+    return K._projected_size(points, np.ascontiguousarray(extent, np.float64),
+                             np.asarray(camera.position, np.float64), fwd, right, up,
+                             float(np.tan(np.radians(camera.view_angle) / 2.0)), float(camera.width),
+                             float(camera.height))
+
+
 def merge_importance(src: SelectiveSource, camera, tf, *, lo, hi, scalar_range, factors=FACTORS) -> np.ndarray:
     """imp(i) of every merge for a fitted camera and a transfer function (with its unit distance
     in the mesh's units) normalised to ``scalar_range`` (see the module docstring); ``factors``
     picks which of :data:`FACTORS` take part."""
-    bad = set(factors) - set(FACTORS)
-    if bad:
-        raise OptionError(f"unknown importance factor {sorted(bad)[0]!r} (choose from {', '.join(FACTORS)})")
+    _check_factors(factors, FACTORS, "importance")
     k = src.n_merges
     if k == 0:
         return np.ones(0)
@@ -216,33 +258,20 @@ def merge_importance(src: SelectiveSource, camera, tf, *, lo, hi, scalar_range, 
         cache["pv"] = np.ascontiguousarray(src.points[src.vertex])
         cache["length"] = np.linalg.norm(src.points[src.target] - cache["pv"], axis=1)
     pv = cache["pv"]
-    lo = np.asarray(lo, np.float64)
-    hi = np.asarray(hi, np.float64)
     colour = light = size = forest = 1.0
-    tf_key = None
-    if "colour" in factors or "light" in factors:  # TF-dependent, view-independent: once per TF
-        table, t_lo, t_inv = tf.table(scalar_range)
-        tf_key = (table.tobytes(), t_lo, t_inv, float(tf.unit_distance), lo.tobytes(), hi.tobytes())
-        if cache.get("tf_key") != tf_key:
-            _, a = tf.resolve(scalar_range).evaluate(src.scalars)
-            sigma = -np.log1p(-np.clip(a, 0.0, 0.999)) / tf.unit_distance
-            cache.update(tf_key=tf_key, grid=K._extinction_grid(src.points, sigma, lo, hi, GRID),
-                         colour=K._colour_change(table, t_lo, t_inv, src.scalars[src.vertex],
-                                                 src.scalars[src.target], COLOUR_SAMPLES, OPAQUE_SHARE))
+    if "colour" in factors or "light" in factors:
+        state = _tf_state(src, tf, scalar_range, lo, hi)
     if "colour" in factors:
-        colour = cache["colour"]
+        colour = state["colour"]
     if "size" in factors:
-        fwd, right, up = camera.basis()
-        size = np.sqrt(K._projected_size(pv, cache["length"], np.asarray(camera.position, np.float64), fwd, right,
-                                         up, float(np.tan(np.radians(camera.view_angle) / 2.0)),
-                                         float(camera.width), float(camera.height)))
+        size = np.sqrt(_pixels(camera, pv, cache["length"]))
     if "light" in factors:
         # light only counts through light * colour, and not at all off the image
-        need = np.ones(k, np.bool_) if "colour" not in factors else cache["colour"] != 0.0
+        need = np.ones(k, np.bool_) if "colour" not in factors else state["colour"] != 0.0
         if "size" in factors:
             need &= size != 0.0
-        light = K._transmittance_where(cache["grid"], lo, hi, np.asarray(camera.position, np.float64), pv, GRID,
-                                        need)
+        light = K._transmittance_where(state["grid"], state["lo"], state["hi"], np.asarray(camera.position, np.float64),
+                                       pv, GRID, need)
     if "forest" in factors:
         forest = (np.arange(k) + 1.0) / k
     modulation = EPS + light * colour if ("colour" in factors or "light" in factors) else 1.0
@@ -282,36 +311,23 @@ def region_error(src: SelectiveSource, camera, tf, *, lo, hi, scalar_range, fact
     A region's error includes its whole subtree's, so err grows up the forest (a merge's error is
     at least roughly its children's): a cut by err is close to closed by itself.
     """
-    bad = set(factors) - set(REGION_FACTORS)
-    if bad:
-        raise OptionError(f"unknown error factor {sorted(bad)[0]!r} (choose from {', '.join(REGION_FACTORS)})")
+    _check_factors(factors, REGION_FACTORS, "error")
     k = src.n_merges
     if k == 0:
         return np.ones(0)
     radius, s_lo, s_hi = merge_regions(src)
-    pt = src.points[src.target]
-    lo = np.asarray(lo, np.float64)
-    hi = np.asarray(hi, np.float64)
+    pt = np.ascontiguousarray(src.points[src.target])
     colour = light = area = 1.0
     if "colour" in factors:
         table, t_lo, t_inv = tf.table(scalar_range)
         colour = K._region_colour_error(table, t_lo, t_inv, s_lo, s_hi, src.scalars[src.target], radius,
                                         boundary_merges(src), float(tf.unit_distance), COLOUR_SAMPLES)
     if "light" in factors:
-        _, a = tf.resolve(scalar_range).evaluate(src.scalars)
-        sigma = -np.log1p(-np.clip(a, 0.0, 0.999)) / tf.unit_distance
-        grid = K._extinction_grid(src.points, sigma, lo, hi, GRID)
-        light = K._transmittance(grid, lo, hi, np.asarray(camera.position, np.float64), pt, GRID)
+        state = _tf_state(src, tf, scalar_range, lo, hi)
+        light = K._transmittance(state["grid"], state["lo"], state["hi"], np.asarray(camera.position, np.float64),
+                                 pt, GRID)
     if "area" in factors:
-        fwd, _, _ = camera.basis()
-        depth = (pt - camera.position) @ fwd
-        pixel = 2.0 * np.tan(np.radians(camera.view_angle) / 2.0) / camera.height
-        with np.errstate(divide="ignore", invalid="ignore"):
-            px = np.where(depth > 0, radius / (np.maximum(depth, 1e-300) * pixel), 0.0)
-            xy = camera.project(pt)
-        on = (depth > 0) & (xy[:, 0] >= -px) & (xy[:, 0] <= camera.width + px) & \
-             (xy[:, 1] >= -px) & (xy[:, 1] <= camera.height + px)
-        area = np.where(on, np.pi * px * px, 0.0)
+        area = np.pi * _pixels(camera, pt, radius) ** 2
     return np.broadcast_to(colour * light * area, (k,)).astype(np.float64)
 
 

@@ -47,8 +47,6 @@ NORMAL_EPS = 1e-6
 
 # Indices into the float parameter array.
 P_WD, P_WG, P_WV, P_WI, P_WQ, P_WS, P_NCP, P_MAXS = 0, 1, 2, 3, 4, 5, 6, 7
-# Indices into the int64 round-state array of the decimation in rounds (see _run).
-R_ON, R_STAMP, R_DONE, R_WAITING, R_COUNT = 0, 1, 2, 3, 4
 # Indices into the int64 counter array.
 C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS, C_STARTED, C_EXACT = 0, 1, 2, 3, 4, 5, 6
 
@@ -1081,19 +1079,11 @@ def _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, de
 
 @njit(cache=True)
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks, marks_b, marks_ab, tcount,
-         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pw, tp_head, tp_count, p_next,
-         rounds, blocked, deferred):
+         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pw, tp_head, tp_count, p_next):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left.
 
     ``marks*`` and ``tcount`` have one row per thread (stamps, evaluation counts); the sequential
     steps use row 0.
-
-    Rounds (``rounds[R_ON]`` = 1; 0 leaves the greedy order exactly as it is): after a merge a -> b,
-    the vertices of a's star are blocked for the rest of the round, and a merge whose a or b is
-    blocked waits (``deferred``: error, a, b, version) for the next round, which starts when more
-    merges wait than the round has done, or when the heap is empty. Merges of one round then
-    hardly touch each other's stars, so a merge's dependencies (:mod:`.dependencies`) lie in
-    earlier rounds and their chains are as long as the number of rounds, not the number of merges.
     """
     n = head.shape[0]
     mark = marks[0]
@@ -1136,9 +1126,6 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         sweeping = False
         if counters[C_MERGES] >= max_merges:
             return False
-        if rounds[R_ON] and rounds[R_WAITING] > 0 and (counters[C_HEAP] == 0 or rounds[R_WAITING] > rounds[R_DONE]):
-            _next_round(rounds, deferred, h_err, h_v, h_b, h_ver, counters, ver)
-            continue
         if counters[C_HEAP] == 0:
             # neighbourhoods two rings away from a merge may have become legal: look again
             counters[C_SWEEPS] += 1
@@ -1158,16 +1145,6 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
             n_todo = 1
             continue
         if parent[b] != b:
-            continue
-        if rounds[R_ON] and (blocked[a] == rounds[R_STAMP] or blocked[b] == rounds[R_STAMP]):
-            w = rounds[R_WAITING]
-            deferred[w, 0] = e
-            deferred[w, 1] = a
-            deferred[w, 2] = b
-            deferred[w, 3] = v_a
-            rounds[R_WAITING] = w + 1
-            if w + 1 >= deferred.shape[0]:
-                _next_round(rounds, deferred, h_err, h_v, h_b, h_ver, counters, ver)
             continue
         st_a = _star(a, head, nxt, T, alive)
         # a's star is unchanged since the entry was made (that would have bumped its version),
@@ -1193,30 +1170,11 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         rank[a] = counters[C_MERGES]
         counters[C_MERGES] += 1
         ver[a] += 1
-        if rounds[R_ON]:
-            rounds[R_DONE] += 1
-            blocked[a] = rounds[R_STAMP]
-            for i in range(k):
-                blocked[nb[i]] = rounds[R_STAMP]
         for i in range(k):
             w = nb[i]
             if parent[w] == w and not pinned[w]:
                 ver[w] += 1
                 _heap_push(h_err, h_v, h_b, h_ver, counters, max(e, last_err[w]), w, -1, ver[w], ver)
-
-
-@njit(cache=True)
-def _next_round(rounds, deferred, h_err, h_v, h_b, h_ver, counters, ver):
-    """Put the merges that waited back on the heap (those still current) and start a new round."""
-    for w in range(rounds[R_WAITING]):
-        a = np.int64(deferred[w, 1])
-        if np.int64(deferred[w, 3]) == ver[a]:
-            _heap_push(h_err, h_v, h_b, h_ver, counters, deferred[w, 0], a, np.int64(deferred[w, 2]),
-                       np.int64(deferred[w, 3]), ver)
-    rounds[R_WAITING] = 0
-    rounds[R_DONE] = 0
-    rounds[R_STAMP] += 1
-    rounds[R_COUNT] += 1
 
 
 @njit(cache=True)

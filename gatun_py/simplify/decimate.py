@@ -187,14 +187,8 @@ def tet_quadrics(u4: np.ndarray, tets: np.ndarray, weight: np.ndarray) -> np.nda
 class DecimationState:
     """All arrays of a running decimation (the kernels mutate them in place)."""
 
-    def __init__(self, mesh: TetMesh, w_density: float, w_geometry: float, rounds: bool = False):
+    def __init__(self, mesh: TetMesh, w_density: float, w_geometry: float):
         n, m = mesh.n_points, mesh.n_tets
-        # decimation in rounds (see _decimate_kernels._run): state, blocked stamps, waiting merges
-        self.rounds = np.zeros(5, np.int64)
-        self.rounds[K.R_ON] = int(rounds)
-        self.rounds[K.R_STAMP] = 1
-        self.blocked = np.zeros(n if rounds else 1, np.int64)
-        self.deferred = np.zeros((n if rounds else 1, 4), np.float64)
         self.n = n
         self.pts = mesh.points.astype(np.float64)
         self.T = np.array(mesh.tets, np.int32)
@@ -274,8 +268,7 @@ class DecimationState:
     def run(self, max_merges: int) -> bool:
         """Merge until ``max_merges`` in total; True when no legal merge is left."""
         return bool(K._run(*self._mesh_args(), self.marks, self.marks_b, self.marks_ab, self.tcount, self.counters,
-                           *self._heap_args(), self.parent, self.rank, np.int64(max_merges), *self._sample_args(),
-                           self.rounds, self.blocked, self.deferred))
+                           *self._heap_args(), self.parent, self.rank, np.int64(max_merges), *self._sample_args()))
 
     def evaluate(self, a: int, b: int):
         """(legal, error) of merging a into b in the current state (for tests against the reference)."""
@@ -310,7 +303,7 @@ class DecimationState:
 
 
 def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry: float = DEFAULT_W_GEOMETRY,
-             progress=None, max_merges: int | None = None, locked=None, rounds: bool = False) -> MergeForest:
+             progress=None, max_merges: int | None = None, locked=None) -> MergeForest:
     """Greedy Van Gelder decimation of a tetrahedral mesh into a merge forest.
 
     Parameters
@@ -329,12 +322,6 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
         so that simplified bricks still meet): added to the decimator's own pinned vertices, which
         are never merged away and never a merge target.
 
-    rounds : bool
-        Merge in rounds in which no merge touches the star of an earlier merge of the same round
-        (a merge that would waits for the next round): the merge dependencies then form short
-        chains, so selective cuts (:mod:`gatun_py.simplify.dependencies`) are freer. Off: the
-        plain greedy order.
-
     Returns
     -------
     MergeForest
@@ -344,7 +331,7 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
     for name, w in (("w_density", w_density), ("w_geometry", w_geometry)):
         if not np.isfinite(w) or w < 0:
             raise OptionError(f"{name} must be a finite number >= 0, got {w}")
-    state = DecimationState(mesh, float(w_density), float(w_geometry), rounds=bool(rounds))
+    state = DecimationState(mesh, float(w_density), float(w_geometry))
     if locked is not None:
         locked = np.asarray(locked)
         if locked.shape != (mesh.n_points,) or locked.dtype != np.bool_:

@@ -326,6 +326,21 @@ def plot(curves):
     return out
 
 
+# Measured by hand (not by this script), 2026-11-24, load average ~8 on the 2-core machine.
+NOTES = """Selection cost per frame, views cycling (3 views x 95/99 % x 4), TF fixed, the first frame of
+each TF left out (it builds the TF's colour and extinction grid once), median over 24 frames,
+`plan_cut`'s `select_s`, this branch against its base be6ee92 in alternating runs (twice each):
+Blunt-fin 14-17 / 10-12 ms (TF / TF x0.3) against 30-38 / 36-50 ms; Combustion 16-28 / 16-21 ms
+against 46-55 / 50-55 ms (2.2-4.9x less). What is left: the transmittance march (about half),
+the sort (a quarter).
+
+A forest built in rounds of independent merges (decimator option tried in commit 139dcb4 and
+reverted: a merge waits for the next round when it would touch the star of an earlier merge of
+the round; default forest bit-identical): the merge at rank 95 % still depends, transitively, on
+94 / 86 / 89 % of the earlier merges on post / fire / Combustion, against 97 / 87 / 80 % for the
+greedy forest. Rounds do not free the closed cut."""
+
+
 def main():
     from gatun_py.codec import TetcReader
 
@@ -391,6 +406,8 @@ Per-merge image change in the merge's prefix state against its predictors (Spear
 
 {table(["data", "merges", "share with no change", "rank (uniform order)", "importance (shipped)",
         "region error"], corr)}
+
+{NOTES}
 
 ## Importance ablation (RMSE at 95 %, view (30, 20), each factor left out)
 

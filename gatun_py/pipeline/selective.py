@@ -116,8 +116,6 @@ class SelectiveSource:
         Level 0's tets.
     tets : (n_tets, 4) int64
         Level 0's tets (decode order).
-    boundary : (n,) bool
-        Level 0's boundary vertices.
     level, first : int
         The stored level all of this is of (0 above; another level: its forest, numbering, vertices
         and tets, and the merges its forest holds, ranks renumbered by ``-first`` = -N_level).
@@ -134,7 +132,6 @@ class SelectiveSource:
     level: int = 0
     first: int = 0
     tets: np.ndarray | None = None
-    boundary: np.ndarray | None = None
 
     @property
     def n_merges(self) -> int:
@@ -188,12 +185,10 @@ def selective_source(reader: TetcReader, scalar: str | None = None, component=No
         if keep_batches:
             kept.append(b)
     tets = np.concatenate(tets) if tets else np.zeros((0, 4), np.int64)
-    boundary = np.zeros(n, np.bool_)
-    boundary[boundary_faces(tets).ravel()] = True
     if keep_batches:
         reader.__dict__.setdefault("_selective_batches", {})[key] = kept
     src = SelectiveSource(deps, parent, rank, vertex, parent[vertex].astype(np.int64), points, scalars,
-                          int(lv["tets"]), level, first, tets, boundary)
+                          int(lv["tets"]), level, first, tets)
     cache[key] = src
     return src
 
@@ -291,10 +286,13 @@ def merge_regions(src: SelectiveSource):
 
 
 def boundary_merges(src: SelectiveSource) -> np.ndarray:
-    """Merges of a boundary vertex (bool by rank), from the level's tets (once per source)."""
+    """Merges of a boundary vertex (bool by rank), from the level's tets (once per source, when
+    first asked: a plain render does not need it)."""
     cache = src.__dict__.setdefault("_regions", {})
     if "b" not in cache:
-        cache["b"] = src.boundary[src.vertex]
+        boundary = np.zeros(src.points.shape[0], np.bool_)
+        boundary[boundary_faces(src.tets).ravel()] = True
+        cache["b"] = boundary[src.vertex]
     return cache["b"]
 
 

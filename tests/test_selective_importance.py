@@ -124,3 +124,32 @@ def test_cached_state_gives_what_a_fresh_source_gives(setup, post_deps_tetc, spe
         e = region_error(src, cam, _tf(spec, lo, hi), lo=lo, hi=hi, scalar_range=rng)
         assert e.shape == (src.n_merges,) and np.all(np.isfinite(e)) and np.all(e >= 0)
     assert set(REGION_FACTORS) == {"colour", "light", "area"}
+
+
+def test_trilinear_reproduces_linear_functions_and_lattice_values(setup):
+    _, src, lo, hi, _ = setup
+    g = 6
+    c = K._cell_centres(np.asarray(lo, np.float64), np.asarray(hi, np.float64), g)
+    f = lambda p: 0.3 + p @ np.array([0.5, -0.25, 0.125])  # noqa: E731
+    vals = f(c).reshape(g, g, g)
+    pts = np.ascontiguousarray(src.points)
+    inside = np.all((pts >= c.min(axis=0)) & (pts <= c.max(axis=0)), axis=1)
+    got = K._trilinear(vals, np.asarray(lo, np.float64), np.asarray(hi, np.float64), pts, np.ones(len(pts), bool))
+    np.testing.assert_allclose(got[inside], f(pts[inside]), rtol=1e-12, atol=1e-12)
+    at = K._trilinear(vals, np.asarray(lo, np.float64), np.asarray(hi, np.float64), c, np.ones(len(c), bool))
+    np.testing.assert_allclose(at, vals.ravel(), rtol=1e-12, atol=1e-12)
+    assert inside.sum() > 0.3 * len(pts)
+
+
+def test_light_lattice_follows_the_per_point_march(setup):
+    """The lattice transmittance stays close to marching to every point (it is smooth at that scale)."""
+    from gatun_py.pipeline.selective import _light, _tf_state
+
+    _, src, lo, hi, rng = setup
+    cam = Camera(48, 40, 30, 20).fit(lo, hi)
+    state = _tf_state(src, _tf("post", lo, hi), rng, lo, hi)
+    eye = np.asarray(cam.position, np.float64)
+    pv = np.ascontiguousarray(src.points[src.vertex])
+    exact = K._transmittance(state["grid"], state["lo"], state["hi"], eye, pv, 32)
+    approx = _light(state, eye, pv, np.ones(len(pv), bool))
+    assert np.median(np.abs(approx - exact)) < 0.05 and np.corrcoef(approx, exact)[0, 1] > 0.75

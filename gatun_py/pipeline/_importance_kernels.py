@@ -235,3 +235,50 @@ def _projected_size(pv, length, eye, fwd, right, up, tan_half, width, height):
         else:
             out[i] = 0.0
     return out
+
+
+@njit(cache=True)
+def _cell_centres(lo, hi, g):
+    """Centres of the g^3 cells over [lo, hi], x slowest."""
+    out = np.empty((g * g * g, 3))
+    r = 0
+    for i in range(g):
+        for j in range(g):
+            for k in range(g):
+                out[r, 0] = lo[0] + (i + 0.5) * (hi[0] - lo[0]) / g
+                out[r, 1] = lo[1] + (j + 0.5) * (hi[1] - lo[1]) / g
+                out[r, 2] = lo[2] + (k + 0.5) * (hi[2] - lo[2]) / g
+                r += 1
+    return out
+
+
+@njit(cache=True)
+def _trilinear(values, lo, hi, pts, need):
+    """``values`` (g, g, g) given at the cell centres over [lo, hi], interpolated at every point
+    (clamped to the outer centres; 1 where ``need`` is False). g >= 2."""
+    g = values.shape[0]
+    out = np.empty(pts.shape[0])
+    scale = np.empty(3)
+    for d in range(3):
+        scale[d] = g / (hi[d] - lo[d]) if hi[d] > lo[d] else 0.0
+    for r in range(pts.shape[0]):
+        if not need[r]:
+            out[r] = 1.0
+            continue
+        x = min(max((pts[r, 0] - lo[0]) * scale[0] - 0.5, 0.0), g - 1.0)
+        y = min(max((pts[r, 1] - lo[1]) * scale[1] - 0.5, 0.0), g - 1.0)
+        z = min(max((pts[r, 2] - lo[2]) * scale[2] - 0.5, 0.0), g - 1.0)
+        i = min(int(x), g - 2)
+        j = min(int(y), g - 2)
+        k = min(int(z), g - 2)
+        fx = x - i
+        fy = y - j
+        fz = z - k
+        c00 = values[i, j, k] * (1.0 - fx) + values[i + 1, j, k] * fx
+        c10 = values[i, j + 1, k] * (1.0 - fx) + values[i + 1, j + 1, k] * fx
+        c01 = values[i, j, k + 1] * (1.0 - fx) + values[i + 1, j, k + 1] * fx
+        c11 = values[i, j + 1, k + 1] * (1.0 - fx) + values[i + 1, j + 1, k + 1] * fx
+        c0 = c00 * (1.0 - fy) + c10 * fy
+        c1 = c01 * (1.0 - fy) + c11 * fy
+        out[r] = c0 * (1.0 - fz) + c1 * fz
+    return out

@@ -329,10 +329,10 @@ def plot(curves):
 # Measured by hand (not by this script), 2026-11-24, load average ~8 on the 2-core machine.
 NOTES = """Selection cost per frame, views cycling (3 views x 95/99 % x 4), TF fixed, the first frame of
 each TF left out (it builds the TF's colour and extinction grid once), median over 24 frames,
-`plan_cut`'s `select_s`, this branch against its base be6ee92 in alternating runs (twice each):
-Blunt-fin 14-17 / 10-12 ms (TF / TF x0.3) against 30-38 / 36-50 ms; Combustion 16-28 / 16-21 ms
-against 46-55 / 50-55 ms (2.2-4.9x less). What is left: the transmittance march (about half),
-the sort (a quarter).
+`plan_cut`'s `select_s`, commit 401eb9d against the base be6ee92 in alternating runs (twice each,
+load average 8-10): Blunt-fin 7.7-8.0 / 7.7-9.8 ms (TF / TF x0.3) against 24-38 / 24-36 ms;
+Combustion 10.7-11.3 / 10.2-10.8 ms against 40-41 / 40-41 ms (3.1-4.7x less). What is left: the
+stable sort of the effective importance (about half), the importance's own kernels.
 
 A forest built in rounds of independent merges (decimator option tried in commit 139dcb4 and
 reverted: a merge waits for the next round when it would touch the star of an earlier merge of

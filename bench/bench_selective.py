@@ -5,7 +5,13 @@
   (0-255) against the full-resolution render of the same view at equal tet counts;
 * PSNR over tets for both (Combustion, figure) and the tets each needs for equal quality;
 * ``--budget`` runs (0.05-0.5 s at 256²): selective vs uniform, PSNR and measured frame time;
-* selection cost against the frame time, the importance ablation, the ``deps`` section's size.
+* selection cost against the frame time, the importance ablation, the ``deps`` section's size;
+* the diagnosis of what limits the selective cut (issue 13, second round): on the same cells, an
+  *unsafe* cut (the importance order without the dependency closure: overlaps allowed) and *legal*
+  cuts (the importance order with a run-time legality check instead of the closure,
+  :func:`gatun_py.simplify.dependencies.legal_cut`), with the shipped importance and with a region
+  error (:func:`gatun_py.pipeline.selective.region_error`); and the per-merge image error measured
+  in each merge's prefix state (render before and after it) against what each predictor says.
 
 Run: ``python bench/bench_selective.py [--quick]`` → ``bench/sections/selective.md`` + ``bench/figures/``.
 """
@@ -97,6 +103,148 @@ def target_table(reader, name, rows, ablation):
                     ablation.append(abl)
 
 
+def _cut_tets(tets, anc) -> int:
+    """Tets of a cut's mesh (four distinct ancestors), for any cut."""
+    a = np.sort(anc[tets], axis=1)
+    return int(((a[:, 0] != a[:, 1]) & (a[:, 1] != a[:, 2]) & (a[:, 2] != a[:, 3])).sum())
+
+
+def _unsafe_cut(src, order, goal):
+    """The shortest prefix of ``order`` (no closure) whose mesh has at most ``goal`` tets."""
+    from gatun_py.simplify.dependencies import cut_ancestors
+
+    lo, hi = 0, order.size
+    while lo < hi:
+        mid = (lo + hi) // 2
+        cut = np.zeros(order.size, bool)
+        cut[order[:mid]] = True
+        if _cut_tets(src.tets, cut_ancestors(src.parent, src.rank, cut)) <= goal:
+            hi = mid
+        else:
+            lo = mid + 1
+    cut = np.zeros(order.size, bool)
+    cut[order[:lo]] = True
+    return cut
+
+
+def _render_cut(reader, view, src, cut):
+    from gatun_py.pipeline.stream import render_tetc
+    from gatun_py.simplify.dependencies import cut_ancestors
+    from gatun_py.simplify.levels import Target
+
+    n = src.points.shape[0]
+    return render_tetc(reader, view, target=Target(0, int(cut.sum()), cut.sum() / n, 0),
+                       ancestors=cut_ancestors(src.parent, src.rank, cut))
+
+
+def _predictors(reader, view, src):
+    """(importance as shipped, region error) for a view."""
+    from gatun_py.pipeline.selective import _transfer_function, merge_importance, region_error
+    from gatun_py.pipeline.stream import file_render_defaults
+
+    lo, hi, rng, _ = file_render_defaults(reader)
+    tf = _transfer_function(reader, view.tf, float(np.linalg.norm(hi - lo)))
+    cam = view.camera.fit(lo, hi)
+    return (merge_importance(src, cam, tf, lo=lo, hi=hi, scalar_range=rng),
+            region_error(src, cam, tf, lo=lo, hi=hi, scalar_range=rng))
+
+
+def diagnose(reader, name, rows):
+    """Per cell of the target table: RMSE / uniform of the closed cut, the unsafe cut and the legal
+    cuts (tets reached, selection time), all against the uniform cut with the same tets."""
+    from gatun_py.pipeline import _importance_kernels as IK
+    from gatun_py.pipeline.selective import render_selective, selective_source
+    from gatun_py.pipeline.stream import View, render_tetc
+    from gatun_py.render.camera import Camera
+    from gatun_py.simplify.dependencies import legal_cut, legal_cut_base
+
+    n = int(reader.meta["points"])
+    base = None
+    for label, tf in transfer_functions(name):
+        for az, el in (VIEWS[:1] if QUICK else VIEWS):
+            view = View(Camera(SIZE, SIZE, az, el), tf=tf)
+            full = rgb(render_tetc(reader, view))
+            src = selective_source(reader, view.scalar, view.component)
+            if base is None:
+                base = legal_cut_base(src.tets, src.points, src.parent, src.rank)
+            imp, err = _predictors(reader, view, src)
+            # the region error per removed tet, never before a child merge (children first)
+            err_key = IK._subtree_max(err / np.maximum(src.deps.removed, 1), src.vertex, src.target, src.rank)
+            for ratio in RATIOS:
+                u = render_selective(reader, view, merges=int(ratio * n), uniform=True)
+                goal = u.stats["cut_tets"]
+                ru = quality(full, u)[0]
+                rc = quality(full, render_selective(reader, view, tets=goal))[0]
+                unsafe = _unsafe_cut(src, np.argsort(imp, kind="stable"), goal)
+                rx = quality(full, _render_cut(reader, view, src, unsafe))[0]
+                row = [name, label, f"({az:g}, {el:g})", f"{ratio:.0%}", goal, ru, rc / ru, rx / ru]
+                for key in (imp, err_key):
+                    t0 = time.perf_counter()
+                    cut, tets, _ = legal_cut(base, np.argsort(key, kind="stable"), tets=goal)
+                    sel = time.perf_counter() - t0
+                    row += [quality(full, _render_cut(reader, view, src, cut))[0] / ru, tets, sel * 1e3]
+                rows.append(row)
+                print(rows[-1], flush=True)
+
+
+NOISE = [0.001, 0.01, 0.05, 0.2]
+
+
+def order_sensitivity(reader, name):
+    """The uniform order (rank) with Gaussian noise of sigma = noise x k ranks, at 95 % merged, view
+    (30, 20): RMSE / uniform of the closed, unsafe, legal and legal children-first cuts it gives."""
+    from gatun_py.pipeline.selective import choose_cut, render_selective, selective_source
+    from gatun_py.pipeline.stream import View, render_tetc
+    from gatun_py.render.camera import Camera
+    from gatun_py.simplify.dependencies import legal_cut, legal_cut_base
+
+    view = View(Camera(SIZE, SIZE, *VIEWS[0]), tf=name)
+    full = rgb(render_tetc(reader, view))
+    src = selective_source(reader, view.scalar, view.component)
+    base = legal_cut_base(src.tets, src.points, src.parent, src.rank)
+    u = render_selective(reader, view, merges=int(RATIOS[0] * int(reader.meta["points"])), uniform=True)
+    goal, ru = u.stats["cut_tets"], quality(full, u)[0]
+    rng = np.random.default_rng(1)
+    rows = []
+    for noise in NOISE[:2] if QUICK else NOISE:
+        key = np.arange(src.n_merges) + rng.normal(0.0, noise * src.n_merges, src.n_merges)
+        order = np.argsort(key, kind="stable")
+        row = [name, noise, quality(full, _render_cut(reader, view, src, choose_cut(src, key, tets=goal)))[0] / ru,
+               quality(full, _render_cut(reader, view, src, _unsafe_cut(src, order, goal)))[0] / ru]
+        for first in (False, True):
+            cut, tets, rejected = legal_cut(base, order, tets=goal, children_first=first)
+            row += [quality(full, _render_cut(reader, view, src, cut))[0] / ru, tets, rejected]
+        rows.append(row)
+        print(rows[-1], flush=True)
+    return rows
+
+
+def per_merge_correlation(reader, name, n_merges):
+    """Spearman correlation between each predictor and the image change a merge makes in its
+    prefix state (sum of squared 0-255 differences between the renders before and after it, 128²,
+    view (30, 20)), over merges drawn from ranks 50-99 %."""
+    from scipy.stats import spearmanr
+
+    from gatun_py.pipeline.selective import render_selective, selective_source
+    from gatun_py.pipeline.stream import View
+    from gatun_py.render.camera import Camera
+
+    view = View(Camera(128, 128, *VIEWS[0]), tf=name)
+    src = selective_source(reader, view.scalar, view.component)
+    imp, err = _predictors(reader, view, src)
+    k = src.n_merges
+    ranks = np.sort(np.random.default_rng(0).choice(np.arange(k // 2, int(0.99 * k)), n_merges, replace=False))
+    measured = []
+    for r in ranks:
+        a = rgb(render_selective(reader, view, merges=int(r), uniform=True)).astype(np.float64)
+        b = rgb(render_selective(reader, view, merges=int(r) + 1, uniform=True)).astype(np.float64)
+        measured.append(float(((a - b) ** 2).sum()))
+    measured = np.array(measured)
+    preds = {"rank (uniform order)": np.arange(k) + 1.0, "importance (shipped)": imp, "region error": err}
+    return [[name, n_merges, float(np.mean(measured == 0))] +
+            [float(spearmanr(p[ranks], measured).statistic) for p in preds.values()]]
+
+
 def psnr_curve(reader, name):
     """(tets, uniform PSNR, selective PSNR) over a geometric series of tet counts."""
     from gatun_py.pipeline.selective import render_selective
@@ -178,10 +326,32 @@ def plot(curves):
     return out
 
 
+# Measured by hand (not by this script), 2026-11-24, load average ~8 on the 2-core machine.
+NOTES = """Selection cost per frame, views cycling (3 views x 95/99 % x 4), TF fixed, the first frame of
+each TF left out (it builds the TF's colour and extinction grid once), median over 24 frames,
+`plan_cut`'s `select_s`, commit 401eb9d against the base be6ee92 in alternating runs (twice each,
+load average 8-10): Blunt-fin 7.7-8.0 / 7.7-9.8 ms (TF / TF x0.3) against 24-38 / 24-36 ms;
+Combustion 10.7-11.3 / 10.2-10.8 ms against 40-41 / 40-41 ms (3.1-4.7x less). What is left: the
+stable sort of the effective importance (about half), the importance's own kernels.
+
+A forest built in rounds of independent merges (decimator option tried in commit 139dcb4 and
+reverted: a merge waits for the next round when it would touch the star of an earlier merge of
+the round; default forest bit-identical): the merge at rank 95 % still depends, transitively, on
+94 / 86 / 89 % of the earlier merges on post / fire / Combustion, against 97 / 87 / 80 % for the
+greedy forest. Rounds do not free the closed cut.
+
+Closed cuts in the middle ranks, where the closure leaves freedom (view (30, 20), the sample's TF,
+PSNR against full resolution at 2 / 5 / 15 / 40 % of the tets), by the order they follow: rank
+(uniform) 50.6 / 55.6 / 63.3 / 75.8 dB on Blunt-fin and 36.8 / 43.4 / 52.6 / 62.6 on Combustion;
+the shipped importance 50.6 / 55.1 / 59.4 / 67.6 and 36.1 / 43.0 / 53.2 / 62.8; the region error
+per removed tet 49.7 / 55.4 / 59.4 / 65.5 and 35.6 / 42.6 / 51.8 / 59.8. The forest order wins
+where there is freedom too."""
+
+
 def main():
     from gatun_py.codec import TetcReader
 
-    rows, ablation, curves, budgets, sizes = [], [], {}, [], []
+    rows, ablation, curves, budgets, sizes, diag, corr, noise = [], [], {}, [], [], [], [], []
     for name in DATASETS:
         path = tetc_file(name)
         reader = TetcReader(path)
@@ -190,6 +360,9 @@ def main():
                       reader.meta["dependencies"]["entries"] / reader.meta["dependencies"]["merges"],
                       deps, path.stat().st_size, 100.0 * deps / path.stat().st_size, 8.0 * deps / reader.meta["tets"]])
         target_table(reader, name, rows, ablation)
+        diagnose(reader, name, diag)
+        noise += order_sensitivity(reader, name)
+        corr += per_merge_correlation(reader, name, 50 if QUICK else 200)
         curves[name] = psnr_curve(reader, name)
         budgets += budget_runs(path, name)
     fig = plot(curves)
@@ -209,6 +382,39 @@ RMSE on 0-255 against the full-resolution render of the same view and transfer f
 Median selective / uniform RMSE: **{np.median(ratios):.3f}** (target <= 0.5; best {min(ratios):.3f}, worst
 {max(ratios):.3f}). Flipped tets over all cuts: {sum(r[9] for r in rows)}. Selection cost: median
 {100 * np.median(sel_share):.1f} % of the frame (target <= 5 %).
+
+## What limits the selective cut
+
+Same cells, RMSE / uniform RMSE at equal tets. *closed*: the shipped cut (importance, dependency
+closure). *unsafe*: the same importance order with no closure (overlapping tets allowed), the
+shortest prefix of it with at most the uniform cut's tets. *legal*: the same order with the
+run-time legality check instead of the closure (each merge applied only if the decimator's tests
+pass on the cut mesh as it is: an edge of it, the link condition, positive volumes, boundary
+normals; only onto its own parent), and *legal (region)*: the legal cut ordered by the region error
+per removed tet, children first. A legal cut stops when no legal merge is left: its tets can stay
+above the goal.
+
+{table(["data", "TF", "view", "merged", "tets", "RMSE uniform", "closed / uniform", "unsafe / uniform",
+        "legal / uniform", "legal tets", "legal ms", "legal (region) / uniform", "legal (region) tets",
+        "legal (region) ms"], diag)}
+
+Medians: closed {np.median([r[6] for r in diag]):.3f}, unsafe {np.median([r[7] for r in diag]):.3f},
+legal {np.median([r[8] for r in diag]):.3f} (reaching the goal in {sum(r[9] <= r[4] for r in diag)} of
+{len(diag)} cells), legal (region) {np.median([r[11] for r in diag]):.3f} ({sum(r[12] <= r[4] for r in diag)}
+of {len(diag)}).
+
+How much the order matters: the uniform order with a little noise (Gaussian, sigma = the share of
+the k merges given, in ranks), 95 % merged, view (30, 20), the sample's TF; RMSE / uniform.
+
+{table(["data", "noise (x k ranks)", "closed", "unsafe", "legal", "legal tets", "legal rejected (first pass)",
+        "legal children-first", "tets", "rejected (first pass)"], noise)}
+
+Per-merge image change in the merge's prefix state against its predictors (Spearman):
+
+{table(["data", "merges", "share with no change", "rank (uniform order)", "importance (shipped)",
+        "region error"], corr)}
+
+{NOTES}
 
 ## Importance ablation (RMSE at 95 %, view (30, 20), each factor left out)
 

@@ -20,8 +20,9 @@ of the region (a factor left out of ``factors`` is 1)::
   of the premultiplied colour and opacity (r a, g a, b a, a; mean of the four) from s(v_i) to any
   of them. *Buys*: merges in transparent regions go first (down to EPS = 0.01 of their rank).
 * ``light``: the transmittance from the camera to v_i, exp(-integral of the extinction
-  -ln(1 - a(s)) / unit_distance), marched through a 32^3 grid of the vertices' mean extinction
-  (an object-space coarse render, a few ms). *Buys*: what is hidden behind opaque matter goes first.
+  -ln(1 - a(s)) / unit_distance), marched through a 32^3 grid of the vertices' mean extinction to
+  the points of a 16^3 lattice and interpolated trilinearly at v_i (an object-space coarse render,
+  about a millisecond). *Buys*: what is hidden behind opaque matter goes first.
 * ``size``: the merge's projected size, |v_i t_i| / depth / pixel angle in pixels (its square root:
   error in an image grows with the area but the rank already grows with the edge), 0 behind the
   camera or off the image. *Buys*: small, far and off-screen regions go first.
@@ -37,7 +38,22 @@ no more than the uniform one.
 Why a selective cut gains little at 95-99 % merged: the dependency closure of a late merge covers
 most earlier merges (on Blunt-fin, 94 % of them for a merge at rank 95 %), so a closed cut that
 applies 95 % of the merges is nearly the prefix whatever the importance says; the freedom is in the
-middle ranks (a merge at rank 80 % needs 3 % of the earlier ones).
+middle ranks (a merge at rank 80 % needs 3 % of the earlier ones). But the closure is not what
+binds (``bench/sections/selective.md``, "What limits the selective cut"): without it, the same
+importance order is 3-45x *worse* than uniform (overlapping tets: the *unsafe* cut), and with a
+run-time legality check instead (:func:`gatun_py.simplify.dependencies.legal_cut`: flip-free, no
+overlaps) still 2-14x worse, and it cannot reach the tet goal. Even the uniform order itself with
+0.1 % noise (sigma = 41 ranks on Blunt-fin) gives legal cuts 4-14x worse, while closed cuts of the
+same noisy order stay within 1.0-1.14x of uniform: a merge is only as good as the decimator made it
+in the state it was evaluated in, and only a closed cut reproduces that state. Per merge, the
+image change a merge makes in its prefix state is zero for 40-80 % of merges and is predicted about
+as well by the rank as by the view- and TF-dependent importance or the region error
+(:func:`region_error`; Spearman 0.55-0.71 for each). So the importance has nothing to exploit that
+the forest order does not already encode, and the closed cut, the only one that keeps the forest's
+quality, cannot move far from the prefix. Nor does a forest built in rounds of independent merges
+loosen the closure (tried and reverted, commit 139dcb4: the merge at rank 95 % still needs 86-94 %
+of the earlier ones): at 95 % merged a merge's star is a large region, and the merges that built
+it are most of the merges there.
 
 Examples
 --------
@@ -52,6 +68,8 @@ Examples
 
 from __future__ import annotations
 
+import json
+import os
 import time
 from dataclasses import dataclass, replace
 
@@ -59,6 +77,7 @@ import numpy as np
 
 from ..codec import TetcReader
 from ..errors import CorruptFileError, OptionError
+from ..mesh.model import boundary_faces
 from ..render.transfer import load_transfer_function
 from ..simplify.dependencies import MergeDependencies, closed_cut_order, cut_ancestors
 from ..simplify.forest import ROOT_RANK, mesh_from_ancestors
@@ -71,7 +90,9 @@ __all__ = ["FACTORS", "SelectiveSource", "selective_source", "merge_importance",
            "take_batches", "SELECTION_ALLOWANCE_S"]
 
 FACTORS = ("colour", "light", "size", "forest")
+REGION_FACTORS = ("colour", "light", "area")
 GRID = 32  # voxels per axis of the extinction grid
+LIGHT_GRID = 16  # lattice points per axis where the transmittance is marched (then interpolated)
 COLOUR_SAMPLES = 8
 OPAQUE_SHARE = 1.0  # weight of the largest opacity beside the colour change
 EPS = 0.01  # what a transparent or hidden merge keeps of its rank
@@ -95,6 +116,8 @@ class SelectiveSource:
         The rendered scalar at level 0's vertices.
     n_tets : int
         Level 0's tets.
+    tets : (n_tets, 4) int64
+        Level 0's tets (decode order).
     level, first : int
         The stored level all of this is of (0 above; another level: its forest, numbering, vertices
         and tets, and the merges its forest holds, ranks renumbered by ``-first`` = -N_level).
@@ -110,6 +133,7 @@ class SelectiveSource:
     n_tets: int
     level: int = 0
     first: int = 0
+    tets: np.ndarray | None = None
 
     @property
     def n_merges(self) -> int:
@@ -155,15 +179,18 @@ def selective_source(reader: TetcReader, scalar: str | None = None, component=No
     points = np.empty((n, 3), np.float64)
     scalars = np.empty(n, np.float64)
     kept = []
+    tets = []
     for b in reader.iter_decode(level, scalar=scalar, component=component):
         points[b.first:b.first + len(b.points)] = b.points
         scalars[b.first:b.first + len(b.points)] = b.density
+        tets.append(np.asarray(b.tets, np.int64))
         if keep_batches:
             kept.append(b)
+    tets = np.concatenate(tets) if tets else np.zeros((0, 4), np.int64)
     if keep_batches:
         reader.__dict__.setdefault("_selective_batches", {})[key] = kept
     src = SelectiveSource(deps, parent, rank, vertex, parent[vertex].astype(np.int64), points, scalars,
-                          int(lv["tets"]), level, first)
+                          int(lv["tets"]), level, first, tets)
     cache[key] = src
     return src
 
@@ -186,44 +213,137 @@ def take_batches(reader, scalar=None, component=None, level: int = 0):
     return reader.__dict__.get("_selective_batches", {}).pop((scalar, component, level), None)
 
 
+def _check_factors(factors, allowed, what: str) -> None:
+    bad = set(factors) - set(allowed)
+    if bad:
+        raise OptionError(f"unknown {what} factor {sorted(bad)[0]!r} (choose from {', '.join(allowed)})")
+
+
+def _tf_state(src: SelectiveSource, tf, scalar_range, lo, hi) -> dict:
+    """What a transfer function gives every frame (cached on the source until the TF changes): the
+    extinction grid and the shipped importance's colour change."""
+    lo = np.asarray(lo, np.float64)
+    hi = np.asarray(hi, np.float64)
+    table, t_lo, t_inv = tf.table(scalar_range)
+    key = (table.tobytes(), t_lo, t_inv, float(tf.unit_distance), lo.tobytes(), hi.tobytes())
+    cache = src.__dict__.setdefault("_importance", {})
+    if cache.get("tf_key") != key:
+        _, a = tf.resolve(scalar_range).evaluate(src.scalars)
+        sigma = -np.log1p(-np.clip(a, 0.0, 0.999)) / tf.unit_distance
+        cache.pop("centres", None)
+        cache.update(tf_key=key, lo=lo, hi=hi, grid=K._extinction_grid(src.points, sigma, lo, hi, GRID),
+                     colour=K._colour_change(table, t_lo, t_inv, src.scalars[src.vertex], src.scalars[src.target],
+                                             COLOUR_SAMPLES, OPAQUE_SHARE))
+    return cache
+
+
+def _light(state: dict, eye, points, need) -> np.ndarray:
+    """Transmittance from the eye to each point where ``need``d: marched through the extinction
+    grid to the centres of a LIGHT_GRID^3 lattice (a coarse render of it, a few thousand rays) and
+    interpolated trilinearly, instead of one march per merge (tens of thousands)."""
+    lo, hi = state["lo"], state["hi"]
+    centres = state.get("centres")
+    if centres is None:
+        centres = state["centres"] = K._cell_centres(lo, hi, LIGHT_GRID)
+    lattice = K._transmittance(state["grid"], lo, hi, eye, centres, GRID)
+    return K._trilinear(lattice.reshape(LIGHT_GRID, LIGHT_GRID, LIGHT_GRID), lo, hi, points, need)
+
+
+def _pixels(camera, points, extent) -> np.ndarray:
+    """``extent`` at each point seen from the camera, in pixels (0 behind it or off the image)."""
+    fwd, right, up = camera.basis()
+    return K._projected_size(points, np.ascontiguousarray(extent, np.float64),
+                             np.asarray(camera.position, np.float64), fwd, right, up,
+                             float(np.tan(np.radians(camera.view_angle) / 2.0)), float(camera.width),
+                             float(camera.height))
+
+
 def merge_importance(src: SelectiveSource, camera, tf, *, lo, hi, scalar_range, factors=FACTORS) -> np.ndarray:
     """imp(i) of every merge for a fitted camera and a transfer function (with its unit distance
     in the mesh's units) normalised to ``scalar_range`` (see the module docstring); ``factors``
     picks which of :data:`FACTORS` take part."""
-    bad = set(factors) - set(FACTORS)
-    if bad:
-        raise OptionError(f"unknown importance factor {sorted(bad)[0]!r} (choose from {', '.join(FACTORS)})")
+    _check_factors(factors, FACTORS, "importance")
     k = src.n_merges
     if k == 0:
         return np.ones(0)
-    pv = src.points[src.vertex]
-    lo = np.asarray(lo, np.float64)
-    hi = np.asarray(hi, np.float64)
+    cache = src.__dict__.setdefault("_importance", {})
+    if "pv" not in cache:  # view- and TF-independent: once per source
+        cache["pv"] = np.ascontiguousarray(src.points[src.vertex])
+        cache["length"] = np.linalg.norm(src.points[src.target] - cache["pv"], axis=1)
+    pv = cache["pv"]
     colour = light = size = forest = 1.0
+    if "colour" in factors or "light" in factors:
+        state = _tf_state(src, tf, scalar_range, lo, hi)
     if "colour" in factors:
-        table, t_lo, t_inv = tf.table(scalar_range)
-        colour = K._colour_change(table, t_lo, t_inv, src.scalars[src.vertex], src.scalars[src.target],
-                                  COLOUR_SAMPLES, OPAQUE_SHARE)
-    if "light" in factors:
-        _, a = tf.resolve(scalar_range).evaluate(src.scalars)
-        sigma = -np.log1p(-np.clip(a, 0.0, 0.999)) / tf.unit_distance
-        grid = K._extinction_grid(src.points, sigma, lo, hi, GRID)
-        light = K._transmittance(grid, lo, hi, np.asarray(camera.position, np.float64), pv, GRID)
+        colour = state["colour"]
     if "size" in factors:
-        fwd, _, _ = camera.basis()
-        depth = (pv - camera.position) @ fwd
-        length = np.linalg.norm(src.points[src.target] - pv, axis=1)
-        pixel = 2.0 * np.tan(np.radians(camera.view_angle) / 2.0) / camera.height
-        with np.errstate(divide="ignore", invalid="ignore"):
-            px = np.where(depth > 0, length / (np.maximum(depth, 1e-300) * pixel), 0.0)
-            xy = camera.project(pv)
-        on = (depth > 0) & (xy[:, 0] >= -px) & (xy[:, 0] <= camera.width + px) & \
-             (xy[:, 1] >= -px) & (xy[:, 1] <= camera.height + px)
-        size = np.sqrt(np.where(on, px, 0.0))
+        size = np.sqrt(_pixels(camera, pv, cache["length"]))
+    if "light" in factors:
+        # light only counts through light * colour, and not at all off the image
+        need = np.ones(k, np.bool_) if "colour" not in factors else state["colour"] != 0.0
+        if "size" in factors:
+            need &= size != 0.0
+        light = _light(state, np.asarray(camera.position, np.float64), pv, need)
     if "forest" in factors:
         forest = (np.arange(k) + 1.0) / k
     modulation = EPS + light * colour if ("colour" in factors or "light" in factors) else 1.0
     return np.broadcast_to(forest * modulation * size, (k,)).astype(np.float64)
+
+
+def merge_regions(src: SelectiveSource):
+    """(radius, scalar lo, scalar hi) of the region every merge changes in its prefix state (its
+    subtree of the forest moving onto t_i), computed once per source."""
+    cache = src.__dict__.setdefault("_regions", {})
+    if "r" not in cache:
+        cache["r"] = K._merge_regions(src.vertex, src.target, src.points, src.scalars)
+    return cache["r"]
+
+
+def boundary_merges(src: SelectiveSource) -> np.ndarray:
+    """Merges of a boundary vertex (bool by rank), from the level's tets (once per source, when
+    first asked: a plain render does not need it)."""
+    cache = src.__dict__.setdefault("_regions", {})
+    if "b" not in cache:
+        boundary = np.zeros(src.points.shape[0], np.bool_)
+        boundary[boundary_faces(src.tets).ravel()] = True
+        cache["b"] = boundary[src.vertex]
+    return cache["b"]
+
+
+def region_error(src: SelectiveSource, camera, tf, *, lo, hi, scalar_range, factors=REGION_FACTORS) -> np.ndarray:
+    """Predicted image error of every merge in its prefix state, for a fitted camera and a
+    transfer function (unit distance in the mesh's units)::
+
+        err(i) = colour(i) * light(i) * area(i)
+
+    * ``colour``: the largest change of premultiplied colour and opacity between t_i's value and
+      any value of the region (the subtree's scalar range), the opacity taken over a path through
+      the region (so a thin faint region counts little, a thick one as much as it shows);
+    * ``light``: transmittance from the camera to t_i (as in :func:`merge_importance`);
+    * ``area``: the region's projected area in pixels, (radius / depth / pixel angle)^2, 0 off the
+      image.
+
+    A region's error includes its whole subtree's, so err grows up the forest (a merge's error is
+    at least roughly its children's): a cut by err is close to closed by itself.
+    """
+    _check_factors(factors, REGION_FACTORS, "error")
+    k = src.n_merges
+    if k == 0:
+        return np.ones(0)
+    radius, s_lo, s_hi = merge_regions(src)
+    pt = np.ascontiguousarray(src.points[src.target])
+    colour = light = area = 1.0
+    if "colour" in factors:
+        table, t_lo, t_inv = tf.table(scalar_range)
+        colour = K._region_colour_error(table, t_lo, t_inv, s_lo, s_hi, src.scalars[src.target], radius,
+                                        boundary_merges(src), float(tf.unit_distance), COLOUR_SAMPLES)
+    if "light" in factors:
+        state = _tf_state(src, tf, scalar_range, lo, hi)
+        light = K._transmittance(state["grid"], state["lo"], state["hi"], np.asarray(camera.position, np.float64),
+                                 pt, GRID)
+    if "area" in factors:
+        area = np.pi * _pixels(camera, pt, radius) ** 2
+    return np.broadcast_to(colour * light * area, (k,)).astype(np.float64)
 
 
 @dataclass(frozen=True, eq=False)
@@ -323,6 +443,21 @@ def _start(reader, src: SelectiveSource, applied) -> Cut:
     return Cut(applied, src.deps.cut_tets(src.n_tets, applied), level, n, anc)
 
 
+def _transfer_function(reader, spec, diagonal: float):
+    """The view's transfer function, parsed once per reader and spec (a frame of the same TF reuses
+    it; a file is read again when it changes)."""
+    if not isinstance(spec, (str, os.PathLike, dict, list)):
+        return load_transfer_function(spec).for_size(diagonal)
+    stamp = os.stat(spec).st_mtime_ns if isinstance(spec, (str, os.PathLike)) and os.path.isfile(spec) else None
+    key = (json.dumps(spec, sort_keys=True, default=str), stamp, diagonal)
+    cache = reader.__dict__.setdefault("_selective_tfs", {})
+    if key not in cache:
+        if len(cache) > 16:
+            cache.clear()
+        cache[key] = load_transfer_function(spec).for_size(diagonal)
+    return cache[key]
+
+
 def plan_cut(reader, view: View, *, ratio=None, tets=None, merges=None, factors=FACTORS,
              uniform: bool = False, level: int = 0) -> Cut | None:
     """The cut of a selective render of ``reader`` for a view: ``ratio`` (merges = floor(ratio *
@@ -355,7 +490,7 @@ def plan_cut(reader, view: View, *, ratio=None, tets=None, merges=None, factors=
         if view.scalar is not None:
             rng = reader.array_range(view.scalar, view.component) or rng
         rng = view.scalar_range if view.scalar_range is not None else rng
-        tf = load_transfer_function(view.tf).for_size(float(np.linalg.norm(hi - lo)))
+        tf = _transfer_function(reader, view.tf, float(np.linalg.norm(hi - lo)))
         imp = merge_importance(src, view.camera.fit(lo, hi), tf, lo=lo, hi=hi, scalar_range=rng, factors=factors)
         applied = choose_cut(src, imp, merges=merges, tets=tets)
     cut = _start(reader, src, applied)

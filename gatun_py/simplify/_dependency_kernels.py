@@ -12,7 +12,21 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ._decimate_kernels import _incidence  # the decimator's slot lists, built the same way
+from ._decimate_kernels import (  # the decimator's state and legality tests, reused as they are
+    VOLUME_EPS,
+    _apply_merge,
+    _boundary_faces_of,
+    _boundary_ok,
+    _contains,
+    _face_neighbours,
+    _incidence,
+    _link_ok,
+    _max_edge2,
+    _orient6,
+    _star,
+    _star_boundary,
+    _vertex_topology,
+)
 
 
 @njit(cache=True)
@@ -185,3 +199,124 @@ def _reduce(ptr, idx, budget):
             ridx[start:nr] = np.sort(ridx[start:nr])
         rptr[i + 1] = nr
     return rptr, ridx[:nr].copy()
+
+
+# -- legal cuts: a runtime check instead of the stored closure ------------------------------------
+# The state is the decimator's (T, alive, nbr, head, nxt over the start mesh); merges are tried in
+# any order and each is applied only when the decimator's own legality tests pass on the *current*
+# cut mesh: an edge of it, the link condition, every surviving tet of the star positive, no
+# boundary face turned by 90 degrees or more. Every intermediate mesh is then a valid mesh, so the
+# final one is, whatever the order.
+
+
+@njit(cache=True)
+def _find(jump, v):
+    """Current representative of v (follow applied merges; path halving)."""
+    while jump[v] != v:
+        jump[v] = jump[jump[v]]
+        v = jump[v]
+    return v
+
+
+@njit(cache=True)
+def _volumes_ok(a, b, st, T, pts, q):
+    """Every tet of a's star without b stays positive with a moved onto b (the decimator's rule:
+    above VOLUME_EPS of its longest edge cubed, or not shrinking). Returns the tets that collapse,
+    -1 when one would flatten or invert."""
+    n_col = 0
+    for k in range(st.shape[0]):
+        t = st[k] >> 2
+        if _contains(T, t, b):
+            n_col += 1
+            continue
+        for j in range(4):
+            q[j] = T[t, j]
+        old = _orient6(pts, q[0], q[1], q[2], q[3])
+        q[st[k] & 3] = b
+        v6 = _orient6(pts, q[0], q[1], q[2], q[3])
+        if not (v6 > VOLUME_EPS * _max_edge2(pts, q) ** 1.5 or (v6 >= old and v6 > 0.0)):
+            return -1
+    return n_col
+
+
+@njit(cache=True)
+def _legal_greedy(order, vertex, target, T, nbr, isb, pts, n_tets, goal, max_passes, children_first):
+    """Apply merges ``order[0], order[1], ...`` (merge i: vertex[i] into target[i], only while
+    target[i]'s own merge is not applied, so every applied merge is an edge of the forest and the
+    ancestors are the cut's) when legal on the current mesh, until it has at most ``goal`` tets; merges found
+    illegal are tried again in later passes (up to ``max_passes``) as the mesh around them changes.
+
+    ``children_first``: a merge waits (to a later pass) until every merge into its vertex is
+    applied, so the cut is a union of whole subtrees of the forest (each applied merge moves the
+    region it moved in its prefix state).
+
+    ``T`` and ``nbr`` are consumed (the start mesh's tets and face neighbours, copies). Returns
+    (applied (k,) bool by merge, tets left, merges rejected at least once).
+    """
+    n = pts.shape[0]
+    m = T.shape[0]
+    k = vertex.shape[0]
+    alive = np.ones(m, np.bool_)
+    head, nxt = _incidence(T, n)
+    jump = np.arange(n)
+    mark_b = np.zeros(n, np.int64)
+    mark_ab = np.zeros(n, np.int64)
+    counters = np.zeros(8, np.int64)
+    applied = np.zeros(k, np.bool_)
+    q = np.empty(4, np.int64)
+    n_new = np.empty(3)
+    tets = n_tets
+    pending = np.zeros(n, np.int64)  # merges into each vertex not applied yet
+    if children_first:
+        for i in range(k):
+            pending[target[i]] += 1
+    todo = order.copy()
+    n_todo = todo.shape[0]
+    rejected = 0
+    for p in range(max_passes):
+        if tets <= goal or n_todo == 0:
+            break
+        left = 0
+        for j in range(n_todo):
+            if tets <= goal:
+                todo[left] = todo[j]
+                left += 1
+                continue
+            i = todo[j]
+            a = vertex[i]
+            b = target[i]
+            if pending[a] > 0:  # a child still to come (children_first)
+                todo[left] = i
+                left += 1
+                continue
+            ok = jump[b] == b and (isb[b] or not isb[a])
+            st = _star(a, head, nxt, T, alive)
+            n_col = -1
+            if ok:
+                n_col = _volumes_ok(a, b, st, T, pts, q)
+                ok = n_col > 0
+            if ok and isb[a]:
+                bf = _boundary_faces_of(st, T, nbr)
+                n_old = np.empty((bf.shape[0], 3))
+                area_old = np.empty(bf.shape[0])
+                area_new = np.empty(bf.shape[0])
+                _star_boundary(bf, pts, n_old, area_old)
+                ok = _boundary_ok(a, b, bf, n_old, area_old, pts, area_new, n_new)
+            if ok:
+                ok = _link_ok(a, b, st, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters)
+            if ok:
+                _apply_merge(a, b, st, T, alive, nbr, head, nxt)
+                jump[a] = b
+                applied[i] = True
+                if children_first:
+                    pending[b] -= 1
+                tets -= n_col
+            else:
+                if p == 0:
+                    rejected += 1
+                todo[left] = i
+                left += 1
+        if left == n_todo:
+            break
+        n_todo = left
+    return applied, tets, rejected

@@ -55,7 +55,12 @@ from . import _dependency_kernels as K
 # bounds the build time; a search cut short only keeps a redundant dependency
 REDUCE_BUDGET = 64
 
-__all__ = ["MergeDependencies", "merge_dependencies", "cut_ancestors", "closed_cut_order", "prefix_cut"]
+__all__ = ["MergeDependencies", "merge_dependencies", "cut_ancestors", "closed_cut_order", "prefix_cut",
+           "LegalCutBase", "legal_cut_base", "legal_cut"]
+
+# passes over the merges a legal cut found illegal (a merge blocked by its neighbourhood may
+# become legal once the merges around it are applied)
+LEGAL_PASSES = 3
 
 
 @dataclass(frozen=True, eq=False)
@@ -187,3 +192,109 @@ def cut_ancestors(parent, rank, applied) -> np.ndarray:
     if parent.shape[0] == 0:
         return np.zeros(0, np.int32)
     return K._cut_ancestors(parent, rank, applied)
+
+
+@dataclass(frozen=True, eq=False)
+class LegalCutBase:
+    """What a *legal* cut (:func:`legal_cut`) starts from: a mesh and the merges of its forest.
+
+    A legal cut needs no stored dependencies: each merge is applied only when the decimator's own
+    legality tests (an edge of the current mesh, the link condition, no tet flattening or
+    inverting, no boundary face turning by 90 degrees or more) pass on the cut mesh as it is at
+    that moment, so every cut mesh along the way, and the final one, is valid whatever the order.
+    It is weaker than a closed cut (a merge may see a star the decimator never saw, so its error
+    is not the forest's) but free to follow any importance.
+
+    Attributes
+    ----------
+    tets : (m, 4) int64
+        The start mesh's tets.
+    neighbours : (m, 4) int32
+        Tet across the face opposite each corner, -1 on the boundary.
+    boundary : (n,) bool
+        Boundary vertices.
+    points : (n, 3) float64
+    vertex, target : (k,) int64
+        v_i and t_i of merge i (rank order, the start mesh's numbering).
+    """
+
+    tets: np.ndarray
+    neighbours: np.ndarray
+    boundary: np.ndarray
+    points: np.ndarray
+    vertex: np.ndarray
+    target: np.ndarray
+
+    @property
+    def n_merges(self) -> int:
+        return int(self.vertex.shape[0])
+
+    def __repr__(self) -> str:
+        return (f"<LegalCutBase: {self.points.shape[0]} vertices, {self.tets.shape[0]} tets, "
+                f"{self.n_merges} merges>")
+
+
+def legal_cut_base(tets, points, parent, rank) -> LegalCutBase:
+    """The state :func:`legal_cut` starts every cut from (built once per mesh: O(m)).
+
+    Parameters
+    ----------
+    tets : (m, 4) int array
+    points : (n, 3) array
+    parent, rank : (n,) int arrays
+        The mesh's merge forest (its numbering); ranks from 0.
+    """
+    T = np.ascontiguousarray(tets, dtype=np.int64)
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    parent = np.ascontiguousarray(parent, dtype=np.int64)
+    rank = np.ascontiguousarray(rank, dtype=np.int64)
+    n = pts.shape[0]
+    if parent.shape != (n,) or rank.shape != (n,):
+        raise OptionError(f"the forest has {parent.shape[0]} vertices, the mesh {n}")
+    try:
+        k = check_forest(parent, rank)
+    except CorruptFileError as e:
+        raise OptionError(str(e)) from None
+    vertex = np.empty(k, np.int64)
+    merged = rank != ROOT_RANK
+    vertex[rank[merged]] = np.flatnonzero(merged)
+    head, nxt = K._incidence(T, n)
+    nbr = K._face_neighbours(T, head, nxt)
+    isb, _ = K._vertex_topology(T, nbr, head, nxt, n)
+    return LegalCutBase(T, nbr, isb, pts, vertex, parent[vertex])
+
+
+def legal_cut(base: LegalCutBase, order, *, tets: int, passes: int = LEGAL_PASSES, children_first: bool = False):
+    """A legal cut: the merges of ``order`` (least important first) that are legal on the cut mesh
+    when their turn comes, until it has at most ``tets`` tets. A merge moves its vertex onto its
+    own parent only (never onto an ancestor further up, which is not an edge the decimator saw);
+    ``children_first``: a merge waits until every merge into its vertex is applied (the cut is a
+    union of whole subtrees of the forest), tried again on the next of ``passes`` passes.
+
+    Returns
+    -------
+    applied : (k,) bool
+        Merge r is applied (give it to :func:`cut_ancestors`).
+    n_tets : int
+        Tets of the cut's mesh.
+    rejected : int
+        Merges found illegal on the first pass (some may have been applied on a later one).
+
+    Examples
+    --------
+    >>> from gatun_py.warmup import tiny_mesh
+    >>> from gatun_py.simplify import decimate
+    >>> mesh = tiny_mesh(); forest = decimate(mesh)
+    >>> base = legal_cut_base(mesh.tets, mesh.points, forest.parent, forest.rank)
+    >>> applied, n_tets, _ = legal_cut(base, np.arange(base.n_merges)[::-1], tets=mesh.n_tets // 2)
+    >>> n_tets <= mesh.n_tets // 2 or bool(applied.all())
+    True
+    """
+    order = np.ascontiguousarray(order, dtype=np.int64)
+    k = base.n_merges
+    if order.ndim != 1 or (order.size and (order.min() < 0 or order.max() >= k)):
+        raise OptionError(f"a cut order lists merges 0..{k - 1}")
+    applied, n_tets, rejected = K._legal_greedy(order, base.vertex, base.target, base.tets.copy(),
+                                                base.neighbours.copy(), base.boundary, base.points,
+                                                base.tets.shape[0], int(tets), int(passes), bool(children_first))
+    return applied, int(n_tets), int(rejected)

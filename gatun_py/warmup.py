@@ -59,6 +59,10 @@ def _selective_kernels(mesh, forest) -> None:
     IK._transmittance(grid, lo, hi, hi + 1.0, pts, 4)
     s = np.asarray(mesh.density, np.float64)
     IK._colour_change(np.ones((8, 4)), 0.0, 1.0, s, s[::-1].copy(), 4, 1.0)
+    IK._projected_size(pts, np.ones(len(pts)), hi + 1.0, np.array([1.0, 0, 0]), np.array([0, 1.0, 0]),
+                       np.array([0, 0, 1.0]), 0.5, 8.0, 8.0)
+    IK._trilinear(np.ones((2, 2, 2)), lo, hi, pts, np.ones(len(pts), np.bool_))
+    IK._cell_centres(lo, hi, 2)
 
 
 def _codec_and_filter() -> str:

@@ -335,3 +335,22 @@ def face_neighbours(tets):
             (t, k), (u, j) = pair
             nbr[t][k], nbr[u][j] = u, t
     return nbr
+
+
+def max_coverage(mesh, n_random: int = 400, seed: int = 0) -> int:
+    """Most tets containing one point (strictly inside, barycentric > 1e-9), over every tet's
+    centroid and random points of the bounding box: 1 when no two tets overlap (a plain O(P m)
+    reference; small meshes only)."""
+    p = mesh.points.astype(np.float64)
+    t = mesh.tets.astype(np.int64)
+    if t.shape[0] == 0:
+        return 0
+    rng = np.random.default_rng(seed)
+    q = np.concatenate([p[t].mean(axis=1), p.min(axis=0) + rng.random((n_random, 3)) * np.ptp(p, axis=0)])
+    p0 = p[t[:, 0]]
+    edges = np.stack([p[t[:, 1]] - p0, p[t[:, 2]] - p0, p[t[:, 3]] - p0], axis=2)
+    solid = np.linalg.det(edges) != 0  # a flat tet (allowed where the input has them) covers nothing
+    p0, inv = p0[solid], np.linalg.inv(edges[solid])
+    lam = np.einsum("mij,pmj->pmi", inv, q[:, None, :] - p0[None])
+    inside = (lam > 1e-9).all(axis=2) & (lam.sum(axis=2) < 1.0 - 1e-9)
+    return int(inside.sum(axis=1).max())

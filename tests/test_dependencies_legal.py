@@ -11,7 +11,7 @@ from conftest import load_sample
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from meshgen import grid_mesh, mesh_strategy
-from naive_simplify import check_valid
+from naive_simplify import check_valid, max_coverage
 from test_simplify_dependencies import _manifold
 
 from gatun_py.errors import OptionError
@@ -21,30 +21,11 @@ from gatun_py.simplify.dependencies import cut_ancestors, legal_cut, legal_cut_b
 from gatun_py.simplify.forest import ancestors, mesh_from_ancestors
 
 
-def _max_coverage(mesh, n_random: int = 400, seed: int = 0) -> int:
-    """Most tets containing one point (strictly inside, barycentric > 1e-9), over every tet's
-    centroid and random points of the bounding box: 1 when no two tets overlap (a plain O(P m)
-    reference; small meshes only)."""
-    p = mesh.points.astype(np.float64)
-    t = mesh.tets.astype(np.int64)
-    if t.shape[0] == 0:
-        return 0
-    rng = np.random.default_rng(seed)
-    q = np.concatenate([p[t].mean(axis=1), p.min(axis=0) + rng.random((n_random, 3)) * np.ptp(p, axis=0)])
-    p0 = p[t[:, 0]]
-    edges = np.stack([p[t[:, 1]] - p0, p[t[:, 2]] - p0, p[t[:, 3]] - p0], axis=2)
-    solid = np.linalg.det(edges) != 0  # a flat tet (allowed where the input has them) covers nothing
-    p0, inv = p0[solid], np.linalg.inv(edges[solid])
-    lam = np.einsum("mij,pmj->pmi", inv, q[:, None, :] - p0[None])
-    inside = (lam > 1e-9).all(axis=2) & (lam.sum(axis=2) < 1.0 - 1e-9)
-    return int(inside.sum(axis=1).max())
-
-
 def _check_legal_cuts(mesh, forest, orders, goals, label, *, children_first=False):
     base = legal_cut_base(mesh.tets, mesh.points, forest.parent, forest.rank)
     n_flat = int((mesh.signed_volumes() == 0).sum())
     manifold = _manifold(mesh)
-    coverage = mesh.n_tets <= 2000 and _max_coverage(mesh) == 1  # the input itself does not overlap
+    coverage = mesh.n_tets <= 2000 and max_coverage(mesh) == 1  # the input itself does not overlap
     for c, (order, goal) in enumerate(zip(orders, goals)):
         applied, n_tets, _ = legal_cut(base, order, tets=goal, children_first=children_first)
         if children_first:  # a union of whole subtrees: every merge into an applied merge's vertex is applied
@@ -55,7 +36,7 @@ def _check_legal_cuts(mesh, forest, orders, goals, label, *, children_first=Fals
         check_valid(out, n_flat, f"{label} cut {c}", manifold=manifold)
         assert out.n_tets == n_tets, f"{label} cut {c}: tet count {out.n_tets} vs {n_tets}"
         if coverage:
-            assert _max_coverage(out) == 1, f"{label} cut {c}: overlapping tets"
+            assert max_coverage(out) == 1, f"{label} cut {c}: overlapping tets"
 
 
 def _orders(k, rng, n):
@@ -146,12 +127,12 @@ def test_coverage_oracle_sees_overlaps():
 
     pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.2, 0.2, 1], [0.3, 0.3, 0.5]], np.float32)
     two = TetMesh(pts, np.zeros(5, np.float32), np.array([[0, 1, 2, 3], [0, 1, 2, 4]], np.int32))
-    assert _max_coverage(two) == 2
-    assert _max_coverage(delaunay_mesh(40, 1)) == 1
+    assert max_coverage(two) == 2
+    assert max_coverage(delaunay_mesh(40, 1)) == 1
     worst = 1
     for seed in range(4):
         mesh = delaunay_mesh(60, seed)
         forest = decimate(mesh)
         cut = np.random.default_rng(seed).random(forest.n_merges) < 0.5
-        worst = max(worst, _max_coverage(mesh_from_ancestors(mesh, cut_ancestors(forest.parent, forest.rank, cut))[0]))
+        worst = max(worst, max_coverage(mesh_from_ancestors(mesh, cut_ancestors(forest.parent, forest.rank, cut))[0]))
     assert worst > 1

@@ -38,6 +38,7 @@ from .io import write_surface
 DEFAULT_BATCH_FACES = 100_000
 MAX_PREVIEW_PIXELS = 1 << 26
 CHUNK_TETS = 8192  # tets per extraction step (rounds start between steps)
+BOUNDARY_CHUNK = 4 * CHUNK_TETS  # boundary faces per extraction step (as many faces as a tet step)
 #: keep at least this share of ``batch_faces`` modifiable faces between rounds (Hou & Chen's
 #: initial phase: early rounds must not over-decimate what little has been seen)
 KEEP_SHARE = 0.5
@@ -250,8 +251,19 @@ class _Extractor:
             self.tris = t
 
     def add(self, pts, dens, tets, boundary, tets_before: int):
-        """Feed one batch, in chunks small enough that a round runs close to every B faces."""
+        """Feed one batch, in chunks small enough that a round runs close to every B faces.
+
+        Boundary faces go first, in chunks of their own: the tables are reserved for the worst
+        case of one call, and a ``.tetc`` file's first batch carries the whole mesh boundary
+        (535,922 faces on the 7.8 M-tet flange, which reserved ~190 MB of hash slots in one
+        call). The result is the same as in one call: a boundary face only enters the border,
+        so no count falls to zero between the chunks that would not at the end of the batch.
+        """
         step = CHUNK_TETS
+        if len(boundary) > BOUNDARY_CHUNK:
+            for i in range(0, len(boundary), BOUNDARY_CHUNK):
+                self._add(pts, dens, tets[:0], boundary[i:i + BOUNDARY_CHUNK], tets_before)
+            boundary = boundary[:0]
         if len(tets) <= step:
             self._add(pts, dens, tets, boundary, tets_before + len(tets))
             return

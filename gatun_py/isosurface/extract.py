@@ -25,6 +25,7 @@ from .._atomic import check_output_path
 from .._resources import peak_rss_mb
 from ..codec import TetcReader
 from ..codec.container import MAGIC
+from ..codec.prefetch import iter_decode_prefetched
 from ..errors import CorruptFileError, OptionError, ReadError
 from ..mesh import TetMesh, mesh_batches, read_mesh
 from ..simplify.filter import SimplifyFilter
@@ -38,6 +39,7 @@ from .io import write_surface
 DEFAULT_BATCH_FACES = 100_000
 MAX_PREVIEW_PIXELS = 1 << 26
 CHUNK_TETS = 8192  # tets per extraction step (rounds start between steps)
+MAX_IN_FLIGHT = 16  # decoded batches waiting for the extraction thread
 BOUNDARY_CHUNK = 4 * CHUNK_TETS  # boundary faces per extraction step (as many faces as a tet step)
 #: keep at least this share of ``batch_faces`` modifiable faces between rounds (Hou & Chen's
 #: initial phase: early rounds must not over-decimate what little has been seen)
@@ -450,9 +452,11 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
         return done
 
     # Extraction and collapses run in a worker thread (their kernels release the GIL) while the
-    # decoder produces the next batch: the two stages overlap on two cores. At most two batches
-    # are in flight, so memory stays bounded; the worker reads only vertices of batches already
-    # stored, the main thread writes only the new batch's.
+    # decoder produces the next batches: the stages overlap on two cores. At most MAX_IN_FLIGHT
+    # batches wait for the worker (a round of collapses takes as long as decoding ~10 batches,
+    # and the decoder should not stall on it), so memory stays bounded (~1 MB of tets each); the
+    # worker reads only vertices of batches already stored, the main thread writes only the new
+    # batch's.
     in_flight = collections.deque()
     with ThreadPoolExecutor(max_workers=1) as pool:
         t_wait = time.perf_counter()
@@ -471,7 +475,7 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
             bnd = np.array(bnd, dtype=np.int32, order="C", copy=True)
             in_flight.append(pool.submit(work, tets, bnd, tets_done))
             tets_done += len(tets)
-            while len(in_flight) > 1:
+            while len(in_flight) > MAX_IN_FLIGHT:
                 done = in_flight.popleft().result()  # re-raises the worker's exception here
                 if progress is not None:
                     progress(done)
@@ -544,7 +548,7 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs):
         raise CorruptFileError("corrupt metadata: bad bounding box or scalar range") from None
     info = {"points": int(lv["points"]), "bbox_lo": lo, "bbox_hi": hi, "scalar_range": rng,
             "level": target.level, "mesh_ratio": target.ratio}
-    batches = reader.iter_decode(target.level)
+    batches = iter_decode_prefetched(reader, target.level)
     anc = target_ancestors(reader, target)
     if anc is None:
         return batches, info

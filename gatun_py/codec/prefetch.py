@@ -1,0 +1,104 @@
+"""Decoding a level with the connectivity running ahead of the geometry, in a thread of its own.
+
+:meth:`TetcReader.iter_decode` decodes each batch's tets and then the vertices they introduce, one
+after the other. The two stages depend on each other only through the new vertices' refs (the
+connectivity decoder writes them, the geometry decoder reads them), and both kernels release the
+GIL, so here the connectivity decoder runs in a producer thread up to ``depth`` batches ahead and
+hands over each batch's tets with a copy of its refs; the caller's thread decodes the geometry.
+On two cores the stream then costs about the slower of the two decoders instead of their sum
+(flange-10m: connectivity 4.8 s, geometry 2.0 s). The batches are the same, in the same order, as
+the default scalar's :meth:`~TetcReader.iter_decode`.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+from typing import Iterator
+
+import numpy as np
+
+from ..errors import CorruptFileError
+from ..mesh import TetBatch
+from .geometry import GeometryDecoder
+from .tetcfile import DEFAULT_BATCH_TETS, TetcReader
+
+_DONE = object()
+
+
+def iter_decode_prefetched(reader: TetcReader, level: int = 0, *, batch_tets: int = DEFAULT_BATCH_TETS,
+                           depth: int = 4) -> Iterator[TetBatch]:
+    """Stream ``level`` of ``reader`` as :meth:`TetcReader.iter_decode` does for the default scalar,
+    the connectivity decoded in a background thread at most ``depth`` batches ahead.
+
+    Errors of the background thread (a damaged stream) are raised here, in the caller's thread.
+    Closing the generator early stops the thread.
+
+    Examples
+    --------
+    >>> from gatun_py.codec import TetcReader
+    >>> from gatun_py.warmup import SHIPPED_TETC
+    >>> r = TetcReader(SHIPPED_TETC)
+    >>> a = [(b.first, len(b.points), len(b.tets)) for b in iter_decode_prefetched(r, batch_tets=40)]
+    >>> a == [(b.first, len(b.points), len(b.tets)) for b in r.iter_decode(batch_tets=40)]
+    True
+    """
+    lv = reader.level_meta(level)
+    n, m = lv["points"], lv["tets"]
+    reader._checked_points(level)
+    geo = GeometryDecoder(reader.read_section(f"L{level}/geometry"), n_points=n)
+    conn = reader._connectivity(level)
+    faces, nbv = conn.boundary()
+    if nbv != lv["boundary_vertices"]:
+        raise CorruptFileError("corrupt boundary section: vertex count does not match the metadata")
+    refs = conn.predictors
+    pts, dens = geo.decode(refs[:nbv])
+    yield TetBatch.of_vertices(0, pts, dens, faces)
+    conn.start_tets()
+    handoff = queue.Queue(maxsize=max(1, int(depth)))
+    stop = threading.Event()
+
+    def put(item) -> None:
+        while not stop.is_set():
+            try:
+                handoff.put(item, timeout=0.05)
+                return
+            except queue.Full:
+                continue
+
+    def produce() -> None:
+        try:
+            known = nbv
+            while conn.tets_done < m and not stop.is_set():
+                tets = conn.next_tets(batch_tets)
+                nv = conn.vertices_known
+                put((known, tets, refs[known:nv].copy()))  # a copy: the refs array keeps growing
+                known = nv
+            put(_DONE)
+        except BaseException as e:  # handed to the consumer, which raises it
+            put(e)
+
+    worker = threading.Thread(target=produce, name="tetc-connectivity", daemon=True)
+    worker.start()
+    known = nbv
+    try:
+        while True:
+            item = handoff.get()
+            if item is _DONE:
+                break
+            if isinstance(item, BaseException):
+                raise item
+            first, tets, new_refs = item
+            pts, dens = geo.decode(new_refs)
+            known = first + len(new_refs)
+            yield TetBatch.of_tets(first, tets, pts, dens)
+    finally:
+        stop.set()
+        worker.join()
+    if known != lv["referenced_points"]:
+        raise CorruptFileError("corrupt tet section: vertex count does not match the metadata")
+    if known < n:  # vertices no tet references: no refs
+        pts, dens = geo.decode(np.full((n - known, 4), -1, np.int32))
+        yield TetBatch.of_vertices(known, pts, dens)
+    geo.finish()
+    reader.last_peak_border = conn.peak_border

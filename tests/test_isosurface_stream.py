@@ -121,13 +121,34 @@ def test_tables_scale_with_the_band_not_the_boundary(monkeypatch):
     monkeypatch.setattr(iso_extract, "BOUNDARY_CHUNK", 64)
     ex = iso_extract._Extractor(float(np.median(mesh.density)), ratio=None, faces=None, batch_faces=10**6,
                                 importance=None, grad_scale=1.0)
-    pts = np.empty((mesh.n_points, 3), np.float32)
-    dens = np.empty(mesh.n_points, np.float32)
-    pts[:len(first.points)] = first.points
-    dens[:len(first.points)] = first.density
-    ex.add(pts, dens, first.tets, first.boundary, 0)
+    vals = np.empty((mesh.n_points, 4), np.float32)
+    vals[:len(first.points), :3] = first.points
+    vals[:len(first.points), 3] = first.density
+    ex.add(vals, first.tets, first.boundary, 0)
     border = int(ex.sizes[0])  # boundary faces that touch the surface
     assert border < nb / 4
     # room for what is in the table plus one chunk's worst case, not for every boundary face
     assert len(ex.fa) <= iso_extract._pow2(4 * (2 * border + 64))
     assert len(ex.fa) < 4 * nb
+
+
+def test_tetc_stream_lends_its_values_and_gives_the_mesh_files_surface():
+    """The .tetc path reads vertices from the decoder's array (no copy); the surface must equal the
+    one from the same mesh fed as an in-memory stream, which fills an array of our own."""
+    from gatun_py.codec.prefetch import PrefetchedDecode
+
+    mesh = grid_mesh(9, 8, 7, jitter=0.25, seed=4)
+    reader = TetcReader(_tetc(mesh))
+    stream = PrefetchedDecode(reader)
+    batches = iter(stream)
+    first = next(batches)
+    assert stream.values is not None and np.shares_memory(first.points, stream.values)
+    batches.close()
+    decoded = reader.decode_mesh(0)  # the stream's vertex and tet order
+    v = float(np.quantile(mesh.density, 0.6))
+    for ratio in (None, 0.3):
+        a = isosurface(TetcReader(_tetc(mesh)), values=v, ratio=ratio, batch_faces=100)
+        b = isosurface(decoded, values=v, ratio=ratio, batch_faces=100)
+        assert a.n_triangles == b.n_triangles > 0
+        if ratio is None:
+            assert np.array_equal(a.points, b.points) and np.array_equal(a.triangles, b.triangles)

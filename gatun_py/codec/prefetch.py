@@ -26,79 +26,108 @@ from .tetcfile import DEFAULT_BATCH_TETS, TetcReader
 _DONE = object()
 
 
-def iter_decode_prefetched(reader: TetcReader, level: int = 0, *, batch_tets: int = DEFAULT_BATCH_TETS,
-                           depth: int = 4) -> Iterator[TetBatch]:
-    """Stream ``level`` of ``reader`` as :meth:`TetcReader.iter_decode` does for the default scalar,
-    the connectivity decoded in a background thread at most ``depth`` batches ahead.
+class PrefetchedDecode:
+    """The stream of one level, the connectivity decoded in a background thread at most ``depth``
+    batches ahead: iterate it once for the same :class:`~gatun_py.mesh.TetBatch`es as
+    :meth:`TetcReader.iter_decode` (default scalar).
 
-    Errors of the background thread (a damaged stream) are raised here, in the caller's thread.
-    Closing the generator early stops the thread.
+    Errors of the background thread (a damaged stream) are raised in the iterating thread. Closing
+    the iteration early stops the thread.
+
+    Attributes
+    ----------
+    values : (n, 4) float32 or None
+        The geometry decoder's own array x, y, z, scalar, set once the first batch is out: the
+        batches' points and density are views of its rows, and the rows of every batch already
+        yielded keep their values, so a consumer can index vertices there instead of copying them.
 
     Examples
     --------
     >>> from gatun_py.codec import TetcReader
     >>> from gatun_py.warmup import SHIPPED_TETC
     >>> r = TetcReader(SHIPPED_TETC)
-    >>> a = [(b.first, len(b.points), len(b.tets)) for b in iter_decode_prefetched(r, batch_tets=40)]
+    >>> stream = PrefetchedDecode(r, batch_tets=40)
+    >>> a = [(b.first, len(b.points), len(b.tets)) for b in stream]
     >>> a == [(b.first, len(b.points), len(b.tets)) for b in r.iter_decode(batch_tets=40)]
     True
+    >>> stream.values.shape == (r.level_meta(0)["points"], 4)
+    True
     """
-    lv = reader.level_meta(level)
-    n, m = lv["points"], lv["tets"]
-    reader._checked_points(level)
-    geo = GeometryDecoder(reader.read_section(f"L{level}/geometry"), n_points=n)
-    conn = reader._connectivity(level)
-    faces, nbv = conn.boundary()
-    if nbv != lv["boundary_vertices"]:
-        raise CorruptFileError("corrupt boundary section: vertex count does not match the metadata")
-    refs = conn.predictors
-    pts, dens = geo.decode(refs[:nbv])
-    yield TetBatch.of_vertices(0, pts, dens, faces)
-    conn.start_tets()
-    handoff = queue.Queue(maxsize=max(1, int(depth)))
-    stop = threading.Event()
 
-    def put(item) -> None:
-        while not stop.is_set():
+    def __init__(self, reader: TetcReader, level: int = 0, *, batch_tets: int = DEFAULT_BATCH_TETS, depth: int = 4):
+        self.values = None
+        self._batches = self._stream(reader, level, batch_tets, depth)
+
+    def __iter__(self) -> Iterator[TetBatch]:
+        return self._batches
+
+    def __repr__(self) -> str:
+        return f"<PrefetchedDecode: values {'not yet' if self.values is None else self.values.shape}>"
+
+    def _stream(self, reader, level, batch_tets, depth):
+        lv = reader.level_meta(level)
+        n, m = lv["points"], lv["tets"]
+        reader._checked_points(level)
+        geo = GeometryDecoder(reader.read_section(f"L{level}/geometry"), n_points=n)
+        conn = reader._connectivity(level)
+        faces, nbv = conn.boundary()
+        if nbv != lv["boundary_vertices"]:
+            raise CorruptFileError("corrupt boundary section: vertex count does not match the metadata")
+        refs = conn.predictors
+        self.values = geo.values
+        pts, dens = geo.decode(refs[:nbv])
+        yield TetBatch.of_vertices(0, pts, dens, faces)
+        conn.start_tets()
+        handoff = queue.Queue(maxsize=max(1, int(depth)))
+        stop = threading.Event()
+
+        def put(item) -> None:
+            while not stop.is_set():
+                try:
+                    handoff.put(item, timeout=0.05)
+                    return
+                except queue.Full:
+                    continue
+
+        def produce() -> None:
             try:
-                handoff.put(item, timeout=0.05)
-                return
-            except queue.Full:
-                continue
+                known = nbv
+                while conn.tets_done < m and not stop.is_set():
+                    tets = conn.next_tets(batch_tets)
+                    nv = conn.vertices_known
+                    put((known, tets, refs[known:nv].copy()))  # a copy: the refs array keeps growing
+                    known = nv
+                put(_DONE)
+            except BaseException as e:  # handed to the consumer, which raises it
+                put(e)
 
-    def produce() -> None:
+        worker = threading.Thread(target=produce, name="tetc-connectivity", daemon=True)
+        worker.start()
+        known = nbv
         try:
-            known = nbv
-            while conn.tets_done < m and not stop.is_set():
-                tets = conn.next_tets(batch_tets)
-                nv = conn.vertices_known
-                put((known, tets, refs[known:nv].copy()))  # a copy: the refs array keeps growing
-                known = nv
-            put(_DONE)
-        except BaseException as e:  # handed to the consumer, which raises it
-            put(e)
+            while True:
+                item = handoff.get()
+                if item is _DONE:
+                    break
+                if isinstance(item, BaseException):
+                    raise item
+                first, tets, new_refs = item
+                pts, dens = geo.decode(new_refs)
+                known = first + len(new_refs)
+                yield TetBatch.of_tets(first, tets, pts, dens)
+        finally:
+            stop.set()
+            worker.join()
+        if known != lv["referenced_points"]:
+            raise CorruptFileError("corrupt tet section: vertex count does not match the metadata")
+        if known < n:  # vertices no tet references: no refs
+            pts, dens = geo.decode(np.full((n - known, 4), -1, np.int32))
+            yield TetBatch.of_vertices(known, pts, dens)
+        geo.finish()
+        reader.last_peak_border = conn.peak_border
 
-    worker = threading.Thread(target=produce, name="tetc-connectivity", daemon=True)
-    worker.start()
-    known = nbv
-    try:
-        while True:
-            item = handoff.get()
-            if item is _DONE:
-                break
-            if isinstance(item, BaseException):
-                raise item
-            first, tets, new_refs = item
-            pts, dens = geo.decode(new_refs)
-            known = first + len(new_refs)
-            yield TetBatch.of_tets(first, tets, pts, dens)
-    finally:
-        stop.set()
-        worker.join()
-    if known != lv["referenced_points"]:
-        raise CorruptFileError("corrupt tet section: vertex count does not match the metadata")
-    if known < n:  # vertices no tet references: no refs
-        pts, dens = geo.decode(np.full((n - known, 4), -1, np.int32))
-        yield TetBatch.of_vertices(known, pts, dens)
-    geo.finish()
-    reader.last_peak_border = conn.peak_border
+
+def iter_decode_prefetched(reader: TetcReader, level: int = 0, *, batch_tets: int = DEFAULT_BATCH_TETS,
+                           depth: int = 4) -> Iterator[TetBatch]:
+    """The batches of :class:`PrefetchedDecode` (same as ``reader.iter_decode(level)``)."""
+    return iter(PrefetchedDecode(reader, level, batch_tets=batch_tets, depth=depth))

@@ -35,11 +35,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "bench"))
 
-from common import FIGURES, WORK, table, write_section  # noqa: E402
+from common import FIGURES, SECTIONS, WORK, code_state, table, write_section  # noqa: E402
 
 OUT = WORK / "iso"
 RATIOS = (0.2, 0.05, 0.01)
 PEERS = ("vtk", "fast", "pyfqmr", "meshopt")
+BIG_DEFAULT = Path("/work/cache/flange-10m.tetc")
 PEER_NAMES = {"vtk": "VTK quadric", "fast": "fast-simplification", "pyfqmr": "pyfqmr", "meshopt": "meshoptimizer"}
 TETC = [str(ROOT / ".venv" / "bin" / "tetc")] if (ROOT / ".venv" / "bin" / "tetc").exists() else ["tetc"]
 
@@ -332,13 +333,23 @@ def _child(cmd) -> tuple[float, float, str]:
     return time.perf_counter() - t0, ru.ru_maxrss / 1024.0, out
 
 
-def part_big(tetc: Path, vtu: Path, runs: int):
-    """Time and memory of one isosurface at R = 0.05 on a large mesh: ours against every cascade."""
+#: bare interpreters, for what the pipelines' peaks hold beyond their imports
+BARE = {"bare: import vtk": [sys.executable, "-c", "import vtk"],
+        "bare: import gatun_py.isosurface, numba": [sys.executable, "-c",
+                                                    "import gatun_py, gatun_py.isosurface, numba"]}
+
+
+def part_big(tetc: Path, vtu: Path, runs: int, value: float | None = None):
+    """Time and memory of one isosurface at R = 0.05 on a large mesh: ours against every cascade.
+
+    Every pipeline runs once first, not counted (numba's cache, the page cache), then ``runs``
+    times, interleaved.
+    """
     from gatun_py.codec import TetcReader
 
     reader = TetcReader(tetc)
     lo_s, hi_s = reader.meta["scalar_range"]
-    v = lo_s + 0.35 * (hi_s - lo_s)
+    v = lo_s + 0.35 * (hi_s - lo_s) if value is None else float(value)
     ratio = 0.05
     cmds = {"ours (tetc isosurface)": TETC + ["isosurface", str(tetc), "--value", str(v), "--ratio", str(ratio), "-o",
                                              str(OUT / "big_ours.ply"), "--force", "--quiet", "--stats"]}
@@ -346,26 +357,33 @@ def part_big(tetc: Path, vtu: Path, runs: int):
         cmds[f"VTK read + contour + {PEER_NAMES[peer]}"] = [sys.executable, __file__, "--peer", peer, "--vtu", str(vtu),
                                                             "--value", str(v), "--ratio", str(ratio),
                                                             "-o", str(OUT / f"big_{peer}.ply")]
+    cmds.update(BARE)
     res = {k: [] for k in cmds}
     stats = None
-    for i in range(runs):
+    for i in range(runs + 1):
         for k, cmd in cmds.items():  # interleaved, so drift hits everyone alike
             try:
                 wall, rss, out = _child(cmd)
             except RuntimeError as e:
                 print(e, file=sys.stderr)
                 continue
-            res[k].append((wall, rss))
             if k.startswith("ours"):
                 stats = json.loads(out)
+            if i == 0:
+                print(f"  (warm-up) {k}: {wall:.2f} s {rss:.0f} MB", flush=True)
+                continue
+            res[k].append((wall, rss))
             print(f"  {k}: {wall:.2f} s {rss:.0f} MB", flush=True)
     rows = []
     med = {k: (statistics.median(w for w, _ in r), statistics.median(m for _, m in r)) for k, r in res.items() if r}
     ours_k = next(iter(cmds))
     for k, (w, m) in med.items():
         samples = ", ".join(f"{x:.2f}" for x, _ in res[k])
-        rows.append([k, f"{w:.2f}", samples, f"{m:.0f}", f"{med[ours_k][0] / w:.2f}", f"{med[ours_k][1] / m:.2f}"])
-    return {"value": v, "ratio": ratio, "rows": rows, "stats": stats, "tets": int(reader.level_meta(0)["tets"])}
+        bare = k in BARE
+        rows.append([k, f"{w:.2f}", samples, f"{m:.0f}", "" if bare else f"{med[ours_k][0] / w:.2f}",
+                     "" if bare else f"{med[ours_k][1] / m:.2f}"])
+    return {"value": v, "ratio": ratio, "rows": rows, "stats": stats, "tets": int(reader.level_meta(0)["tets"]),
+            "file": tetc.name, "runs": runs, "code": code_state()}
 
 
 # -- report ----------------------------------------------------------------------------------------------
@@ -426,7 +444,11 @@ def plots(curves, big):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--big", default=None, help="large .tetc for time and memory (its .vtu beside it)")
+    ap.add_argument("--big", default=str(BIG_DEFAULT) if BIG_DEFAULT.exists() else None,
+                    help="large .tetc for time and memory (its .vtu beside it; default: the 7.8 M-tet gmsh flange "
+                         "from the shared cache when it is there)")
+    ap.add_argument("--big-value", type=float, default=None,
+                    help="isovalue for the large mesh (default: 35 %% of its scalar range)")
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--only", choices=["quality", "levels", "big"], default=None)
     ap.add_argument("--peer", choices=PEERS)
@@ -447,13 +469,33 @@ def main(argv=None) -> int:
         saved["levels"] = part_levels()
     if args.only in (None, "big") and args.big:
         big = Path(args.big)
-        saved["big"] = part_big(big, big.with_suffix(".vtu"), args.runs)
+        saved["big"] = part_big(big, big.with_suffix(".vtu"), args.runs, args.big_value)
     OUT.mkdir(parents=True, exist_ok=True)
     cache.write_text(json.dumps(saved))
     curves = {tuple(k): v for k, v in saved.get("curves", [])}
     plots(curves, saved.get("big"))
-    write_section("isosurface", report(saved))
+    text = report(saved)
+    old = SECTIONS / "isosurface.md"
+    if "quality" not in saved and old.exists():  # a partial run (--only big): keep the other tables
+        text = _splice_big(old.read_text(), text)
+    write_section("isosurface", text)
     return 0
+
+
+_BIG_HEADING = "### Time and memory on a large mesh"
+
+
+def _splice_big(old: str, new: str) -> str:
+    """``old`` with its large-mesh part replaced by ``new``'s (appended when ``old`` has none)."""
+    if _BIG_HEADING not in new:
+        return old
+    part = new[new.index(_BIG_HEADING):]
+    if _BIG_HEADING not in old:
+        return old.rstrip() + "\n\n" + part
+    head, rest = old.split(_BIG_HEADING, 1)
+    nxt = rest.find("\n### ")
+    tail = rest[nxt:] if nxt >= 0 else ""
+    return head + part.rstrip() + "\n" + tail
 
 
 def report(s) -> str:
@@ -489,8 +531,12 @@ def report(s) -> str:
         b = s["big"]
         st = b["stats"] or {}
         out += [f"### Time and memory on a large mesh ({b['tets']:,} tets, isovalue {b['value']:.4g}, R = {b['ratio']})", "",
-                "Each line is a whole process (median of the runs, interleaved); ours reads the `.tetc`, the "
-                "cascades VTK's `.vtu`. Ratios: ours / that line.", "",
+                f"`python bench/bench_isosurface.py --only big --big {b.get('file', '?')} --big-value {b['value']:.4g} "
+                f"--runs {b.get('runs', '?')}` ({b.get('code', '?')}). "
+                "Each line is a whole process (median of the runs, interleaved, after one warm-up run each); "
+                "ours reads the `.tetc`, the cascades VTK's `.vtu`; peak RSS from the kernel's accounting of the "
+                "child. Ratios: ours / that line. The bare lines only import, for what each peak holds beyond "
+                "its interpreter.", "",
                 table(["pipeline", "wall s (median)", "samples", "peak RSS MB", "time ratio", "memory ratio"], b["rows"]), ""]
         if st:
             out += [f"Our run: {st['faces_extracted']:,} faces extracted, {st['faces']:,} written, at most "

@@ -563,14 +563,15 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs):
     # The filter parks boundary faces until their ancestors arrive, but the lock test needs the
     # whole boundary up front. Boundary vertices merge only into boundary vertices, so the first
     # batch (all boundary vertices) already has every ancestor: map its faces ourselves.
-    first = next(batches)
+    stream = iter(batches)
+    first = next(stream)
     f = anc[first.boundary]
     keep = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
     info["boundary"] = np.ascontiguousarray(f[keep], dtype=np.int32)
 
     def chained():
         yield first
-        yield from batches
+        yield from stream
 
     return SimplifyFilter(anc).filter(chained()), info
 

@@ -347,6 +347,7 @@ def part_big(tetc: Path, vtu: Path, runs: int, value: float | None = None):
     """
     from gatun_py.codec import TetcReader
 
+    OUT.mkdir(parents=True, exist_ok=True)
     reader = TetcReader(tetc)
     lo_s, hi_s = reader.meta["scalar_range"]
     v = lo_s + 0.35 * (hi_s - lo_s) if value is None else float(value)

@@ -321,8 +321,8 @@ def part_levels():
     return {"value": v, "full": full.n_triangles, "rows": rows}
 
 
-def _child(cmd) -> tuple[float, float, str]:
-    """Wall seconds, peak RSS (MB) of the child process, its stdout."""
+def _child(cmd) -> tuple[float, float, str, float]:
+    """Wall seconds, peak RSS (MB) of the child process, its stdout, its CPU seconds (user + system)."""
     t0 = time.perf_counter()
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env={**os.environ, "NUMBA_NUM_THREADS": "2"})
     out = p.stdout.read().decode()
@@ -330,7 +330,7 @@ def _child(cmd) -> tuple[float, float, str]:
     p.returncode = os.waitstatus_to_exitcode(status)
     if p.returncode != 0:
         raise RuntimeError(f"{cmd[:3]} failed ({p.returncode})")
-    return time.perf_counter() - t0, ru.ru_maxrss / 1024.0, out
+    return time.perf_counter() - t0, ru.ru_maxrss / 1024.0, out, ru.ru_utime + ru.ru_stime
 
 
 #: bare interpreters, for what the pipelines' peaks hold beyond their imports
@@ -359,12 +359,13 @@ def part_big(tetc: Path, vtu: Path, runs: int, value: float | None = None):
                                                             "--value", str(v), "--ratio", str(ratio),
                                                             "-o", str(OUT / f"big_{peer}.ply")]
     cmds.update(BARE)
+    load0 = os.getloadavg()[0]
     res = {k: [] for k in cmds}
     stats = None
     for i in range(runs + 1):
         for k, cmd in cmds.items():  # interleaved, so drift hits everyone alike
             try:
-                wall, rss, out = _child(cmd)
+                wall, rss, out, cpu = _child(cmd)
             except RuntimeError as e:
                 print(e, file=sys.stderr)
                 continue
@@ -373,18 +374,19 @@ def part_big(tetc: Path, vtu: Path, runs: int, value: float | None = None):
             if i == 0:
                 print(f"  (warm-up) {k}: {wall:.2f} s {rss:.0f} MB", flush=True)
                 continue
-            res[k].append((wall, rss))
+            res[k].append((wall, rss, cpu))
             print(f"  {k}: {wall:.2f} s {rss:.0f} MB", flush=True)
     rows = []
-    med = {k: (statistics.median(w for w, _ in r), statistics.median(m for _, m in r)) for k, r in res.items() if r}
+    med = {k: (statistics.median(x[0] for x in r), statistics.median(x[1] for x in r),
+               statistics.median(x[2] for x in r)) for k, r in res.items() if r}
     ours_k = next(iter(cmds))
-    for k, (w, m) in med.items():
-        samples = ", ".join(f"{x:.2f}" for x, _ in res[k])
+    for k, (w, m, c) in med.items():
+        samples = ", ".join(f"{x[0]:.2f}" for x in res[k])
         bare = k in BARE
-        rows.append([k, f"{w:.2f}", samples, f"{m:.0f}", "" if bare else f"{med[ours_k][0] / w:.2f}",
+        rows.append([k, f"{w:.2f}", samples, f"{c:.2f}", f"{m:.0f}", "" if bare else f"{med[ours_k][0] / w:.2f}",
                      "" if bare else f"{med[ours_k][1] / m:.2f}"])
     return {"value": v, "ratio": ratio, "rows": rows, "stats": stats, "tets": int(reader.level_meta(0)["tets"]),
-            "file": tetc.name, "runs": runs, "code": code_state()}
+            "file": tetc.name, "runs": runs, "code": code_state(), "load": [load0, os.getloadavg()[0]]}
 
 
 # -- report ----------------------------------------------------------------------------------------------
@@ -394,11 +396,19 @@ def plots(curves, big):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import matplotlib.ticker  # noqa: F401
 
     FIGURES.mkdir(parents=True, exist_ok=True)
     keys = list(curves)
     n = len(keys)
+    if n:
+        _plot_error_curves(plt, curves, keys, n)
+    if big and big.get("stats"):
+        _plot_memory(plt, big)
+
+
+def _plot_error_curves(plt, curves, keys, n):
+    import matplotlib.ticker
+
     fig, axes = plt.subplots(2, (n + 1) // 2, figsize=(4.2 * ((n + 1) // 2), 7), squeeze=False)
     for ax, key in zip(axes.ravel(), keys):
         for label, pts in curves[key].items():
@@ -418,28 +428,32 @@ def plots(curves, big):
     fig.tight_layout()
     fig.savefig(FIGURES / "iso_error_vs_faces.png", dpi=110)
     plt.close(fig)
-    if big and big.get("stats"):
-        band = big["stats"]["band"]
-        fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
-        t = [b["t_s"] for b in band]
-        ax[0].plot(t, [b["rss_mb"] for b in band], label="ours: RSS")
-        ax[0].plot(t, [b["peak_rss_mb"] for b in band], label="ours: peak RSS so far")
-        for row in big["rows"][1:]:
-            ax[0].axhline(float(row[3]), ls="--", lw=1, label=f"{row[0].split(' + ')[-1]} cascade peak", color="grey")
-        ax[0].set_xlabel("seconds")
-        ax[0].set_ylabel("MB")
-        ax[0].legend(fontsize=7)
-        ax[0].set_title("memory over one run", fontsize=9)
-        ax[1].plot(t, [b["faces"] for b in band], label="faces held")
-        ax[1].plot(t, [b["faces_extracted"] for b in band], label="faces extracted so far")
-        ax[1].plot(t, [b["locked"] for b in band], label="locked vertices (band)")
-        ax[1].set_yscale("log")
-        ax[1].set_xlabel("seconds")
-        ax[1].legend(fontsize=7)
-        ax[1].set_title("surface held and locked band", fontsize=9)
-        fig.tight_layout()
-        fig.savefig(FIGURES / "iso_memory_over_time.png", dpi=110)
-        plt.close(fig)
+
+
+def _plot_memory(plt, big):
+    band = big["stats"]["band"]
+    fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+    t = [b["t_s"] for b in band]
+    ax[0].plot(t, [b["rss_mb"] for b in band], label="ours: RSS")
+    ax[0].plot(t, [b["peak_rss_mb"] for b in band], label="ours: peak RSS so far")
+    for row in big["rows"][1:]:
+        if row[0] in BARE:
+            continue
+        ax[0].axhline(float(row[4]), ls="--", lw=1, label=f"{row[0].split(' + ')[-1]} cascade peak", color="grey")
+    ax[0].set_xlabel("seconds")
+    ax[0].set_ylabel("MB")
+    ax[0].legend(fontsize=7)
+    ax[0].set_title("memory over one run", fontsize=9)
+    ax[1].plot(t, [b["faces"] for b in band], label="faces held")
+    ax[1].plot(t, [b["faces_extracted"] for b in band], label="faces extracted so far")
+    ax[1].plot(t, [b["locked"] for b in band], label="locked vertices (band)")
+    ax[1].set_yscale("log")
+    ax[1].set_xlabel("seconds")
+    ax[1].legend(fontsize=7)
+    ax[1].set_title("surface held and locked band", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(FIGURES / "iso_memory_over_time.png", dpi=110)
+    plt.close(fig)
 
 
 def main(argv=None) -> int:
@@ -451,7 +465,8 @@ def main(argv=None) -> int:
     ap.add_argument("--big-value", type=float, default=None,
                     help="isovalue for the large mesh (default: 35 %% of its scalar range)")
     ap.add_argument("--runs", type=int, default=3)
-    ap.add_argument("--only", choices=["quality", "levels", "big"], default=None)
+    ap.add_argument("--only", choices=["quality", "levels", "big", "report"], default=None,
+                    help="run one part (report: only rewrite the section and figures from the saved results)")
     ap.add_argument("--peer", choices=PEERS)
     ap.add_argument("--vtu")
     ap.add_argument("--value", type=float)
@@ -538,7 +553,12 @@ def report(s) -> str:
                 "ours reads the `.tetc`, the cascades VTK's `.vtu`; peak RSS from the kernel's accounting of the "
                 "child. Ratios: ours / that line. The bare lines only import, for what each peak holds beyond "
                 "its interpreter.", "",
-                table(["pipeline", "wall s (median)", "samples", "peak RSS MB", "time ratio", "memory ratio"], b["rows"]), ""]
+                table(["pipeline", "wall s (median)", "samples", "CPU s (median)", "peak RSS MB", "time ratio",
+                       "memory ratio"], b["rows"]), ""]
+        if b.get("load"):
+            out += [f"Load average (1 min) {b['load'][0]:.1f} at the start and {b['load'][1]:.1f} at the end, on 2 "
+                    "cores: wall times on a busy machine favour the single-threaded cascades (ours keeps three "
+                    "threads fed), so compare the CPU column too.", ""]
         if st:
             out += [f"Our run: {st['faces_extracted']:,} faces extracted, {st['faces']:,} written, at most "
                     f"{st['peak_faces']:,} held; locked band at most {st['peak_locked']:,} vertices "

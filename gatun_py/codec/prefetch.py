@@ -75,8 +75,7 @@ class PrefetchedDecode:
             raise CorruptFileError("corrupt boundary section: vertex count does not match the metadata")
         refs = conn.predictors
         self.values = geo.values
-        pts, dens = geo.decode(refs[:nbv])
-        yield TetBatch.of_vertices(0, pts, dens, faces)
+        boundary_refs = refs[:nbv].copy()  # the producer below writes the rows after these
         conn.start_tets()
         handoff = queue.Queue(maxsize=max(1, int(depth)))
         stop = threading.Event()
@@ -101,10 +100,13 @@ class PrefetchedDecode:
             except BaseException as e:  # handed to the consumer, which raises it
                 put(e)
 
+        # started before the boundary's geometry is decoded: the tets start decoding at once
         worker = threading.Thread(target=produce, name="tetc-connectivity", daemon=True)
         worker.start()
         known = nbv
         try:
+            pts, dens = geo.decode(boundary_refs)
+            yield TetBatch.of_vertices(0, pts, dens, faces)
             while True:
                 item = handoff.get()
                 if item is _DONE:

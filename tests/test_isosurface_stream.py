@@ -59,10 +59,11 @@ def _threads() -> set:
     return {t for t in threading.enumerate() if t.name == "tetc-connectivity"}
 
 
-def test_prefetched_stream_raises_damage_in_the_caller_and_stops():
+@pytest.mark.parametrize("section", ["L0/tets", "L0/boundary", "L0/geometry"])
+def test_prefetched_stream_raises_damage_in_the_caller_and_stops(section):
     mesh = grid_mesh(7, 6, 5, jitter=0.2, seed=5)
     reader = TetcReader(_tetc(mesh))
-    raw = bytearray(reader.read_section("L0/tets"))
+    raw = bytearray(reader.read_section(section))
     failures = 0
     for pos in range(len(raw) // 4, len(raw), max(1, len(raw) // 12)):
         bad = bytearray(raw)
@@ -70,7 +71,7 @@ def test_prefetched_stream_raises_damage_in_the_caller_and_stops():
         r = TetcReader(_tetc(mesh))
         # the container checks CRCs, so feed the damaged code to the reader as if it were stored
         r.read_section = lambda name, _bad=bytes(bad), _r=r, _orig=r.read_section: (
-            _bad if name == "L0/tets" else _orig(name))
+            _bad if name == section else _orig(name))
         try:
             ref_error = None
             list(r.iter_decode(0, batch_tets=16))

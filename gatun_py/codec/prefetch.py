@@ -68,15 +68,7 @@ class PrefetchedDecode:
         lv = reader.level_meta(level)
         n, m = lv["points"], lv["tets"]
         reader._checked_points(level)
-        geo = GeometryDecoder(reader.read_section(f"L{level}/geometry"), n_points=n)
         conn = reader._connectivity(level)
-        faces, nbv = conn.boundary()
-        if nbv != lv["boundary_vertices"]:
-            raise CorruptFileError("corrupt boundary section: vertex count does not match the metadata")
-        refs = conn.predictors
-        self.values = geo.values
-        boundary_refs = refs[:nbv].copy()  # the producer below writes the rows after these
-        conn.start_tets()
         handoff = queue.Queue(maxsize=max(1, int(depth)))
         stop = threading.Event()
 
@@ -90,29 +82,42 @@ class PrefetchedDecode:
 
         def produce() -> None:
             try:
+                faces, nbv = conn.boundary()
+                refs = conn.predictors
+                put((faces, nbv, refs[:nbv].copy()))  # copies: the refs array keeps growing
+                if nbv != lv["boundary_vertices"]:
+                    return  # the consumer raises
+                conn.start_tets()
                 known = nbv
                 while conn.tets_done < m and not stop.is_set():
                     tets = conn.next_tets(batch_tets)
                     nv = conn.vertices_known
-                    put((known, tets, refs[known:nv].copy()))  # a copy: the refs array keeps growing
+                    put((known, tets, refs[known:nv].copy()))
                     known = nv
                 put(_DONE)
             except BaseException as e:  # handed to the consumer, which raises it
                 put(e)
 
-        # started before the boundary's geometry is decoded: the tets start decoding at once
+        def take():
+            item = handoff.get()
+            if isinstance(item, BaseException):
+                raise item
+            return item
+
+        # the boundary and then the tets decode in the producer from the start, while this thread
+        # sets up the geometry decoder and decodes the vertices of each batch handed over
         worker = threading.Thread(target=produce, name="tetc-connectivity", daemon=True)
         worker.start()
-        known = nbv
         try:
+            geo = GeometryDecoder(reader.read_section(f"L{level}/geometry"), n_points=n)
+            self.values = geo.values
+            faces, nbv, boundary_refs = take()
+            if nbv != lv["boundary_vertices"]:
+                raise CorruptFileError("corrupt boundary section: vertex count does not match the metadata")
+            known = nbv
             pts, dens = geo.decode(boundary_refs)
             yield TetBatch.of_vertices(0, pts, dens, faces)
-            while True:
-                item = handoff.get()
-                if item is _DONE:
-                    break
-                if isinstance(item, BaseException):
-                    raise item
+            while (item := take()) is not _DONE:
                 first, tets, new_refs = item
                 pts, dens = geo.decode(new_refs)
                 known = first + len(new_refs)

@@ -389,6 +389,58 @@ def part_big(tetc: Path, vtu: Path, runs: int, value: float | None = None):
             "file": tetc.name, "runs": runs, "code": code_state(), "load": [load0, os.getloadavg()[0]]}
 
 
+def _memory_stages_child(tetc: str) -> int:
+    """(child) Where the memory of a .tetc stream goes: RSS after the imports, the arrays the two
+    decoders hold at the end of the level, and the decode-only peak; one JSON line on stdout."""
+    import gc
+
+    import gatun_py.isosurface.extract  # noqa: F401  (the isosurface path's imports)
+    from gatun_py.codec import TetcReader
+    from gatun_py.codec.cutborder import ConnectivityDecoder
+    from gatun_py.codec.geometry import GeometryDecoder
+    from gatun_py.codec.prefetch import PrefetchedDecode
+
+    def mb(x):
+        return round(x / 2**20, 1)
+
+    def rss():
+        with open("/proc/self/status") as fh:
+            f = {ln.split(":")[0]: ln.split()[1] for ln in fh if ln.startswith(("VmRSS", "VmHWM"))}
+        return mb(int(f["VmRSS"]) * 1024), mb(int(f["VmHWM"]) * 1024)
+
+    def held(cls):
+        out = {}
+        for obj in gc.get_objects():
+            if isinstance(obj, cls):
+                for name, v in vars(obj).items():
+                    for i, a in enumerate(v if isinstance(v, tuple) else (v,)):
+                        if isinstance(a, np.ndarray) and a.nbytes >= 2**20:
+                            out[name if not isinstance(v, tuple) else f"{name}[{i}]"] = mb(a.nbytes)
+        return out
+
+    rec = {"imports": rss()[0]}
+    reader = TetcReader(tetc)
+    total, seen, geo, conn = reader.level_meta(0)["tets"], 0, {}, {}
+    for batch in PrefetchedDecode(reader):
+        seen += len(batch.tets)
+        if seen == total and len(batch.tets):  # the last tets: every decoder array is in use
+            geo, conn = held(GeometryDecoder), held(ConnectivityDecoder)
+            rec["rss_at_end"] = rss()[0]
+    rec.update(decode_peak=rss()[1], geometry=geo, connectivity=conn)
+    print(json.dumps(rec))
+    return 0
+
+
+def part_memory_stages(tetc: Path):
+    """Run :func:`_memory_stages_child` in a fresh process."""
+    p = subprocess.run([sys.executable, __file__, "--memory-stages", str(tetc)], capture_output=True, text=True,
+                       env={**os.environ, "NUMBA_NUM_THREADS": "2"})
+    if p.returncode != 0:
+        print(p.stderr, file=sys.stderr)
+        return None
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
 # -- report ----------------------------------------------------------------------------------------------
 
 def plots(curves, big):
@@ -465,9 +517,11 @@ def main(argv=None) -> int:
     ap.add_argument("--big-value", type=float, default=None,
                     help="isovalue for the large mesh (default: 35 %% of its scalar range)")
     ap.add_argument("--runs", type=int, default=3)
-    ap.add_argument("--only", choices=["quality", "levels", "big", "report"], default=None,
-                    help="run one part (report: only rewrite the section and figures from the saved results)")
+    ap.add_argument("--only", choices=["quality", "levels", "big", "stages", "report"], default=None,
+                    help="run one part (stages: where the large run's memory goes, also part of big; report: "
+                         "only rewrite the section and figures from the saved results)")
     ap.add_argument("--peer", choices=PEERS)
+    ap.add_argument("--memory-stages", metavar="TETC", help=argparse.SUPPRESS)
     ap.add_argument("--vtu")
     ap.add_argument("--value", type=float)
     ap.add_argument("--ratio", type=float)
@@ -475,6 +529,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.peer:
         return run_peer(args)
+    if args.memory_stages:
+        return _memory_stages_child(args.memory_stages)
     cache = OUT / "results.json"
     saved = json.loads(cache.read_text()) if cache.exists() else {}
     if args.only in (None, "quality"):
@@ -486,6 +542,9 @@ def main(argv=None) -> int:
     if args.only in (None, "big") and args.big:
         big = Path(args.big)
         saved["big"] = part_big(big, big.with_suffix(".vtu"), args.runs, args.big_value)
+        saved["big"]["stages"] = part_memory_stages(big)
+    if args.only == "stages" and args.big and saved.get("big"):
+        saved["big"]["stages"] = part_memory_stages(Path(args.big))
     OUT.mkdir(parents=True, exist_ok=True)
     cache.write_text(json.dumps(saved))
     curves = {tuple(k): v for k, v in saved.get("curves", [])}
@@ -565,7 +624,30 @@ def report(s) -> str:
                     f"({100 * st['peak_locked'] / max(st['faces_extracted'], 1):.2f} % of the faces extracted); "
                     f"decode {st['decode_s']:.1f} s, extraction {st['extract_s']:.1f} s, QEM {st['qem_s']:.1f} s.", "",
                     "![memory over time](../figures/iso_memory_over_time.png)", ""]
+        if b.get("stages"):
+            out += _stages_report(b)
     return "\n".join(out)
+
+
+def _stages_report(b) -> list:
+    """Where our peak goes: the interpreter, the decoders' arrays, the rest of a decode-only stream,
+    and what extraction and QEM add on top."""
+    st = b["stages"]
+    ours = next((float(r[4]) for r in b["rows"] if r[0].startswith("ours")), None)
+    geo, conn = sum(st["geometry"].values()), sum(st["connectivity"].values())
+    rest = st["decode_peak"] - st["imports"] - geo - conn
+    rows = [["interpreter, numpy, numba and our modules (after the imports)", f"{st['imports']:.0f}"],
+            ["geometry decoder: " + ", ".join(f"{k} {v:.0f}" for k, v in st["geometry"].items()), f"{geo:.0f}"],
+            ["connectivity decoder: " + ", ".join(f"{k} {v:.0f}" for k, v in st["connectivity"].items()),
+             f"{conn:.0f}"],
+            ["the rest of a decode-only stream (compiled code loaded, freed transients such as the boundary's "
+             "border, allocator slack)", f"{rest:.0f}"],
+            ["= peak of the decode-only stream", f"{st['decode_peak']:.0f}"]]
+    if ours is not None:
+        rows.append(["extraction, QEM and the batches in flight (our peak minus the decode-only peak)",
+                     f"{ours - st['decode_peak']:.0f}"])
+    return ["Where our peak goes (MB; arrays of 1 MB or more held by the two decoders at the last tets, "
+            "measured in a separate decode-only process):", "", table(["part", "MB"], rows), ""]
 
 
 if __name__ == "__main__":

@@ -35,11 +35,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "bench"))
 
-from common import FIGURES, WORK, table, write_section  # noqa: E402
+from common import FIGURES, SECTIONS, WORK, code_state, table, write_section  # noqa: E402
 
 OUT = WORK / "iso"
 RATIOS = (0.2, 0.05, 0.01)
 PEERS = ("vtk", "fast", "pyfqmr", "meshopt")
+BIG_DEFAULT = Path("/work/cache/flange-10m.tetc")
 PEER_NAMES = {"vtk": "VTK quadric", "fast": "fast-simplification", "pyfqmr": "pyfqmr", "meshopt": "meshoptimizer"}
 TETC = [str(ROOT / ".venv" / "bin" / "tetc")] if (ROOT / ".venv" / "bin" / "tetc").exists() else ["tetc"]
 
@@ -320,8 +321,8 @@ def part_levels():
     return {"value": v, "full": full.n_triangles, "rows": rows}
 
 
-def _child(cmd) -> tuple[float, float, str]:
-    """Wall seconds, peak RSS (MB) of the child process, its stdout."""
+def _child(cmd) -> tuple[float, float, str, float]:
+    """Wall seconds, peak RSS (MB) of the child process, its stdout, its CPU seconds (user + system)."""
     t0 = time.perf_counter()
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env={**os.environ, "NUMBA_NUM_THREADS": "2"})
     out = p.stdout.read().decode()
@@ -329,16 +330,27 @@ def _child(cmd) -> tuple[float, float, str]:
     p.returncode = os.waitstatus_to_exitcode(status)
     if p.returncode != 0:
         raise RuntimeError(f"{cmd[:3]} failed ({p.returncode})")
-    return time.perf_counter() - t0, ru.ru_maxrss / 1024.0, out
+    return time.perf_counter() - t0, ru.ru_maxrss / 1024.0, out, ru.ru_utime + ru.ru_stime
 
 
-def part_big(tetc: Path, vtu: Path, runs: int):
-    """Time and memory of one isosurface at R = 0.05 on a large mesh: ours against every cascade."""
+#: bare interpreters, for what the pipelines' peaks hold beyond their imports
+BARE = {"bare: import vtk": [sys.executable, "-c", "import vtk"],
+        "bare: import gatun_py.isosurface, numba": [sys.executable, "-c",
+                                                    "import gatun_py, gatun_py.isosurface, numba"]}
+
+
+def part_big(tetc: Path, vtu: Path, runs: int, value: float | None = None):
+    """Time and memory of one isosurface at R = 0.05 on a large mesh: ours against every cascade.
+
+    Every pipeline runs once first, not counted (numba's cache, the page cache), then ``runs``
+    times, interleaved.
+    """
     from gatun_py.codec import TetcReader
 
+    OUT.mkdir(parents=True, exist_ok=True)
     reader = TetcReader(tetc)
     lo_s, hi_s = reader.meta["scalar_range"]
-    v = lo_s + 0.35 * (hi_s - lo_s)
+    v = lo_s + 0.35 * (hi_s - lo_s) if value is None else float(value)
     ratio = 0.05
     cmds = {"ours (tetc isosurface)": TETC + ["isosurface", str(tetc), "--value", str(v), "--ratio", str(ratio), "-o",
                                              str(OUT / "big_ours.ply"), "--force", "--quiet", "--stats"]}
@@ -346,26 +358,87 @@ def part_big(tetc: Path, vtu: Path, runs: int):
         cmds[f"VTK read + contour + {PEER_NAMES[peer]}"] = [sys.executable, __file__, "--peer", peer, "--vtu", str(vtu),
                                                             "--value", str(v), "--ratio", str(ratio),
                                                             "-o", str(OUT / f"big_{peer}.ply")]
+    cmds.update(BARE)
+    load0 = os.getloadavg()[0]
     res = {k: [] for k in cmds}
     stats = None
-    for i in range(runs):
+    for i in range(runs + 1):
         for k, cmd in cmds.items():  # interleaved, so drift hits everyone alike
             try:
-                wall, rss, out = _child(cmd)
+                wall, rss, out, cpu = _child(cmd)
             except RuntimeError as e:
                 print(e, file=sys.stderr)
                 continue
-            res[k].append((wall, rss))
             if k.startswith("ours"):
                 stats = json.loads(out)
+            if i == 0:
+                print(f"  (warm-up) {k}: {wall:.2f} s {rss:.0f} MB", flush=True)
+                continue
+            res[k].append((wall, rss, cpu))
             print(f"  {k}: {wall:.2f} s {rss:.0f} MB", flush=True)
     rows = []
-    med = {k: (statistics.median(w for w, _ in r), statistics.median(m for _, m in r)) for k, r in res.items() if r}
+    med = {k: (statistics.median(x[0] for x in r), statistics.median(x[1] for x in r),
+               statistics.median(x[2] for x in r)) for k, r in res.items() if r}
     ours_k = next(iter(cmds))
-    for k, (w, m) in med.items():
-        samples = ", ".join(f"{x:.2f}" for x, _ in res[k])
-        rows.append([k, f"{w:.2f}", samples, f"{m:.0f}", f"{med[ours_k][0] / w:.2f}", f"{med[ours_k][1] / m:.2f}"])
-    return {"value": v, "ratio": ratio, "rows": rows, "stats": stats, "tets": int(reader.level_meta(0)["tets"])}
+    for k, (w, m, c) in med.items():
+        samples = ", ".join(f"{x[0]:.2f}" for x in res[k])
+        bare = k in BARE
+        rows.append([k, f"{w:.2f}", samples, f"{c:.2f}", f"{m:.0f}", "" if bare else f"{med[ours_k][0] / w:.2f}",
+                     "" if bare else f"{med[ours_k][1] / m:.2f}"])
+    return {"value": v, "ratio": ratio, "rows": rows, "stats": stats, "tets": int(reader.level_meta(0)["tets"]),
+            "file": tetc.name, "runs": runs, "code": code_state(), "load": [load0, os.getloadavg()[0]]}
+
+
+def _memory_stages_child(tetc: str) -> int:
+    """(child) Where the memory of a .tetc stream goes: RSS after the imports, the arrays the two
+    decoders hold at the end of the level, and the decode-only peak; one JSON line on stdout."""
+    import gc
+
+    import gatun_py.isosurface.extract  # noqa: F401  (the isosurface path's imports)
+    from gatun_py.codec import TetcReader
+    from gatun_py.codec.cutborder import ConnectivityDecoder
+    from gatun_py.codec.geometry import GeometryDecoder
+    from gatun_py.codec.prefetch import PrefetchedDecode
+
+    def mb(x):
+        return round(x / 2**20, 1)
+
+    def rss():
+        with open("/proc/self/status") as fh:
+            f = {ln.split(":")[0]: ln.split()[1] for ln in fh if ln.startswith(("VmRSS", "VmHWM"))}
+        return mb(int(f["VmRSS"]) * 1024), mb(int(f["VmHWM"]) * 1024)
+
+    def held(cls):
+        out = {}
+        for obj in gc.get_objects():
+            if isinstance(obj, cls):
+                for name, v in vars(obj).items():
+                    for i, a in enumerate(v if isinstance(v, tuple) else (v,)):
+                        if isinstance(a, np.ndarray) and a.nbytes >= 2**20:
+                            out[name if not isinstance(v, tuple) else f"{name}[{i}]"] = mb(a.nbytes)
+        return out
+
+    rec = {"imports": rss()[0]}
+    reader = TetcReader(tetc)
+    total, seen, geo, conn = reader.level_meta(0)["tets"], 0, {}, {}
+    for batch in PrefetchedDecode(reader):
+        seen += len(batch.tets)
+        if seen == total and len(batch.tets):  # the last tets: every decoder array is in use
+            geo, conn = held(GeometryDecoder), held(ConnectivityDecoder)
+            rec["rss_at_end"] = rss()[0]
+    rec.update(decode_peak=rss()[1], geometry=geo, connectivity=conn)
+    print(json.dumps(rec))
+    return 0
+
+
+def part_memory_stages(tetc: Path):
+    """Run :func:`_memory_stages_child` in a fresh process."""
+    p = subprocess.run([sys.executable, __file__, "--memory-stages", str(tetc)], capture_output=True, text=True,
+                       env={**os.environ, "NUMBA_NUM_THREADS": "2"})
+    if p.returncode != 0:
+        print(p.stderr, file=sys.stderr)
+        return None
+    return json.loads(p.stdout.strip().splitlines()[-1])
 
 
 # -- report ----------------------------------------------------------------------------------------------
@@ -375,11 +448,19 @@ def plots(curves, big):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import matplotlib.ticker  # noqa: F401
 
     FIGURES.mkdir(parents=True, exist_ok=True)
     keys = list(curves)
     n = len(keys)
+    if n:
+        _plot_error_curves(plt, curves, keys, n)
+    if big and big.get("stats"):
+        _plot_memory(plt, big)
+
+
+def _plot_error_curves(plt, curves, keys, n):
+    import matplotlib.ticker
+
     fig, axes = plt.subplots(2, (n + 1) // 2, figsize=(4.2 * ((n + 1) // 2), 7), squeeze=False)
     for ax, key in zip(axes.ravel(), keys):
         for label, pts in curves[key].items():
@@ -399,37 +480,48 @@ def plots(curves, big):
     fig.tight_layout()
     fig.savefig(FIGURES / "iso_error_vs_faces.png", dpi=110)
     plt.close(fig)
-    if big and big.get("stats"):
-        band = big["stats"]["band"]
-        fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
-        t = [b["t_s"] for b in band]
-        ax[0].plot(t, [b["rss_mb"] for b in band], label="ours: RSS")
-        ax[0].plot(t, [b["peak_rss_mb"] for b in band], label="ours: peak RSS so far")
-        for row in big["rows"][1:]:
-            ax[0].axhline(float(row[3]), ls="--", lw=1, label=f"{row[0].split(' + ')[-1]} cascade peak", color="grey")
-        ax[0].set_xlabel("seconds")
-        ax[0].set_ylabel("MB")
-        ax[0].legend(fontsize=7)
-        ax[0].set_title("memory over one run", fontsize=9)
-        ax[1].plot(t, [b["faces"] for b in band], label="faces held")
-        ax[1].plot(t, [b["faces_extracted"] for b in band], label="faces extracted so far")
-        ax[1].plot(t, [b["locked"] for b in band], label="locked vertices (band)")
-        ax[1].set_yscale("log")
-        ax[1].set_xlabel("seconds")
-        ax[1].legend(fontsize=7)
-        ax[1].set_title("surface held and locked band", fontsize=9)
-        fig.tight_layout()
-        fig.savefig(FIGURES / "iso_memory_over_time.png", dpi=110)
-        plt.close(fig)
+
+
+def _plot_memory(plt, big):
+    band = big["stats"]["band"]
+    fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+    t = [b["t_s"] for b in band]
+    ax[0].plot(t, [b["rss_mb"] for b in band], label="ours: RSS")
+    ax[0].plot(t, [b["peak_rss_mb"] for b in band], label="ours: peak RSS so far")
+    for row in big["rows"][1:]:
+        if row[0] in BARE:
+            continue
+        ax[0].axhline(float(row[4]), ls="--", lw=1, label=f"{row[0].split(' + ')[-1]} cascade peak", color="grey")
+    ax[0].set_xlabel("seconds")
+    ax[0].set_ylabel("MB")
+    ax[0].legend(fontsize=7)
+    ax[0].set_title("memory over one run", fontsize=9)
+    ax[1].plot(t, [b["faces"] for b in band], label="faces held")
+    ax[1].plot(t, [b["faces_extracted"] for b in band], label="faces extracted so far")
+    ax[1].plot(t, [b["locked"] for b in band], label="locked vertices (band)")
+    ax[1].set_yscale("log")
+    ax[1].set_xlabel("seconds")
+    ax[1].legend(fontsize=7)
+    ax[1].set_title("surface held and locked band", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(FIGURES / "iso_memory_over_time.png", dpi=110)
+    plt.close(fig)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--big", default=None, help="large .tetc for time and memory (its .vtu beside it)")
+    ap.add_argument("--big", default=str(BIG_DEFAULT) if BIG_DEFAULT.exists() else None,
+                    help="large .tetc for time and memory (its .vtu beside it; default: the 7.8 M-tet gmsh flange "
+                         "from the shared cache when it is there)")
+    ap.add_argument("--big-value", type=float, default=None,
+                    help="isovalue for the large mesh (default: 35 %% of its scalar range)")
     ap.add_argument("--runs", type=int, default=3)
-    ap.add_argument("--only", choices=["quality", "levels", "big"], default=None)
+    ap.add_argument("--only", choices=["quality", "levels", "big", "stages", "report"], default=None,
+                    help="run one part (stages: where the large run's memory goes, also part of big; report: "
+                         "only rewrite the section and figures from the saved results)")
     ap.add_argument("--peer", choices=PEERS)
+    ap.add_argument("--memory-stages", metavar="TETC", help=argparse.SUPPRESS)
     ap.add_argument("--vtu")
     ap.add_argument("--value", type=float)
     ap.add_argument("--ratio", type=float)
@@ -437,6 +529,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.peer:
         return run_peer(args)
+    if args.memory_stages:
+        return _memory_stages_child(args.memory_stages)
     cache = OUT / "results.json"
     saved = json.loads(cache.read_text()) if cache.exists() else {}
     if args.only in (None, "quality"):
@@ -447,13 +541,36 @@ def main(argv=None) -> int:
         saved["levels"] = part_levels()
     if args.only in (None, "big") and args.big:
         big = Path(args.big)
-        saved["big"] = part_big(big, big.with_suffix(".vtu"), args.runs)
+        saved["big"] = part_big(big, big.with_suffix(".vtu"), args.runs, args.big_value)
+        saved["big"]["stages"] = part_memory_stages(big)
+    if args.only == "stages" and args.big and saved.get("big"):
+        saved["big"]["stages"] = part_memory_stages(Path(args.big))
     OUT.mkdir(parents=True, exist_ok=True)
     cache.write_text(json.dumps(saved))
     curves = {tuple(k): v for k, v in saved.get("curves", [])}
     plots(curves, saved.get("big"))
-    write_section("isosurface", report(saved))
+    text = report(saved)
+    old = SECTIONS / "isosurface.md"
+    if "quality" not in saved and old.exists():  # a partial run (--only big): keep the other tables
+        text = _splice_big(old.read_text(), text)
+    write_section("isosurface", text)
     return 0
+
+
+_BIG_HEADING = "### Time and memory on a large mesh"
+
+
+def _splice_big(old: str, new: str) -> str:
+    """``old`` with its large-mesh part replaced by ``new``'s (appended when ``old`` has none)."""
+    if _BIG_HEADING not in new:
+        return old
+    part = new[new.index(_BIG_HEADING):]
+    if _BIG_HEADING not in old:
+        return old.rstrip() + "\n\n" + part
+    head, rest = old.split(_BIG_HEADING, 1)
+    nxt = rest.find("\n### ")
+    tail = rest[nxt:] if nxt >= 0 else ""
+    return head + part.rstrip() + "\n" + tail
 
 
 def report(s) -> str:
@@ -489,16 +606,48 @@ def report(s) -> str:
         b = s["big"]
         st = b["stats"] or {}
         out += [f"### Time and memory on a large mesh ({b['tets']:,} tets, isovalue {b['value']:.4g}, R = {b['ratio']})", "",
-                "Each line is a whole process (median of the runs, interleaved); ours reads the `.tetc`, the "
-                "cascades VTK's `.vtu`. Ratios: ours / that line.", "",
-                table(["pipeline", "wall s (median)", "samples", "peak RSS MB", "time ratio", "memory ratio"], b["rows"]), ""]
+                f"`python bench/bench_isosurface.py --only big --big {b.get('file', '?')} --big-value {b['value']:.4g} "
+                f"--runs {b.get('runs', '?')}` ({b.get('code', '?')}). "
+                "Each line is a whole process (median of the runs, interleaved, after one warm-up run each); "
+                "ours reads the `.tetc`, the cascades VTK's `.vtu`; peak RSS from the kernel's accounting of the "
+                "child. Ratios: ours / that line. The bare lines only import, for what each peak holds beyond "
+                "its interpreter.", "",
+                table(["pipeline", "wall s (median)", "samples", "CPU s (median)", "peak RSS MB", "time ratio",
+                       "memory ratio"], b["rows"]), ""]
+        if b.get("load"):
+            out += [f"Load average (1 min) {b['load'][0]:.1f} at the start and {b['load'][1]:.1f} at the end, on 2 "
+                    "cores: wall times on a busy machine favour the single-threaded cascades (ours keeps three "
+                    "threads fed), so compare the CPU column too.", ""]
         if st:
             out += [f"Our run: {st['faces_extracted']:,} faces extracted, {st['faces']:,} written, at most "
                     f"{st['peak_faces']:,} held; locked band at most {st['peak_locked']:,} vertices "
                     f"({100 * st['peak_locked'] / max(st['faces_extracted'], 1):.2f} % of the faces extracted); "
                     f"decode {st['decode_s']:.1f} s, extraction {st['extract_s']:.1f} s, QEM {st['qem_s']:.1f} s.", "",
                     "![memory over time](../figures/iso_memory_over_time.png)", ""]
+        if b.get("stages"):
+            out += _stages_report(b)
     return "\n".join(out)
+
+
+def _stages_report(b) -> list:
+    """Where our peak goes: the interpreter, the decoders' arrays, the rest of a decode-only stream,
+    and what extraction and QEM add on top."""
+    st = b["stages"]
+    ours = next((float(r[4]) for r in b["rows"] if r[0].startswith("ours")), None)
+    geo, conn = sum(st["geometry"].values()), sum(st["connectivity"].values())
+    rest = st["decode_peak"] - st["imports"] - geo - conn
+    rows = [["interpreter, numpy, numba and our modules (after the imports)", f"{st['imports']:.0f}"],
+            ["geometry decoder: " + ", ".join(f"{k} {v:.0f}" for k, v in st["geometry"].items()), f"{geo:.0f}"],
+            ["connectivity decoder: " + ", ".join(f"{k} {v:.0f}" for k, v in st["connectivity"].items()),
+             f"{conn:.0f}"],
+            ["the rest of a decode-only stream (compiled code loaded, freed transients such as the boundary's "
+             "border, allocator slack)", f"{rest:.0f}"],
+            ["= peak of the decode-only stream", f"{st['decode_peak']:.0f}"]]
+    if ours is not None:
+        rows.append(["extraction, QEM and the batches in flight (our peak minus the decode-only peak)",
+                     f"{ours - st['decode_peak']:.0f}"])
+    return ["Where our peak goes (MB; arrays of 1 MB or more held by the two decoders at the last tets, "
+            "measured in a separate decode-only process):", "", table(["part", "MB"], rows), ""]
 
 
 if __name__ == "__main__":

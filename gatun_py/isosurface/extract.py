@@ -25,6 +25,7 @@ from .._atomic import check_output_path
 from .._resources import peak_rss_mb
 from ..codec import TetcReader
 from ..codec.container import MAGIC
+from ..codec.prefetch import PrefetchedDecode
 from ..errors import CorruptFileError, OptionError, ReadError
 from ..mesh import TetMesh, mesh_batches, read_mesh
 from ..simplify.filter import SimplifyFilter
@@ -38,6 +39,8 @@ from .io import write_surface
 DEFAULT_BATCH_FACES = 100_000
 MAX_PREVIEW_PIXELS = 1 << 26
 CHUNK_TETS = 8192  # tets per extraction step (rounds start between steps)
+MAX_IN_FLIGHT = 16  # decoded batches waiting for the extraction thread
+BOUNDARY_CHUNK = 4 * CHUNK_TETS  # boundary faces per extraction step (as many faces as a tet step)
 #: keep at least this share of ``batch_faces`` modifiable faces between rounds (Hou & Chen's
 #: initial phase: early rounds must not over-decimate what little has been seen)
 KEEP_SHARE = 0.5
@@ -249,24 +252,35 @@ class _Extractor:
             t[:self.nt] = self.tris[:self.nt]
             self.tris = t
 
-    def add(self, pts, dens, tets, boundary, tets_before: int):
-        """Feed one batch, in chunks small enough that a round runs close to every B faces."""
+    def add(self, vals, tets, boundary, tets_before: int):
+        """Feed one batch, in chunks small enough that a round runs close to every B faces.
+
+        Boundary faces go first, in chunks of their own: the tables are reserved for the worst
+        case of one call, and a ``.tetc`` file's first batch carries the whole mesh boundary
+        (535,922 faces on the 7.8 M-tet flange, which reserved ~190 MB of hash slots in one
+        call). The result is the same as in one call: a boundary face only enters the border,
+        so no count falls to zero between the chunks that would not at the end of the batch.
+        """
         step = CHUNK_TETS
+        if len(boundary) > BOUNDARY_CHUNK:
+            for i in range(0, len(boundary), BOUNDARY_CHUNK):
+                self._add(vals, tets[:0], boundary[i:i + BOUNDARY_CHUNK], tets_before)
+            boundary = boundary[:0]
         if len(tets) <= step:
-            self._add(pts, dens, tets, boundary, tets_before + len(tets))
+            self._add(vals, tets, boundary, tets_before + len(tets))
             return
         for i in range(0, len(tets), step):
-            self._add(pts, dens, tets[i:i + step], boundary if i == 0 else boundary[:0],
+            self._add(vals, tets[i:i + step], boundary if i == 0 else boundary[:0],
                       tets_before + min(i + step, len(tets)))
 
-    def _add(self, pts, dens, tets, boundary, tets_done):
+    def _add(self, vals, tets, boundary, tets_done):
         self.tets_done = tets_done
         t0 = time.perf_counter()
         self._reserve(len(tets), len(boundary))
         zero = np.empty(12 * len(tets) + 3 * len(boundary) + 1, np.int64)
         nt0 = self.nt
         self.nv, self.nt, _ = marching.extract_batch(
-            pts, dens, tets, boundary, self.iso, marching.CASE_COUNT, marching.CASE_TRIS, marching.TET_EDGES,
+            vals, tets, boundary, self.iso, marching.CASE_COUNT, marching.CASE_TRIS, marching.TET_EDGES,
             self.fa, self.fb, self.fc, self.ek, self.evid, self.ecount, self.vpos, self.vgrad, self.vkey,
             self.vlock, self.nv, self.tris, self.nt, zero, self.sizes)
         new = self.nt - nt0
@@ -415,17 +429,19 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
     extractors = [_Extractor(v, ratio=ratio, faces=faces, batch_faces=batch_faces, importance=imp,
                              grad_scale=grad_scale, check=check) for v in inside]
     n = int(info["points"])
-    points = np.empty((n, 3), np.float32)
-    density = np.empty(n, np.float32)
+    # x, y, z, scalar of every vertex streamed so far: the decoder's own array when it offers one
+    # (a .tetc stream: no copy of O(vertices)), else ours, filled batch by batch
+    shared = info.get("shared_values")
+    vdata = None
     boundary_override = info.get("boundary")
     band = []
     first_batch = True
     tets_done = 0
     wait_s = 0.0
 
-    def work(tets, bnd, before):
+    def work(vdata, tets, bnd, before):
         for ex in extractors:
-            ex.add(points, density, tets, bnd, before)
+            ex.add(vdata, tets, bnd, before)
         done = before + len(tets)
         if extractors and (len(tets) or len(bnd)):
             band.append({"tets": done, "t_s": round(time.perf_counter() - t_start, 4),
@@ -438,17 +454,24 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
         return done
 
     # Extraction and collapses run in a worker thread (their kernels release the GIL) while the
-    # decoder produces the next batch: the two stages overlap on two cores. At most two batches
-    # are in flight, so memory stays bounded; the worker reads only vertices of batches already
-    # stored, the main thread writes only the new batch's.
+    # decoder produces the next batches: the stages overlap on two cores. At most MAX_IN_FLIGHT
+    # batches wait for the worker (a round of collapses takes as long as decoding ~10 batches,
+    # and the decoder should not stall on it), so memory stays bounded (~1 MB of tets each); the
+    # worker reads only vertices of batches already stored, the main thread writes only the new
+    # batch's.
     in_flight = collections.deque()
     with ThreadPoolExecutor(max_workers=1) as pool:
         t_wait = time.perf_counter()
         for batch in stream:
             wait_s += time.perf_counter() - t_wait
-            k = len(batch.points)
-            points[batch.first:batch.first + k] = batch.points
-            density[batch.first:batch.first + k] = batch.density
+            if shared is not None:
+                vdata = shared.values  # the batch's vertices are already there
+            else:
+                if vdata is None:
+                    vdata = np.empty((n, 4), np.float32)
+                k = len(batch.points)
+                vdata[batch.first:batch.first + k, :3] = batch.points
+                vdata[batch.first:batch.first + k, 3] = batch.density
             if boundary_override is not None:  # simplified start: the whole boundary with the first batch
                 bnd = boundary_override if first_batch else np.zeros((0, 3), np.int32)
             else:
@@ -457,9 +480,9 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
             # copies: the worker must own its input even if a producer reuses its buffers
             tets = np.array(batch.tets, dtype=np.int32, order="C", copy=True)
             bnd = np.array(bnd, dtype=np.int32, order="C", copy=True)
-            in_flight.append(pool.submit(work, tets, bnd, tets_done))
+            in_flight.append(pool.submit(work, vdata, tets, bnd, tets_done))
             tets_done += len(tets)
-            while len(in_flight) > 1:
+            while len(in_flight) > MAX_IN_FLIGHT:
                 done = in_flight.popleft().result()  # re-raises the worker's exception here
                 if progress is not None:
                     progress(done)
@@ -532,21 +555,23 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs):
         raise CorruptFileError("corrupt metadata: bad bounding box or scalar range") from None
     info = {"points": int(lv["points"]), "bbox_lo": lo, "bbox_hi": hi, "scalar_range": rng,
             "level": target.level, "mesh_ratio": target.ratio}
-    batches = reader.iter_decode(target.level)
+    batches = PrefetchedDecode(reader, target.level)
     anc = target_ancestors(reader, target)
     if anc is None:
+        info["shared_values"] = batches
         return batches, info
     # The filter parks boundary faces until their ancestors arrive, but the lock test needs the
     # whole boundary up front. Boundary vertices merge only into boundary vertices, so the first
     # batch (all boundary vertices) already has every ancestor: map its faces ourselves.
-    first = next(batches)
+    stream = iter(batches)
+    first = next(stream)
     f = anc[first.boundary]
     keep = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
     info["boundary"] = np.ascontiguousarray(f[keep], dtype=np.int32)
 
     def chained():
         yield first
-        yield from batches
+        yield from stream
 
     return SimplifyFilter(anc).filter(chained()), info
 

@@ -204,7 +204,7 @@ def _edge_key(a, b):
 
 
 @njit(cache=True)
-def _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, dens, iso, a, b, c, sizes):
+def _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, vals, iso, a, b, c, sizes):
     """Toggle face (a, b, c) in the border if it touches the surface; update its edges' counts.
     Returns the new number of recorded count-hits-zero keys."""
     # sort the triple
@@ -214,12 +214,12 @@ def _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, dens, iso, a, b, c, s
         b, c = c, b
     if a > b:
         a, b = b, a
-    sa = dens[a] >= iso
-    sb = dens[b] >= iso
-    sc = dens[c] >= iso
-    ea = dens[a] == iso
-    eb = dens[b] == iso
-    ec = dens[c] == iso
+    sa = vals[a, 3] >= iso
+    sb = vals[b, 3] >= iso
+    sc = vals[c, 3] >= iso
+    ea = vals[a, 3] == iso
+    eb = vals[b, 3] == iso
+    ec = vals[c, 3] == iso
     if sa == sb and sb == sc and not (ea or eb or ec):
         return nzero
     d = _face_toggle(fa, fb, fc, a, b, c)
@@ -259,9 +259,9 @@ def _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, dens, iso, a, b, c, s
 
 
 @njit(cache=True)
-def _surface_vertex(ek, evid, ecount, pts, dens, iso, a, b, vpos, vgrad, vkey, nv, gmag, sizes):
+def _surface_vertex(ek, evid, ecount, vals, iso, a, b, vpos, vgrad, vkey, nv, gmag, sizes):
     """Id of the surface vertex on edge (a, b) (a above, b below), created if new."""
-    if dens[a] == iso:
+    if vals[a, 3] == iso:
         key = _edge_key(a, a)
     else:
         key = _edge_key(a, b)
@@ -269,16 +269,16 @@ def _surface_vertex(ek, evid, ecount, pts, dens, iso, a, b, vpos, vgrad, vkey, n
     if evid[i] == EMPTY:
         evid[i] = nv
         vkey[nv] = key
-        if dens[a] == iso:
+        if vals[a, 3] == iso:
             for k in range(3):
-                vpos[nv, k] = pts[a, k]
+                vpos[nv, k] = vals[a, k]
         else:
-            sa = np.float64(dens[a])
-            sb = np.float64(dens[b])
+            sa = np.float64(vals[a, 3])
+            sb = np.float64(vals[b, 3])
             t = (iso - sb) / (sa - sb)
             for k in range(3):
-                pb = np.float64(pts[b, k])
-                vpos[nv, k] = pb + t * (np.float64(pts[a, k]) - pb)
+                pb = np.float64(vals[b, k])
+                vpos[nv, k] = pb + t * (np.float64(vals[a, k]) - pb)
         vgrad[nv, 0] = 0.0
         vgrad[nv, 1] = 0.0
         nv += 1
@@ -289,10 +289,12 @@ def _surface_vertex(ek, evid, ecount, pts, dens, iso, a, b, vpos, vgrad, vkey, n
 
 
 @njit(cache=True, nogil=True)
-def extract_batch(pts, dens, tets, boundary, iso, case_count, case_tris, tet_edges,
+def extract_batch(vals, tets, boundary, iso, case_count, case_tris, tet_edges,
                   fa, fb, fc, ek, evid, ecount, vpos, vgrad, vkey, vlock, nv, tris, nt, zero, sizes):
     """Marching tetrahedra on one batch; border bookkeeping; unlock complete edges.
 
+    ``vals`` (n, 4) float32 holds x, y, z and the scalar of every vertex streamed so far (one
+    array, so a ``.tetc`` stream can lend the decoder's own instead of a copy).
     Capacities (checked by the caller): the tables hold at least twice their entries after the
     batch, ``vpos``/``vgrad``/``vlock`` room for 4 new vertices per tet, ``tris`` 2 per tet,
     ``zero`` 12 per tet + 3 per boundary face.
@@ -304,7 +306,7 @@ def extract_batch(pts, dens, tets, boundary, iso, case_count, case_tris, tet_edg
     """
     nzero = 0
     for f in range(boundary.shape[0]):
-        nzero = _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, dens, iso,
+        nzero = _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, vals, iso,
                             boundary[f, 0], boundary[f, 1], boundary[f, 2], sizes)
     g = np.empty(3)
     m = np.empty((3, 3))
@@ -313,7 +315,7 @@ def extract_batch(pts, dens, tets, boundary, iso, case_count, case_tris, tet_edg
         case = 0
         on_iso = False
         for i in range(4):
-            s = dens[tets[t, i]]
+            s = vals[tets[t, i], 3]
             if s >= iso:
                 case |= 1 << i
             if s == iso:
@@ -326,8 +328,8 @@ def extract_batch(pts, dens, tets, boundary, iso, case_count, case_tris, tet_edg
             for r in range(3):
                 q = tets[t, r + 1]
                 for k in range(3):
-                    m[r, k] = np.float64(pts[q, k]) - np.float64(pts[p0, k])
-                g[r] = np.float64(dens[q]) - np.float64(dens[p0])
+                    m[r, k] = np.float64(vals[q, k]) - np.float64(vals[p0, k])
+                g[r] = np.float64(vals[q, 3]) - np.float64(vals[p0, 3])
             det = (m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1])
                    - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
                    + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]))
@@ -355,10 +357,10 @@ def extract_batch(pts, dens, tets, boundary, iso, case_count, case_tris, tet_edg
                     if vid[e] == EMPTY:
                         a = tets[t, tet_edges[e, 0]]
                         b = tets[t, tet_edges[e, 1]]
-                        if dens[b] >= iso:
+                        if vals[b, 3] >= iso:
                             a, b = b, a
                         nv0 = nv
-                        vid[e], nv = _surface_vertex(ek, evid, ecount, pts, dens, iso, a, b, vpos, vgrad, vkey,
+                        vid[e], nv = _surface_vertex(ek, evid, ecount, vals, iso, a, b, vpos, vgrad, vkey,
                                                      nv, gmag, sizes)
                         if nv > nv0:
                             vlock[nv0] = 1
@@ -375,7 +377,7 @@ def extract_batch(pts, dens, tets, boundary, iso, case_count, case_tris, tet_edg
                     tris[nt, 2] = tri2
                     nt += 1
         for f in range(4):
-            nzero = _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, dens, iso,
+            nzero = _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, vals, iso,
                                 tets[t, _FACES[f, 0]], tets[t, _FACES[f, 1]], tets[t, _FACES[f, 2]], sizes)
     unlocked = 0
     for z in range(nzero):

@@ -14,7 +14,8 @@ still to arrive can then reference a vertex that a collapse removes or moves. Le
 Quadrics accumulate over collapses and across calls, so the error of the whole history is kept;
 each face's quadric is weighted by its area and by the importance of its vertices (Peng et al.).
 
-State is plain arrays (the driver owns and grows them); the heap is local to a call.
+State is plain arrays (the driver owns and grows them); the heap is local to a call: one array of
+24-byte records (cost, edge, stamps), stale entries dropped when they surface.
 """
 
 from __future__ import annotations
@@ -131,52 +132,52 @@ def _placement(vq, vpos, vbnd, u, v, qs):
     return max(best, 0.0), bx, by, bz
 
 
-# -- binary min-heap over parallel arrays ---------------------------------------------------------
+# -- binary min-heap of collapse candidates --------------------------------------------------------
+#: one heap entry: the cost first (the key), then the edge and the stamps that tell a stale entry;
+#: one record of 24 bytes per entry, so a sift step touches one cache line, not five arrays
+HEAP_ENTRY = np.dtype([("cost", np.float64), ("u", np.int32), ("v", np.int32), ("su", np.int32), ("sv", np.int32)])
+
 
 @njit(cache=True)
-def _heap_push(hc, hu, hv, hsu, hsv, n, cost, u, v, su, sv):
-    if n == hc.shape[0]:
-        cap = 2 * n + 16
-        hc2 = np.empty(cap)
-        hu2 = np.empty(cap, np.int32)
-        hv2 = np.empty(cap, np.int32)
-        hsu2 = np.empty(cap, np.int32)
-        hsv2 = np.empty(cap, np.int32)
-        hc2[:n] = hc[:n]
-        hu2[:n] = hu[:n]
-        hv2[:n] = hv[:n]
-        hsu2[:n] = hsu[:n]
-        hsv2[:n] = hsv[:n]
-        hc, hu, hv, hsu, hsv = hc2, hu2, hv2, hsu2, hsv2
+def _heap_push(heap, n, cost, u, v, su, sv):
+    if n == heap.shape[0]:
+        grown = np.empty(2 * n + 16, HEAP_ENTRY)
+        grown[:n] = heap[:n]
+        heap = grown
     i = n
     while i > 0:
         p = (i - 1) >> 1
-        if hc[p] <= cost:
+        if heap[p].cost <= cost:
             break
-        hc[i], hu[i], hv[i], hsu[i], hsv[i] = hc[p], hu[p], hv[p], hsu[p], hsv[p]
+        heap[i] = heap[p]
         i = p
-    hc[i], hu[i], hv[i], hsu[i], hsv[i] = cost, u, v, su, sv
-    return hc, hu, hv, hsu, hsv, n + 1
+    e = heap[i]
+    e.cost = cost
+    e.u = u
+    e.v = v
+    e.su = su
+    e.sv = sv
+    return heap, n + 1
 
 
 @njit(cache=True)
-def _heap_pop(hc, hu, hv, hsu, hsv, n):
+def _heap_pop(heap, n):
     """Remove the top (the caller read it at index 0); returns the new size."""
     n -= 1
-    c, u, v, su, sv = hc[n], hu[n], hv[n], hsu[n], hsv[n]
+    c = heap[n].cost
     i = 0
     while True:
         l = 2 * i + 1
         if l >= n:
             break
         r = l + 1
-        m = r if (r < n and hc[r] < hc[l]) else l
-        if hc[m] >= c:
+        m = r if (r < n and heap[r].cost < heap[l].cost) else l
+        if heap[m].cost >= c:
             break
-        hc[i], hu[i], hv[i], hsu[i], hsv[i] = hc[m], hu[m], hv[m], hsu[m], hsv[m]
+        heap[i] = heap[m]
         i = m
     if n > 0:
-        hc[i], hu[i], hv[i], hsu[i], hsv[i] = c, u, v, su, sv
+        heap[i] = heap[n]
     return n
 
 
@@ -276,7 +277,6 @@ def _flips(x, y, z, moving, other, start, cnt, refs, tris, vpos, min_dot):
 
 @njit(cache=True)
 def _push_edges(v, start, cnt, refs, tris, vpos, vq, vbnd, vlock, stamp, qs, heap, hn):
-    hc, hu, hv, hsu, hsv = heap
     for i in range(cnt[v]):
         f = refs[start[v] + i]
         if tris[f, 0] < 0:
@@ -290,8 +290,8 @@ def _push_edges(v, start, cnt, refs, tris, vpos, vq, vbnd, vlock, stamp, qs, hea
             if tris[f, (k + 2) % 3] != v and not (vbnd[v] and vbnd[w]):
                 continue
             cost, _, _, _ = _placement(vq, vpos, vbnd, v, w, qs)
-            hc, hu, hv, hsu, hsv, hn = _heap_push(hc, hu, hv, hsu, hsv, hn, cost, v, w, stamp[v], stamp[w])
-    return (hc, hu, hv, hsu, hsv), hn
+            heap, hn = _heap_push(heap, hn, cost, v, w, stamp[v], stamp[w])
+    return heap, hn
 
 
 @njit(cache=True, nogil=True)
@@ -320,8 +320,7 @@ def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, m
     stamp = np.zeros(nv, np.int32)
     qs = np.empty(10)
     cap = 3 * alive + 16
-    heap = (np.empty(cap), np.empty(cap, np.int32), np.empty(cap, np.int32),
-            np.empty(cap, np.int32), np.empty(cap, np.int32))
+    heap = np.empty(cap, HEAP_ENTRY)
     hn = 0
     for v in range(nv):
         if not vlock[v] and not vdead[v]:
@@ -330,9 +329,9 @@ def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, m
     tag = 0
     done = 0
     while alive > target and hn > 0:
-        hc, hu, hv, hsu, hsv = heap
-        u, v, su, sv = hu[0], hv[0], hsu[0], hsv[0]
-        hn = _heap_pop(hc, hu, hv, hsu, hsv, hn)
+        top = heap[0]
+        u, v, su, sv = top.u, top.v, top.su, top.sv
+        hn = _heap_pop(heap, hn)
         if vdead[u] or vdead[v] or stamp[u] != su or stamp[v] != sv:
             continue
         # keep the boundary vertex when there is one

@@ -1,0 +1,140 @@
+"""Decoding a level with the connectivity running ahead of the geometry, in a thread of its own.
+
+:meth:`TetcReader.iter_decode` decodes each batch's tets and then the vertices they introduce, one
+after the other. The two stages depend on each other only through the new vertices' refs (the
+connectivity decoder writes them, the geometry decoder reads them), and both kernels release the
+GIL, so here the connectivity decoder runs in a producer thread up to ``depth`` batches ahead and
+hands over each batch's tets with a copy of its refs; the caller's thread decodes the geometry.
+On two cores the stream then costs about the slower of the two decoders instead of their sum
+(flange-10m: connectivity 4.8 s, geometry 2.0 s). The batches are the same, in the same order, as
+the default scalar's :meth:`~TetcReader.iter_decode`.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+from typing import Iterator
+
+import numpy as np
+
+from ..errors import CorruptFileError
+from ..mesh import TetBatch
+from .geometry import GeometryDecoder
+from .tetcfile import DEFAULT_BATCH_TETS, TetcReader
+
+_DONE = object()
+
+
+class PrefetchedDecode:
+    """The stream of one level, the connectivity decoded in a background thread at most ``depth``
+    batches ahead: iterate it once for the same :class:`~gatun_py.mesh.TetBatch`es as
+    :meth:`TetcReader.iter_decode` (default scalar).
+
+    Errors of the background thread (a damaged stream) are raised in the iterating thread. Closing
+    the iteration early stops the thread.
+
+    Attributes
+    ----------
+    values : (n, 4) float32 or None
+        The geometry decoder's own array x, y, z, scalar, set once the first batch is out: the
+        batches' points and density are views of its rows, and the rows of every batch already
+        yielded keep their values, so a consumer can index vertices there instead of copying them.
+
+    Examples
+    --------
+    >>> from gatun_py.codec import TetcReader
+    >>> from gatun_py.warmup import SHIPPED_TETC
+    >>> r = TetcReader(SHIPPED_TETC)
+    >>> stream = PrefetchedDecode(r, batch_tets=40)
+    >>> a = [(b.first, len(b.points), len(b.tets)) for b in stream]
+    >>> a == [(b.first, len(b.points), len(b.tets)) for b in r.iter_decode(batch_tets=40)]
+    True
+    >>> stream.values.shape == (r.level_meta(0)["points"], 4)
+    True
+    """
+
+    def __init__(self, reader: TetcReader, level: int = 0, *, batch_tets: int = DEFAULT_BATCH_TETS, depth: int = 4):
+        self.values = None
+        self._batches = self._stream(reader, level, batch_tets, depth)
+
+    def __iter__(self) -> Iterator[TetBatch]:
+        return self._batches
+
+    def __repr__(self) -> str:
+        return f"<PrefetchedDecode: values {'not yet' if self.values is None else self.values.shape}>"
+
+    def _stream(self, reader, level, batch_tets, depth):
+        lv = reader.level_meta(level)
+        n, m = lv["points"], lv["tets"]
+        reader._checked_points(level)
+        conn = reader._connectivity(level)
+        handoff = queue.Queue(maxsize=max(1, int(depth)))
+        stop = threading.Event()
+
+        def put(item) -> None:
+            while not stop.is_set():
+                try:
+                    handoff.put(item, timeout=0.05)
+                    return
+                except queue.Full:
+                    continue
+
+        def produce() -> None:
+            try:
+                faces, nbv = conn.boundary()
+                refs = conn.predictors
+                put((faces, nbv, refs[:nbv].copy()))  # copies: the refs array keeps growing
+                if nbv != lv["boundary_vertices"]:
+                    return  # the consumer raises
+                conn.start_tets()
+                known = nbv
+                while conn.tets_done < m and not stop.is_set():
+                    tets = conn.next_tets(batch_tets)
+                    nv = conn.vertices_known
+                    put((known, tets, refs[known:nv].copy()))
+                    known = nv
+                put(_DONE)
+            except BaseException as e:  # handed to the consumer, which raises it
+                put(e)
+
+        def take():
+            item = handoff.get()
+            if isinstance(item, BaseException):
+                raise item
+            return item
+
+        # the boundary and then the tets decode in the producer from the start, while this thread
+        # sets up the geometry decoder and decodes the vertices of each batch handed over
+        worker = threading.Thread(target=produce, name="tetc-connectivity", daemon=True)
+        worker.start()
+        try:
+            geo = GeometryDecoder(reader.read_section(f"L{level}/geometry"), n_points=n)
+            self.values = geo.values
+            faces, nbv, boundary_refs = take()
+            if nbv != lv["boundary_vertices"]:
+                raise CorruptFileError("corrupt boundary section: vertex count does not match the metadata")
+            known = nbv
+            pts, dens = geo.decode(boundary_refs)
+            yield TetBatch.of_vertices(0, pts, dens, faces)
+            while (item := take()) is not _DONE:
+                first, tets, new_refs = item
+                pts, dens = geo.decode(new_refs)
+                known = first + len(new_refs)
+                yield TetBatch.of_tets(first, tets, pts, dens)
+        finally:
+            stop.set()
+            worker.join()
+        if known != lv["referenced_points"]:
+            raise CorruptFileError("corrupt tet section: vertex count does not match the metadata")
+        if known < n:  # vertices no tet references: no refs
+            pts, dens = geo.decode(np.full((n - known, 4), -1, np.int32))
+            yield TetBatch.of_vertices(known, pts, dens)
+        geo.finish()
+        reader.last_peak_border = conn.peak_border
+
+
+def iter_decode_prefetched(reader: TetcReader, level: int = 0, *, batch_tets: int = DEFAULT_BATCH_TETS,
+                           depth: int = 4) -> Iterator[TetBatch]:
+    """The batches of :class:`PrefetchedDecode` (same as ``reader.iter_decode(level)``)."""
+    return iter(PrefetchedDecode(reader, level, batch_tets=batch_tets, depth=depth))

@@ -37,7 +37,8 @@ from .budget import plan_file_budget
 from .stream import PipelineResult, View, _run_streaming, bounded_step, file_render_defaults
 
 __all__ = ["MeshExtent", "FrameSetup", "BrickRef", "frame_setup", "split_for_render", "render_brick",
-           "render_bricks", "brick_tets", "open_brick", "plan_brick_budgets", "load_brick_kernels", "balance"]
+           "render_bricks", "brick_tets", "open_brick", "plan_brick_budgets", "load_brick_kernels", "balance",
+           "composite_rows", "join_rows"]
 
 
 @dataclass(frozen=True)
@@ -226,6 +227,7 @@ def combine_stats(per_brick: list[dict]) -> dict:
     out = {k: sum(s.get(k, 0) for s in per_brick) for k in _SUMMED if any(k in s for s in per_brick)}
     out["bricks"] = len(per_brick)
     out["brick_levels"] = [s.get("level", 0) for s in per_brick]
+    out["brick_ratios"] = [float(s.get("ratio", 0.0)) for s in per_brick]
     out["slowest_brick_s"] = max((s.get("brick_s", 0.0) for s in per_brick), default=0.0)
     return out
 
@@ -240,6 +242,41 @@ def composite_frame(parts: list[Fragments], per_brick: list[dict]) -> PipelineRe
     stats["fragment_mb"] = merged.nbytes / 2**20
     stats["rays_hit"] = int(len(np.unique(merged.ray)))
     stats["rays"] = merged.width * merged.height
+    return PipelineResult(image, stats)
+
+
+def composite_rows(rows, parts: list[Fragments], per_brick: list[dict] | None = None) -> tuple[np.ndarray, dict]:
+    """One row band of a frame (see :func:`~gatun_py.render.composite.split_rows`): its image rows
+    and counts that add up over bands; with ``per_brick``, also the frame's stats of the bricks."""
+    t0 = time.perf_counter()
+    merged = merge_fragments(*parts)
+    stats = combine_stats(per_brick) if per_brick is not None else {}
+    if per_brick is not None:
+        stats["brick_s"] = [float(s.get("brick_s", 0.0)) for s in per_brick]
+    image = composite(merged, stats=stats)
+    stats["composite_s"] = time.perf_counter() - t0
+    stats["fragment_mb"] = merged.nbytes / 2**20
+    stats["rays_hit"] = int(np.count_nonzero(np.bincount(merged.ray, minlength=1)))
+    stats["rows"] = tuple(rows)
+    return image, stats
+
+
+def join_rows(bands: list[tuple[np.ndarray, dict]], width: int) -> PipelineResult:
+    """The frame of its row bands (:func:`composite_rows`, top band first): rows stacked, counts
+    summed, the slowest band's compositing time."""
+    image = np.concatenate([b[0] for b in bands], axis=0)
+    stats = {}
+    for _, st in bands:
+        for k, v in st.items():
+            if k not in stats:
+                stats[k] = v
+            elif k in ("fragments_overlapping_pixels", "rays_hit", "fragment_mb"):
+                stats[k] += v
+            elif k == "composite_s":
+                stats[k] = max(stats[k], v)
+    stats.pop("rows", None)
+    stats["rays"] = int(width * image.shape[0])
+    stats["bands"] = len(bands)
     return PipelineResult(image, stats)
 
 

@@ -33,7 +33,7 @@ from ..errors import OptionError, TetcError
 from ..mesh import TetMesh
 from ..render.composite import row_bands, split_rows
 from .sortlast import (BrickRef, FrameSetup, balance, brick_tets, composite_rows, frame_setup, join_rows,
-                       load_brick_kernels, open_brick, plan_brick_budgets, render_brick)
+                       load_brick_kernels, open_brick, plan_brick_budgets, render_brick, shared_rays)
 
 __all__ = ["BrickCluster", "ClusterError", "FrameOutcome"]
 
@@ -85,6 +85,7 @@ def _render_on_worker(setup: FrameSetup, bands, indices, targets, *bricks):
     """
     out = [[] for _ in bands]
     stats = []
+    setup = shared_rays(setup)
     for i, target, brick in zip(indices, targets, bricks):
         frags, st = render_brick(brick, setup, target=target)
         st["brick"] = i

@@ -41,7 +41,10 @@ CONNECT_TIMEOUT_S = 10.0
 FRAMES_AHEAD = 2  # frames submitted beyond the one being waited for
 # a brick moves to another worker when that shortens the slowest worker's frame by this share of the
 # mean (a move costs its transfer; smaller gains are noise)
-REBALANCE_GAIN = 0.02
+REBALANCE_GAIN = 0.05
+# weight of the newest frame in each brick's smoothed render time (the rest: the frames before), so
+# that one noisy frame does not move bricks back and forth
+TIME_SMOOTHING = 0.5
 
 
 class ClusterError(TetcError, OSError):
@@ -248,9 +251,20 @@ class BrickCluster:
         """Each worker's bricks now (they move between frames to even out the measured render times)."""
         return [[i for i, x in enumerate(self._brick_worker) if x == w] for w in self.workers]
 
+    def _observe(self, brick_s) -> None:
+        """Fold one frame's per-brick render times into the smoothed ones."""
+        if not brick_s or len(brick_s) != len(self._bricks):
+            return
+        if self._brick_s is None:
+            self._brick_s = [float(t) for t in brick_s]
+        else:
+            self._brick_s = [TIME_SMOOTHING * float(t) + (1.0 - TIME_SMOOTHING) * old if old > 0 else float(t)
+                             for t, old in zip(brick_s, self._brick_s)]
+
     def _rebalance(self) -> None:
-        """Move at most one brick, from the worker whose bricks took longest in the last frame to the
-        quickest, when that shortens the longest by more than ``REBALANCE_GAIN`` of the frame.
+        """Move at most one brick, from the worker whose bricks took longest (smoothed render times of
+        the frames so far) to the quickest, when that shortens the longest by more than
+        ``REBALANCE_GAIN`` of the mean.
 
         Deterministic (it depends only on the measured times) and without effect on the image: the
         bands composite the fragments in brick order, whichever worker made them. The brick moves
@@ -258,7 +272,7 @@ class BrickCluster:
         stays that of the bricks it holds.
         """
         times = self._brick_s
-        if times is None or len(set(self._brick_worker)) < 1:
+        if times is None:
             return
         workers = self.workers
         load = {w: 0.0 for w in workers}
@@ -282,7 +296,6 @@ class BrickCluster:
         self._bricks[best] = self.client.submit(_keep, old, workers=[lo], allow_other_workers=True, pure=False,
                                                 key=f"tetc-brick-{best}-{id(self)}-{time.monotonic_ns()}")
         self._brick_worker[best] = lo
-        times[best] = 0.0  # measured again where it is now, before it moves again
         self.moves += 1
         self._log(f"brick {best} moved to {lo} (last frame: {load[hi]:.3f} s against {load[lo]:.3f} s)")
 
@@ -354,7 +367,7 @@ class BrickCluster:
                 return
             futs, notes, setup, t0 = pending.popleft()
             res = join_rows(self._wait(futs, "the frame"), setup.camera.width)
-            self._brick_s = res.stats.pop("brick_s", None) or self._brick_s
+            self._observe(res.stats.pop("brick_s", None))
             res.stats.update(notes=notes, step=setup.step, mode=setup.mode, frame_s=time.perf_counter() - t0,
                              workers=len(self.workers), brick_moves=self.moves)
             yield res

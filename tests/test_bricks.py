@@ -443,3 +443,33 @@ def test_one_brick_renders_through_the_plain_pipeline(tmp_path):
     ref = render_mesh(b.decode_mesh(0), camera, v.tf, mode="volume", step=step, scalar_range=rng).image
     assert np.abs(streamed - ref).max() < 1e-5 and ref.max() > 0
     assert rng == tuple(f.reader.meta["scalar_range"]) and step == f.reader.meta["render_step"]
+
+
+def test_brick_budget_probes_once_and_follows_the_budget(tmp_path, monkeypatch):
+    """A series plans every frame from planners probed on the first: coarser bricks for smaller
+    budgets, the finest for a generous one, and no probe after the first frame."""
+    from gatun_py.pipeline import budget as budget_module
+    from gatun_py.pipeline.sortlast import BrickBudget, MeshExtent, frame_setup
+    from gatun_py.pipeline.stream import View
+    from gatun_py.render import Camera
+
+    monkeypatch.setenv("TETC_CACHE_DIR", str(tmp_path))
+    m = jittered_grid((12, 12, 12), jitter=0.25, seed=4)
+    f = gatun_py.compress(m, tmp_path / "b.tetc", bricks=3, jobs=1)
+    probes = []
+    real_probe = budget_module.FramePlanner.probe
+    monkeypatch.setattr(budget_module.FramePlanner, "probe", lambda self, *a, **k: probes.append(1) or real_probe(
+        self, *a, **k))
+    plan = BrickBudget([f.reader.brick(k) for k in range(3)])
+    extent = MeshExtent.of_reader(f.reader)
+    ratios = []
+    for k, budget in enumerate((1e-4, 0.05, 60.0)):
+        view = View(Camera(64, 64, 20.0 * k, 10))
+        setup, _ = frame_setup(view, extent)
+        targets = plan.targets(setup, view, budget, groups=[[0, 1], [2]])
+        ratios.append([t.ratio for t in targets])
+    assert len(probes) == 3  # one per brick, on the first frame only
+    assert all(r > 0 for r in ratios[0]) and ratios[2] == [0.0, 0.0, 0.0]
+    assert all(a >= b >= c for a, b, c in zip(*ratios))
+    with pytest.raises(OptionError):
+        plan.targets(setup, view, 0.0)

@@ -32,8 +32,8 @@ from ..codec import TetcReader
 from ..errors import OptionError, TetcError
 from ..mesh import TetMesh
 from ..render.composite import row_bands, split_rows
-from .sortlast import (BrickRef, FrameSetup, balance, brick_tets, composite_rows, frame_setup, join_rows,
-                       load_brick_kernels, open_brick, plan_brick_budgets, render_brick, shared_rays)
+from .sortlast import (BrickBudget, BrickRef, FrameSetup, balance, brick_tets, composite_rows, frame_setup, join_rows,
+                       load_brick_kernels, open_brick, render_brick, shared_rays)
 
 __all__ = ["BrickCluster", "ClusterError", "FrameOutcome"]
 
@@ -156,7 +156,7 @@ class BrickCluster:
         self._bricks = []  # futures of the resident bricks
         self._brick_worker = []
         self._sources = []
-        self._readers = None
+        self._planner = None
         self._budget_ready = False
         self._brick_s = None
         self.moves = 0
@@ -238,7 +238,7 @@ class BrickCluster:
         self._sources = sources
         self._brick_worker = where
         self._budget_ready = bool(budget)
-        self._readers = [open_brick(s) for s in sources] if budget else None
+        self._planner = BrickBudget([open_brick(s) for s in sources]) if budget else None
         self._brick_s = None  # each brick's last measured render time (places the bricks)
         # allow_other_workers: when a worker dies, its bricks load again elsewhere
         self._bricks = [self.client.submit(_load_brick, s, bool(budget), workers=[w], allow_other_workers=True,
@@ -330,14 +330,14 @@ class BrickCluster:
         """One frame: every brick's fragments composited. Returns a PipelineResult."""
         return next(iter(self.render_series([view], extent, budget=budget)))
 
-    def _targets(self, view, budget):
+    def _targets(self, setup, view, budget):
         """Each brick's level and ratio for a frame of ``budget`` seconds: the budget is shared out
         among the bricks a worker renders one after another (workers run side by side)."""
         if budget is None:
             return None
         if not self._budget_ready:
             raise OptionError("a frame-time budget needs the bricks loaded with load(..., budget=True)")
-        return plan_brick_budgets(self._readers, view, budget, groups=[g for g in self.placement() if g])
+        return self._planner.targets(setup, view, budget, groups=[g for g in self.placement() if g])
 
     def render_series(self, views, extent, *, ahead: int = FRAMES_AHEAD, budget: float | None = None):
         """Render ``views`` (View objects) in order, yielding each frame's PipelineResult as it completes.
@@ -361,7 +361,7 @@ class BrickCluster:
                     break
                 setup, notes = frame_setup(view, extent)
                 self._rebalance()
-                targets = self._targets(view, budget)
+                targets = self._targets(setup, view, budget)
                 pending.append((self._submit_frame(setup, targets), notes, setup, time.perf_counter()))
             if not pending:
                 return

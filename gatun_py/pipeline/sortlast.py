@@ -33,12 +33,12 @@ from ..render.composite import Fragments, composite, merge_fragments
 from ..render.raycast import render_mesh
 from ..render.transfer import TransferFunction, load_transfer_function
 from ..simplify.levels import Target, resolve_target, target_ancestors
-from .budget import plan_file_budget
+from .budget import FramePlanner, TimeModel, machine_costs, plan_file_budget
 from .stream import PipelineResult, View, _run_streaming, bounded_step, file_render_defaults
 
 __all__ = ["MeshExtent", "FrameSetup", "BrickRef", "frame_setup", "split_for_render", "render_brick",
            "render_bricks", "brick_tets", "open_brick", "plan_brick_budgets", "load_brick_kernels", "balance",
-           "composite_rows", "join_rows", "FrameCamera", "shared_rays"]
+           "composite_rows", "join_rows", "FrameCamera", "shared_rays", "BrickBudget"]
 
 
 @dataclass(frozen=True)
@@ -329,6 +329,49 @@ def plan_brick_budgets(sources, view: View, budget_s: float, *, groups=None) -> 
         for i in g:
             share[i] = budget_s * tets[i] / total
     return [plan_file_budget(r, view, max(share[i], 1e-3))[0] for i, r in enumerate(readers)]
+
+
+class BrickBudget:
+    """Frame by frame, a level and ratio for every ``.tetc`` brick of a series so that each frame
+    fits its budget (what a cluster holding the bricks plans with, in the client).
+
+    The same planner as one file's budget (:class:`~gatun_py.pipeline.budget.FramePlanner` with the
+    machine's time model), made and probed once per brick on the first frame (tiny renders of the
+    brick's coarse levels) and kept for the frames that follow: a series does not pay the probes
+    again. Each frame's plan projects the brick's box through the frame's camera. The budget is shared out as :func:`plan_brick_budgets`
+    does: in proportion to the tets among the bricks that run one after another (``groups``).
+
+    Parameters
+    ----------
+    readers : list of TetcReader
+        One per brick.
+    """
+
+    def __init__(self, readers):
+        self.readers = list(readers)
+        self.tets = [int(r.level_meta(0)["tets"]) for r in self.readers]
+        self._planners = None
+
+    def __repr__(self) -> str:
+        return f"BrickBudget({len(self.readers)} bricks, {'probed' if self._planners else 'not probed yet'})"
+
+    def targets(self, setup: FrameSetup, view: View, budget_s: float, *, groups=None) -> list[Target]:
+        """Each brick's :class:`~gatun_py.simplify.levels.Target` for one frame of ``budget_s`` seconds."""
+        if not (isinstance(budget_s, (int, float)) and np.isfinite(budget_s) and budget_s > 0):
+            raise OptionError(f"the budget must be a positive number of seconds, got {budget_s!r}")
+        if self._planners is None:
+            model = TimeModel(machine_costs()[0])
+            self._planners = []
+            for r in self.readers:
+                planner = FramePlanner(r, model, step=setup.step, mode=setup.mode)
+                planner.probe(r, view)  # as one file's budget probes: the brick fitted to the view
+                self._planners.append(planner)
+        share = [0.0] * len(self.readers)
+        for g in groups or [list(range(len(self.readers)))]:
+            total = max(sum(self.tets[i] for i in g), 1)
+            for i in g:
+                share[i] = budget_s * self.tets[i] / total
+        return [p.target(p.plan(max(share[i], 1e-3), setup.camera)) for i, p in enumerate(self._planners)]
 
 
 def render_bricks(sources, view: View, extent: MeshExtent, *, ratio: float | None = None, level: int | None = None,

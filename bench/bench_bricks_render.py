@@ -100,6 +100,7 @@ def scaling(mesh, tf, *, size, frames, n_bricks, log=print):
         for name, c in clusters.items():
             peaks = c.client.run(peak_rss_mb)
             workers = c.workers
+            placed[name] = c.placement()  # where the bricks are after the frames (they move)
             out[name] = {
                 "frames_s": times[name][1:],  # the first frame of each is warm-up
                 "workers": [(w, sum(tets[i] for i in placed[name][j]), idle[name][w], peaks[w])

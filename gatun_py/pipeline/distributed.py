@@ -32,8 +32,8 @@ from ..codec import TetcReader
 from ..errors import OptionError, TetcError
 from ..mesh import TetMesh
 from ..render.composite import row_bands, split_rows
-from .sortlast import (BrickBudget, BrickRef, FrameSetup, balance, brick_tets, composite_rows, frame_setup, join_rows,
-                       load_brick_kernels, open_brick, render_brick, shared_rays)
+from .sortlast import (BrickBudget, BrickRef, FrameSetup, brick_tets, composite_rows, frame_setup, join_rows,
+                       load_brick_kernels, open_brick, place, render_brick, shared_rays)
 
 __all__ = ["BrickCluster", "ClusterError", "FrameOutcome"]
 
@@ -214,7 +214,8 @@ class BrickCluster:
 
     # -- bricks ------------------------------------------------------------------------------------
     def load(self, sources, *, budget: bool = False) -> list[list[int]]:
-        """Put every brick on a worker (balanced by tets) and keep it there; returns each worker's bricks.
+        """Put every brick on a worker (interleaved in k-d order, or balanced by tets: :func:`place`)
+        and keep it there; returns each worker's bricks.
 
         ``sources``: TetMeshes, :class:`BrickRef`\\ s or ``.tetc`` paths (one brick each). A path
         must be readable by the workers (a shared folder on a real cluster), and by this process
@@ -230,7 +231,7 @@ class BrickCluster:
         if budget and any(isinstance(s, TetMesh) for s in sources):
             raise OptionError("a frame-time budget needs .tetc bricks (tetc compress --bricks K): each brick "
                               "picks one of its stored levels")
-        bins = balance([brick_tets(s) for s in sources], len(workers))
+        bins = place([brick_tets(s) for s in sources], len(workers))
         where = [None] * len(sources)
         for w, idx in zip(workers, bins):
             for i in idx:

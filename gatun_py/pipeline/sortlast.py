@@ -38,7 +38,7 @@ from .stream import PipelineResult, View, _run_streaming, bounded_step, file_ren
 
 __all__ = ["MeshExtent", "FrameSetup", "BrickRef", "frame_setup", "split_for_render", "render_brick",
            "render_bricks", "brick_tets", "open_brick", "plan_brick_budgets", "load_brick_kernels", "balance",
-           "composite_rows", "join_rows", "FrameCamera", "shared_rays", "BrickBudget"]
+           "composite_rows", "join_rows", "FrameCamera", "shared_rays", "BrickBudget", "place"]
 
 
 @dataclass(frozen=True)
@@ -436,6 +436,29 @@ def load_brick_kernels() -> float:
     for mode in ("volume", "face"):
         composite(render_mesh(mesh, Camera(4, 4), "default", mode=mode, fragments=True).fragments)
     return time.perf_counter() - t0
+
+
+def place(sizes, n_bins: int, *, tolerance: float = 0.05) -> list[list[int]]:
+    """Bricks (in k-d order, ``sizes`` their tets) for ``n_bins`` workers: interleaved, brick i to
+    worker i mod n, when that balances the tets within ``tolerance``; else :func:`balance`.
+
+    Consecutive k-d bricks are neighbours (siblings split one cell), so interleaving gives every
+    worker a share of every region: whatever the view, each has a similar part of the screen and
+    of the depth. On flange-1m (16 bricks, 8 views) that left 3.5 % of a frame idle on average
+    against 5.6 % for bricks balanced by tets alone.
+
+    Examples
+    --------
+    >>> place([10, 10, 10, 10], 2), place([40, 10, 10, 10], 2)
+    ([[0, 2], [1, 3]], [[0], [1, 2, 3]])
+    """
+    if n_bins < 1:
+        raise OptionError(f"need at least one bin, got {n_bins}")
+    bins = [list(range(j, len(sizes), n_bins)) for j in range(n_bins)]
+    totals = [sum(sizes[i] for i in b) for b in bins]
+    if min(totals) > 0 and max(totals) <= (1.0 + tolerance) * min(totals):
+        return bins
+    return balance(sizes, n_bins)
 
 
 def balance(sizes, n_bins: int) -> list[list[int]]:

@@ -244,3 +244,19 @@ def test_cli_budget_on_a_local_cluster(post_bricked_file, tmp_path, monkeypatch)
     plain = tmp_path / "plain.png"
     assert_error(run("render", SAMPLE_FILES["post"][0], "-o", plain, "--workers", "1", "--budget", "0.5"), "bricked")
     assert not plain.exists()
+
+
+def test_one_band_and_no_moves_give_the_same_image():
+    """Compositing on one worker (bands=1) and fixed placement are the same frames, and skewed
+    times move nothing when moves are off."""
+    mesh = load_sample("post")[0]
+    bricks, extent = split_for_render(mesh, 4)
+    view = View(Camera(36, 30, 70, 25), "post", "face")
+    with BrickCluster(workers=2, threads_per_worker=1, timeout=60, bands=1, move_bricks=False) as cluster:
+        cluster.load(bricks)
+        cluster._brick_s = [5.0, 0.0, 5.0, 0.0]
+        frame = cluster.render(view, extent)
+        assert cluster.moves == 0 and frame.stats["bands"] == 1
+    assert np.array_equal(frame.image, render_bricks(bricks, view, extent).image)
+    with pytest.raises(Exception, match="bands"):
+        BrickCluster(workers=1, bands=0)

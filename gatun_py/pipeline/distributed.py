@@ -131,6 +131,11 @@ class BrickCluster:
         Seconds to wait for the scheduler (and for local workers to start).
     log : callable, optional
         Receives one-line notes.
+    bands : int, optional
+        Row bands a frame is composited in, each on its own worker (default one per worker holding
+        bricks: direct send; 1: all fragments to one worker, as a root would).
+    move_bricks : bool
+        Move bricks between frames to even out the workers' measured render times (default).
 
     Examples
     --------
@@ -149,9 +154,14 @@ class BrickCluster:
     """
 
     def __init__(self, *, scheduler: str | None = None, workers: int | None = None,
-                 threads_per_worker: int | None = None, timeout: float = CONNECT_TIMEOUT_S, log=None):
+                 threads_per_worker: int | None = None, timeout: float = CONNECT_TIMEOUT_S, log=None,
+                 bands: int | None = None, move_bricks: bool = True):
         dd = _distributed()
         self._log = log or (lambda _m: None)
+        if bands is not None and not (isinstance(bands, int) and bands >= 1):
+            raise OptionError(f"bands must be a whole number >= 1, got {bands!r}")
+        self.bands = bands
+        self.move_bricks = bool(move_bricks)
         self._cluster = None
         self._bricks = []  # futures of the resident bricks
         self._brick_worker = []
@@ -273,7 +283,7 @@ class BrickCluster:
         stays that of the bricks it holds.
         """
         times = self._brick_s
-        if times is None:
+        if times is None or not self.move_bricks:
             return
         workers = self.workers
         load = {w: 0.0 for w in workers}
@@ -310,7 +320,7 @@ class BrickCluster:
         for i, w in enumerate(self._brick_worker):
             by_worker.setdefault(w, []).append(i)
         owners = sorted(by_worker)
-        bands = row_bands(setup.camera.height, len(owners))
+        bands = row_bands(setup.camera.height, min(self.bands or len(owners), len(owners)))
         targets = targets or [None] * len(self._bricks)
         parts = [c.submit(_render_on_worker, setup, bands, idx, [targets[i] for i in idx],
                           *[self._bricks[i] for i in idx], workers=[w], allow_other_workers=True, pure=False)

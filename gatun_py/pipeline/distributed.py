@@ -379,6 +379,9 @@ class BrickCluster:
             futs, notes, setup, t0 = pending.popleft()
             res = join_rows(self._wait(futs, "the frame"), setup.camera.width)
             self._observe(res.stats.pop("brick_s", None))
+            per_brick = res.stats.pop("per_brick", None)
+            if self._planner is not None and budget is not None and per_brick:
+                self._planner.observe(per_brick)
             res.stats.update(notes=notes, step=setup.step, mode=setup.mode, frame_s=time.perf_counter() - t0,
                              workers=len(self.workers), brick_moves=self.moves)
             yield res

@@ -243,7 +243,8 @@ def render_brick(source, setup: FrameSetup, *, ratio: float | None = None, level
         res, _ = _run_streaming(reader, target, anc, cam, view, setup.scalar_range, setup.step, times, progress,
                                 fragments=True)
         stats = dict(res.stats)
-        stats.update(times, level=target.level, ratio=target.ratio)
+        stats.update(times, level=target.level, ratio=target.ratio, merges=target.merges,
+                     tets_decoded=int(reader.level_meta(target.level)["tets"]))
     stats["brick_s"] = time.perf_counter() - t0
     return res.fragments, stats
 
@@ -284,6 +285,7 @@ def composite_rows(rows, parts: list[Fragments], per_brick: list[dict] | None = 
     stats = combine_stats(per_brick) if per_brick is not None else {}
     if per_brick is not None:
         stats["brick_s"] = [float(s.get("brick_s", 0.0)) for s in per_brick]
+        stats["per_brick"] = [{k: v for k, v in s.items() if isinstance(v, (int, float, str))} for s in per_brick]
     image = composite(merged, stats=stats)
     stats["composite_s"] = time.perf_counter() - t0
     stats["fragment_mb"] = merged.nbytes / 2**20
@@ -372,6 +374,16 @@ class BrickBudget:
             for i in g:
                 share[i] = budget_s * self.tets[i] / total
         return [p.target(p.plan(max(share[i], 1e-3), setup.camera)) for i, p in enumerate(self._planners)]
+
+    def observe(self, per_brick: list[dict]) -> None:
+        """Correct the planners with a rendered frame's per-brick stats (each brick's render time,
+        work and level), as one file's budget learns from its frames: the time model is shared, so
+        a busy or quiet machine is learnt from every brick."""
+        if self._planners is None or len(per_brick) != len(self._planners):
+            return
+        for planner, st in zip(self._planners, per_brick):
+            if "level" in st and "brick_s" in st:
+                planner.observe(st, total_s=float(st["brick_s"]))
 
 
 def render_bricks(sources, view: View, extent: MeshExtent, *, ratio: float | None = None, level: int | None = None,

@@ -744,7 +744,7 @@ def render_frames(source, output, *, workers: int | None = None, scheduler: str 
     """Render ``source`` as bricks on a Dask cluster, frame by frame, each frame written as it completes.
 
     The bricks go to the workers once and stay there for every frame. Each frame's fragments are
-    composited by a tree reduction over the workers (:mod:`gatun_py.pipeline.distributed`); the
+    composited in row bands on the workers (:mod:`gatun_py.pipeline.distributed`); the
     image equals the one :func:`render` gives (max difference 1 on 0-255).
 
     Parameters

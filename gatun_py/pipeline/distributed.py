@@ -1,12 +1,19 @@
-"""Render bricks on a Dask cluster: bricks resident on workers, fragments composited by a tree reduction.
+"""Render bricks on a Dask cluster: bricks resident on workers, fragments composited by direct send.
 
 :class:`BrickCluster` connects to a scheduler (``tcp://HOST:PORT``) or starts a ``LocalCluster`` of
-worker processes, then :meth:`BrickCluster.load` puts every brick on one worker (balanced by tets)
-where it stays, decoded, for every frame that follows. A frame is one task per worker (render the
-fragments of the bricks it holds), a binary tree of merge tasks between workers, and one
-composite task at the root; the client receives only the image. A series of frames (views of an
-orbit, or time steps) is submitted a few frames ahead and each frame is handed back as soon as it
-is complete, in order.
+worker processes, then :meth:`BrickCluster.load` puts every brick on one worker (interleaved in k-d
+order, or balanced by tets) where it stays, decoded, for every frame that follows. A frame is one
+task per worker (render the fragments of the bricks it holds, cut into one row band per worker)
+and one task per band on its worker (composite the band from every worker's fragments, in brick
+order); the client receives only the bands' rows. There is no root: compositing is split like the
+rendering. Between frames a brick may move to another worker, when the render times measured so
+far say that evens out the workers (the image does not change: it does not depend on where a
+brick was drawn). A series of frames (views of an orbit, or time steps) is submitted a few frames
+ahead and each frame is handed back as soon as it is complete, in order.
+
+With a budget (bricks loaded with ``budget=True``) the workers keep each brick's compressed
+reader, and every frame each brick renders at the level and ratio the client planned for it
+(:class:`~gatun_py.pipeline.sortlast.BrickBudget`).
 
 Resilience is Dask's: a brick is loaded by a task (from its file, or from the mesh the task
 carries), so when a worker dies the scheduler loads its bricks again on the others and reruns the

@@ -1,6 +1,7 @@
 """Bricked rendering: exact sort-last compositing and Dask workers.
 
     python bench/bench_bricks_render.py [--quick] [--mesh flange-1m] [--big flange-10m] [--size 512]
+    python bench/bench_bricks_render.py --scaling [--mesh flange-1m] [--bricks 16] [--frames 5] [--bands 1] [--no-moves]
 
 Writes ``bench/sections/composite.md``:
 
@@ -77,7 +78,7 @@ def equality_rows(name, mesh, tf, *, size, views, bricks=(8, 64), modes=("volume
     return rows
 
 
-def scaling(mesh, tf, *, size, frames, n_bricks, log=print):
+def scaling(mesh, tf, *, size, frames, n_bricks, log=print, **cluster_options):
     """Frame times of a 1-worker and a 2-worker LocalCluster (1 thread each) in turn; also 1 worker x 2 threads."""
     from gatun_py.pipeline.distributed import BrickCluster  # optional dependency (dask)
 
@@ -85,8 +86,8 @@ def scaling(mesh, tf, *, size, frames, n_bricks, log=print):
     tets = [p.n_tets for p in parts]
     views = [View(Camera(size, size, 360.0 * i / frames, 20.0), tf) for i in range(frames + 1)]
     out = {"load": " / ".join(f"{x:.1f}" for x in os.getloadavg())}
-    clusters = {"1 worker × 1 thread": BrickCluster(workers=1, threads_per_worker=1, timeout=60),
-                "2 workers × 1 thread": BrickCluster(workers=2, threads_per_worker=1, timeout=60)}
+    clusters = {"1 worker × 1 thread": BrickCluster(workers=1, threads_per_worker=1, timeout=60, **cluster_options),
+                "2 workers × 1 thread": BrickCluster(workers=2, threads_per_worker=1, timeout=60, **cluster_options)}
     try:
         idle = {name: c.client.run(peak_rss_mb) for name, c in clusters.items()}
         placed = {name: c.load(parts) for name, c in clusters.items()}
@@ -99,6 +100,7 @@ def scaling(mesh, tf, *, size, frames, n_bricks, log=print):
         for name, c in clusters.items():
             peaks = c.client.run(peak_rss_mb)
             workers = c.workers
+            placed[name] = c.placement()  # where the bricks are after the frames (they move)
             out[name] = {
                 "frames_s": times[name][1:],  # the first frame of each is warm-up
                 "workers": [(w, sum(tets[i] for i in placed[name][j]), idle[name][w], peaks[w])
@@ -109,7 +111,7 @@ def scaling(mesh, tf, *, size, frames, n_bricks, log=print):
     finally:
         for c in clusters.values():
             c.close()
-    c2 = BrickCluster(workers=1, threads_per_worker=2, timeout=60)
+    c2 = BrickCluster(workers=1, threads_per_worker=2, timeout=60, **cluster_options)
     try:
         c2.load(parts)
         ts = []
@@ -124,6 +126,61 @@ def scaling(mesh, tf, *, size, frames, n_bricks, log=print):
     return out
 
 
+def orbit_throughput(parts, extent, tf, *, size, frames, rounds=2, log=print, **cluster_options):
+    """Seconds for an orbit of ``frames`` views through ``render_series`` (frames in flight, as
+    ``tetc render --workers N --orbit`` renders) on 1 and on 2 workers (1 thread each), both
+    clusters up, rounds alternating; the best round of each."""
+    from gatun_py.pipeline.distributed import BrickCluster  # optional dependency (dask)
+
+    views = [View(Camera(size, size, 360.0 * i / frames, 20.0), tf) for i in range(frames)]
+    clusters = {n: BrickCluster(workers=n, threads_per_worker=1, timeout=60, **cluster_options) for n in (1, 2)}
+    try:
+        for c in clusters.values():
+            c.load(parts)
+            c.render(views[0], extent)  # warm-up
+        best = {n: float("inf") for n in clusters}
+        for _ in range(rounds):
+            for n, c in clusters.items():
+                t0 = time.perf_counter()
+                for _res in c.render_series(views, extent):
+                    pass
+                best[n] = min(best[n], time.perf_counter() - t0)
+        moves = clusters[2].moves
+    finally:
+        for c in clusters.values():
+            c.close()
+    log({"orbit 1 worker s": best[1], "orbit 2 workers s": best[2], "moves": moves})
+    return best, moves
+
+
+def scaling_section(mesh_name, *, size, frames, n_bricks, orbit_frames=8, log=print, bands=None, moves=True):
+    """``--scaling``: only the 1 vs 2 worker figures (per frame and over an orbit), as a subsection."""
+    mesh = read_mesh(mesh_path(mesh_name))[0]
+    parts, extent = split_for_render(mesh, n_bricks)
+    opts = dict(bands=bands, move_bricks=moves)
+    sc = scaling(mesh, "default", size=size, frames=frames, n_bricks=n_bricks, log=log, **opts)
+    med = {k: statistics.median(v["frames_s"]) for k, v in sc.items() if isinstance(v, dict)}
+    orbit, n_moves = orbit_throughput(parts, extent, "default", size=size, frames=orbit_frames, log=log, **opts)
+    r = sc["ratios"]
+    return [
+        "", f"### 1 vs 2 workers, {'direct-send compositing' if bands is None else f'{bands} band(s)'}, "
+        f"{'bricks moved by measured time' if moves else 'bricks not moved'} ({mesh_name}, "
+        f"{mesh.n_tets:,} tets, {n_bricks} bricks, {size}²)",
+        "", f"`python bench/bench_bricks_render.py --scaling --mesh {mesh_name} --bricks {n_bricks} --frames {frames}"
+        f"{'' if bands is None else f' --bands {bands}'}{'' if moves else ' --no-moves'}` "
+        f"({code_state()}); load average at the start {sc['load']} (1 / 5 / 15 min) on 2 cores. Both clusters up, "
+        "one frame of each in turn (`BrickCluster.render`, a frame at a time), the first frame of each dropped; "
+        "then an orbit through `render_series` (frames in flight), best of 2 alternating rounds. Target: 2 workers "
+        ">= 1.6x faster than 1.",
+        "", table(["cluster", "median s/frame", "min", "max"],
+                  [[k, med[k], min(sc[k]["frames_s"]), max(sc[k]["frames_s"])] for k in med]),
+        "", f"Per frame, ratio 1 worker / 2 workers frame by frame: median **{statistics.median(r):.2f}x** "
+        f"(min {min(r):.2f}, max {max(r):.2f}).",
+        "", f"Orbit of {orbit_frames} frames: 1 worker {orbit[1]:.2f} s, 2 workers {orbit[2]:.2f} s = "
+        f"**{orbit[1] / orbit[2]:.2f}x** ({n_moves} brick moves on the 2-worker cluster).",
+    ]
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="samples only, small images, no cluster")
@@ -134,8 +191,20 @@ def main(argv=None):
     ap.add_argument("--bricks", type=int, default=16, help="bricks for the worker scaling")
     ap.add_argument("--append-big", default=None, metavar="NAME",
                     help="only the equality rows of gmsh mesh NAME (e.g. flange-10m), appended to the section")
+    ap.add_argument("--scaling", action="store_true",
+                    help="only the 1 vs 2 worker figures on --mesh, appended to the section")
+    ap.add_argument("--bands", type=int, default=None,
+                    help="--scaling: row bands per frame (default one per worker; 1 = composite on one worker)")
+    ap.add_argument("--no-moves", action="store_true", help="--scaling: keep every brick where it was placed")
     args = ap.parse_args(argv)
     t_start = time.perf_counter()
+    if args.scaling:
+        text = scaling_section(args.mesh, size=args.size, frames=args.frames, n_bricks=args.bricks, bands=args.bands,
+                               moves=not args.no_moves)
+        section = ROOT / "bench" / "sections" / "composite.md"
+        old = section.read_text() if section.exists() else ""
+        write_section("composite", old + "\n".join(text + ["", f"Wall time {time.perf_counter() - t_start:.0f} s."]))
+        return
     if args.append_big:
         huge = read_mesh(mesh_path(args.append_big))[0]
         rows = equality_rows(args.append_big, huge, "default", size=args.size, views=[(30.0, 20.0)])

@@ -75,7 +75,8 @@ def _component(text):
 @click.option("--budget", type=POSITIVE, default=None, metavar="SECONDS",
               help="Frame-time budget: pick the finest level and ratio predicted to fit, by a model of costs per "
                    "decoded tet, ray-tet step, sample and boundary face (measured once per machine in under a "
-                   "second and cached; no per-file calibration). .tetc input only.")
+                   "second and cached; no per-file calibration). .tetc input only; with --workers/--scheduler a "
+                   "bricked file (compress --bricks K), every brick picking its level for its share of each frame.")
 @click.option("--pipeline", type=click.Choice(["streaming", "generic"]), default="streaming", show_default=True,
               help="streaming: decode, simplify and render in one pass; generic: decode all, simplify, render "
                    "(the paper's baseline).")
@@ -130,10 +131,11 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     if n_bricks is not None and workers is None and scheduler is None:
         raise click.UsageError("--bricks is for rendering on a cluster (--workers or --scheduler)")
     if workers is not None or scheduler is not None or orbit > 1:
-        _check_series_options(workers, scheduler, n_bricks, ratio, budget, colorbar, lean, pipeline, component)
+        _check_series_options(workers, scheduler, n_bricks, ratio, colorbar, lean, pipeline, component)
     if workers is not None or scheduler is not None:
         _render_on_cluster(input, output, workers=workers, scheduler=scheduler, bricks=n_bricks, orbit=orbit,
-                           size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom, level=level, mode=mode,
+                           size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom, level=level,
+                           budget=budget, mode=mode,
                            step=step, scalar_range=scalar_range, opacity_model=opacity_model, background=background,
                            force=force, timeout=timeout, read_options=read_kwargs(scalar, q_file, q_var, cell_to_point,
                                                                                    time_step),
@@ -171,10 +173,10 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
         status(f"wrote {output} ({w}x{h}, {st['tets_rendered']} tets, {st['total_s']:.2f} s)", quiet)
 
 
-def _check_series_options(workers, scheduler, n_bricks, ratio, budget, colorbar, lean, pipeline, component):
+def _check_series_options(workers, scheduler, n_bricks, ratio, colorbar, lean, pipeline, component):
     if workers is not None and scheduler is not None:
         raise click.UsageError("give either --workers (a local cluster) or --scheduler (a running one), not both")
-    unsupported = [name for name, given in (("--ratio", ratio is not None), ("--budget", budget is not None),
+    unsupported = [name for name, given in (("--ratio", ratio is not None),
                                             ("--colorbar", colorbar), ("--lean", lean),
                                             ("--pipeline generic", pipeline != "streaming"),
                                             ("--component", component is not None)) if given]

@@ -737,14 +737,14 @@ def frame_paths(output, n_frames: int) -> list[Path]:
 
 def render_frames(source, output, *, workers: int | None = None, scheduler: str | None = None,
                   bricks: int | None = None, orbit: int = 1, size=256, tf="default", azimuth: float = 0.0,
-                  elevation: float = 0.0, zoom: float = 1.0, level: int | None = None, mode: str = "volume",
-                  step: float | None = None, scalar_range=None, opacity_model: str | None = None,
-                  background="black", force: bool = False, read_options: dict | None = None,
-                  timeout: float = 10.0, progress=None, log=None) -> list[dict]:
+                  elevation: float = 0.0, zoom: float = 1.0, level: int | None = None, budget: float | None = None,
+                  mode: str = "volume", step: float | None = None, scalar_range=None,
+                  opacity_model: str | None = None, background="black", force: bool = False,
+                  read_options: dict | None = None, timeout: float = 10.0, progress=None, log=None) -> list[dict]:
     """Render ``source`` as bricks on a Dask cluster, frame by frame, each frame written as it completes.
 
     The bricks go to the workers once and stay there for every frame. Each frame's fragments are
-    composited by a tree reduction over the workers (:mod:`gatun_py.pipeline.distributed`); the
+    composited in row bands on the workers (:mod:`gatun_py.pipeline.distributed`); the
     image equals the one :func:`render` gives (max difference 1 on 0-255).
 
     Parameters
@@ -766,6 +766,10 @@ def render_frames(source, output, *, workers: int | None = None, scheduler: str 
         Frames at azimuths ``azimuth + 360 k / orbit``.
     size, tf, azimuth, elevation, zoom, level, mode, step, scalar_range, opacity_model, background
         As for :func:`render`.
+    budget : float, optional
+        Seconds per frame (a bricked ``.tetc`` file): every frame, each brick picks the level and
+        ratio it can render in its share of the budget (the bricks of one worker share it; workers
+        run side by side).
     force : bool
         Overwrite existing frames.
     read_options : dict, optional
@@ -800,6 +804,14 @@ def render_frames(source, output, *, workers: int | None = None, scheduler: str 
         if not scalar_range[1] > scalar_range[0]:
             raise OptionError(f"scalar_range must be (min, max) with min < max, got {scalar_range}")
     inputs = _frame_inputs(source)
+    if budget is not None:
+        budget = _check_number("budget", budget, lo=0.0, lo_open=True)
+        if level is not None:
+            raise OptionError("give either a level or a budget, not both")
+        for src in inputs:
+            if not (isinstance(src, (str, os.PathLike)) and is_tetc(src) and TetcReader(src).n_bricks > 1):
+                raise OptionError(f"a frame-time budget on a cluster needs a bricked .tetc file (tetc compress "
+                                  f"--bricks K), not {src if isinstance(src, (str, os.PathLike)) else 'a mesh'}")
     paths = frame_paths(output, orbit * len(inputs))
     for p in paths:
         image_format(p)  # refuse what cannot be written before the work, not after
@@ -818,8 +830,8 @@ def render_frames(source, output, *, workers: int | None = None, scheduler: str 
         for src in inputs:  # time steps: one file's bricks on the workers at a time
             sources, extent = _cluster_bricks(src, k, level, read_options, log)
             log(f"placing {len(sources)} bricks on {n_workers} workers...")
-            cluster.load(sources)
-            for res, view in zip(cluster.render_series(views, extent), views):
+            cluster.load(sources, budget=budget is not None)
+            for res, view in zip(cluster.render_series(views, extent, budget=budget), views):
                 i = len(out)
                 for note in res.stats.pop("notes", []):
                     log(f"note: {note}")

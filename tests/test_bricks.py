@@ -166,6 +166,55 @@ def test_simplified_bricks_never_crack(tmp_path):
         assert f.mesh(level=lv).n_tets == sum(f.brick(k).reader.level_meta(lv)["tets"] for k in range(6))
 
 
+def _boundary_triangles(mesh: TetMesh) -> set:
+    """The mesh's boundary faces as triangles of coordinates (what a neighbour brick can match)."""
+    pts = [tuple(p) for p in mesh.points.tolist()]
+    return {tuple(sorted(pts[v] for v in f)) for f in mesh.boundary_faces().tolist()}
+
+
+def test_cut_faces_stay_the_same_triangles_at_every_level_and_ratio(tmp_path):
+    """Locked cut vertices are merge targets for interior vertices, never merged away themselves:
+    at every stored level and ratio each brick's cut faces (its boundary triangles that another
+    brick's boundary also has) are exactly its level-0 cut faces, so the bricks still meet."""
+    m = jittered_grid((12, 12, 12), jitter=0.25, seed=11)
+    f = gatun_py.compress(m, tmp_path / "b.tetc", bricks=3, jobs=1)
+    bricks = [f.brick(k) for k in range(3)]
+
+    def cut_faces(meshes):
+        tri = [_boundary_triangles(x) for x in meshes]
+        return [t & set().union(*(tri[:k] + tri[k + 1:])) for k, t in enumerate(tri)]
+
+    ref = cut_faces([b.mesh() for b in bricks])
+    assert all(ref) and sum(map(len, ref)) > 100
+    assert len(f.levels) >= 2 and f.max_ratio > 0.5  # simplified levels to check
+    for how in [{"level": lv} for lv in f.levels] + [{"ratio": r} for r in (0.3, f.max_ratio)]:
+        meshes = [b.mesh(**how) for b in bricks]
+        assert cut_faces(meshes) == ref, how
+        for b, x in zip(ref, meshes):
+            assert b <= _boundary_triangles(x)
+        whole = f.mesh(**how)
+        faces, counts = np.unique(_faces(whole.tets), axis=0, return_counts=True)
+        assert counts.max() <= 2 and (whole.signed_volumes() >= 0).all()  # conforming, nothing inverted
+
+
+def test_interior_vertices_merge_into_locked_ones():
+    """Locked vertices take merges from interior vertices (not from boundary ones), so a brick's
+    forest goes on past the vertices around its cut; without locks nothing changes."""
+    m = jittered_grid((7, 7, 7), jitter=0.2, seed=2)
+    # lock one side of the grid, as a cut would
+    locked = m.points[:, 0] <= np.quantile(m.points[:, 0], 0.2)
+    forest = decimate(m, locked=locked)
+    assert np.all(forest.parent[locked] == np.flatnonzero(locked))
+    merged = np.flatnonzero(forest.parent != np.arange(m.n_points))
+    into_locked = merged[locked[forest.parent[merged]]]
+    assert into_locked.size > 0
+    on_boundary = np.zeros(m.n_points, bool)
+    on_boundary[m.boundary_faces().ravel()] = True
+    assert not on_boundary[into_locked].any()
+    free = decimate(m)
+    assert np.array_equal(free.parent, decimate(m, locked=np.zeros(m.n_points, bool)).parent)
+
+
 def test_decimate_keeps_locked_vertices():
     m = jittered_grid((6, 6, 6), jitter=0.2, seed=0)
     locked = np.zeros(m.n_points, bool)
@@ -394,3 +443,33 @@ def test_one_brick_renders_through_the_plain_pipeline(tmp_path):
     ref = render_mesh(b.decode_mesh(0), camera, v.tf, mode="volume", step=step, scalar_range=rng).image
     assert np.abs(streamed - ref).max() < 1e-5 and ref.max() > 0
     assert rng == tuple(f.reader.meta["scalar_range"]) and step == f.reader.meta["render_step"]
+
+
+def test_brick_budget_probes_once_and_follows_the_budget(tmp_path, monkeypatch):
+    """A series plans every frame from planners probed on the first: coarser bricks for smaller
+    budgets, the finest for a generous one, and no probe after the first frame."""
+    from gatun_py.pipeline import budget as budget_module
+    from gatun_py.pipeline.sortlast import BrickBudget, MeshExtent, frame_setup
+    from gatun_py.pipeline.stream import View
+    from gatun_py.render import Camera
+
+    monkeypatch.setenv("TETC_CACHE_DIR", str(tmp_path))
+    m = jittered_grid((12, 12, 12), jitter=0.25, seed=4)
+    f = gatun_py.compress(m, tmp_path / "b.tetc", bricks=3, jobs=1)
+    probes = []
+    real_probe = budget_module.FramePlanner.probe
+    monkeypatch.setattr(budget_module.FramePlanner, "probe", lambda self, *a, **k: probes.append(1) or real_probe(
+        self, *a, **k))
+    plan = BrickBudget([f.reader.brick(k) for k in range(3)])
+    extent = MeshExtent.of_reader(f.reader)
+    ratios = []
+    for k, budget in enumerate((1e-4, 0.05, 60.0)):
+        view = View(Camera(64, 64, 20.0 * k, 10))
+        setup, _ = frame_setup(view, extent)
+        targets = plan.targets(setup, view, budget, groups=[[0, 1], [2]])
+        ratios.append([t.ratio for t in targets])
+    assert len(probes) == 3  # one per brick, on the first frame only
+    assert all(r > 0 for r in ratios[0]) and ratios[2] == [0.0, 0.0, 0.0]
+    assert all(a >= b >= c for a, b, c in zip(*ratios))
+    with pytest.raises(OptionError):
+        plan.targets(setup, view, 0.0)

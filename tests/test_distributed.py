@@ -172,3 +172,91 @@ def test_a_glob_of_time_steps_renders_file_after_file(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["t0.png", "t1.png", "t2.png", "t3.png"]
     assert (out / "t0.png").read_bytes() == (out / "t2.png").read_bytes()  # same data, same view
     assert_error(run("render", tmp_path / "none*.vtk", "-o", out / "x.png", "--workers", "1"), "no file matches")
+
+
+def test_bricks_move_to_the_quicker_worker_and_the_image_does_not_change():
+    """Skewed render times move a brick from the slower worker to the quicker one (one per frame,
+    its old copy freed); the frames stay bit-identical to the one-process render."""
+    mesh = load_sample("post")[0]
+    bricks, extent = split_for_render(mesh, 6)
+    views = [View(Camera(40, 40, 50.0 * k, 15), "post") for k in range(3)]
+    with BrickCluster(workers=2, threads_per_worker=1, timeout=60) as cluster:
+        cluster.load(bricks)
+        before = cluster.placement()
+        assert cluster.render(views[0], extent).stats["bands"] == 2
+        slow = set(before[0])
+        cluster._brick_s = [1.0 if i in slow else 0.01 for i in range(6)]  # worker 0 "took" 100x longer
+        frame = cluster.render(views[1], extent)
+        after = cluster.placement()
+        assert cluster.moves == 1 and frame.stats["brick_moves"] == 1
+        moved = set(before[0]) - set(after[0])
+        assert len(moved) == 1 and moved <= set(after[1])
+        (i,) = moved
+        assert len(cluster.client.who_has(cluster._bricks[i])[cluster._bricks[i].key]) == 1  # moved, not copied
+        for view in views[1:]:
+            got = cluster.render(view, extent) if view is not views[1] else frame
+            assert np.array_equal(got.image, render_bricks(bricks, view, extent).image)
+
+
+@pytest.fixture(scope="module")
+def post_bricked_file(tmp_path_factory):
+    """post.vtk compressed as 4 bricks with their forests and levels."""
+    import gatun_py
+
+    path = tmp_path_factory.mktemp("post_bricked") / "post4.tetc"
+    gatun_py.compress(load_sample("post")[0], path, bricks=4, jobs=1)
+    return path
+
+
+def test_budget_on_a_cluster_picks_a_level_per_brick(post_bricked_file, tmp_path, monkeypatch):
+    from gatun_py.codec import TetcReader
+    from gatun_py.errors import OptionError
+    from gatun_py.pipeline.sortlast import BrickRef, MeshExtent
+
+    monkeypatch.setenv("TETC_CACHE_DIR", str(tmp_path))
+    reader = TetcReader(post_bricked_file)
+    refs = [BrickRef(str(post_bricked_file), k) for k in range(reader.n_bricks)]
+    extent = MeshExtent.of_reader(reader)
+    view = View(Camera(48, 48, 30, 20), "post")
+    with BrickCluster(workers=2, threads_per_worker=1, timeout=60) as cluster:
+        with pytest.raises(OptionError, match="budget=True"):
+            cluster.load(refs)
+            cluster.render(view, extent, budget=1.0)  # bricks held as meshes: no levels to pick from
+        cluster.load(refs, budget=True)
+        generous = cluster.render(view, extent, budget=60.0)
+        tight = cluster.render(view, extent, budget=1e-4)
+    assert generous.stats["brick_levels"] == [0] * 4 and generous.stats["brick_ratios"] == [0.0] * 4
+    assert np.array_equal(generous.image, render_bricks(refs, view, extent).image)  # the full mesh everywhere
+    assert all(lv > 0 for lv in tight.stats["brick_levels"]) and min(tight.stats["brick_ratios"]) > 0.5
+    assert tight.stats["tets_rendered"] < generous.stats["tets_rendered"]
+    # the bricks chose what one process would choose for the same budget and the same grouping
+    local = render_bricks(refs, view, extent, budget=1e-4)
+    assert local.stats["brick_levels"] == tight.stats["brick_levels"]
+
+
+def test_cli_budget_on_a_local_cluster(post_bricked_file, tmp_path, monkeypatch):
+    monkeypatch.setenv("TETC_CACHE_DIR", str(tmp_path))
+    out = tmp_path / "b{frame}.png"
+    res = run("render", post_bricked_file, "-o", out, "--workers", "2", "--budget", "0.5", "--orbit", "2",
+              "--tf", "post", "--size", "32", "-q", "--stats")
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "b0.png").exists() and (tmp_path / "b1.png").exists()
+    plain = tmp_path / "plain.png"
+    assert_error(run("render", SAMPLE_FILES["post"][0], "-o", plain, "--workers", "1", "--budget", "0.5"), "bricked")
+    assert not plain.exists()
+
+
+def test_one_band_and_no_moves_give_the_same_image():
+    """Compositing on one worker (bands=1) and fixed placement are the same frames, and skewed
+    times move nothing when moves are off."""
+    mesh = load_sample("post")[0]
+    bricks, extent = split_for_render(mesh, 4)
+    view = View(Camera(36, 30, 70, 25), "post", "face")
+    with BrickCluster(workers=2, threads_per_worker=1, timeout=60, bands=1, move_bricks=False) as cluster:
+        cluster.load(bricks)
+        cluster._brick_s = [5.0, 0.0, 5.0, 0.0]
+        frame = cluster.render(view, extent)
+        assert cluster.moves == 0 and frame.stats["bands"] == 1
+    assert np.array_equal(frame.image, render_bricks(bricks, view, extent).image)
+    with pytest.raises(Exception, match="bands"):
+        BrickCluster(workers=1, bands=0)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -33,11 +33,12 @@ from ..render.composite import Fragments, composite, merge_fragments
 from ..render.raycast import render_mesh
 from ..render.transfer import TransferFunction, load_transfer_function
 from ..simplify.levels import Target, resolve_target, target_ancestors
-from .budget import plan_file_budget
+from .budget import FramePlanner, TimeModel, machine_costs, plan_file_budget
 from .stream import PipelineResult, View, _run_streaming, bounded_step, file_render_defaults
 
 __all__ = ["MeshExtent", "FrameSetup", "BrickRef", "frame_setup", "split_for_render", "render_brick",
-           "render_bricks", "brick_tets", "open_brick", "plan_brick_budgets", "load_brick_kernels", "balance"]
+           "render_bricks", "brick_tets", "open_brick", "plan_brick_budgets", "load_brick_kernels", "balance",
+           "composite_rows", "join_rows", "FrameCamera", "shared_rays", "BrickBudget", "place"]
 
 
 @dataclass(frozen=True)
@@ -97,6 +98,37 @@ class FrameSetup:
     scalar_range: tuple
     scalar: str | None = None
     component: object = None
+
+
+@dataclass(frozen=True, eq=False)
+class FrameCamera(FittedCamera):
+    """A fitted camera that computes its pixel rays once: the bricks of one frame share them.
+
+    Every brick is ray-cast through every pixel of the frame; the rays' directions (24 bytes a
+    pixel, a normalisation per pixel) were most of the cost of a small brick. The same arrays, so
+    the same image.
+    """
+
+    def ray_directions(self) -> np.ndarray:
+        dirs = self.__dict__.get("_dirs")
+        if dirs is None:
+            dirs = super().ray_directions()
+            object.__setattr__(self, "_dirs", dirs)
+        return dirs
+
+    @classmethod
+    def of(cls, cam: FittedCamera) -> "FrameCamera":
+        return cam if isinstance(cam, cls) else cls(cam.width, cam.height, cam.position, cam.focal_point,
+                                                    cam.view_up, cam.view_angle)
+
+    def __reduce__(self):  # what a worker receives: the camera, not its rays
+        return (FrameCamera, (self.width, self.height, self.position, self.focal_point, self.view_up,
+                              self.view_angle))
+
+
+def shared_rays(setup: FrameSetup) -> FrameSetup:
+    """``setup`` whose camera computes the pixel rays once for all the bricks drawn with it."""
+    return replace(setup, camera=FrameCamera.of(setup.camera))
 
 
 def frame_setup(view: View, extent: MeshExtent) -> tuple[FrameSetup, list[str]]:
@@ -211,7 +243,8 @@ def render_brick(source, setup: FrameSetup, *, ratio: float | None = None, level
         res, _ = _run_streaming(reader, target, anc, cam, view, setup.scalar_range, setup.step, times, progress,
                                 fragments=True)
         stats = dict(res.stats)
-        stats.update(times, level=target.level, ratio=target.ratio)
+        stats.update(times, level=target.level, ratio=target.ratio, merges=target.merges,
+                     tets_decoded=int(reader.level_meta(target.level)["tets"]))
     stats["brick_s"] = time.perf_counter() - t0
     return res.fragments, stats
 
@@ -226,6 +259,7 @@ def combine_stats(per_brick: list[dict]) -> dict:
     out = {k: sum(s.get(k, 0) for s in per_brick) for k in _SUMMED if any(k in s for s in per_brick)}
     out["bricks"] = len(per_brick)
     out["brick_levels"] = [s.get("level", 0) for s in per_brick]
+    out["brick_ratios"] = [float(s.get("ratio", 0.0)) for s in per_brick]
     out["slowest_brick_s"] = max((s.get("brick_s", 0.0) for s in per_brick), default=0.0)
     return out
 
@@ -240,6 +274,42 @@ def composite_frame(parts: list[Fragments], per_brick: list[dict]) -> PipelineRe
     stats["fragment_mb"] = merged.nbytes / 2**20
     stats["rays_hit"] = int(len(np.unique(merged.ray)))
     stats["rays"] = merged.width * merged.height
+    return PipelineResult(image, stats)
+
+
+def composite_rows(rows, parts: list[Fragments], per_brick: list[dict] | None = None) -> tuple[np.ndarray, dict]:
+    """One row band of a frame (see :func:`~gatun_py.render.composite.split_rows`): its image rows
+    and counts that add up over bands; with ``per_brick``, also the frame's stats of the bricks."""
+    t0 = time.perf_counter()
+    merged = merge_fragments(*parts)
+    stats = combine_stats(per_brick) if per_brick is not None else {}
+    if per_brick is not None:
+        stats["brick_s"] = [float(s.get("brick_s", 0.0)) for s in per_brick]
+        stats["per_brick"] = [{k: v for k, v in s.items() if isinstance(v, (int, float, str))} for s in per_brick]
+    image = composite(merged, stats=stats)
+    stats["composite_s"] = time.perf_counter() - t0
+    stats["fragment_mb"] = merged.nbytes / 2**20
+    stats["rays_hit"] = int(np.count_nonzero(np.bincount(merged.ray, minlength=1)))
+    stats["rows"] = tuple(rows)
+    return image, stats
+
+
+def join_rows(bands: list[tuple[np.ndarray, dict]], width: int) -> PipelineResult:
+    """The frame of its row bands (:func:`composite_rows`, top band first): rows stacked, counts
+    summed, the slowest band's compositing time."""
+    image = np.concatenate([b[0] for b in bands], axis=0)
+    stats = {}
+    for _, st in bands:
+        for k, v in st.items():
+            if k not in stats:
+                stats[k] = v
+            elif k in ("fragments_overlapping_pixels", "rays_hit", "fragment_mb"):
+                stats[k] += v
+            elif k == "composite_s":
+                stats[k] = max(stats[k], v)
+    stats.pop("rows", None)
+    stats["rays"] = int(width * image.shape[0])
+    stats["bands"] = len(bands)
     return PipelineResult(image, stats)
 
 
@@ -261,6 +331,59 @@ def plan_brick_budgets(sources, view: View, budget_s: float, *, groups=None) -> 
         for i in g:
             share[i] = budget_s * tets[i] / total
     return [plan_file_budget(r, view, max(share[i], 1e-3))[0] for i, r in enumerate(readers)]
+
+
+class BrickBudget:
+    """Frame by frame, a level and ratio for every ``.tetc`` brick of a series so that each frame
+    fits its budget (what a cluster holding the bricks plans with, in the client).
+
+    The same planner as one file's budget (:class:`~gatun_py.pipeline.budget.FramePlanner` with the
+    machine's time model), made and probed once per brick on the first frame (tiny renders of the
+    brick's coarse levels) and kept for the frames that follow: a series does not pay the probes
+    again. Each frame's plan projects the brick's box through the frame's camera. The budget is shared out as :func:`plan_brick_budgets`
+    does: in proportion to the tets among the bricks that run one after another (``groups``).
+
+    Parameters
+    ----------
+    readers : list of TetcReader
+        One per brick.
+    """
+
+    def __init__(self, readers):
+        self.readers = list(readers)
+        self.tets = [int(r.level_meta(0)["tets"]) for r in self.readers]
+        self._planners = None
+
+    def __repr__(self) -> str:
+        return f"BrickBudget({len(self.readers)} bricks, {'probed' if self._planners else 'not probed yet'})"
+
+    def targets(self, setup: FrameSetup, view: View, budget_s: float, *, groups=None) -> list[Target]:
+        """Each brick's :class:`~gatun_py.simplify.levels.Target` for one frame of ``budget_s`` seconds."""
+        if not (isinstance(budget_s, (int, float)) and np.isfinite(budget_s) and budget_s > 0):
+            raise OptionError(f"the budget must be a positive number of seconds, got {budget_s!r}")
+        if self._planners is None:
+            model = TimeModel(machine_costs()[0])
+            self._planners = []
+            for r in self.readers:
+                planner = FramePlanner(r, model, step=setup.step, mode=setup.mode)
+                planner.probe(r, view)  # as one file's budget probes: the brick fitted to the view
+                self._planners.append(planner)
+        share = [0.0] * len(self.readers)
+        for g in groups or [list(range(len(self.readers)))]:
+            total = max(sum(self.tets[i] for i in g), 1)
+            for i in g:
+                share[i] = budget_s * self.tets[i] / total
+        return [p.target(p.plan(max(share[i], 1e-3), setup.camera)) for i, p in enumerate(self._planners)]
+
+    def observe(self, per_brick: list[dict]) -> None:
+        """Correct the planners with a rendered frame's per-brick stats (each brick's render time,
+        work and level), as one file's budget learns from its frames: the time model is shared, so
+        a busy or quiet machine is learnt from every brick."""
+        if self._planners is None or len(per_brick) != len(self._planners):
+            return
+        for planner, st in zip(self._planners, per_brick):
+            if "level" in st and "brick_s" in st:
+                planner.observe(st, total_s=float(st["brick_s"]))
 
 
 def render_bricks(sources, view: View, extent: MeshExtent, *, ratio: float | None = None, level: int | None = None,
@@ -302,6 +425,7 @@ def render_bricks(sources, view: View, extent: MeshExtent, *, ratio: float | Non
     if budget is not None and (ratio is not None or level is not None):
         raise OptionError("give at most one of ratio, level and budget")
     setup, notes = frame_setup(view, extent)
+    setup = shared_rays(setup)
     targets = plan_brick_budgets(sources, view, budget) if budget is not None else [None] * len(sources)
     parts, per_brick = [], []
     for src, target in zip(sources, targets):
@@ -324,6 +448,29 @@ def load_brick_kernels() -> float:
     for mode in ("volume", "face"):
         composite(render_mesh(mesh, Camera(4, 4), "default", mode=mode, fragments=True).fragments)
     return time.perf_counter() - t0
+
+
+def place(sizes, n_bins: int, *, tolerance: float = 0.05) -> list[list[int]]:
+    """Bricks (in k-d order, ``sizes`` their tets) for ``n_bins`` workers: interleaved, brick i to
+    worker i mod n, when that balances the tets within ``tolerance``; else :func:`balance`.
+
+    Consecutive k-d bricks are neighbours (siblings split one cell), so interleaving gives every
+    worker a share of every region: whatever the view, each has a similar part of the screen and
+    of the depth. On flange-1m (16 bricks, 8 views) that left 3.5 % of a frame idle on average
+    against 5.6 % for bricks balanced by tets alone.
+
+    Examples
+    --------
+    >>> place([10, 10, 10, 10], 2), place([40, 10, 10, 10], 2)
+    ([[0, 2], [1, 3]], [[0], [1, 2, 3]])
+    """
+    if n_bins < 1:
+        raise OptionError(f"need at least one bin, got {n_bins}")
+    bins = [list(range(j, len(sizes), n_bins)) for j in range(n_bins)]
+    totals = [sum(sizes[i] for i in b) for b in bins]
+    if min(totals) > 0 and max(totals) <= (1.0 + tolerance) * min(totals):
+        return bins
+    return balance(sizes, n_bins)
 
 
 def balance(sizes, n_bins: int) -> list[list[int]]:

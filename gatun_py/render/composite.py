@@ -35,7 +35,8 @@ DEPTH_FRONT, DEPTH_BACK = 0, 1
 # 4e-16 relative). That is not an overlap.
 OVERLAP_TOLERANCE = 1e-12
 
-__all__ = ["Fragments", "composite", "merge_fragments", "segment_fragments", "DEPTH_FRONT", "DEPTH_BACK"]
+__all__ = ["Fragments", "composite", "merge_fragments", "segment_fragments", "split_rows", "row_bands", "DEPTH_FRONT",
+           "DEPTH_BACK"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -146,6 +147,43 @@ def merge_fragments(*parts: Fragments) -> Fragments:
         return parts[0]
     return Fragments(np.concatenate([p.ray for p in parts]), np.concatenate([p.rgba for p in parts]),
                      np.concatenate([p.depth for p in parts]), w, h)
+
+
+def row_bands(height: int, n: int) -> list[tuple[int, int]]:
+    """``height`` rows cut into ``n`` bands (at most one per row) of near-equal height, top first.
+
+    Examples
+    --------
+    >>> row_bands(10, 3)
+    [(0, 4), (4, 7), (7, 10)]
+    """
+    n = max(1, min(int(n), int(height)))
+    cuts = [(int(height) * j + n - 1) // n for j in range(n + 1)]
+    return [(cuts[j], cuts[j + 1]) for j in range(n)]
+
+
+def split_rows(fragments: Fragments, bands) -> list[Fragments]:
+    """``fragments`` cut into the image rows ``bands`` ((start, stop) pairs covering the image):
+    each part a :class:`Fragments` of its band alone (pixels renumbered from the band's first row),
+    in the input's order. Pixels are independent, so compositing the bands apart and stacking the
+    rows gives the image of compositing them together (direct-send compositing).
+
+    Examples
+    --------
+    >>> f = Fragments(np.array([0, 3, 5], np.int32), np.zeros((3, 4)), np.zeros((3, 2)), 2, 3)
+    >>> [p.ray.tolist() for p in split_rows(f, row_bands(3, 2))]
+    [[0, 3], [1]]
+    """
+    w = fragments.width
+    if len(bands) == 1 and tuple(bands[0]) == (0, fragments.height):
+        return [fragments]
+    row = fragments.ray // w
+    out = []
+    for r0, r1 in bands:
+        keep = (row >= r0) & (row < r1)
+        out.append(Fragments((fragments.ray[keep] - r0 * w).astype(np.int32), fragments.rgba[keep],
+                             fragments.depth[keep], w, int(r1 - r0)))
+    return out
 
 
 @njit(cache=True)

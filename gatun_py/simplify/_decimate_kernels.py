@@ -49,6 +49,13 @@ NORMAL_EPS = 1e-6
 P_WD, P_WG, P_WV, P_WI, P_WQ, P_WS, P_NCP, P_MAXS = 0, 1, 2, 3, 4, 5, 6, 7
 # Indices into the int64 counter array.
 C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS, C_STARTED, C_EXACT = 0, 1, 2, 3, 4, 5, 6
+# bits of a vertex's ``pinned`` flags: PIN_KEEP never merged away, PIN_NO_TARGET nothing merges into
+# it. A non-manifold vertex has both (PIN_ALL); a locked vertex (a brick's cut vertex) only
+# PIN_KEEP, and only interior vertices merge into it: an interior vertex's merge keeps every
+# boundary triangle (its star is a ball whose surface, the link, is unchanged), so a brick's cut
+# faces stay exactly the triangles its neighbours have.
+PIN_KEEP, PIN_NO_TARGET = 1, 2
+PIN_ALL = PIN_KEEP | PIN_NO_TARGET
 
 
 @njit(cache=True)
@@ -757,7 +764,7 @@ def _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mar
             if mark[b] == stamp:
                 continue
             mark[b] = stamp
-            if pinned[b] or (a_bnd and not isb[b]):
+            if (pinned[b] != 0 and ((pinned[b] & PIN_NO_TARGET) != 0 or a_bnd)) or (a_bnd and not isb[b]):
                 continue
             counters[C_EVALS] += 1
             n_col = _new_volumes(b, st, T, pts, vol_old, nrm, off, fast_ok, v6n, q)
@@ -1233,7 +1240,8 @@ def _face_neighbours(T, head, nxt):
 
 @njit(cache=True)
 def _vertex_topology(T, nbr, head, nxt, n):
-    """(is_boundary, pinned): boundary vertices, and vertices whose neighbourhood is not a manifold.
+    """(is_boundary, pinned): boundary vertices, and vertices whose neighbourhood is not a manifold
+    (``PIN_ALL`` in ``pinned``, a uint8 array of ``PIN_*`` flags).
 
     A vertex is left alone when its link is not a sphere (interior) or a disk (boundary), judged by
     the link's Euler characteristic, or when it lies on a boundary edge not shared by exactly two
@@ -1241,7 +1249,7 @@ def _vertex_topology(T, nbr, head, nxt, n):
     manifold, so this is decided once.
     """
     isb = np.zeros(n, np.bool_)
-    pinned = np.zeros(n, np.bool_)
+    pinned = np.zeros(n, np.uint8)
     for t in range(T.shape[0]):
         for k in range(4):
             if nbr[t, k] < 0:
@@ -1278,7 +1286,7 @@ def _vertex_topology(T, nbr, head, nxt, n):
         # of its tets, or in one when it is a boundary face)
         chi = n_edges - (3 * n_tets + n_faces) // 2 + n_tets
         if chi != (1 if isb[v] else 2):
-            pinned[v] = True
+            pinned[v] = PIN_ALL
         if isb[v]:
             # boundary edges not shared by exactly two boundary faces
             s = head[v]
@@ -1287,8 +1295,8 @@ def _vertex_topology(T, nbr, head, nxt, n):
                 for j in range(4):
                     w = T[t, j]
                     if w != v and n_bf[w] != 0 and n_bf[w] != 2:
-                        pinned[v] = True
-                        pinned[w] = True
+                        pinned[v] = PIN_ALL
+                        pinned[w] = PIN_ALL
                 s = nxt[s]
     return isb, pinned
 

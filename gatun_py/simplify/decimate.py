@@ -319,8 +319,9 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
         Stop after this many merges (default: until no legal merge is left).
     locked : (n_points,) bool array, optional
         Vertices that must keep their place in every prefix of the forest (a brick's cut vertices,
-        so that simplified bricks still meet): added to the decimator's own pinned vertices, which
-        are never merged away and never a merge target.
+        so that simplified bricks still meet): never merged away. Interior vertices may merge into
+        them (that keeps every boundary triangle, so the cut faces stay as they are); boundary
+        vertices may not.
 
     Returns
     -------
@@ -337,7 +338,7 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
         if locked.shape != (mesh.n_points,) or locked.dtype != np.bool_:
             raise OptionError(f"locked must be a bool array of one value per point ({mesh.n_points}), "
                               f"got {locked.dtype} {locked.shape}")
-        state.pinned |= locked
+        state.pinned[locked] |= K.PIN_KEEP
     limit = mesh.n_points if max_merges is None else max(0, min(int(max_merges), mesh.n_points))
     state.start()
     done = 0

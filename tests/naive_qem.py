@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+DET_FLOOR = 1e-12  # below it (relative to trace^3) the system counts as singular
+
 
 def quadric_matrix(q):
     """(A (3, 3), b (3,), c) of a 10-number quadric."""
@@ -41,17 +43,16 @@ def naive_segment_min(q, pu, pv, steps: int = 20001):
     return float(costs[i]), pts[i]
 
 
-def naive_placement(q, pu, pv, bu: bool, bv: bool, *, ridge: float, reach: float):
-    """(cost, point) the kernel should pick for collapsing u-v (up to the segment's sampling)."""
+def naive_placement(q, pu, pv, *, ridge: float, reach: float):
+    """(cost, point) the kernel should pick for collapsing u-v (up to the segment's sampling); the
+    surface boundary needs no rule of its own (its constraint planes are in the quadric)."""
     pu, pv = np.asarray(pu, np.float64), np.asarray(pv, np.float64)
-    if bu != bv:  # interior into boundary: the boundary vertex stays
-        p = pu if bu else pv
-        return max(quadric_cost(q, p), 0.0), p
     a, b, _ = quadric_matrix(q)
     m = 0.5 * (pu + pv)
     best = (np.inf, None)
     tr = np.trace(a)
-    if tr > 0:
+    # the kernel solves only a well-conditioned system: |det(A + eps I)| > 1e-12 trace^3
+    if tr > 0 and abs(np.linalg.det(a + ridge * tr * np.eye(3))) > DET_FLOOR * tr ** 3:
         eps = ridge * tr
         x = np.linalg.solve(a + eps * np.eye(3), -b + eps * m)
         if np.sum((x - m) ** 2) <= reach * np.sum((pv - pu) ** 2):

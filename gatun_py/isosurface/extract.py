@@ -41,7 +41,7 @@ CHUNK_TETS = 8192  # tets per extraction step (rounds start between steps)
 #: keep at least this share of ``batch_faces`` modifiable faces between rounds (Hou & Chen's
 #: initial phase: early rounds must not over-decimate what little has been seen)
 KEEP_SHARE = 0.5
-MIN_DOT = 0.2  # a collapse may not tilt a face by more than ~78 degrees (cos 78 = 0.2)
+MIN_DOT = 0.0  # a collapse may not turn a face by more than 90 degrees (0.2, ~78 degrees, measured worse)
 
 
 @dataclass

@@ -8,8 +8,13 @@ still to arrive can then reference a vertex that a collapse removes or moves. Le
 * the link condition (the common neighbours of u and v are exactly the apexes of the faces on uv);
 * no face around u or v turns over (its normal keeps a positive dot product with the old one);
 * the surface boundary stays: a boundary vertex only merges with a boundary neighbour along a
-  boundary edge (with Garland's perpendicular constraint planes in its quadric), and an interior
-  vertex merging into a boundary one lands on the boundary vertex.
+  boundary edge, the boundary vertex survives a merge with an interior one, and Garland's
+  perpendicular constraint planes in its quadric keep the new position on the border.
+
+Placement: the quadric's minimum, solved as an offset from the edge's midpoint with a tiny ridge
+(so a flat or cylindrical quadric does not throw the vertex along its free directions) and kept
+within two edge lengths of the midpoint; else, or when cheaper, the cheapest point of the segment
+(the quadric restricted to the edge is a parabola).
 
 Quadrics accumulate over collapses and across calls, so the error of the whole history is kept;
 each face's quadric is weighted by its area and by the importance of its vertices (Peng et al.).
@@ -23,7 +28,7 @@ import numpy as np
 from numba import njit
 
 BOUNDARY_WEIGHT = 100.0  # Garland's constraint planes: strong enough to keep the border in place
-PLACE_RIDGE = 1e-3  # ridge on the placement solve, relative to the trace of the quadric
+PLACE_RIDGE = 1e-6  # ridge on the placement solve, relative to the trace of the quadric
 PLACE_REACH = 4.0  # the optimum may lie within 2 edge lengths of the midpoint (squared ratio)
 
 
@@ -86,13 +91,14 @@ def _qcost(q, x, y, z):
 
 @njit(cache=True)
 def _placement(vq, vpos, vbnd, u, v, qs):
-    """Best position and cost for collapsing edge (u, v): (cost, x, y, z)."""
+    """Best position and cost for collapsing edge (u, v): (cost, x, y, z).
+
+    The same rule for every edge, on the border or not: a boundary vertex carries Garland's
+    perpendicular constraint planes in its quadric, which keep the result on the border (snapping an
+    interior vertex onto the boundary vertex instead measured worse RMS on all three data sets).
+    """
     for k in range(10):
         qs[k] = vq[u, k] + vq[v, k]
-    if vbnd[u] != vbnd[v]:  # interior into boundary: stay on the boundary vertex
-        b = u if vbnd[u] else v
-        x, y, z = vpos[b, 0], vpos[b, 1], vpos[b, 2]
-        return max(_qcost(qs, x, y, z), 0.0), x, y, z
     ux, uy, uz = vpos[u, 0], vpos[u, 1], vpos[u, 2]
     ex, ey, ez = vpos[v, 0] - ux, vpos[v, 1] - uy, vpos[v, 2] - uz
     mx, my, mz = ux + 0.5 * ex, uy + 0.5 * ey, uz + 0.5 * ez

@@ -44,7 +44,7 @@ BOUNDARY_CHUNK = 4 * CHUNK_TETS  # boundary faces per extraction step (as many f
 #: keep at least this share of ``batch_faces`` modifiable faces between rounds (Hou & Chen's
 #: initial phase: early rounds must not over-decimate what little has been seen)
 KEEP_SHARE = 0.5
-MIN_DOT = 0.2  # a collapse may not tilt a face by more than ~78 degrees (cos 78 = 0.2)
+MIN_DOT = 0.0  # a collapse may not turn a face by more than 90 degrees (0.2, ~78 degrees, measured worse)
 
 
 @dataclass

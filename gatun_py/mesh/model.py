@@ -358,8 +358,14 @@ def face_multiplicity(tets: np.ndarray):
         # bounded memory (a 10 M-tet mesh: 0.5 GB instead of 3.9 GB): one sorted int64 key per face
         keys = _packed_face_keys(t)
         keys.sort()
-        starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]])
-        counts = np.diff(np.r_[starts, keys.shape[0]])
+        new = np.empty(keys.shape[0], bool)
+        new[0] = True
+        np.not_equal(keys[1:], keys[:-1], out=new[1:])
+        starts = np.flatnonzero(new)
+        del new
+        counts = np.empty_like(starts)  # written in place: no concatenated copies of 8 bytes per face
+        np.subtract(starts[1:], starts[:-1], out=counts[:-1])
+        counts[-1] = keys.shape[0] - starts[-1]
         bad = keys[starts[counts > 2]]
         mask = (1 << _KEY_BITS) - 1
         over = np.stack([bad >> (2 * _KEY_BITS), (bad >> _KEY_BITS) & mask, bad & mask], axis=1)

@@ -84,3 +84,21 @@ def test_render_step_from_the_encoder_boundary_equals_the_mesh_one(tmp_path_fact
     path = tmp_path_factory.mktemp("step") / "m.tetc"
     write_tetc(path, mesh)
     assert TetcReader(path).meta["render_step"] == float(default_step(mesh.points32, mesh.boundary_faces()))
+
+
+@settings(max_examples=40, deadline=None)
+@given(mesh_strategy())
+def test_packed_boundary_faces_equal_the_triples_reference(mesh):
+    from gatun_py.mesh.model import _boundary_faces_packed, _boundary_faces_triples
+
+    got = _boundary_faces_packed(mesh.tets)
+    assert got.dtype == np.int32
+    assert np.array_equal(got, _boundary_faces_triples(mesh.tets))
+
+
+def test_boundary_faces_of_ids_beyond_the_packed_keys_take_the_triples_path():
+    from gatun_py.mesh.model import _KEY_BITS, boundary_faces
+
+    mesh = delaunay_mesh(30, 2)
+    shifted = mesh.tets.astype(np.int64) + (1 << _KEY_BITS)  # same faces, ids too wide to pack
+    assert np.array_equal(boundary_faces(shifted) - (1 << _KEY_BITS), boundary_faces(mesh.tets))

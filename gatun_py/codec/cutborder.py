@@ -122,11 +122,15 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> E
         If a face is shared by more than two tets (validation rejects such meshes earlier).
     """
     n = int(points_count)
-    tets = np.ascontiguousarray(tets, dtype=np.int64).reshape(-1, 4)
+    tets = np.asarray(tets).reshape(-1, 4)
     m = len(tets)
     if m >= MAX_TETS or n >= MAX_TETS:
         raise MeshError(f"mesh too large for the .tetc format ({m} tets, {n} points; limit {MAX_TETS - 1})")
-    nbr = np.empty((m, 4), np.int64)
+    if m and (int(tets.min()) < 0 or int(tets.max()) >= n):
+        raise MeshError(f"tet vertex ids must lie in 0..{n - 1}, got {int(tets.min())}..{int(tets.max())}")
+    # ids < n < 2**29 and tet ids < m < 2**29: the kernels' tables are int32 (16 bytes per tet each)
+    tets = np.ascontiguousarray(tets, dtype=np.int32)
+    nbr = np.empty((m, 4), np.int32)
     if K.tet_neighbours(tets, nbr):
         raise MeshError("a face is shared by more than two tets: the mesh is not conforming")
     faces = np.empty((int(np.count_nonzero(nbr == -1)), 3), np.int64)
@@ -167,7 +171,7 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> E
         pred[:] = pred_b
         # each tet takes its face off the border and adds at most three: at most nf + 2 m live
         B = K.new_border(n, nf + 2 * m + 8, nf + 3 * m + 8)
-        tgt = np.full(nf + 3 * m + 8, -1, np.int64)
+        tgt = np.full(nf + 3 * m + 8, -1, np.int32)
         tgt[K.add_faces(B, out_faces, -1)] = bowner
         res = K.encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nbv, out_tets, symbols)
         run_tets.result = res

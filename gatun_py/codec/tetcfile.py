@@ -76,6 +76,7 @@ class EncodedLevel:
     meta: dict
     vertex_order: np.ndarray
     peak_border: int
+    render_step: float  # default_step of this level's mesh, from the boundary the encoder found
 
 
 def encode_level(payload: LevelPayload) -> EncodedLevel:
@@ -86,6 +87,9 @@ def encode_level(payload: LevelPayload) -> EncodedLevel:
     vo = conn.vertex_order
     refs = np.ascontiguousarray(conn.predictors, dtype=np.int32)
     p32, d32 = mesh.points32[vo], mesh.density[vo]
+    # The boundary in decode ids and order has the same edges as mesh.boundary_faces(), so the same
+    # median; deriving it again from the tets would sort all 4m faces (4 GB at 7.8 M tets).
+    render_step = float(default_step(p32, conn.boundary))
     geometry = encode_geometry(p32, d32, refs)
     i = int(payload.level)
     sections = {f"L{i}/boundary": conn.boundary_code, f"L{i}/tets": conn.tet_code, f"L{i}/geometry": geometry}
@@ -117,7 +121,7 @@ def encode_level(payload: LevelPayload) -> EncodedLevel:
         "scalar_range": [float(x) for x in mesh.scalar_range],
         "has_forest": payload.forest is not None,
     }
-    return EncodedLevel(i, sections, meta, vo, conn.peak_border)
+    return EncodedLevel(i, sections, meta, vo, conn.peak_border, render_step)
 
 
 def _encode_level_forest(mesh, vertex_order, parent, rank, n_boundary_vertices) -> bytes:
@@ -182,10 +186,13 @@ def _arrays_meta(mesh, *, ranges: bool = False) -> list:
     return out
 
 
-def file_meta(mesh0, n_boundary_faces: int, source: str = "") -> dict:
+def file_meta(mesh0, n_boundary_faces: int, source: str = "", *, render_step: float | None = None) -> dict:
     """The metadata that describes the whole mesh (counts, bounds, arrays and their ranges, render
-    step), before the levels or the bricks that hold it."""
+    step), before the levels or the bricks that hold it. ``render_step``: the mesh's
+    :func:`~gatun_py.mesh.default_step` when the caller has it (computed here otherwise)."""
     lo, hi = mesh0.bbox
+    if render_step is None:
+        render_step = default_step(mesh0.points32, mesh0.boundary_faces())
     return {
         "format": FORMAT_NAME,
         "points": int(mesh0.n_points),
@@ -198,7 +205,7 @@ def file_meta(mesh0, n_boundary_faces: int, source: str = "") -> dict:
         "scalar_range": [float(x) for x in mesh0.scalar_range],
         "source": os.path.basename(str(source)),
         # The full mesh's volume-mode sample step, so that every level and ratio samples alike.
-        "render_step": float(default_step(mesh0.points32, mesh0.boundary_faces())),
+        "render_step": float(render_step),
     }
 
 
@@ -228,7 +235,7 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
         encoded.append(encode_level(lv))
         if progress is not None:
             progress(lv.level)
-    meta = file_meta(mesh0, encoded[0].meta["boundary_faces"], source)
+    meta = file_meta(mesh0, encoded[0].meta["boundary_faces"], source, render_step=encoded[0].render_step)
     meta["levels"] = [e.meta for e in encoded]
     sections = [(name, data) for e in encoded for name, data in e.sections.items()]
     if dependencies is not None:

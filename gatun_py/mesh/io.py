@@ -208,7 +208,7 @@ def mesh_from_meshio(m, *, scalar: str | None = None, cell_to_point: bool = Fals
     for bi, cb in enumerate(m.cells):
         if cb.type in VOLUME_CELLS:
             lin, k = VOLUME_CELLS[cb.type]
-            data = np.asarray(cb.data)[:, :k].astype(np.int64)
+            data = np.asarray(cb.data)[:, :k].astype(np.int64, copy=False)  # meshio's own array when int64
             blocks.append((lin, data, bi))
         else:
             other.add(cb.type)
@@ -250,7 +250,7 @@ def mesh_from_meshio(m, *, scalar: str | None = None, cell_to_point: bool = Fals
         tet_chunks.append(tt)
         cell_of_tet.append((bi, offset, per, len(data)))
         offset += len(data)
-    tets = np.concatenate(tet_chunks)
+    tets = tet_chunks[0] if len(tet_chunks) == 1 else np.concatenate(tet_chunks)  # no copy of one block
 
     point_data = _point_arrays(m.point_data, n, notes)
     cell_names = sorted(m.cell_data)

@@ -152,7 +152,7 @@ def test_border_beyond_the_slot_limit_is_refused(monkeypatch):
     d.boundary()
     # a tet phase that starts with the boundary faces and no room to spare must grow its border
     tight = K.new_border
-    monkeypatch.setattr(K, "new_border", lambda n, cap, qcap: tight(n, e.n_boundary_faces + 4, qcap))
+    monkeypatch.setattr(K, "new_border", lambda n, cap, qcap, **kw: tight(n, e.n_boundary_faces + 4, qcap, **kw))
     d.start_tets()
     start_rows = len(d._B[0]) // K.E_COLS
     monkeypatch.setattr(K, "MAX_SLOTS", start_rows + 64)
@@ -173,10 +173,13 @@ def test_decoder_border_grows_from_a_tight_start(monkeypatch):
     d = _decoder(e)
     d.boundary()
     tight = K.new_border
-    monkeypatch.setattr(K, "new_border", lambda n, cap, qcap: tight(n, e.n_boundary_faces + 4, e.n_boundary_faces + 4))
+    monkeypatch.setattr(K, "new_border", lambda n, cap, qcap, **kw: tight(n, e.n_boundary_faces + 4, e.n_boundary_faces + 4, **kw))
     d.start_tets()
-    parts = []
+    parts, caps = [], []
     while d.tets_done < d.n_tets:
         parts.append(d.next_tets(101))
+        if d._B is not None:
+            caps.append(len(d._B[0]) // K.E_COLS)
     assert np.array_equal(np.concatenate(parts), e.tets)
-    assert len(d._B[0]) // K.E_COLS > e.n_boundary_faces + 4  # it did grow
+    assert max(caps) > e.n_boundary_faces + 4  # it did grow
+    assert d._B is None  # and was let go after the last tet

@@ -898,6 +898,10 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
     prev_esc = tstate[2]
     prev_flip = tstate[3]
     pred_base = tstate[4]
+    # new vertices get ids below this (the header's count and the end of the refs window)
+    limit = min(n_limit, pred_base + pred.shape[0])
+    if pred_base > nv:
+        return 0, ST_ERROR
     n_out = 0
     status = ST_DONE
     E, vhead, Q, bs = B
@@ -942,15 +946,14 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
             kctx = TM_KIND + 4 * ((1 if n1 > 0 else 0) + 2 * prev_esc)
             kind = rc.dec_sym(st, data, probs, kctx, 2)
             if kind == KIND_NEW:
-                row = nv - pred_base
-                if nv >= n_limit or row < 0 or row >= pred.shape[0]:
+                if nv >= limit:
                     status = ST_ERROR
                     break
                 d = nv
-                pred[row, 0] = a
-                pred[row, 1] = b
-                pred[row, 2] = c
-                pred[row, 3] = behind
+                pred[nv - pred_base, 0] = a
+                pred[nv - pred_base, 1] = b
+                pred[nv - pred_base, 2] = c
+                pred[nv - pred_base, 3] = behind
                 nv += 1
             elif kind == KIND_VERTEX_ADJACENT:
                 n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq)

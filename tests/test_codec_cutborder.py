@@ -152,7 +152,7 @@ def test_border_beyond_the_slot_limit_is_refused(monkeypatch):
     d.boundary()
     # a tet phase that starts with the boundary faces and no room to spare must grow its border
     tight = K.new_border
-    monkeypatch.setattr(K, "new_border", lambda n, cap, qcap: tight(n, e.n_boundary_faces + 4, qcap))
+    monkeypatch.setattr(K, "new_border", lambda n, cap, qcap, **kw: tight(n, e.n_boundary_faces + 4, qcap, **kw))
     d.start_tets()
     start_rows = len(d._B[0]) // K.E_COLS
     monkeypatch.setattr(K, "MAX_SLOTS", start_rows + 64)
@@ -173,10 +173,66 @@ def test_decoder_border_grows_from_a_tight_start(monkeypatch):
     d = _decoder(e)
     d.boundary()
     tight = K.new_border
-    monkeypatch.setattr(K, "new_border", lambda n, cap, qcap: tight(n, e.n_boundary_faces + 4, e.n_boundary_faces + 4))
+    monkeypatch.setattr(K, "new_border", lambda n, cap, qcap, **kw: tight(n, e.n_boundary_faces + 4, e.n_boundary_faces + 4, **kw))
     d.start_tets()
-    parts = []
+    parts, caps = [], []
     while d.tets_done < d.n_tets:
         parts.append(d.next_tets(101))
+        if d._B is not None:
+            caps.append(len(d._B[0]) // K.E_COLS)
     assert np.array_equal(np.concatenate(parts), e.tets)
-    assert len(d._B[0]) // K.E_COLS > e.n_boundary_faces + 4  # it did grow
+    assert max(caps) > e.n_boundary_faces + 4  # it did grow
+    assert d._B is None  # and was let go after the last tet
+
+
+@pytest.mark.parametrize("batch", [1, 37, 100_000])
+def test_streaming_refs_window_matches_the_kept_predictors(small_sample, batch):
+    """Without ``keep_predictors`` the decoder holds only the last batch's refs: batch after batch
+    they are the rows of the full table, and the tets are the same."""
+    e = encode_connectivity(small_sample.n_points, small_sample.tets)
+    d = ConnectivityDecoder(e.boundary_code, e.tet_code, n_points=e.n_points, n_tets=e.n_tets,
+                            n_boundary_faces=e.n_boundary_faces, n_referenced=e.n_referenced,
+                            keep_predictors=False)
+    faces, nbv = d.boundary()
+    refs = [d.last_refs.copy()]
+    d.start_tets()
+    assert d.predictors is None  # the full table is gone in the tet phase
+    parts = []
+    while d.tets_done < d.n_tets:
+        before = d.vertices_known
+        parts.append(d.next_tets(batch))
+        assert len(d.last_refs) == d.vertices_known - before
+        refs.append(d.last_refs.copy())
+    assert np.array_equal(np.concatenate(parts), e.tets) and np.array_equal(faces, e.boundary)
+    assert np.array_equal(np.concatenate(refs), e.predictors[:e.n_referenced])
+
+
+def test_refs_window_overflow_is_an_error_not_a_write(small_sample):
+    """The tet kernel writes a new vertex's refs at row ``id - pred_base``: a window too small, or a
+    base past the vertex, ends the decode with an error (no write out of bounds)."""
+    from gatun_py.codec import _cutborder_kernels as K
+
+    e = encode_connectivity(small_sample.n_points, small_sample.tets)
+    assert e.n_referenced > e.n_boundary_vertices  # the sample has interior vertices
+    for rows, base in [(0, 0), (2, e.n_boundary_vertices + 1)]:
+        d = _decoder(e)
+        d.boundary()
+        d.start_tets()
+        d._tstate[4] = base
+        out = np.zeros((e.n_tets, 4), np.int32)
+        _, status = K.decode_tets(d._tst, d._tdata, d._probs, d.n_tets, d.n_referenced, d._B,
+                                  np.full((rows, 4), -1, np.int32), d._tstate, out)
+        assert status == K.ST_ERROR
+
+
+def test_header_counts_past_int32_sequence_numbers_are_corruption():
+    """Every border element gets an int32 sequence number (the queue holds them too): counts that
+    would add more than 2^31 elements cannot be a file of ours (and are refused before allocating)."""
+    from gatun_py.codec import _cutborder_kernels as K
+
+    for nf, m in [(800_000_000, 10), (200_000_000, (1 << 29) - 1), (-1, 10)]:
+        with pytest.raises(CorruptFileError, match="limits"):
+            ConnectivityDecoder(b"", b"", n_points=10, n_tets=m, n_boundary_faces=nf, n_referenced=10)
+    # the largest legal counts are accepted (no allocation by the border yet)
+    nf = (K.MAX_SEQ - 64 - 3 * 1000) // 3 - 1
+    ConnectivityDecoder(b"", b"", n_points=10, n_tets=1000, n_boundary_faces=nf, n_referenced=10)

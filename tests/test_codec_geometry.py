@@ -357,3 +357,19 @@ def test_kernel_callable_from_another_numba_kernel():
     dec.finish()
     _assert_bit_identical(dec.points, points)
     _assert_bit_identical(dec.density, density)
+
+
+def test_hash_table_without_a_free_slot_is_refused(post_blob):
+    """The x -> y table is right-sized (at most 2/3 full): a table the n vertices could fill would
+    let a lookup probe forever, so the kernel refuses it instead of running."""
+    blob, refs = post_blob
+    dec = GeometryDecoder(blob)
+    n = dec.n_points
+    assert 1.5 * n < len(dec.hkeys) <= K.hash_capacity(n)  # at most 2/3 full, never above the encoder's
+    full = 1 << (n.bit_length() - 1)  # the largest power of two <= n
+    dec.hkeys, dec.hvals = np.zeros(full, np.int64), np.zeros(full, np.uint8)
+    with pytest.raises(CorruptFileError):
+        dec.decode(refs[:10])
+    dec.hkeys, dec.hvals = np.zeros(3 * full, np.int64), np.zeros(3 * full, np.uint8)  # not a power of two
+    with pytest.raises(CorruptFileError):
+        dec.decode(refs[:10])

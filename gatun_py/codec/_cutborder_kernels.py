@@ -21,7 +21,8 @@ the list walks' chain of dependent loads): vertices (+ apex data) in columns 0-3
 4 * slot + corner, taken apart with a shift and a mask rather than a floor division by 3),
 free-list link (``E_FREE``; slots never used are handed out in order past ``BS_BUMP``, so the
 table needs no initialisation); ``vhead (nv) int32`` list heads;
-``Q (qcap, 2) int64`` FIFO ring of (slot, sequence); ``bs int64`` scalars (see ``BS_*``).
+``Q (qcap, 2) int64`` (the decoders: int32) FIFO ring of (slot, sequence); ``bs int64`` scalars
+(see ``BS_*``).
 """
 
 from __future__ import annotations
@@ -35,6 +36,9 @@ BS_NFREE, BS_QHEAD, BS_QTAIL, BS_SEQ, BS_LIVE, BS_PEAK, BS_FREE_HEAD, BS_BUMP = 
 # columns of the element table E: vertices/apex 0-3, sequence, list links per corner, free list
 E_SEQ, E_NEXT, E_PREV, E_FREE, E_COLS = 4, 5, 8, 11, 12
 MAX_SLOTS = 1 << 29  # node ids 4 * slot + corner are int32
+# sequence numbers are int32 (E_SEQ, and the decoders' queue): one per element ever added, so a
+# stream adds fewer than this many elements (the decoders check it from the header's counts)
+MAX_SEQ = (1 << 31) - 1
 
 MAX_C1 = 15  # coded edge-adjacent candidates (symbol 15 = escape)
 MAX_C2 = 64  # vertex-adjacent candidates
@@ -68,13 +72,15 @@ SM_SIZE = SM_FLIP + 4
 ST_DONE, ST_BATCH, ST_GROW, ST_ERROR = 0, 1, 2, 3
 
 
-def new_border(n_vertices: int, cap: int, qcap: int):
-    """Allocate an empty border for ``n_vertices`` vertices."""
+def new_border(n_vertices: int, cap: int, qcap: int, *, queue_dtype=np.int64):
+    """Allocate an empty border for ``n_vertices`` vertices (the decoders pass ``queue_dtype``
+    int32: slots and sequence numbers fit, see ``MAX_SLOTS`` and ``MAX_SEQ``, and the queue is
+    their largest array after E)."""
     cap = max(int(cap), 16)
     qcap = max(int(qcap), 16)
     E = np.empty((cap, E_COLS), np.int32)
     vhead = np.full(max(int(n_vertices), 1), -1, np.int32)
-    Q = np.zeros((qcap, 2), np.int64)
+    Q = np.zeros((qcap, 2), queue_dtype)
     bs = np.zeros(8, np.int64)
     bs[BS_NFREE] = cap
     bs[BS_FREE_HEAD] = -1  # freed slots; the never used ones start at BS_BUMP = 0
@@ -99,7 +105,7 @@ def grow_border(B, need_slots: int, need_queue: int):
     if qcap - used < need_queue:
         new_qcap = max(2 * qcap, used + need_queue)
         idx = (int(bs[BS_QHEAD]) + np.arange(used)) % qcap
-        nq = np.zeros((new_qcap, 2), np.int64)
+        nq = np.zeros((new_qcap, 2), Q.dtype)
         nq[:used] = Q[idx]
         Q = nq
         bs[BS_QHEAD] = 0
@@ -920,11 +926,13 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
 def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
     """Resumable inverse of :func:`encode_tets`.
 
-    ``tstate`` int64 array: [vertices known, tets done, prev_esc]; ``probs`` persists between
-    calls. Decodes until ``out_tets`` is full (status ST_BATCH), the border needs more room
-    (ST_GROW: enlarge it and call again), all ``m`` tets are done (ST_DONE) or the data is
-    inconsistent (ST_ERROR). New vertices (ids < ``n_limit``) get their predictors in ``pred``
-    (indexed by decode id). Returns (number of tets written to ``out_tets``, status)."""
+    ``tstate`` int64 array: [vertices known, tets done, prev_esc, prev_flip, pred_base];
+    ``probs`` persists between calls. Decodes until ``out_tets`` is full (status ST_BATCH), the
+    border needs more room (ST_GROW: enlarge it and call again), all ``m`` tets are done
+    (ST_DONE) or the data is inconsistent (ST_ERROR). New vertices (ids < ``n_limit``) get their
+    predictors in ``pred``, row ``decode id - pred_base`` (a window of the newest vertices, or the
+    whole table with ``pred_base`` 0); a vertex past the window is an error, never a write out of
+    bounds. Returns (number of tets written to ``out_tets``, status)."""
     cand = np.empty(MAX_C1, np.int64)
     cscore = np.empty(MAX_C1, np.int64)
     cseq = np.empty(MAX_C1, np.int64)
@@ -934,6 +942,11 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
     done = tstate[1]
     prev_esc = tstate[2]
     prev_flip = tstate[3]
+    pred_base = tstate[4]
+    # new vertices get ids below this (the header's count and the end of the refs window)
+    limit = min(n_limit, pred_base + pred.shape[0])
+    if pred_base > nv:
+        return 0, ST_ERROR
     n_out = 0
     status = ST_DONE
     E, vhead, Q, bs = B
@@ -978,14 +991,14 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
             kctx = TM_KIND + 4 * ((1 if n1 > 0 else 0) + 2 * prev_esc)
             kind = rc.dec_sym(st, data, probs, kctx, 2)
             if kind == KIND_NEW:
-                if nv >= n_limit:
+                if nv >= limit:
                     status = ST_ERROR
                     break
                 d = nv
-                pred[nv, 0] = a
-                pred[nv, 1] = b
-                pred[nv, 2] = c
-                pred[nv, 3] = behind
+                pred[nv - pred_base, 0] = a
+                pred[nv - pred_base, 1] = b
+                pred[nv - pred_base, 2] = c
+                pred[nv - pred_base, 3] = behind
                 nv += 1
             elif kind == KIND_VERTEX_ADJACENT:
                 n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq)

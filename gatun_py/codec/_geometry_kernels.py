@@ -719,8 +719,8 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, 
 
     ``refs`` (count, 4) int32 are the refs of those vertices. ``st`` (4, 8) decoder states,
     ``probs`` (4, MODEL_SIZE) models, ``scores`` (4, N_PATTERNS, MAX_CANDS) predictor scores,
-    ``flags`` (8,) context flags, ``adj`` (n, ADJ_CAP) int32 and ``deg`` (n,) int32 (the edges seen
-    so far), ``mark`` (n,) int32 scratch and ``hkeys`` int64 / ``hvals`` uint8 (``hash_capacity(n)``,)
+    ``flags`` (8,) context flags, ``adj`` (n, ADJ_CAP) int32 and ``deg`` (n,) uint8 or int32 (the edges seen
+    so far), ``mark`` (n,) int32 scratch and ``hkeys`` int64 / ``hvals`` uint8 (a power of two above n,)
     (the x -> y table: packed key and value, slot used) carry the decoder's state from one call to the next. Every index is checked: returns
     ``OK``, ``ERR_REF`` (a ref not in ``[-1, k)``), ``ERR_RANK`` (a table index out of range) or
     ``ERR_STREAM`` (the range decoder failed).
@@ -730,7 +730,8 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, 
     if start < 0 or count < 0 or start + count > n or refs.shape[0] < count or refs.shape[1] != 4:
         return ERR_REF
     if (adj.shape[0] < n or deg.shape[0] < n or mark.shape[0] < n or adj.shape[1] != ADJ_CAP
-            or hkeys.shape[0] != hash_capacity(n) or hvals.shape[0] != hkeys.shape[0]):
+            or hkeys.shape[0] <= n or (hkeys.shape[0] & (hkeys.shape[0] - 1)) != 0
+            or hvals.shape[0] != hkeys.shape[0]):  # a power of two with a free slot after n keys
         return ERR_REF
     cand_o = np.zeros(MAX_CANDS, dtype=np.int64)
     eq_o = np.zeros(5, dtype=np.int64)

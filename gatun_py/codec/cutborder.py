@@ -203,9 +203,23 @@ class ConnectivityDecoder:
         The streams written by :func:`encode_connectivity`.
     n_points, n_tets, n_boundary_faces, n_referenced : int
         Counts from the section header (checked against what the streams produce).
+    keep_predictors : bool, default True
+        Keep the geometry refs of every vertex in :attr:`predictors`. A streaming reader that
+        takes each batch's refs from :attr:`last_refs` passes False: the tet phase then holds
+        only the refs of the last batch (16 bytes per vertex less at the end of a level).
+
+    Attributes
+    ----------
+    predictors : (n_points, 4) int32 or None
+        Geometry refs by decode id (rows of vertices not decoded yet are -1); None in the tet
+        phase without ``keep_predictors``.
+    last_refs : (k, 4) int32
+        Refs of the vertices introduced by the last :meth:`boundary` or :meth:`next_tets` call
+        (valid until the next call).
     """
 
-    def __init__(self, boundary_code, tet_code, *, n_points, n_tets, n_boundary_faces, n_referenced):
+    def __init__(self, boundary_code, tet_code, *, n_points, n_tets, n_boundary_faces, n_referenced,
+                 keep_predictors: bool = True):
         self.n_points = int(n_points)
         self.n_tets = int(n_tets)
         self.n_boundary_faces = int(n_boundary_faces)
@@ -214,9 +228,15 @@ class ConnectivityDecoder:
             raise CorruptFileError("corrupt connectivity header: counts beyond the format's limits")
         if not (0 <= self.n_referenced <= self.n_points):
             raise CorruptFileError("corrupt connectivity header: inconsistent vertex counts")
+        # every element added to a border gets an int32 sequence number (and the queue holds them):
+        # the boundary adds fewer than 3 per face, the tets fewer than 3 per tet
+        if 3 * self.n_boundary_faces + 3 * self.n_tets + 64 >= K.MAX_SEQ or self.n_boundary_faces < 0:
+            raise CorruptFileError("corrupt connectivity header: counts beyond the format's limits")
         self._bdata = np.frombuffer(boundary_code, dtype=np.uint8)
         self._tdata = np.frombuffer(tet_code, dtype=np.uint8)
         self.predictors = np.full((max(self.n_points, 1), 4), -1, np.int32)
+        self.keep_predictors = bool(keep_predictors)
+        self.last_refs = self.predictors[:0]
         self.peak_border = 0
         self._tstate = None
 
@@ -224,7 +244,7 @@ class ConnectivityDecoder:
         """Decode the boundary surface: returns (faces (b, 3) int32, number of boundary vertices)."""
         nf = self.n_boundary_faces
         faces = np.zeros((nf, 3), np.int32)
-        B = K.new_border(self.n_points, 3 * nf + 8, 3 * nf + 8)
+        B = K.new_border(self.n_points, 3 * nf + 8, 3 * nf + 8, queue_dtype=np.int32)
         st = rc.dec_state()
         if nf:
             nv, status = K.decode_boundary(st, self._bdata, nf, self.n_points, B, self.predictors, faces)
@@ -239,16 +259,23 @@ class ConnectivityDecoder:
             raise CorruptFileError("corrupt boundary section: too many vertices")
         self._nbv = int(nv)
         self._faces = faces
+        self.last_refs = self.predictors[:nv]
         return faces, int(nv)
 
     def start_tets(self):
         """Prepare the tet phase (after :meth:`boundary`)."""
         nf = self.n_boundary_faces
         cap = max(64, 2 * nf)
-        self._B = K.new_border(self.n_points, cap, cap)
+        self._B = K.new_border(self.n_points, cap, cap, queue_dtype=np.int32)
         K.add_faces(self._B, self._faces, -1)
+        self._faces = None  # the caller has them; the border holds what the tets need
         self._tst = rc.dec_state()
-        self._tstate = np.array([self._nbv, 0, 0, 0], np.int64)
+        # [vertices known, tets done, prev_esc, prev_flip, decode id of the predictors' row 0]
+        self._tstate = np.array([self._nbv, 0, 0, 0, 0], np.int64)
+        if not self.keep_predictors:  # from here on, a window of the newest vertices' refs
+            self.predictors = None
+            self._window = np.empty((0, 4), np.int32)
+        self.last_refs = np.empty((0, 4), np.int32)
         self._probs = np.full(K.TM_SIZE, rc.PROB_INIT, np.uint16)
         if self.n_tets:
             rc.dec_init(self._tst, self._tdata)
@@ -268,10 +295,19 @@ class ConnectivityDecoder:
     def next_tets(self, max_tets: int) -> np.ndarray:
         """Decode up to ``max_tets`` more tets (fewer only at the end); (j, 4) int32 decode ids."""
         out = np.zeros((min(max_tets, self.n_tets - self.tets_done), 4), np.int32)
+        first = self.vertices_known
+        if self.keep_predictors:
+            pred = self.predictors
+        else:  # each tet introduces at most one vertex: len(out) rows, reused across batches
+            if len(self._window) < len(out):
+                self._window = np.empty((len(out), 4), np.int32)
+            pred = self._window[:len(out)]
+            pred.fill(-1)
+            self._tstate[4] = first
         filled = 0
         while filled < len(out):
             n, status = K.decode_tets(self._tst, self._tdata, self._probs, self.n_tets, self.n_referenced,
-                                      self._B, self.predictors, self._tstate, out[filled:])
+                                      self._B, pred, self._tstate, out[filled:])
             filled += n
             if status == K.ST_GROW:
                 if len(self._B[0]) // K.E_COLS + 64 >= K.MAX_SLOTS:
@@ -282,7 +318,10 @@ class ConnectivityDecoder:
             elif status == K.ST_DONE:
                 break
         self.peak_border = max(self.peak_border, int(self._B[3][K.BS_PEAK]))
+        known = self.vertices_known
+        self.last_refs = self.predictors[first:known] if self.keep_predictors else pred[:known - first]
         if self.tets_done == self.n_tets:
+            self._B = None  # empty now: the decoder may outlive its level (a consumer's reference)
             rc.check_decoder(self._tst, self._tdata, "tet section")
             if self.vertices_known != self.n_referenced:
                 raise CorruptFileError("corrupt tet section: vertex count does not match the header")

@@ -25,6 +25,7 @@ class DecodedConnectivity:
         self.n_tets = decoder.n_tets
         self.tets = decoder.next_tets(decoder.n_tets) if decoder.n_tets else np.zeros((0, 4), np.int32)
         self.predictors = decoder.predictors
+        self.last_refs = self.predictors[:self._nbv]
         self.peak_border = decoder.peak_border
         self._known_end = decoder.vertices_known
         self._done = 0
@@ -52,9 +53,11 @@ class DecodedConnectivity:
         """The next up to ``max_tets`` tets; the vertices they introduce are the next ids in order
         (the decoder numbers new vertices as they appear), so the count known is the largest id + 1."""
         out = self.tets[self._done:self._done + max_tets]
+        first = self._known
         self._done += len(out)
         if len(out):
             self._known = max(self._known, int(out.max()) + 1)
         if self._done == self.n_tets:
             self._known = self._known_end
+        self.last_refs = self.predictors[first:self._known]
         return out

@@ -292,9 +292,11 @@ class GeometryDecoder:
         self.scores = np.zeros((K.N_CHANNELS, K.N_PATTERNS, K.MAX_CANDS), dtype=np.int64)
         self.flags = np.zeros(2 * K.N_CHANNELS, dtype=np.int64)
         self.adj = np.zeros((self.n_points, K.ADJ_CAP), dtype=np.int32)
-        self.deg = np.zeros(self.n_points, dtype=np.int32)
+        self.deg = np.zeros(self.n_points, dtype=np.uint8)  # at most K.ADJ_CAP
         self.mark = np.zeros(self.n_points, dtype=np.int32)
-        self.hkeys = np.zeros(K.hash_capacity(self.n_points), dtype=np.int64)
+        # the x -> y table holds at most one key per vertex: at most 2/3 full (the encoder's, at most
+        # half, is twice this size at 1.4 M vertices); lookups do not depend on the capacity
+        self.hkeys = np.zeros(K.hash_capacity((3 * self.n_points) // 4 + 1), dtype=np.int64)
         self.hvals = np.zeros(len(self.hkeys), dtype=np.uint8)
         stream_bytes = [int(length) for length in lengths]
         table_room = sum(min(self.n_points, _MAX_TABLE_PER_BYTE * (stream_bytes[ch] + 8))

@@ -83,17 +83,15 @@ class PrefetchedDecode:
         def produce() -> None:
             try:
                 faces, nbv = conn.boundary()
-                refs = conn.predictors
-                put((faces, nbv, refs[:nbv].copy()))  # copies: the refs array keeps growing
+                put((faces, nbv, conn.last_refs.copy()))  # copies: the decoder rewrites its refs
                 if nbv != lv["boundary_vertices"]:
                     return  # the consumer raises
                 conn.start_tets()
                 known = nbv
                 while conn.tets_done < m and not stop.is_set():
                     tets = conn.next_tets(batch_tets)
-                    nv = conn.vertices_known
-                    put((known, tets, refs[known:nv].copy()))
-                    known = nv
+                    put((known, tets, conn.last_refs.copy()))
+                    known = conn.vertices_known
                 put(_DONE)
             except BaseException as e:  # handed to the consumer, which raises it
                 put(e)

@@ -442,20 +442,20 @@ class TetcReader:
         self._decoded = (level, DecodedConnectivity(self._connectivity_decoder(level)))
         return self._decoded[1].tets
 
-    def _connectivity_decoder(self, level: int) -> ConnectivityDecoder:
+    def _connectivity_decoder(self, level: int, *, keep_predictors: bool = True) -> ConnectivityDecoder:
         lv = self.level_meta(level)
         return ConnectivityDecoder(self.read_section(f"L{level}/boundary"), self.read_section(f"L{level}/tets"),
                                    n_points=lv["points"], n_tets=lv["tets"], n_boundary_faces=lv["boundary_faces"],
-                                   n_referenced=lv["referenced_points"])
+                                   n_referenced=lv["referenced_points"], keep_predictors=keep_predictors)
 
     def _connectivity(self, level: int):
         """The level's connectivity for one decode: the one :meth:`_level_tets` kept (handed over
-        once, then dropped), else a fresh decoder."""
+        once, then dropped), else a fresh decoder. Either way, a batch's refs are in ``last_refs``."""
         kept = getattr(self, "_decoded", None)
         self._decoded = None
         if kept is not None and kept[0] == level:
             return kept[1]
-        return self._connectivity_decoder(level)
+        return self._connectivity_decoder(level, keep_predictors=False)
 
     def forest_merges(self) -> int:
         """Merges the file's full forest holds (0 when it stores none), from the section header only."""
@@ -527,17 +527,17 @@ class TetcReader:
         faces, nbv = conn.boundary()
         if nbv != lv["boundary_vertices"]:
             raise CorruptFileError("corrupt boundary section: vertex count does not match the metadata")
-        refs = conn.predictors
-        pts, dens = geo.decode(refs[:nbv])
-        yield TetBatch.of_vertices(0, pts, dens, faces), exact(refs[:nbv], pts, dens)
+        refs = conn.last_refs
+        pts, dens = geo.decode(refs)
+        yield TetBatch.of_vertices(0, pts, dens, faces), exact(refs, pts, dens)
         conn.start_tets()
         known = nbv
         while conn.tets_done < m:
             tets = conn.next_tets(batch_tets)
-            nv = conn.vertices_known
-            pts, dens = geo.decode(refs[known:nv])
-            yield TetBatch.of_tets(known, tets, pts, dens), exact(refs[known:nv], pts, dens)
-            known = nv
+            refs = conn.last_refs  # the batch's new vertices (a window the next call rewrites)
+            pts, dens = geo.decode(refs)
+            yield TetBatch.of_tets(known, tets, pts, dens), exact(refs, pts, dens)
+            known = conn.vertices_known
         if known != lv["referenced_points"]:
             raise CorruptFileError("corrupt tet section: vertex count does not match the metadata")
         if known < n:

@@ -954,7 +954,12 @@ def _apply_merge(a, b, st_a, T, alive, nbr, head, nxt):
         t = st_a[i] >> 2
         if alive[t]:
             T[t, st_a[i] & 3] = b
-    # splice a's incidence list in front of b's
+    _splice_incidence(a, b, head, nxt)
+
+
+@njit(cache=True)
+def _splice_incidence(a, b, head, nxt):
+    """Vertex a's incidence list put in front of b's (a's left empty): a merged into b."""
     s = head[a]
     if s >= 0:
         while nxt[s] >= 0:

@@ -24,6 +24,7 @@ from ._decimate_kernels import (  # the decimator's state and legality tests, re
     _max_edge2,
     _orient6,
     _star,
+    _splice_incidence,
     _star_boundary,
     _vertex_topology,
 )
@@ -93,13 +94,7 @@ def _dependencies(tets, by_rank, parent):
             ptr[0] = -1 - i
             return ptr, idx[:0], removed
         removed[i] = shared
-        s = head[a]
-        if s >= 0:
-            while nxt[s] >= 0:
-                s = nxt[s]
-            nxt[s] = head[b]
-            head[b] = head[a]
-            head[a] = -1
+        _splice_incidence(a, b, head, nxt)
         idx[start:nd] = np.sort(idx[start:nd])
         ptr[i + 1] = nd
     return ptr, idx[:nd], removed

@@ -500,6 +500,16 @@ def _render_selective(reader, view, *, ratio, tets, budget, pipeline, progress, 
     return result, planned
 
 
+def _note_if_unsimplifiable(reader, name, log) -> None:
+    """Say once that a budget cannot simplify a file stored without levels or a forest
+    (``--mesh-only``): the render then meets the budget only by drawing fewer pixels, or not at all."""
+    parts = [reader.brick(k) for k in range(reader.n_bricks)] if reader.n_bricks > 1 else [reader]
+    if not any(len(r.levels) > 1 or any(lv.get("has_forest") for lv in r.levels) for r in parts):
+        log(f"note: {name} stores no simplified levels and no merge forest (compressed with --mesh-only): "
+            "a budget cannot simplify its mesh; compress it without --mesh-only to let a budget pick "
+            "a coarser level")
+
+
 def _check_number(name, v, *, lo=None, lo_open=False, hi=None, allow_none=True):
     if v is None and allow_none:
         return None
@@ -629,6 +639,8 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
     bricked = None
     if isinstance(source, TetcFile) or (isinstance(source, (str, os.PathLike)) and is_tetc(source)):
         f = source if isinstance(source, TetcFile) else TetcFile(source)
+        if budget is not None:
+            _note_if_unsimplifiable(f.reader, os.path.basename(os.fspath(f.reader.container.name)), log)
         if f.n_bricks > 1:
             if selective:
                 raise OptionError("selective refinement needs a file of one plain stream, not a bricked one")
@@ -812,6 +824,7 @@ def render_frames(source, output, *, workers: int | None = None, scheduler: str 
             if not (isinstance(src, (str, os.PathLike)) and is_tetc(src) and TetcReader(src).n_bricks > 1):
                 raise OptionError(f"a frame-time budget on a cluster needs a bricked .tetc file (tetc compress "
                                   f"--bricks K), not {src if isinstance(src, (str, os.PathLike)) else 'a mesh'}")
+            _note_if_unsimplifiable(TetcReader(src), os.path.basename(os.fspath(src)), log)
     paths = frame_paths(output, orbit * len(inputs))
     for p in paths:
         image_format(p)  # refuse what cannot be written before the work, not after

@@ -473,3 +473,19 @@ def test_brick_budget_probes_once_and_follows_the_budget(tmp_path, monkeypatch):
     assert all(a >= b >= c for a, b, c in zip(*ratios))
     with pytest.raises(OptionError):
         plan.targets(setup, view, 0.0)
+
+
+# -- a budget on a file that cannot be simplified says so ---------------------------------------
+
+@pytest.mark.parametrize("bricks", [1, 4])
+def test_budget_on_a_mesh_only_file_says_it_cannot_simplify(tmp_path, bricks):
+    m = jittered_grid((6, 6, 5), jitter=0.2, seed=3)
+    gatun_py.compress(m, tmp_path / "mo.tetc", mesh_only=True, bricks=bricks)
+    notes = []
+    gatun_py.render(tmp_path / "mo.tetc", budget=0.01, size=32, log=notes.append)
+    said = [n for n in notes if "no simplified levels" in n]
+    assert len(said) == 1 and "--mesh-only" in said[0]
+    gatun_py.compress(m, tmp_path / "lv.tetc", bricks=bricks, jobs=1)
+    notes = []
+    gatun_py.render(tmp_path / "lv.tetc", budget=0.01, size=32, log=notes.append)
+    assert not any("no simplified levels" in n for n in notes)

@@ -1,0 +1,207 @@
+"""Selective refinement (issue 13, third round): how far any importance can take a closed cut.
+
+An *oracle* importance: the image error each region of merges measurably makes for this view and
+transfer function (renders, not a model), then the same closed cut as the shipped one
+(:func:`gatun_py.pipeline.selective.choose_cut`). If this cannot reach RMSE <= 0.5 x uniform at
+equal tets, no importance can with this forest.
+
+Per cell (data, TF, view, 95 / 99 % merged): P = the uniform cut (first n merges, N tets). Merges
+are grouped by their vertex's cell in a G = 4^3 grid over the bounding box. Per group g, two
+measured renders around P, both closed cuts:
+
+* *refine*: P without g's merges and every merge of P that depends on one of them (transitively):
+  image error drop dE_r and tets added dT_r;
+* *coarsen*: P plus g's merges of rank n .. n2 (n2: the uniform cut with N / 2 tets) and their
+  dependencies beyond P: error rise dE_c, tets removed dT_c.
+
+w_g = (dE_r + dE_c) / (dT_r + dT_c) (squared error on 0-255 per tet), and the oracle importance of
+merge i is rank(i)^a * w_g(i)^p (p in 0.5, 1, 2; a in 1, 0: with and without the forest's order);
+the best of these per cell (by the measured RMSE) is the oracle's figure. Also the same best
+order without the closure (*unsafe*: the shortest prefix with at most N tets, overlaps allowed;
+its inverted tets counted on the cut's mesh).
+
+Run: ``python bench/bench_selective_bound.py [--quick]`` -> ``bench/sections/selective_bound.md``.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+from numba import njit
+
+from bench_selective import (DATASETS, RATIOS, SIZE, VIEWS, _unsafe_cut, quality, rgb, tetc_file,
+                             transfer_functions)
+from common import code_state, table, write_section
+
+QUICK = "--quick" in sys.argv
+GRID = 4  # groups per axis (G = 64: one bit each)
+POWERS = (0.5, 1.0, 2.0)
+
+
+@njit(cache=True)
+def _upward_masks(ptr, idx, group, n):
+    """Bit g of mask[i] (i < n): merge i is in group g or depends (transitively) on one that is."""
+    mask = np.zeros(n, np.uint64)
+    for i in range(n):
+        m = np.uint64(1) << np.uint64(group[i])
+        for q in range(ptr[i], ptr[i + 1]):
+            j = idx[q]
+            if j < n:
+                m |= mask[j]
+        mask[i] = m
+    return mask
+
+
+@njit(cache=True)
+def _downward_masks(ptr, idx, group, n, n2):
+    """Bit g of need[j] (n <= j < n2): merge j is needed by (or is) a merge of group g in n .. n2."""
+    k = ptr.shape[0] - 1
+    need = np.zeros(k, np.uint64)
+    for i in range(n2 - 1, n - 1, -1):
+        need[i] |= np.uint64(1) << np.uint64(group[i])
+        for q in range(ptr[i], ptr[i + 1]):
+            j = idx[q]
+            if j >= n:
+                need[j] |= need[i]
+    return need
+
+
+class Frame:
+    """Renders cuts of one file's level 0 for one view, in memory, fitted to the full mesh."""
+
+    def __init__(self, reader, view, src):
+        from gatun_py.pipeline.stream import file_view
+
+        self.view, self.camera, self.rng, self.step, _ = file_view(reader, view)
+        self.mesh = reader.decode_mesh(0)
+        self.src = src
+
+    def image(self, applied):
+        from gatun_py.render.raycast import render_mesh
+        from gatun_py.render.image import to_rgb8
+        from gatun_py.simplify.dependencies import cut_ancestors
+        from gatun_py.simplify.forest import mesh_from_ancestors
+
+        mesh = mesh_from_ancestors(self.mesh, cut_ancestors(self.src.parent, self.src.rank, applied))[0]
+        res = render_mesh(mesh, self.camera, self.view.tf, mode=self.view.mode, step=self.step,
+                          scalar_range=self.rng)
+        return to_rgb8(res.image, (0.0, 0.0, 0.0)), mesh
+
+
+def sse(a, b) -> float:
+    d = a.astype(np.float64) - b.astype(np.float64)
+    return float((d * d).sum())
+
+
+def rmse(full, img) -> float:
+    from gatun_py.pipeline.quality import compare_images
+
+    return compare_images(full, img).rmse
+
+
+def groups_of(src) -> np.ndarray:
+    pv = src.points[src.vertex]
+    lo, hi = pv.min(axis=0), pv.max(axis=0)
+    cell = np.clip(((pv - lo) / np.maximum(hi - lo, 1e-30) * GRID).astype(np.int64), 0, GRID - 1)
+    return (cell[:, 0] * GRID + cell[:, 1]) * GRID + cell[:, 2]
+
+
+def group_weights(frame, full, src, group, n, n2):
+    """w_g of every group around the uniform cut P = first n merges (see the module docstring)."""
+    deps = src.deps
+    k = src.n_merges
+    base = np.zeros(k, bool)
+    base[:n] = True
+    img, _ = frame.image(base)
+    e0 = sse(full, img)
+    t0 = deps.cut_tets(src.n_tets, base)
+    up = _upward_masks(deps.ptr, deps.idx, group, n)
+    down = _downward_masks(deps.ptr, deps.idx, group, n, n2)
+    w = np.zeros(GRID ** 3)
+    for g in range(GRID ** 3):
+        bit = np.uint64(1) << np.uint64(g)
+        de = dt = 0.0
+        refine = base.copy()
+        refine[:n] &= (up & bit) == 0
+        if (refine != base).any():
+            de += e0 - sse(full, frame.image(refine)[0])
+            dt += deps.cut_tets(src.n_tets, refine) - t0
+        coarsen = base.copy()
+        coarsen[n:] = (down[n:] & bit) != 0
+        if (coarsen != base).any():
+            de += sse(full, frame.image(coarsen)[0]) - e0
+            dt += t0 - deps.cut_tets(src.n_tets, coarsen)
+        w[g] = max(de, 0.0) / dt if dt > 0 else 0.0
+    return w
+
+
+def cell(reader, name, label, tf, az, el, rows):
+    from gatun_py.pipeline.selective import choose_cut, flipped_tets, selective_source, uniform_cut
+    from gatun_py.pipeline.stream import View
+    from gatun_py.render.camera import Camera
+
+    view = View(Camera(SIZE, SIZE, az, el), tf=tf)
+    src = selective_source(reader, view.scalar, view.component)
+    frame = Frame(reader, view, src)
+    full, _ = frame.image(np.zeros(src.n_merges, bool))
+    group = groups_of(src)
+    n_points = src.points.shape[0]
+    rank = np.arange(src.n_merges) + 1.0
+    for ratio in RATIOS:
+        t_start = time.perf_counter()
+        u = uniform_cut(src, merges=int(ratio * n_points))
+        n = int(u.sum())
+        goal = src.deps.cut_tets(src.n_tets, u)
+        n2 = int(uniform_cut(src, tets=max(goal // 2, 1)).sum())
+        ru = rmse(full, frame.image(u)[0])
+        w = group_weights(frame, full, src, group, n, n2)
+        best = None
+        for a in (1.0, 0.0):
+            for p in POWERS:
+                imp = rank ** a * (w[group] + 1e-12 * w.max()) ** p
+                cut = choose_cut(src, imp, tets=goal)
+                r = rmse(full, frame.image(cut)[0])
+                if best is None or r < best[0]:
+                    best = (r, a, p, imp, src.deps.cut_tets(src.n_tets, cut))
+        r, a, p, imp, tets = best
+        unsafe = _unsafe_cut(src, np.argsort(imp, kind="stable"), goal)
+        img, mesh = frame.image(unsafe)
+        rx = rmse(full, img)
+        rows.append([name, label, f"({az:g}, {el:g})", f"{ratio:.0%}", goal, ru, tets, r, r / ru,
+                     f"rank^{a:g} w^{p:g}", rx / ru, mesh.n_tets, flipped_tets(mesh.points, mesh.tets),
+                     float(np.count_nonzero(w) / w.size), time.perf_counter() - t_start])
+        print(rows[-1], flush=True)
+
+
+def main():
+    from gatun_py.codec import TetcReader
+
+    rows = []
+    for name in DATASETS:
+        reader = TetcReader(tetc_file(name))
+        for label, tf in transfer_functions(name):
+            for az, el in (VIEWS[:1] if QUICK else VIEWS):
+                cell(reader, name, label, tf, az, el, rows)
+    ratios = [r[8] for r in rows]
+    text = f"""# Selective refinement: the oracle bound (issue 13)
+
+Code: {code_state()}. {SIZE}², volume mode, in memory (level 0 decoded once, cut, rendered with the
+full mesh's camera, scalar range and step). RMSE on 0-255 against the full-resolution render.
+Oracle importance = rank^a x w_g^p, w_g the *measured* image error per tet of the merges in cell g
+of a {GRID}^3 grid (refining and coarsening g around the uniform cut, closed cuts both; see
+`bench/bench_selective_bound.py`), the best (a, p) per cell picked by the measured RMSE; then the
+same closed cut as shipped. *unsafe*: that order without the closure (overlaps allowed).
+
+{table(["data", "TF", "view", "merged", "tets", "RMSE uniform", "oracle tets", "RMSE oracle", "oracle / uniform",
+        "best order", "unsafe / uniform", "unsafe tets", "unsafe inverted tets", "groups with w > 0", "cell s"], rows)}
+
+Median oracle / uniform: **{np.median(ratios):.3f}** (best {min(ratios):.3f}, worst {max(ratios):.3f}; target
+<= 0.5).
+"""
+    write_section("selective_bound", text)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,277 @@
+"""Selective refinement from bricked forests (issue 13, third round, step 2).
+
+A bricked file (issue 16) holds one forest per brick, every brick's cut vertices locked, so any
+choice of one prefix length per brick is a conforming, flip-free mesh by construction (the cut
+faces are the same triangles at every prefix). A *selective* cut here = a prefix length per brick,
+chosen for the view and transfer function, against the uniform cut of the unbricked forest at
+equal total tets.
+
+* reach: the fewest tets each K can get to (every brick's forest exhausted; cut vertices never
+  merge), against the uniform cuts at 95 / 99 % merged;
+* allocation: per brick an error curve E_b(m) (image error with brick b at prefix m, the others
+  full; *oracle*: measured renders of the whole mesh; *estimate*: brick b rendered alone), then
+  the greedy marginal allocation over the curves' lower convex hulls (give tets to the brick with
+  the largest error drop per tet) to the goal's tets; the stitched mesh rendered and compared with
+  the unbricked uniform cut and with the bricked uniform one (the same share of each brick's
+  merges) at the same tets;
+* two tiers: the exhausted bricks stitched in groups (the k-d tree's subtrees) and decimated again
+  with only the group's outer cut vertices locked; how far that reaches.
+
+Run: ``python bench/bench_selective_bricks.py [--quick]`` -> ``bench/sections/selective_bricks.md``.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+
+from bench_selective import DATASETS, RATIOS, SIZE, VIEWS, tetc_file, transfer_functions
+from common import WORK, code_state, table, write_section
+
+QUICK = "--quick" in sys.argv
+KS = [8, 27, 64]
+FRACTIONS = (0.0, 0.5, 0.8, 0.9, 0.95, 0.98, 1.0)  # of a brick's merges, where its error is measured
+
+
+def bricked_file(name, k):
+    import gatun_py
+    from common import SAMPLE_FILES
+
+    path = WORK / f"{name}_k{k}.tetc"
+    if not path.exists():
+        src, kw, _ = SAMPLE_FILES[name]
+        t0 = time.perf_counter()
+        gatun_py.compress(src, path, bricks=k, jobs=1, **kw)
+        print(f"compressed {name} as {k} bricks in {time.perf_counter() - t0:.1f} s", flush=True)
+    return path
+
+
+class Bricks:
+    """Every brick's level 0, forest, tets per prefix length and cut vertices; stitched meshes."""
+
+    def __init__(self, reader):
+        from gatun_py.codec.bricks import read_cut
+        from gatun_py.simplify.dependencies import merge_dependencies
+
+        self.reader = reader
+        self.k = reader.n_bricks
+        self.n_cut = int(reader.meta["cut_points"])
+        self.meshes, self.forests, self.cuts, self.tets_after, self.n_merges = [], [], [], [], []
+        for b in range(self.k):
+            br = reader.brick(b)
+            mesh = br.decode_mesh(0)
+            forest = br.read_forest(0)
+            removed = merge_dependencies(mesh, forest, reduce=False).removed
+            self.meshes.append(mesh)
+            self.forests.append(forest)
+            self.cuts.append(read_cut(reader, b, 0))
+            self.tets_after.append(mesh.n_tets - np.concatenate([[0], np.cumsum(removed, dtype=np.int64)]))
+            self.n_merges.append(removed.size)
+        self._cache = {}
+
+    def tets(self, m) -> int:
+        return int(sum(t[int(x)] for t, x in zip(self.tets_after, m)))
+
+    def brick_mesh(self, b, m):
+        from gatun_py.simplify.forest import ancestors, mesh_from_ancestors
+
+        key = (b, int(m))
+        if key not in self._cache:
+            if len(self._cache) > 4 * self.k + 64:
+                self._cache.clear()
+            parent, rank = self.forests[b]
+            mesh, kept = mesh_from_ancestors(self.meshes[b], ancestors(parent, rank, int(m)))
+            pos, ids = self.cuts[b]
+            self._cache[key] = (mesh, (np.searchsorted(kept, pos), ids))
+        return self._cache[key]
+
+    def stitched(self, m):
+        from gatun_py.codec.bricks import stitch_bricks
+
+        parts = [self.brick_mesh(b, x) for b, x in enumerate(m)]
+        return stitch_bricks([p[0] for p in parts], [p[1] for p in parts], self.n_cut)
+
+
+class Renderer:
+    """In-memory renders fitted to the full mesh (its camera, scalar range and step)."""
+
+    def __init__(self, reader, view):
+        from gatun_py.pipeline.stream import file_view
+
+        self.view, self.camera, self.rng, self.step, _ = file_view(reader, view)
+
+    def __call__(self, mesh):
+        from gatun_py.render.image import to_rgb8
+        from gatun_py.render.raycast import render_mesh
+
+        res = render_mesh(mesh, self.camera, self.view.tf, mode=self.view.mode, step=self.step, scalar_range=self.rng)
+        return to_rgb8(res.image, (0.0, 0.0, 0.0))
+
+
+def sse(a, b) -> float:
+    d = a.astype(np.float64) - b.astype(np.float64)
+    return float((d * d).sum())
+
+
+def rmse(full, img) -> float:
+    from gatun_py.pipeline.quality import compare_images
+
+    return compare_images(full, img).rmse
+
+
+def error_curves(bricks, render, full, *, alone=False):
+    """Per brick: (merges, tets, error) at FRACTIONS of its merges. Oracle: the whole mesh with
+    brick b at that prefix, the others full (SSE against the full render); ``alone``: brick b
+    rendered by itself at that prefix against itself full."""
+    curves = []
+    zero = [0] * bricks.k
+    for b in range(bricks.k):
+        ms = sorted({int(round(f * bricks.n_merges[b])) for f in FRACTIONS})
+        ref = render(bricks.brick_mesh(b, 0)[0]) if alone else full
+        pts = []
+        for m in ms:
+            if m == 0:
+                pts.append((0, int(bricks.tets_after[b][0]), 0.0))
+                continue
+            if alone:
+                img = render(bricks.brick_mesh(b, m)[0])
+            else:
+                mm = list(zero)
+                mm[b] = m
+                img = render(bricks.stitched(mm))
+            pts.append((m, int(bricks.tets_after[b][m]), sse(ref, img)))
+        curves.append(pts)
+    return curves
+
+
+def _hull(pts):
+    """The lower convex hull of (tets, error) points, from the coarsest (fewest tets) up."""
+    pts = sorted(pts, key=lambda p: p[1])
+    hull = []
+    for p in pts:
+        while len(hull) >= 2:
+            (_, t1, e1), (_, t2, e2) = hull[-2], hull[-1]
+            # drop the middle point when it lies on or above the segment from hull[-2] to p
+            if (e2 - e1) * (p[1] - t1) >= (p[2] - e1) * (t2 - t1):
+                hull.pop()
+            else:
+                break
+        if hull and p[2] >= hull[-1][2]:
+            continue  # more tets, no less error: never worth it
+        hull.append(p)
+    return hull
+
+
+def allocate(bricks, curves, goal):
+    """Prefix lengths (one per brick) with at most ``goal`` tets by the greedy marginal allocation
+    over the curves' lower hulls; None when the bricks cannot get down to ``goal``."""
+    hulls = [_hull(c) for c in curves]
+    m = [h[0][0] for h in hulls]  # coarsest point of each hull
+    if bricks.tets(m) > goal:
+        return None
+    at = [0] * bricks.k
+    while True:
+        best, gain = None, 0.0
+        for b, h in enumerate(hulls):
+            if at[b] + 1 < len(h):
+                (_, t1, e1), (_, t2, e2) = h[at[b]], h[at[b] + 1]
+                g = (e1 - e2) / max(t2 - t1, 1)
+                if g > gain:
+                    best, gain = b, g
+        if best is None:
+            return m
+        nxt = hulls[best][at[best] + 1]
+        trial = list(m)
+        trial[best] = nxt[0]
+        if bricks.tets(trial) <= goal:
+            m, at[best] = trial, at[best] + 1
+            continue
+        # part of the step: the fewest merges of this brick that still fit
+        room = goal - (bricks.tets(m) - int(bricks.tets_after[best][m[best]]))
+        ok = np.flatnonzero(bricks.tets_after[best] <= room)
+        ok = ok[ok >= nxt[0]]
+        if ok.size:
+            m[best] = int(ok[0])
+        return m
+
+
+def uniform_bricked(bricks, goal):
+    """The same share of every brick's merges, the smallest share with at most ``goal`` tets."""
+    lo, hi = 0.0, 1.0
+    if bricks.tets([bricks.n_merges[b] for b in range(bricks.k)]) > goal:
+        return None
+    for _ in range(40):
+        mid = (lo + hi) / 2
+        if bricks.tets([int(mid * n) for n in bricks.n_merges]) <= goal:
+            hi = mid
+        else:
+            lo = mid
+    return [int(hi * n) for n in bricks.n_merges]
+
+
+def unbricked(reader, render, src, goal):
+    from gatun_py.pipeline.selective import uniform_cut
+    from gatun_py.simplify.dependencies import cut_ancestors
+    from gatun_py.simplify.forest import mesh_from_ancestors
+
+    if not hasattr(reader, "_bench_mesh0"):
+        reader._bench_mesh0 = reader.decode_mesh(0)
+    cut = uniform_cut(src, tets=goal)
+    mesh = mesh_from_ancestors(reader._bench_mesh0, cut_ancestors(src.parent, src.rank, cut))[0]
+    return render(mesh), mesh.n_tets
+
+
+def reach_rows(name, src_reader, rows):
+    from gatun_py.codec import TetcReader
+    from gatun_py.pipeline.selective import selective_source, uniform_cut
+
+    src = selective_source(src_reader)
+    n = src.points.shape[0]
+    goals = {r: src.deps.cut_tets(src.n_tets, uniform_cut(src, merges=int(r * n))) for r in RATIOS}
+    for k in KS:
+        reader = TetcReader(bricked_file(name, k))
+        bricks = Bricks(reader)
+        lowest = bricks.tets(bricks.n_merges)
+        n_cut = int(reader.meta["cut_points"])
+        rows.append([name, k, src.n_tets, n_cut, 100.0 * n_cut / n, lowest, 100.0 * lowest / src.n_tets,
+                     goals[0.95], goals[0.99], lowest / goals[0.95]])
+        print(rows[-1], flush=True)
+
+
+def allocation_rows(name, k, shares, rows, *, views=None):
+    """Per view / TF and goal (a share of the tets): the oracle and estimated per-brick allocations
+    against the unbricked and bricked uniform cuts."""
+    from gatun_py.codec import TetcReader
+    from gatun_py.pipeline.selective import selective_source
+    from gatun_py.pipeline.stream import View
+    from gatun_py.render.camera import Camera
+
+    base = TetcReader(tetc_file(name))
+    src = selective_source(base)
+    reader = TetcReader(bricked_file(name, k))
+    bricks = Bricks(reader)
+    lowest = bricks.tets(bricks.n_merges)
+    for label, tf in transfer_functions(name):
+        for az, el in views or VIEWS:
+            t0 = time.perf_counter()
+            view = View(Camera(SIZE, SIZE, az, el), tf=tf)
+            render = Renderer(base, view)
+            full = render(bricks.stitched([0] * bricks.k))
+            oracle = error_curves(bricks, render, full)
+            alone = error_curves(bricks, render, full, alone=True)
+            for share in shares:
+                goal = max(int(share * src.n_tets), lowest)
+                img_u, tets_u = unbricked(base, render, src, goal)
+                ru = rmse(full, img_u)
+                row = [name, k, label, f"({az:g}, {el:g})", goal, tets_u, ru]
+                for m in (uniform_bricked(bricks, goal), allocate(bricks, oracle, goal), allocate(bricks, alone, goal)):
+                    if m is None:
+                        row += ["-", "-"]
+                        continue
+                    mesh = bricks.stitched(m)
+                    row += [mesh.n_tets, rmse(full, render(mesh)) / ru]
+                row.append(time.perf_counter() - t0)
+                rows.append(row)
+                print(rows[-1], flush=True)

@@ -15,7 +15,7 @@ measured renders around P, both closed cuts:
   dependencies beyond P: error rise dE_c, tets removed dT_c.
 
 w_g = (dE_r + dE_c) / (dT_r + dT_c) (squared error on 0-255 per tet), and the oracle importance of
-merge i is rank(i)^a * w_g(i)^p (p in 0.5, 1, 2; a in 1, 0: with and without the forest's order);
+merge i is rank(i)^a * w_g(i)^p (p in 0.1, 0.25, 0.5, 1, 2; a in 1, 0: with and without the forest's order);
 the best of these per cell (by the measured RMSE) is the oracle's figure. Also the same best
 order without the closure (*unsafe*: the shortest prefix with at most N tets, overlaps allowed;
 its inverted tets counted on the cut's mesh).
@@ -37,7 +37,7 @@ from common import code_state, table, write_section
 
 QUICK = "--quick" in sys.argv
 GRID = 4  # groups per axis (G = 64: one bit each)
-POWERS = (0.5, 1.0, 2.0)
+POWERS = (0.1, 0.25, 0.5, 1.0, 2.0)
 
 
 @njit(cache=True)

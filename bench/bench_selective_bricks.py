@@ -275,3 +275,145 @@ def allocation_rows(name, k, shares, rows, *, views=None):
                 row.append(time.perf_counter() - t0)
                 rows.append(row)
                 print(rows[-1], flush=True)
+
+
+def kd_groups(count, depth, first=0):
+    """Brick index ranges of the k-d tree's subtrees ``depth`` splits down (as partition_tets
+    splits: the lower half gets count // 2 bricks)."""
+    if depth == 0 or count == 1:
+        return [(first, first + count)]
+    low = count // 2
+    return kd_groups(low, depth - 1, first) + kd_groups(count - low, depth - 1, first + low)
+
+
+def tier_forest(mesh, tet_group):
+    """A forest over ``mesh`` whose vertices used by tets of two groups are locked (none for one
+    group), and the tets after each prefix of it."""
+    from gatun_py.simplify import decimate
+    from gatun_py.simplify.dependencies import merge_dependencies
+
+    locked = None
+    if tet_group.max() > 0:
+        lo = np.full(mesh.n_points, np.iinfo(np.int64).max)
+        hi = np.full(mesh.n_points, -1)
+        for c in range(4):
+            np.minimum.at(lo, mesh.tets[:, c], tet_group)
+            np.maximum.at(hi, mesh.tets[:, c], tet_group)
+        locked = lo != hi
+    forest = decimate(mesh, locked=locked)
+    removed = merge_dependencies(mesh, forest, reduce=False).removed
+    return forest, mesh.n_tets - np.concatenate([[0], np.cumsum(removed, dtype=np.int64)]), locked
+
+
+def tier_rows(name, k, rows):
+    """Tiers above the bricks: the exhausted bricks stitched, decimated again with only the cut
+    vertices between the k-d tree's subtrees locked (8 subtrees, then none), each tier exhausted
+    before the next. Below the last locked tier's reach the cut is forced: a prefix of the top
+    tier's forest (no choice left); its RMSE against the unbricked uniform cut at the 95 / 99 %
+    goals, for every view and TF."""
+    from gatun_py.codec import TetcReader
+    from gatun_py.pipeline.selective import selective_source, uniform_cut
+    from gatun_py.pipeline.stream import View
+    from gatun_py.render.camera import Camera
+    from gatun_py.simplify.forest import ancestors, mesh_from_ancestors
+
+    base = TetcReader(tetc_file(name))
+    src = selective_source(base)
+    n = src.points.shape[0]
+    goals = {r: src.deps.cut_tets(src.n_tets, uniform_cut(src, merges=int(r * n))) for r in RATIOS}
+    bricks = Bricks(TetcReader(bricked_file(name, k)))
+    mesh = bricks.stitched(bricks.n_merges)
+    brick_of_tet = np.repeat(np.arange(k), [bricks.brick_mesh(b, bricks.n_merges[b])[0].n_tets for b in range(k)])
+    reach = [bricks.tets(bricks.n_merges)]
+    t0 = time.perf_counter()
+    for depth in ([3, 0] if k > 8 else [0]):
+        group = np.zeros(k, np.int64)
+        for g, (a, b) in enumerate(kd_groups(k, depth)):
+            group[a:b] = g
+        forest, tets_after, locked = tier_forest(mesh, group[brick_of_tet])
+        if depth:  # a locked tier: exhausted before the next (its tets then lie in one group each)
+            mesh = mesh_from_ancestors(mesh, ancestors(forest.parent, forest.rank, forest.n_merges))[0]
+            reach.append(mesh.n_tets)
+            brick_of_tet = np.zeros(mesh.n_tets, np.int64)  # the next (top) tier locks nothing
+    build_s = time.perf_counter() - t0
+    for ratio in RATIOS:
+        goal = goals[ratio]
+        m = int(np.flatnonzero(tets_after <= goal)[0]) if (tets_after <= goal).any() else forest.n_merges
+        cut = mesh_from_ancestors(mesh, ancestors(forest.parent, forest.rank, m))[0]
+        errs = []
+        for label, tf in transfer_functions(name):
+            for az, el in VIEWS:
+                render = Renderer(base, View(Camera(SIZE, SIZE, az, el), tf=tf))
+                full = render(bricks.stitched([0] * k))
+                img_u, _ = unbricked(base, render, src, goal)
+                errs.append(rmse(full, render(cut)) / rmse(full, img_u))
+        rows.append([name, k, f"{ratio:.0%}", goal, " / ".join(f"{x:,}" for x in reach), int(tets_after[-1]),
+                     cut.n_tets, float(np.median(errs)), float(min(errs)), float(max(errs)), build_s])
+        print(rows[-1], flush=True)
+
+
+
+SHARES = (0.12, 0.2, 0.3, 0.45)  # goals for the allocation, as shares of the full mesh's tets
+
+
+def main():
+    from gatun_py.codec import TetcReader
+
+    reach, alloc, tiers = [], [], []
+    for name in DATASETS:
+        reach_rows(name, TetcReader(tetc_file(name)), reach)
+    for name in DATASETS:
+        for k in (KS[:1] if QUICK else KS):
+            lowest = next(r[6] for r in reach if r[0] == name and r[1] == k) / 100.0
+            shares = [s for s in SHARES if s > lowest] or [lowest]
+            allocation_rows(name, k, shares, alloc, views=VIEWS[:1])
+            tier_rows(name, k, tiers)
+    ok = [r for r in alloc if r[10] != "-"]
+    text = f"""# Selective refinement from bricked forests (issue 13)
+
+Code: {code_state()}. {SIZE}², volume mode, in memory: every mesh (stitched bricks, unbricked cuts)
+rendered with the full mesh's camera, scalar range and step. RMSE on 0-255 against the full
+render. Bricked files: `tetc compress --bricks K` of the same samples (default levels, cut
+vertices locked in every brick's forest); unbricked: the file of `bench_selective.py`.
+
+## Reach: the fewest tets a bricked file's per-brick prefixes can give
+
+{table(["data", "K", "tets", "cut vertices", "cut % of points", "fewest tets", "% of tets", "goal 95 %",
+        "goal 99 %", "fewest / goal 95 %"], reach)}
+
+No K reaches the issue's 95 % or 99 % cells: at 95 % merged 5 % of the vertices are left, and the
+locked cut vertices alone are {min(r[4] for r in reach):.1f}-{max(r[4] for r in reach):.1f} % of all the points.
+
+## Per-brick prefixes chosen for the view against uniform, at equal tets (view (30, 20))
+
+Goal = a share of the tets the bricks can reach. *unbricked uniform*: the first N merges of the
+unbricked forest. *bricked uniform*: the same share of every brick's merges. *oracle*: per-brick
+prefixes by the greedy marginal allocation over measured error curves (the whole mesh rendered with
+brick b at {len(FRACTIONS) - 1} prefix lengths, the others full); *estimate*: the same from brick b
+rendered alone. Ratios are RMSE / unbricked uniform RMSE.
+
+{table(["data", "K", "TF", "view", "goal tets", "unbricked tets", "RMSE unbricked uniform", "bricked uniform tets",
+        "bricked uniform / unbricked", "oracle tets", "oracle / unbricked", "estimate tets", "estimate / unbricked",
+        "cell s"], alloc)}
+
+Median oracle / unbricked uniform: **{np.median([r[10] for r in ok]):.3f}** (best {min(r[10] for r in ok):.3f});
+bricked uniform / unbricked uniform {np.median([r[8] for r in ok]):.3f}: the locks cost more than the
+per-brick choice gains.
+
+## Two tiers and more: the exhausted bricks stitched and decimated again
+
+Tier 2 (K > 8): the exhausted bricks stitched and decimated with only the cut vertices between the
+8 subtrees of the k-d tree locked; the top tier: the exhausted tiers below decimated with nothing
+locked. Below the last locked tier's reach every brick and group must be exhausted first, so the cut
+is *forced*: a prefix of the top tier's forest. Its RMSE / the unbricked uniform RMSE at the 95 / 99 %
+goals, over the 3 views x 2 TFs.
+
+{table(["data", "K", "merged", "goal tets", "reach per tier (tets)", "top tier fewest", "forced cut tets",
+        "median / unbricked", "best", "worst", "tiers built s"], tiers)}
+"""
+    write_section("selective_bricks", text)
+
+
+
+if __name__ == "__main__":
+    main()

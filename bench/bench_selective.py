@@ -47,9 +47,37 @@ def tetc_file(name):
     return path
 
 
-def transfer_functions(name):
-    """(label, spec): the sample's preset and the same with every opacity x 0.3."""
-    return [(name, name), (f"{name} x0.3", _transparent(name))]
+def transfer_functions(name, *, cutoff: bool = False):
+    """(label, spec): the sample's preset and the same with every opacity x 0.3; with ``cutoff``
+    also a third, fully transparent below the scalar's 75th percentile (see :func:`_cutoff`)."""
+    out = [(name, name), (f"{name} x0.3", _transparent(name))]
+    if cutoff:
+        out.append((f"{name} 0 below p75", _cutoff(name)))
+    return out
+
+
+def _preset(name):
+    from importlib.resources import files
+
+    spec = json.loads(files("gatun_py.render.presets").joinpath(f"{name}.json").read_text())
+    spec.pop("comment", None)
+    return spec
+
+
+def _cutoff(name):
+    """The sample's preset with zero opacity below the 75th percentile of the scalar over the
+    vertices (normalised to the file's range): 3/4 of the vertices fully transparent (the preset:
+    29-39 %), Peng's case for a TF importance; the opacity ramps from 0 there to the preset's next
+    point."""
+    from gatun_py.codec import TetcReader
+
+    reader = TetcReader(tetc_file(name))
+    lo, hi = (float(x) for x in reader.meta["scalar_range"])
+    s = np.concatenate([b.density for b in reader.iter_decode(0)])
+    x0 = float((np.percentile(s, 75) - lo) / (hi - lo))
+    spec = _preset(name)
+    spec["opacity"] = [{"x": 0.0, "a": 0.0}, {"x": x0, "a": 0.0}] + [p for p in spec["opacity"] if p["x"] > x0]
+    return spec
 
 
 def _transparent(name):

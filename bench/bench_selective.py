@@ -102,6 +102,37 @@ def quality(full, res):
     return d.rmse, d.psnr
 
 
+class InMemoryRenderer:
+    """Renders meshes in memory with the full mesh's camera, scalar range and step (those of
+    ``reader``'s file), so cuts made outside the file's own pipeline compare with its renders."""
+
+    def __init__(self, reader, view):
+        from gatun_py.pipeline.stream import file_view
+
+        self.view, self.camera, self.rng, self.step, _ = file_view(reader, view)
+
+    def __call__(self, mesh):
+        """(H, W, 3) uint8 on black."""
+        from gatun_py.render.image import to_rgb8
+        from gatun_py.render.raycast import render_mesh
+
+        res = render_mesh(mesh, self.camera, self.view.tf, mode=self.view.mode, step=self.step, scalar_range=self.rng)
+        return to_rgb8(res.image, (0.0, 0.0, 0.0))
+
+
+def sse(a, b) -> float:
+    """Sum of squared differences of two 0-255 images."""
+    d = a.astype(np.float64) - b.astype(np.float64)
+    return float((d * d).sum())
+
+
+def rmse(full, img) -> float:
+    """RMSE as every table of this section quotes it (:func:`compare_images`)."""
+    from gatun_py.pipeline.quality import compare_images
+
+    return compare_images(full, img).rmse
+
+
 def target_table(reader, name, rows, ablation):
     from gatun_py.pipeline.selective import FACTORS, render_selective
     from gatun_py.pipeline.stream import View, render_tetc

@@ -31,7 +31,8 @@ import time
 import numpy as np
 from numba import njit
 
-from bench_selective import DATASETS, RATIOS, SIZE, VIEWS, _predictors, _unsafe_cut, tetc_file, transfer_functions
+from bench_selective import (DATASETS, RATIOS, SIZE, VIEWS, InMemoryRenderer, _predictors, _unsafe_cut, rmse, sse,
+                             tetc_file, transfer_functions)
 from common import WORK, code_state, table, write_section
 
 QUICK = "--quick" in sys.argv
@@ -68,36 +69,19 @@ def _downward_masks(ptr, idx, group, n, n2):
 
 
 class Frame:
-    """Renders cuts of one file's level 0 for one view, in memory, fitted to the full mesh."""
+    """Renders cuts (bool per rank) of one file's level 0 for one view, in memory."""
 
     def __init__(self, reader, view, src):
-        from gatun_py.pipeline.stream import file_view
-
-        self.view, self.camera, self.rng, self.step, _ = file_view(reader, view)
+        self.render = InMemoryRenderer(reader, view)
         self.mesh = reader.decode_mesh(0)
         self.src = src
 
     def image(self, applied):
-        from gatun_py.render.raycast import render_mesh
-        from gatun_py.render.image import to_rgb8
         from gatun_py.simplify.dependencies import cut_ancestors
         from gatun_py.simplify.forest import mesh_from_ancestors
 
         mesh = mesh_from_ancestors(self.mesh, cut_ancestors(self.src.parent, self.src.rank, applied))[0]
-        res = render_mesh(mesh, self.camera, self.view.tf, mode=self.view.mode, step=self.step,
-                          scalar_range=self.rng)
-        return to_rgb8(res.image, (0.0, 0.0, 0.0)), mesh
-
-
-def sse(a, b) -> float:
-    d = a.astype(np.float64) - b.astype(np.float64)
-    return float((d * d).sum())
-
-
-def rmse(full, img) -> float:
-    from gatun_py.pipeline.quality import compare_images
-
-    return compare_images(full, img).rmse
+        return self.render(mesh), mesh
 
 
 def groups_of(src) -> np.ndarray:

@@ -27,7 +27,8 @@ import time
 
 import numpy as np
 
-from bench_selective import DATASETS, RATIOS, SIZE, VIEWS, tetc_file, transfer_functions
+from bench_selective import (DATASETS, RATIOS, SIZE, VIEWS, InMemoryRenderer as Renderer, rmse, sse, tetc_file,
+                             transfer_functions)
 from common import WORK, code_state, table, write_section
 
 QUICK = "--quick" in sys.argv
@@ -92,33 +93,6 @@ class Bricks:
 
         parts = [self.brick_mesh(b, x) for b, x in enumerate(m)]
         return stitch_bricks([p[0] for p in parts], [p[1] for p in parts], self.n_cut)
-
-
-class Renderer:
-    """In-memory renders fitted to the full mesh (its camera, scalar range and step)."""
-
-    def __init__(self, reader, view):
-        from gatun_py.pipeline.stream import file_view
-
-        self.view, self.camera, self.rng, self.step, _ = file_view(reader, view)
-
-    def __call__(self, mesh):
-        from gatun_py.render.image import to_rgb8
-        from gatun_py.render.raycast import render_mesh
-
-        res = render_mesh(mesh, self.camera, self.view.tf, mode=self.view.mode, step=self.step, scalar_range=self.rng)
-        return to_rgb8(res.image, (0.0, 0.0, 0.0))
-
-
-def sse(a, b) -> float:
-    d = a.astype(np.float64) - b.astype(np.float64)
-    return float((d * d).sum())
-
-
-def rmse(full, img) -> float:
-    from gatun_py.pipeline.quality import compare_images
-
-    return compare_images(full, img).rmse
 
 
 def error_curves(bricks, render, full, *, alone=False):

@@ -38,6 +38,7 @@ from common import WORK, code_state, table, write_section
 QUICK = "--quick" in sys.argv
 GRID = 4  # groups per axis (G = 64: one bit each)
 POWERS = (0.1, 0.25, 0.5, 1.0, 2.0)
+MEASURE = 128  # image side of the oracle's measurement renders (its final cuts: SIZE)
 
 
 @njit(cache=True)
@@ -72,16 +73,21 @@ class Frame:
     """Renders cuts (bool per rank) of one file's level 0 for one view, in memory."""
 
     def __init__(self, reader, view, src):
+        from dataclasses import replace
+
         self.render = InMemoryRenderer(reader, view)
+        small = replace(view.camera, width=MEASURE, height=MEASURE)
+        self.render_small = InMemoryRenderer(reader, replace(view, camera=small))
         self.mesh = reader.decode_mesh(0)
         self.src = src
 
-    def image(self, applied):
+    def image(self, applied, *, small=False):
+        """(image, mesh) of a cut; ``small``: at MEASURE² (the oracle's measurements)."""
         from gatun_py.simplify.dependencies import cut_ancestors
         from gatun_py.simplify.forest import mesh_from_ancestors
 
         mesh = mesh_from_ancestors(self.mesh, cut_ancestors(self.src.parent, self.src.rank, applied))[0]
-        return self.render(mesh), mesh
+        return (self.render_small if small else self.render)(mesh), mesh
 
 
 def groups_of(src) -> np.ndarray:
@@ -91,14 +97,14 @@ def groups_of(src) -> np.ndarray:
     return (cell[:, 0] * GRID + cell[:, 1]) * GRID + cell[:, 2]
 
 
-def group_weights(frame, full, src, group, n, n2):
+def group_weights(frame, src, group, n, n2):
     """w_g of every group around the uniform cut P = first n merges (see the module docstring)."""
     deps = src.deps
     k = src.n_merges
     base = np.zeros(k, bool)
     base[:n] = True
-    img, _ = frame.image(base)
-    e0 = sse(full, img)
+    full = frame.image(np.zeros(k, bool), small=True)[0]
+    e0 = sse(full, frame.image(base, small=True)[0])
     t0 = deps.cut_tets(src.n_tets, base)
     up = _upward_masks(deps.ptr, deps.idx, group, n)
     down = _downward_masks(deps.ptr, deps.idx, group, n, n2)
@@ -109,12 +115,12 @@ def group_weights(frame, full, src, group, n, n2):
         refine = base.copy()
         refine[:n] &= (up & bit) == 0
         if (refine != base).any():
-            de += e0 - sse(full, frame.image(refine)[0])
+            de += e0 - sse(full, frame.image(refine, small=True)[0])
             dt += deps.cut_tets(src.n_tets, refine) - t0
         coarsen = base.copy()
         coarsen[n:] = (down[n:] & bit) != 0
         if (coarsen != base).any():
-            de += sse(full, frame.image(coarsen)[0]) - e0
+            de += sse(full, frame.image(coarsen, small=True)[0]) - e0
             dt += t0 - deps.cut_tets(src.n_tets, coarsen)
         w[g] = max(de, 0.0) / dt if dt > 0 else 0.0
     return w
@@ -140,7 +146,7 @@ def cell(reader, name, label, tf, az, el, rows):
         n2 = int(uniform_cut(src, tets=max(goal // 2, 1)).sum())
         ru = rmse(full, frame.image(u)[0])
         shipped = rmse(full, frame.image(choose_cut(src, _predictors(reader, view, src)[0], tets=goal))[0])
-        w = group_weights(frame, full, src, group, n, n2)
+        w = group_weights(frame, src, group, n, n2)
         best = None
         for a in (1.0, 0.0):
             for p in POWERS:
@@ -185,7 +191,8 @@ def main():
 Code: {code_state()}. {SIZE}², volume mode, in memory (level 0 decoded once, cut, rendered with the
 full mesh's camera, scalar range and step). RMSE on 0-255 against the full-resolution render.
 Oracle importance = rank^a x w_g^p, w_g the *measured* image error per tet of the merges in cell g
-of a {GRID}^3 grid (refining and coarsening g around the uniform cut, closed cuts both; see
+of a {GRID}^3 grid (refining and coarsening g around the uniform cut, closed cuts both, measured at
+{MEASURE}²; see
 `bench/bench_selective_bound.py`), the best (a, p) per cell picked by the measured RMSE; then the
 same closed cut as shipped. *shipped*: the shipped importance's closed cut (the cells of
 `selective.md`, here in memory). *unsafe*: the oracle's order without the closure (overlaps

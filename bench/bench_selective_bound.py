@@ -21,7 +21,9 @@ the best of these per cell (by the measured RMSE) is the oracle's figure. Also t
 order without the closure (*unsafe*: the shortest prefix with at most N tets, overlaps allowed;
 its inverted tets counted on the cut's mesh).
 
-Run: ``python bench/bench_selective_bound.py [--quick]`` -> ``bench/sections/selective_bound.md``.
+Run: ``python bench/bench_selective_bound.py [--quick] [--from-cache]`` -> ``bench/sections/selective_bound.md``
+(cells are kept in ``bench/out`` as they finish and a run resumes from them; ``--from-cache``: write
+the section from the kept cells only).
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from bench_selective import (DATASETS, RATIOS, SIZE, VIEWS, InMemoryRenderer, _p
 from common import WORK, code_state, table, write_section
 
 QUICK = "--quick" in sys.argv
+FROM_CACHE = "--from-cache" in sys.argv
 GRID = 4  # groups per axis (G = 64: one bit each)
 POWERS = (0.1, 0.25, 0.5, 1.0)
 FLOORS = (0.0, 0.1)  # w + c x mean(w): how far a group with little measured error still follows the rank
@@ -185,6 +188,8 @@ def main():
                 have = [r for r in done if r[:3] == [name, label, f"({az:g}, {el:g})"]]
                 if len(have) == len(RATIOS):
                     rows += have
+                    continue
+                if FROM_CACHE:  # the section from the cells measured so far
                     continue
                 cell(reader, name, label, tf, az, el, rows)
                 keep.write_text(json.dumps(rows + [r for r in done if r not in rows], default=float))

@@ -282,8 +282,8 @@ def tier_forest(mesh, tet_group):
 def tier_rows(name, k, rows, switch: float = 1.0):
     """Tiers above the bricks: the exhausted bricks stitched, decimated again with only the cut
     vertices between the k-d tree's subtrees locked (8 subtrees, then none), each tier exhausted
-    before the next (``switch`` < 1: each brick stops at that share of its merges, before its
-    forest's costly tail; the groups' tier is exhausted). Below the last locked tier's reach the
+    before the next (``switch`` < 1: each brick, then each group, stops at that share of its
+    forest's merges, before the forest's costly tail). Below the last locked tier's reach the
     cut is forced: a prefix of the top tier's forest (no choice left); its RMSE against the
     unbricked uniform cut at the 95 / 99 % goals, for every view and TF."""
     from gatun_py.codec import TetcReader
@@ -307,8 +307,8 @@ def tier_rows(name, k, rows, switch: float = 1.0):
         for g, (a, b) in enumerate(kd_groups(k, depth)):
             group[a:b] = g
         forest, tets_after, locked = tier_forest(mesh, group[brick_of_tet])
-        if depth:  # a locked tier: exhausted before the next (its tets then lie in one group each)
-            mesh = mesh_from_ancestors(mesh, ancestors(forest.parent, forest.rank, forest.n_merges))[0]
+        if depth:  # a locked tier: done before the next (its tets then lie in one group each)
+            mesh = mesh_from_ancestors(mesh, ancestors(forest.parent, forest.rank, int(switch * forest.n_merges)))[0]
             reach.append(mesh.n_tets)
             brick_of_tet = np.zeros(mesh.n_tets, np.int64)  # the next (top) tier locks nothing
     build_s = time.perf_counter() - t0
@@ -399,7 +399,7 @@ per-brick choice gains.
 
 Tier 2 (K > 8): the bricks stitched when each has applied the *switch* share of its merges (100 %:
 exhausted) and decimated with only the cut vertices between the 8 subtrees of the k-d tree locked;
-the top tier: the exhausted tiers below decimated with nothing locked. Below the last locked tier's
+the top tier: the tiers below (each at the same switch share) decimated with nothing locked. Below the last locked tier's
 reach every brick and group must be done first, so the cut is *forced*: a prefix of the top tier's
 forest, with no choice left for a view or TF. Its RMSE / the unbricked uniform RMSE at the 95 / 99 %
 goals, over the 3 views x 3 TFs. The last 2 % of the bricks' merges lose 1.5-15 % of the mesh's

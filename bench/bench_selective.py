@@ -411,11 +411,11 @@ BOUND = """## The bound: no importance and no brick choice reaches 0.5x with the
 
 Measured by `bench/bench_selective_bound.py` ([selective_bound.md](selective_bound.md)) and
 `bench/bench_selective_bricks.py` ([selective_bricks.md](selective_bricks.md)), 256², in memory,
-RMSE / the uniform cut's RMSE at equal tets (the unbricked forest's first N merges). The first three
-rows: 18 cells per column, 2 samples x 3 views x 3 TFs (the sample's; its opacities x 0.3; the sample's with zero
-opacity below the scalar's 75th percentile, 3/4 of the vertices fully transparent against 29-39 %
-for the preset); the bricked rows: per K (and goal), each the median over views and TFs. Median
-(range).
+RMSE / the uniform cut's RMSE at equal tets (the unbricked forest's first N merges). The first
+three rows: 18 cells per column, 2 samples x 3 views x 3 TFs (the sample's; its opacities x 0.3;
+the sample's with zero opacity below the scalar's 75th percentile, 3/4 of the vertices fully
+transparent against 29-39 % for the preset); the bricked rows: per K (and goal), each the median
+over views and TFs. Median (range).
 
 | cut | chosen by | 95 % merged | 99 % merged | flip-free |
 |---|---|---|---|---|

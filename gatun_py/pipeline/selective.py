@@ -55,6 +55,18 @@ loosen the closure (tried and reverted, commit 139dcb4: the merge at rank 95 % s
 of the earlier ones): at 95 % merged a merge's star is a large region, and the merges that built
 it are most of the merges there.
 
+The bound (``bench/sections/selective_bound.md``, ``selective_bricks.md``): an *oracle* importance,
+the image error each region of merges (4^3 grid) is measured to make for the view and TF, with the
+same closed cut, gives 0.88-1.19x uniform's RMSE at 95 % merged and 0.95-2.7x at 99 % (median 0.99
+over 36 cells; the shipped importance 1.07), on both samples with three TFs, one of them fully
+transparent over 3/4 of the vertices: no importance reaches 0.5x with this forest. Bricked forests
+(issue 16), whose per-brick prefixes are free and flip-free by construction, cannot get to 95 or
+99 % at all (their locked cut vertices are 9.5-34 % of the points: 2.2-9.9x the 95 % goal's tets
+at the least), and where they reach, the locks cost more than the choice gains (oracle per-brick
+allocations 1.25-9.3x the unbricked uniform RMSE at equal tets, median 1.67); tiers above the
+bricks (groups decimated again with their shared cuts unlocked) leave no choice below the locked
+tiers' reach: there the cut is a prefix of the top tier's forest.
+
 Examples
 --------
 >>> import gatun_py, tempfile, os

@@ -245,6 +245,23 @@ def test_locks_on_a_tetc_stream(post_tetc):
     band = s.stats["band"]
     assert band and all(b["locked"] <= b["vertices"] for b in band)
     assert max(b["locked"] for b in band) < full.n_points
+    # the timeline: a batch is extracted after it is decoded, in stream order; rounds are counted
+    assert all(b["decoded_s"] <= b["t_s"] for b in band)
+    assert [b["decoded_s"] for b in band] == sorted(b["decoded_s"] for b in band)
+    assert [b["rounds"] for b in band] == sorted(b["rounds"] for b in band)
+    assert 1 <= band[-1]["rounds"] == s.stats["rounds"] - 1  # all but the final round ran mid-stream
+
+
+def test_trim_heap_is_safe_to_call_between_batches():
+    import platform
+
+    from gatun_py.isosurface import extract
+
+    extract._trim_heap()
+    extract._trim_heap()  # looked up once, then reused
+    assert len(extract._MALLOC_TRIM) == 1
+    if platform.system() == "Linux" and platform.libc_ver()[0] == "glibc":
+        assert extract._MALLOC_TRIM[0] is not None  # on glibc the trim is real, not silently skipped
 
 
 def test_faces_target_and_error_small():

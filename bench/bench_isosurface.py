@@ -397,7 +397,7 @@ def _rss_now() -> float:
         return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
-def _memory_stages_child(tetc: str) -> int:
+def _memory_stages_child(tetc: str, value: float) -> int:
     """(child) Where the peak of one isosurface run goes; one JSON line on stdout.
 
     In one fresh process: RSS after each import, after a run on the 90-tet file shipped with the
@@ -487,7 +487,7 @@ def _memory_stages_child(tetc: str) -> int:
     ex.PrefetchedDecode, ex._Extractor.decimate = Watched, watched_decimate
     th = threading.Thread(target=sample, daemon=True)
     th.start()
-    s = ex.isosurface(tetc, values=float(os.environ.get("ISO_VALUE", "0.2")), ratio=0.05)
+    s = ex.isosurface(tetc, values=value, ratio=0.05)
     stop.set()
     th.join()
     with open("/proc/self/status") as fh:
@@ -505,6 +505,17 @@ def _memory_stages_child(tetc: str) -> int:
                total_s=round(s.stats["total_s"], 2), samples=samples[::4])
     print(json.dumps(rec))
     return 0
+
+
+def part_memory_stages(tetc: Path, value: float):
+    """Run :func:`_memory_stages_child` in a fresh process (the isovalue and ratio of :func:`part_big`)."""
+    p = subprocess.run([sys.executable, __file__, "--memory-stages", str(tetc), "--value", str(value)],
+                       capture_output=True, text=True,
+                       env={**os.environ, "NUMBA_NUM_THREADS": "2"})
+    if p.returncode != 0:
+        print(p.stderr, file=sys.stderr)
+        return None
+    return json.loads(p.stdout.strip().splitlines()[-1])
 
 
 # -- report ----------------------------------------------------------------------------------------------
@@ -618,7 +629,7 @@ def main(argv=None) -> int:
     if args.peer:
         return run_peer(args)
     if args.memory_stages:
-        return _memory_stages_child(args.memory_stages)
+        return _memory_stages_child(args.memory_stages, args.value)
     cache = OUT / "results.json"
     saved = json.loads(cache.read_text()) if cache.exists() else {}
     if args.only in (None, "quality"):
@@ -630,9 +641,11 @@ def main(argv=None) -> int:
     if args.only in (None, "big") and args.big:
         big = Path(args.big)
         saved["big"] = part_big(big, big.with_suffix(".vtu"), args.runs, args.big_value)
-        saved["big"]["stages"] = part_memory_stages(big)
+        OUT.mkdir(parents=True, exist_ok=True)
+        cache.write_text(json.dumps(saved))  # the timed runs are kept even if the stages fail
+        saved["big"]["stages"] = part_memory_stages(big, saved["big"]["value"])
     if args.only == "stages" and args.big and saved.get("big"):
-        saved["big"]["stages"] = part_memory_stages(Path(args.big))
+        saved["big"]["stages"] = part_memory_stages(Path(args.big), saved["big"]["value"])
     OUT.mkdir(parents=True, exist_ok=True)
     cache.write_text(json.dumps(saved))
     curves = {tuple(k): v for k, v in saved.get("curves", [])}

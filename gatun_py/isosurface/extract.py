@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import collections
 import ctypes
+import functools
 import json
 import math
 import os
@@ -539,29 +540,31 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
     return Surface(surf_pts, surf_tris, point_data, stats)
 
 
-_MALLOC_TRIM = []  # [glibc's malloc_trim, or None], looked up on first use
+@functools.cache
+def _malloc_trim():
+    """glibc's ``malloc_trim``, or None where the C library has none (macOS, Windows, musl)."""
+    try:
+        fn = ctypes.CDLL(None).malloc_trim
+    except (OSError, TypeError, AttributeError):
+        return None
+    fn.argtypes, fn.restype = [ctypes.c_size_t], ctypes.c_int
+    return fn
 
 
 def _trim_heap() -> None:
     """Give the C heap's free pages back to the system (glibc's ``malloc_trim``; elsewhere nothing).
 
-    Why: the stream frees large transients early (the connectivity decoder's 22 MB refs table
-    and the boundary's border on the 7.8 M-tet flange), which raises glibc's dynamic mmap
-    threshold to their size and the trim threshold to twice that, per arena. From then on the
-    per-batch arrays (1 MB of tets, refs, extraction buffers), allocated and freed by three
-    threads, come from the arenas, and up to ~40 MB of freed pages stayed resident at the peak.
-    Trimming every few batches costs under a millisecond a call and changes no allocator
-    setting of the process (``mallopt`` would, for the user's code too).
+    Why: freeing a large transient early in the stream (the connectivity decoder's 22 MB table of
+    refs, the boundary's border queue on the 7.8 M-tet flange) raises glibc's dynamic mmap
+    threshold to its size and the trim threshold to twice that. From then on the per-batch arrays
+    (1 MB of tets, refs, extraction buffers), allocated and freed by three threads, come from the
+    arenas, and ~35 MB of freed pages stayed resident at the peak (455 -> 420 MB there). A call
+    costs about a millisecond, and it changes no allocator setting of the process (``mallopt``
+    would, for the user's code too).
     """
-    if not _MALLOC_TRIM:
-        try:
-            fn = ctypes.CDLL(None).malloc_trim
-            fn.argtypes, fn.restype = [ctypes.c_size_t], ctypes.c_int
-        except (OSError, TypeError, AttributeError):  # not glibc (macOS, Windows, musl without it)
-            fn = None
-        _MALLOC_TRIM.append(fn)
-    if _MALLOC_TRIM[0] is not None:
-        _MALLOC_TRIM[0](0)
+    fn = _malloc_trim()
+    if fn is not None:
+        fn(0)
 
 
 def _rss_mb() -> float:

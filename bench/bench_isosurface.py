@@ -501,7 +501,7 @@ def _memory_stages_child(tetc: str, value: float) -> int:
         if before and during:
             adds.append(round(max(during) - before[-1], 1))
     rec.update(peak=round(hwm, 1), sampled_peak=peak, t_peak=t_peak, at_end=at_end, rounds=rounds,
-               round_adds=adds, peak_in_round=any(a <= t_peak <= b + 0.2 for a, b, _ in rounds),
+               round_adds=adds, peak_in_round=any(a <= t_peak <= b + 1.0 for a, b, _ in rounds),
                total_s=round(s.stats["total_s"], 2), samples=samples[::4])
     print(json.dumps(rec))
     return 0
@@ -787,7 +787,8 @@ def _stages_report(b) -> list:
             ["a round of collapses mid-stream (heap, face lists; the largest rise while one runs)", f"{rnd:.0f}"],
             ["the rest (batches in flight and queued, allocator slack, Python objects)", f"{rest:.0f}"],
             ["= our peak in this run", f"{st['peak']:.0f}"]]
-    when = "while or just after a round of collapses" if st.get("peak_in_round") else "outside the rounds"
+    when = ("during a round of collapses or within a second after it (its memory goes back at the next trim "
+            "of the heap)") if st.get("peak_in_round") else "outside the rounds"
     return [f"Where our peak goes (MB, measured in one process: RSS after each import and after a run on a "
             f"90-tet file, then the arrays held at the last tets of the real run; the peak came at "
             f"{st['t_peak']:.1f} s of {st['total_s']:.1f} s, {when}, before the end of the stream frees the "

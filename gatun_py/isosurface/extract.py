@@ -39,6 +39,12 @@ DEFAULT_BATCH_FACES = 100_000
 MAX_PREVIEW_PIXELS = 1 << 26
 CHUNK_TETS = 8192  # tets per extraction step (rounds start between steps)
 MAX_IN_FLIGHT = 16  # decoded batches waiting for the extraction thread
+#: tets batches the connectivity decoder may run ahead of the geometry (each ~1.2 MB of tets and
+#: refs): the geometry of the boundary's vertices comes first and takes as long as ~10 batches of
+#: connectivity (flange-10m: 268 k vertices), so with the decoder's default of 4 the connectivity
+#: thread, the critical path, sat idle on a full queue for that long; afterwards the geometry is
+#: the faster stage and the queue stays nearly empty, so the depth costs no memory at the peak
+PREFETCH_DEPTH = 16
 BOUNDARY_CHUNK = 4 * CHUNK_TETS  # boundary faces per extraction step (as many faces as a tet step)
 #: keep at least this share of ``batch_faces`` modifiable faces between rounds (Hou & Chen's
 #: initial phase: early rounds must not over-decimate what little has been seen)
@@ -598,7 +604,7 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs):
         raise CorruptFileError("corrupt metadata: bad bounding box or scalar range") from None
     info = {"points": int(lv["points"]), "bbox_lo": lo, "bbox_hi": hi, "scalar_range": rng,
             "level": target.level, "mesh_ratio": target.ratio}
-    batches = PrefetchedDecode(reader, target.level)
+    batches = PrefetchedDecode(reader, target.level, depth=PREFETCH_DEPTH)
     anc = target_ancestors(reader, target)
     if anc is None:
         info["shared_values"] = batches

@@ -391,51 +391,126 @@ def part_big(tetc: Path, vtu: Path, runs: int, value: float | None = None):
             "file": tetc.name, "runs": runs, "code": code_state(), "load": [load0, os.getloadavg()[0]]}
 
 
-def _memory_stages_child(tetc: str) -> int:
-    """(child) Where the memory of a .tetc stream goes: RSS after the imports, the arrays the two
-    decoders hold at the end of the level, and the decode-only peak; one JSON line on stdout."""
-    import gc
+def _rss_now() -> float:
+    """VmRSS of this process, MB (the memory children read it often: statm is one line)."""
+    with open("/proc/self/statm") as fh:
+        return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
-    import gatun_py.isosurface.extract  # noqa: F401  (the isosurface path's imports)
-    from gatun_py.codec import TetcReader
+
+def _memory_stages_child(tetc: str, value: float) -> int:
+    """(child) Where the peak of one isosurface run goes; one JSON line on stdout.
+
+    In one fresh process: RSS after each import, after a run on the 90-tet file shipped with the
+    package (the floor: numba's runtime and our kernels' compiled code, loaded on the first call),
+    then the real run with RSS sampled every 5 ms, the arrays the decoders and the extractor hold
+    at the last tets (sizes; the connectivity border counted as far as it was used), and the RSS a
+    round of collapses adds while it runs. tracemalloc cannot see most of this (numba's runtime
+    allocates outside it), so everything is RSS or array sizes.
+    """
+    import gc
+    import importlib
+    import threading
+
+    rec = {"numpy": _rss_now()}
+    import numba  # noqa: F401
+
+    rec["numba"] = _rss_now()
+    ex = importlib.import_module("gatun_py.isosurface.extract")
+    importlib.import_module("gatun_py.cli.main")  # what the command imports before the verb
+    from gatun_py.codec import _cutborder_kernels as CK
     from gatun_py.codec.cutborder import ConnectivityDecoder
     from gatun_py.codec.geometry import GeometryDecoder
-    from gatun_py.codec.prefetch import PrefetchedDecode
+    from gatun_py.warmup import SHIPPED_TETC
+
+    rec["modules"] = _rss_now()
+    had_scipy = "scipy.linalg" in sys.modules
+    lo, hi = ex.TetcReader(SHIPPED_TETC).meta["scalar_range"]
+    ex.isosurface(SHIPPED_TETC, values=(lo + hi) / 2, ratio=0.5)
+    rec["floor"] = _rss_now()
+    rec["scipy_linalg_by_numba"] = "scipy.linalg" in sys.modules and not had_scipy
+
+    samples, stop = [], threading.Event()
+    t0 = time.perf_counter()
+
+    def sample():
+        while not stop.is_set():
+            samples.append((round(time.perf_counter() - t0, 3), round(_rss_now(), 1)))
+            time.sleep(0.005)
 
     def mb(x):
         return round(x / 2**20, 1)
 
-    def rss():
-        with open("/proc/self/status") as fh:
-            f = {ln.split(":")[0]: ln.split()[1] for ln in fh if ln.startswith(("VmRSS", "VmHWM"))}
-        return mb(int(f["VmRSS"]) * 1024), mb(int(f["VmHWM"]) * 1024)
+    def _border_mb(B):
+        """The cut border: its element table as far as slots were handed out, its list heads and queue."""
+        used = int(B[3][CK.BS_BUMP]) * CK.E_COLS * B[0].itemsize
+        return mb(min(used, B[0].nbytes) + B[1].nbytes + B[2].nbytes)
 
     def held(cls):
         out = {}
         for obj in gc.get_objects():
             if isinstance(obj, cls):
                 for name, v in vars(obj).items():
-                    for i, a in enumerate(v if isinstance(v, tuple) else (v,)):
+                    if name == "_B" and v is not None:
+                        out["border"] = _border_mb(v)
+                        continue
+                    for a in (v if isinstance(v, tuple) else (v,)):
                         if isinstance(a, np.ndarray) and a.nbytes >= 2**20:
-                            out[name if not isinstance(v, tuple) else f"{name}[{i}]"] = mb(a.nbytes)
+                            out[name] = round(out.get(name, 0) + mb(a.nbytes), 1)
         return out
 
-    rec = {"imports": rss()[0]}
-    reader = TetcReader(tetc)
-    total, seen, geo, conn = reader.level_meta(0)["tets"], 0, {}, {}
-    for batch in PrefetchedDecode(reader):
-        seen += len(batch.tets)
-        if seen == total and len(batch.tets):  # the last tets: every decoder array is in use
-            geo, conn = held(GeometryDecoder), held(ConnectivityDecoder)
-            rec["rss_at_end"] = rss()[0]
-    rec.update(decode_peak=rss()[1], geometry=geo, connectivity=conn)
+    total = ex.TetcReader(tetc).level_meta(0)["tets"]
+    at_end = {}
+
+    class Watched(ex.PrefetchedDecode):  # the arrays held when the last tets come out
+        def __iter__(self):
+            seen, conn, border = 0, None, 0.0
+            for batch in super().__iter__():
+                seen += len(batch.tets)
+                if conn is None and len(batch.tets):
+                    conn = next(o for o in gc.get_objects() if isinstance(o, ConnectivityDecoder))
+                if conn is not None and getattr(conn, "_B", None) is not None:  # freed with the last tets
+                    border = max(border, _border_mb(conn._B))
+                if seen == total and len(batch.tets) and not at_end:
+                    at_end.update(geometry=held(GeometryDecoder), connectivity=held(ConnectivityDecoder),
+                                  extraction=held(ex._Extractor), rss=_rss_now())
+                    at_end["connectivity"]["border (at its largest)"] = round(border, 1)
+                yield batch
+
+    rounds = []
+    decimate = ex._Extractor.decimate
+
+    def watched_decimate(self, *, final):
+        a = time.perf_counter() - t0
+        decimate(self, final=final)
+        rounds.append((round(a, 3), round(time.perf_counter() - t0, 3), final))
+
+    ex.PrefetchedDecode, ex._Extractor.decimate = Watched, watched_decimate
+    th = threading.Thread(target=sample, daemon=True)
+    th.start()
+    s = ex.isosurface(tetc, values=value, ratio=0.05)
+    stop.set()
+    th.join()
+    with open("/proc/self/status") as fh:
+        hwm = next(int(ln.split()[1]) / 1024 for ln in fh if ln.startswith("VmHWM"))
+    t_peak, peak = max(samples, key=lambda x: x[1])
+    # what a round adds: the highest sample during it minus the last sample before it
+    adds = []
+    for a, b, final in rounds:
+        before = [r for t, r in samples if t <= a]
+        during = [r for t, r in samples if a <= t <= b]
+        if before and during:
+            adds.append(round(max(during) - before[-1], 1))
+    rec.update(peak=round(hwm, 1), sampled_peak=peak, t_peak=t_peak, at_end=at_end, rounds=rounds,
+               round_adds=adds, peak_in_round=any(a <= t_peak <= b + 1.0 for a, b, _ in rounds),
+               total_s=round(s.stats["total_s"], 2), samples=samples[::4])
     print(json.dumps(rec))
     return 0
 
 
-def part_memory_stages(tetc: Path):
-    """Run :func:`_memory_stages_child` in a fresh process."""
-    p = subprocess.run([sys.executable, __file__, "--memory-stages", str(tetc)], capture_output=True, text=True,
+def part_memory_stages(tetc: Path, value: float):
+    """Run :func:`_memory_stages_child` in a fresh process (the isovalue and ratio of :func:`part_big`)."""
+    p = subprocess.run([sys.executable, __file__, "--memory-stages", str(tetc), "--value", str(value)],
+                       capture_output=True, text=True,
                        env={**os.environ, "NUMBA_NUM_THREADS": "2"})
     if p.returncode != 0:
         print(p.stderr, file=sys.stderr)
@@ -485,26 +560,48 @@ def _plot_error_curves(plt, curves, keys, n):
 
 
 def _plot_memory(plt, big):
+    """Memory over one run, the stream's timeline (when each batch was decoded and extracted, the
+    rounds of collapses) and the surface held."""
     band = big["stats"]["band"]
-    fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+    st = big.get("stages") or {}
+    fig, ax = plt.subplots(1, 3, figsize=(15, 3.8))
     t = [b["t_s"] for b in band]
-    ax[0].plot(t, [b["rss_mb"] for b in band], label="ours: RSS")
-    ax[0].plot(t, [b["peak_rss_mb"] for b in band], label="ours: peak RSS so far")
+    ax[0].plot(t, [b["rss_mb"] for b in band], label="ours (tetc isosurface): RSS at each batch")
+    if st.get("samples"):
+        ax[0].plot([x[0] for x in st["samples"]], [x[1] for x in st["samples"]], lw=0.8,
+                   label="ours in one process, sampled every 20 ms")
+        for a, b_, _ in st.get("rounds", []):
+            ax[0].axvspan(a, b_, color="orange", alpha=0.2, lw=0)
+        if "floor" in st:
+            ax[0].axhline(st["floor"], ls=":", lw=1, color="black", label="floor: the same run on 90 tets")
     for row in big["rows"][1:]:
         if row[0] in BARE:
             continue
         ax[0].axhline(float(row[4]), ls="--", lw=1, label=f"{row[0].split(' + ')[-1]} cascade peak", color="grey")
-    ax[0].set_xlabel("seconds")
+    ax[0].set_xlabel("seconds (orange: rounds of collapses)")
     ax[0].set_ylabel("MB")
-    ax[0].legend(fontsize=7)
+    ax[0].legend(fontsize=6)
     ax[0].set_title("memory over one run", fontsize=9)
-    ax[1].plot(t, [b["faces"] for b in band], label="faces held")
-    ax[1].plot(t, [b["faces_extracted"] for b in band], label="faces extracted so far")
-    ax[1].plot(t, [b["locked"] for b in band], label="locked vertices (band)")
-    ax[1].set_yscale("log")
-    ax[1].set_xlabel("seconds")
-    ax[1].legend(fontsize=7)
-    ax[1].set_title("surface held and locked band", fontsize=9)
+    if band and "decoded_s" in band[0]:
+        k = range(len(band))
+        ax[1].plot([b["decoded_s"] for b in band], k, label="batch decoded (out of the stream)")
+        ax[1].plot(t, k, label="batch extracted (worker done)")
+        prev = 0
+        for b in band:  # a batch whose extraction ran a round: its span, shaded
+            if b["rounds"] > prev:
+                ax[1].axhspan(band.index(b) - 0.5, band.index(b) + 0.5, color="orange", alpha=0.5, lw=0)
+                prev = b["rounds"]
+        ax[1].set_xlabel("seconds")
+        ax[1].set_ylabel("batch (65,536 tets)")
+        ax[1].legend(fontsize=7)
+        ax[1].set_title("timeline: decoding runs ahead, extraction follows", fontsize=9)
+    ax[2].plot(t, [b["faces"] for b in band], label="faces held")
+    ax[2].plot(t, [b["faces_extracted"] for b in band], label="faces extracted so far")
+    ax[2].plot(t, [b["locked"] for b in band], label="locked vertices (band)")
+    ax[2].set_yscale("log")
+    ax[2].set_xlabel("seconds")
+    ax[2].legend(fontsize=7)
+    ax[2].set_title("surface held and locked band", fontsize=9)
     fig.tight_layout()
     fig.savefig(FIGURES / "iso_memory_over_time.png", dpi=110)
     plt.close(fig)
@@ -532,7 +629,7 @@ def main(argv=None) -> int:
     if args.peer:
         return run_peer(args)
     if args.memory_stages:
-        return _memory_stages_child(args.memory_stages)
+        return _memory_stages_child(args.memory_stages, args.value)
     cache = OUT / "results.json"
     saved = json.loads(cache.read_text()) if cache.exists() else {}
     if args.only in (None, "quality"):
@@ -544,9 +641,11 @@ def main(argv=None) -> int:
     if args.only in (None, "big") and args.big:
         big = Path(args.big)
         saved["big"] = part_big(big, big.with_suffix(".vtu"), args.runs, args.big_value)
-        saved["big"]["stages"] = part_memory_stages(big)
+        OUT.mkdir(parents=True, exist_ok=True)
+        cache.write_text(json.dumps(saved))  # the timed runs are kept even if the stages fail
+        saved["big"]["stages"] = part_memory_stages(big, saved["big"]["value"])
     if args.only == "stages" and args.big and saved.get("big"):
-        saved["big"]["stages"] = part_memory_stages(Path(args.big))
+        saved["big"]["stages"] = part_memory_stages(Path(args.big), saved["big"]["value"])
     OUT.mkdir(parents=True, exist_ok=True)
     cache.write_text(json.dumps(saved))
     curves = {tuple(k): v for k, v in saved.get("curves", [])}
@@ -639,32 +738,61 @@ def report(s) -> str:
             out += [f"Our run: {st['faces_extracted']:,} faces extracted, {st['faces']:,} written, at most "
                     f"{st['peak_faces']:,} held; locked band at most {st['peak_locked']:,} vertices "
                     f"({100 * st['peak_locked'] / max(st['faces_extracted'], 1):.2f} % of the faces extracted); "
-                    f"decode {st['decode_s']:.1f} s, extraction {st['extract_s']:.1f} s, QEM {st['qem_s']:.1f} s.", "",
+                    f"decode {st['decode_s']:.1f} s, extraction {st['extract_s']:.1f} s, QEM {st['qem_s']:.1f} s.",
+                    _timeline_line(st), "",
                     "![memory over time](../figures/iso_memory_over_time.png)", ""]
         if b.get("stages"):
             out += _stages_report(b)
     return "\n".join(out)
 
 
+def _timeline_line(st) -> str:
+    """How far extraction trails decoding, from the per-batch records (when both times are there)."""
+    band = st.get("band") or []
+    if not band or "decoded_s" not in band[0]:
+        return ""
+    lag = sorted(b["t_s"] - b["decoded_s"] for b in band)
+    return (f"Timeline: a batch is extracted a median {lag[len(lag) // 2]:.2f} s after it is decoded (at most "
+            f"{lag[-1]:.2f} s, behind a round of collapses); the last one {band[-1]['t_s'] - band[-1]['decoded_s']:.2f} s "
+            f"after, and the final round, once the stream is over, takes the last {st['total_s'] - band[-1]['t_s']:.2f} s "
+            f"of the verb's {st['total_s']:.2f} s.")
+
+
 def _stages_report(b) -> list:
-    """Where our peak goes: the interpreter, the decoders' arrays, the rest of a decode-only stream,
-    and what extraction and QEM add on top."""
+    """Where our peak goes, from :func:`_memory_stages_child`: the floor every run pays (imports,
+    numba's runtime, compiled code), the decoders' and the extractor's arrays at the end of the
+    stream, what a round of collapses adds, and the rest."""
     st = b["stages"]
-    ours = next((float(r[4]) for r in b["rows"] if r[0].startswith("ours")), None)
-    geo, conn = sum(st["geometry"].values()), sum(st["connectivity"].values())
-    rest = st["decode_peak"] - st["imports"] - geo - conn
-    rows = [["interpreter, numpy, numba and our modules (after the imports)", f"{st['imports']:.0f}"],
-            ["geometry decoder: " + ", ".join(f"{k} {v:.0f}" for k, v in st["geometry"].items()), f"{geo:.0f}"],
-            ["connectivity decoder: " + ", ".join(f"{k} {v:.0f}" for k, v in st["connectivity"].items()),
-             f"{conn:.0f}"],
-            ["the rest of a decode-only stream (compiled code loaded, freed transients such as the boundary's "
-             "border, allocator slack)", f"{rest:.0f}"],
-            ["= peak of the decode-only stream", f"{st['decode_peak']:.0f}"]]
-    if ours is not None:
-        rows.append(["extraction, QEM and the batches in flight (our peak minus the decode-only peak)",
-                     f"{ours - st['decode_peak']:.0f}"])
-    return ["Where our peak goes (MB; arrays of 1 MB or more held by the two decoders at the last tets, "
-            "measured in a separate decode-only process):", "", table(["part", "MB"], rows), ""]
+    if "floor" not in st:  # results saved by an older version of this script
+        return []
+    end = st["at_end"]
+    geo, conn, ext = (sum(end[k].values()) for k in ("geometry", "connectivity", "extraction"))
+    rnd = max(st["round_adds"][:-1] or [0.0])  # mid-stream rounds (the final one runs after the decoders are gone)
+    rest = st["peak"] - st["floor"] - geo - conn - ext - rnd
+
+    def parts(d):
+        return ", ".join(f"{k} {v:.0f}" for k, v in d.items())
+
+    scipy = " (numba's first kernel call imports scipy.linalg, with its own OpenBLAS, to look for a BLAS)" \
+        if st.get("scipy_linalg_by_numba") else ""
+    rows = [["interpreter and numpy", f"{st['numpy']:.0f}"],
+            ["numba import (mostly the pages of libllvmlite.so it maps)", f"{st['numba'] - st['numpy']:.0f}"],
+            ["our modules, meshio, click", f"{st['modules'] - st['numba']:.0f}"],
+            ["numba's runtime and our kernels' compiled code, loaded on the first call" + scipy,
+             f"{st['floor'] - st['modules']:.0f}"],
+            ["= floor: the same run on the 90-tet file shipped with the package", f"{st['floor']:.0f}"],
+            ["geometry decoder: " + parts(end["geometry"]), f"{geo:.0f}"],
+            ["connectivity decoder: " + parts(end["connectivity"]), f"{conn:.0f}"],
+            ["extraction state: " + parts(end["extraction"]), f"{ext:.0f}"],
+            ["a round of collapses mid-stream (heap, face lists; the largest rise while one runs)", f"{rnd:.0f}"],
+            ["the rest (batches in flight and queued, allocator slack, Python objects)", f"{rest:.0f}"],
+            ["= our peak in this run", f"{st['peak']:.0f}"]]
+    when = ("during a round of collapses or within a second after it (its memory goes back at the next trim "
+            "of the heap)") if st.get("peak_in_round") else "outside the rounds"
+    return [f"Where our peak goes (MB, measured in one process: RSS after each import and after a run on a "
+            f"90-tet file, then the arrays held at the last tets of the real run; the peak came at "
+            f"{st['t_peak']:.1f} s of {st['total_s']:.1f} s, {when}, before the end of the stream frees the "
+            f"decoders):", "", table(["part", "MB"], rows), ""]
 
 
 if __name__ == "__main__":

@@ -245,6 +245,43 @@ def test_locks_on_a_tetc_stream(post_tetc):
     band = s.stats["band"]
     assert band and all(b["locked"] <= b["vertices"] for b in band)
     assert max(b["locked"] for b in band) < full.n_points
+    # the timeline: a batch is extracted after it is decoded, in stream order; rounds are counted
+    assert all(b["decoded_s"] <= b["t_s"] for b in band)
+    assert [b["decoded_s"] for b in band] == sorted(b["decoded_s"] for b in band)
+    assert [b["rounds"] for b in band] == sorted(b["rounds"] for b in band)
+    assert 1 <= band[-1]["rounds"] == s.stats["rounds"] - 1  # all but the final round ran mid-stream
+
+
+def test_result_does_not_depend_on_how_far_the_decoder_runs_ahead(post_tetc, monkeypatch):
+    import functools
+
+    from gatun_py.codec.prefetch import PrefetchedDecode
+    from gatun_py.isosurface import extract
+
+    v = 0.5 * sum(isosurface(post_tetc, values=0.0).stats["scalar_range"])
+    # small batches, so that the queues fill and drain many times over the stream
+    monkeypatch.setattr(extract, "PrefetchedDecode", functools.partial(PrefetchedDecode, batch_tets=300))
+    runs = []
+    for depth, in_flight in ((1, 1), (extract.PREFETCH_DEPTH, extract.MAX_IN_FLIGHT), (64, 64)):
+        monkeypatch.setattr(extract, "PREFETCH_DEPTH", depth)
+        monkeypatch.setattr(extract, "MAX_IN_FLIGHT", in_flight)
+        s = isosurface(post_tetc, values=v, ratio=0.2, batch_faces=200)
+        runs.append((s.points, s.triangles, s.stats["rounds"]))
+        assert len(s.stats["band"]) > 20  # many batches went through the queues
+    assert runs[0][1].shape[0] > 0
+    for pts, tris, rounds in runs[1:]:
+        assert np.array_equal(pts, runs[0][0]) and np.array_equal(tris, runs[0][1]) and rounds == runs[0][2]
+
+
+def test_trim_heap_is_safe_to_call_between_batches():
+    import platform
+
+    from gatun_py.isosurface import extract
+
+    extract._trim_heap()
+    extract._trim_heap()
+    if platform.system() == "Linux" and platform.libc_ver()[0] == "glibc":
+        assert extract._malloc_trim() is not None  # on glibc the trim is real, not silently skipped
 
 
 def test_faces_target_and_error_small():

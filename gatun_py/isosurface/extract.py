@@ -11,6 +11,8 @@ The full-resolution surface never exists unless no reduction was asked for.
 from __future__ import annotations
 
 import collections
+import ctypes
+import functools
 import json
 import math
 import os
@@ -30,9 +32,6 @@ from ..errors import CorruptFileError, OptionError, ReadError
 from ..mesh import TetMesh, mesh_batches, read_mesh
 from ..simplify.filter import SimplifyFilter
 from ..simplify.levels import resolve_target, target_ancestors
-from ..render.camera import Camera
-from ..render.image import png_bytes, to_rgb8, write_image
-from ..render.surface import render_surface
 from . import marching, qem
 from .io import write_surface
 
@@ -40,10 +39,18 @@ DEFAULT_BATCH_FACES = 100_000
 MAX_PREVIEW_PIXELS = 1 << 26
 CHUNK_TETS = 8192  # tets per extraction step (rounds start between steps)
 MAX_IN_FLIGHT = 16  # decoded batches waiting for the extraction thread
+#: tets batches the connectivity decoder may run ahead of the geometry (each ~1.2 MB of tets and
+#: refs): the geometry of the boundary's vertices comes first and takes as long as ~10 batches of
+#: connectivity (flange-10m: 268 k vertices), so with the decoder's default of 4 the connectivity
+#: thread, the critical path, sat idle on a full queue for that long; afterwards the geometry is
+#: the faster stage and the queue stays nearly empty, so the depth costs no memory at the peak
+PREFETCH_DEPTH = 16
 BOUNDARY_CHUNK = 4 * CHUNK_TETS  # boundary faces per extraction step (as many faces as a tet step)
 #: keep at least this share of ``batch_faces`` modifiable faces between rounds (Hou & Chen's
 #: initial phase: early rounds must not over-decimate what little has been seen)
 KEEP_SHARE = 0.5
+#: hand the C heap's free pages back to the system after every this many batches (see _trim_heap)
+TRIM_EVERY = 4
 MIN_DOT = 0.0  # a collapse may not turn a face by more than 90 degrees (0.2, ~78 degrees, measured worse)
 
 
@@ -104,6 +111,11 @@ class Surface:
         >>> s.preview(size=(48, 32)).shape
         (32, 48, 3)
         """
+        # the renderer (and PIL, for images) load only for a preview: start-up and memory of a plain extraction
+        from ..render.camera import Camera
+        from ..render.image import to_rgb8
+        from ..render.surface import render_surface
+
         w, h = (int(size), int(size)) if np.isscalar(size) else (int(size[0]), int(size[1]))
         if w <= 0 or h <= 0 or w * h > MAX_PREVIEW_PIXELS:
             raise OptionError(f"preview size {w}x{h}: each side must be >= 1 and the image at most "
@@ -123,10 +135,14 @@ class Surface:
     def save_preview(self, path, *, size=512, azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0,
                      force: bool = False) -> None:
         """Write :meth:`preview` as an image (PNG, JPEG, WebP, TIFF or BMP from the extension), atomically."""
+        from ..render.image import write_image  # PIL only for a preview (see preview)
+
         check_output_path(path, force=force)
         write_image(path, self.preview(size=size, azimuth=azimuth, elevation=elevation, zoom=zoom), force=force)
 
     def _repr_png_(self) -> bytes:
+        from ..render.image import png_bytes  # PIL only for a preview (see preview)
+
         return png_bytes(self.preview(size=384, azimuth=30, elevation=20))
 
 
@@ -437,14 +453,16 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
     band = []
     first_batch = True
     tets_done = 0
+    n_batches = 0
     wait_s = 0.0
 
-    def work(vdata, tets, bnd, before):
+    def work(vdata, tets, bnd, before, decoded_s):
         for ex in extractors:
             ex.add(vdata, tets, bnd, before)
         done = before + len(tets)
         if extractors and (len(tets) or len(bnd)):
-            band.append({"tets": done, "t_s": round(time.perf_counter() - t_start, 4),
+            band.append({"tets": done, "decoded_s": round(decoded_s, 4),
+                         "t_s": round(time.perf_counter() - t_start, 4), "rounds": sum(e.rounds for e in extractors),
                          "faces_extracted": sum(e.extracted for e in extractors),
                          "faces": sum(e.nt for e in extractors),
                          "locked": sum(e.locked for e in extractors),
@@ -463,6 +481,7 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
     with ThreadPoolExecutor(max_workers=1) as pool:
         t_wait = time.perf_counter()
         for batch in stream:
+            decoded_s = time.perf_counter() - t_start
             wait_s += time.perf_counter() - t_wait
             if shared is not None:
                 vdata = shared.values  # the batch's vertices are already there
@@ -480,8 +499,11 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
             # copies: the worker must own its input even if a producer reuses its buffers
             tets = np.array(batch.tets, dtype=np.int32, order="C", copy=True)
             bnd = np.array(bnd, dtype=np.int32, order="C", copy=True)
-            in_flight.append(pool.submit(work, vdata, tets, bnd, tets_done))
+            in_flight.append(pool.submit(work, vdata, tets, bnd, tets_done, decoded_s))
             tets_done += len(tets)
+            n_batches += 1
+            if n_batches % TRIM_EVERY == 0:
+                _trim_heap()
             while len(in_flight) > MAX_IN_FLIGHT:
                 done = in_flight.popleft().result()  # re-raises the worker's exception here
                 if progress is not None:
@@ -524,6 +546,33 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
     return Surface(surf_pts, surf_tris, point_data, stats)
 
 
+@functools.cache
+def _malloc_trim():
+    """glibc's ``malloc_trim``, or None where the C library has none (macOS, Windows, musl)."""
+    try:
+        fn = ctypes.CDLL(None).malloc_trim
+    except (OSError, TypeError, AttributeError):
+        return None
+    fn.argtypes, fn.restype = [ctypes.c_size_t], ctypes.c_int
+    return fn
+
+
+def _trim_heap() -> None:
+    """Give the C heap's free pages back to the system (glibc's ``malloc_trim``; elsewhere nothing).
+
+    Why: freeing a large transient early in the stream (the connectivity decoder's 22 MB table of
+    refs, the boundary's border queue on the 7.8 M-tet flange) raises glibc's dynamic mmap
+    threshold to its size and the trim threshold to twice that. From then on the per-batch arrays
+    (1 MB of tets, refs, extraction buffers), allocated and freed by three threads, come from the
+    arenas, and ~35 MB of freed pages stayed resident at the peak (455 -> 420 MB there). A call
+    costs about a millisecond, and it changes no allocator setting of the process (``mallopt``
+    would, for the user's code too).
+    """
+    fn = _malloc_trim()
+    if fn is not None:
+        fn(0)
+
+
 def _rss_mb() -> float:
     """Resident memory now (not the peak), for the memory-over-time record; 0 where /proc is absent."""
     try:
@@ -555,7 +604,7 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs):
         raise CorruptFileError("corrupt metadata: bad bounding box or scalar range") from None
     info = {"points": int(lv["points"]), "bbox_lo": lo, "bbox_hi": hi, "scalar_range": rng,
             "level": target.level, "mesh_ratio": target.ratio}
-    batches = PrefetchedDecode(reader, target.level)
+    batches = PrefetchedDecode(reader, target.level, depth=PREFETCH_DEPTH)
     anc = target_ancestors(reader, target)
     if anc is None:
         info["shared_values"] = batches

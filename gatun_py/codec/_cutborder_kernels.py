@@ -3,26 +3,35 @@
 The *border* is a set of live elements with up to three vertices each: oriented triangles (the
 current surface T of the tet phase) or directed edges (the border of the boundary-surface phase,
 column 2 then holds the apex of the triangle that created the edge, used only as a geometry
-predictor). Elements live in slots; every vertex has a doubly linked list of the (slot, corner)
-nodes incident to it, so adjacency queries cost the vertex degree in the border. Elements are
-processed first-in first-out (a ring buffer of (slot, sequence) pairs with lazy deletion), which is
-the breadth-first, iteration-by-iteration growth of the paper.
+predictor). Elements live in slots; every vertex has a list of the (slot, corner) nodes incident
+to it, so adjacency queries cost the vertex degree in the border. Elements are processed
+first-in first-out (a ring buffer of (slot, sequence) pairs with lazy deletion), which is the
+breadth-first, iteration-by-iteration growth of the paper.
 
 Encoder and decoder share every rule that shapes the state (candidate lists, additions,
 removals); only the symbol I/O differs. Decoders check every index and count they read and stop
 with an error code instead of touching memory out of bounds.
 
-Border arrays, passed as a tuple ``B = (E, vhead, Q, bs)`` (few arrays: every array passed to a
+A vertex's incidence list is an unrolled list of fixed 64-byte blocks (one cache line: a link to
+the next, older block, a count and ``BLOCK_NODES`` node ids, oldest first). A lookup reads one
+block for a typical vertex, and the element rows its nodes point to are independent loads; a
+linked list of nodes made each step of the walk wait for the previous load (two thirds of the
+decode time on unstructured meshes, whose border is larger than the caches). Nodes are appended to
+the newest block and walked newest first, and a removal shifts the rest of its block down, so
+every walk visits the nodes in the order the linked lists did (the order decides ties and is
+part of the format).
+
+Border arrays, passed as a tuple ``B = (E, vhead, A, Q, bs)`` (few arrays: every array passed to a
 kernel costs reference-count updates on each call, which dominated the per-tet cost before):
 ``E (cap * E_COLS,) int32`` one row of ``E_COLS`` per slot, flat so that a row's offset is a
-multiplication by a constant (a 2-D array's row stride is a run-time value: one more multiply on
-the list walks' chain of dependent loads): vertices (+ apex data) in columns 0-3, sequence number
-(``E_SEQ``, -1: free slot), incidence-list links per corner (``E_NEXT``, ``E_PREV``; node id =
-4 * slot + corner, taken apart with a shift and a mask rather than a floor division by 3),
-free-list link (``E_FREE``; slots never used are handed out in order past ``BS_BUMP``, so the
-table needs no initialisation); ``vhead (nv) int32`` list heads;
-``Q (qcap, 2) int64`` (the decoders: int32) FIFO ring of (slot, sequence); ``bs int64`` scalars
-(see ``BS_*``).
+multiplication by a constant: vertices (+ apex data) in columns 0-3, sequence number (``E_SEQ``,
+-1: free slot), free-list link (``E_FREE``; slots never used are handed out in order past
+``BS_BUMP``, so the table needs no initialisation); node id = 4 * slot + corner, taken apart with a
+shift and a mask; ``vhead (nv) int32`` each vertex's newest block (-1: empty list);
+``A (blocks * BLOCK_WORDS,) int32`` the blocks (``BLK_NEXT``, ``BLK_COUNT``, nodes from
+``BLK_NODES``; free blocks chained through ``BLK_NEXT`` from ``BS_BLOCK_FREE``, never used ones
+handed out past ``BS_BLOCK_BUMP``); ``Q (qcap, 2) int64`` (the decoders: int32) FIFO ring of
+(slot, sequence); ``bs int64`` scalars (see ``BS_*``).
 """
 
 from __future__ import annotations
@@ -33,8 +42,17 @@ from numba import njit
 from . import rangecoder as rc
 
 BS_NFREE, BS_QHEAD, BS_QTAIL, BS_SEQ, BS_LIVE, BS_PEAK, BS_FREE_HEAD, BS_BUMP = 0, 1, 2, 3, 4, 5, 6, 7
-# columns of the element table E: vertices/apex 0-3, sequence, list links per corner, free list
-E_SEQ, E_NEXT, E_PREV, E_FREE, E_COLS = 4, 5, 8, 11, 12
+BS_BLOCKS_FREE, BS_BLOCK_FREE, BS_BLOCK_BUMP, BS_SIZE = 8, 9, 10, 11
+# the border tuple's members
+B_ELEMENTS, B_VHEAD, B_BLOCKS, B_QUEUE, B_SCALARS = 0, 1, 2, 3, 4
+# columns of the element table E: vertices/apex 0-3, sequence, the block holding each listed
+# corner's node (a free slot: the free-list link instead); 8 columns, rows of 32 bytes
+E_SEQ, E_BLOCK, E_FREE, E_COLS = 4, 5, 5, 8
+# incidence blocks, 16 int32 = one cache line: the next (older) and previous block, the count
+BLK_NEXT, BLK_PREV, BLK_COUNT, BLK_NODES, BLOCK_WORDS = 0, 1, 2, 3, 16
+BLOCK_NODES = BLOCK_WORDS - BLK_NODES
+# blocks an element's addition may take (one per listed vertex) and that a step must find free
+BLOCKS_PER_TET = 9
 MAX_SLOTS = 1 << 29  # node ids 4 * slot + corner are int32
 # sequence numbers are int32 (E_SEQ, and the decoders' queue): one per element ever added, so a
 # stream adds fewer than this many elements (the decoders check it from the header's counts)
@@ -68,38 +86,62 @@ SM_SEED = SM_NEW + 8
 SM_FLIP = SM_SEED + 8
 SM_SIZE = SM_FLIP + 4
 
+# the encoders' status when the border ran out of incidence blocks (the caller grows it and reruns)
+ENC_NEED_BLOCKS = 6
+
 # status codes of the resumable decoder
 ST_DONE, ST_BATCH, ST_GROW, ST_ERROR = 0, 1, 2, 3
 
 
-def new_border(n_vertices: int, cap: int, qcap: int, *, queue_dtype=np.int64):
-    """Allocate an empty border for ``n_vertices`` vertices (the decoders pass ``queue_dtype``
-    int32: slots and sequence numbers fit, see ``MAX_SLOTS`` and ``MAX_SEQ``, and the queue is
-    their largest array after E)."""
+def new_border(n_vertices: int, cap: int, qcap: int, *, queue_dtype=np.int64, blocks: int | None = None):
+    """Allocate an empty border for ``n_vertices`` vertices with room for ``cap`` elements, ``qcap``
+    queue entries and ``blocks`` incidence blocks (default ``cap // 2``: a typical border has
+    about one vertex per two faces, most with one block; :func:`grow_border` adds more). The
+    decoders pass ``queue_dtype`` int32: slots and sequence numbers fit, see ``MAX_SLOTS`` and
+    ``MAX_SEQ``, and the queue is their largest array after E. The tables are not initialised:
+    rows and blocks are written when handed out, so untouched capacity costs no memory."""
     cap = max(int(cap), 16)
     qcap = max(int(qcap), 16)
-    E = np.empty((cap, E_COLS), np.int32)
+    blocks = max(int(cap // 2 if blocks is None else blocks), 4 * BLOCKS_PER_TET)
+    E = np.empty(cap * E_COLS, np.int32)
     vhead = np.full(max(int(n_vertices), 1), -1, np.int32)
+    A = np.empty(blocks * BLOCK_WORDS, np.int32)
     Q = np.zeros((qcap, 2), queue_dtype)
-    bs = np.zeros(8, np.int64)
+    bs = np.zeros(BS_SIZE, np.int64)
     bs[BS_NFREE] = cap
     bs[BS_FREE_HEAD] = -1  # freed slots; the never used ones start at BS_BUMP = 0
-    return (E.reshape(-1), vhead, Q, bs)
+    bs[BS_BLOCKS_FREE] = blocks
+    bs[BS_BLOCK_FREE] = -1
+    return (E, vhead, A, Q, bs)
 
 
-def grow_border(B, need_slots: int, need_queue: int):
-    """A copy of border ``B`` with room for at least ``need_slots`` more elements and queue entries."""
-    E, vhead, Q, bs = B
-    E = E.reshape(-1, E_COLS)
+def border_capacity(B) -> tuple[int, int]:
+    """(element slots, incidence blocks) that border ``B`` has allocated."""
+    return len(B[B_ELEMENTS]) // E_COLS, len(B[B_BLOCKS]) // BLOCK_WORDS
+
+
+def grow_border(B, need_slots: int, need_queue: int, need_blocks: int = 4 * BLOCKS_PER_TET):
+    """A copy of border ``B`` with room for at least ``need_slots`` more elements, ``need_queue``
+    queue entries and ``need_blocks`` incidence blocks."""
+    E, vhead, A, Q, bs = B
     bs = bs.copy()
-    cap = E.shape[0]
+    cap = E.shape[0] // E_COLS
     nfree = int(bs[BS_NFREE])
     if nfree < need_slots:
         new_cap = min(max(2 * cap, cap + need_slots), MAX_SLOTS - 1)  # the caller checks cap + need_slots
-        grown = np.empty((new_cap, E_COLS), np.int32)  # slots past BS_BUMP are written when handed out
-        grown[:cap] = E
+        grown = np.empty(new_cap * E_COLS, np.int32)  # slots past BS_BUMP are written when handed out
+        grown[:E.shape[0]] = E
         E = grown
         bs[BS_NFREE] = nfree + new_cap - cap
+    nblocks = A.shape[0] // BLOCK_WORDS
+    bfree = int(bs[BS_BLOCKS_FREE])
+    if bfree < need_blocks:
+        new_blocks = max(2 * nblocks, nblocks + need_blocks)
+        grown = np.empty(new_blocks * BLOCK_WORDS, np.int32)
+        used = int(bs[BS_BLOCK_BUMP]) * BLOCK_WORDS  # blocks past the bump were never written
+        grown[:used] = A[:used]
+        A = grown
+        bs[BS_BLOCKS_FREE] = bfree + new_blocks - nblocks
     qcap = Q.shape[0]
     used = int(bs[BS_QTAIL] - bs[BS_QHEAD])
     if qcap - used < need_queue:
@@ -110,7 +152,7 @@ def grow_border(B, need_slots: int, need_queue: int):
         Q = nq
         bs[BS_QHEAD] = 0
         bs[BS_QTAIL] = used
-    return (E.reshape(-1), vhead, Q, bs)
+    return (E, vhead, A, Q, bs)
 
 
 # The border helpers below are compiled with ``_nrt=False``: they never allocate, and without the
@@ -118,15 +160,17 @@ def grow_border(B, need_slots: int, need_queue: int):
 # the border's arrays (most of the per-tet overhead of the decoder, measured with perf).
 @njit(cache=True, _nrt=False)
 def _room(B, slots, entries):
-    E, vhead, Q, bs = B
-    return bs[BS_NFREE] >= slots and Q.shape[0] - (bs[BS_QTAIL] - bs[BS_QHEAD]) >= entries
+    """Room for ``slots`` more elements (and their incidence blocks) and ``entries`` queue entries."""
+    E, vhead, A, Q, bs = B
+    return (bs[BS_NFREE] >= slots and bs[BS_BLOCKS_FREE] >= 3 * slots
+            and Q.shape[0] - (bs[BS_QTAIL] - bs[BS_QHEAD]) >= entries)
 
 
 @njit(cache=True, _nrt=False)
 def _add(B, k, v0, v1, v2, v3):
     """Add an element with ``k`` listed vertices (the rest of v0..v3 is stored as data: the apex
     of the triangle or tet that created it, for the geometry coder); returns its slot."""
-    E, vhead, Q, bs = B
+    E, vhead, A, Q, bs = B
     s = bs[BS_FREE_HEAD]
     if s != -1:
         bs[BS_FREE_HEAD] = E[s * E_COLS + E_FREE]
@@ -141,15 +185,31 @@ def _add(B, k, v0, v1, v2, v3):
     seq = bs[BS_SEQ]
     bs[BS_SEQ] = seq + 1
     E[s * E_COLS + E_SEQ] = seq
+    # append node 4 s + c to its vertex's newest block, or to a new one (written out here: a
+    # helper called per corner was not inlined and cost more than the work)
     for c in range(k):
         v = E[s * E_COLS + c]
-        node = 4 * s + c
         h = vhead[v]
-        E[s * E_COLS + E_NEXT + c] = h
-        E[s * E_COLS + E_PREV + c] = -1
-        if h != -1:
-            E[(h >> 2) * E_COLS + E_PREV + (h & 3)] = node
-        vhead[v] = node
+        if h == -1 or A[h * BLOCK_WORDS + BLK_COUNT] == BLOCK_NODES:
+            nb = bs[BS_BLOCK_FREE]
+            if nb != -1:
+                bs[BS_BLOCK_FREE] = A[nb * BLOCK_WORDS + BLK_NEXT]
+            else:
+                nb = bs[BS_BLOCK_BUMP]
+                bs[BS_BLOCK_BUMP] = nb + 1
+            bs[BS_BLOCKS_FREE] -= 1
+            A[nb * BLOCK_WORDS + BLK_NEXT] = h
+            A[nb * BLOCK_WORDS + BLK_PREV] = -1
+            A[nb * BLOCK_WORDS + BLK_COUNT] = 0
+            if h != -1:
+                A[h * BLOCK_WORDS + BLK_PREV] = nb
+            vhead[v] = nb
+            h = nb
+        base = h * BLOCK_WORDS
+        n = A[base + BLK_COUNT]
+        A[base + BLK_NODES + n] = 4 * s + c
+        A[base + BLK_COUNT] = n + 1
+        E[s * E_COLS + E_BLOCK + c] = h
     t = bs[BS_QTAIL] % Q.shape[0]
     Q[t, 0] = s
     Q[t, 1] = seq
@@ -162,16 +222,32 @@ def _add(B, k, v0, v1, v2, v3):
 
 @njit(cache=True, _nrt=False)
 def _remove(B, k, s):
-    E, vhead, Q, bs = B
+    E, vhead, A, Q, bs = B
+    # take node 4 s + c out of the block that holds it (a node never leaves its block), keeping
+    # the order of the others; a block left empty is unlinked and freed
     for c in range(k):
-        p = E[s * E_COLS + E_PREV + c]
-        n = E[s * E_COLS + E_NEXT + c]
-        if p != -1:
-            E[(p >> 2) * E_COLS + E_NEXT + (p & 3)] = n
-        else:
-            vhead[E[s * E_COLS + c]] = n
-        if n != -1:
-            E[(n >> 2) * E_COLS + E_PREV + (n & 3)] = p
+        node = 4 * s + c
+        blk = E[s * E_COLS + E_BLOCK + c]
+        base = blk * BLOCK_WORDS
+        n = A[base + BLK_COUNT]
+        i = 0
+        while i < n and A[base + BLK_NODES + i] != node:
+            i += 1
+        for j in range(i + 1, n):
+            A[base + BLK_NODES + j - 1] = A[base + BLK_NODES + j]
+        A[base + BLK_COUNT] = n - 1
+        if n == 1:
+            nxt = A[base + BLK_NEXT]
+            prv = A[base + BLK_PREV]
+            if prv == -1:
+                vhead[E[s * E_COLS + c]] = nxt
+            else:
+                A[prv * BLOCK_WORDS + BLK_NEXT] = nxt
+            if nxt != -1:
+                A[nxt * BLOCK_WORDS + BLK_PREV] = prv
+            A[base + BLK_NEXT] = bs[BS_BLOCK_FREE]
+            bs[BS_BLOCK_FREE] = blk
+            bs[BS_BLOCKS_FREE] += 1
     E[s * E_COLS + E_SEQ] = -1
     E[s * E_COLS + E_FREE] = bs[BS_FREE_HEAD]
     bs[BS_FREE_HEAD] = s
@@ -182,7 +258,7 @@ def _remove(B, k, s):
 @njit(cache=True, _nrt=False)
 def _pop(B):
     """The oldest live element's slot (it stays live), or -1 when the border is empty."""
-    E, vhead, Q, bs = B
+    E, vhead, A, Q, bs = B
     qcap = Q.shape[0]
     while bs[BS_QHEAD] < bs[BS_QTAIL]:
         h = bs[BS_QHEAD] % qcap
@@ -196,18 +272,21 @@ def _pop(B):
 @njit(cache=True, _nrt=False)
 def _find_edge(B, p, r):
     """Slot of a live border edge {p, r} (either direction; the oldest one), or -1."""
-    E, vhead, Q, bs = B
-    node = vhead[p]
+    E, vhead, A, Q, bs = B
     best = -1
     best_seq = np.int64(-1)
-    while node != -1:
-        s = node >> 2
-        c = node & 3
-        if c < 2 and E[s * E_COLS + 1 - c] == r:
-            if best == -1 or E[s * E_COLS + E_SEQ] < best_seq:
-                best = s
-                best_seq = E[s * E_COLS + E_SEQ]
-        node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+    b = vhead[p]
+    while b != -1:
+        base = b * BLOCK_WORDS
+        for i in range(A[base + BLK_COUNT] - 1, -1, -1):
+            node = A[base + BLK_NODES + i]
+            s = node >> 2
+            c = node & 3
+            if c < 2 and E[s * E_COLS + 1 - c] == r:
+                if best == -1 or E[s * E_COLS + E_SEQ] < best_seq:
+                    best = s
+                    best_seq = E[s * E_COLS + E_SEQ]
+        b = A[base + BLK_NEXT]
     return best
 
 
@@ -249,7 +328,7 @@ def _gather_face(B, s, cand, cscore, cseq):
     """Candidates for the fourth vertex of the tet behind border face ``s`` = (a, b, c): the
     apexes of faces of T adjacent to an edge of ``s``, sorted by score (how many of the face's
     edges they are adjacent across) and then by traversal order. Returns their number."""
-    E, vhead, Q, bs = B
+    E, vhead, A, Q, bs = B
     a = np.int64(E[s * E_COLS + 0])
     b = np.int64(E[s * E_COLS + 1])
     c = np.int64(E[s * E_COLS + 2])
@@ -257,30 +336,32 @@ def _gather_face(B, s, cand, cscore, cseq):
     # faces on edges (a, b) and (a, c) are all in a's list; those on (b, c) in b's list
     for k in range(2):
         u = a if k == 0 else b
-        node = vhead[u]
-        while node != -1:
-            g = node >> 2
-            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
-            if g == s:
-                continue
-            g0 = np.int64(E[g * E_COLS + 0])
-            g1 = np.int64(E[g * E_COLS + 1])
-            g2 = np.int64(E[g * E_COLS + 2])
-            has_a = g0 == a or g1 == a or g2 == a
-            has_b = g0 == b or g1 == b or g2 == b
-            has_c = g0 == c or g1 == c or g2 == c
-            if k == 0:
-                if has_b == has_c:  # neither: vertex-adjacent only; both: corrupt duplicate
+        blk = vhead[u]
+        while blk != -1:
+            base = blk * BLOCK_WORDS
+            blk = A[base + BLK_NEXT]
+            for i_node in range(base + BLK_NODES + A[base + BLK_COUNT] - 1, base + BLK_NODES - 1, -1):  # newest first
+                g = A[i_node] >> 2
+                if g == s:
                     continue
-            elif has_a or not has_c:
-                continue
-            if g0 != a and g0 != b and g0 != c:
-                x = g0
-            elif g1 != a and g1 != b and g1 != c:
-                x = g1
-            else:
-                x = g2
-            n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g * E_COLS + E_SEQ])
+                g0 = np.int64(E[g * E_COLS + 0])
+                g1 = np.int64(E[g * E_COLS + 1])
+                g2 = np.int64(E[g * E_COLS + 2])
+                has_a = g0 == a or g1 == a or g2 == a
+                has_b = g0 == b or g1 == b or g2 == b
+                has_c = g0 == c or g1 == c or g2 == c
+                if k == 0:
+                    if has_b == has_c:  # neither: vertex-adjacent only; both: corrupt duplicate
+                        continue
+                elif has_a or not has_c:
+                    continue
+                if g0 != a and g0 != b and g0 != c:
+                    x = g0
+                elif g1 != a and g1 != b and g1 != c:
+                    x = g1
+                else:
+                    x = g2
+                n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g * E_COLS + E_SEQ])
     _sort_candidates(cand, cscore, cseq, n1)
     return n1
 
@@ -290,43 +371,45 @@ def _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq):
     """The paper's case (c) list: vertices of faces of T sharing exactly one vertex with the
     current face (a, b, c) (already removed from T), except the edge candidates, in traversal
     order (oldest face first). Only needed after an escape, so computed lazily."""
-    E, vhead, Q, bs = B
+    E, vhead, A, Q, bs = B
     n2 = 0
     for k in range(3):
         u = a if k == 0 else (b if k == 1 else c)
-        node = vhead[u]
-        while node != -1:
-            g = node >> 2
-            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
-            shared = 0
-            for cj in range(3):
-                w = E[g * E_COLS + cj]
-                if w == a or w == b or w == c:
-                    shared += 1
-            if shared != 1:
-                continue
-            for cj in range(3):
-                w = np.int64(E[g * E_COLS + cj])
-                if w == a or w == b or w == c:
+        blk = vhead[u]
+        while blk != -1:
+            base = blk * BLOCK_WORDS
+            blk = A[base + BLK_NEXT]
+            for i_node in range(base + BLK_NODES + A[base + BLK_COUNT] - 1, base + BLK_NODES - 1, -1):  # newest first
+                g = A[i_node] >> 2
+                shared = 0
+                for cj in range(3):
+                    w = E[g * E_COLS + cj]
+                    if w == a or w == b or w == c:
+                        shared += 1
+                if shared != 1:
                     continue
-                skip = False
-                for i in range(n1):
-                    if cand[i] == w:
-                        skip = True
-                        break
-                if skip:
-                    continue
-                dup = False
-                for i in range(n2):
-                    if c2[i] == w:
-                        dup = True
-                        if E[g * E_COLS + E_SEQ] < c2seq[i]:
-                            c2seq[i] = E[g * E_COLS + E_SEQ]
-                        break
-                if not dup and n2 < c2.shape[0]:
-                    c2[n2] = w
-                    c2seq[n2] = E[g * E_COLS + E_SEQ]
-                    n2 += 1
+                for cj in range(3):
+                    w = np.int64(E[g * E_COLS + cj])
+                    if w == a or w == b or w == c:
+                        continue
+                    skip = False
+                    for i in range(n1):
+                        if cand[i] == w:
+                            skip = True
+                            break
+                    if skip:
+                        continue
+                    dup = False
+                    for i in range(n2):
+                        if c2[i] == w:
+                            dup = True
+                            if E[g * E_COLS + E_SEQ] < c2seq[i]:
+                                c2seq[i] = E[g * E_COLS + E_SEQ]
+                            break
+                    if not dup and n2 < c2.shape[0]:
+                        c2[n2] = w
+                        c2seq[n2] = E[g * E_COLS + E_SEQ]
+                        n2 += 1
     # stable insertion sort by sequence
     for i in range(1, n2):
         x, sq = c2[i], c2seq[i]
@@ -360,25 +443,28 @@ def _apply_tet(B, t0, t1, t2, t3):
     already removed): each other face closes a face of the border or joins it, wound as the
     consistently oriented tet on its other side would see it from outside. Returns the slots of
     the faces opposite t0, t1, t2 that joined the border (-1 where a face was closed)."""
-    E, vhead, Q, bs = B
+    E, vhead, A, Q, bs = B
     # all three faces hold t3 (the apex just attached, often new with an empty list): one walk
     # of its list finds those already on the border
     f0 = -1
     f1 = -1
     f2 = -1
-    node = vhead[t3]
-    while node != -1:
-        g = node >> 2
-        c0 = node & 3
-        node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
-        x = E[g * E_COLS + (0 if c0 == 2 else c0 + 1)]
-        y = E[g * E_COLS + (2 if c0 == 0 else c0 - 1)]
-        if (x == t1 and y == t2) or (x == t2 and y == t1):
-            f0 = g
-        elif (x == t2 and y == t0) or (x == t0 and y == t2):
-            f1 = g
-        elif (x == t0 and y == t1) or (x == t1 and y == t0):
-            f2 = g
+    blk = vhead[t3]
+    while blk != -1:
+        base = blk * BLOCK_WORDS
+        blk = A[base + BLK_NEXT]
+        for i_node in range(base + BLK_NODES + A[base + BLK_COUNT] - 1, base + BLK_NODES - 1, -1):  # newest first
+            node = A[i_node]
+            g = node >> 2
+            c0 = node & 3
+            x = E[g * E_COLS + (0 if c0 == 2 else c0 + 1)]
+            y = E[g * E_COLS + (2 if c0 == 0 else c0 - 1)]
+            if (x == t1 and y == t2) or (x == t2 and y == t1):
+                f0 = g
+            elif (x == t2 and y == t0) or (x == t0 and y == t2):
+                f1 = g
+            elif (x == t0 and y == t1) or (x == t1 and y == t0):
+                f2 = g
     # outward faces opposite t0, t1, t2 (TET_FACES), stored reversed when they join the border
     if f0 != -1:
         _remove(B, 3, f0)
@@ -414,22 +500,25 @@ def _bitlen(n):
 def _gather_edge(B, s, cand, cscore, cseq):
     """Candidates for the apex of the unvisited triangle on border edge s = {p, r}: apexes x
     that would close border edges {r, x} or {x, p}. Returns n1 (sorted like the tet phase)."""
-    E, vhead, Q, bs = B
+    E, vhead, A, Q, bs = B
     p = np.int64(E[s * E_COLS + 0])
     r = np.int64(E[s * E_COLS + 1])
     n1 = 0
     for k in range(2):
         u = r if k == 0 else p
         other = p if k == 0 else r
-        node = vhead[u]
-        while node != -1:
-            g = node >> 2
-            c = node & 3
-            if c < 2 and g != s:
-                x = np.int64(E[g * E_COLS + 1 - c])
-                if x != other:
-                    n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g * E_COLS + E_SEQ])
-            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+        blk = vhead[u]
+        while blk != -1:
+            base = blk * BLOCK_WORDS
+            blk = A[base + BLK_NEXT]
+            for i_node in range(base + BLK_NODES + A[base + BLK_COUNT] - 1, base + BLK_NODES - 1, -1):  # newest first
+                node = A[i_node]
+                g = node >> 2
+                c = node & 3
+                if c < 2 and g != s:
+                    x = np.int64(E[g * E_COLS + 1 - c])
+                    if x != other:
+                        n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g * E_COLS + E_SEQ])
     _sort_candidates(cand, cscore, cseq, n1)
     return n1
 
@@ -572,8 +661,8 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
         done += 1
         _apply_triangle(B, u0, u1, x, p, r)
         if not _room(B, 4, 4):
-            return -1, 2
-    if B[3][BS_LIVE] != 0:
+            return -1, ENC_NEED_BLOCKS if B[B_SCALARS][BS_BLOCKS_FREE] < 12 else 2
+    if B[B_SCALARS][BS_LIVE] != 0:
         return -1, 3
     rc.enc_finish(st, out)
     return nv, 0
@@ -657,7 +746,7 @@ def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
         out_faces[done, 2] = x
         done += 1
         _apply_triangle(B, u0, u1, x, p, r)
-    if B[3][BS_LIVE] != 0 or rc.dec_failed(st):
+    if B[B_SCALARS][BS_LIVE] != 0 or rc.dec_failed(st):
         return nv, ST_ERROR
     return nv, ST_DONE
 
@@ -813,7 +902,7 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
     nv = nv0
     prev_esc = 0
     prev_flip = 0
-    E, vhead, Q, bs = B
+    E, vhead, A, Q, bs = B
     qcap = Q.shape[0]
     for done in range(m):
         s = -1  # _pop written out
@@ -916,7 +1005,9 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
                 tgt[slot] = nbr[t, kk]
         if bs[BS_NFREE] < 4 or qcap - (bs[BS_QTAIL] - bs[BS_QHEAD]) < 4:
             return nv, 4
-    if B[3][BS_LIVE] != 0:
+        if bs[BS_BLOCKS_FREE] < BLOCKS_PER_TET:
+            return nv, ENC_NEED_BLOCKS
+    if B[B_SCALARS][BS_LIVE] != 0:
         return nv, 5
     rc.enc_finish(st, out)
     return nv, 0
@@ -949,7 +1040,7 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         return 0, ST_ERROR
     n_out = 0
     status = ST_DONE
-    E, vhead, Q, bs = B
+    E, vhead, A, Q, bs = B
     qcap = Q.shape[0]
     while done < m:
         # the checks and the pop of _room / _pop / dec_failed, written out (once per tet)
@@ -959,7 +1050,8 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         if n_out >= out_tets.shape[0]:
             status = ST_BATCH
             break
-        if bs[BS_NFREE] < 4 or qcap - (bs[BS_QTAIL] - bs[BS_QHEAD]) < 4:
+        if (bs[BS_NFREE] < 4 or qcap - (bs[BS_QTAIL] - bs[BS_QHEAD]) < 4
+                or bs[BS_BLOCKS_FREE] < BLOCKS_PER_TET):
             status = ST_GROW
             break
         s = -1
@@ -1030,7 +1122,7 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         n_out += 1
         done += 1
         _apply_tet(B, a, t1, t2, d)
-    if status == ST_DONE and (B[3][BS_LIVE] != 0 or rc.dec_failed(st)):
+    if status == ST_DONE and (B[B_SCALARS][BS_LIVE] != 0 or rc.dec_failed(st)):
         status = ST_ERROR
     tstate[0] = nv
     tstate[1] = done

@@ -48,9 +48,13 @@ B_ELEMENTS, B_VHEAD, B_BLOCKS, B_QUEUE, B_SCALARS = 0, 1, 2, 3, 4
 # columns of the element table E: vertices/apex 0-3, sequence, the block holding each listed
 # corner's node (a free slot: the free-list link instead); 8 columns, rows of 32 bytes
 E_SEQ, E_BLOCK, E_FREE, E_COLS = 4, 5, 5, 8
-# incidence blocks, 16 int32 = one cache line: the next (older) and previous block, the count
-BLK_NEXT, BLK_PREV, BLK_COUNT, BLK_NODES, BLOCK_WORDS = 0, 1, 2, 3, 16
-BLOCK_NODES = BLOCK_WORDS - BLK_NODES
+# incidence blocks, 32 int32 = two cache lines: the next (older) and previous block, the count,
+# then entries of ENT_WORDS: the node, the element's other two vertices (a triangle's in cyclic
+# order after the corner, an edge's other end and its apex) and its sequence number, so that
+# walking a list reads the blocks alone
+BLK_NEXT, BLK_PREV, BLK_COUNT, BLK_ENTRIES, BLOCK_WORDS = 0, 1, 2, 4, 32
+ENT_NODE, ENT_W1, ENT_W2, ENT_SEQ, ENT_WORDS = 0, 1, 2, 3, 4
+BLOCK_NODES = (BLOCK_WORDS - BLK_ENTRIES) // ENT_WORDS
 # blocks an element's addition may take (one per listed vertex) and that a step must find free
 BLOCKS_PER_TET = 9
 MAX_SLOTS = 1 << 29  # node ids 4 * slot + corner are int32
@@ -207,7 +211,15 @@ def _add(B, k, v0, v1, v2, v3):
             h = nb
         base = h * BLOCK_WORDS
         n = A[base + BLK_COUNT]
-        A[base + BLK_NODES + n] = 4 * s + c
+        e = base + BLK_ENTRIES + n * ENT_WORDS
+        A[e + ENT_NODE] = 4 * s + c
+        if k == 3:
+            A[e + ENT_W1] = E[s * E_COLS + (0 if c == 2 else c + 1)]
+            A[e + ENT_W2] = E[s * E_COLS + (2 if c == 0 else c - 1)]
+        else:
+            A[e + ENT_W1] = E[s * E_COLS + 1 - c]
+            A[e + ENT_W2] = v2
+        A[e + ENT_SEQ] = seq
         A[base + BLK_COUNT] = n + 1
         E[s * E_COLS + E_BLOCK + c] = h
     t = bs[BS_QTAIL] % Q.shape[0]
@@ -230,11 +242,12 @@ def _remove(B, k, s):
         blk = E[s * E_COLS + E_BLOCK + c]
         base = blk * BLOCK_WORDS
         n = A[base + BLK_COUNT]
+        first = base + BLK_ENTRIES
         i = 0
-        while i < n and A[base + BLK_NODES + i] != node:
+        while i < n and A[first + i * ENT_WORDS + ENT_NODE] != node:
             i += 1
-        for j in range(i + 1, n):
-            A[base + BLK_NODES + j - 1] = A[base + BLK_NODES + j]
+        for j in range(first + (i + 1) * ENT_WORDS, first + n * ENT_WORDS):
+            A[j - ENT_WORDS] = A[j]
         A[base + BLK_COUNT] = n - 1
         if n == 1:
             nxt = A[base + BLK_NEXT]
@@ -278,14 +291,11 @@ def _find_edge(B, p, r):
     b = vhead[p]
     while b != -1:
         base = b * BLOCK_WORDS
-        for i in range(A[base + BLK_COUNT] - 1, -1, -1):
-            node = A[base + BLK_NODES + i]
-            s = node >> 2
-            c = node & 3
-            if c < 2 and E[s * E_COLS + 1 - c] == r:
-                if best == -1 or E[s * E_COLS + E_SEQ] < best_seq:
-                    best = s
-                    best_seq = E[s * E_COLS + E_SEQ]
+        for e in range(base + BLK_ENTRIES + (A[base + BLK_COUNT] - 1) * ENT_WORDS, base, -ENT_WORDS):
+            if A[e + ENT_W1] == r:  # an edge's W1 is its other end
+                if best == -1 or A[e + ENT_SEQ] < best_seq:
+                    best = A[e + ENT_NODE] >> 2
+                    best_seq = A[e + ENT_SEQ]
         b = A[base + BLK_NEXT]
     return best
 
@@ -340,28 +350,23 @@ def _gather_face(B, s, cand, cscore, cseq):
         while blk != -1:
             base = blk * BLOCK_WORDS
             blk = A[base + BLK_NEXT]
-            for i_node in range(base + BLK_NODES + A[base + BLK_COUNT] - 1, base + BLK_NODES - 1, -1):  # newest first
-                g = A[i_node] >> 2
-                if g == s:
+            for e in range(base + BLK_ENTRIES + (A[base + BLK_COUNT] - 1) * ENT_WORDS, base, -ENT_WORDS):
+                if A[e + ENT_NODE] >> 2 == s:
                     continue
-                g0 = np.int64(E[g * E_COLS + 0])
-                g1 = np.int64(E[g * E_COLS + 1])
-                g2 = np.int64(E[g * E_COLS + 2])
-                has_a = g0 == a or g1 == a or g2 == a
-                has_b = g0 == b or g1 == b or g2 == b
-                has_c = g0 == c or g1 == c or g2 == c
+                # the face holds u and w1, w2 (three distinct vertices: the decoders check it)
+                w1 = np.int64(A[e + ENT_W1])
+                w2 = np.int64(A[e + ENT_W2])
+                has_c = w1 == c or w2 == c
                 if k == 0:
+                    has_b = w1 == b or w2 == b
                     if has_b == has_c:  # neither: vertex-adjacent only; both: corrupt duplicate
                         continue
-                elif has_a or not has_c:
-                    continue
-                if g0 != a and g0 != b and g0 != c:
-                    x = g0
-                elif g1 != a and g1 != b and g1 != c:
-                    x = g1
+                    x = w1 if w1 != b and w1 != c else w2
                 else:
-                    x = g2
-                n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g * E_COLS + E_SEQ])
+                    if w1 == a or w2 == a or not has_c:
+                        continue
+                    x = w1 if w1 != c else w2
+                n1 = _insert_candidate(cand, cscore, cseq, n1, x, A[e + ENT_SEQ])
     _sort_candidates(cand, cscore, cseq, n1)
     return n1
 
@@ -379,19 +384,16 @@ def _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq):
         while blk != -1:
             base = blk * BLOCK_WORDS
             blk = A[base + BLK_NEXT]
-            for i_node in range(base + BLK_NODES + A[base + BLK_COUNT] - 1, base + BLK_NODES - 1, -1):  # newest first
-                g = A[i_node] >> 2
-                shared = 0
-                for cj in range(3):
-                    w = E[g * E_COLS + cj]
-                    if w == a or w == b or w == c:
-                        shared += 1
-                if shared != 1:
-                    continue
-                for cj in range(3):
-                    w = np.int64(E[g * E_COLS + cj])
-                    if w == a or w == b or w == c:
-                        continue
+            for e in range(base + BLK_ENTRIES + (A[base + BLK_COUNT] - 1) * ENT_WORDS, base, -ENT_WORDS):
+                w1 = np.int64(A[e + ENT_W1])
+                w2 = np.int64(A[e + ENT_W2])
+                if w1 == a or w1 == b or w1 == c or w2 == a or w2 == b or w2 == c:
+                    continue  # u is shared: the face must share nothing else
+                gseq = A[e + ENT_SEQ]
+                # w1, w2 are the corners after u's, cyclically: visited in the face's own order
+                swap = (A[e + ENT_NODE] & 3) == 1
+                for cj in range(2):
+                    w = w2 if (cj == 0) == swap else w1
                     skip = False
                     for i in range(n1):
                         if cand[i] == w:
@@ -403,12 +405,12 @@ def _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq):
                     for i in range(n2):
                         if c2[i] == w:
                             dup = True
-                            if E[g * E_COLS + E_SEQ] < c2seq[i]:
-                                c2seq[i] = E[g * E_COLS + E_SEQ]
+                            if gseq < c2seq[i]:
+                                c2seq[i] = gseq
                             break
                     if not dup and n2 < c2.shape[0]:
                         c2[n2] = w
-                        c2seq[n2] = E[g * E_COLS + E_SEQ]
+                        c2seq[n2] = gseq
                         n2 += 1
     # stable insertion sort by sequence
     for i in range(1, n2):
@@ -453,12 +455,10 @@ def _apply_tet(B, t0, t1, t2, t3):
     while blk != -1:
         base = blk * BLOCK_WORDS
         blk = A[base + BLK_NEXT]
-        for i_node in range(base + BLK_NODES + A[base + BLK_COUNT] - 1, base + BLK_NODES - 1, -1):  # newest first
-            node = A[i_node]
-            g = node >> 2
-            c0 = node & 3
-            x = E[g * E_COLS + (0 if c0 == 2 else c0 + 1)]
-            y = E[g * E_COLS + (2 if c0 == 0 else c0 - 1)]
+        for e in range(base + BLK_ENTRIES + (A[base + BLK_COUNT] - 1) * ENT_WORDS, base, -ENT_WORDS):
+            g = A[e + ENT_NODE] >> 2
+            x = A[e + ENT_W1]
+            y = A[e + ENT_W2]
             if (x == t1 and y == t2) or (x == t2 and y == t1):
                 f0 = g
             elif (x == t2 and y == t0) or (x == t0 and y == t2):
@@ -511,14 +511,11 @@ def _gather_edge(B, s, cand, cscore, cseq):
         while blk != -1:
             base = blk * BLOCK_WORDS
             blk = A[base + BLK_NEXT]
-            for i_node in range(base + BLK_NODES + A[base + BLK_COUNT] - 1, base + BLK_NODES - 1, -1):  # newest first
-                node = A[i_node]
-                g = node >> 2
-                c = node & 3
-                if c < 2 and g != s:
-                    x = np.int64(E[g * E_COLS + 1 - c])
+            for e in range(base + BLK_ENTRIES + (A[base + BLK_COUNT] - 1) * ENT_WORDS, base, -ENT_WORDS):
+                if A[e + ENT_NODE] >> 2 != s:
+                    x = np.int64(A[e + ENT_W1])  # the edge's other end
                     if x != other:
-                        n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g * E_COLS + E_SEQ])
+                        n1 = _insert_candidate(cand, cscore, cseq, n1, x, A[e + ENT_SEQ])
     _sort_candidates(cand, cscore, cseq, n1)
     return n1
 

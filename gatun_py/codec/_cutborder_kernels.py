@@ -3,35 +3,26 @@
 The *border* is a set of live elements with up to three vertices each: oriented triangles (the
 current surface T of the tet phase) or directed edges (the border of the boundary-surface phase,
 column 2 then holds the apex of the triangle that created the edge, used only as a geometry
-predictor). Elements live in slots; every vertex has a list of the (slot, corner) nodes incident
-to it, so adjacency queries cost the vertex degree in the border. Elements are processed
-first-in first-out (a ring buffer of (slot, sequence) pairs with lazy deletion), which is the
-breadth-first, iteration-by-iteration growth of the paper.
+predictor). Elements live in slots; every vertex has a doubly linked list of the (slot, corner)
+nodes incident to it, so adjacency queries cost the vertex degree in the border. Elements are
+processed first-in first-out (a ring buffer of (slot, sequence) pairs with lazy deletion), which is
+the breadth-first, iteration-by-iteration growth of the paper.
 
 Encoder and decoder share every rule that shapes the state (candidate lists, additions,
 removals); only the symbol I/O differs. Decoders check every index and count they read and stop
 with an error code instead of touching memory out of bounds.
 
-A vertex's incidence list is an unrolled list of fixed 64-byte blocks (one cache line: a link to
-the next, older block, a count and ``BLOCK_NODES`` node ids, oldest first). A lookup reads one
-block for a typical vertex, and the element rows its nodes point to are independent loads; a
-linked list of nodes made each step of the walk wait for the previous load (two thirds of the
-decode time on unstructured meshes, whose border is larger than the caches). Nodes are appended to
-the newest block and walked newest first, and a removal shifts the rest of its block down, so
-every walk visits the nodes in the order the linked lists did (the order decides ties and is
-part of the format).
-
-Border arrays, passed as a tuple ``B = (E, vhead, A, Q, bs)`` (few arrays: every array passed to a
+Border arrays, passed as a tuple ``B = (E, vhead, Q, bs)`` (few arrays: every array passed to a
 kernel costs reference-count updates on each call, which dominated the per-tet cost before):
 ``E (cap * E_COLS,) int32`` one row of ``E_COLS`` per slot, flat so that a row's offset is a
-multiplication by a constant: vertices (+ apex data) in columns 0-3, sequence number (``E_SEQ``,
--1: free slot), free-list link (``E_FREE``; slots never used are handed out in order past
-``BS_BUMP``, so the table needs no initialisation); node id = 4 * slot + corner, taken apart with a
-shift and a mask; ``vhead (nv) int32`` each vertex's newest block (-1: empty list);
-``A (blocks * BLOCK_WORDS,) int32`` the blocks (``BLK_NEXT``, ``BLK_COUNT``, nodes from
-``BLK_NODES``; free blocks chained through ``BLK_NEXT`` from ``BS_BLOCK_FREE``, never used ones
-handed out past ``BS_BLOCK_BUMP``); ``Q (qcap, 2) int64`` (the decoders: int32) FIFO ring of
-(slot, sequence); ``bs int64`` scalars (see ``BS_*``).
+multiplication by a constant (a 2-D array's row stride is a run-time value: one more multiply on
+the list walks' chain of dependent loads): vertices (+ apex data) in columns 0-3, sequence number
+(``E_SEQ``, -1: free slot), incidence-list links per corner (``E_NEXT``, ``E_PREV``; node id =
+4 * slot + corner, taken apart with a shift and a mask rather than a floor division by 3),
+free-list link (``E_FREE``; slots never used are handed out in order past ``BS_BUMP``, so the
+table needs no initialisation); ``vhead (nv) int32`` list heads;
+``Q (qcap, 2) int64`` (the decoders: int32) FIFO ring of (slot, sequence), ``qcap`` a power of two; ``bs int64`` scalars
+(see ``BS_*``).
 """
 
 from __future__ import annotations
@@ -42,21 +33,8 @@ from numba import njit
 from . import rangecoder as rc
 
 BS_NFREE, BS_QHEAD, BS_QTAIL, BS_SEQ, BS_LIVE, BS_PEAK, BS_FREE_HEAD, BS_BUMP = 0, 1, 2, 3, 4, 5, 6, 7
-BS_BLOCKS_FREE, BS_BLOCK_FREE, BS_BLOCK_BUMP, BS_SIZE = 8, 9, 10, 11
-# the border tuple's members
-B_ELEMENTS, B_VHEAD, B_BLOCKS, B_QUEUE, B_SCALARS = 0, 1, 2, 3, 4
-# columns of the element table E: vertices/apex 0-3, sequence, the block holding each listed
-# corner's node (a free slot: the free-list link instead); 8 columns, rows of 32 bytes
-E_SEQ, E_BLOCK, E_FREE, E_COLS = 4, 5, 5, 8
-# incidence blocks, 32 int32 = two cache lines: the next (older) and previous block, the count,
-# then entries of ENT_WORDS: the node, the element's other two vertices (a triangle's in cyclic
-# order after the corner, an edge's other end and its apex) and its sequence number, so that
-# walking a list reads the blocks alone
-BLK_NEXT, BLK_PREV, BLK_COUNT, BLK_ENTRIES, BLOCK_WORDS = 0, 1, 2, 4, 32
-ENT_NODE, ENT_W1, ENT_W2, ENT_SEQ, ENT_WORDS = 0, 1, 2, 3, 4
-BLOCK_NODES = (BLOCK_WORDS - BLK_ENTRIES) // ENT_WORDS
-# blocks an element's addition may take (one per listed vertex) and that a step must find free
-BLOCKS_PER_TET = 9
+# columns of the element table E: vertices/apex 0-3, sequence, list links per corner, free list
+E_SEQ, E_NEXT, E_PREV, E_FREE, E_COLS = 4, 5, 8, 11, 12
 MAX_SLOTS = 1 << 29  # node ids 4 * slot + corner are int32
 # sequence numbers are int32 (E_SEQ, and the decoders' queue): one per element ever added, so a
 # stream adds fewer than this many elements (the decoders check it from the header's counts)
@@ -90,73 +68,55 @@ SM_SEED = SM_NEW + 8
 SM_FLIP = SM_SEED + 8
 SM_SIZE = SM_FLIP + 4
 
-# the encoders' status when the border ran out of incidence blocks (the caller grows it and reruns)
-ENC_NEED_BLOCKS = 6
-
 # status codes of the resumable decoder
 ST_DONE, ST_BATCH, ST_GROW, ST_ERROR = 0, 1, 2, 3
 
 
-def new_border(n_vertices: int, cap: int, qcap: int, *, queue_dtype=np.int64, blocks: int | None = None):
-    """Allocate an empty border for ``n_vertices`` vertices with room for ``cap`` elements, ``qcap``
-    queue entries and ``blocks`` incidence blocks (default ``cap // 2``: a typical border has
-    about one vertex per two faces, most with one block; :func:`grow_border` adds more). The
-    decoders pass ``queue_dtype`` int32: slots and sequence numbers fit, see ``MAX_SLOTS`` and
-    ``MAX_SEQ``, and the queue is their largest array after E. The tables are not initialised:
-    rows and blocks are written when handed out, so untouched capacity costs no memory."""
+def _pow2_at_least(n: int) -> int:
+    """The smallest power of two >= n: the queue's capacity, so that a position in the ring is
+    a mask of the running count rather than a division (two per tet)."""
+    return 1 << max(int(n) - 1, 0).bit_length()
+
+
+def new_border(n_vertices: int, cap: int, qcap: int, *, queue_dtype=np.int64):
+    """Allocate an empty border for ``n_vertices`` vertices (the decoders pass ``queue_dtype``
+    int32: slots and sequence numbers fit, see ``MAX_SLOTS`` and ``MAX_SEQ``, and the queue is
+    their largest array after E)."""
     cap = max(int(cap), 16)
-    qcap = max(int(qcap), 16)
-    blocks = max(int(cap // 2 if blocks is None else blocks), 4 * BLOCKS_PER_TET)
-    E = np.empty(cap * E_COLS, np.int32)
+    qcap = _pow2_at_least(max(int(qcap), 16))
+    E = np.empty((cap, E_COLS), np.int32)
     vhead = np.full(max(int(n_vertices), 1), -1, np.int32)
-    A = np.empty(blocks * BLOCK_WORDS, np.int32)
     Q = np.zeros((qcap, 2), queue_dtype)
-    bs = np.zeros(BS_SIZE, np.int64)
+    bs = np.zeros(8, np.int64)
     bs[BS_NFREE] = cap
     bs[BS_FREE_HEAD] = -1  # freed slots; the never used ones start at BS_BUMP = 0
-    bs[BS_BLOCKS_FREE] = blocks
-    bs[BS_BLOCK_FREE] = -1
-    return (E, vhead, A, Q, bs)
+    return (E.reshape(-1), vhead, Q, bs)
 
 
-def border_capacity(B) -> tuple[int, int]:
-    """(element slots, incidence blocks) that border ``B`` has allocated."""
-    return len(B[B_ELEMENTS]) // E_COLS, len(B[B_BLOCKS]) // BLOCK_WORDS
-
-
-def grow_border(B, need_slots: int, need_queue: int, need_blocks: int = 4 * BLOCKS_PER_TET):
-    """A copy of border ``B`` with room for at least ``need_slots`` more elements, ``need_queue``
-    queue entries and ``need_blocks`` incidence blocks."""
-    E, vhead, A, Q, bs = B
+def grow_border(B, need_slots: int, need_queue: int):
+    """A copy of border ``B`` with room for at least ``need_slots`` more elements and queue entries."""
+    E, vhead, Q, bs = B
+    E = E.reshape(-1, E_COLS)
     bs = bs.copy()
-    cap = E.shape[0] // E_COLS
+    cap = E.shape[0]
     nfree = int(bs[BS_NFREE])
     if nfree < need_slots:
         new_cap = min(max(2 * cap, cap + need_slots), MAX_SLOTS - 1)  # the caller checks cap + need_slots
-        grown = np.empty(new_cap * E_COLS, np.int32)  # slots past BS_BUMP are written when handed out
-        grown[:E.shape[0]] = E
+        grown = np.empty((new_cap, E_COLS), np.int32)  # slots past BS_BUMP are written when handed out
+        grown[:cap] = E
         E = grown
         bs[BS_NFREE] = nfree + new_cap - cap
-    nblocks = A.shape[0] // BLOCK_WORDS
-    bfree = int(bs[BS_BLOCKS_FREE])
-    if bfree < need_blocks:
-        new_blocks = max(2 * nblocks, nblocks + need_blocks)
-        grown = np.empty(new_blocks * BLOCK_WORDS, np.int32)
-        used = int(bs[BS_BLOCK_BUMP]) * BLOCK_WORDS  # blocks past the bump were never written
-        grown[:used] = A[:used]
-        A = grown
-        bs[BS_BLOCKS_FREE] = bfree + new_blocks - nblocks
     qcap = Q.shape[0]
     used = int(bs[BS_QTAIL] - bs[BS_QHEAD])
     if qcap - used < need_queue:
-        new_qcap = max(2 * qcap, used + need_queue)
-        idx = (int(bs[BS_QHEAD]) + np.arange(used)) % qcap
+        new_qcap = _pow2_at_least(max(2 * qcap, used + need_queue))
+        idx = (int(bs[BS_QHEAD]) + np.arange(used)) & (qcap - 1)
         nq = np.zeros((new_qcap, 2), Q.dtype)
         nq[:used] = Q[idx]
         Q = nq
         bs[BS_QHEAD] = 0
         bs[BS_QTAIL] = used
-    return (E, vhead, A, Q, bs)
+    return (E.reshape(-1), vhead, Q, bs)
 
 
 # The border helpers below are compiled with ``_nrt=False``: they never allocate, and without the
@@ -164,17 +124,15 @@ def grow_border(B, need_slots: int, need_queue: int, need_blocks: int = 4 * BLOC
 # the border's arrays (most of the per-tet overhead of the decoder, measured with perf).
 @njit(cache=True, _nrt=False)
 def _room(B, slots, entries):
-    """Room for ``slots`` more elements (and their incidence blocks) and ``entries`` queue entries."""
-    E, vhead, A, Q, bs = B
-    return (bs[BS_NFREE] >= slots and bs[BS_BLOCKS_FREE] >= 3 * slots
-            and Q.shape[0] - (bs[BS_QTAIL] - bs[BS_QHEAD]) >= entries)
+    E, vhead, Q, bs = B
+    return bs[BS_NFREE] >= slots and Q.shape[0] - (bs[BS_QTAIL] - bs[BS_QHEAD]) >= entries
 
 
 @njit(cache=True, _nrt=False)
 def _add(B, k, v0, v1, v2, v3):
     """Add an element with ``k`` listed vertices (the rest of v0..v3 is stored as data: the apex
     of the triangle or tet that created it, for the geometry coder); returns its slot."""
-    E, vhead, A, Q, bs = B
+    E, vhead, Q, bs = B
     s = bs[BS_FREE_HEAD]
     if s != -1:
         bs[BS_FREE_HEAD] = E[s * E_COLS + E_FREE]
@@ -189,40 +147,16 @@ def _add(B, k, v0, v1, v2, v3):
     seq = bs[BS_SEQ]
     bs[BS_SEQ] = seq + 1
     E[s * E_COLS + E_SEQ] = seq
-    # append node 4 s + c to its vertex's newest block, or to a new one (written out here: a
-    # helper called per corner was not inlined and cost more than the work)
     for c in range(k):
         v = E[s * E_COLS + c]
+        node = 4 * s + c
         h = vhead[v]
-        if h == -1 or A[h * BLOCK_WORDS + BLK_COUNT] == BLOCK_NODES:
-            nb = bs[BS_BLOCK_FREE]
-            if nb != -1:
-                bs[BS_BLOCK_FREE] = A[nb * BLOCK_WORDS + BLK_NEXT]
-            else:
-                nb = bs[BS_BLOCK_BUMP]
-                bs[BS_BLOCK_BUMP] = nb + 1
-            bs[BS_BLOCKS_FREE] -= 1
-            A[nb * BLOCK_WORDS + BLK_NEXT] = h
-            A[nb * BLOCK_WORDS + BLK_PREV] = -1
-            A[nb * BLOCK_WORDS + BLK_COUNT] = 0
-            if h != -1:
-                A[h * BLOCK_WORDS + BLK_PREV] = nb
-            vhead[v] = nb
-            h = nb
-        base = h * BLOCK_WORDS
-        n = A[base + BLK_COUNT]
-        e = base + BLK_ENTRIES + n * ENT_WORDS
-        A[e + ENT_NODE] = 4 * s + c
-        if k == 3:
-            A[e + ENT_W1] = E[s * E_COLS + (0 if c == 2 else c + 1)]
-            A[e + ENT_W2] = E[s * E_COLS + (2 if c == 0 else c - 1)]
-        else:
-            A[e + ENT_W1] = E[s * E_COLS + 1 - c]
-            A[e + ENT_W2] = v2
-        A[e + ENT_SEQ] = seq
-        A[base + BLK_COUNT] = n + 1
-        E[s * E_COLS + E_BLOCK + c] = h
-    t = bs[BS_QTAIL] % Q.shape[0]
+        E[s * E_COLS + E_NEXT + c] = h
+        E[s * E_COLS + E_PREV + c] = -1
+        if h != -1:
+            E[(h >> 2) * E_COLS + E_PREV + (h & 3)] = node
+        vhead[v] = node
+    t = bs[BS_QTAIL] & (Q.shape[0] - 1)
     Q[t, 0] = s
     Q[t, 1] = seq
     bs[BS_QTAIL] += 1
@@ -234,33 +168,16 @@ def _add(B, k, v0, v1, v2, v3):
 
 @njit(cache=True, _nrt=False)
 def _remove(B, k, s):
-    E, vhead, A, Q, bs = B
-    # take node 4 s + c out of the block that holds it (a node never leaves its block), keeping
-    # the order of the others; a block left empty is unlinked and freed
+    E, vhead, Q, bs = B
     for c in range(k):
-        node = 4 * s + c
-        blk = E[s * E_COLS + E_BLOCK + c]
-        base = blk * BLOCK_WORDS
-        n = A[base + BLK_COUNT]
-        first = base + BLK_ENTRIES
-        i = 0
-        while i < n and A[first + i * ENT_WORDS + ENT_NODE] != node:
-            i += 1
-        for j in range(first + (i + 1) * ENT_WORDS, first + n * ENT_WORDS):
-            A[j - ENT_WORDS] = A[j]
-        A[base + BLK_COUNT] = n - 1
-        if n == 1:
-            nxt = A[base + BLK_NEXT]
-            prv = A[base + BLK_PREV]
-            if prv == -1:
-                vhead[E[s * E_COLS + c]] = nxt
-            else:
-                A[prv * BLOCK_WORDS + BLK_NEXT] = nxt
-            if nxt != -1:
-                A[nxt * BLOCK_WORDS + BLK_PREV] = prv
-            A[base + BLK_NEXT] = bs[BS_BLOCK_FREE]
-            bs[BS_BLOCK_FREE] = blk
-            bs[BS_BLOCKS_FREE] += 1
+        p = E[s * E_COLS + E_PREV + c]
+        n = E[s * E_COLS + E_NEXT + c]
+        if p != -1:
+            E[(p >> 2) * E_COLS + E_NEXT + (p & 3)] = n
+        else:
+            vhead[E[s * E_COLS + c]] = n
+        if n != -1:
+            E[(n >> 2) * E_COLS + E_PREV + (n & 3)] = p
     E[s * E_COLS + E_SEQ] = -1
     E[s * E_COLS + E_FREE] = bs[BS_FREE_HEAD]
     bs[BS_FREE_HEAD] = s
@@ -271,10 +188,10 @@ def _remove(B, k, s):
 @njit(cache=True, _nrt=False)
 def _pop(B):
     """The oldest live element's slot (it stays live), or -1 when the border is empty."""
-    E, vhead, A, Q, bs = B
+    E, vhead, Q, bs = B
     qcap = Q.shape[0]
     while bs[BS_QHEAD] < bs[BS_QTAIL]:
-        h = bs[BS_QHEAD] % qcap
+        h = bs[BS_QHEAD] & (qcap - 1)
         bs[BS_QHEAD] += 1
         s = Q[h, 0]
         if E[s * E_COLS + E_SEQ] == Q[h, 1]:
@@ -285,18 +202,18 @@ def _pop(B):
 @njit(cache=True, _nrt=False)
 def _find_edge(B, p, r):
     """Slot of a live border edge {p, r} (either direction; the oldest one), or -1."""
-    E, vhead, A, Q, bs = B
+    E, vhead, Q, bs = B
+    node = vhead[p]
     best = -1
     best_seq = np.int64(-1)
-    b = vhead[p]
-    while b != -1:
-        base = b * BLOCK_WORDS
-        for e in range(base + BLK_ENTRIES + (A[base + BLK_COUNT] - 1) * ENT_WORDS, base, -ENT_WORDS):
-            if A[e + ENT_W1] == r:  # an edge's W1 is its other end
-                if best == -1 or A[e + ENT_SEQ] < best_seq:
-                    best = A[e + ENT_NODE] >> 2
-                    best_seq = A[e + ENT_SEQ]
-        b = A[base + BLK_NEXT]
+    while node != -1:
+        s = node >> 2
+        c = node & 3
+        if c < 2 and E[s * E_COLS + 1 - c] == r:
+            if best == -1 or E[s * E_COLS + E_SEQ] < best_seq:
+                best = s
+                best_seq = E[s * E_COLS + E_SEQ]
+        node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
     return best
 
 
@@ -338,7 +255,7 @@ def _gather_face(B, s, cand, cscore, cseq):
     """Candidates for the fourth vertex of the tet behind border face ``s`` = (a, b, c): the
     apexes of faces of T adjacent to an edge of ``s``, sorted by score (how many of the face's
     edges they are adjacent across) and then by traversal order. Returns their number."""
-    E, vhead, A, Q, bs = B
+    E, vhead, Q, bs = B
     a = np.int64(E[s * E_COLS + 0])
     b = np.int64(E[s * E_COLS + 1])
     c = np.int64(E[s * E_COLS + 2])
@@ -346,27 +263,30 @@ def _gather_face(B, s, cand, cscore, cseq):
     # faces on edges (a, b) and (a, c) are all in a's list; those on (b, c) in b's list
     for k in range(2):
         u = a if k == 0 else b
-        blk = vhead[u]
-        while blk != -1:
-            base = blk * BLOCK_WORDS
-            blk = A[base + BLK_NEXT]
-            for e in range(base + BLK_ENTRIES + (A[base + BLK_COUNT] - 1) * ENT_WORDS, base, -ENT_WORDS):
-                if A[e + ENT_NODE] >> 2 == s:
+        node = vhead[u]
+        while node != -1:
+            g = node >> 2
+            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+            if g == s:
+                continue
+            g0 = np.int64(E[g * E_COLS + 0])
+            g1 = np.int64(E[g * E_COLS + 1])
+            g2 = np.int64(E[g * E_COLS + 2])
+            has_a = g0 == a or g1 == a or g2 == a
+            has_b = g0 == b or g1 == b or g2 == b
+            has_c = g0 == c or g1 == c or g2 == c
+            if k == 0:
+                if has_b == has_c:  # neither: vertex-adjacent only; both: corrupt duplicate
                     continue
-                # the face holds u and w1, w2 (three distinct vertices: the decoders check it)
-                w1 = np.int64(A[e + ENT_W1])
-                w2 = np.int64(A[e + ENT_W2])
-                has_c = w1 == c or w2 == c
-                if k == 0:
-                    has_b = w1 == b or w2 == b
-                    if has_b == has_c:  # neither: vertex-adjacent only; both: corrupt duplicate
-                        continue
-                    x = w1 if w1 != b and w1 != c else w2
-                else:
-                    if w1 == a or w2 == a or not has_c:
-                        continue
-                    x = w1 if w1 != c else w2
-                n1 = _insert_candidate(cand, cscore, cseq, n1, x, A[e + ENT_SEQ])
+            elif has_a or not has_c:
+                continue
+            if g0 != a and g0 != b and g0 != c:
+                x = g0
+            elif g1 != a and g1 != b and g1 != c:
+                x = g1
+            else:
+                x = g2
+            n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g * E_COLS + E_SEQ])
     _sort_candidates(cand, cscore, cseq, n1)
     return n1
 
@@ -376,42 +296,43 @@ def _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq):
     """The paper's case (c) list: vertices of faces of T sharing exactly one vertex with the
     current face (a, b, c) (already removed from T), except the edge candidates, in traversal
     order (oldest face first). Only needed after an escape, so computed lazily."""
-    E, vhead, A, Q, bs = B
+    E, vhead, Q, bs = B
     n2 = 0
     for k in range(3):
         u = a if k == 0 else (b if k == 1 else c)
-        blk = vhead[u]
-        while blk != -1:
-            base = blk * BLOCK_WORDS
-            blk = A[base + BLK_NEXT]
-            for e in range(base + BLK_ENTRIES + (A[base + BLK_COUNT] - 1) * ENT_WORDS, base, -ENT_WORDS):
-                w1 = np.int64(A[e + ENT_W1])
-                w2 = np.int64(A[e + ENT_W2])
-                if w1 == a or w1 == b or w1 == c or w2 == a or w2 == b or w2 == c:
-                    continue  # u is shared: the face must share nothing else
-                gseq = A[e + ENT_SEQ]
-                # w1, w2 are the corners after u's, cyclically: visited in the face's own order
-                swap = (A[e + ENT_NODE] & 3) == 1
-                for cj in range(2):
-                    w = w2 if (cj == 0) == swap else w1
-                    skip = False
-                    for i in range(n1):
-                        if cand[i] == w:
-                            skip = True
-                            break
-                    if skip:
-                        continue
-                    dup = False
-                    for i in range(n2):
-                        if c2[i] == w:
-                            dup = True
-                            if gseq < c2seq[i]:
-                                c2seq[i] = gseq
-                            break
-                    if not dup and n2 < c2.shape[0]:
-                        c2[n2] = w
-                        c2seq[n2] = gseq
-                        n2 += 1
+        node = vhead[u]
+        while node != -1:
+            g = node >> 2
+            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+            shared = 0
+            for cj in range(3):
+                w = E[g * E_COLS + cj]
+                if w == a or w == b or w == c:
+                    shared += 1
+            if shared != 1:
+                continue
+            for cj in range(3):
+                w = np.int64(E[g * E_COLS + cj])
+                if w == a or w == b or w == c:
+                    continue
+                skip = False
+                for i in range(n1):
+                    if cand[i] == w:
+                        skip = True
+                        break
+                if skip:
+                    continue
+                dup = False
+                for i in range(n2):
+                    if c2[i] == w:
+                        dup = True
+                        if E[g * E_COLS + E_SEQ] < c2seq[i]:
+                            c2seq[i] = E[g * E_COLS + E_SEQ]
+                        break
+                if not dup and n2 < c2.shape[0]:
+                    c2[n2] = w
+                    c2seq[n2] = E[g * E_COLS + E_SEQ]
+                    n2 += 1
     # stable insertion sort by sequence
     for i in range(1, n2):
         x, sq = c2[i], c2seq[i]
@@ -423,6 +344,11 @@ def _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq):
         c2[j + 1] = x
         c2seq[j + 1] = sq
     return n2
+
+
+# The tet decoder's copies of the two per-tet helpers, inlined into it by numba: called, each
+# call passed the border's arrays and the candidate lists as some forty words on the stack.
+_gather_face_inlined = njit(cache=True, _nrt=False, inline="always")(_gather_face.py_func)
 
 
 @njit(cache=True, _nrt=False)
@@ -445,26 +371,25 @@ def _apply_tet(B, t0, t1, t2, t3):
     already removed): each other face closes a face of the border or joins it, wound as the
     consistently oriented tet on its other side would see it from outside. Returns the slots of
     the faces opposite t0, t1, t2 that joined the border (-1 where a face was closed)."""
-    E, vhead, A, Q, bs = B
+    E, vhead, Q, bs = B
     # all three faces hold t3 (the apex just attached, often new with an empty list): one walk
     # of its list finds those already on the border
     f0 = -1
     f1 = -1
     f2 = -1
-    blk = vhead[t3]
-    while blk != -1:
-        base = blk * BLOCK_WORDS
-        blk = A[base + BLK_NEXT]
-        for e in range(base + BLK_ENTRIES + (A[base + BLK_COUNT] - 1) * ENT_WORDS, base, -ENT_WORDS):
-            g = A[e + ENT_NODE] >> 2
-            x = A[e + ENT_W1]
-            y = A[e + ENT_W2]
-            if (x == t1 and y == t2) or (x == t2 and y == t1):
-                f0 = g
-            elif (x == t2 and y == t0) or (x == t0 and y == t2):
-                f1 = g
-            elif (x == t0 and y == t1) or (x == t1 and y == t0):
-                f2 = g
+    node = vhead[t3]
+    while node != -1:
+        g = node >> 2
+        c0 = node & 3
+        node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+        x = E[g * E_COLS + (0 if c0 == 2 else c0 + 1)]
+        y = E[g * E_COLS + (2 if c0 == 0 else c0 - 1)]
+        if (x == t1 and y == t2) or (x == t2 and y == t1):
+            f0 = g
+        elif (x == t2 and y == t0) or (x == t0 and y == t2):
+            f1 = g
+        elif (x == t0 and y == t1) or (x == t1 and y == t0):
+            f2 = g
     # outward faces opposite t0, t1, t2 (TET_FACES), stored reversed when they join the border
     if f0 != -1:
         _remove(B, 3, f0)
@@ -484,6 +409,9 @@ def _apply_tet(B, t0, t1, t2, t3):
     return added0, added1, added2
 
 
+_apply_tet_inlined = njit(cache=True, _nrt=False, inline="always")(_apply_tet.py_func)
+
+
 @njit(cache=True, _nrt=False)
 def _bitlen(n):
     k = 0
@@ -500,22 +428,22 @@ def _bitlen(n):
 def _gather_edge(B, s, cand, cscore, cseq):
     """Candidates for the apex of the unvisited triangle on border edge s = {p, r}: apexes x
     that would close border edges {r, x} or {x, p}. Returns n1 (sorted like the tet phase)."""
-    E, vhead, A, Q, bs = B
+    E, vhead, Q, bs = B
     p = np.int64(E[s * E_COLS + 0])
     r = np.int64(E[s * E_COLS + 1])
     n1 = 0
     for k in range(2):
         u = r if k == 0 else p
         other = p if k == 0 else r
-        blk = vhead[u]
-        while blk != -1:
-            base = blk * BLOCK_WORDS
-            blk = A[base + BLK_NEXT]
-            for e in range(base + BLK_ENTRIES + (A[base + BLK_COUNT] - 1) * ENT_WORDS, base, -ENT_WORDS):
-                if A[e + ENT_NODE] >> 2 != s:
-                    x = np.int64(A[e + ENT_W1])  # the edge's other end
-                    if x != other:
-                        n1 = _insert_candidate(cand, cscore, cseq, n1, x, A[e + ENT_SEQ])
+        node = vhead[u]
+        while node != -1:
+            g = node >> 2
+            c = node & 3
+            if c < 2 and g != s:
+                x = np.int64(E[g * E_COLS + 1 - c])
+                if x != other:
+                    n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g * E_COLS + E_SEQ])
+            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
     _sort_candidates(cand, cscore, cseq, n1)
     return n1
 
@@ -658,8 +586,8 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
         done += 1
         _apply_triangle(B, u0, u1, x, p, r)
         if not _room(B, 4, 4):
-            return -1, ENC_NEED_BLOCKS if B[B_SCALARS][BS_BLOCKS_FREE] < 12 else 2
-    if B[B_SCALARS][BS_LIVE] != 0:
+            return -1, 2
+    if B[3][BS_LIVE] != 0:
         return -1, 3
     rc.enc_finish(st, out)
     return nv, 0
@@ -743,7 +671,7 @@ def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
         out_faces[done, 2] = x
         done += 1
         _apply_triangle(B, u0, u1, x, p, r)
-    if B[B_SCALARS][BS_LIVE] != 0 or rc.dec_failed(st):
+    if B[3][BS_LIVE] != 0 or rc.dec_failed(st):
         return nv, ST_ERROR
     return nv, ST_DONE
 
@@ -899,12 +827,12 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
     nv = nv0
     prev_esc = 0
     prev_flip = 0
-    E, vhead, A, Q, bs = B
+    E, vhead, Q, bs = B
     qcap = Q.shape[0]
     for done in range(m):
         s = -1  # _pop written out
         while bs[BS_QHEAD] < bs[BS_QTAIL]:
-            h = bs[BS_QHEAD] % qcap
+            h = bs[BS_QHEAD] & (qcap - 1)
             bs[BS_QHEAD] += 1
             if E[Q[h, 0] * E_COLS + E_SEQ] == Q[h, 1]:
                 s = Q[h, 0]
@@ -1002,9 +930,7 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
                 tgt[slot] = nbr[t, kk]
         if bs[BS_NFREE] < 4 or qcap - (bs[BS_QTAIL] - bs[BS_QHEAD]) < 4:
             return nv, 4
-        if bs[BS_BLOCKS_FREE] < BLOCKS_PER_TET:
-            return nv, ENC_NEED_BLOCKS
-    if B[B_SCALARS][BS_LIVE] != 0:
+    if B[3][BS_LIVE] != 0:
         return nv, 5
     rc.enc_finish(st, out)
     return nv, 0
@@ -1037,7 +963,7 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         return 0, ST_ERROR
     n_out = 0
     status = ST_DONE
-    E, vhead, A, Q, bs = B
+    E, vhead, Q, bs = B
     qcap = Q.shape[0]
     while done < m:
         # the checks and the pop of _room / _pop / dec_failed, written out (once per tet)
@@ -1047,13 +973,12 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         if n_out >= out_tets.shape[0]:
             status = ST_BATCH
             break
-        if (bs[BS_NFREE] < 4 or qcap - (bs[BS_QTAIL] - bs[BS_QHEAD]) < 4
-                or bs[BS_BLOCKS_FREE] < BLOCKS_PER_TET):
+        if bs[BS_NFREE] < 4 or qcap - (bs[BS_QTAIL] - bs[BS_QHEAD]) < 4:
             status = ST_GROW
             break
         s = -1
         while bs[BS_QHEAD] < bs[BS_QTAIL]:
-            h = bs[BS_QHEAD] % qcap
+            h = bs[BS_QHEAD] & (qcap - 1)
             bs[BS_QHEAD] += 1
             if E[Q[h, 0] * E_COLS + E_SEQ] == Q[h, 1]:
                 s = Q[h, 0]
@@ -1065,7 +990,7 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         b = np.int64(E[s * E_COLS + 1])
         c = np.int64(E[s * E_COLS + 2])
         behind = np.int64(E[s * E_COLS + 3])
-        n1 = _gather_face(B, s, cand, cscore, cseq)
+        n1 = _gather_face_inlined(B, s, cand, cscore, cseq)
         _remove(B, 3, s)
         ctx = _score_context(n1, cscore, prev_esc, 3)
         sym = rc.dec_sym(st, data, probs, TM_C1 + ctx * 16, 4)
@@ -1118,8 +1043,8 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         out_tets[n_out, 3] = d
         n_out += 1
         done += 1
-        _apply_tet(B, a, t1, t2, d)
-    if status == ST_DONE and (B[B_SCALARS][BS_LIVE] != 0 or rc.dec_failed(st)):
+        _apply_tet_inlined(B, a, t1, t2, d)
+    if status == ST_DONE and (B[3][BS_LIVE] != 0 or rc.dec_failed(st)):
         status = ST_ERROR
     tstate[0] = nv
     tstate[1] = done

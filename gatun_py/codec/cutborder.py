@@ -150,12 +150,11 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> E
         dec_of[:] = -1
         order[:] = -1
         pred[:] = -1
-        B = K.new_border(n, 3 * nf + 8, 3 * nf + 8, blocks=run_boundary.blocks)
+        B = K.new_border(n, 3 * nf + 8, 3 * nf + 8)
         res = K.encode_boundary(st, out, faces, hkey, hface, n, B, dec_of, order, pred, out_faces, face_src)
         run_boundary.result = res
 
-    run_boundary.blocks = nf + 64
-    boundary_code = _run_growing_blocks(run_boundary, capacity=rc.capacity_hint(nf * 4))
+    boundary_code = rc.run_encoder(run_boundary, capacity=rc.capacity_hint(nf * 4))
     nbv, code = run_boundary.result
     if code:
         raise MeshError(f"boundary surface cannot be coded (code {code}): is the mesh valid?")
@@ -171,17 +170,14 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> E
         order[:] = order_b
         pred[:] = pred_b
         # each tet takes its face off the border and adds at most three: at most nf + 2 m live
-        B = K.new_border(n, nf + 2 * m + 8, nf + 3 * m + 8, blocks=run_tets.blocks)
+        B = K.new_border(n, nf + 2 * m + 8, nf + 3 * m + 8)
         tgt = np.full(nf + 3 * m + 8, -1, np.int32)
         tgt[K.add_faces(B, out_faces, -1)] = bowner
         res = K.encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nbv, out_tets, symbols)
         run_tets.result = res
-        run_tets.peak = int(B[K.B_SCALARS][K.BS_PEAK])
+        run_tets.peak = int(B[3][K.BS_PEAK])
 
-    # the boundary's vertices each take a block at the start; the border's faces are about a
-    # fifth of the tets on meshes from a mesher, with about one vertex per two faces
-    run_tets.blocks = 3 * nf + m // 8 + 64
-    tet_code = _run_growing_blocks(run_tets, capacity=rc.capacity_hint(m * 2))
+    tet_code = rc.run_encoder(run_tets, capacity=rc.capacity_hint(m * 2))
     nref, code = run_tets.result
     if code:
         raise MeshError(f"tet connectivity cannot be coded: {_ENCODER_ERRORS.get(code, code)}; is the mesh valid?")
@@ -196,16 +192,6 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> E
         predictors=pred[:n].copy(), boundary=out_faces, tets=out_tets, peak_border=run_tets.peak,
         symbols=symbols,
     )
-
-
-def _run_growing_blocks(run, *, capacity):
-    """``rc.run_encoder(run)``, rerun with twice the incidence blocks (``run.blocks``) while the
-    border ran out of them (the encoders stop with ``ENC_NEED_BLOCKS``; the decoders grow theirs)."""
-    while True:
-        code = rc.run_encoder(run, capacity=capacity)
-        if run.result[1] != K.ENC_NEED_BLOCKS:
-            return code
-        run.blocks *= 2
 
 
 class ConnectivityDecoder:
@@ -324,14 +310,14 @@ class ConnectivityDecoder:
                                       self._B, pred, self._tstate, out[filled:])
             filled += n
             if status == K.ST_GROW:
-                if K.border_capacity(self._B)[0] + 64 >= K.MAX_SLOTS:
+                if len(self._B[0]) // K.E_COLS + 64 >= K.MAX_SLOTS:
                     raise CorruptFileError("corrupt tet section: the cut border grows beyond any mesh's")
                 self._B = K.grow_border(self._B, 64, 64)
             elif status == K.ST_ERROR:
                 raise CorruptFileError("corrupt tet section: the connectivity code is inconsistent")
             elif status == K.ST_DONE:
                 break
-        self.peak_border = max(self.peak_border, int(self._B[K.B_SCALARS][K.BS_PEAK]))
+        self.peak_border = max(self.peak_border, int(self._B[3][K.BS_PEAK]))
         known = self.vertices_known
         self.last_refs = self.predictors[first:known] if self.keep_predictors else pred[:known - first]
         if self.tets_done == self.n_tets:

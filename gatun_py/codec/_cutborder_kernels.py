@@ -346,11 +346,6 @@ def _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq):
     return n2
 
 
-# The tet decoder's copies of the two per-tet helpers, inlined into it by numba: called, each
-# call passed the border's arrays and the candidate lists as some forty words on the stack.
-_gather_face_inlined = njit(cache=True, _nrt=False, inline="always")(_gather_face.py_func)
-
-
 @njit(cache=True, _nrt=False)
 def _score_context(n1, cscore, prev, cap):
     """Context of a candidate-index symbol: how many candidates (capped at 4), the scores of the
@@ -390,6 +385,13 @@ def _apply_tet(B, t0, t1, t2, t3):
             f1 = g
         elif (x == t0 and y == t1) or (x == t1 and y == t0):
             f2 = g
+    return _attach_tet(B, t0, t1, t2, t3, f0, f1, f2)
+
+
+@njit(cache=True, _nrt=False)
+def _attach_tet(B, t0, t1, t2, t3, f0, f1, f2):
+    """The second half of :func:`_apply_tet`, given the border faces ``f0``, ``f1``, ``f2`` (-1:
+    none) that the faces opposite t0, t1, t2 close."""
     # outward faces opposite t0, t1, t2 (TET_FACES), stored reversed when they join the border
     if f0 != -1:
         _remove(B, 3, f0)
@@ -409,7 +411,77 @@ def _apply_tet(B, t0, t1, t2, t3):
     return added0, added1, added2
 
 
+# The tet decoder's copies of the per-tet helpers, inlined into it by numba (like
+# _gather_face_noting): called, each call passed the border's arrays and the candidate lists as
+# some forty words on the stack.
 _apply_tet_inlined = njit(cache=True, _nrt=False, inline="always")(_apply_tet.py_func)
+_attach_tet_inlined = njit(cache=True, _nrt=False, inline="always")(_attach_tet.py_func)
+
+# edges of the current face (a, b, c) in the tet decoder's record of the faces on them
+EDGE_BC, EDGE_AB, EDGE_AC = 0, 1, 2
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _gather_face_noting(B, s, cand, cscore, cseq, cface):
+    """:func:`_gather_face` that also notes, for the candidate at each position of the gather
+    (``cand`` before its sort: the caller keeps a copy), the oldest face on each edge of ``s``
+    holding it (``cface[i, EDGE_*]``, -1 none). A tet on candidate x closes exactly those faces:
+    they are the border faces holding x and an edge of ``s`` (the faces :func:`_apply_tet` finds
+    on x's list, the oldest first), so the decoder need not walk x's list for them."""
+    E, vhead, Q, bs = B
+    a = np.int64(E[s * E_COLS + 0])
+    b = np.int64(E[s * E_COLS + 1])
+    c = np.int64(E[s * E_COLS + 2])
+    n1 = 0
+    for k in range(2):
+        u = a if k == 0 else b
+        node = vhead[u]
+        while node != -1:
+            g = node >> 2
+            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+            if g == s:
+                continue
+            g0 = np.int64(E[g * E_COLS + 0])
+            g1 = np.int64(E[g * E_COLS + 1])
+            g2 = np.int64(E[g * E_COLS + 2])
+            has_a = g0 == a or g1 == a or g2 == a
+            has_b = g0 == b or g1 == b or g2 == b
+            has_c = g0 == c or g1 == c or g2 == c
+            if k == 0:
+                if has_b == has_c:  # neither: vertex-adjacent only; both: corrupt duplicate
+                    continue
+                edge = EDGE_AB if has_b else EDGE_AC
+            elif has_a or not has_c:
+                continue
+            else:
+                edge = EDGE_BC
+            if g0 != a and g0 != b and g0 != c:
+                x = g0
+            elif g1 != a and g1 != b and g1 != c:
+                x = g1
+            else:
+                x = g2
+            seq = E[g * E_COLS + E_SEQ]
+            i = 0
+            while i < n1 and cand[i] != x:
+                i += 1
+            if i < n1:
+                cscore[i] += 1
+                if seq < cseq[i]:
+                    cseq[i] = seq
+                f = cface[i, edge]
+                if f == -1 or seq < E[f * E_COLS + E_SEQ]:
+                    cface[i, edge] = g
+            elif n1 < cand.shape[0]:  # as _insert_candidate
+                cand[n1] = x
+                cscore[n1] = 1
+                cseq[n1] = seq
+                cface[n1, 0] = -1
+                cface[n1, 1] = -1
+                cface[n1, 2] = -1
+                cface[n1, edge] = g
+                n1 += 1
+    return n1
 
 
 @njit(cache=True, _nrt=False)
@@ -952,6 +1024,8 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
     cseq = np.empty(MAX_C1, np.int64)
     c2 = np.empty(MAX_C2, np.int64)
     c2seq = np.empty(MAX_C2, np.int64)
+    cface = np.empty((MAX_C1, 3), np.int64)
+    cfirst = np.empty(MAX_C1, np.int64)  # the candidates in gather order (cface's rows)
     nv = tstate[0]
     done = tstate[1]
     prev_esc = tstate[2]
@@ -990,7 +1064,10 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         b = np.int64(E[s * E_COLS + 1])
         c = np.int64(E[s * E_COLS + 2])
         behind = np.int64(E[s * E_COLS + 3])
-        n1 = _gather_face_inlined(B, s, cand, cscore, cseq)
+        n1 = _gather_face_noting(B, s, cand, cscore, cseq, cface)
+        for i in range(n1):
+            cfirst[i] = cand[i]
+        _sort_candidates(cand, cscore, cseq, n1)
         _remove(B, 3, s)
         ctx = _score_context(n1, cscore, prev_esc, 3)
         sym = rc.dec_sym(st, data, probs, TM_C1 + ctx * 16, 4)
@@ -1043,7 +1120,15 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         out_tets[n_out, 3] = d
         n_out += 1
         done += 1
-        _apply_tet_inlined(B, a, t1, t2, d)
+        if sym < ESC:  # the faces this tet closes were noted by the gather
+            i = 0
+            while cfirst[i] != d:
+                i += 1
+            # faces opposite a, t1, t2: on edges (t1, t2) = (b, c), (a, t2) and (a, t1)
+            _attach_tet_inlined(B, a, t1, t2, d, cface[i, EDGE_BC],
+                                cface[i, EDGE_AC if flip else EDGE_AB], cface[i, EDGE_AB if flip else EDGE_AC])
+        else:
+            _apply_tet_inlined(B, a, t1, t2, d)
     if status == ST_DONE and (B[3][BS_LIVE] != 0 or rc.dec_failed(st)):
         status = ST_ERROR
     tstate[0] = nv

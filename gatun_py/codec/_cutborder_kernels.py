@@ -1026,6 +1026,16 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
     c2seq = np.empty(MAX_C2, np.int64)
     cface = np.empty((MAX_C1, 3), np.int64)
     cfirst = np.empty(MAX_C1, np.int64)  # the candidates in gather order (cface's rows)
+    return _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets,
+                            (cand, cscore, cseq, c2, c2seq, cface, cfirst))
+
+
+# compiled without the runtime's reference counting (it allocates nothing): the helpers inlined
+# into its loop would otherwise increment and decrement the border arrays' counts on every tet
+@njit(cache=True, nogil=True, _nrt=False)
+def _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets, scratch):
+    """The loop of :func:`decode_tets`, with its candidate lists in ``scratch``."""
+    cand, cscore, cseq, c2, c2seq, cface, cfirst = scratch
     nv = tstate[0]
     done = tstate[1]
     prev_esc = tstate[2]

@@ -422,12 +422,14 @@ EDGE_BC, EDGE_AB, EDGE_AC = 0, 1, 2
 
 
 @njit(cache=True, _nrt=False, inline="always")
-def _gather_face_noting(B, s, cand, cscore, cseq, cface):
+def _gather_face_noting(B, s, cand, cscore, cseq, cface, cface_full):
     """:func:`_gather_face` that also notes, for the candidate at each position of the gather
     (``cand`` before its sort: the caller keeps a copy), the oldest face on each edge of ``s``
     holding it (``cface[i, EDGE_*]``, -1 none). A tet on candidate x closes exactly those faces:
     they are the border faces holding x and an edge of ``s`` (the faces :func:`_apply_tet` finds
-    on x's list, the oldest first), so the decoder need not walk x's list for them."""
+    on x's list, the oldest first), so the decoder need not walk x's list for them. A vertex
+    that is no candidate holds no such face, unless the list was full: ``cface_full[0]`` is then
+    set (the caller clears it)."""
     E, vhead, Q, bs = B
     a = np.int64(E[s * E_COLS + 0])
     b = np.int64(E[s * E_COLS + 1])
@@ -481,6 +483,8 @@ def _gather_face_noting(B, s, cand, cscore, cseq, cface):
                 cface[n1, 2] = -1
                 cface[n1, edge] = g
                 n1 += 1
+            else:
+                cface_full[0] = 1
     return n1
 
 
@@ -1026,8 +1030,9 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
     c2seq = np.empty(MAX_C2, np.int64)
     cface = np.empty((MAX_C1, 3), np.int64)
     cfirst = np.empty(MAX_C1, np.int64)  # the candidates in gather order (cface's rows)
+    cface_full = np.zeros(1, np.int64)
     return _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets,
-                            (cand, cscore, cseq, c2, c2seq, cface, cfirst))
+                            (cand, cscore, cseq, c2, c2seq, cface, cfirst, cface_full))
 
 
 # compiled without the runtime's reference counting (it allocates nothing): the helpers inlined
@@ -1035,7 +1040,7 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
 @njit(cache=True, nogil=True, _nrt=False)
 def _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets, scratch):
     """The loop of :func:`decode_tets`, with its candidate lists in ``scratch``."""
-    cand, cscore, cseq, c2, c2seq, cface, cfirst = scratch
+    cand, cscore, cseq, c2, c2seq, cface, cfirst, cface_full = scratch
     nv = tstate[0]
     done = tstate[1]
     prev_esc = tstate[2]
@@ -1074,7 +1079,8 @@ def _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets, scr
         b = np.int64(E[s * E_COLS + 1])
         c = np.int64(E[s * E_COLS + 2])
         behind = np.int64(E[s * E_COLS + 3])
-        n1 = _gather_face_noting(B, s, cand, cscore, cseq, cface)
+        cface_full[0] = 0
+        n1 = _gather_face_noting(B, s, cand, cscore, cseq, cface, cface_full)
         for i in range(n1):
             cfirst[i] = cand[i]
         _sort_candidates(cand, cscore, cseq, n1)
@@ -1130,13 +1136,16 @@ def _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets, scr
         out_tets[n_out, 3] = d
         n_out += 1
         done += 1
-        if sym < ESC:  # the faces this tet closes were noted by the gather
-            i = 0
-            while cfirst[i] != d:
-                i += 1
-            # faces opposite a, t1, t2: on edges (t1, t2) = (b, c), (a, t2) and (a, t1)
+        # the faces this tet closes were noted by the gather (d a candidate), or there are none
+        # (d no candidate, the list not full); else they are found on d's list
+        i = 0
+        while i < n1 and cfirst[i] != d:
+            i += 1
+        if i < n1:  # faces opposite a, t1, t2: on edges (t1, t2) = (b, c), (a, t2) and (a, t1)
             _attach_tet_inlined(B, a, t1, t2, d, cface[i, EDGE_BC],
                                 cface[i, EDGE_AC if flip else EDGE_AB], cface[i, EDGE_AB if flip else EDGE_AC])
+        elif cface_full[0] == 0:
+            _attach_tet_inlined(B, a, t1, t2, d, -1, -1, -1)
         else:
             _apply_tet_inlined(B, a, t1, t2, d)
     if status == ST_DONE and (B[3][BS_LIVE] != 0 or rc.dec_failed(st)):

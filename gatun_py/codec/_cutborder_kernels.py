@@ -251,47 +251,6 @@ def _sort_candidates(cand, cscore, cseq, n):
 
 
 @njit(cache=True, _nrt=False)
-def _gather_face(B, s, cand, cscore, cseq):
-    """Candidates for the fourth vertex of the tet behind border face ``s`` = (a, b, c): the
-    apexes of faces of T adjacent to an edge of ``s``, sorted by score (how many of the face's
-    edges they are adjacent across) and then by traversal order. Returns their number."""
-    E, vhead, Q, bs = B
-    a = np.int64(E[s * E_COLS + 0])
-    b = np.int64(E[s * E_COLS + 1])
-    c = np.int64(E[s * E_COLS + 2])
-    n1 = 0
-    # faces on edges (a, b) and (a, c) are all in a's list; those on (b, c) in b's list
-    for k in range(2):
-        u = a if k == 0 else b
-        node = vhead[u]
-        while node != -1:
-            g = node >> 2
-            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
-            if g == s:
-                continue
-            g0 = np.int64(E[g * E_COLS + 0])
-            g1 = np.int64(E[g * E_COLS + 1])
-            g2 = np.int64(E[g * E_COLS + 2])
-            has_a = g0 == a or g1 == a or g2 == a
-            has_b = g0 == b or g1 == b or g2 == b
-            has_c = g0 == c or g1 == c or g2 == c
-            if k == 0:
-                if has_b == has_c:  # neither: vertex-adjacent only; both: corrupt duplicate
-                    continue
-            elif has_a or not has_c:
-                continue
-            if g0 != a and g0 != b and g0 != c:
-                x = g0
-            elif g1 != a and g1 != b and g1 != c:
-                x = g1
-            else:
-                x = g2
-            n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g * E_COLS + E_SEQ])
-    _sort_candidates(cand, cscore, cseq, n1)
-    return n1
-
-
-@njit(cache=True, _nrt=False)
 def _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq):
     """The paper's case (c) list: vertices of faces of T sharing exactly one vertex with the
     current face (a, b, c) (already removed from T), except the edge candidates, in traversal
@@ -411,9 +370,8 @@ def _attach_tet(B, t0, t1, t2, t3, f0, f1, f2):
     return added0, added1, added2
 
 
-# The tet decoder's copies of the per-tet helpers, inlined into it by numba (like
-# _gather_face_noting): called, each call passed the border's arrays and the candidate lists as
-# some forty words on the stack.
+# The tet decoder's copies of the per-tet helpers, inlined into it by numba: called, each call
+# passed the border's arrays and the candidate lists as some forty words on the stack.
 _apply_tet_inlined = njit(cache=True, _nrt=False, inline="always")(_apply_tet.py_func)
 _attach_tet_inlined = njit(cache=True, _nrt=False, inline="always")(_attach_tet.py_func)
 
@@ -421,15 +379,19 @@ _attach_tet_inlined = njit(cache=True, _nrt=False, inline="always")(_attach_tet.
 EDGE_BC, EDGE_AB, EDGE_AC = 0, 1, 2
 
 
-@njit(cache=True, _nrt=False, inline="always")
-def _gather_face_noting(B, s, cand, cscore, cseq, cface, cface_full):
-    """:func:`_gather_face` that also notes, for the candidate at each position of the gather
-    (``cand`` before its sort: the caller keeps a copy), the oldest face on each edge of ``s``
-    holding it (``cface[i, EDGE_*]``, -1 none). A tet on candidate x closes exactly those faces:
-    they are the border faces holding x and an edge of ``s`` (the faces :func:`_apply_tet` finds
-    on x's list, the oldest first), so the decoder need not walk x's list for them. A vertex
-    that is no candidate holds no such face, unless the list was full: ``cface_full[0]`` is then
-    set (the caller clears it)."""
+@njit(cache=True, _nrt=False)
+def _gather_face(B, s, cand, cscore, cseq, cface, cface_full):
+    """Candidates for the fourth vertex of the tet behind border face ``s`` = (a, b, c): the
+    apexes of faces of T adjacent to an edge of ``s``, unsorted (:func:`_sort_candidates` orders
+    them by score, how many of the face's edges they are adjacent across, and then by traversal
+    order). Returns their number.
+
+    Also notes, for the candidate at each position (``cand`` before the sort: the decoder keeps
+    a copy), the oldest face on each edge of ``s`` holding it (``cface[i, EDGE_*]``, -1 none). A
+    tet on candidate x closes exactly those faces: they are the border faces holding x and an
+    edge of ``s`` (the faces :func:`_apply_tet` finds on x's list, the oldest first), so the
+    decoder need not walk x's list for them. A vertex that is no candidate holds no such face,
+    unless the list was full: ``cface_full[0]`` is then set (the caller clears it)."""
     E, vhead, Q, bs = B
     a = np.int64(E[s * E_COLS + 0])
     b = np.int64(E[s * E_COLS + 1])
@@ -486,6 +448,9 @@ def _gather_face_noting(B, s, cand, cscore, cseq, cface, cface_full):
             else:
                 cface_full[0] = 1
     return n1
+
+
+_gather_face_inlined = njit(cache=True, _nrt=False, inline="always")(_gather_face.py_func)
 
 
 @njit(cache=True, _nrt=False)
@@ -900,6 +865,8 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
     cseq = np.empty(MAX_C1, np.int64)
     c2 = np.empty(MAX_C2, np.int64)
     c2seq = np.empty(MAX_C2, np.int64)
+    cface = np.empty((MAX_C1, 3), np.int64)  # the encoder attaches by _apply_tet's walk
+    cface_full = np.zeros(1, np.int64)
     nv = nv0
     prev_esc = 0
     prev_flip = 0
@@ -932,7 +899,8 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
             if w != ao and w != bo and w != co:
                 do = w
         d = dec_of[do]
-        n1 = _gather_face(B, s, cand, cscore, cseq)
+        n1 = _gather_face(B, s, cand, cscore, cseq, cface, cface_full)
+        _sort_candidates(cand, cscore, cseq, n1)
         _remove(B, 3, s)
         ctx = _score_context(n1, cscore, prev_esc, 3)
         sym = ESC
@@ -1080,7 +1048,7 @@ def _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets, scr
         c = np.int64(E[s * E_COLS + 2])
         behind = np.int64(E[s * E_COLS + 3])
         cface_full[0] = 0
-        n1 = _gather_face_noting(B, s, cand, cscore, cseq, cface, cface_full)
+        n1 = _gather_face_inlined(B, s, cand, cscore, cseq, cface, cface_full)
         for i in range(n1):
             cfirst[i] = cand[i]
         _sort_candidates(cand, cscore, cseq, n1)

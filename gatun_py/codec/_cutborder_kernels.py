@@ -21,8 +21,13 @@ the list walks' chain of dependent loads): vertices (+ apex data) in columns 0-3
 4 * slot + corner, taken apart with a shift and a mask rather than a floor division by 3),
 free-list link (``E_FREE``; slots never used are handed out in order past ``BS_BUMP``, so the
 table needs no initialisation); ``vhead (nv) int32`` list heads;
-``Q (qcap, 2) int64`` (the decoders: int32) FIFO ring of (slot, sequence), ``qcap`` a power of two; ``bs int64`` scalars
-(see ``BS_*``).
+``Q (qcap, 2) int64`` (the decoders: int32) FIFO ring of (slot, sequence), ``qcap`` a power of
+two; ``bs int64`` scalars (see ``BS_*``).
+
+The tet decoder does not walk the fourth vertex's list for the faces a new tet closes: they are
+the faces on an edge of the current face holding that vertex, which its candidate gather has
+just visited and notes (:func:`_gather_face`); the encoder walks the list (:func:`_apply_tet`),
+so every round trip compares the two.
 """
 
 from __future__ import annotations
@@ -397,6 +402,7 @@ def _gather_face(B, s, cand, cscore, cseq, cface, cface_full):
     b = np.int64(E[s * E_COLS + 1])
     c = np.int64(E[s * E_COLS + 2])
     n1 = 0
+    # faces on edges (a, b) and (a, c) are all in a's list; those on (b, c) in b's list
     for k in range(2):
         u = a if k == 0 else b
         node = vhead[u]

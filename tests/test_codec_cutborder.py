@@ -80,6 +80,31 @@ def test_random_meshes_round_trip(mesh, batch):
     check_round_trip(mesh, batch)
 
 
+def _book_of_tets(pages: int, *, closed: bool) -> TetMesh:
+    """Tets around the edge from (0, 0, 0) to (0, 0, 1): a closed ring (each sharing faces with
+    its two neighbours), or ``pages`` separate tets meeting only along that edge."""
+    angles = np.linspace(0.0, 2 * np.pi, 2 * pages, endpoint=False)
+    rim = np.stack([np.cos(angles), np.sin(angles), np.full_like(angles, 0.5)], axis=1)
+    points = np.vstack([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], rim])
+    if closed:
+        tets = [[0, 1, 2 + i, 2 + (i + 1) % (2 * pages)] for i in range(2 * pages)]
+    else:
+        tets = [[0, 1, 2 + 2 * i, 3 + 2 * i] for i in range(pages)]
+    mesh = TetMesh(points, np.arange(len(points), dtype=float), np.array(tets))
+    tets = mesh.tets.copy()
+    neg = mesh.signed_volumes() < 0
+    tets[neg] = tets[neg][:, [1, 0, 2, 3]]
+    return TetMesh(points, mesh.density, tets)
+
+
+@pytest.mark.parametrize("pages,closed", [(8, False), (40, False), (40, True)])
+def test_tets_around_one_edge_round_trip(pages, closed):
+    """Many border faces on one edge (a ring of tets, or tets meeting only there): the decoder
+    takes the faces a tet closes from its gather's notes, the encoder walks the fourth vertex's
+    list for them; the round trip compares the two."""
+    check_round_trip(_book_of_tets(pages, closed=closed))
+
+
 def test_folded_zero_volume_tets_round_trip():
     """Zero-volume tets may be wound either way (as in Blunt-fin): the coder keeps each one's winding."""
     mesh = degenerate_grid()

@@ -21,8 +21,13 @@ the list walks' chain of dependent loads): vertices (+ apex data) in columns 0-3
 4 * slot + corner, taken apart with a shift and a mask rather than a floor division by 3),
 free-list link (``E_FREE``; slots never used are handed out in order past ``BS_BUMP``, so the
 table needs no initialisation); ``vhead (nv) int32`` list heads;
-``Q (qcap, 2) int64`` (the decoders: int32) FIFO ring of (slot, sequence); ``bs int64`` scalars
-(see ``BS_*``).
+``Q (qcap, 2) int64`` (the decoders: int32) FIFO ring of (slot, sequence), ``qcap`` a power of
+two; ``bs int64`` scalars (see ``BS_*``).
+
+The tet decoder does not walk the fourth vertex's list for the faces a new tet closes: they are
+the faces on an edge of the current face holding that vertex, which its candidate gather has
+just visited and notes (:func:`_gather_face`); the encoder walks the list (:func:`_apply_tet`),
+so every round trip compares the two.
 """
 
 from __future__ import annotations
@@ -72,12 +77,18 @@ SM_SIZE = SM_FLIP + 4
 ST_DONE, ST_BATCH, ST_GROW, ST_ERROR = 0, 1, 2, 3
 
 
+def _pow2_at_least(n: int) -> int:
+    """The smallest power of two >= n: the queue's capacity, so that a position in the ring is
+    a mask of the running count rather than a division (two per tet)."""
+    return 1 << max(int(n) - 1, 0).bit_length()
+
+
 def new_border(n_vertices: int, cap: int, qcap: int, *, queue_dtype=np.int64):
     """Allocate an empty border for ``n_vertices`` vertices (the decoders pass ``queue_dtype``
     int32: slots and sequence numbers fit, see ``MAX_SLOTS`` and ``MAX_SEQ``, and the queue is
     their largest array after E)."""
     cap = max(int(cap), 16)
-    qcap = max(int(qcap), 16)
+    qcap = _pow2_at_least(max(int(qcap), 16))
     E = np.empty((cap, E_COLS), np.int32)
     vhead = np.full(max(int(n_vertices), 1), -1, np.int32)
     Q = np.zeros((qcap, 2), queue_dtype)
@@ -103,8 +114,8 @@ def grow_border(B, need_slots: int, need_queue: int):
     qcap = Q.shape[0]
     used = int(bs[BS_QTAIL] - bs[BS_QHEAD])
     if qcap - used < need_queue:
-        new_qcap = max(2 * qcap, used + need_queue)
-        idx = (int(bs[BS_QHEAD]) + np.arange(used)) % qcap
+        new_qcap = _pow2_at_least(max(2 * qcap, used + need_queue))
+        idx = (int(bs[BS_QHEAD]) + np.arange(used)) & (qcap - 1)
         nq = np.zeros((new_qcap, 2), Q.dtype)
         nq[:used] = Q[idx]
         Q = nq
@@ -150,7 +161,7 @@ def _add(B, k, v0, v1, v2, v3):
         if h != -1:
             E[(h >> 2) * E_COLS + E_PREV + (h & 3)] = node
         vhead[v] = node
-    t = bs[BS_QTAIL] % Q.shape[0]
+    t = bs[BS_QTAIL] & (Q.shape[0] - 1)
     Q[t, 0] = s
     Q[t, 1] = seq
     bs[BS_QTAIL] += 1
@@ -185,7 +196,7 @@ def _pop(B):
     E, vhead, Q, bs = B
     qcap = Q.shape[0]
     while bs[BS_QHEAD] < bs[BS_QTAIL]:
-        h = bs[BS_QHEAD] % qcap
+        h = bs[BS_QHEAD] & (qcap - 1)
         bs[BS_QHEAD] += 1
         s = Q[h, 0]
         if E[s * E_COLS + E_SEQ] == Q[h, 1]:
@@ -242,47 +253,6 @@ def _sort_candidates(cand, cscore, cseq, n):
         cand[j + 1] = x
         cscore[j + 1] = sc
         cseq[j + 1] = sq
-
-
-@njit(cache=True, _nrt=False)
-def _gather_face(B, s, cand, cscore, cseq):
-    """Candidates for the fourth vertex of the tet behind border face ``s`` = (a, b, c): the
-    apexes of faces of T adjacent to an edge of ``s``, sorted by score (how many of the face's
-    edges they are adjacent across) and then by traversal order. Returns their number."""
-    E, vhead, Q, bs = B
-    a = np.int64(E[s * E_COLS + 0])
-    b = np.int64(E[s * E_COLS + 1])
-    c = np.int64(E[s * E_COLS + 2])
-    n1 = 0
-    # faces on edges (a, b) and (a, c) are all in a's list; those on (b, c) in b's list
-    for k in range(2):
-        u = a if k == 0 else b
-        node = vhead[u]
-        while node != -1:
-            g = node >> 2
-            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
-            if g == s:
-                continue
-            g0 = np.int64(E[g * E_COLS + 0])
-            g1 = np.int64(E[g * E_COLS + 1])
-            g2 = np.int64(E[g * E_COLS + 2])
-            has_a = g0 == a or g1 == a or g2 == a
-            has_b = g0 == b or g1 == b or g2 == b
-            has_c = g0 == c or g1 == c or g2 == c
-            if k == 0:
-                if has_b == has_c:  # neither: vertex-adjacent only; both: corrupt duplicate
-                    continue
-            elif has_a or not has_c:
-                continue
-            if g0 != a and g0 != b and g0 != c:
-                x = g0
-            elif g1 != a and g1 != b and g1 != c:
-                x = g1
-            else:
-                x = g2
-            n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g * E_COLS + E_SEQ])
-    _sort_candidates(cand, cscore, cseq, n1)
-    return n1
 
 
 @njit(cache=True, _nrt=False)
@@ -379,6 +349,13 @@ def _apply_tet(B, t0, t1, t2, t3):
             f1 = g
         elif (x == t0 and y == t1) or (x == t1 and y == t0):
             f2 = g
+    return _attach_tet(B, t0, t1, t2, t3, f0, f1, f2)
+
+
+@njit(cache=True, _nrt=False)
+def _attach_tet(B, t0, t1, t2, t3, f0, f1, f2):
+    """The second half of :func:`_apply_tet`, given the border faces ``f0``, ``f1``, ``f2`` (-1:
+    none) that the faces opposite t0, t1, t2 close."""
     # outward faces opposite t0, t1, t2 (TET_FACES), stored reversed when they join the border
     if f0 != -1:
         _remove(B, 3, f0)
@@ -396,6 +373,90 @@ def _apply_tet(B, t0, t1, t2, t3):
     else:
         added2 = _add(B, 3, t0, t3, t1, t2)
     return added0, added1, added2
+
+
+# The tet decoder's copies of the per-tet helpers, inlined into it by numba: called, each call
+# passed the border's arrays and the candidate lists as some forty words on the stack.
+_apply_tet_inlined = njit(cache=True, _nrt=False, inline="always")(_apply_tet.py_func)
+_attach_tet_inlined = njit(cache=True, _nrt=False, inline="always")(_attach_tet.py_func)
+
+# edges of the current face (a, b, c) in the tet decoder's record of the faces on them
+EDGE_BC, EDGE_AB, EDGE_AC = 0, 1, 2
+
+
+@njit(cache=True, _nrt=False)
+def _gather_face(B, s, cand, cscore, cseq, cface, cface_full):
+    """Candidates for the fourth vertex of the tet behind border face ``s`` = (a, b, c): the
+    apexes of faces of T adjacent to an edge of ``s``, unsorted (:func:`_sort_candidates` orders
+    them by score, how many of the face's edges they are adjacent across, and then by traversal
+    order). Returns their number.
+
+    Also notes, for the candidate at each position (``cand`` before the sort: the decoder keeps
+    a copy), the oldest face on each edge of ``s`` holding it (``cface[i, EDGE_*]``, -1 none). A
+    tet on candidate x closes exactly those faces: they are the border faces holding x and an
+    edge of ``s`` (the faces :func:`_apply_tet` finds on x's list, the oldest first), so the
+    decoder need not walk x's list for them. A vertex that is no candidate holds no such face,
+    unless the list was full: ``cface_full[0]`` is then set (the caller clears it)."""
+    E, vhead, Q, bs = B
+    a = np.int64(E[s * E_COLS + 0])
+    b = np.int64(E[s * E_COLS + 1])
+    c = np.int64(E[s * E_COLS + 2])
+    n1 = 0
+    # faces on edges (a, b) and (a, c) are all in a's list; those on (b, c) in b's list
+    for k in range(2):
+        u = a if k == 0 else b
+        node = vhead[u]
+        while node != -1:
+            g = node >> 2
+            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+            if g == s:
+                continue
+            g0 = np.int64(E[g * E_COLS + 0])
+            g1 = np.int64(E[g * E_COLS + 1])
+            g2 = np.int64(E[g * E_COLS + 2])
+            has_a = g0 == a or g1 == a or g2 == a
+            has_b = g0 == b or g1 == b or g2 == b
+            has_c = g0 == c or g1 == c or g2 == c
+            if k == 0:
+                if has_b == has_c:  # neither: vertex-adjacent only; both: corrupt duplicate
+                    continue
+                edge = EDGE_AB if has_b else EDGE_AC
+            elif has_a or not has_c:
+                continue
+            else:
+                edge = EDGE_BC
+            if g0 != a and g0 != b and g0 != c:
+                x = g0
+            elif g1 != a and g1 != b and g1 != c:
+                x = g1
+            else:
+                x = g2
+            seq = E[g * E_COLS + E_SEQ]
+            i = 0
+            while i < n1 and cand[i] != x:
+                i += 1
+            if i < n1:
+                cscore[i] += 1
+                if seq < cseq[i]:
+                    cseq[i] = seq
+                f = cface[i, edge]
+                if f == -1 or seq < E[f * E_COLS + E_SEQ]:
+                    cface[i, edge] = g
+            elif n1 < cand.shape[0]:  # as _insert_candidate
+                cand[n1] = x
+                cscore[n1] = 1
+                cseq[n1] = seq
+                cface[n1, 0] = -1
+                cface[n1, 1] = -1
+                cface[n1, 2] = -1
+                cface[n1, edge] = g
+                n1 += 1
+            else:
+                cface_full[0] = 1
+    return n1
+
+
+_gather_face_inlined = njit(cache=True, _nrt=False, inline="always")(_gather_face.py_func)
 
 
 @njit(cache=True, _nrt=False)
@@ -810,6 +871,8 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
     cseq = np.empty(MAX_C1, np.int64)
     c2 = np.empty(MAX_C2, np.int64)
     c2seq = np.empty(MAX_C2, np.int64)
+    cface = np.empty((MAX_C1, 3), np.int64)  # the encoder attaches by _apply_tet's walk
+    cface_full = np.zeros(1, np.int64)
     nv = nv0
     prev_esc = 0
     prev_flip = 0
@@ -818,7 +881,7 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
     for done in range(m):
         s = -1  # _pop written out
         while bs[BS_QHEAD] < bs[BS_QTAIL]:
-            h = bs[BS_QHEAD] % qcap
+            h = bs[BS_QHEAD] & (qcap - 1)
             bs[BS_QHEAD] += 1
             if E[Q[h, 0] * E_COLS + E_SEQ] == Q[h, 1]:
                 s = Q[h, 0]
@@ -842,7 +905,8 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
             if w != ao and w != bo and w != co:
                 do = w
         d = dec_of[do]
-        n1 = _gather_face(B, s, cand, cscore, cseq)
+        n1 = _gather_face(B, s, cand, cscore, cseq, cface, cface_full)
+        _sort_candidates(cand, cscore, cseq, n1)
         _remove(B, 3, s)
         ctx = _score_context(n1, cscore, prev_esc, 3)
         sym = ESC
@@ -938,6 +1002,19 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
     cseq = np.empty(MAX_C1, np.int64)
     c2 = np.empty(MAX_C2, np.int64)
     c2seq = np.empty(MAX_C2, np.int64)
+    cface = np.empty((MAX_C1, 3), np.int64)
+    cfirst = np.empty(MAX_C1, np.int64)  # the candidates in gather order (cface's rows)
+    cface_full = np.zeros(1, np.int64)
+    return _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets,
+                            (cand, cscore, cseq, c2, c2seq, cface, cfirst, cface_full))
+
+
+# compiled without the runtime's reference counting (it allocates nothing): the helpers inlined
+# into its loop would otherwise increment and decrement the border arrays' counts on every tet
+@njit(cache=True, nogil=True, _nrt=False)
+def _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets, scratch):
+    """The loop of :func:`decode_tets`, with its candidate lists in ``scratch``."""
+    cand, cscore, cseq, c2, c2seq, cface, cfirst, cface_full = scratch
     nv = tstate[0]
     done = tstate[1]
     prev_esc = tstate[2]
@@ -964,7 +1041,7 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
             break
         s = -1
         while bs[BS_QHEAD] < bs[BS_QTAIL]:
-            h = bs[BS_QHEAD] % qcap
+            h = bs[BS_QHEAD] & (qcap - 1)
             bs[BS_QHEAD] += 1
             if E[Q[h, 0] * E_COLS + E_SEQ] == Q[h, 1]:
                 s = Q[h, 0]
@@ -976,7 +1053,11 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         b = np.int64(E[s * E_COLS + 1])
         c = np.int64(E[s * E_COLS + 2])
         behind = np.int64(E[s * E_COLS + 3])
-        n1 = _gather_face(B, s, cand, cscore, cseq)
+        cface_full[0] = 0
+        n1 = _gather_face_inlined(B, s, cand, cscore, cseq, cface, cface_full)
+        for i in range(n1):
+            cfirst[i] = cand[i]
+        _sort_candidates(cand, cscore, cseq, n1)
         _remove(B, 3, s)
         ctx = _score_context(n1, cscore, prev_esc, 3)
         sym = rc.dec_sym(st, data, probs, TM_C1 + ctx * 16, 4)
@@ -1029,7 +1110,18 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
         out_tets[n_out, 3] = d
         n_out += 1
         done += 1
-        _apply_tet(B, a, t1, t2, d)
+        # the faces this tet closes were noted by the gather (d a candidate), or there are none
+        # (d no candidate, the list not full); else they are found on d's list
+        i = 0
+        while i < n1 and cfirst[i] != d:
+            i += 1
+        if i < n1:  # faces opposite a, t1, t2: on edges (t1, t2) = (b, c), (a, t2) and (a, t1)
+            _attach_tet_inlined(B, a, t1, t2, d, cface[i, EDGE_BC],
+                                cface[i, EDGE_AC if flip else EDGE_AB], cface[i, EDGE_AB if flip else EDGE_AC])
+        elif cface_full[0] == 0:
+            _attach_tet_inlined(B, a, t1, t2, d, -1, -1, -1)
+        else:
+            _apply_tet_inlined(B, a, t1, t2, d)
     if status == ST_DONE and (B[3][BS_LIVE] != 0 or rc.dec_failed(st)):
         status = ST_ERROR
     tstate[0] = nv

@@ -38,13 +38,22 @@ import numpy as np
 
 from ..errors import CorruptFileError
 from . import _geometry_kernels as K
+from .container import VERSION_MAJOR
 from .rangecoder import (ADAPT_SHIFT, DEC_ERROR, DEC_OVERRUN, DEC_POS, INT_BUCKET_BITS, PROB_ONE, dec_state,
                          enc_state, new_model)
 
-# the block's coding version: 1 (format <= 3), 2 (format 4: adds the tet-geometry predictors of
-# _geometry_kernels._geometric_cands); the reader takes both, the encoder writes FORMAT_VERSION
-FORMAT_VERSION = 2
 CODINGS = K.CODINGS
+
+
+def coding_for_format(major: int) -> int:
+    """The geometry block coding a file of container format ``major`` is written with: 1 up to
+    format 3, 2 from format 4 on (the tet-geometry predictors of
+    :func:`gatun_py.codec._geometry_kernels._geometric_cands`). Readers take both codings."""
+    return 1 if major <= 3 else 2
+
+
+# what this version of tetc writes
+FORMAT_VERSION = coding_for_format(VERSION_MAJOR)
 MAX_POINTS = 1 << 29  # the decoder's scratch tags (3 per vertex) are int32
 _HEADER = struct.Struct("<BBI4I")
 HEADER_SIZE = _HEADER.size

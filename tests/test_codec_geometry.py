@@ -301,11 +301,40 @@ def test_emulated_order_is_a_valid_decode_order():
 # ------------------------------------------------------------------------------ bad input
 
 
-@pytest.fixture(scope="module")
-def post_blob():
+@pytest.fixture(scope="module", params=CODINGS, ids=lambda c: f"coding{c}")
+def post_blob(request):
     mesh = load_sample("post")[0]
     points, density, refs = _in_decode_order(mesh)
-    return encode_geometry(points, density, refs), refs
+    return encode_geometry(points, density, refs, coding=request.param), refs
+
+
+@pytest.fixture(scope="module")
+def smooth_blob():
+    """Coding 2 on an unstructured mesh with a smooth field: the tet-geometry predictors at work."""
+    from meshgen import delaunay_mesh
+
+    mesh = delaunay_mesh(400, seed=5)
+    points, _, refs = _in_decode_order(mesh)
+    x, y, z = points.astype(np.float64).T
+    density = (np.sin(3 * x) * np.cos(2 * y) + z).astype(np.float32)
+    blob = encode_geometry(points, density, refs, coding=2)
+    assert len(blob) < len(encode_geometry(points, density, refs, coding=1))
+    return blob, refs
+
+
+def test_truncation_and_flips_of_coding_2_on_a_smooth_mesh(smooth_blob):
+    blob, refs = smooth_blob
+    for cut in np.linspace(0, len(blob) - 1, 60).astype(int):
+        with pytest.raises(CorruptFileError):
+            decode_geometry(blob[:cut], refs)
+    rng = np.random.default_rng(11)
+    detected = 0
+    for _ in range(200):
+        data = bytearray(blob)
+        pos = int(rng.integers(HEADER_SIZE, len(data)))
+        data[pos] ^= int(rng.integers(1, 256))
+        detected += not _decode_or_corrupt(bytes(data), refs)
+    assert detected > 60
 
 
 def _decode_or_corrupt(data, refs):

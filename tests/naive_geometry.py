@@ -279,6 +279,24 @@ def naive_beyond_face(values, f0, f1, f2, apex, ch, fallback):
     return out + [g[ch] - n_c * h, g[ch] + n_c * (REGULAR_HEIGHT * math.sqrt(0.5 * norm))]
 
 
+def naive_beyond_edge(values, f0, f1, apex, ch, fallback):
+    """Coordinate ch of: m - p and m - p/|p| * equilateral height (m: the edge's midpoint, p: the
+    apex's offset from the edge's line)."""
+    e = [_f(values, f1, c) - _f(values, f0, c) for c in range(3)]
+    m = [(_f(values, f0, c) + _f(values, f1, c)) * 0.5 for c in range(3)]
+    e2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
+    if not (0.0 < e2 < math.inf):
+        return [fallback, fallback]
+    d = [_f(values, apex, c) - m[c] for c in range(3)]
+    t = (d[0] * e[0] + d[1] * e[1] + d[2] * e[2]) / e2
+    p = [d[c] - t * e[c] for c in range(3)]
+    plen = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
+    first = m[ch] - p[ch]
+    if not (0.0 < plen < math.inf):
+        return [first, fallback]
+    return [first, m[ch] - p[ch] / plen * (0.8660254037844386 * math.sqrt(e2))]
+
+
 def _geometric(values, k, face, apex, ch, cands):
     """Version 2's extra candidates (float32-rounded where the kernel stores them)."""
     f32 = lambda x: float(np.float32(x))  # noqa: E731  (the kernel's scratch is float32)
@@ -292,7 +310,10 @@ def _geometric(values, k, face, apex, ch, cands):
     if len(face) == 3:
         return [naive_tri_linear(values, k, *face, ch, f32(cands[0])) if ch == 3 else cands[0]]
     if len(face) == 2 and apex >= 0:
-        return [naive_tri_linear(values, k, face[0], face[1], apex, ch, f32(cands[0])) if ch == 3 else cands[0]]
+        if ch == 3:
+            tri = f32(naive_tri_linear(values, k, face[0], face[1], apex, ch, f32(cands[0])))
+            return [tri, 0.5 * (tri + f32(cands[0]))]
+        return naive_beyond_edge(values, face[0], face[1], apex, ch, f32(cands[0]))
     return []
 
 

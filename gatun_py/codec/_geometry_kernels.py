@@ -69,7 +69,7 @@ MAX_CANDS = 15
 # candidates per pattern, by coding version: version 2 appends the tet-geometry predictors
 # (:func:`_geometric_cands`) after version 1's, so the version-1 candidates keep their indices
 N_CANDS_V1 = (1, 1, 6, 6, 10, 12)
-N_CANDS_V2 = (1, 1, 6, 7, 11, 15)
+N_CANDS_V2 = (1, 1, 6, 8, 11, 15)
 CODINGS = (1, 2)  # the geometry block versions these kernels decode
 CAND_VERSION = N_PATTERNS  # where candidate_table keeps the coding version
 
@@ -448,6 +448,43 @@ def _beyond_face(vf, f0, f1, f2, apex, ch, scratch_f, at, fallback):
     scratch_f[at + 2] = gc + n_c * (REGULAR_HEIGHT * np.sqrt(0.5 * norm))
 
 
+EQUILATERAL_HEIGHT = 0.8660254037844386  # sqrt(3) / 2
+
+
+@njit(cache=True, _nrt=False)
+def _beyond_edge(vf, f0, f1, apex, ch, scratch_f, at, fallback):
+    """Coordinate ``ch`` of two predictions of the vertex across edge (f0, f1) from the apex (a
+    boundary triangle strip), into ``scratch_f[at:at + 2]``: the edge midpoint m minus the apex's
+    offset perpendicular to the edge, and m minus the unit perpendicular times an equilateral
+    triangle's height on the edge."""
+    ex = _sub(vf, f1, f0, 0)
+    ey = _sub(vf, f1, f0, 1)
+    ez = _sub(vf, f1, f0, 2)
+    mx = (np.float64(vf[f0, 0]) + np.float64(vf[f1, 0])) * 0.5
+    my = (np.float64(vf[f0, 1]) + np.float64(vf[f1, 1])) * 0.5
+    mz = (np.float64(vf[f0, 2]) + np.float64(vf[f1, 2])) * 0.5
+    e2 = ex * ex + ey * ey + ez * ez
+    if not (e2 > 0.0 and e2 < np.inf):
+        scratch_f[at] = fallback
+        scratch_f[at + 1] = fallback
+        return
+    dx = np.float64(vf[apex, 0]) - mx
+    dy = np.float64(vf[apex, 1]) - my
+    dz = np.float64(vf[apex, 2]) - mz
+    t = (dx * ex + dy * ey + dz * ez) / e2
+    px = dx - t * ex  # the apex's offset from the edge's line, perpendicular to it
+    py = dy - t * ey
+    pz = dz - t * ez
+    m_c = mx if ch == 0 else (my if ch == 1 else mz)
+    p_c = px if ch == 0 else (py if ch == 1 else pz)
+    scratch_f[at] = m_c - p_c
+    plen = np.sqrt(px * px + py * py + pz * pz)
+    if not (plen > 0.0 and plen < np.inf):
+        scratch_f[at + 1] = fallback
+        return
+    scratch_f[at + 1] = m_c - p_c / plen * (EQUILATERAL_HEIGHT * np.sqrt(e2))
+
+
 @njit(cache=True, _nrt=False)
 def _geometric_cands(k, face0, face1, face2, apex, nf, vf, ch, scratch_f, nc):
     """Version 2's candidates, appended at ``scratch_f[nc:]``; returns the new count.
@@ -472,8 +509,13 @@ def _geometric_cands(k, face0, face1, face2, apex, nf, vf, ch, scratch_f, nc):
         scratch_f[nc] = _tri_linear(vf, k, face0, face1, face2, ch, scratch_f[0]) if ch == 3 else scratch_f[0]
         return nc + 1
     if nf == 2 and apex >= 0:
-        scratch_f[nc] = _tri_linear(vf, k, face0, face1, apex, ch, scratch_f[0]) if ch == 3 else scratch_f[0]
-        return nc + 1
+        if ch == 3:
+            tri = _tri_linear(vf, k, face0, face1, apex, ch, scratch_f[0])
+            scratch_f[nc] = tri
+            scratch_f[nc + 1] = 0.5 * (np.float64(scratch_f[nc]) + np.float64(scratch_f[0]))
+        else:
+            _beyond_edge(vf, face0, face1, apex, ch, scratch_f, nc, scratch_f[0])
+        return nc + 2
     return nc
 
 

@@ -339,11 +339,6 @@ MAX_WEIGHT = 4.0
 REGULAR_HEIGHT = 1.2408064788027995
 
 
-@njit(cache=True, inline="always")
-def _sub(vf, x, y, c):
-    return np.float64(vf[x, c]) - np.float64(vf[y, c])
-
-
 @njit(cache=True, _nrt=False)
 def _tri_linear(vf, k, p0, p1, p2, ch, fallback):
     """The linear field through triangle (p0, p1, p2) on channel ``ch``, at the orthogonal
@@ -354,9 +349,9 @@ def _tri_linear(vf, k, p0, p1, p2, ch, fallback):
     r1 = 0.0
     r2 = 0.0
     for c in range(3):
-        a = _sub(vf, p1, p0, c)
-        b = _sub(vf, p2, p0, c)
-        r = _sub(vf, k, p0, c)
+        a = np.float64(vf[p1, c]) - np.float64(vf[p0, c])
+        b = np.float64(vf[p2, c]) - np.float64(vf[p0, c])
+        r = np.float64(vf[k, c]) - np.float64(vf[p0, c])
         e11 += a * a
         e12 += a * b
         e22 += b * b
@@ -377,18 +372,18 @@ def _tri_linear(vf, k, p0, p1, p2, ch, fallback):
 def _tet_linear(vf, k, p0, p1, p2, p3, ch, fallback):
     """The linear field through tet (p0, p1, p2, p3) on channel ``ch`` at vertex k's position
     (its barycentric coordinates by Cramer's rule)."""
-    ax = _sub(vf, p1, p0, 0)
-    ay = _sub(vf, p1, p0, 1)
-    az = _sub(vf, p1, p0, 2)
-    bx = _sub(vf, p2, p0, 0)
-    by = _sub(vf, p2, p0, 1)
-    bz = _sub(vf, p2, p0, 2)
-    cx = _sub(vf, p3, p0, 0)
-    cy = _sub(vf, p3, p0, 1)
-    cz = _sub(vf, p3, p0, 2)
-    rx = _sub(vf, k, p0, 0)
-    ry = _sub(vf, k, p0, 1)
-    rz = _sub(vf, k, p0, 2)
+    ax = np.float64(vf[p1, 0]) - np.float64(vf[p0, 0])
+    ay = np.float64(vf[p1, 1]) - np.float64(vf[p0, 1])
+    az = np.float64(vf[p1, 2]) - np.float64(vf[p0, 2])
+    bx = np.float64(vf[p2, 0]) - np.float64(vf[p0, 0])
+    by = np.float64(vf[p2, 1]) - np.float64(vf[p0, 1])
+    bz = np.float64(vf[p2, 2]) - np.float64(vf[p0, 2])
+    cx = np.float64(vf[p3, 0]) - np.float64(vf[p0, 0])
+    cy = np.float64(vf[p3, 1]) - np.float64(vf[p0, 1])
+    cz = np.float64(vf[p3, 2]) - np.float64(vf[p0, 2])
+    rx = np.float64(vf[k, 0]) - np.float64(vf[p0, 0])
+    ry = np.float64(vf[k, 1]) - np.float64(vf[p0, 1])
+    rz = np.float64(vf[k, 2]) - np.float64(vf[p0, 2])
     # b x c, c x a, a x b: the rows of the inverse (times det)
     bcx = by * cz - bz * cy
     bcy = bz * cx - bx * cz
@@ -422,12 +417,12 @@ def _beyond_face(vf, f0, f1, f2, apex, ch, scratch_f, at, fallback):
     g0 = (np.float64(vf[f0, 0]) + np.float64(vf[f1, 0]) + np.float64(vf[f2, 0])) / 3.0
     g1 = (np.float64(vf[f0, 1]) + np.float64(vf[f1, 1]) + np.float64(vf[f2, 1])) / 3.0
     g2 = (np.float64(vf[f0, 2]) + np.float64(vf[f1, 2]) + np.float64(vf[f2, 2])) / 3.0
-    ax = _sub(vf, f1, f0, 0)
-    ay = _sub(vf, f1, f0, 1)
-    az = _sub(vf, f1, f0, 2)
-    bx = _sub(vf, f2, f0, 0)
-    by = _sub(vf, f2, f0, 1)
-    bz = _sub(vf, f2, f0, 2)
+    ax = np.float64(vf[f1, 0]) - np.float64(vf[f0, 0])
+    ay = np.float64(vf[f1, 1]) - np.float64(vf[f0, 1])
+    az = np.float64(vf[f1, 2]) - np.float64(vf[f0, 2])
+    bx = np.float64(vf[f2, 0]) - np.float64(vf[f0, 0])
+    by = np.float64(vf[f2, 1]) - np.float64(vf[f0, 1])
+    bz = np.float64(vf[f2, 2]) - np.float64(vf[f0, 2])
     nx = ay * bz - az * by
     ny = az * bx - ax * bz
     nz = ax * by - ay * bx
@@ -457,9 +452,9 @@ def _beyond_edge(vf, f0, f1, apex, ch, scratch_f, at, fallback):
     boundary triangle strip), into ``scratch_f[at:at + 2]``: the edge midpoint m minus the apex's
     offset perpendicular to the edge, and m minus the unit perpendicular times an equilateral
     triangle's height on the edge."""
-    ex = _sub(vf, f1, f0, 0)
-    ey = _sub(vf, f1, f0, 1)
-    ez = _sub(vf, f1, f0, 2)
+    ex = np.float64(vf[f1, 0]) - np.float64(vf[f0, 0])
+    ey = np.float64(vf[f1, 1]) - np.float64(vf[f0, 1])
+    ez = np.float64(vf[f1, 2]) - np.float64(vf[f0, 2])
     mx = (np.float64(vf[f0, 0]) + np.float64(vf[f1, 0])) * 0.5
     my = (np.float64(vf[f0, 1]) + np.float64(vf[f1, 1])) * 0.5
     mz = (np.float64(vf[f0, 2]) + np.float64(vf[f1, 2])) * 0.5
@@ -634,7 +629,9 @@ def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_
             pat = PAT_FACE
             nc = 10
     if version >= 2:
-        nc = _geometric_cands(k, face0, face1, face2, apex, nf, vf, ch, scratch_f, nc)
+        # int64 casts: numba would otherwise compile a copy per call site that sees a literal -1
+        nc = _geometric_cands(k, np.int64(face0), np.int64(face1), np.int64(face2), np.int64(apex), nf, vf, ch,
+                              scratch_f, nc)
     for q in range(nc):
         if scratch_f[q] != scratch_f[q]:  # NaN: payload bits are not portable, predict 0
             scratch_f[q] = 0.0

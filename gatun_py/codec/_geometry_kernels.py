@@ -31,6 +31,14 @@ Then per channel:
    in a context of ref pattern, size of the previous residual and local activity (spread of the
    refs' values).
 
+Coding 2 (format 4) appends candidates built from the geometry of the tet being added
+(:func:`_geometric_cands`): for the density, which is coded after the vertex's x, y, z, the linear
+field through the ref tet (or the face's plane, or the boundary triangle) evaluated at the vertex's
+decoded position; for the coordinates, the apex reflected through the face centroid and the
+centroid moved along the face normal by the apex's height or a regular tet's height (across the
+edge for boundary vertices). The kernels learn the coding from the ``cands`` array of
+:func:`candidate_table` (candidate counts per pattern, then the version).
+
 All prediction arithmetic is float64 on float32 inputs, rounded to float32 once, without
 ``fastmath``; partners are chosen from vertices < k only. Encoder and decoder run the same
 kernels on the same bits, so they agree exactly. The decoder checks every ref, table index and

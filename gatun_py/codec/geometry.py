@@ -15,7 +15,8 @@ although validation keeps those out of meshes). The model, per vertex and per ch
 density), is described in :mod:`gatun_py.codec._geometry_kernels`: a cheap symbol for "equal to a
 ref's value" (y also "equal to the y last seen with this x"), otherwise a backward-adaptively
 chosen linear prediction from the refs and from grid-line partners the coder finds in its own edge
-graph, with an exact integer residual, either on the order-preserving integer of the float bits or
+graph (coding 2 adds predictions from the tet's geometry: the density as the linear field through
+the ref tet at the vertex's decoded position, the coordinates beyond the face or edge), with an exact integer residual, either on the order-preserving integer of the float bits or
 on the rank in a table of the channel's distinct values (chosen per channel, whichever is smaller).
 
 The decoder keeps, besides the vertex table (16 bytes per vertex), its edge graph (36 bytes per
@@ -23,7 +24,7 @@ vertex) and the x -> y table (18 to 36 bytes per vertex).
 
 Byte layout of the geometry block (little endian)::
 
-    u8  version (1)
+    u8  coding      1 (format <= 3) or 2 (format 4: adds the tet-geometry predictors)
     u8  modes       bit ch set: channel ch uses the value table
     u32 n_points
     u32 length[4]   byte length of each channel's range-coded stream

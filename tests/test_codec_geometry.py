@@ -479,3 +479,19 @@ def test_hash_table_without_a_free_slot_is_refused(post_blob):
     dec.hkeys, dec.hvals = np.zeros(3 * full, np.int64), np.zeros(3 * full, np.uint8)  # not a power of two
     with pytest.raises(CorruptFileError):
         dec.decode(refs[:10])
+
+
+# ------------------------------------------------------------------------------ format versions
+
+
+def test_files_of_format_4_carry_geometry_coding_2_and_older_formats_coding_1(post_tetc):
+    from gatun_py.codec.container import VERSION_MAJOR
+    from gatun_py.codec.geometry import coding_for_format
+    from gatun_py.codec.tetcfile import TetcReader
+
+    assert [coding_for_format(v) for v in (1, 2, 3, 4)] == [1, 1, 1, 2]
+    assert FORMAT_VERSION == coding_for_format(VERSION_MAJOR) == 2
+    r = TetcReader(post_tetc)
+    assert r.container.major == VERSION_MAJOR == 4
+    for lv in range(len(r.levels)):
+        assert r.read_section(f"L{lv}/geometry")[0] == 2

@@ -37,9 +37,9 @@ field through the ref tet (or the face's plane, or the boundary triangle) evalua
 decoded position; for the coordinates, the apex reflected through the face centroid and the
 centroid moved along the face normal by the apex's height or a regular tet's height (across the
 edge for boundary vertices). It also codes a coordinate's repetition symbol (when there are at
-least two candidates) in a context of which candidate the chosen prediction lands nearest: on a
-grid that is usually the repeated value (Blunt-fin 22.1 -> 21.4 bits per vertex, fire 17.1 ->
-16.3). The kernels learn the coding from the ``cands`` array of :func:`candidate_table`
+least two candidates) in a context of which candidate the pattern's first prediction lands
+nearest: on a grid that is usually the repeated value (Blunt-fin 22.1 -> 21.3 bits per vertex,
+fire 17.1 -> 16.1). The kernels learn the coding from the ``cands`` array of :func:`candidate_table`
 (candidate counts per pattern, then the version).
 
 All prediction arithmetic is float64 on float32 inputs, rounded to float32 once, without
@@ -653,6 +653,41 @@ def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_
 
 
 @njit(cache=True, _nrt=False)
+def _first_prediction(k, r0, r1, r2, r3, vf, vi, ch, scratch_f, scratch_i):
+    """Coding 2's repetition context: the ordered integer of the first candidate of the vertex's
+    pattern, as :func:`_gather` computes it (the parallelepiped corner, the parallelogram, the
+    centroid, or the one ref's value): a cheap prediction. Uses ``scratch_f[0]``."""
+    a = 0.0
+    b = 0.0
+    c = 0.0
+    one = -1
+    nf = 0
+    for j in range(3):
+        r = r0 if j == 0 else (r1 if j == 1 else r2)
+        if r >= 0:
+            v = np.float64(vf[r, ch])
+            if nf == 0:
+                a = v
+                one = r
+            elif nf == 1:
+                b = v
+            else:
+                c = v
+            nf += 1
+    if nf == 0:
+        one = r3 if r3 >= 0 else k - 1
+    if nf <= 1:
+        return ordered_int(vi[one, ch]) if one >= 0 else np.int64(0)
+    if nf == 2:
+        scratch_f[0] = a + b - np.float64(vf[r3, ch]) if r3 >= 0 else (a + b) * 0.5
+    else:
+        scratch_f[0] = (a + b + c - np.float64(vf[r3, ch])) * 0.5 if r3 >= 0 else (a + b + c) / 3.0
+    if scratch_f[0] != scratch_f[0]:  # NaN: as _gather, predict 0
+        scratch_f[0] = 0.0
+    return ordered_int(scratch_i[0])
+
+
+@njit(cache=True, _nrt=False)
 def _nearest(eq_o, m, pred):
     """Index of the repetition candidate nearest to the prediction (the first of equals)."""
     near = 0
@@ -773,7 +808,6 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
     scores = np.zeros((N_CHANNELS, N_PATTERNS, MAX_CANDS), dtype=np.int64)
     cand_o = np.zeros(MAX_CANDS, dtype=np.int64)
     eq_o = np.zeros(5, dtype=np.int64)
-    eq_s = np.zeros(5, dtype=np.int64)  # scratch for predictions-only calls of _gather
     scratch_f = np.zeros(MAX_CANDS, dtype=np.float32)
     scratch_i = scratch_f.view(np.int32)
     was_eq = np.zeros(n, dtype=np.int8)
@@ -831,9 +865,8 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
                         break
                 near = 0
                 if version >= 2 and m >= 2 and ch < 3:
-                    pat, _ = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
-                                     vf, vi, ch, cand_o, eq_s, scratch_f, scratch_i, WANT_PREDICTIONS, version)
-                    near = _nearest(eq_o, m, cand_o[_best_cand(scores, ch, pat, cands)])
+                    near = _nearest(eq_o, m, _first_prediction(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3],
+                                                               vf, vi, ch, scratch_f, scratch_i))
                 enc_sym(stc, outc, probs, _eq_context(m, flag, near, version), _eq_bits(m), sym)
                 is_eq = 1 if sym < m else 0
             if is_eq == 0:
@@ -915,14 +948,10 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
     is_eq = 0
     o = np.int64(0)
     sym = 0
-    predicted = False
     if m > 0:
         near = 0
         if cands[CAND_VERSION] >= 2 and m >= 2 and ch < 3:
-            pat, _ = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_PREDICTIONS,
-                             cands[CAND_VERSION])
-            predicted = True
-            near = _nearest(eq_o, m, cand_o[_best_cand(scores, ch, pat, cands)])
+            near = _nearest(eq_o, m, _first_prediction(k, r0, r1, r2, r3, vf, vi, ch, scratch_f, scratch_i))
         sym = dec_sym(stc, data, pc, _eq_context(m, flag, near, cands[CAND_VERSION]), _eq_bits(m))
         if sym < m:
             o = eq_o[sym]
@@ -931,9 +960,8 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
             return -ERR_STREAM
     if is_eq == 0:
         # the repetition candidates of the refs (eq_o[:m_refs]) are still those of the first call
-        if not predicted:
-            pat, _ = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_PREDICTIONS,
-                             cands[CAND_VERSION])
+        pat, _ = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_PREDICTIONS,
+                         cands[CAND_VERSION])
         mode = modes[ch]
         best = _best_cand(scores, ch, pat, cands)
         ctx = _res_context(pat, flags[N_CHANNELS + ch], eq_o, m_refs)

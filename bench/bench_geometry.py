@@ -244,7 +244,8 @@ def main(argv: list[str]) -> None:
              "predictors (density: the linear field through the ref tet, the face plane or the boundary "
              "triangle at the vertex's decoded position; coordinates: the apex reflected through the face "
              "centroid, and the centroid plus the face normal times the apex's height or a regular tet's "
-             "height), chosen backward-adaptively like the others. The rest are coding 2 without a part: "
+             "height), chosen backward-adaptively like the others, and the coordinates' repetition symbol in a "
+             "context of which ref value the pattern's first prediction lands nearest. The rest are coding 2 without a part: "
              "*no apex*: refs without the apex column; *no tables*: prediction residuals only; *no refs*: "
              "vertices in a random order with no refs (each predicted from the previous one), i.e. what the "
              "same entropy coder does without the mesh.\n\n")

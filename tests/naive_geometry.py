@@ -13,6 +13,7 @@ Two things live here:
 
 from __future__ import annotations
 
+import math
 from collections import deque
 
 import numpy as np
@@ -201,7 +202,122 @@ def naive_extra_refs(values: np.ndarray, refs: np.ndarray):
     return out
 
 
-def _predictions(k, ref, col, extra):
+MAX_WEIGHT = 4.0
+REGULAR_HEIGHT = 1.2408064788027995  # sqrt(8 / (3 sqrt(3))): a regular tet's height / sqrt(face area)
+
+
+def _f(values, v, c):
+    return float(values[v, c])
+
+
+def naive_tri_linear(values, k, p0, p1, p2, ch, fallback):
+    """The linear field through triangle (p0, p1, p2) at vertex k's position projected into its
+    plane (2x2 normal equations), or ``fallback`` on a flat triangle or a far extrapolation."""
+    e1 = [_f(values, p1, c) - _f(values, p0, c) for c in range(3)]
+    e2 = [_f(values, p2, c) - _f(values, p0, c) for c in range(3)]
+    r = [_f(values, k, c) - _f(values, p0, c) for c in range(3)]
+    e11 = e12 = e22 = r1 = r2 = 0.0
+    for c in range(3):  # accumulated in the kernel's order
+        e11 += e1[c] * e1[c]
+        e12 += e1[c] * e2[c]
+        e22 += e2[c] * e2[c]
+        r1 += r[c] * e1[c]
+        r2 += r[c] * e2[c]
+    det = e11 * e22 - e12 * e12
+    if not det > 1e-12 * e11 * e22:
+        return fallback
+    u = (r1 * e22 - r2 * e12) / det
+    v = (r2 * e11 - r1 * e12) / det
+    if not (abs(u) <= MAX_WEIGHT and abs(v) <= MAX_WEIGHT):
+        return fallback
+    s0 = _f(values, p0, ch)
+    return s0 + u * (_f(values, p1, ch) - s0) + v * (_f(values, p2, ch) - s0)
+
+
+def naive_tet_linear(values, k, p0, p1, p2, p3, ch, fallback):
+    """The linear field through tet (p0..p3) at vertex k (barycentric weights by Cramer's rule)."""
+    a = [_f(values, p1, c) - _f(values, p0, c) for c in range(3)]
+    b = [_f(values, p2, c) - _f(values, p0, c) for c in range(3)]
+    cc = [_f(values, p3, c) - _f(values, p0, c) for c in range(3)]
+    r = [_f(values, k, c) - _f(values, p0, c) for c in range(3)]
+
+    def cross(u, v):
+        return [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+
+    def dot(u, v):
+        return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+
+    bc, ca, ab = cross(b, cc), cross(cc, a), cross(a, b)
+    det = dot(a, bc)
+    scale = math.sqrt(dot(a, a) * dot(b, b) * dot(cc, cc))
+    if not abs(det) > 1e-9 * scale:
+        return fallback
+    lam = [dot(r, bc) / det, dot(r, ca) / det, dot(r, ab) / det]
+    if not all(abs(x) <= MAX_WEIGHT for x in lam):
+        return fallback
+    s0 = _f(values, p0, ch)
+    return (s0 + lam[0] * (_f(values, p1, ch) - s0) + lam[1] * (_f(values, p2, ch) - s0)
+            + lam[2] * (_f(values, p3, ch) - s0))
+
+
+def naive_beyond_face(values, f0, f1, f2, apex, ch, fallback):
+    """Coordinate ch of: 2 g - apex, g + n h_apex, g + n * regular height (n: the face's unit
+    normal pointing away from the apex, g its centroid)."""
+    g = [(_f(values, f0, c) + _f(values, f1, c) + _f(values, f2, c)) / 3.0 for c in range(3)]
+    a = [_f(values, f1, c) - _f(values, f0, c) for c in range(3)]
+    b = [_f(values, f2, c) - _f(values, f0, c) for c in range(3)]
+    nrm = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    norm = math.sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2])
+    out = [2.0 * g[ch] - _f(values, apex, ch)]
+    if not (0.0 < norm < math.inf):
+        return out + [fallback, fallback]
+    h = ((_f(values, apex, 0) - g[0]) * nrm[0] + (_f(values, apex, 1) - g[1]) * nrm[1]
+         + (_f(values, apex, 2) - g[2]) * nrm[2]) / norm
+    n_c = nrm[ch] / norm
+    if h > 0.0:
+        n_c, h = -n_c, -h
+    return out + [g[ch] - n_c * h, g[ch] + n_c * (REGULAR_HEIGHT * math.sqrt(0.5 * norm))]
+
+
+def naive_beyond_edge(values, f0, f1, apex, ch, fallback):
+    """Coordinate ch of: m - p and m - p/|p| * equilateral height (m: the edge's midpoint, p: the
+    apex's offset from the edge's line)."""
+    e = [_f(values, f1, c) - _f(values, f0, c) for c in range(3)]
+    m = [(_f(values, f0, c) + _f(values, f1, c)) * 0.5 for c in range(3)]
+    e2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
+    if not (0.0 < e2 < math.inf):
+        return [fallback, fallback]
+    d = [_f(values, apex, c) - m[c] for c in range(3)]
+    t = (d[0] * e[0] + d[1] * e[1] + d[2] * e[2]) / e2
+    p = [d[c] - t * e[c] for c in range(3)]
+    plen = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
+    first = m[ch] - p[ch]
+    if not (0.0 < plen < math.inf):
+        return [first, fallback]
+    return [first, m[ch] - p[ch] / plen * (0.8660254037844386 * math.sqrt(e2))]
+
+
+def _geometric(values, k, face, apex, ch, cands):
+    """Version 2's extra candidates (float32-rounded where the kernel stores them)."""
+    f32 = lambda x: float(np.float32(x))  # noqa: E731  (the kernel's scratch is float32)
+    if len(face) == 3 and apex >= 0:
+        if ch == 3:
+            centroid = f32(cands[1])
+            plane = naive_tri_linear(values, k, *face, ch, centroid)
+            tet = f32(naive_tet_linear(values, k, *face, apex, ch, plane))
+            return [tet, plane, 0.5 * (tet + centroid)]
+        return naive_beyond_face(values, *face, apex, ch, f32(cands[0]))
+    if len(face) == 3:
+        return [naive_tri_linear(values, k, *face, ch, f32(cands[0])) if ch == 3 else cands[0]]
+    if len(face) == 2 and apex >= 0:
+        if ch == 3:
+            tri = f32(naive_tri_linear(values, k, face[0], face[1], apex, ch, f32(cands[0])))
+            return [tri, 0.5 * (tri + f32(cands[0]))]
+        return naive_beyond_edge(values, face[0], face[1], apex, ch, f32(cands[0]))
+    return []
+
+
+def _predictions(k, ref, col, extra, values=None, ch=0, coding=1):
     """(pattern, candidate predictions, repetition candidates) of vertex k on one channel."""
     face, apex = _face_and_apex(k, ref)
     if not face:
@@ -238,7 +354,10 @@ def _predictions(k, ref, col, extra):
             first = (a + b) * 0.5
             cands = [first, a, b]
             pat = 2
-        return pat, cands + [parallelogram(0, 1, 0, first), extrapolation(0, first), extrapolation(1, first)], eq
+        cands = cands + [parallelogram(0, 1, 0, first), extrapolation(0, first), extrapolation(1, first)]
+        if coding >= 2:
+            cands += _geometric(values, k, face, apex, ch, cands)
+        return pat, cands, eq
     c = v[2]
     if apex >= 0:
         d = float(col[apex])
@@ -250,6 +369,8 @@ def _predictions(k, ref, col, extra):
     h = float(np.float32(cands[0]))  # the kernel reads the first candidate back as float32
     cands += [parallelogram(0, 1, 0, h), parallelogram(0, 2, 1, h), parallelogram(1, 2, 2, h),
               extrapolation(0, h), extrapolation(1, h), extrapolation(2, h)]
+    if coding >= 2:
+        cands += _geometric(values, k, face, apex, ch, cands)
     return pat, cands, eq
 
 
@@ -264,7 +385,7 @@ def _candidate_int(x) -> int:
     return ordered_int(f)
 
 
-def naive_symbols(values: np.ndarray, refs: np.ndarray, modes) -> np.ndarray:
+def naive_symbols(values: np.ndarray, refs: np.ndarray, modes, coding: int = 1) -> np.ndarray:
     """What the geometry encoder codes, computed the slow, obvious way.
 
     Parameters
@@ -275,6 +396,8 @@ def naive_symbols(values: np.ndarray, refs: np.ndarray, modes) -> np.ndarray:
         Geometry refs.
     modes : 4 ints
         0 = residual on ordered integers, 1 = residual on ranks in the sorted table of values.
+    coding : 1 or 2
+        The geometry block's coding version (2 adds the tet-geometry candidates).
 
     Returns
     -------
@@ -292,7 +415,7 @@ def naive_symbols(values: np.ndarray, refs: np.ndarray, modes) -> np.ndarray:
         scores: dict = {}
         y_of_x: dict = {}  # channel 1 only: the y last seen with each x
         for k in range(n):
-            pat, cands, eq = _predictions(k, [int(r) for r in refs[k]], col, extra[k])
+            pat, cands, eq = _predictions(k, [int(r) for r in refs[k]], col, extra[k], values, ch, coding)
             o = ordered_int(col[k])
             if ch == 1:
                 x = ordered_int(values[k, 0])

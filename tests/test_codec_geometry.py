@@ -14,6 +14,8 @@ from meshgen import cavity_mesh, grid_mesh, two_components, with_unreferenced
 from naive_geometry import emulate_decode_order, naive_symbols
 from gatun_py.codec import _geometry_kernels as K
 from gatun_py.codec.geometry import (
+    CODINGS,
+    FORMAT_VERSION,
     HEADER_SIZE,
     GeometryDecoder,
     _channels,
@@ -148,8 +150,12 @@ def test_special_floats_round_trip():
 
 @settings(max_examples=40, deadline=None)
 @given(n=st.integers(1, 120), seed=st.integers(0, 2**32 - 1), kind=st.sampled_from(["bits", "smooth", "few"]),
-       batch=st.integers(1, 50))
-def test_hypothesis_round_trip_streaming(n, seed, kind, batch):
+       batch=st.integers(1, 50), coding=st.sampled_from(CODINGS))
+def test_hypothesis_round_trip_streaming_both_codings(n, seed, kind, batch, coding):
+    _streaming_round_trip(n, seed, kind, batch, coding)
+
+
+def _streaming_round_trip(n, seed, kind, batch, coding=FORMAT_VERSION):
     rng = np.random.default_rng(seed)
     if kind == "bits":  # any bit pattern at all
         vals = rng.integers(-(2**31), 2**31, size=(n, 4), dtype=np.int64).astype(np.int32).view(np.float32)
@@ -159,7 +165,7 @@ def test_hypothesis_round_trip_streaming(n, seed, kind, batch):
         vals = rng.choice(np.array([-2.5, 0.0, 1.0, 3.25, 1e-40], np.float32), size=(n, 4))
     vals = np.ascontiguousarray(vals)
     refs = _random_refs(rng, n)
-    blob = encode_geometry(vals[:, :3], vals[:, 3], refs)
+    blob = encode_geometry(vals[:, :3], vals[:, 3], refs, coding=coding)
     dec = GeometryDecoder(blob, n_points=n)
     for start in range(0, n, batch):
         p, d = dec.decode(refs[start:start + batch])
@@ -171,7 +177,7 @@ def test_hypothesis_round_trip_streaming(n, seed, kind, batch):
 # ------------------------------------------------------------------------------ reference model
 
 
-def _kernel_trace(points, density, refs, modes):
+def _kernel_trace(points, density, refs, modes, coding=FORMAT_VERSION):
     vf = _channels(points, density)
     ordered = _ordered(vf)
     tables_list = [np.unique(ordered[:, ch]) for ch in range(4)]
@@ -181,7 +187,7 @@ def _kernel_trace(points, density, refs, modes):
     trace = np.zeros((len(vf), 4, 3), np.int64)
     full = np.full((len(vf), 4), -1, np.int32)
     full[:, : refs.shape[1]] = refs
-    _run_encode(vf, full, np.asarray(modes, np.int64), tables, offs, trace)
+    _run_encode(vf, full, np.asarray(modes, np.int64), tables, offs, K.candidate_table(coding), trace)
     return vf, full, trace
 
 
@@ -191,26 +197,97 @@ def test_naive_reference_uses_the_kernel_constants():
     assert naive_geometry.ADJ_CAP == K.ADJ_CAP
 
 
+@pytest.mark.parametrize("coding", CODINGS)
 @pytest.mark.parametrize("modes", [(0, 0, 0, 0), (1, 1, 1, 1)])
-def test_kernel_model_matches_naive_reference_on_post(modes):
+def test_kernel_model_matches_naive_reference_on_post(modes, coding):
     mesh = load_sample("post")[0]
     points, density, refs = _in_decode_order(mesh)
-    vf, full, trace = _kernel_trace(points, density, refs, modes)
-    np.testing.assert_array_equal(trace, naive_symbols(vf, full, modes))
+    vf, full, trace = _kernel_trace(points, density, refs, modes, coding)
+    np.testing.assert_array_equal(trace, naive_symbols(vf, full, modes, coding))
 
 
+@pytest.mark.filterwarnings("ignore:invalid value:RuntimeWarning")  # inf - inf in the reference's numpy
 @settings(max_examples=25, deadline=None)
 @given(n=st.integers(1, 60), seed=st.integers(0, 2**32 - 1), modes=st.tuples(*[st.integers(0, 1)] * 4),
-       hub=st.booleans())
-def test_kernel_model_matches_naive_reference_random(n, seed, modes, hub):
+       hub=st.booleans(), coding=st.sampled_from(CODINGS))
+def test_kernel_model_matches_naive_reference_random(n, seed, modes, hub, coding):
     rng = np.random.default_rng(seed)
-    few = rng.choice(np.array([0.0, -0.0, 1.0, 2.0, -3.5, 1e-42, 7e20, np.nan], np.float32), size=(n, 4))
+    few = rng.choice(np.array([0.0, -0.0, 1.0, 2.0, -3.5, 1e-42, 7e20, np.nan, np.inf], np.float32), size=(n, 4))
     vals = np.where(rng.random((n, 4)) < 0.3, rng.normal(size=(n, 4)), few).astype(np.float32)
     refs = _random_refs(rng, n)
     if hub and n > 2:  # one vertex in every face: its neighbour list overflows ADJ_CAP
         refs[2:, 0] = 0
-    vf, full, trace = _kernel_trace(vals[:, :3], vals[:, 3], refs, modes)
-    np.testing.assert_array_equal(trace, naive_symbols(vf, full, modes))
+    vf, full, trace = _kernel_trace(vals[:, :3], vals[:, 3], refs, modes, coding)
+    np.testing.assert_array_equal(trace, naive_symbols(vf, full, modes, coding))
+
+
+@settings(max_examples=20, deadline=None)
+@given(n=st.integers(4, 60), seed=st.integers(0, 2**32 - 1))
+def test_tet_geometry_predictors_match_naive_reference_on_smooth_meshes(n, seed):
+    """Version 2's predictors on a smooth field over jittered points (where they are chosen)."""
+    rng = np.random.default_rng(seed)
+    xyz = rng.normal(size=(n, 3)) * 10.0
+    vals = np.empty((n, 4), np.float32)
+    vals[:, :3] = xyz
+    vals[:, 3] = 2.0 * xyz[:, 0] - xyz[:, 1] + 0.5 * xyz[:, 2] + 0.01 * rng.normal(size=n)
+    refs = _random_refs(rng, n)
+    vf, full, trace = _kernel_trace(vals[:, :3], vals[:, 3], refs, (0, 0, 0, 0), 2)
+    np.testing.assert_array_equal(trace, naive_symbols(vf, full, (0, 0, 0, 0), 2))
+    # the linear field is predicted exactly up to its noise: the tet candidate wins on density
+    used = trace[:, 3, 2]
+    if n > 30:
+        assert (used >= K.N_CANDS_V1[K.PAT_FACE_APEX]).any()
+
+
+def test_geometry_predictors_fall_back_on_flat_and_broken_tets():
+    import naive_geometry as N
+
+    vals = np.zeros((5, 4), np.float32)
+    vals[1, 0] = vals[2, 1] = 1.0  # 0, 1, 2 in the plane z = 0; 3 on the same plane: a flat tet
+    vals[3, :2] = 0.5
+    vals[4] = (0.2, 0.2, 1.0, 7.0)
+    vf = np.ascontiguousarray(vals)
+    assert K._tet_linear(vf, 4, 0, 1, 2, 3, 3, 42.0) == N.naive_tet_linear(vf, 4, 0, 1, 2, 3, 3, 42.0) == 42.0
+    vals[3, 2] = np.nan  # a broken apex
+    assert K._tet_linear(vf, 4, 0, 1, 2, 3, 3, 42.0) == 42.0
+    vals[3] = (0.0, 0.0, 1.0, 1.0)  # a proper tet; vertex 4 inside it: an interpolation
+    got = K._tet_linear(vf, 4, 0, 1, 2, 3, 3, 42.0)
+    assert got == N.naive_tet_linear(vf, 4, 0, 1, 2, 3, 3, 42.0) and got != 42.0
+    vals[4, :3] = (1e6, 0.0, 0.0)  # far outside: not an extrapolation the coder trusts
+    assert K._tet_linear(vf, 4, 0, 1, 2, 3, 3, 42.0) == 42.0
+    assert K._tri_linear(vf, 4, 0, 1, 1, 3, -1.0) == -1.0  # a degenerate triangle
+
+
+@pytest.mark.parametrize("coding", CODINGS)
+def test_both_codings_round_trip_and_say_which_they_are(coding):
+    mesh = load_sample("post")[0]
+    points, density, refs = _in_decode_order(mesh)
+    blob = _round_trip(points, density, refs, coding=coding)
+    assert blob[0] == coding
+    assert GeometryDecoder(blob).coding == coding
+
+
+def test_coding_2_is_smaller_on_the_samples_than_coding_1():
+    mesh = load_sample("post")[0]
+    points, density, refs = _in_decode_order(mesh)
+    v1 = encode_geometry(points, density, refs, coding=1)
+    v2 = encode_geometry(points, density, refs, coding=2)
+    assert len(v2) < len(v1)
+    with pytest.raises(ValueError, match="coding"):
+        encode_geometry(points, density, refs, coding=3)
+
+
+def test_a_block_in_one_coding_read_as_the_other_is_caught_or_differs():
+    mesh = load_sample("post")[0]
+    points, density, refs = _in_decode_order(mesh)
+    blob = bytearray(encode_geometry(points, density, refs, coding=2))
+    blob[0] = 1  # the header says coding 1: the predictions differ, so must the values (or corrupt)
+    try:
+        p, d = decode_geometry(bytes(blob), refs)
+    except CorruptFileError:
+        return
+    assert not (np.array_equal(p.view(np.int32), points.view(np.int32))
+                and np.array_equal(d.view(np.int32), density.view(np.int32)))
 
 
 def test_emulated_order_is_a_valid_decode_order():
@@ -224,11 +301,40 @@ def test_emulated_order_is_a_valid_decode_order():
 # ------------------------------------------------------------------------------ bad input
 
 
-@pytest.fixture(scope="module")
-def post_blob():
+@pytest.fixture(scope="module", params=CODINGS, ids=lambda c: f"coding{c}")
+def post_blob(request):
     mesh = load_sample("post")[0]
     points, density, refs = _in_decode_order(mesh)
-    return encode_geometry(points, density, refs), refs
+    return encode_geometry(points, density, refs, coding=request.param), refs
+
+
+@pytest.fixture(scope="module")
+def smooth_blob():
+    """Coding 2 on an unstructured mesh with a smooth field: the tet-geometry predictors at work."""
+    from meshgen import delaunay_mesh
+
+    mesh = delaunay_mesh(400, seed=5)
+    points, _, refs = _in_decode_order(mesh)
+    x, y, z = points.astype(np.float64).T
+    density = (np.sin(3 * x) * np.cos(2 * y) + z).astype(np.float32)
+    blob = encode_geometry(points, density, refs, coding=2)
+    assert len(blob) < len(encode_geometry(points, density, refs, coding=1))
+    return blob, refs
+
+
+def test_truncation_and_flips_of_coding_2_on_a_smooth_mesh(smooth_blob):
+    blob, refs = smooth_blob
+    for cut in np.linspace(0, len(blob) - 1, 60).astype(int):
+        with pytest.raises(CorruptFileError):
+            decode_geometry(blob[:cut], refs)
+    rng = np.random.default_rng(11)
+    detected = 0
+    for _ in range(200):
+        data = bytearray(blob)
+        pos = int(rng.integers(HEADER_SIZE, len(data)))
+        data[pos] ^= int(rng.integers(1, 256))
+        detected += not _decode_or_corrupt(bytes(data), refs)
+    assert detected > 60
 
 
 def _decode_or_corrupt(data, refs):
@@ -336,13 +442,13 @@ def test_kernel_callable_from_another_numba_kernel():
 
     @njit
     def decode_in_batches(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, hvals, modes, tables,
-                          tab_offs, refs, values, batch):
+                          tab_offs, cands, refs, values, batch):
         n = values.shape[0]
         start = 0
         while start < n:
             count = min(batch, n - start)
             status = K.decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, hvals, modes,
-                                       tables, tab_offs, refs[start:start + count], values, start, count)
+                                       tables, tab_offs, cands, refs[start:start + count], values, start, count)
             if status != K.OK:
                 return status
             start += count
@@ -373,3 +479,19 @@ def test_hash_table_without_a_free_slot_is_refused(post_blob):
     dec.hkeys, dec.hvals = np.zeros(3 * full, np.int64), np.zeros(3 * full, np.uint8)  # not a power of two
     with pytest.raises(CorruptFileError):
         dec.decode(refs[:10])
+
+
+# ------------------------------------------------------------------------------ format versions
+
+
+def test_files_of_format_4_carry_geometry_coding_2_and_older_formats_coding_1(post_tetc):
+    from gatun_py.codec.container import VERSION_MAJOR
+    from gatun_py.codec.geometry import coding_for_format
+    from gatun_py.codec.tetcfile import TetcReader
+
+    assert [coding_for_format(v) for v in (1, 2, 3, 4)] == [1, 1, 1, 2]
+    assert FORMAT_VERSION == coding_for_format(VERSION_MAJOR) == 2
+    r = TetcReader(post_tetc)
+    assert r.container.major == VERSION_MAJOR == 4
+    for lv in range(len(r.levels)):
+        assert r.read_section(f"L{lv}/geometry")[0] == 2

@@ -15,7 +15,8 @@ although validation keeps those out of meshes). The model, per vertex and per ch
 density), is described in :mod:`gatun_py.codec._geometry_kernels`: a cheap symbol for "equal to a
 ref's value" (y also "equal to the y last seen with this x"), otherwise a backward-adaptively
 chosen linear prediction from the refs and from grid-line partners the coder finds in its own edge
-graph, with an exact integer residual, either on the order-preserving integer of the float bits or
+graph (coding 2 adds predictions from the tet's geometry: the density as the linear field through
+the ref tet at the vertex's decoded position, the coordinates beyond the face or edge), with an exact integer residual, either on the order-preserving integer of the float bits or
 on the rank in a table of the channel's distinct values (chosen per channel, whichever is smaller).
 
 The decoder keeps, besides the vertex table (16 bytes per vertex), its edge graph (36 bytes per
@@ -23,7 +24,7 @@ vertex) and the x -> y table (18 to 36 bytes per vertex).
 
 Byte layout of the geometry block (little endian)::
 
-    u8  version (1)
+    u8  coding      1 (format <= 3) or 2 (format 4: adds the tet-geometry predictors)
     u8  modes       bit ch set: channel ch uses the value table
     u32 n_points
     u32 length[4]   byte length of each channel's range-coded stream
@@ -38,10 +39,22 @@ import numpy as np
 
 from ..errors import CorruptFileError
 from . import _geometry_kernels as K
+from .container import VERSION_MAJOR
 from .rangecoder import (ADAPT_SHIFT, DEC_ERROR, DEC_OVERRUN, DEC_POS, INT_BUCKET_BITS, PROB_ONE, dec_state,
                          enc_state, new_model)
 
-FORMAT_VERSION = 1
+CODINGS = K.CODINGS
+
+
+def coding_for_format(major: int) -> int:
+    """The geometry block coding a file of container format ``major`` is written with: 1 up to
+    format 3, 2 from format 4 on (the tet-geometry predictors of
+    :func:`gatun_py.codec._geometry_kernels._geometric_cands`). Readers take both codings."""
+    return 1 if major <= 3 else 2
+
+
+# what this version of tetc writes
+FORMAT_VERSION = coding_for_format(VERSION_MAJOR)
 MAX_POINTS = 1 << 29  # the decoder's scratch tags (3 per vertex) are int32
 _HEADER = struct.Struct("<BBI4I")
 HEADER_SIZE = _HEADER.size
@@ -100,7 +113,7 @@ def _ordered(vf: np.ndarray) -> np.ndarray:
 _NO_TRACE = np.zeros((0, 4, 3), dtype=np.int64)
 
 
-def _run_encode(vf, refs, modes, tables, tab_offs, trace=_NO_TRACE, wpar=None):
+def _run_encode(vf, refs, modes, tables, tab_offs, cands, trace=_NO_TRACE, wpar=None):
     n = vf.shape[0]
     if wpar is None:
         wpar = K.link_all(refs, vf)
@@ -108,7 +121,7 @@ def _run_encode(vf, refs, modes, tables, tab_offs, trace=_NO_TRACE, wpar=None):
     while True:
         st = np.stack([enc_state() for _ in range(K.N_CHANNELS)])
         out = np.empty((K.N_CHANNELS, cap), dtype=np.uint8)
-        nbytes = K.encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, trace)
+        nbytes = K.encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace)
         if int(nbytes.max()) <= cap:
             return [out[ch, : nbytes[ch]].tobytes() for ch in range(K.N_CHANNELS)]
         cap = int(nbytes.max()) + 64
@@ -151,7 +164,7 @@ def refs_from_predictors(predictors, n_boundary_vertices: int, interior_apex=Non
     return refs
 
 
-def encode_geometry(points, density, refs, *, modes=None) -> bytes:
+def encode_geometry(points, density, refs, *, modes=None, coding: int = FORMAT_VERSION) -> bytes:
     """Losslessly encode vertex coordinates and density given in decode order.
 
     Parameters
@@ -166,6 +179,9 @@ def encode_geometry(points, density, refs, *, modes=None) -> bytes:
     modes : sequence of 4 ints, optional
         Force the residual mode per channel (0 prediction, 1 value table); by default both are
         tried and the smaller stream is kept, channel by channel.
+    coding : {1, 2}
+        The block's coding version: 2 (the default, format 4) adds the tet-geometry predictors;
+        1 writes what format 3 and older wrote.
 
     Returns
     -------
@@ -179,6 +195,9 @@ def encode_geometry(points, density, refs, *, modes=None) -> bytes:
     """
     vf = _channels(points, density)
     n = vf.shape[0]
+    if coding not in CODINGS:
+        raise ValueError(f"coding must be one of {CODINGS}, got {coding!r}")
+    cands = K.candidate_table(coding)
     if n >= MAX_POINTS:
         raise ValueError(f"at most {MAX_POINTS - 1} vertices per geometry block, got {n}")
     refs = _as_refs(refs, n)
@@ -191,16 +210,16 @@ def encode_geometry(points, density, refs, *, modes=None) -> bytes:
         modes = np.asarray(modes, dtype=np.int64)
         if modes.shape != (K.N_CHANNELS,) or not np.isin(modes, (0, 1)).all():
             raise ValueError("modes must be 4 values, each 0 (prediction) or 1 (table)")
-        streams = _run_encode(vf, refs, modes, tables, tab_offs)
+        streams = _run_encode(vf, refs, modes, tables, tab_offs, cands)
     else:
         wpar = K.link_all(refs, vf)
-        pred = _run_encode(vf, refs, np.zeros(4, np.int64), tables, tab_offs, wpar=wpar)
+        pred = _run_encode(vf, refs, np.zeros(4, np.int64), tables, tab_offs, cands, wpar=wpar)
         # a table pays off only when values repeat: skip the trial when most values are distinct
         use_table = np.array([len(t) <= n // 2 for t in tables_list], dtype=np.int64)
         if use_table.any():
             # second pass: only the channels worth a table (channels are independent streams)
             trial = np.where(use_table == 1, K.MODE_TABLE, K.MODE_SKIP).astype(np.int64)
-            tab = _run_encode(vf, refs, trial, tables, tab_offs, wpar=wpar)
+            tab = _run_encode(vf, refs, trial, tables, tab_offs, cands, wpar=wpar)
             modes = np.zeros(K.N_CHANNELS, dtype=np.int64)
             streams = []
             for ch in range(K.N_CHANNELS):
@@ -213,7 +232,7 @@ def encode_geometry(points, density, refs, *, modes=None) -> bytes:
             modes = np.zeros(K.N_CHANNELS, dtype=np.int64)
             streams = pred
     mode_bits = sum(int(m) << ch for ch, m in enumerate(modes))
-    header = _HEADER.pack(FORMAT_VERSION, mode_bits, n, *(len(s) for s in streams))
+    header = _HEADER.pack(coding, mode_bits, n, *(len(s) for s in streams))
     return header + b"".join(streams)
 
 
@@ -240,7 +259,7 @@ def check_geometry_header(data, n_points: int | None = None, *, total: int | Non
     if len(data) < HEADER_SIZE:
         raise CorruptFileError("corrupt geometry block: truncated header")
     version, mode_bits, n, *lengths = _HEADER.unpack_from(data)
-    if version != FORMAT_VERSION:
+    if version not in CODINGS:
         raise CorruptFileError(f"corrupt geometry block: unknown geometry format version {version}")
     if mode_bits >> K.N_CHANNELS:
         raise CorruptFileError("corrupt geometry block: invalid channel modes")
@@ -250,7 +269,7 @@ def check_geometry_header(data, n_points: int | None = None, *, total: int | Non
         raise CorruptFileError("corrupt geometry block: stream lengths do not match the block size")
     if n > max_vertices(lengths):
         raise CorruptFileError(f"corrupt geometry block: {n} vertices cannot fit in {total} bytes")
-    return mode_bits, n, lengths
+    return version, mode_bits, n, lengths
 
 
 class GeometryDecoder:
@@ -280,7 +299,9 @@ class GeometryDecoder:
 
     def __init__(self, data, n_points: int | None = None):
         buf = np.frombuffer(bytes(data), dtype=np.uint8)
-        mode_bits, n, lengths = check_geometry_header(buf, n_points)
+        coding, mode_bits, n, lengths = check_geometry_header(buf, n_points)
+        self.coding = int(coding)
+        self.cands = K.candidate_table(self.coding)
         self.n_points = int(n)
         self.modes = np.array([(mode_bits >> ch) & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64)
         self.offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
@@ -323,9 +344,9 @@ class GeometryDecoder:
     @property
     def kernel_args(self) -> tuple:
         """``(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, hvals, modes, tables,
-        tab_offs)``, the leading arguments of ``decode_vertices``."""
+        tab_offs, cands)``, the leading arguments of ``decode_vertices``."""
         return (self.st, self.buf, self.offs, self.probs, self.scores, self.flags, self.adj, self.deg,
-                self.mark, self.hkeys, self.hvals, self.modes, self.tables, self.tab_offs)
+                self.mark, self.hkeys, self.hvals, self.modes, self.tables, self.tab_offs, self.cands)
 
     def decode(self, refs) -> tuple[np.ndarray, np.ndarray]:
         """Decode the next ``len(refs)`` vertices.

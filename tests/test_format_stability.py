@@ -1,8 +1,9 @@
 """Files written by earlier versions of the format still decode bit-exactly, and reference renders hold.
 
-``tests/data/post_v2.tetc`` (format 2, written by ``tests/data/make_golden.py 2``) holds float64
-coordinates and point arrays of four dtypes/shapes; ``post_v2.json`` the hashes of every level's
-decoded points, arrays, tets and forest.
+``tests/data/post_v{2,3,4}.tetc`` (formats 2, 3 and 4, each written by ``tests/data/make_golden.py N``
+with the code of its time: format 3 at commit e8af4f5) hold float64 coordinates and point arrays of
+four dtypes/shapes; ``post_v{N}.json`` the hashes of every level's decoded points, arrays, tets and
+forest.
 
 ``tests/data/post_v1.tetc`` was written by format 1 (commit 4545c9c) from ``post.vtk`` with every
 level and the merge forest; ``post_v1.json`` holds the SHA-256 of every level's decoded points,
@@ -58,18 +59,22 @@ def test_format_1_decodes_bit_exactly(level):
     _check_forest(r, level, want)
 
 
-GOLDEN_V2 = DATA / "post_v2.tetc"
-EXPECTED_V2 = json.loads((DATA / "post_v2.json").read_text())
+GOLDEN_VERSIONS = (2, 3, 4)  # one golden file per format version since 2, each written when it came
+GOLDEN_OF = {v: DATA / f"post_v{v}.tetc" for v in GOLDEN_VERSIONS}
+EXPECTED_OF = {v: json.loads((DATA / f"post_v{v}.json").read_text()) for v in GOLDEN_VERSIONS}
 
 
-def test_golden_v2_file_is_unchanged():
-    assert _sha(np.frombuffer(GOLDEN_V2.read_bytes(), np.uint8)) == EXPECTED_V2["file_sha256"]
+@pytest.mark.parametrize("version", GOLDEN_VERSIONS)
+def test_golden_file_of_each_version_is_unchanged(version):
+    assert TetcReader(GOLDEN_OF[version]).container.major == version
+    assert _sha(np.frombuffer(GOLDEN_OF[version].read_bytes(), np.uint8)) == EXPECTED_OF[version]["file_sha256"]
 
 
-@pytest.mark.parametrize("level", sorted(EXPECTED_V2["levels"], key=int))
-def test_format_2_decodes_bit_exactly(level):
-    r = TetcReader(GOLDEN_V2)
-    want = EXPECTED_V2["levels"][level]
+@pytest.mark.parametrize("version, level", [(v, lv) for v in GOLDEN_VERSIONS
+                                            for lv in sorted(EXPECTED_OF[v]["levels"], key=int)])
+def test_each_format_decodes_bit_exactly(version, level):
+    r = TetcReader(GOLDEN_OF[version])
+    want = EXPECTED_OF[version]["levels"][level]
     m = r.decode_mesh(int(level))
     assert (m.n_points, m.n_tets) == (want["n_points"], want["n_tets"])
     assert str(m.points.dtype) == want["points_dtype"]
@@ -80,13 +85,23 @@ def test_format_2_decodes_bit_exactly(level):
     _check_forest(r, level, want)
 
 
-def test_golden_v2_is_the_generated_mesh():
-    """Level 0 of the format-2 golden file is lossless against the mesh ``make_golden`` builds."""
+def test_formats_3_and_4_hold_the_same_mesh():
+    """Format 4 changed only how the geometry is coded: the same mesh decodes from both."""
+    a, b = (TetcReader(GOLDEN_OF[v]).decode_mesh(0) for v in (3, 4))
+    np.testing.assert_array_equal(a.tets, b.tets)
+    np.testing.assert_array_equal(a.points.view(np.int64), b.points.view(np.int64))
+    for name in a.point_data:
+        np.testing.assert_array_equal(a.point_data[name], b.point_data[name])
+
+
+@pytest.mark.parametrize("version", GOLDEN_VERSIONS)
+def test_golden_file_is_the_generated_mesh(version):
+    """Level 0 of each golden file is lossless against the mesh ``make_golden`` builds."""
     import importlib.util  # the generator lives beside the data, not in an importable package
     spec = importlib.util.spec_from_file_location("make_golden", DATA / "make_golden.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    src, dec = mod.golden_mesh(), TetcReader(GOLDEN_V2).decode_mesh(0)
+    src, dec = mod.golden_mesh(), TetcReader(GOLDEN_OF[version]).decode_mesh(0)
     order_src = np.lexsort(src.points.T[::-1])
     order_dec = np.lexsort(dec.points.T[::-1])
     np.testing.assert_array_equal(src.points[order_src].view(np.int64), dec.points[order_dec].view(np.int64))

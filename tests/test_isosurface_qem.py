@@ -13,8 +13,8 @@ from gatun_py.isosurface import qem
 
 
 def _place(q, pu, pv, bu=False, bv=False):
-    vq = np.zeros((2, 10))
-    vq[0] = q  # the edge's quadric is the sum of its ends': put it all on u
+    vq = np.zeros((2, qem.QUADRIC_WIDTH))
+    vq[0, qem.CURRENT] = q  # the edge's quadric is the sum of its ends': put it all on u
     vpos = np.array([pu, pv], np.float64)
     vbnd = np.array([bu, bv], np.uint8)
     cost, x, y, z = qem._placement(vq, vpos, vbnd, 0, 1, np.empty(10))

@@ -180,8 +180,7 @@ def test_cost_weighs_current_and_history():
 
 def test_border_survives_on_an_open_patch():
     """The patch's border (a square) stays: every border vertex stays on the square's sides, up to
-    what the soft constraint planes allow (a few % of the grid spacing, against a tenth of the patch
-    that an unconstrained border loses)."""
+    what the soft constraint planes allow (a few % of the grid spacing)."""
     pts, tris = _wavy_patch(seed=4)
     st = _state(pts, tris)
     _decimate(st, len(tris) // 20)

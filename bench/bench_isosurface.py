@@ -676,15 +676,17 @@ def _splice_big(old: str, new: str) -> str:
 
 def _quality_tally(rows) -> str:
     """One line: in how many cells RMS, Hausdorff and both are at most the best cascade's."""
-    rr = [float(r[11]) for r in rows if len(r) > 13 and r[11] != "-"]
-    hr = [float(r[12]) for r in rows if len(r) > 13 and r[12] != "-"]
-    both = sum(1 for r in rows if len(r) > 13 and r[13] == "yes")
+    # from the errors' columns, not the ratios rounded to 2 decimals (a 1.002 would count as <= 1)
+    done = [r for r in rows if len(r) > 13 and r[11] != "-"]
+    rr = [float(r[5]) / float(r[9]) if float(r[9]) > 0 else float("inf") for r in done]
+    hr = [float(r[6]) / float(r[10]) if float(r[10]) > 0 else float("inf") for r in done]
+    both = sum(1 for r in done if r[13] == "yes")
     if not rr:
         return ""
     gm = lambda x: float(np.exp(np.mean(np.log(x))))  # noqa: E731
     return (f"Cells with RMS <= the best cascade's: {sum(x <= 1 for x in rr)} of {len(rr)}; Hausdorff: "
             f"{sum(x <= 1 for x in hr)} of {len(hr)}; both: {both} of {len(rr)}. Geometric mean of the ratios: "
-            f"RMS {gm(rr):.3f}, Hausdorff {gm(hr):.3f}; worst: RMS {max(rr):.2f}, Hausdorff {max(hr):.2f}.")
+            f"RMS {gm(rr):.3f}, Hausdorff {gm(hr):.3f}; worst: RMS {max(rr):.3f}, Hausdorff {max(hr):.2f}.")
 
 
 def report(s) -> str:

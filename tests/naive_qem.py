@@ -1,4 +1,4 @@
-"""Slow plain references for gatun_py.isosurface.qem's cost and placement.
+"""Slow plain references for gatun_py.isosurface.qem: quadrics, cost and placement.
 
 A quadric is the 10 numbers (a00, a01, a02, b0, a11, a12, b1, a22, b2, c) of
 Q(x) = x^T A x + 2 b^T x + c. The placement of an edge collapse is the cheapest point the kernel may
@@ -61,3 +61,58 @@ def naive_placement(q, pu, pv, *, ridge: float, reach: float):
     if seg[0] < best[0]:
         best = seg
     return max(best[0], 0.0), best[1]
+
+
+def naive_face_quadrics(points, triangles, importance=None):
+    """Per face (unit normal n, offset d, weight): the plane n . x + d = 0 and the face's area times
+    the mean importance of its corners (weight 0 for a degenerate face)."""
+    p = np.asarray(points, np.float64)
+    out = []
+    for a, b, c in np.asarray(triangles):
+        n = np.cross(p[b] - p[a], p[c] - p[a])
+        ln = np.linalg.norm(n)
+        if ln == 0:
+            out.append((np.zeros(3), 0.0, 0.0))
+            continue
+        n = n / ln
+        imp = 1.0 if importance is None else (importance[a] + importance[b] + importance[c]) / 3
+        out.append((n, -float(n @ p[a]), 0.5 * ln * imp))
+    return out
+
+
+def naive_border_planes(points, triangles, v, weight):
+    """The constraint planes of vertex v's border edges (edges of one face): through the edge,
+    perpendicular to that face, weighted ``weight`` x the edge's length squared (Garland)."""
+    p = np.asarray(points, np.float64)
+    t = np.asarray(triangles)
+    q = np.zeros(10)
+    faces = [f for f in t if v in f]
+    nbrs = {}
+    for f in faces:
+        for w in f:
+            if w != v:
+                nbrs.setdefault(int(w), []).append(f)
+    for w, fs in nbrs.items():
+        if len(fs) != 1:
+            continue
+        a, b, c = fs[0]
+        n = np.cross(p[b] - p[a], p[c] - p[a])
+        e = p[w] - p[v]
+        perp = np.cross(e, n)
+        if np.linalg.norm(perp) == 0:
+            continue
+        perp = perp / np.linalg.norm(perp)
+        q += plane_quadric(perp, -float(perp @ p[v]), w=weight * float(e @ e))
+    return q
+
+
+def naive_current_quadric(points, triangles, v, *, border_weight, importance=None):
+    """The memoryless quadric of vertex v: the weighted planes of the faces around it as they are,
+    plus its border's constraint planes."""
+    t = np.asarray(triangles)
+    around = np.flatnonzero((t == v).any(axis=1))
+    q = np.zeros(10)
+    for (n, d, w) in naive_face_quadrics(points, t[around], importance):
+        if w > 0:
+            q += plane_quadric(n, d, w)
+    return q + naive_border_planes(points, t, v, border_weight)

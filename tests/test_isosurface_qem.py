@@ -7,14 +7,15 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from naive_qem import DET_FLOOR, naive_placement, naive_segment_min, plane_quadric, quadric_cost
+from naive_qem import (DET_FLOOR, naive_border_planes, naive_current_quadric, naive_face_quadrics, naive_placement,
+                       naive_segment_min, plane_quadric, quadric_cost)
 
 from gatun_py.isosurface import qem
 
 
 def _place(q, pu, pv, bu=False, bv=False):
-    vq = np.zeros((2, 10))
-    vq[0] = q  # the edge's quadric is the sum of its ends': put it all on u
+    vq = np.zeros((2, qem.QUADRIC_WIDTH))
+    vq[0, qem.CURRENT] = q  # the edge's quadric is the sum of its ends': put it all on u
     vpos = np.array([pu, pv], np.float64)
     vbnd = np.array([bu, bv], np.uint8)
     cost, x, y, z = qem._placement(vq, vpos, vbnd, 0, 1, np.empty(10))
@@ -94,3 +95,100 @@ def test_border_constraint_planes_hold_a_boundary_collapse(bu, bv):
     assert abs(p[1]) < 1e-3 and abs(p[2]) < 1e-3
     ref_cost, _ = naive_placement(q, pu, pv, ridge=qem.PLACE_RIDGE, reach=qem.PLACE_REACH)
     assert cost == pytest.approx(ref_cost, rel=1e-6, abs=1e-9)
+
+
+def _wavy_patch(n=24, seed=0):
+    """An open height-field surface (border all round), triangulated with random diagonals."""
+    rng = np.random.default_rng(seed)
+    x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n), indexing="ij")
+    z = 0.1 * np.sin(5 * x) * np.cos(4 * y) + 0.002 * rng.normal(size=x.shape)
+    pts = np.c_[x.ravel(), y.ravel(), z.ravel()]
+    tris = []
+    for i in range(n - 1):
+        for j in range(n - 1):
+            a, b, c, d = i * n + j, (i + 1) * n + j, (i + 1) * n + j + 1, i * n + j + 1
+            tris += [(a, b, c), (a, c, d)] if rng.random() < 0.5 else [(a, b, d), (b, c, d)]
+    return pts, np.array(tris, np.int32)
+
+
+def _state(pts, tris, importance=None):
+    nv = len(pts)
+    imp = np.ones(nv) if importance is None else np.asarray(importance, np.float64)
+    return dict(vpos=pts.astype(np.float64).copy(), vq=np.zeros((nv, qem.QUADRIC_WIDTH)), vbnd=np.zeros(nv, np.uint8),
+                vlock=np.zeros(nv, np.uint8), vdead=np.zeros(nv, np.uint8), vimp=imp, vfresh=np.ones(nv, np.uint8),
+                tris=tris.astype(np.int32).copy())
+
+
+def _decimate(st, target):
+    nt = len(st["tris"])
+    qem.add_face_quadrics(st["vpos"], st["vq"], st["vimp"], st["tris"], 0, nt)
+    return qem.decimate(st["vpos"], st["vq"], st["vbnd"], st["vlock"], st["vdead"], st["vimp"], st["vfresh"],
+                        st["tris"], len(st["vpos"]), nt, target, 0.0, np.empty(0, np.int64))
+
+
+@pytest.mark.parametrize("seed, keep", [(0, 0.5), (1, 0.2), (2, 0.05)])
+def test_current_quadrics_are_the_faces_as_they_are(seed, keep):
+    """After any number of collapses every live vertex's current quadric is the reference's
+    memoryless quadric of the surface as it is (faces around it now, border planes)."""
+    pts, tris = _wavy_patch(seed=seed)
+    imp = np.random.default_rng(seed).uniform(0.5, 2.0, len(pts))
+    st = _state(pts, tris, imp)
+    target = int(keep * len(tris))
+    alive, done = _decimate(st, target)
+    assert done > 0 and target - 2 <= alive <= target  # an interior collapse removes two faces
+    live_t = st["tris"][st["tris"][:, 0] >= 0]
+    for v in np.unique(live_t):
+        ref = naive_current_quadric(st["vpos"], live_t, v, border_weight=qem.BOUNDARY_WEIGHT, importance=imp)
+        assert np.allclose(st["vq"][v, qem.CURRENT], ref, rtol=1e-9, atol=1e-15), v
+
+
+def test_history_quadrics_are_conserved():
+    """A collapse adds the removed vertex's history to the survivor's: over the live vertices the
+    history sums to every original face's quadric (three corners each) plus the original border's
+    planes, whatever was collapsed."""
+    pts, tris = _wavy_patch(seed=3)
+    expect = np.zeros(10)
+    for n, d, w in naive_face_quadrics(pts, tris):
+        expect += 3 * plane_quadric(n, d, w)
+    for v in range(len(pts)):
+        expect += naive_border_planes(pts, tris, v, qem.BOUNDARY_WEIGHT)
+    st = _state(pts, tris)
+    _, done = _decimate(st, len(tris) // 10)
+    assert done > 0
+    live = st["vdead"] == 0
+    got = st["vq"][live][:, qem.HISTORY].sum(axis=0)
+    assert np.allclose(got, expect, rtol=1e-9, atol=1e-12)
+
+
+def test_cost_weighs_current_and_history():
+    """The placement works on current + HISTORY_WEIGHT x history of both ends."""
+    rng = np.random.default_rng(11)
+    for _ in range(20):
+        pu, pv = rng.normal(size=3), rng.normal(size=3)
+        cur = [_random_quadric(rng, 2, 0.5 * (pu + pv), 0.3) for _ in range(2)]
+        hist = [_random_quadric(rng, 3, 0.5 * (pu + pv), 0.3) for _ in range(2)]
+        vq = np.zeros((2, qem.QUADRIC_WIDTH))
+        for i in range(2):
+            vq[i, qem.CURRENT], vq[i, qem.HISTORY] = cur[i], hist[i]
+        cost, x, y, z = qem._placement(vq, np.array([pu, pv]), np.zeros(2, np.uint8), 0, 1, np.empty(10))
+        q = cur[0] + cur[1] + qem.HISTORY_WEIGHT * (hist[0] + hist[1])
+        ref_cost, _ = naive_placement(q, pu, pv, ridge=qem.PLACE_RIDGE, reach=qem.PLACE_REACH)
+        scale = max(abs(q[9]), quadric_cost(q, pu), quadric_cost(q, pv), 1e-12)
+        assert cost == pytest.approx(max(quadric_cost(q, np.array([x, y, z])), 0.0), rel=1e-7, abs=1e-9 * scale)
+        assert abs(cost - ref_cost) <= 1e-6 * scale + 1e-12
+
+
+def test_border_survives_on_an_open_patch():
+    """The patch's border (a square) stays: every border vertex stays on the square's sides, up to
+    what the soft constraint planes allow (a few % of the grid spacing)."""
+    pts, tris = _wavy_patch(seed=4)
+    st = _state(pts, tris)
+    _decimate(st, len(tris) // 20)
+    live_t = st["tris"][st["tris"][:, 0] >= 0]
+    e = np.sort(np.concatenate([live_t[:, [0, 1]], live_t[:, [1, 2]], live_t[:, [2, 0]]]), axis=1)
+    u, c = np.unique(e, axis=0, return_counts=True)
+    border = np.unique(u[c == 1])
+    xy = st["vpos"][border, :2]
+    on_side = np.minimum(np.minimum(np.abs(xy[:, 0]), np.abs(xy[:, 0] - 1)),
+                         np.minimum(np.abs(xy[:, 1]), np.abs(xy[:, 1] - 1)))
+    assert on_side.max() < 0.05 / 23  # grid spacing 1/23

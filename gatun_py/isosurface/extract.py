@@ -246,7 +246,7 @@ class _Extractor:
         old = getattr(self, "vpos", None)
         n = self.nv
         new = dict(vpos=np.empty((cap, 3)), vgrad=np.zeros((cap, 2)), vkey=np.empty(cap, np.int64),
-                   vlock=np.zeros(cap, np.uint8), vq=np.zeros((cap, 10)), vbnd=np.zeros(cap, np.uint8),
+                   vlock=np.zeros(cap, np.uint8), vq=np.zeros((cap, qem.QUADRIC_WIDTH)), vbnd=np.zeros(cap, np.uint8),
                    vdead=np.zeros(cap, np.uint8), vimp=np.ones(cap), vfresh=np.ones(cap, np.uint8))
         if old is not None:
             for name, arr in new.items():
@@ -346,6 +346,12 @@ class _Extractor:
             arr = getattr(self, name)
             arr[:self.nv] = arr[:n][live]
         self.vdead[:n] = 0
+        # the freed slots are reused by the next batch's new vertices: clear what marching does not
+        # set (stale quadrics, border flags and importance would otherwise pass to a new vertex)
+        self.vq[self.nv:n] = 0.0
+        self.vbnd[self.nv:n] = 0
+        self.vfresh[self.nv:n] = 1
+        self.vimp[self.nv:n] = 1.0
         used = (self.ek != marching.EMPTY) & (self.evid >= 0)
         self.evid[used] = remap[self.evid[used]].astype(np.int32)
         self.nq = self.nt

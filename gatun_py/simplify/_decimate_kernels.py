@@ -57,8 +57,16 @@ C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS, C_STARTED, C_EXACT = 0, 1, 2, 3, 4
 PIN_KEEP, PIN_NO_TARGET = 1, 2
 PIN_ALL = PIN_KEEP | PIN_NO_TARGET
 
+# Reference counting: the helpers below that never allocate are compiled with ``_nrt=False`` (no
+# numba runtime, so no atomic incref / decref of every array argument, view and tuple item on
+# every call; their caller owns every array for the whole call). Profiled on Blunt-fin (perf on the
+# kernels' code), those two atomic instructions were ~19 % of the decimation's CPU time: the
+# per-tet helpers (_tet_planes, _contains, ...) run millions of times. The arithmetic is the
+# same, so the forest is bit-identical (bench/forest_identity.py). Functions that allocate
+# (stars, contexts, the evaluation, the merge, the driver) keep the runtime.
 
-@njit(cache=True)
+
+@njit(cache=True, _nrt=False)
 def _orient6(p, a, b, c, d):
     """6 x signed volume of (a, b, c, d), evaluated like ``TetMesh.signed_volumes`` (same order)."""
     ax = p[a, 0]
@@ -79,7 +87,7 @@ def _orient6(p, a, b, c, d):
     return (ux * cx + uy * cy) + uz * cz
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _det6(ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz):
     """6 x signed volume of four explicit points (same formula as :func:`_orient6`)."""
     ux = bx - ax
@@ -94,7 +102,7 @@ def _det6(ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz):
     return (ux * (vy * wz - vz * wy) + uy * (vz * wx - vx * wz)) + uz * (vx * wy - vy * wx)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _value_at(pts, dens, q, v6, x, y, z, out):
     """Barycentric interpolation of the density at (x, y, z) in tet q (6 vol v6 > 0).
 
@@ -123,7 +131,7 @@ def _value_at(pts, dens, q, v6, x, y, z, out):
     out[1] = val
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _max_edge2(p, q):
     best = 0.0
     for i in range(4):
@@ -137,7 +145,7 @@ def _max_edge2(p, q):
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _tri_normal(p, a, b, c, out):
     ux = p[b, 0] - p[a, 0]
     uy = p[b, 1] - p[a, 1]
@@ -150,7 +158,7 @@ def _tri_normal(p, a, b, c, out):
     out[2] = ux * vy - uy * vx
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _tidy(v, head, nxt, T, alive):
     """Unlink the slots of dead tets (and of tets that no longer hold v) from v's list."""
     prev = -1
@@ -195,12 +203,12 @@ def _star(v, head, nxt, T, alive):
     return _star_view(v, head, nxt, T, alive)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _contains(T, t, v):
     return T[t, 0] == v or T[t, 1] == v or T[t, 2] == v or T[t, 3] == v
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _next_stamp(counters):
     counters[C_STAMP] += 1
     return counters[C_STAMP]
@@ -362,7 +370,7 @@ def _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counter
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _quadric_at(quad, u4, v, w):
     """Quadric of vertex v at vertex w's point u = u4[w] = (x, y, z, s): u^T A u + 2 b.u + c.
 
@@ -381,7 +389,7 @@ def _quadric_at(quad, u4, v, w):
     return e if e > 0.0 else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _tet_planes(pts, dens, q, lam, val):
     """Tet q's barycentric coordinates and interpolant as affine functions of the point.
 
@@ -418,7 +426,7 @@ def _tet_planes(pts, dens, q, lam, val):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _new_value(p, k0, pts, ok, lam, val, fallback):
     """Value at sample point p after the merge, from the new star's tet planes (``ok[k]``: tet k of
     the star survives positive; ``lam``, ``val`` from :func:`_tet_planes`).
@@ -457,7 +465,7 @@ def _new_value(p, k0, pts, ok, lam, val, fallback):
 # bound of :func:`_evaluate` (the terms that cannot be negative left out) rounds below it.
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _star_volumes(a, st, T, pts, dens, vol_old, mass_old, dsum, nrm, off, fn):
     """Per star tet: 6 x volume, mass, density sum without a, and the plane of the face opposite a
     (so that the volume with a moved onto b is one dot product: 6 vol = off - nrm . p_b, linear in
@@ -487,7 +495,7 @@ def _star_volumes(a, st, T, pts, dens, vol_old, mass_old, dsum, nrm, off, fn):
     return vol_star, reach2
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _star_boundary(bf, pts, n_old, area_old):
     """Outward normals (2 x area) and areas of a's boundary faces; returns their total area."""
     area_sum = 0.0
@@ -498,7 +506,7 @@ def _star_boundary(bf, pts, n_old, area_old):
     return area_sum
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _star_sample_count(st, tp_count):
     """Number of sample points listed in the star's tets."""
     npt = 0
@@ -507,7 +515,7 @@ def _star_sample_count(st, tp_count):
     return npt
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _star_samples(st, T, pts, dens, pw, tp_head, tp_count, p_next, stride, p_id, p_k, lam, val, q):
     """Every stride-th sample point of the star (``p_id``) with its star tet (``p_k``); returns the
     sum of their weighted squared errors against the current interpolant (``lam``, ``val``: scratch)."""
@@ -535,7 +543,7 @@ def _star_samples(st, T, pts, dens, pw, tp_head, tp_count, p_next, stride, p_id,
     return e_old
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _new_volumes(b, st, T, pts, vol_old, nrm, off, fast_ok, v6n, q):
     """Legality of the volumes after a -> b: every tet of a's star without b stays positive (or
     the input's flat tets stay flat). Fills ``v6n`` (6 x new volume) of the surviving tets and
@@ -568,7 +576,7 @@ def _new_volumes(b, st, T, pts, vol_old, nrm, off, fast_ok, v6n, q):
     return n_col
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _mass_error(b, st, T, dens, mass_old, dsum, v6n):
     """The paper's density error: sum over a's tets of |mass after - mass before| (a collapsed tet
     loses all its mass)."""
@@ -581,7 +589,7 @@ def _mass_error(b, st, T, dens, mass_old, dsum, v6n):
     return dm
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _interp_deviation(a, b, st, T, pts, dens, v6n, q, vout):
     """|value of a - the new mesh's interpolant at a's position|: in the new tet containing it (the
     smallest deviation if several do, which only happens on shared faces or at coincident points),
@@ -609,7 +617,7 @@ def _interp_deviation(a, b, st, T, pts, dens, v6n, q, vout):
     return dev_in if dev_in >= 0.0 else dev_out
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _boundary_ok(a, b, bf, n_old, area_old, pts, area_new, n_new):
     """Legality on the boundary: no face of a's that survives turns by 90 degrees or more (the
     paper's negative area). Fills ``area_new`` (-1 for the faces that collapse)."""
@@ -629,7 +637,7 @@ def _boundary_ok(a, b, bf, n_old, area_old, pts, area_new, n_new):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _swept_volume(b, bf, n_old, pts):
     """Volume swept by a's boundary faces moving a onto b (the tet between each old face and b)."""
     swept = 0.0
@@ -641,7 +649,7 @@ def _swept_volume(b, bf, n_old, pts):
     return swept
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _area_error(a, b, bf, area_old, area_new, area_sum):
     """The paper's geometry error: each new face against every old face sharing an edge with it,
     weighted by the old face's share of the affected area."""
@@ -661,7 +669,7 @@ def _area_error(a, b, bf, area_old, area_new, area_sum):
     return ge
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _sample_error(b, st, T, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val, q):
     """Sum of the weighted squared errors at the sample points after a -> b (``p_id``, ``p_k``
     from :func:`_star_samples`; the other arrays are scratch)."""
@@ -681,7 +689,7 @@ def _sample_error(b, st, T, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val, q):
     return se
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _total_error(dm_w, di, ge_w, swept_w, qe_w, se, n_col, power):
     """The merge error from its weighted terms, per collapsed tet (to a power): the comparison
     that matters is at equal tet counts."""
@@ -725,7 +733,7 @@ def _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, 
             stride, e_old, np.empty(ns), np.empty(2), q, np.empty(3), np.empty(bf.shape[0]), s_ok, s_lam, s_val)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _exact_terms(a, b, st, T, pts, dens, params, pw, ctx):
     """The two terms left out of the bound: (interpolation term, sampled error term), weighted."""
     (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
@@ -741,7 +749,7 @@ def _exact_terms(a, b, st, T, pts, dens, params, pw, ctx):
     return di, se
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mark, counters, ctx, cand_out,
                      err_out, terms_out, exact):
     """Every geometrically legal merge a -> b (b a neighbour of a): its target in ``cand_out``,
@@ -785,7 +793,7 @@ def _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mar
     return nc
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _candidate_exact(a, b, terms, st, T, pts, dens, params, pw, ctx):
     """The exact error of candidate b of :func:`_candidate_terms` (``terms`` its row)."""
     _new_volumes(b, st, T, pts, ctx[0], ctx[3], ctx[4], ctx[6], ctx[15], ctx[17])  # v6n, for the interpolant
@@ -857,12 +865,12 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
 
 
 # -- a binary min-heap over (error, vertex) with a version stamp for lazy deletion ----------------
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _heap_less(h_err, h_v, i, j):
     return h_err[i] < h_err[j] or (h_err[i] == h_err[j] and h_v[i] < h_v[j])
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _heap_swap(h_err, h_v, h_b, h_ver, i, j):
     h_err[i], h_err[j] = h_err[j], h_err[i]
     h_v[i], h_v[j] = h_v[j], h_v[i]
@@ -870,7 +878,7 @@ def _heap_swap(h_err, h_v, h_b, h_ver, i, j):
     h_ver[i], h_ver[j] = h_ver[j], h_ver[i]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _heap_push(h_err, h_v, h_b, h_ver, counters, e, v, b, ver, cur_ver):
     n = counters[C_HEAP]
     if n >= h_err.shape[0]:
@@ -901,7 +909,7 @@ def _heap_push(h_err, h_v, h_b, h_ver, counters, e, v, b, ver, cur_ver):
     counters[C_HEAP] = n + 1
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _sift_down(h_err, h_v, h_b, h_ver, i, n):
     while True:
         l = 2 * i + 1
@@ -917,7 +925,7 @@ def _sift_down(h_err, h_v, h_b, h_ver, i, n):
             break
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _heap_pop(h_err, h_v, h_b, h_ver, counters):
     n = counters[C_HEAP] - 1
     e, v, b, ver = h_err[0], h_v[0], h_b[0], h_ver[0]
@@ -927,7 +935,7 @@ def _heap_pop(h_err, h_v, h_b, h_ver, counters):
     return e, v, b, ver
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _apply_merge(a, b, st_a, T, alive, nbr, head, nxt):
     """Merge a into b: collapse the tets of edge ab (gluing their outer neighbours), relabel the rest."""
     for i in range(st_a.shape[0]):
@@ -957,7 +965,7 @@ def _apply_merge(a, b, st_a, T, alive, nbr, head, nxt):
     _splice_incidence(a, b, head, nxt)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _splice_incidence(a, b, head, nxt):
     """Vertex a's incidence list put in front of b's (a's left empty): a merged into b."""
     s = head[a]

@@ -670,9 +670,8 @@ def _area_error(a, b, bf, area_old, area_new, area_sum):
 
 
 @njit(cache=True, _nrt=False)
-def _sample_error(b, st, T, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val, q):
-    """Sum of the weighted squared errors at the sample points after a -> b (``p_id``, ``p_k``
-    from :func:`_star_samples`; the other arrays are scratch)."""
+def _new_star_planes(b, st, T, pts, dens, s_ok, s_lam, s_val, q):
+    """Tet planes (:func:`_tet_planes`) of the new star after a -> b; ``s_ok[k]``: tet k survives positive."""
     for k in range(st.shape[0]):
         t = st[k] >> 2
         s_ok[k] = False
@@ -681,12 +680,25 @@ def _sample_error(b, st, T, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val, q):
                 q[j] = T[t, j]
             q[st[k] & 3] = b
             s_ok[k] = _tet_planes(pts, dens, q, s_lam[k], s_val[k])
-    se = 0.0
-    for ip in range(p_id.shape[0]):
+
+
+@njit(cache=True, _nrt=False)
+def _sample_sum(se, lo, hi, b, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val):
+    """``se`` plus the weighted squared errors after a -> b at sample points ``lo:hi``, added one
+    by one in order (so a sum taken in pieces is the sum taken at once, bit for bit)."""
+    for ip in range(lo, hi):
         p = p_id[ip]
         f = _new_value(p, p_k[ip], pts, s_ok, s_lam, s_val, dens[b])
         se += pw[p] * (dens[p] - f) ** 2
     return se
+
+
+@njit(cache=True, _nrt=False)
+def _sample_error(b, st, T, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val, q):
+    """Sum of the weighted squared errors at the sample points after a -> b (``p_id``, ``p_k``
+    from :func:`_star_samples`; the other arrays are scratch)."""
+    _new_star_planes(b, st, T, pts, dens, s_ok, s_lam, s_val, q)
+    return _sample_sum(0.0, 0, p_id.shape[0], b, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val)
 
 
 @njit(cache=True, _nrt=False)
@@ -794,11 +806,52 @@ def _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mar
 
 
 @njit(cache=True, _nrt=False)
-def _candidate_exact(a, b, terms, st, T, pts, dens, params, pw, ctx):
-    """The exact error of candidate b of :func:`_candidate_terms` (``terms`` its row)."""
-    _new_volumes(b, st, T, pts, ctx[0], ctx[3], ctx[4], ctx[6], ctx[15], ctx[17])  # v6n, for the interpolant
-    di, se = _exact_terms(a, b, st, T, pts, dens, params, pw, ctx)
-    return _total_error(terms[0], di, terms[1], terms[2], terms[3], se, int(terms[4]), params[P_NCP])
+def _loses(e, b, best_e, best_b):
+    """True when (e, b) cannot be the best against the best so far (``best_b`` < 0: none yet)."""
+    return best_b >= 0 and (e > best_e or (e == best_e and b > best_b))
+
+
+# Sample points summed between two checks of the running lower bound in _candidate_exact.
+_BOUND_EVERY = 32
+
+
+@njit(cache=True, _nrt=False)
+def _candidate_exact(a, b, terms, st, T, pts, dens, params, pw, ctx, best_b, best_e):
+    """(exact error, True) of candidate b of :func:`_candidate_terms` (``terms`` its row), or
+    (0, False) as soon as a lower bound of it loses against (``best_e``, ``best_b``).
+
+    The bound is the error with the sample points not yet summed at a new error of 0: the
+    sampled sum only grows point by point, and every step after it (subtracting the old sum,
+    the positive weights, the fixed order of :func:`_total_error`) is monotone in it under
+    rounding, so the bound never exceeds the exact error and the choice is the one of computing
+    every error in full, bit for bit.
+    """
+    (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
+     stride, e_old, v6n, vout, q, n_new, area_new, s_ok, s_lam, s_val) = ctx
+    n_col = int(terms[4])
+    power = params[P_NCP]
+    _new_volumes(b, st, T, pts, vol_old, nrm, off, fast_ok, v6n, q)  # v6n, for the interpolant
+    di = 0.0
+    if params[P_WI] > 0.0:
+        f_dev = _interp_deviation(a, b, st, T, pts, dens, v6n, q, vout)
+        di = params[P_WI] * f_dev * f_dev * vol_star
+    se = 0.0
+    npt = p_id.shape[0]
+    if npt > 0:
+        w = params[P_WS] * stride
+        if _loses(_total_error(terms[0], di, terms[1], terms[2], terms[3], w * (0.0 - e_old), n_col, power),
+                  b, best_e, best_b):
+            return 0.0, False
+        _new_star_planes(b, st, T, pts, dens, s_ok, s_lam, s_val, q)
+        acc = 0.0
+        for lo in range(0, npt, _BOUND_EVERY):
+            hi = min(npt, lo + _BOUND_EVERY)
+            acc = _sample_sum(acc, lo, hi, b, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val)
+            if hi < npt and _loses(_total_error(terms[0], di, terms[1], terms[2], terms[3], w * (acc - e_old), n_col,
+                                                power), b, best_e, best_b):
+                return 0.0, False
+        se = w * (acc - e_old)
+    return _total_error(terms[0], di, terms[1], terms[2], terms[3], se, n_col, power), True
 
 
 @njit(cache=True)
@@ -852,11 +905,11 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
     for x in range(nc):
         k = order[x]
         b = cand[k]
-        if best_b >= 0 and (low[k] > best_e or (low[k] == best_e and b > best_b)):
+        if _loses(low[k], b, best_e, best_b):
             return best_b, best_e
         counters[C_EXACT] += 1
-        e = _candidate_exact(a, b, terms[k], st, T, pts, dens, params, pw, ctx)
-        if best_b >= 0 and (e > best_e or (e == best_e and b > best_b)):
+        e, whole = _candidate_exact(a, b, terms[k], st, T, pts, dens, params, pw, ctx, best_b, best_e)
+        if not whole or _loses(e, b, best_e, best_b):
             continue
         if _link_ok(a, b, st, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
             best_b = b

@@ -145,8 +145,9 @@ def test_sample_points_follow_the_merges(name):
     mesh = AWKWARD[name]()
     pts, dens = _sample_points(mesh)
     state = DecimationState(mesh, 1.0, 1.0)
-    assert np.allclose(state.pw, _sample_weights(mesh), rtol=1e-12, atol=0)
-    assert np.allclose(state.pts, pts, rtol=1e-12, atol=1e-12) and np.allclose(state.dens, dens, rtol=1e-12)
+    assert np.allclose(state.pdat[:, 4], _sample_weights(mesh), rtol=1e-12, atol=0)
+    assert np.allclose(state.pdat[:, :3], pts, rtol=1e-12, atol=1e-12)
+    assert np.allclose(state.pdat[:, 3], dens, rtol=1e-12)
     forest = decimate(mesh)
     tets = [tuple(int(x) for x in t) for t in mesh.tets]
     ref = {mesh.n_points + i: t for i, t in enumerate(tets)}

@@ -15,12 +15,11 @@ validates the input and drives the loop. The mesh state during decimation:
 ``quad`` (n, 15) float64, ``u4`` (n, 4) float64
     every vertex's error quadric (A's upper triangle, b, c; see :func:`_quadric_at`) and its
     (x, y, z, s) point; merging a into b adds a's quadric to b's.
-``pw`` (n + m,) float64, ``tp_head``, ``tp_count`` (m,) int32, ``p_next`` (n + m,) int32
-    sample points of the original field (ids 0..n-1: the vertices, once merged away; n + t: the
-    centroid of input tet t; positions and values in rows n.. of ``pts`` and ``dens``, which
-    tets never index): every one is listed in the live tet that holds it (``tp_count[t]`` of them,
-    ``tp_head[t]`` ->
-    ``p_next`` chain), with weight ``pw`` (its share of the original volume); a merge a -> b hands
+``pdat`` (n + m, 5) float64, ``tp_head``, ``tp_count`` (m,) int32, ``p_next`` (n + m,) int32
+    sample points of the original field, one row (x, y, z, value, weight) each (ids 0..n-1: the
+    vertices, once merged away; n + t: the centroid of input tet t): every one is listed in the
+    live tet that holds it (``tp_count[t]`` of them, ``tp_head[t]`` -> ``p_next`` chain), with
+    its weight (its share of the original volume); a merge a -> b hands
     a and the points of a's star to the tets of the new star.
 
 A merge a -> b is legal when every surviving tet of a's star stays positive, every boundary face
@@ -427,7 +426,7 @@ def _tet_planes(pts, dens, q, lam, val):
 
 
 @njit(cache=True, _nrt=False)
-def _new_value(p, k0, pts, ok, lam, val, fallback):
+def _new_value(p, k0, pdat, ok, lam, val, fallback):
     """Value at sample point p after the merge, from the new star's tet planes (``ok[k]``: tet k of
     the star survives positive; ``lam``, ``val`` from :func:`_tet_planes`).
 
@@ -435,9 +434,9 @@ def _new_value(p, k0, pts, ok, lam, val, fallback):
     star order; if none does (the boundary moved), the one p is nearest to (largest smallest
     barycentric coordinate, the first of equals).
     """
-    x = pts[p, 0]
-    y = pts[p, 1]
-    z = pts[p, 2]
+    x = pdat[p, 0]
+    y = pdat[p, 1]
+    z = pdat[p, 2]
     best_lo = -1e300
     v = fallback
     for kk in range(-1, ok.shape[0]):
@@ -516,7 +515,7 @@ def _star_sample_count(st, tp_count):
 
 
 @njit(cache=True, _nrt=False)
-def _star_samples(st, T, pts, dens, pw, tp_head, tp_count, p_next, stride, p_id, p_k, lam, val, q):
+def _star_samples(st, T, pts, dens, pdat, tp_head, tp_count, p_next, stride, p_id, p_k, lam, val, q):
     """Every stride-th sample point of the star (``p_id``) with its star tet (``p_k``); returns the
     sum of their weighted squared errors against the current interpolant (``lam``, ``val``: scratch)."""
     e_old = 0.0
@@ -535,8 +534,8 @@ def _star_samples(st, T, pts, dens, pw, tp_head, tp_count, p_next, stride, p_id,
                 p_id[npt] = p
                 p_k[npt] = i
                 if not flat:
-                    f = val[0] * pts[p, 0] + val[1] * pts[p, 1] + val[2] * pts[p, 2] + val[3]
-                    e_old += pw[p] * (dens[p] - f) ** 2
+                    f = val[0] * pdat[p, 0] + val[1] * pdat[p, 1] + val[2] * pdat[p, 2] + val[3]
+                    e_old += pdat[p, 4] * (pdat[p, 3] - f) ** 2
                 npt += 1
             seen += 1
             p = p_next[p]
@@ -683,22 +682,22 @@ def _new_star_planes(b, st, T, pts, dens, s_ok, s_lam, s_val, q):
 
 
 @njit(cache=True, _nrt=False)
-def _sample_sum(se, lo, hi, b, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val):
+def _sample_sum(se, lo, hi, b, pts, dens, pdat, p_id, p_k, s_ok, s_lam, s_val):
     """``se`` plus the weighted squared errors after a -> b at sample points ``lo:hi``, added one
     by one in order (so a sum taken in pieces is the sum taken at once, bit for bit)."""
     for ip in range(lo, hi):
         p = p_id[ip]
-        f = _new_value(p, p_k[ip], pts, s_ok, s_lam, s_val, dens[b])
-        se += pw[p] * (dens[p] - f) ** 2
+        f = _new_value(p, p_k[ip], pdat, s_ok, s_lam, s_val, dens[b])
+        se += pdat[p, 4] * (pdat[p, 3] - f) ** 2
     return se
 
 
 @njit(cache=True, _nrt=False)
-def _sample_error(b, st, T, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val, q):
+def _sample_error(b, st, T, pts, dens, pdat, p_id, p_k, s_ok, s_lam, s_val, q):
     """Sum of the weighted squared errors at the sample points after a -> b (``p_id``, ``p_k``
     from :func:`_star_samples`; the other arrays are scratch)."""
     _new_star_planes(b, st, T, pts, dens, s_ok, s_lam, s_val, q)
-    return _sample_sum(0.0, 0, p_id.shape[0], b, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val)
+    return _sample_sum(0.0, 0, p_id.shape[0], b, pts, dens, pdat, p_id, p_k, s_ok, s_lam, s_val)
 
 
 @njit(cache=True, _nrt=False)
@@ -709,7 +708,7 @@ def _total_error(dm_w, di, ge_w, swept_w, qe_w, se, n_col, power):
 
 
 @njit(cache=True)
-def _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next):
+def _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next):
     """Everything about a's star that every candidate merge of a shares, and the scratch arrays of
     one evaluation, as one tuple (see the names unpacked in :func:`_candidate_terms`)."""
     ns = st.shape[0]
@@ -740,13 +739,13 @@ def _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, 
     q = np.empty(4, np.int64)
     e_old = 0.0
     if npt > 0:
-        e_old = _star_samples(st, T, pts, dens, pw, tp_head, tp_count, p_next, stride, p_id, p_k, s_lam[0], s_val[0], q)
+        e_old = _star_samples(st, T, pts, dens, pdat, tp_head, tp_count, p_next, stride, p_id, p_k, s_lam[0], s_val[0], q)
     return (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
             stride, e_old, np.empty(ns), np.empty(2), q, np.empty(3), np.empty(bf.shape[0]), s_ok, s_lam, s_val)
 
 
 @njit(cache=True, _nrt=False)
-def _exact_terms(a, b, st, T, pts, dens, params, pw, ctx):
+def _exact_terms(a, b, st, T, pts, dens, params, pdat, ctx):
     """The two terms left out of the bound: (interpolation term, sampled error term), weighted."""
     (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
      stride, e_old, v6n, vout, q, n_new, area_new, s_ok, s_lam, s_val) = ctx
@@ -756,13 +755,13 @@ def _exact_terms(a, b, st, T, pts, dens, params, pw, ctx):
         di = params[P_WI] * f_dev * f_dev * vol_star
     se = 0.0
     if p_id.shape[0] > 0:
-        se = _sample_error(b, st, T, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val, q)
+        se = _sample_error(b, st, T, pts, dens, pdat, p_id, p_k, s_ok, s_lam, s_val, q)
         se = params[P_WS] * stride * (se - e_old)
     return di, se
 
 
 @njit(cache=True, _nrt=False)
-def _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mark, counters, ctx, cand_out,
+def _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pdat, mark, counters, ctx, cand_out,
                      err_out, terms_out, exact):
     """Every geometrically legal merge a -> b (b a neighbour of a): its target in ``cand_out``,
     its weighted mass, area, swept volume and quadric terms and collapsed-tet count in
@@ -797,7 +796,7 @@ def _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mar
             terms_out[nc, 2] = params[P_WV] * _swept_volume(b, bf, n_old, pts)
             terms_out[nc, 3] = params[P_WQ] * (_quadric_at(quad, u4, a, b) if params[P_WQ] > 0.0 else 0.0)
             terms_out[nc, 4] = n_col
-            di, se = _exact_terms(a, b, st, T, pts, dens, params, pw, ctx) if exact else (0.0, se_low)
+            di, se = _exact_terms(a, b, st, T, pts, dens, params, pdat, ctx) if exact else (0.0, se_low)
             err_out[nc] = _total_error(terms_out[nc, 0], di, terms_out[nc, 1], terms_out[nc, 2], terms_out[nc, 3],
                                        se, n_col, params[P_NCP])
             cand_out[nc] = b
@@ -816,7 +815,7 @@ _BOUND_EVERY = 32
 
 
 @njit(cache=True, _nrt=False)
-def _candidate_exact(a, b, terms, st, T, pts, dens, params, pw, ctx, best_b, best_e):
+def _candidate_exact(a, b, terms, st, T, pts, dens, params, pdat, ctx, best_b, best_e):
     """(exact error, True) of candidate b of :func:`_candidate_terms` (``terms`` its row), or
     (0, False) as soon as a lower bound of it loses against (``best_e``, ``best_b``).
 
@@ -846,7 +845,7 @@ def _candidate_exact(a, b, terms, st, T, pts, dens, params, pw, ctx, best_b, bes
         acc = 0.0
         for lo in range(0, npt, _BOUND_EVERY):
             hi = min(npt, lo + _BOUND_EVERY)
-            acc = _sample_sum(acc, lo, hi, b, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val)
+            acc = _sample_sum(acc, lo, hi, b, pts, dens, pdat, p_id, p_k, s_ok, s_lam, s_val)
             if hi < npt and _loses(_total_error(terms[0], di, terms[1], terms[2], terms[3], w * (acc - e_old), n_col,
                                                 power), b, best_e, best_b):
                 return 0.0, False
@@ -856,21 +855,21 @@ def _candidate_exact(a, b, terms, st, T, pts, dens, params, pw, ctx, best_b, bes
 
 @njit(cache=True)
 def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, mark, counters, cand_out, err_out,
-                      pw, tp_head, tp_count, p_next):
+                      pdat, tp_head, tp_count, p_next):
     """Error of every geometrically legal merge a -> b (b a neighbour of a): fills the outputs.
 
     Returns the number of candidates. Legality here covers volumes, boundary orientation and the
     boundary-into-interior rule; the link condition is checked by the caller, best first.
     """
-    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next)
+    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next)
     terms = np.empty((cand_out.shape[0], 5))
-    return _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mark, counters, ctx, cand_out,
+    return _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pdat, mark, counters, ctx, cand_out,
                             err_out, terms, True)
 
 
 @njit(cache=True)
 def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab, counters,
-              pw, tp_head, tp_count, p_next):
+              pdat, tp_head, tp_count, p_next):
     """Best legal merge of a: (target, error), or (-1, 0) when a has none.
 
     The best is the smallest (error, target id) among the candidates that pass the link
@@ -886,8 +885,8 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
     cand = np.empty(cap, np.int64)
     low = np.empty(cap)
     terms = np.empty((cap, 5))
-    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next)
-    nc = _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mark, counters, ctx, cand, low,
+    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next)
+    nc = _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pdat, mark, counters, ctx, cand, low,
                           terms, False)
     if nc == 0:
         return -1, 0.0
@@ -908,7 +907,7 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
         if _loses(low[k], b, best_e, best_b):
             return best_b, best_e
         counters[C_EXACT] += 1
-        e, whole = _candidate_exact(a, b, terms[k], st, T, pts, dens, params, pw, ctx, best_b, best_e)
+        e, whole = _candidate_exact(a, b, terms[k], st, T, pts, dens, params, pdat, ctx, best_b, best_e)
         if not whole or _loses(e, b, best_e, best_b):
             continue
         if _link_ok(a, b, st, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
@@ -1031,7 +1030,7 @@ def _splice_incidence(a, b, head, nxt):
 
 
 @njit(cache=True)
-def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next):
+def _reassign_points(a, st_a, T, alive, pts, dens, pdat, tp_head, tp_count, p_next):
     """After merging a: a and every point listed in a's former star go to the first live tet of
     the new star (star order) that contains them, else the one they are nearest to (largest
     smallest barycentric coordinate of :func:`_value_at`, the first of equals; as :func:`_new_value`).
@@ -1070,8 +1069,8 @@ def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next):
                 hi3[d] = max(hi3[d], pts[T[t, j], d])
     for ip in range(cnt):
         for d in range(3):
-            lo3[d] = min(lo3[d], pts[plist[ip], d])
-            hi3[d] = max(hi3[d], pts[plist[ip], d])
+            lo3[d] = min(lo3[d], pdat[plist[ip], d])
+            hi3[d] = max(hi3[d], pdat[plist[ip], d])
     ext3 = ((hi3[0] - lo3[0]) ** 2 + (hi3[1] - lo3[1]) ** 2 + (hi3[2] - lo3[2]) ** 2) ** 1.5
     v6s = np.zeros(ns)
     usable = np.zeros(ns, np.bool_)
@@ -1094,9 +1093,9 @@ def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next):
     vout = np.empty(2)
     for ip in range(cnt):
         p = plist[ip]
-        x = pts[p, 0]
-        y = pts[p, 1]
-        z = pts[p, 2]
+        x = pdat[p, 0]
+        y = pdat[p, 1]
+        z = pdat[p, 2]
         best = -1
         for i in range(ns):
             if not usable[i]:
@@ -1139,20 +1138,20 @@ def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next):
 
 @njit(cache=True, parallel=True)
 def _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4,
-                   marks, marks_b, marks_ab, tcount, pw, tp_head, tp_count, p_next):
+                   marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count, p_next):
     """:func:`_evaluate` of ``todo[:n_todo]`` in parallel: every evaluation only reads the mesh
     (each thread stamps its own mark rows), so the results cannot depend on the scheduling."""
     for i in prange(n_todo):
         tid = get_thread_id()
         b, e = _evaluate(todo[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks[tid],
-                         marks_b[tid], marks_ab[tid], tcount[tid], pw, tp_head, tp_count, p_next)
+                         marks_b[tid], marks_ab[tid], tcount[tid], pdat, tp_head, tp_count, p_next)
         out_b[i] = b
         out_e[i] = e
 
 
 @njit(cache=True)
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks, marks_b, marks_ab, tcount,
-         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pw, tp_head, tp_count, p_next):
+         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pdat, tp_head, tp_count, p_next):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left.
 
     ``marks*`` and ``tcount`` have one row per thread (stamps, evaluation counts); the sequential
@@ -1179,10 +1178,10 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         found = False
         if n_todo == 1:
             out_b[0], out_e[0] = _evaluate(todo[0], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
-                                           u4, mark, mark_b, mark_ab, tc, pw, tp_head, tp_count, p_next)
+                                           u4, mark, mark_b, mark_ab, tc, pdat, tp_head, tp_count, p_next)
         elif n_todo > 1:
             _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params,
-                           quad, u4, marks, marks_b, marks_ab, tcount, pw, tp_head, tp_count, p_next)
+                           quad, u4, marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count, p_next)
         # pushed in todo order, as evaluated one by one
         for i in range(n_todo):
             v = todo[i]
@@ -1238,7 +1237,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
                     mark[w] = stamp
                     nb[k] = w
                     k += 1
-        _merge(a, b, st_a, nb[:k], T, alive, nbr, head, nxt, pts, dens, params, quad, tp_head, tp_count, p_next)
+        _merge(a, b, st_a, nb[:k], T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, tp_head, tp_count, p_next)
         parent[a] = b
         rank[a] = counters[C_MERGES]
         counters[C_MERGES] += 1
@@ -1251,14 +1250,14 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
 
 
 @njit(cache=True)
-def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, tp_head, tp_count, p_next):
+def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, tp_head, tp_count, p_next):
     """Everything a merge a -> b changes: the tets, the lists of the vertices around it (``nb``:
     the vertices of a's star but a), the sample points and b's quadric."""
     _apply_merge(a, b, st_a, T, alive, nbr, head, nxt)
     for i in range(nb.shape[0]):
         _tidy(nb[i], head, nxt, T, alive)
     if params[P_WS] > 0.0:
-        _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next)
+        _reassign_points(a, st_a, T, alive, pts, dens, pdat, tp_head, tp_count, p_next)
     for j in range(quad.shape[1]):
         quad[b, j] += quad[a, j]
 
@@ -1369,24 +1368,24 @@ def _vertex_topology(T, nbr, head, nxt, n):
 
 @njit(cache=True)
 def _sample_points(pts, dens, T, tet_w, centroid_weight):
-    """(pw, points, values) of the sample points: the n vertices (weight a quarter of their tets'
-    volume fractions), then every tet's centroid (its volume fraction x ``centroid_weight``)."""
+    """The sample points as rows (x, y, z, value, weight): the n vertices (weight a quarter of
+    their tets' volume fractions), then every tet's centroid (its volume fraction x
+    ``centroid_weight``). One row per point, so that walking a tet's list of points reads one
+    place in memory per point, not three arrays."""
     n = pts.shape[0]
     m = T.shape[0]
-    pw = np.zeros(n + m)
-    p = np.empty((n + m, 3))
-    d = np.empty(n + m)
-    p[:n] = pts
-    d[:n] = dens
+    pdat = np.zeros((n + m, 5))
+    pdat[:n, :3] = pts
+    pdat[:n, 3] = dens
     for t in range(m):
         for c in range(4):
-            pw[T[t, c]] += tet_w[t] / 4.0
+            pdat[T[t, c], 4] += tet_w[t] / 4.0
     for t in range(m):
-        pw[n + t] = tet_w[t] * centroid_weight
+        pdat[n + t, 4] = tet_w[t] * centroid_weight
         for k in range(3):
-            p[n + t, k] = (((pts[T[t, 0], k] + pts[T[t, 1], k]) + pts[T[t, 2], k]) + pts[T[t, 3], k]) / 4.0
-        d[n + t] = (((dens[T[t, 0]] + dens[T[t, 1]]) + dens[T[t, 2]]) + dens[T[t, 3]]) / 4.0
-    return pw, p, d
+            pdat[n + t, k] = (((pts[T[t, 0], k] + pts[T[t, 1], k]) + pts[T[t, 2], k]) + pts[T[t, 3], k]) / 4.0
+        pdat[n + t, 3] = (((dens[T[t, 0]] + dens[T[t, 1]]) + dens[T[t, 2]]) + dens[T[t, 3]]) / 4.0
+    return pdat
 
 
 @njit(cache=True)

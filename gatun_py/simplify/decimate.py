@@ -227,9 +227,9 @@ class DecimationState:
         self.dens = mesh.density.astype(np.float64)
         # Sample points of the original field, listed in the live tet holding them: every input
         # tet's centroid from the start (ids n + t, weight its volume fraction x CENTROID_WEIGHT),
-        # every vertex once merged away (weight a quarter of its tets' volume fraction). Their
-        # positions and values follow the vertices' in pts and dens: tets only index the first n.
-        self.pw, self.pts, self.dens = K._sample_points(self.pts, self.dens, self.T, tet_w, CENTROID_WEIGHT)
+        # every vertex once merged away (weight a quarter of its tets' volume fraction); one row
+        # (x, y, z, value, weight) per point.
+        self.pdat = K._sample_points(self.pts, self.dens, self.T, tet_w, CENTROID_WEIGHT)
         self.p_next = np.full(n + m, -1, np.int32)
         self.tp_head = np.arange(n, n + m, dtype=np.int32)
         self.tp_count = np.ones(m, np.int32)
@@ -256,7 +256,7 @@ class DecimationState:
                 self.params, self.quad, self.u4)
 
     def _sample_args(self):
-        return (self.pw, self.tp_head, self.tp_count, self.p_next)
+        return (self.pdat, self.tp_head, self.tp_count, self.p_next)
 
     def _heap_args(self):
         return (self.ver, self.h_err, self.h_v, self.h_b, self.h_ver, self.last_err)
@@ -289,7 +289,7 @@ class DecimationState:
         st = K._star(a, self.head, self.nxt, self.T, self.alive)
         nb = np.unique(self.T[st >> 2])
         K._merge(a, b, st, nb[nb != a].astype(np.int64), self.T, self.alive, self.nbr, self.head, self.nxt, self.pts,
-                 self.dens, self.params, self.quad, self.tp_head, self.tp_count, self.p_next)
+                 self.dens, self.params, self.quad, self.pdat, self.tp_head, self.tp_count, self.p_next)
         self.parent[a] = b
         self.rank[a] = self.counters[K.C_MERGES]
         self.counters[K.C_MERGES] += 1

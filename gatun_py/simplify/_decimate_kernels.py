@@ -15,11 +15,16 @@ validates the input and drives the loop. The mesh state during decimation:
 ``quad`` (n, 15) float64, ``u4`` (n, 4) float64
     every vertex's error quadric (A's upper triangle, b, c; see :func:`_quadric_at`) and its
     (x, y, z, s) point; merging a into b adds a's quadric to b's.
-``pdat`` (n + m, 5) float64, ``tp_head``, ``tp_count`` (m,) int32, ``p_next`` (n + m,) int32
-    sample points of the original field, one row (x, y, z, value, weight) each (ids 0..n-1: the
-    vertices, once merged away; n + t: the centroid of input tet t): every one is listed in the
-    live tet that holds it (``tp_count[t]`` of them, ``tp_head[t]`` -> ``p_next`` chain), with
-    its weight (its share of the original volume); a merge a -> b hands
+``pdat`` (n + m, 5) float64, ``p_orig``, ``p_next`` (n + m,) int32, ``tp_head``, ``tp_count`` (m,) int32
+    sample points of the original field, one row (x, y, z, value, weight) each: the centroid of
+    every input tet from the start, every vertex once merged away (its row added then, from
+    ``pts``, ``dens`` and its weight ``vw``); ``p_orig`` names the point (a vertex id, or n + t
+    for tet t's centroid). Every one is listed in the live tet that holds it (``tp_count[t]`` of
+    them, ``tp_head[t]`` -> ``p_next`` chain), with its weight (its share of the original
+    volume). Rows ``counters[C_PTOP]`` on are free; every ``_compact_every(n)`` merges the rows are
+    rewritten tet by tet in list order (:func:`_compact_points`), so that a tet's points lie
+    side by side in memory (the evaluations walk these lists; the order within a list, which fixes
+    the sums, is kept). A merge a -> b hands
     a and the points of a's star to the tets of the new star.
 
 A merge a -> b is legal when every surviving tet of a's star stays positive, every boundary face
@@ -47,7 +52,7 @@ NORMAL_EPS = 1e-6
 # Indices into the float parameter array.
 P_WD, P_WG, P_WV, P_WI, P_WQ, P_WS, P_NCP, P_MAXS = 0, 1, 2, 3, 4, 5, 6, 7
 # Indices into the int64 counter array.
-C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS, C_STARTED, C_EXACT = 0, 1, 2, 3, 4, 5, 6
+C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS, C_STARTED, C_EXACT, C_PTOP = 0, 1, 2, 3, 4, 5, 6, 7
 # bits of a vertex's ``pinned`` flags: PIN_KEEP never merged away, PIN_NO_TARGET nothing merges into
 # it. A non-manifold vertex has both (PIN_ALL); a locked vertex (a brick's cut vertex) only
 # PIN_KEEP, and only interior vertices merge into it: an interior vertex's merge keeps every
@@ -1030,7 +1035,7 @@ def _splice_incidence(a, b, head, nxt):
 
 
 @njit(cache=True)
-def _reassign_points(a, st_a, T, alive, pts, dens, pdat, tp_head, tp_count, p_next):
+def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp_count, p_next, counters):
     """After merging a: a and every point listed in a's former star go to the first live tet of
     the new star (star order) that contains them, else the one they are nearest to (largest
     smallest barycentric coordinate of :func:`_value_at`, the first of equals; as :func:`_new_value`).
@@ -1046,7 +1051,17 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, tp_head, tp_count, p_ne
             cnt += 1
             p = p_next[p]
     plist = np.empty(cnt, np.int64)
-    plist[0] = a
+    # a becomes a sample point: its row at the top of the point rows
+    r = counters[C_PTOP]
+    counters[C_PTOP] = r + 1
+    pdat[r, 0] = pts[a, 0]
+    pdat[r, 1] = pts[a, 1]
+    pdat[r, 2] = pts[a, 2]
+    pdat[r, 3] = dens[a]
+    pdat[r, 4] = vw[a]
+    p_orig[r] = a
+    p_next[r] = -1
+    plist[0] = r
     cnt = 1
     for i in range(st_a.shape[0]):
         t = st_a[i] >> 2
@@ -1136,6 +1151,46 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, tp_head, tp_count, p_ne
             tp_count[best] += 1
 
 
+@njit(cache=True)
+def _compact_every(n):
+    """Merges between two rewrites of the point rows (about 16 in a whole decimation)."""
+    return max(4096, n // 16)
+
+
+@njit(cache=True)
+def _compact_points(alive, pdat, p_orig, tp_head, p_next, counters):
+    """Rewrite the point rows tet by tet, every list in its order, from row 0 (dropped points
+    go): a tet's points side by side in memory. Ids change, lists and their order do not."""
+    k = 0
+    for t in range(tp_head.shape[0]):
+        if alive[t]:
+            p = tp_head[t]
+            while p >= 0:
+                k += 1
+                p = p_next[p]
+    new_dat = np.empty((k, 5))
+    new_orig = np.empty(k, np.int32)
+    new_next = np.empty(k, np.int32)
+    k = 0
+    for t in range(tp_head.shape[0]):
+        p = tp_head[t]
+        if not alive[t] or p < 0:
+            tp_head[t] = -1
+            continue
+        tp_head[t] = k
+        while p >= 0:
+            for j in range(5):
+                new_dat[k, j] = pdat[p, j]
+            new_orig[k] = p_orig[p]
+            p = p_next[p]
+            new_next[k] = k + 1 if p >= 0 else -1
+            k += 1
+    pdat[:k] = new_dat
+    p_orig[:k] = new_orig
+    p_next[:k] = new_next
+    counters[C_PTOP] = k
+
+
 @njit(cache=True, parallel=True)
 def _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4,
                    marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count, p_next):
@@ -1151,13 +1206,15 @@ def _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, de
 
 @njit(cache=True)
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks, marks_b, marks_ab, tcount,
-         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pdat, tp_head, tp_count, p_next):
+         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pdat, tp_head, tp_count, p_next,
+         vw, p_orig):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left.
 
     ``marks*`` and ``tcount`` have one row per thread (stamps, evaluation counts); the sequential
     steps use row 0.
     """
     n = head.shape[0]
+    compact_every = _compact_every(n)
     mark = marks[0]
     mark_b = marks_b[0]
     mark_ab = marks_ab[0]
@@ -1237,10 +1294,13 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
                     mark[w] = stamp
                     nb[k] = w
                     k += 1
-        _merge(a, b, st_a, nb[:k], T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, tp_head, tp_count, p_next)
+        _merge(a, b, st_a, nb[:k], T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, vw, p_orig, tp_head,
+               tp_count, p_next, counters)
         parent[a] = b
         rank[a] = counters[C_MERGES]
         counters[C_MERGES] += 1
+        if params[P_WS] > 0.0 and counters[C_MERGES] % compact_every == 0:
+            _compact_points(alive, pdat, p_orig, tp_head, p_next, counters)
         ver[a] += 1
         for i in range(k):
             w = nb[i]
@@ -1250,14 +1310,15 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
 
 
 @njit(cache=True)
-def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, tp_head, tp_count, p_next):
+def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, vw, p_orig, tp_head, tp_count,
+           p_next, counters):
     """Everything a merge a -> b changes: the tets, the lists of the vertices around it (``nb``:
     the vertices of a's star but a), the sample points and b's quadric."""
     _apply_merge(a, b, st_a, T, alive, nbr, head, nxt)
     for i in range(nb.shape[0]):
         _tidy(nb[i], head, nxt, T, alive)
     if params[P_WS] > 0.0:
-        _reassign_points(a, st_a, T, alive, pts, dens, pdat, tp_head, tp_count, p_next)
+        _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp_count, p_next, counters)
     for j in range(quad.shape[1]):
         quad[b, j] += quad[a, j]
 
@@ -1368,24 +1429,24 @@ def _vertex_topology(T, nbr, head, nxt, n):
 
 @njit(cache=True)
 def _sample_points(pts, dens, T, tet_w, centroid_weight):
-    """The sample points as rows (x, y, z, value, weight): the n vertices (weight a quarter of
-    their tets' volume fractions), then every tet's centroid (its volume fraction x
-    ``centroid_weight``). One row per point, so that walking a tet's list of points reads one
-    place in memory per point, not three arrays."""
+    """(pdat, vw, p_orig): the rows (x, y, z, value, weight) of every tet's centroid (weight its
+    volume fraction x ``centroid_weight``; row t, named n + t), room for the n vertices after
+    them, and every vertex's weight as a point (a quarter of its tets' volume fractions)."""
     n = pts.shape[0]
     m = T.shape[0]
     pdat = np.zeros((n + m, 5))
-    pdat[:n, :3] = pts
-    pdat[:n, 3] = dens
+    p_orig = np.full(n + m, -1, np.int32)
+    vw = np.zeros(n)
     for t in range(m):
         for c in range(4):
-            pdat[T[t, c], 4] += tet_w[t] / 4.0
+            vw[T[t, c]] += tet_w[t] / 4.0
     for t in range(m):
-        pdat[n + t, 4] = tet_w[t] * centroid_weight
+        pdat[t, 4] = tet_w[t] * centroid_weight
         for k in range(3):
-            pdat[n + t, k] = (((pts[T[t, 0], k] + pts[T[t, 1], k]) + pts[T[t, 2], k]) + pts[T[t, 3], k]) / 4.0
-        pdat[n + t, 3] = (((dens[T[t, 0]] + dens[T[t, 1]]) + dens[T[t, 2]]) + dens[T[t, 3]]) / 4.0
-    return pdat
+            pdat[t, k] = (((pts[T[t, 0], k] + pts[T[t, 1], k]) + pts[T[t, 2], k]) + pts[T[t, 3], k]) / 4.0
+        pdat[t, 3] = (((dens[T[t, 0]] + dens[T[t, 1]]) + dens[T[t, 2]]) + dens[T[t, 3]]) / 4.0
+        p_orig[t] = n + t
+    return pdat, vw, p_orig
 
 
 @njit(cache=True)

@@ -228,10 +228,10 @@ class DecimationState:
         # Sample points of the original field, listed in the live tet holding them: every input
         # tet's centroid from the start (ids n + t, weight its volume fraction x CENTROID_WEIGHT),
         # every vertex once merged away (weight a quarter of its tets' volume fraction); one row
-        # (x, y, z, value, weight) per point.
-        self.pdat = K._sample_points(self.pts, self.dens, self.T, tet_w, CENTROID_WEIGHT)
+        # (x, y, z, value, weight) per point, the centroids first (p_orig: which point a row is).
+        self.pdat, self.vw, self.p_orig = K._sample_points(self.pts, self.dens, self.T, tet_w, CENTROID_WEIGHT)
         self.p_next = np.full(n + m, -1, np.int32)
-        self.tp_head = np.arange(n, n + m, dtype=np.int32)
+        self.tp_head = np.arange(m, dtype=np.int32)
         self.tp_count = np.ones(m, np.int32)
         # per thread of the parallel evaluations: stamp rows and counters (stamps, evaluations)
         threads = max(1, int(numba.config.NUMBA_NUM_THREADS))
@@ -240,6 +240,7 @@ class DecimationState:
         self.marks_ab = np.zeros((threads, n), np.int64)
         self.tcount = np.zeros((threads, 8), np.int64)
         self.counters = np.zeros(8, np.int64)
+        self.counters[K.C_PTOP] = m
         self.ver = np.zeros(n, np.int32)
         self.last_err = np.full(n, -1.0)
         # at most one live entry per vertex: a full heap compacts to <= n and has n free slots again
@@ -268,7 +269,8 @@ class DecimationState:
     def run(self, max_merges: int) -> bool:
         """Merge until ``max_merges`` in total; True when no legal merge is left."""
         return bool(K._run(*self._mesh_args(), self.marks, self.marks_b, self.marks_ab, self.tcount, self.counters,
-                           *self._heap_args(), self.parent, self.rank, np.int64(max_merges), *self._sample_args()))
+                           *self._heap_args(), self.parent, self.rank, np.int64(max_merges), *self._sample_args(),
+                           self.vw, self.p_orig))
 
     def evaluate(self, a: int, b: int):
         """(legal, error) of merging a into b in the current state (for tests against the reference)."""
@@ -289,7 +291,8 @@ class DecimationState:
         st = K._star(a, self.head, self.nxt, self.T, self.alive)
         nb = np.unique(self.T[st >> 2])
         K._merge(a, b, st, nb[nb != a].astype(np.int64), self.T, self.alive, self.nbr, self.head, self.nxt, self.pts,
-                 self.dens, self.params, self.quad, self.pdat, self.tp_head, self.tp_count, self.p_next)
+                 self.dens, self.params, self.quad, self.pdat, self.vw, self.p_orig, self.tp_head, self.tp_count,
+                 self.p_next, self.counters)
         self.parent[a] = b
         self.rank[a] = self.counters[K.C_MERGES]
         self.counters[K.C_MERGES] += 1

@@ -1315,8 +1315,15 @@ def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, pd
     """Everything a merge a -> b changes: the tets, the lists of the vertices around it (``nb``:
     the vertices of a's star but a), the sample points and b's quadric."""
     _apply_merge(a, b, st_a, T, alive, nbr, head, nxt)
+    # only the tets of edge ab died (the others keep their slots, relabelled a -> b), so only
+    # the lists of their vertices hold dead slots: tidy those (a's is b's now)
     for i in range(nb.shape[0]):
-        _tidy(nb[i], head, nxt, T, alive)
+        w = nb[i]
+        for k in range(st_a.shape[0]):
+            t = st_a[k] >> 2
+            if not alive[t] and _contains(T, t, w):
+                _tidy(w, head, nxt, T, alive)
+                break
     if params[P_WS] > 0.0:
         _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp_count, p_next, counters)
     for j in range(quad.shape[1]):

@@ -75,8 +75,14 @@ def main(argv=None) -> int:
         line = f"{name}: {result[name]} merges {forest.n_merges} cpu {cpu:.2f} s wall {wall:.2f} s"
         if args.counters:
             _, c = counted(mesh)
-            names = [k for k in dir(D.K) if k.startswith("C_")]
-            line += " " + " ".join(f"{k[2:].lower()}={int(c[getattr(D.K, k)])}" for k in sorted(names))
+            K = D.K
+            m = max(1, int(c[K.C_MERGES]))
+            evals = int(c[K.C_LAZY]) + mesh.n_points * (1 + int(c[K.C_SWEEPS]))
+            line += (f"\n  per merge: evaluations {evals / m:.2f} (on pop {c[K.C_LAZY] / m:.2f}), candidates "
+                     f"{c[K.C_EVALS] / m:.1f}, exact {c[K.C_EXACT] / m:.2f} (stopped by the bound "
+                     f"{c[K.C_PRUNED] / m:.2f}), sample points summed {c[K.C_POINTS] / m:.0f}, points moved "
+                     f"{c[K.C_MOVED] / m:.0f}, link tests {c[K.C_LINK] / m:.2f}, heap pops {c[K.C_POPS] / m:.2f} "
+                     f"(stale {c[K.C_STALE] / m:.2f}); sweeps {int(c[K.C_SWEEPS])}")
         print(line, flush=True)
     if args.out:
         Path(args.out).write_text(json.dumps(result, indent=1))

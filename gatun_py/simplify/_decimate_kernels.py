@@ -53,6 +53,11 @@ NORMAL_EPS = 1e-6
 P_WD, P_WG, P_WV, P_WI, P_WQ, P_WS, P_NCP, P_MAXS = 0, 1, 2, 3, 4, 5, 6, 7
 # Indices into the int64 counter array.
 C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS, C_STARTED, C_EXACT, C_PTOP = 0, 1, 2, 3, 4, 5, 6, 7
+# what the search does (bench/forest_identity.py --counters prints them): link tests, exact
+# evaluations stopped by their bound, sample points summed by exact evaluations, heap pops and the
+# stale ones, evaluations of one vertex on its pop, sample points moved by merges
+C_LINK, C_PRUNED, C_POINTS, C_POPS, C_STALE, C_LAZY, C_MOVED = 8, 9, 10, 11, 12, 13, 14
+N_COUNTERS = 16
 # bits of a vertex's ``pinned`` flags: PIN_KEEP never merged away, PIN_NO_TARGET nothing merges into
 # it. A non-manifold vertex has both (PIN_ALL); a locked vertex (a brick's cut vertex) only
 # PIN_KEEP, and only interior vertices merge into it: an interior vertex's merge keeps every
@@ -820,7 +825,7 @@ _BOUND_EVERY = 32
 
 
 @njit(cache=True, _nrt=False)
-def _candidate_exact(a, b, terms, st, T, pts, dens, params, pdat, ctx, best_b, best_e):
+def _candidate_exact(a, b, terms, st, T, pts, dens, params, pdat, ctx, best_b, best_e, counters):
     """(exact error, True) of candidate b of :func:`_candidate_terms` (``terms`` its row), or
     (0, False) as soon as a lower bound of it loses against (``best_e``, ``best_b``).
 
@@ -833,6 +838,7 @@ def _candidate_exact(a, b, terms, st, T, pts, dens, params, pdat, ctx, best_b, b
     (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
      stride, e_old, v6n, vout, q, n_new, area_new, s_ok, s_lam, s_val) = ctx
     n_col = int(terms[4])
+    counters[C_EXACT] += 1
     power = params[P_NCP]
     _new_volumes(b, st, T, pts, vol_old, nrm, off, fast_ok, v6n, q)  # v6n, for the interpolant
     di = 0.0
@@ -845,14 +851,17 @@ def _candidate_exact(a, b, terms, st, T, pts, dens, params, pdat, ctx, best_b, b
         w = params[P_WS] * stride
         if _loses(_total_error(terms[0], di, terms[1], terms[2], terms[3], w * (0.0 - e_old), n_col, power),
                   b, best_e, best_b):
+            counters[C_PRUNED] += 1
             return 0.0, False
         _new_star_planes(b, st, T, pts, dens, s_ok, s_lam, s_val, q)
         acc = 0.0
         for lo in range(0, npt, _BOUND_EVERY):
             hi = min(npt, lo + _BOUND_EVERY)
             acc = _sample_sum(acc, lo, hi, b, pts, dens, pdat, p_id, p_k, s_ok, s_lam, s_val)
+            counters[C_POINTS] += hi - lo
             if hi < npt and _loses(_total_error(terms[0], di, terms[1], terms[2], terms[3], w * (acc - e_old), n_col,
                                                 power), b, best_e, best_b):
+                counters[C_PRUNED] += 1
                 return 0.0, False
         se = w * (acc - e_old)
     return _total_error(terms[0], di, terms[1], terms[2], terms[3], se, n_col, power), True
@@ -911,10 +920,10 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
         b = cand[k]
         if _loses(low[k], b, best_e, best_b):
             return best_b, best_e
-        counters[C_EXACT] += 1
-        e, whole = _candidate_exact(a, b, terms[k], st, T, pts, dens, params, pdat, ctx, best_b, best_e)
+        e, whole = _candidate_exact(a, b, terms[k], st, T, pts, dens, params, pdat, ctx, best_b, best_e, counters)
         if not whole or _loses(e, b, best_e, best_b):
             continue
+        counters[C_LINK] += 1
         if _link_ok(a, b, st, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
             best_b = b
             best_e = e
@@ -1051,6 +1060,7 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp
             cnt += 1
             p = p_next[p]
     plist = np.empty(cnt, np.int64)
+    counters[C_MOVED] += cnt
     # a becomes a sample point: its row at the top of the point rows
     r = counters[C_PTOP]
     counters[C_PTOP] = r + 1
@@ -1265,9 +1275,12 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
             sweeping = True
             continue
         e, a, b, v_a = _heap_pop(h_err, h_v, h_b, h_ver, counters)
+        tc[C_POPS] += 1
         if v_a != ver[a] or parent[a] != a:
+            tc[C_STALE] += 1
             continue
         if b < 0:
+            tc[C_LAZY] += 1
             # a's neighbourhood changed since its last evaluation: evaluate now (lazily, so a vertex
             # touched by several merges before its turn is evaluated once)
             todo[0] = a
@@ -1276,6 +1289,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         if parent[b] != b:
             continue
         st_a = _star(a, head, nxt, T, alive)
+        tc[C_LINK] += 1
         # a's star is unchanged since the entry was made (that would have bumped its version),
         # but b's may have changed: check the link condition again
         if not _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, tc):

@@ -238,8 +238,8 @@ class DecimationState:
         self.marks = np.zeros((threads, n), np.int64)
         self.marks_b = np.zeros((threads, n), np.int64)
         self.marks_ab = np.zeros((threads, n), np.int64)
-        self.tcount = np.zeros((threads, 8), np.int64)
-        self.counters = np.zeros(8, np.int64)
+        self.tcount = np.zeros((threads, K.N_COUNTERS), np.int64)
+        self.counters = np.zeros(K.N_COUNTERS, np.int64)
         self.counters[K.C_PTOP] = m
         self.ver = np.zeros(n, np.int32)
         self.last_err = np.full(n, -1.0)

@@ -292,7 +292,9 @@ def main(argv=None):
                 vtk_best = min(vtk_best, dt)
         vol0 = mesh.signed_volumes().sum()
         vol9 = simplified_mesh(mesh, forest, int(0.9 * mesh.n_points)).signed_volumes().sum()
-        fb = len(encode_forest_on_mesh(forest.parent, forest.rank, mesh.tets))
+        on_boundary = np.zeros(mesh.n_points, bool)
+        on_boundary[mesh.boundary_faces().ravel()] = True
+        fb = len(encode_forest_on_mesh(forest.parent, forest.rank, mesh.tets, boundary=on_boundary))
         row = dict(name=name, points=mesh.n_points, tets=mesh.n_tets, wall=wall, cpu=cpu,
                    ratio=forest.max_ratio, vol9=vol9 / vol0, forest_bpv=8 * fb / mesh.n_points,
                    levels=len(available_levels(forest)) - 1)

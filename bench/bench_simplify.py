@@ -389,6 +389,7 @@ def main(argv=None):
          "manifold with a closed boundary. Decimation runs until no legal merge is left (a final sweep re-checks "
          "every vertex). Search: the cheap terms of every candidate first, the interpolation and sampled terms "
          "only while a lower bound (interpolation 0, sampled error at its most negative) can still win, the "
+         "sampled sum stopped as soon as that bound with the points summed so far loses, the "
          "choice of computing every error bit for bit; every vertex's first evaluation and the sweeps in "
          "parallel, pushed in vertex order (forests independent of the thread count).", "",
          "### Whole forest: time and reach", "",

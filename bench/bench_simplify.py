@@ -255,6 +255,9 @@ def main(argv=None):
                     help="re-measure one table and replace it in the section")
     ap.add_argument("--meshes", metavar="NAMES", help=f"with --only: comma-separated gmsh meshes "
                                                       f"[default: {','.join(SCALING)} / {COMPRESS_MESH}]")
+    ap.add_argument("--keep-scaling", action="store_true",
+                    help="keep the scaling table of the existing section instead of re-measuring it (hours on a "
+                         "loaded machine: it builds gmsh meshes up to 10 M tets)")
     ap.add_argument("--scale-worker", metavar="MESH", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.scale_worker:
@@ -304,7 +307,7 @@ def main(argv=None):
             row["vtk_reached"] = 1 - out.GetNumberOfCells() / mesh.n_tets
         rows.append(row)
         print(f"{name}: forest {wall:.2f} s (cpu {cpu:.2f}), ratio {forest.max_ratio:.5f}, "
-              f"vol@0.9 {vol9 / vol0:.5f}" + (f", VTK 99% {row['vtk']:.2f} s" if "vtk" in row else ""), flush=True)
+              f"vol@0.9 {vol9 / vol0:.5f}" + (f", VTK 99% {row['vtk']:.2f} s (cpu {row['vtk_cpu']:.2f})" if "vtk" in row else ""), flush=True)
 
         if name not in SAMPLE_FILES:
             continue  # levels and fidelity: the samples
@@ -454,10 +457,13 @@ def main(argv=None):
                  f"{compress[1]} bytes. Target: well under a minute.")
     else:
         L.append("Not measured: `tetc compress` was not available in this run.")
-    L += ["", scaling_section(SCALING)]
     out = ROOT / "bench" / "sections" / "simplify.md"
     out.parent.mkdir(parents=True, exist_ok=True)
     old = out.read_text() if out.exists() else ""
+    if args.keep_scaling and SCALING_HEAD in old:
+        L += ["", (SCALING_HEAD + old.partition(SCALING_HEAD)[2].split("\n### ")[0]).rstrip()]
+    else:
+        L += ["", scaling_section(SCALING)]
     if COMPRESS_HEAD in old:  # measured on its own (--only compress-scale: long): kept
         kept = COMPRESS_HEAD + old.partition(COMPRESS_HEAD)[2].split("\n### ")[0]
         L += ["", kept.rstrip()]

@@ -54,8 +54,8 @@ def _kernel_samples(state):
     for t in np.flatnonzero(state.alive):
         p = state.tp_head[t]
         while p >= 0:
-            assert p not in out, "a sample point listed twice"
-            out[int(p)] = tuple(int(x) for x in state.T[t])
+            assert state.p_orig[p] not in out, "a sample point listed twice"
+            out[int(state.p_orig[p])] = tuple(int(x) for x in state.T[t])
             p = state.p_next[p]
     return out
 
@@ -66,7 +66,7 @@ def _star_samples(state, a):
     for s in K._star(a, state.head, state.nxt, state.T, state.alive):
         p = state.tp_head[s >> 2]
         while p >= 0:
-            out[int(p)] = tuple(int(x) for x in state.T[s >> 2])
+            out[int(state.p_orig[p])] = tuple(int(x) for x in state.T[s >> 2])
             p = state.p_next[p]
     return out
 
@@ -145,8 +145,13 @@ def test_sample_points_follow_the_merges(name):
     mesh = AWKWARD[name]()
     pts, dens = _sample_points(mesh)
     state = DecimationState(mesh, 1.0, 1.0)
-    assert np.allclose(state.pw, _sample_weights(mesh), rtol=1e-12, atol=0)
-    assert np.allclose(state.pts, pts, rtol=1e-12, atol=1e-12) and np.allclose(state.dens, dens, rtol=1e-12)
+    n, m = mesh.n_points, mesh.n_tets
+    # the centroids' rows first (named n + t), the vertices' weights beside
+    assert np.array_equal(state.p_orig[:m], np.arange(n, n + m))
+    assert np.allclose(state.vw, _sample_weights(mesh)[:n], rtol=1e-12, atol=0)
+    assert np.allclose(state.pdat[:m, 4], _sample_weights(mesh)[n:], rtol=1e-12, atol=0)
+    assert np.allclose(state.pdat[:m, :3], pts[n:], rtol=1e-12, atol=1e-12)
+    assert np.allclose(state.pdat[:m, 3], dens[n:], rtol=1e-12)
     forest = decimate(mesh)
     tets = [tuple(int(x) for x in t) for t in mesh.tets]
     ref = {mesh.n_points + i: t for i, t in enumerate(tets)}
@@ -330,3 +335,37 @@ def test_unstructured_gmsh_mesh():
     assert forest.max_ratio > 0.99
     n = forest.n_merges
     _check_forest_prefixes(mesh, forest, [0, 1, n // 4, n // 2, 9 * n // 10, n - 1, n], "block-50k")
+
+
+@pytest.mark.parametrize("name", ["delaunay", "cavity"])
+def test_compacting_the_points_keeps_every_list_and_its_order(name):
+    """The point rows are rewritten tet by tet from time to time: the same points (by name and
+    row content) in the same order in every tet's list, side by side from row 0."""
+    mesh = AWKWARD[name]()
+    state = DecimationState(mesh, 1.0, 1.0)
+    forest = decimate(mesh)
+    for a in np.argsort(forest.rank)[: forest.n_merges // 2]:
+        state.apply(int(a), int(forest.parent[a]))
+
+    def lists():
+        out = {}
+        for t in np.flatnonzero(state.alive):
+            rows, p = [], state.tp_head[t]
+            while p >= 0:
+                rows.append((int(state.p_orig[p]), tuple(state.pdat[p])))
+                p = state.p_next[p]
+            out[int(t)] = rows
+        return out
+
+    before = lists()
+    assert state.counters[K.C_PTOP] == mesh.n_tets + forest.n_merges // 2
+    K._compact_points(state.alive, state.pdat, state.p_orig, state.tp_head, state.p_next, state.counters)
+    assert lists() == before
+    k = int(state.counters[K.C_PTOP])
+    assert k == sum(len(v) for v in before.values())
+    # side by side: every list is a run of consecutive rows
+    for t in np.flatnonzero(state.alive):
+        p = state.tp_head[t]
+        while p >= 0 and state.p_next[p] >= 0:
+            assert state.p_next[p] == p + 1
+            p = state.p_next[p]

@@ -15,12 +15,16 @@ validates the input and drives the loop. The mesh state during decimation:
 ``quad`` (n, 15) float64, ``u4`` (n, 4) float64
     every vertex's error quadric (A's upper triangle, b, c; see :func:`_quadric_at`) and its
     (x, y, z, s) point; merging a into b adds a's quadric to b's.
-``pw`` (n + m,) float64, ``tp_head``, ``tp_count`` (m,) int32, ``p_next`` (n + m,) int32
-    sample points of the original field (ids 0..n-1: the vertices, once merged away; n + t: the
-    centroid of input tet t; positions and values in rows n.. of ``pts`` and ``dens``, which
-    tets never index): every one is listed in the live tet that holds it (``tp_count[t]`` of them,
-    ``tp_head[t]`` ->
-    ``p_next`` chain), with weight ``pw`` (its share of the original volume); a merge a -> b hands
+``pdat`` (n + m, 5) float64, ``p_orig``, ``p_next`` (n + m,) int32, ``tp_head``, ``tp_count`` (m,) int32
+    sample points of the original field, one row (x, y, z, value, weight) each: the centroid of
+    every input tet from the start, every vertex once merged away (its row added then, from
+    ``pts``, ``dens`` and its weight ``vw``); ``p_orig`` names the point (a vertex id, or n + t
+    for tet t's centroid). Every one is listed in the live tet that holds it (``tp_count[t]`` of
+    them, ``tp_head[t]`` -> ``p_next`` chain), with its weight (its share of the original
+    volume). Rows ``counters[C_PTOP]`` on are free; every ``_compact_every(n)`` merges the rows are
+    rewritten tet by tet in list order (:func:`_compact_points`), so that a tet's points lie
+    side by side in memory (the evaluations walk these lists; the order within a list, which fixes
+    the sums, is kept). A merge a -> b hands
     a and the points of a's star to the tets of the new star.
 
 A merge a -> b is legal when every surviving tet of a's star stays positive, every boundary face
@@ -48,7 +52,12 @@ NORMAL_EPS = 1e-6
 # Indices into the float parameter array.
 P_WD, P_WG, P_WV, P_WI, P_WQ, P_WS, P_NCP, P_MAXS = 0, 1, 2, 3, 4, 5, 6, 7
 # Indices into the int64 counter array.
-C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS, C_STARTED, C_EXACT = 0, 1, 2, 3, 4, 5, 6
+C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS, C_STARTED, C_EXACT, C_PTOP = 0, 1, 2, 3, 4, 5, 6, 7
+# what the search does (bench/forest_identity.py --counters prints them): link tests, exact
+# evaluations stopped by their bound, sample points summed by exact evaluations, heap pops and the
+# stale ones, evaluations of one vertex on its pop, sample points moved by merges
+C_LINK, C_PRUNED, C_POINTS, C_POPS, C_STALE, C_LAZY, C_MOVED = 8, 9, 10, 11, 12, 13, 14
+N_COUNTERS = 16
 # bits of a vertex's ``pinned`` flags: PIN_KEEP never merged away, PIN_NO_TARGET nothing merges into
 # it. A non-manifold vertex has both (PIN_ALL); a locked vertex (a brick's cut vertex) only
 # PIN_KEEP, and only interior vertices merge into it: an interior vertex's merge keeps every
@@ -57,8 +66,16 @@ C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS, C_STARTED, C_EXACT = 0, 1, 2, 3, 4
 PIN_KEEP, PIN_NO_TARGET = 1, 2
 PIN_ALL = PIN_KEEP | PIN_NO_TARGET
 
+# Reference counting: the helpers below that never allocate are compiled with ``_nrt=False`` (no
+# numba runtime, so no atomic incref / decref of every array argument, view and tuple item on
+# every call; their caller owns every array for the whole call). Profiled on Blunt-fin (perf on the
+# kernels' code), those two atomic instructions were ~19 % of the decimation's CPU time: the
+# per-tet helpers (_tet_planes, _contains, ...) run millions of times. The arithmetic is the
+# same, so the forest is bit-identical (bench/forest_identity.py). Functions that allocate
+# (stars, contexts, the evaluation, the merge, the driver) keep the runtime.
 
-@njit(cache=True)
+
+@njit(cache=True, _nrt=False)
 def _orient6(p, a, b, c, d):
     """6 x signed volume of (a, b, c, d), evaluated like ``TetMesh.signed_volumes`` (same order)."""
     ax = p[a, 0]
@@ -79,7 +96,7 @@ def _orient6(p, a, b, c, d):
     return (ux * cx + uy * cy) + uz * cz
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _det6(ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz):
     """6 x signed volume of four explicit points (same formula as :func:`_orient6`)."""
     ux = bx - ax
@@ -94,7 +111,7 @@ def _det6(ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz):
     return (ux * (vy * wz - vz * wy) + uy * (vz * wx - vx * wz)) + uz * (vx * wy - vy * wx)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _value_at(pts, dens, q, v6, x, y, z, out):
     """Barycentric interpolation of the density at (x, y, z) in tet q (6 vol v6 > 0).
 
@@ -123,7 +140,7 @@ def _value_at(pts, dens, q, v6, x, y, z, out):
     out[1] = val
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _max_edge2(p, q):
     best = 0.0
     for i in range(4):
@@ -137,7 +154,7 @@ def _max_edge2(p, q):
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _tri_normal(p, a, b, c, out):
     ux = p[b, 0] - p[a, 0]
     uy = p[b, 1] - p[a, 1]
@@ -150,7 +167,7 @@ def _tri_normal(p, a, b, c, out):
     out[2] = ux * vy - uy * vx
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _tidy(v, head, nxt, T, alive):
     """Unlink the slots of dead tets (and of tets that no longer hold v) from v's list."""
     prev = -1
@@ -195,12 +212,12 @@ def _star(v, head, nxt, T, alive):
     return _star_view(v, head, nxt, T, alive)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _contains(T, t, v):
     return T[t, 0] == v or T[t, 1] == v or T[t, 2] == v or T[t, 3] == v
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _next_stamp(counters):
     counters[C_STAMP] += 1
     return counters[C_STAMP]
@@ -362,7 +379,7 @@ def _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counter
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _quadric_at(quad, u4, v, w):
     """Quadric of vertex v at vertex w's point u = u4[w] = (x, y, z, s): u^T A u + 2 b.u + c.
 
@@ -381,7 +398,7 @@ def _quadric_at(quad, u4, v, w):
     return e if e > 0.0 else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _tet_planes(pts, dens, q, lam, val):
     """Tet q's barycentric coordinates and interpolant as affine functions of the point.
 
@@ -418,8 +435,8 @@ def _tet_planes(pts, dens, q, lam, val):
     return True
 
 
-@njit(cache=True)
-def _new_value(p, k0, pts, ok, lam, val, fallback):
+@njit(cache=True, _nrt=False)
+def _new_value(p, k0, pdat, ok, lam, val, fallback):
     """Value at sample point p after the merge, from the new star's tet planes (``ok[k]``: tet k of
     the star survives positive; ``lam``, ``val`` from :func:`_tet_planes`).
 
@@ -427,9 +444,9 @@ def _new_value(p, k0, pts, ok, lam, val, fallback):
     star order; if none does (the boundary moved), the one p is nearest to (largest smallest
     barycentric coordinate, the first of equals).
     """
-    x = pts[p, 0]
-    y = pts[p, 1]
-    z = pts[p, 2]
+    x = pdat[p, 0]
+    y = pdat[p, 1]
+    z = pdat[p, 2]
     best_lo = -1e300
     v = fallback
     for kk in range(-1, ok.shape[0]):
@@ -457,7 +474,7 @@ def _new_value(p, k0, pts, ok, lam, val, fallback):
 # bound of :func:`_evaluate` (the terms that cannot be negative left out) rounds below it.
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _star_volumes(a, st, T, pts, dens, vol_old, mass_old, dsum, nrm, off, fn):
     """Per star tet: 6 x volume, mass, density sum without a, and the plane of the face opposite a
     (so that the volume with a moved onto b is one dot product: 6 vol = off - nrm . p_b, linear in
@@ -487,7 +504,7 @@ def _star_volumes(a, st, T, pts, dens, vol_old, mass_old, dsum, nrm, off, fn):
     return vol_star, reach2
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _star_boundary(bf, pts, n_old, area_old):
     """Outward normals (2 x area) and areas of a's boundary faces; returns their total area."""
     area_sum = 0.0
@@ -498,7 +515,7 @@ def _star_boundary(bf, pts, n_old, area_old):
     return area_sum
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _star_sample_count(st, tp_count):
     """Number of sample points listed in the star's tets."""
     npt = 0
@@ -507,8 +524,8 @@ def _star_sample_count(st, tp_count):
     return npt
 
 
-@njit(cache=True)
-def _star_samples(st, T, pts, dens, pw, tp_head, tp_count, p_next, stride, p_id, p_k, lam, val, q):
+@njit(cache=True, _nrt=False)
+def _star_samples(st, T, pts, dens, pdat, tp_head, tp_count, p_next, stride, p_id, p_k, lam, val, q):
     """Every stride-th sample point of the star (``p_id``) with its star tet (``p_k``); returns the
     sum of their weighted squared errors against the current interpolant (``lam``, ``val``: scratch)."""
     e_old = 0.0
@@ -527,15 +544,15 @@ def _star_samples(st, T, pts, dens, pw, tp_head, tp_count, p_next, stride, p_id,
                 p_id[npt] = p
                 p_k[npt] = i
                 if not flat:
-                    f = val[0] * pts[p, 0] + val[1] * pts[p, 1] + val[2] * pts[p, 2] + val[3]
-                    e_old += pw[p] * (dens[p] - f) ** 2
+                    f = val[0] * pdat[p, 0] + val[1] * pdat[p, 1] + val[2] * pdat[p, 2] + val[3]
+                    e_old += pdat[p, 4] * (pdat[p, 3] - f) ** 2
                 npt += 1
             seen += 1
             p = p_next[p]
     return e_old
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _new_volumes(b, st, T, pts, vol_old, nrm, off, fast_ok, v6n, q):
     """Legality of the volumes after a -> b: every tet of a's star without b stays positive (or
     the input's flat tets stay flat). Fills ``v6n`` (6 x new volume) of the surviving tets and
@@ -568,7 +585,7 @@ def _new_volumes(b, st, T, pts, vol_old, nrm, off, fast_ok, v6n, q):
     return n_col
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _mass_error(b, st, T, dens, mass_old, dsum, v6n):
     """The paper's density error: sum over a's tets of |mass after - mass before| (a collapsed tet
     loses all its mass)."""
@@ -581,7 +598,7 @@ def _mass_error(b, st, T, dens, mass_old, dsum, v6n):
     return dm
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _interp_deviation(a, b, st, T, pts, dens, v6n, q, vout):
     """|value of a - the new mesh's interpolant at a's position|: in the new tet containing it (the
     smallest deviation if several do, which only happens on shared faces or at coincident points),
@@ -609,7 +626,7 @@ def _interp_deviation(a, b, st, T, pts, dens, v6n, q, vout):
     return dev_in if dev_in >= 0.0 else dev_out
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _boundary_ok(a, b, bf, n_old, area_old, pts, area_new, n_new):
     """Legality on the boundary: no face of a's that survives turns by 90 degrees or more (the
     paper's negative area). Fills ``area_new`` (-1 for the faces that collapse)."""
@@ -629,7 +646,7 @@ def _boundary_ok(a, b, bf, n_old, area_old, pts, area_new, n_new):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _swept_volume(b, bf, n_old, pts):
     """Volume swept by a's boundary faces moving a onto b (the tet between each old face and b)."""
     swept = 0.0
@@ -641,7 +658,7 @@ def _swept_volume(b, bf, n_old, pts):
     return swept
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _area_error(a, b, bf, area_old, area_new, area_sum):
     """The paper's geometry error: each new face against every old face sharing an edge with it,
     weighted by the old face's share of the affected area."""
@@ -661,10 +678,9 @@ def _area_error(a, b, bf, area_old, area_new, area_sum):
     return ge
 
 
-@njit(cache=True)
-def _sample_error(b, st, T, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val, q):
-    """Sum of the weighted squared errors at the sample points after a -> b (``p_id``, ``p_k``
-    from :func:`_star_samples`; the other arrays are scratch)."""
+@njit(cache=True, _nrt=False)
+def _new_star_planes(b, st, T, pts, dens, s_ok, s_lam, s_val, q):
+    """Tet planes (:func:`_tet_planes`) of the new star after a -> b; ``s_ok[k]``: tet k survives positive."""
     for k in range(st.shape[0]):
         t = st[k] >> 2
         s_ok[k] = False
@@ -673,15 +689,28 @@ def _sample_error(b, st, T, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val, q):
                 q[j] = T[t, j]
             q[st[k] & 3] = b
             s_ok[k] = _tet_planes(pts, dens, q, s_lam[k], s_val[k])
-    se = 0.0
-    for ip in range(p_id.shape[0]):
+
+
+@njit(cache=True, _nrt=False)
+def _sample_sum(se, lo, hi, b, pts, dens, pdat, p_id, p_k, s_ok, s_lam, s_val):
+    """``se`` plus the weighted squared errors after a -> b at sample points ``lo:hi``, added one
+    by one in order (so a sum taken in pieces is the sum taken at once, bit for bit)."""
+    for ip in range(lo, hi):
         p = p_id[ip]
-        f = _new_value(p, p_k[ip], pts, s_ok, s_lam, s_val, dens[b])
-        se += pw[p] * (dens[p] - f) ** 2
+        f = _new_value(p, p_k[ip], pdat, s_ok, s_lam, s_val, dens[b])
+        se += pdat[p, 4] * (pdat[p, 3] - f) ** 2
     return se
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
+def _sample_error(b, st, T, pts, dens, pdat, p_id, p_k, s_ok, s_lam, s_val, q):
+    """Sum of the weighted squared errors at the sample points after a -> b (``p_id``, ``p_k``
+    from :func:`_star_samples`; the other arrays are scratch)."""
+    _new_star_planes(b, st, T, pts, dens, s_ok, s_lam, s_val, q)
+    return _sample_sum(0.0, 0, p_id.shape[0], b, pts, dens, pdat, p_id, p_k, s_ok, s_lam, s_val)
+
+
+@njit(cache=True, _nrt=False)
 def _total_error(dm_w, di, ge_w, swept_w, qe_w, se, n_col, power):
     """The merge error from its weighted terms, per collapsed tet (to a power): the comparison
     that matters is at equal tet counts."""
@@ -689,7 +718,7 @@ def _total_error(dm_w, di, ge_w, swept_w, qe_w, se, n_col, power):
 
 
 @njit(cache=True)
-def _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next):
+def _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next):
     """Everything about a's star that every candidate merge of a shares, and the scratch arrays of
     one evaluation, as one tuple (see the names unpacked in :func:`_candidate_terms`)."""
     ns = st.shape[0]
@@ -720,13 +749,13 @@ def _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, 
     q = np.empty(4, np.int64)
     e_old = 0.0
     if npt > 0:
-        e_old = _star_samples(st, T, pts, dens, pw, tp_head, tp_count, p_next, stride, p_id, p_k, s_lam[0], s_val[0], q)
+        e_old = _star_samples(st, T, pts, dens, pdat, tp_head, tp_count, p_next, stride, p_id, p_k, s_lam[0], s_val[0], q)
     return (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
             stride, e_old, np.empty(ns), np.empty(2), q, np.empty(3), np.empty(bf.shape[0]), s_ok, s_lam, s_val)
 
 
-@njit(cache=True)
-def _exact_terms(a, b, st, T, pts, dens, params, pw, ctx):
+@njit(cache=True, _nrt=False)
+def _exact_terms(a, b, st, T, pts, dens, params, pdat, ctx):
     """The two terms left out of the bound: (interpolation term, sampled error term), weighted."""
     (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
      stride, e_old, v6n, vout, q, n_new, area_new, s_ok, s_lam, s_val) = ctx
@@ -736,13 +765,13 @@ def _exact_terms(a, b, st, T, pts, dens, params, pw, ctx):
         di = params[P_WI] * f_dev * f_dev * vol_star
     se = 0.0
     if p_id.shape[0] > 0:
-        se = _sample_error(b, st, T, pts, dens, pw, p_id, p_k, s_ok, s_lam, s_val, q)
+        se = _sample_error(b, st, T, pts, dens, pdat, p_id, p_k, s_ok, s_lam, s_val, q)
         se = params[P_WS] * stride * (se - e_old)
     return di, se
 
 
-@njit(cache=True)
-def _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mark, counters, ctx, cand_out,
+@njit(cache=True, _nrt=False)
+def _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pdat, mark, counters, ctx, cand_out,
                      err_out, terms_out, exact):
     """Every geometrically legal merge a -> b (b a neighbour of a): its target in ``cand_out``,
     its weighted mass, area, swept volume and quadric terms and collapsed-tet count in
@@ -777,7 +806,7 @@ def _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mar
             terms_out[nc, 2] = params[P_WV] * _swept_volume(b, bf, n_old, pts)
             terms_out[nc, 3] = params[P_WQ] * (_quadric_at(quad, u4, a, b) if params[P_WQ] > 0.0 else 0.0)
             terms_out[nc, 4] = n_col
-            di, se = _exact_terms(a, b, st, T, pts, dens, params, pw, ctx) if exact else (0.0, se_low)
+            di, se = _exact_terms(a, b, st, T, pts, dens, params, pdat, ctx) if exact else (0.0, se_low)
             err_out[nc] = _total_error(terms_out[nc, 0], di, terms_out[nc, 1], terms_out[nc, 2], terms_out[nc, 3],
                                        se, n_col, params[P_NCP])
             cand_out[nc] = b
@@ -785,31 +814,76 @@ def _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mar
     return nc
 
 
-@njit(cache=True)
-def _candidate_exact(a, b, terms, st, T, pts, dens, params, pw, ctx):
-    """The exact error of candidate b of :func:`_candidate_terms` (``terms`` its row)."""
-    _new_volumes(b, st, T, pts, ctx[0], ctx[3], ctx[4], ctx[6], ctx[15], ctx[17])  # v6n, for the interpolant
-    di, se = _exact_terms(a, b, st, T, pts, dens, params, pw, ctx)
-    return _total_error(terms[0], di, terms[1], terms[2], terms[3], se, int(terms[4]), params[P_NCP])
+@njit(cache=True, _nrt=False)
+def _loses(e, b, best_e, best_b):
+    """True when (e, b) cannot be the best against the best so far (``best_b`` < 0: none yet)."""
+    return best_b >= 0 and (e > best_e or (e == best_e and b > best_b))
+
+
+# Sample points summed between two checks of the running lower bound in _candidate_exact.
+_BOUND_EVERY = 32
+
+
+@njit(cache=True, _nrt=False)
+def _candidate_exact(a, b, terms, st, T, pts, dens, params, pdat, ctx, best_b, best_e, counters):
+    """(exact error, True) of candidate b of :func:`_candidate_terms` (``terms`` its row), or
+    (0, False) as soon as a lower bound of it loses against (``best_e``, ``best_b``).
+
+    The bound is the error with the sample points not yet summed at a new error of 0: the
+    sampled sum only grows point by point, and every step after it (subtracting the old sum,
+    the positive weights, the fixed order of :func:`_total_error`) is monotone in it under
+    rounding, so the bound never exceeds the exact error and the choice is the one of computing
+    every error in full, bit for bit.
+    """
+    (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
+     stride, e_old, v6n, vout, q, n_new, area_new, s_ok, s_lam, s_val) = ctx
+    n_col = int(terms[4])
+    counters[C_EXACT] += 1
+    power = params[P_NCP]
+    _new_volumes(b, st, T, pts, vol_old, nrm, off, fast_ok, v6n, q)  # v6n, for the interpolant
+    di = 0.0
+    if params[P_WI] > 0.0:
+        f_dev = _interp_deviation(a, b, st, T, pts, dens, v6n, q, vout)
+        di = params[P_WI] * f_dev * f_dev * vol_star
+    se = 0.0
+    npt = p_id.shape[0]
+    if npt > 0:
+        w = params[P_WS] * stride
+        if _loses(_total_error(terms[0], di, terms[1], terms[2], terms[3], w * (0.0 - e_old), n_col, power),
+                  b, best_e, best_b):
+            counters[C_PRUNED] += 1
+            return 0.0, False
+        _new_star_planes(b, st, T, pts, dens, s_ok, s_lam, s_val, q)
+        acc = 0.0
+        for lo in range(0, npt, _BOUND_EVERY):
+            hi = min(npt, lo + _BOUND_EVERY)
+            acc = _sample_sum(acc, lo, hi, b, pts, dens, pdat, p_id, p_k, s_ok, s_lam, s_val)
+            counters[C_POINTS] += hi - lo
+            if hi < npt and _loses(_total_error(terms[0], di, terms[1], terms[2], terms[3], w * (acc - e_old), n_col,
+                                                power), b, best_e, best_b):
+                counters[C_PRUNED] += 1
+                return 0.0, False
+        se = w * (acc - e_old)
+    return _total_error(terms[0], di, terms[1], terms[2], terms[3], se, n_col, power), True
 
 
 @njit(cache=True)
 def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, mark, counters, cand_out, err_out,
-                      pw, tp_head, tp_count, p_next):
+                      pdat, tp_head, tp_count, p_next):
     """Error of every geometrically legal merge a -> b (b a neighbour of a): fills the outputs.
 
     Returns the number of candidates. Legality here covers volumes, boundary orientation and the
     boundary-into-interior rule; the link condition is checked by the caller, best first.
     """
-    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next)
+    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next)
     terms = np.empty((cand_out.shape[0], 5))
-    return _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mark, counters, ctx, cand_out,
+    return _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pdat, mark, counters, ctx, cand_out,
                             err_out, terms, True)
 
 
 @njit(cache=True)
 def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab, counters,
-              pw, tp_head, tp_count, p_next):
+              pdat, tp_head, tp_count, p_next):
     """Best legal merge of a: (target, error), or (-1, 0) when a has none.
 
     The best is the smallest (error, target id) among the candidates that pass the link
@@ -825,8 +899,8 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
     cand = np.empty(cap, np.int64)
     low = np.empty(cap)
     terms = np.empty((cap, 5))
-    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pw, tp_head, tp_count, p_next)
-    nc = _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pw, mark, counters, ctx, cand, low,
+    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next)
+    nc = _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pdat, mark, counters, ctx, cand, low,
                           terms, False)
     if nc == 0:
         return -1, 0.0
@@ -844,12 +918,12 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
     for x in range(nc):
         k = order[x]
         b = cand[k]
-        if best_b >= 0 and (low[k] > best_e or (low[k] == best_e and b > best_b)):
+        if _loses(low[k], b, best_e, best_b):
             return best_b, best_e
-        counters[C_EXACT] += 1
-        e = _candidate_exact(a, b, terms[k], st, T, pts, dens, params, pw, ctx)
-        if best_b >= 0 and (e > best_e or (e == best_e and b > best_b)):
+        e, whole = _candidate_exact(a, b, terms[k], st, T, pts, dens, params, pdat, ctx, best_b, best_e, counters)
+        if not whole or _loses(e, b, best_e, best_b):
             continue
+        counters[C_LINK] += 1
         if _link_ok(a, b, st, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
             best_b = b
             best_e = e
@@ -857,12 +931,12 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
 
 
 # -- a binary min-heap over (error, vertex) with a version stamp for lazy deletion ----------------
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _heap_less(h_err, h_v, i, j):
     return h_err[i] < h_err[j] or (h_err[i] == h_err[j] and h_v[i] < h_v[j])
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _heap_swap(h_err, h_v, h_b, h_ver, i, j):
     h_err[i], h_err[j] = h_err[j], h_err[i]
     h_v[i], h_v[j] = h_v[j], h_v[i]
@@ -870,7 +944,7 @@ def _heap_swap(h_err, h_v, h_b, h_ver, i, j):
     h_ver[i], h_ver[j] = h_ver[j], h_ver[i]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _heap_push(h_err, h_v, h_b, h_ver, counters, e, v, b, ver, cur_ver):
     n = counters[C_HEAP]
     if n >= h_err.shape[0]:
@@ -901,7 +975,7 @@ def _heap_push(h_err, h_v, h_b, h_ver, counters, e, v, b, ver, cur_ver):
     counters[C_HEAP] = n + 1
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _sift_down(h_err, h_v, h_b, h_ver, i, n):
     while True:
         l = 2 * i + 1
@@ -917,7 +991,7 @@ def _sift_down(h_err, h_v, h_b, h_ver, i, n):
             break
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _heap_pop(h_err, h_v, h_b, h_ver, counters):
     n = counters[C_HEAP] - 1
     e, v, b, ver = h_err[0], h_v[0], h_b[0], h_ver[0]
@@ -927,7 +1001,7 @@ def _heap_pop(h_err, h_v, h_b, h_ver, counters):
     return e, v, b, ver
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _apply_merge(a, b, st_a, T, alive, nbr, head, nxt):
     """Merge a into b: collapse the tets of edge ab (gluing their outer neighbours), relabel the rest."""
     for i in range(st_a.shape[0]):
@@ -957,7 +1031,7 @@ def _apply_merge(a, b, st_a, T, alive, nbr, head, nxt):
     _splice_incidence(a, b, head, nxt)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _splice_incidence(a, b, head, nxt):
     """Vertex a's incidence list put in front of b's (a's left empty): a merged into b."""
     s = head[a]
@@ -970,7 +1044,7 @@ def _splice_incidence(a, b, head, nxt):
 
 
 @njit(cache=True)
-def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next):
+def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp_count, p_next, counters):
     """After merging a: a and every point listed in a's former star go to the first live tet of
     the new star (star order) that contains them, else the one they are nearest to (largest
     smallest barycentric coordinate of :func:`_value_at`, the first of equals; as :func:`_new_value`).
@@ -986,7 +1060,18 @@ def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next):
             cnt += 1
             p = p_next[p]
     plist = np.empty(cnt, np.int64)
-    plist[0] = a
+    counters[C_MOVED] += cnt
+    # a becomes a sample point: its row at the top of the point rows
+    r = counters[C_PTOP]
+    counters[C_PTOP] = r + 1
+    pdat[r, 0] = pts[a, 0]
+    pdat[r, 1] = pts[a, 1]
+    pdat[r, 2] = pts[a, 2]
+    pdat[r, 3] = dens[a]
+    pdat[r, 4] = vw[a]
+    p_orig[r] = a
+    p_next[r] = -1
+    plist[0] = r
     cnt = 1
     for i in range(st_a.shape[0]):
         t = st_a[i] >> 2
@@ -1009,8 +1094,8 @@ def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next):
                 hi3[d] = max(hi3[d], pts[T[t, j], d])
     for ip in range(cnt):
         for d in range(3):
-            lo3[d] = min(lo3[d], pts[plist[ip], d])
-            hi3[d] = max(hi3[d], pts[plist[ip], d])
+            lo3[d] = min(lo3[d], pdat[plist[ip], d])
+            hi3[d] = max(hi3[d], pdat[plist[ip], d])
     ext3 = ((hi3[0] - lo3[0]) ** 2 + (hi3[1] - lo3[1]) ** 2 + (hi3[2] - lo3[2]) ** 2) ** 1.5
     v6s = np.zeros(ns)
     usable = np.zeros(ns, np.bool_)
@@ -1033,9 +1118,9 @@ def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next):
     vout = np.empty(2)
     for ip in range(cnt):
         p = plist[ip]
-        x = pts[p, 0]
-        y = pts[p, 1]
-        z = pts[p, 2]
+        x = pdat[p, 0]
+        y = pdat[p, 1]
+        z = pdat[p, 2]
         best = -1
         for i in range(ns):
             if not usable[i]:
@@ -1076,28 +1161,70 @@ def _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next):
             tp_count[best] += 1
 
 
+@njit(cache=True)
+def _compact_every(n):
+    """Merges between two rewrites of the point rows (about 16 in a whole decimation)."""
+    return max(4096, n // 16)
+
+
+@njit(cache=True)
+def _compact_points(alive, pdat, p_orig, tp_head, p_next, counters):
+    """Rewrite the point rows tet by tet, every list in its order, from row 0 (dropped points
+    go): a tet's points side by side in memory. Ids change, lists and their order do not."""
+    k = 0
+    for t in range(tp_head.shape[0]):
+        if alive[t]:
+            p = tp_head[t]
+            while p >= 0:
+                k += 1
+                p = p_next[p]
+    new_dat = np.empty((k, 5))
+    new_orig = np.empty(k, np.int32)
+    new_next = np.empty(k, np.int32)
+    k = 0
+    for t in range(tp_head.shape[0]):
+        p = tp_head[t]
+        if not alive[t] or p < 0:
+            tp_head[t] = -1
+            continue
+        tp_head[t] = k
+        while p >= 0:
+            for j in range(5):
+                new_dat[k, j] = pdat[p, j]
+            new_orig[k] = p_orig[p]
+            p = p_next[p]
+            new_next[k] = k + 1 if p >= 0 else -1
+            k += 1
+    pdat[:k] = new_dat
+    p_orig[:k] = new_orig
+    p_next[:k] = new_next
+    counters[C_PTOP] = k
+
+
 @njit(cache=True, parallel=True)
 def _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4,
-                   marks, marks_b, marks_ab, tcount, pw, tp_head, tp_count, p_next):
+                   marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count, p_next):
     """:func:`_evaluate` of ``todo[:n_todo]`` in parallel: every evaluation only reads the mesh
     (each thread stamps its own mark rows), so the results cannot depend on the scheduling."""
     for i in prange(n_todo):
         tid = get_thread_id()
         b, e = _evaluate(todo[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks[tid],
-                         marks_b[tid], marks_ab[tid], tcount[tid], pw, tp_head, tp_count, p_next)
+                         marks_b[tid], marks_ab[tid], tcount[tid], pdat, tp_head, tp_count, p_next)
         out_b[i] = b
         out_e[i] = e
 
 
 @njit(cache=True)
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks, marks_b, marks_ab, tcount,
-         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pw, tp_head, tp_count, p_next):
+         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pdat, tp_head, tp_count, p_next,
+         vw, p_orig):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left.
 
     ``marks*`` and ``tcount`` have one row per thread (stamps, evaluation counts); the sequential
     steps use row 0.
     """
     n = head.shape[0]
+    compact_every = _compact_every(n)
     mark = marks[0]
     mark_b = marks_b[0]
     mark_ab = marks_ab[0]
@@ -1118,10 +1245,10 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         found = False
         if n_todo == 1:
             out_b[0], out_e[0] = _evaluate(todo[0], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
-                                           u4, mark, mark_b, mark_ab, tc, pw, tp_head, tp_count, p_next)
+                                           u4, mark, mark_b, mark_ab, tc, pdat, tp_head, tp_count, p_next)
         elif n_todo > 1:
             _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params,
-                           quad, u4, marks, marks_b, marks_ab, tcount, pw, tp_head, tp_count, p_next)
+                           quad, u4, marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count, p_next)
         # pushed in todo order, as evaluated one by one
         for i in range(n_todo):
             v = todo[i]
@@ -1148,9 +1275,12 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
             sweeping = True
             continue
         e, a, b, v_a = _heap_pop(h_err, h_v, h_b, h_ver, counters)
+        tc[C_POPS] += 1
         if v_a != ver[a] or parent[a] != a:
+            tc[C_STALE] += 1
             continue
         if b < 0:
+            tc[C_LAZY] += 1
             # a's neighbourhood changed since its last evaluation: evaluate now (lazily, so a vertex
             # touched by several merges before its turn is evaluated once)
             todo[0] = a
@@ -1159,6 +1289,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         if parent[b] != b:
             continue
         st_a = _star(a, head, nxt, T, alive)
+        tc[C_LINK] += 1
         # a's star is unchanged since the entry was made (that would have bumped its version),
         # but b's may have changed: check the link condition again
         if not _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, tc):
@@ -1177,10 +1308,13 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
                     mark[w] = stamp
                     nb[k] = w
                     k += 1
-        _merge(a, b, st_a, nb[:k], T, alive, nbr, head, nxt, pts, dens, params, quad, tp_head, tp_count, p_next)
+        _merge(a, b, st_a, nb[:k], T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, vw, p_orig, tp_head,
+               tp_count, p_next, counters)
         parent[a] = b
         rank[a] = counters[C_MERGES]
         counters[C_MERGES] += 1
+        if params[P_WS] > 0.0 and counters[C_MERGES] % compact_every == 0:
+            _compact_points(alive, pdat, p_orig, tp_head, p_next, counters)
         ver[a] += 1
         for i in range(k):
             w = nb[i]
@@ -1190,14 +1324,22 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
 
 
 @njit(cache=True)
-def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, tp_head, tp_count, p_next):
+def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, vw, p_orig, tp_head, tp_count,
+           p_next, counters):
     """Everything a merge a -> b changes: the tets, the lists of the vertices around it (``nb``:
     the vertices of a's star but a), the sample points and b's quadric."""
     _apply_merge(a, b, st_a, T, alive, nbr, head, nxt)
+    # only the tets of edge ab died (the others keep their slots, relabelled a -> b), so only
+    # the lists of their vertices hold dead slots: tidy those (a's is b's now)
     for i in range(nb.shape[0]):
-        _tidy(nb[i], head, nxt, T, alive)
+        w = nb[i]
+        for k in range(st_a.shape[0]):
+            t = st_a[k] >> 2
+            if not alive[t] and _contains(T, t, w):
+                _tidy(w, head, nxt, T, alive)
+                break
     if params[P_WS] > 0.0:
-        _reassign_points(a, st_a, T, alive, pts, dens, tp_head, tp_count, p_next)
+        _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp_count, p_next, counters)
     for j in range(quad.shape[1]):
         quad[b, j] += quad[a, j]
 
@@ -1308,24 +1450,24 @@ def _vertex_topology(T, nbr, head, nxt, n):
 
 @njit(cache=True)
 def _sample_points(pts, dens, T, tet_w, centroid_weight):
-    """(pw, points, values) of the sample points: the n vertices (weight a quarter of their tets'
-    volume fractions), then every tet's centroid (its volume fraction x ``centroid_weight``)."""
+    """(pdat, vw, p_orig): the rows (x, y, z, value, weight) of every tet's centroid (weight its
+    volume fraction x ``centroid_weight``; row t, named n + t), room for the n vertices after
+    them, and every vertex's weight as a point (a quarter of its tets' volume fractions)."""
     n = pts.shape[0]
     m = T.shape[0]
-    pw = np.zeros(n + m)
-    p = np.empty((n + m, 3))
-    d = np.empty(n + m)
-    p[:n] = pts
-    d[:n] = dens
+    pdat = np.zeros((n + m, 5))
+    p_orig = np.full(n + m, -1, np.int32)
+    vw = np.zeros(n)
     for t in range(m):
         for c in range(4):
-            pw[T[t, c]] += tet_w[t] / 4.0
+            vw[T[t, c]] += tet_w[t] / 4.0
     for t in range(m):
-        pw[n + t] = tet_w[t] * centroid_weight
+        pdat[t, 4] = tet_w[t] * centroid_weight
         for k in range(3):
-            p[n + t, k] = (((pts[T[t, 0], k] + pts[T[t, 1], k]) + pts[T[t, 2], k]) + pts[T[t, 3], k]) / 4.0
-        d[n + t] = (((dens[T[t, 0]] + dens[T[t, 1]]) + dens[T[t, 2]]) + dens[T[t, 3]]) / 4.0
-    return pw, p, d
+            pdat[t, k] = (((pts[T[t, 0], k] + pts[T[t, 1], k]) + pts[T[t, 2], k]) + pts[T[t, 3], k]) / 4.0
+        pdat[t, 3] = (((dens[T[t, 0]] + dens[T[t, 1]]) + dens[T[t, 2]]) + dens[T[t, 3]]) / 4.0
+        p_orig[t] = n + t
+    return pdat, vw, p_orig
 
 
 @njit(cache=True)

@@ -50,10 +50,19 @@ Each term is one small kernel (``_mass_error``, ``_interp_deviation``, ``_area_e
 order). The search for a vertex's best merge is a branch and bound: the cheap terms of every
 candidate first, with the interpolation term (>= 0) left out and the sampled error at its most
 negative (every point's new error 0) as a lower bound, then the two expensive terms only for the
-candidates whose bound can still win; the choice is the one of computing every error, bit for bit
-(Combustion: 19 % of the candidates get them). The first evaluation of every vertex and the sweeps
-run in parallel (each evaluation only reads the mesh), and their results are pushed in vertex
-order, so the forest does not depend on the thread count either.
+candidates whose bound can still win, and of those the sampled sum stops as soon as the bound with
+the points not yet summed at 0 loses (it only grows point by point); the choice is the one of
+computing every error, bit for bit (Combustion: 19 % of the candidates get the expensive terms, a
+quarter of those stop early). The first evaluation of every vertex and the sweeps run in parallel
+(each evaluation only reads the mesh), and their results are pushed in vertex order, so the forest
+does not depend on the thread count either.
+
+Where the time goes (perf on the kernels' code, Blunt-fin, one thread, after the speed work of
+issue 12): the star context of an evaluation (chiefly walking the star's sample points: memory
+bound) ~20 %, the sampled errors of the exact evaluations ~15 %, moving the points after a merge
+~11 %, the merge and list upkeep ~10 %, star and link walks ~12 %, the heap ~5 %. Per merge
+(``bench/forest_identity.py --counters``): ~3.8 evaluations, ~38 candidates, ~5.3 exact
+evaluations, ~220 sample points summed, ~3.6 link tests, ~11 heap pops of which ~8.6 stale.
 """
 
 from __future__ import annotations
@@ -227,19 +236,20 @@ class DecimationState:
         self.dens = mesh.density.astype(np.float64)
         # Sample points of the original field, listed in the live tet holding them: every input
         # tet's centroid from the start (ids n + t, weight its volume fraction x CENTROID_WEIGHT),
-        # every vertex once merged away (weight a quarter of its tets' volume fraction). Their
-        # positions and values follow the vertices' in pts and dens: tets only index the first n.
-        self.pw, self.pts, self.dens = K._sample_points(self.pts, self.dens, self.T, tet_w, CENTROID_WEIGHT)
+        # every vertex once merged away (weight a quarter of its tets' volume fraction); one row
+        # (x, y, z, value, weight) per point, the centroids first (p_orig: which point a row is).
+        self.pdat, self.vw, self.p_orig = K._sample_points(self.pts, self.dens, self.T, tet_w, CENTROID_WEIGHT)
         self.p_next = np.full(n + m, -1, np.int32)
-        self.tp_head = np.arange(n, n + m, dtype=np.int32)
+        self.tp_head = np.arange(m, dtype=np.int32)
         self.tp_count = np.ones(m, np.int32)
         # per thread of the parallel evaluations: stamp rows and counters (stamps, evaluations)
         threads = max(1, int(numba.config.NUMBA_NUM_THREADS))
         self.marks = np.zeros((threads, n), np.int64)
         self.marks_b = np.zeros((threads, n), np.int64)
         self.marks_ab = np.zeros((threads, n), np.int64)
-        self.tcount = np.zeros((threads, 8), np.int64)
-        self.counters = np.zeros(8, np.int64)
+        self.tcount = np.zeros((threads, K.N_COUNTERS), np.int64)
+        self.counters = np.zeros(K.N_COUNTERS, np.int64)
+        self.counters[K.C_PTOP] = m
         self.ver = np.zeros(n, np.int32)
         self.last_err = np.full(n, -1.0)
         # at most one live entry per vertex: a full heap compacts to <= n and has n free slots again
@@ -256,7 +266,7 @@ class DecimationState:
                 self.params, self.quad, self.u4)
 
     def _sample_args(self):
-        return (self.pw, self.tp_head, self.tp_count, self.p_next)
+        return (self.pdat, self.tp_head, self.tp_count, self.p_next)
 
     def _heap_args(self):
         return (self.ver, self.h_err, self.h_v, self.h_b, self.h_ver, self.last_err)
@@ -268,7 +278,8 @@ class DecimationState:
     def run(self, max_merges: int) -> bool:
         """Merge until ``max_merges`` in total; True when no legal merge is left."""
         return bool(K._run(*self._mesh_args(), self.marks, self.marks_b, self.marks_ab, self.tcount, self.counters,
-                           *self._heap_args(), self.parent, self.rank, np.int64(max_merges), *self._sample_args()))
+                           *self._heap_args(), self.parent, self.rank, np.int64(max_merges), *self._sample_args(),
+                           self.vw, self.p_orig))
 
     def evaluate(self, a: int, b: int):
         """(legal, error) of merging a into b in the current state (for tests against the reference)."""
@@ -289,7 +300,8 @@ class DecimationState:
         st = K._star(a, self.head, self.nxt, self.T, self.alive)
         nb = np.unique(self.T[st >> 2])
         K._merge(a, b, st, nb[nb != a].astype(np.int64), self.T, self.alive, self.nbr, self.head, self.nxt, self.pts,
-                 self.dens, self.params, self.quad, self.tp_head, self.tp_count, self.p_next)
+                 self.dens, self.params, self.quad, self.pdat, self.vw, self.p_orig, self.tp_head, self.tp_count,
+                 self.p_next, self.counters)
         self.parent[a] = b
         self.rank[a] = self.counters[K.C_MERGES]
         self.counters[K.C_MERGES] += 1

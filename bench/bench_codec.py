@@ -28,7 +28,8 @@ DECODE_ONLY = "--decode" in sys.argv
 REPEAT = 1 if QUICK else 3
 CMD = "python bench/bench_codec.py" + (" --quick" if QUICK else "")
 # the gmsh flanges (issue 12's unstructured meshes), decoded beside the samples when present
-FLANGES = {"flange-1m": Path("/work/cache/flange-1m.tetc"), "flange-10m": Path("/work/cache/flange-10m.tetc")}
+FLANGE_DIR = Path(os.environ.get("TETC_FLANGE_DIR", "/work/cache"))  # e.g. files written by this version
+FLANGES = {"flange-1m": FLANGE_DIR / "flange-1m.tetc", "flange-10m": FLANGE_DIR / "flange-10m.tetc"}
 DECODE_MARK = ("<!-- decode speed -->", "<!-- /decode speed -->")
 
 
@@ -220,7 +221,7 @@ def decode_speed_text() -> str:
              "`TetcReader(bytes).decode_mesh()` (level 0 into a `TetMesh`: connectivity, geometry, point "
              "arrays, container) and `TetcReader(bytes).iter_decode()` (default batches of 65,536 tets, "
              "each dropped: the streaming path render and isosurface use). The flanges are the gmsh meshes "
-             "of issue 12 (`/work/cache`, all levels stored; level 0 decoded). VTK: "
+             f"of issue 12 (`{FLANGE_DIR}`, format {_formats()}; level 0 decoded). VTK: "
              "`vtkXMLUnstructuredGridReader` on the same mesh written by VTK's own XML writer as appended "
              "raw binary (float32 points and density, int64 connectivity), uncompressed and zlib-compressed, "
              "and as this project writes a `.vtu` (`gatun_py.mesh.write_mesh`, meshio: inline base64, zlib); "
@@ -254,6 +255,12 @@ def decode_speed_text() -> str:
                  "hold a border of 160 k faces in 11–21 MB instead of 7.7 MB), walking the two lists in "
                  "turns so that their loads overlap (0.33 s), and prefetching the next border rows.\n")
     return text + "\n" + flange_connectivity_text() + f"\n{DECODE_MARK[1]}\n"
+
+
+def _formats() -> str:
+    """The format versions of the flange files the decode table read."""
+    from gatun_py.codec import TetcReader
+    return "/".join(sorted({str(TetcReader(p).container.major) for p in FLANGES.values() if p.exists()})) or "n/a"
 
 
 def flange_connectivity_text() -> str:

@@ -60,6 +60,10 @@ LOCAL_OK_REASONS = {
 LOCAL_OK_MODULES = {
     "viewer.server": "needs the optional aiohttp: imported only when the viewer starts",
     "api": "start-up time: meshio's .tetc reader and writer load the verbs (and numba) when first called",
+    # an isosurface extraction loads the renderer (and PIL) only when a preview is asked for
+    "render.camera": "memory and start-up of an isosurface without a preview",
+    "render.image": "memory and start-up of an isosurface without a preview",
+    "render.surface": "memory and start-up of an isosurface without a preview",
 }
 
 

@@ -51,6 +51,21 @@ BOUNDARY_CHUNK = 4 * CHUNK_TETS  # boundary faces per extraction step (as many f
 KEEP_SHARE = 0.5
 #: hand the C heap's free pages back to the system after every this many batches (see _trim_heap)
 TRIM_EVERY = 4
+#: the per-vertex columns of an extractor: name -> (shape after the vertex axis, dtype, value of a
+#: fresh slot, both when allocated and when freed by a round's compaction, or None where marching
+#: writes the value of every vertex it adds); a stale quadric, border flag or importance in a reused
+#: slot would pass to the new vertex
+VERTEX_COLUMNS = {
+    "vpos": ((3,), np.float64, None),
+    "vgrad": ((2,), np.float64, 0.0),
+    "vkey": ((), np.int64, None),
+    "vlock": ((), np.uint8, 0),
+    "vq": ((qem.QUADRIC_WIDTH,), np.float64, 0.0),
+    "vbnd": ((), np.uint8, 0),
+    "vdead": ((), np.uint8, 0),
+    "vimp": ((), np.float64, 1.0),
+    "vfresh": ((), np.uint8, 1),
+}
 MIN_DOT = 0.0  # a collapse may not turn a face by more than 90 degrees (0.2, ~78 degrees, measured worse)
 
 
@@ -245,9 +260,8 @@ class _Extractor:
     def _alloc_vertices(self, cap):
         old = getattr(self, "vpos", None)
         n = self.nv
-        new = dict(vpos=np.empty((cap, 3)), vgrad=np.zeros((cap, 2)), vkey=np.empty(cap, np.int64),
-                   vlock=np.zeros(cap, np.uint8), vq=np.zeros((cap, qem.QUADRIC_WIDTH)), vbnd=np.zeros(cap, np.uint8),
-                   vdead=np.zeros(cap, np.uint8), vimp=np.ones(cap), vfresh=np.ones(cap, np.uint8))
+        new = {name: np.empty((cap, *shape), dtype) if fresh is None else np.full((cap, *shape), fresh, dtype)
+               for name, (shape, dtype, fresh) in VERTEX_COLUMNS.items()}
         if old is not None:
             for name, arr in new.items():
                 arr[:n] = getattr(self, name)[:n]
@@ -341,17 +355,12 @@ class _Extractor:
         self.collapses += done
         self.rounds += 1
         remap, self.nv, self.nt = qem.compact(self.vdead, self.tris, n, self.nt)
-        live = remap >= 0
-        for name in ("vpos", "vgrad", "vkey", "vlock", "vq", "vbnd", "vimp", "vfresh"):
+        live = remap >= 0  # the vertices not dead: their vdead moves as 0
+        for name, (_, _, fresh) in VERTEX_COLUMNS.items():
             arr = getattr(self, name)
             arr[:self.nv] = arr[:n][live]
-        self.vdead[:n] = 0
-        # the freed slots are reused by the next batch's new vertices: clear what marching does not
-        # set (stale quadrics, border flags and importance would otherwise pass to a new vertex)
-        self.vq[self.nv:n] = 0.0
-        self.vbnd[self.nv:n] = 0
-        self.vfresh[self.nv:n] = 1
-        self.vimp[self.nv:n] = 1.0
+            if fresh is not None:  # the freed slots are reused by the next batch's new vertices
+                arr[self.nv:n] = fresh
         used = (self.ek != marching.EMPTY) & (self.evid >= 0)
         self.evid[used] = remap[self.evid[used]].astype(np.int32)
         self.nq = self.nt

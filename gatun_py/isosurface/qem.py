@@ -336,6 +336,14 @@ def _flips(x, y, z, moving, other, start, cnt, refs, tris, vpos, min_dot):
 
 
 @njit(cache=True)
+def _edge_cost(vq, vpos, vbnd, vimp, u, v, qs):
+    """The heap key of edge (u, v): its collapse's quadric cost times the larger importance of its
+    ends (one definition for the first costing and the lazy re-costing, so the heap stays ordered)."""
+    cost, _, _, _ = _placement(vq, vpos, vbnd, u, v, qs)
+    return cost * max(vimp[u], vimp[v])
+
+
+@njit(cache=True)
 def _push_edges(v, start, cnt, refs, tris, vpos, vq, vbnd, vlock, vimp, stamp, qs, heap, hn, t):
     for i in range(cnt[v]):
         f = refs[start[v] + i]
@@ -349,8 +357,7 @@ def _push_edges(v, start, cnt, refs, tris, vpos, vq, vbnd, vlock, vimp, stamp, q
                 continue
             if tris[f, (k + 2) % 3] != v and not (vbnd[v] and vbnd[w]):
                 continue
-            cost, _, _, _ = _placement(vq, vpos, vbnd, v, w, qs)
-            cost *= max(vimp[v], vimp[w])
+            cost = _edge_cost(vq, vpos, vbnd, vimp, v, w, qs)
             heap, hn = _heap_push(heap, hn, cost, v, w, stamp[v], stamp[w], t)
     return heap, hn
 
@@ -422,8 +429,7 @@ def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, m
             # a collapse next to it rebuilt an end's current quadric: re-cost it now (lazily, instead
             # of re-pushing every edge of the ring at each collapse) and go on with it only if it
             # is still the cheapest
-            cost, _, _, _ = _placement(vq, vpos, vbnd, u, v, qs)
-            cost *= max(vimp[u], vimp[v])
+            cost = _edge_cost(vq, vpos, vbnd, vimp, u, v, qs)
             if hn > 0 and cost > heap[0].cost:
                 heap, hn = _heap_push(heap, hn, cost, u, v, su, sv, done)
                 continue

@@ -821,10 +821,11 @@ def render_frames(source, output, *, workers: int | None = None, scheduler: str 
         if level is not None:
             raise OptionError("give either a level or a budget, not both")
         for src in inputs:
-            if not (isinstance(src, (str, os.PathLike)) and is_tetc(src) and TetcReader(src).n_bricks > 1):
+            reader = TetcReader(src) if isinstance(src, (str, os.PathLike)) and is_tetc(src) else None
+            if reader is None or reader.n_bricks <= 1:
                 raise OptionError(f"a frame-time budget on a cluster needs a bricked .tetc file (tetc compress "
                                   f"--bricks K), not {src if isinstance(src, (str, os.PathLike)) else 'a mesh'}")
-            _note_if_unsimplifiable(TetcReader(src), os.path.basename(os.fspath(src)), log)
+            _note_if_unsimplifiable(reader, os.path.basename(os.fspath(src)), log)
     paths = frame_paths(output, orbit * len(inputs))
     for p in paths:
         image_format(p)  # refuse what cannot be written before the work, not after

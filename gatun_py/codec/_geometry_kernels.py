@@ -60,10 +60,12 @@ from .rangecoder import (
     dec_failed,
     dec_init,
     dec_sint,
+    dec_sint_wide,
     dec_sym,
     dec_uint,
     enc_finish,
     enc_sint,
+    enc_sint_wide,
     enc_sym,
     enc_uint,
 )
@@ -81,7 +83,7 @@ MAX_CANDS = 15
 # (:func:`_geometric_cands`) after version 1's, so the version-1 candidates keep their indices
 N_CANDS_V1 = (1, 1, 6, 6, 10, 12)
 N_CANDS_V2 = (1, 1, 6, 8, 11, 15)
-CODINGS = (1, 2)  # the geometry block versions these kernels decode
+CODINGS = (1, 2, 3)  # the geometry block versions these kernels decode
 CAND_VERSION = N_PATTERNS  # where candidate_table keeps the coding version
 
 
@@ -726,6 +728,22 @@ def _update_scores(scores, ch, pat, cand_o, o, cands):
 
 
 @njit(cache=True, inline="always")
+def _enc_residual(st, out, probs, base, res, version):
+    """Code a residual: coding 3 sends its unmodelled mantissa bits in wide range-coder steps."""
+    if version >= 3:
+        enc_sint_wide(st, out, probs, base, res)
+    else:
+        enc_sint(st, out, probs, base, res)
+
+
+@njit(cache=True, inline="always")
+def _dec_residual(st, data, probs, base, version):
+    if version >= 3:
+        return dec_sint_wide(st, data, probs, base)
+    return dec_sint(st, data, probs, base)
+
+
+@njit(cache=True, inline="always")
 def _search(table, lo, hi, o):
     """First index i in [lo, hi) with table[i] >= o (``hi`` if none)."""
     while lo < hi:
@@ -879,10 +897,10 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
                     if rp >= hi:
                         rp = hi - 1
                     res = _search(tables, lo, hi, o) - rp
-                    enc_sint(stc, outc, probs, RANK_BASE + ctx * INT_MODEL_SIZE, res)
+                    _enc_residual(stc, outc, probs, RANK_BASE + ctx * INT_MODEL_SIZE, res, version)
                 else:
                     res = o - cand_o[best]
-                    enc_sint(stc, outc, probs, RES_BASE + ctx * INT_MODEL_SIZE, res)
+                    _enc_residual(stc, outc, probs, RES_BASE + ctx * INT_MODEL_SIZE, res, version)
                 big = _is_big(mode, res)
                 # only predicted values train the predictor choice: repeats need no prediction
                 _update_scores(scores, ch, pat, cand_o, o, cands)
@@ -973,13 +991,13 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
             rp = _search(tables, lo, hi, cand_o[best])
             if rp >= hi:
                 rp = hi - 1
-            res = dec_sint(stc, data, pc, RANK_BASE + ctx * INT_MODEL_SIZE)
+            res = _dec_residual(stc, data, pc, RANK_BASE + ctx * INT_MODEL_SIZE, cands[CAND_VERSION])
             r = rp + res
             if r < lo or r >= hi:
                 return -ERR_RANK
             o = tables[r]
         else:
-            res = dec_sint(stc, data, pc, RES_BASE + ctx * INT_MODEL_SIZE)
+            res = _dec_residual(stc, data, pc, RES_BASE + ctx * INT_MODEL_SIZE, cands[CAND_VERSION])
             o = cand_o[best] + res
             if o < -(1 << 31) or o >= (1 << 31):
                 return -ERR_STREAM

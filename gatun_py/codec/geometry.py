@@ -50,7 +50,7 @@ def coding_for_format(major: int) -> int:
     """The geometry block coding a file of container format ``major`` is written with: 1 up to
     format 3, 2 from format 4 on (the tet-geometry predictors of
     :func:`gatun_py.codec._geometry_kernels._geometric_cands`). Readers take both codings."""
-    return 1 if major <= 3 else 2
+    return 1 if major <= 3 else (2 if major == 4 else 3)
 
 
 # what this version of tetc writes

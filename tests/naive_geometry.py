@@ -396,8 +396,9 @@ def naive_symbols(values: np.ndarray, refs: np.ndarray, modes, coding: int = 1) 
         Geometry refs.
     modes : 4 ints
         0 = residual on ordered integers, 1 = residual on ranks in the sorted table of values.
-    coding : 1 or 2
-        The geometry block's coding version (2 adds the tet-geometry candidates).
+    coding : 1, 2 or 3
+        The geometry block's coding version (2 adds the tet-geometry candidates, 3 scores them
+        lazily).
 
     Returns
     -------
@@ -413,6 +414,7 @@ def naive_symbols(values: np.ndarray, refs: np.ndarray, modes, coding: int = 1) 
         col = values[:, ch]
         table = sorted({ordered_int(v) for v in col})
         scores: dict = {}
+        ticks: dict = {}  # coding 3: predicted values seen per pattern
         y_of_x: dict = {}  # channel 1 only: the y last seen with each x
         for k in range(n):
             pat, cands, eq = _predictions(k, [int(r) for r in refs[k]], col, extra[k], values, ch, coding)
@@ -431,13 +433,18 @@ def naive_symbols(values: np.ndarray, refs: np.ndarray, modes, coding: int = 1) 
                 cand_o = [_candidate_int(x) for x in cands]
                 sc = scores.setdefault(pat, [0] * len(cand_o))
                 best = min(range(len(cand_o)), key=lambda q: (sc[q], q))
+                # coding 3 scores every candidate at every 4th predicted value of the pattern,
+                # only the chosen one in between
+                tick = ticks.get(pat, 0)
+                ticks[pat] = tick + 1
+                scored = range(len(cand_o)) if coding < 3 or tick % 4 == 0 else [best]
                 if modes[ch] == 1:
                     rank_pred = min(bisect_left(table, cand_o[best]), len(table) - 1)
                     res = table.index(o) - rank_pred
                 else:
                     res = o - cand_o[best]
                 # scores: exponentially decayed bit lengths of each candidate's residual
-                for q in range(len(cand_o)):
+                for q in scored:
                     sc[q] = sc[q] - (sc[q] >> 4) + (abs(o - cand_o[q]).bit_length() << 4)
             out[k, ch] = (sym, res, best)
     return out

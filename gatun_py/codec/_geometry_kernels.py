@@ -85,14 +85,18 @@ N_CANDS_V1 = (1, 1, 6, 6, 10, 12)
 N_CANDS_V2 = (1, 1, 6, 8, 11, 15)
 CODINGS = (1, 2, 3)  # the geometry block versions these kernels decode
 CAND_VERSION = N_PATTERNS  # where candidate_table keeps the coding version
+CAND_XY = N_PATTERNS + 1  # and whether channel 1 uses the x -> y table
 
 
-def candidate_table(version: int) -> np.ndarray:
+def candidate_table(version: int, xy_table: bool = True) -> np.ndarray:
     """The ``cands`` array the kernels take: the candidate count of each ref pattern, then the
-    coding version (the one place the kernels learn which version they code)."""
+    coding version (the one place the kernels learn which version they code), then whether y
+    gets the repetition candidate of the x -> y table (always in codings 1 and 2; coding 3
+    says per block)."""
     if version not in CODINGS:
         raise ValueError(f"unknown geometry coding version {version}")
-    return np.array((N_CANDS_V1 if version == 1 else N_CANDS_V2) + (version,), dtype=np.int64)
+    xy = 1 if (version < 3 or xy_table) else 0
+    return np.array((N_CANDS_V1 if version == 1 else N_CANDS_V2) + (version, xy), dtype=np.int64)
 
 
 # the coder's own view of the mesh: the edges from every vertex to its face refs (at most
@@ -121,6 +125,12 @@ MODEL_SIZE = EQ2_BASE + EQ_CONTEXTS * 5 * 8
 WANT_REPEATS, WANT_BOTH, WANT_PREDICTIONS = 0, 1, 2
 
 SCORE_SHIFT = 4  # predictor scores: exponentially decayed bit lengths, window ~16 vertices
+# Coding 3 scores every candidate of a (channel, pattern) only at every REFRESH-th predicted value
+# of it; in between it computes and scores only the candidate it predicts with. The count lives
+# in the scores array, after the candidates' scores (slot TICK).
+REFRESH = 4
+TICK = MAX_CANDS
+SCORE_SLOTS = MAX_CANDS + 1
 
 # decoder status codes
 OK = 0
@@ -309,25 +319,40 @@ def hash_capacity(n):
     return cap
 
 
+# Coding 3's x -> y table is a direct-mapped cache of this many slots (a new x evicts whatever
+# shared its slot): a grid has few distinct x (Blunt-fin 876, fire 41), and 64 KB stay in cache
+# where the exact table, 16-24 bytes per vertex, cost a cache miss per vertex on large meshes.
+XY_CACHE_SLOTS = 1 << 13
+
+
+def xy_table_slots(n: int, version: int) -> int:
+    """Slots of the decoder's x -> y table for n vertices in this coding."""
+    return XY_CACHE_SLOTS if version >= 3 else hash_capacity((3 * n) // 4 + 1)
+
+
 @njit(cache=True, inline="always")
-def _hash_slot(slots, used, x):
-    """Slot of key x (an ordered int) in the open-addressing table: its slot or a free one."""
+def _hash_slot(slots, used, x, version):
+    """Slot of key x (an ordered int) in the open-addressing table: its slot or a free one
+    (coding 3: the one slot of x in the direct-mapped cache, whatever it holds)."""
     mask = slots.shape[0] - 1
     # multiplicative hashing, high bits: float bit patterns often end in runs of zero bits
     h = ((x * -7046029254386353131) >> 32) & mask
+    if version >= 3:
+        return h
     while used[h] != 0 and (slots[h] >> 32) != x:
         h = (h + 1) & mask
     return h
 
 
 @njit(cache=True, inline="always")
-def _add_conditional(ch, k, vi, slots, used, eq_o, m):
+def _add_conditional(ch, k, vi, slots, used, eq_o, m, cands):
     """Channel 1 (y) gets one more repetition candidate: the y last seen with this vertex's x
     (curvilinear grids repeat whole (x, y) columns). Returns the new candidate count."""
-    if ch != 1:
+    if ch != 1 or cands[CAND_XY] == 0:
         return m
-    h = _hash_slot(slots, used, ordered_int(vi[k, 0]))
-    if used[h] == 0:
+    x = ordered_int(vi[k, 0])
+    h = _hash_slot(slots, used, x, cands[CAND_VERSION])
+    if used[h] == 0 or (slots[h] >> 32) != x:
         return m
     v = ((slots[h] & 0xFFFFFFFF) ^ 0x80000000) - 0x80000000  # low half, sign-extended
     for q in range(m):
@@ -338,10 +363,10 @@ def _add_conditional(ch, k, vi, slots, used, eq_o, m):
 
 
 @njit(cache=True, inline="always")
-def _remember_conditional(ch, k, vi, slots, used):
-    if ch == 1:
+def _remember_conditional(ch, k, vi, slots, used, cands):
+    if ch == 1 and cands[CAND_XY] != 0:
         x = ordered_int(vi[k, 0])
-        h = _hash_slot(slots, used, x)
+        h = _hash_slot(slots, used, x, cands[CAND_VERSION])
         slots[h] = (x << 32) | (ordered_int(vi[k, 1]) & 0xFFFFFFFF)  # key and value in one word
         used[h] = 1
 
@@ -529,8 +554,18 @@ def _geometric_cands(k, face0, face1, face2, apex, nf, vf, ch, scratch_f, nc):
     return nc
 
 
+@njit(cache=True, inline="always")
+def _geometric_count(nf, apex, nc):
+    """The candidate count after :func:`_geometric_cands` appended its candidates to ``nc``."""
+    if nf == 3:
+        return nc + (3 if apex >= 0 else 1)
+    if nf == 2 and apex >= 0:
+        return nc + 2
+    return nc
+
+
 @njit(cache=True, _nrt=False)
-def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, need_cands, version):
+def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, need_cands, version, only):
     """Predictor candidates and distinct repetition candidates of vertex ``k`` on channel ``ch``.
 
     ``r0, r1, r2`` are the face refs and ``r3`` the apex (each ``-1`` or a checked id ``< k``).
@@ -538,7 +573,9 @@ def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_
     distinct ordered ints of the refs' values, in ref order); returns ``(pattern, m)``. ``need_cands``:
     ``WANT_REPEATS`` fills only the repetition candidates (a repeated value needs no prediction),
     ``WANT_BOTH`` both, ``WANT_PREDICTIONS`` only the predictions (m is then 0: the caller kept the
-    repetition candidates of its first call, which are the same).
+    repetition candidates of its first call, which are the same). ``only`` >= 0: the caller needs
+    candidate ``only`` alone (coding 3 between score refreshes), so the partner and tet-geometry
+    candidates are computed only when it is one of them (the rest of ``cand_o`` is then stale).
     """
     face0 = -1
     face1 = -1
@@ -596,17 +633,19 @@ def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_
             scratch_f[0] = a + b - d  # parallelogram across the edge
             scratch_f[1] = (a + b) * 0.5
             scratch_f[2] = a
-            scratch_f[3] = _par(vf, ch, face0, face1, ws[0, 0], a + b - d)
-            scratch_f[4] = _ext(vf, ch, face0, ws[0, 1], a + b - d)
-            scratch_f[5] = _ext(vf, ch, face1, ws[1, 1], a + b - d)
+            if only < 0 or 3 <= only < 6:
+                scratch_f[3] = _par(vf, ch, face0, face1, ws[0, 0], a + b - d)
+                scratch_f[4] = _ext(vf, ch, face0, ws[0, 1], a + b - d)
+                scratch_f[5] = _ext(vf, ch, face1, ws[1, 1], a + b - d)
             pat = PAT_EDGE_APEX
         else:
             scratch_f[0] = (a + b) * 0.5
             scratch_f[1] = a
             scratch_f[2] = b
-            scratch_f[3] = _par(vf, ch, face0, face1, ws[0, 0], (a + b) * 0.5)
-            scratch_f[4] = _ext(vf, ch, face0, ws[0, 1], (a + b) * 0.5)
-            scratch_f[5] = _ext(vf, ch, face1, ws[1, 1], (a + b) * 0.5)
+            if only < 0 or 3 <= only < 6:
+                scratch_f[3] = _par(vf, ch, face0, face1, ws[0, 0], (a + b) * 0.5)
+                scratch_f[4] = _ext(vf, ch, face0, ws[0, 1], (a + b) * 0.5)
+                scratch_f[5] = _ext(vf, ch, face1, ws[1, 1], (a + b) * 0.5)
             pat = PAT_EDGE
     else:
         c = np.float64(vf[face2, ch])
@@ -621,12 +660,13 @@ def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_
             scratch_f[4] = b + c - d
             scratch_f[5] = a
             h = scratch_f[0]
-            scratch_f[6] = _par(vf, ch, face0, face1, ws[0, 0], h)
-            scratch_f[7] = _par(vf, ch, face0, face2, ws[1, 0], h)
-            scratch_f[8] = _par(vf, ch, face1, face2, ws[2, 0], h)
-            scratch_f[9] = _ext(vf, ch, face0, ws[0, 1], h)
-            scratch_f[10] = _ext(vf, ch, face1, ws[1, 1], h)
-            scratch_f[11] = _ext(vf, ch, face2, ws[2, 1], h)
+            if only < 0 or 6 <= only < 12:
+                scratch_f[6] = _par(vf, ch, face0, face1, ws[0, 0], h)
+                scratch_f[7] = _par(vf, ch, face0, face2, ws[1, 0], h)
+                scratch_f[8] = _par(vf, ch, face1, face2, ws[2, 0], h)
+                scratch_f[9] = _ext(vf, ch, face0, ws[0, 1], h)
+                scratch_f[10] = _ext(vf, ch, face1, ws[1, 1], h)
+                scratch_f[11] = _ext(vf, ch, face2, ws[2, 1], h)
             pat = PAT_FACE_APEX
             nc = 12
         else:
@@ -635,18 +675,21 @@ def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_
             scratch_f[2] = b
             scratch_f[3] = c
             h = scratch_f[0]
-            scratch_f[4] = _par(vf, ch, face0, face1, ws[0, 0], h)
-            scratch_f[5] = _par(vf, ch, face0, face2, ws[1, 0], h)
-            scratch_f[6] = _par(vf, ch, face1, face2, ws[2, 0], h)
-            scratch_f[7] = _ext(vf, ch, face0, ws[0, 1], h)
-            scratch_f[8] = _ext(vf, ch, face1, ws[1, 1], h)
-            scratch_f[9] = _ext(vf, ch, face2, ws[2, 1], h)
+            if only < 0 or 4 <= only < 10:
+                scratch_f[4] = _par(vf, ch, face0, face1, ws[0, 0], h)
+                scratch_f[5] = _par(vf, ch, face0, face2, ws[1, 0], h)
+                scratch_f[6] = _par(vf, ch, face1, face2, ws[2, 0], h)
+                scratch_f[7] = _ext(vf, ch, face0, ws[0, 1], h)
+                scratch_f[8] = _ext(vf, ch, face1, ws[1, 1], h)
+                scratch_f[9] = _ext(vf, ch, face2, ws[2, 1], h)
             pat = PAT_FACE
             nc = 10
-    if version >= 2:
+    if version >= 2 and (only < 0 or only >= nc):
         # int64 casts: numba would otherwise compile a copy per call site that sees a literal -1
-        nc = _geometric_cands(k, np.int64(face0), np.int64(face1), np.int64(face2), np.int64(apex), nf, vf, ch,
+        _geometric_cands(k, np.int64(face0), np.int64(face1), np.int64(face2), np.int64(apex), nf, vf, ch,
                               scratch_f, nc)
+    if version >= 2:
+        nc = _geometric_count(nf, apex, nc)
     for q in range(nc):
         if scratch_f[q] != scratch_f[q]:  # NaN: payload bits are not portable, predict 0
             scratch_f[q] = 0.0
@@ -721,7 +764,28 @@ def _best_cand(scores, ch, pat, cands):
 
 
 @njit(cache=True, inline="always")
-def _update_scores(scores, ch, pat, cand_o, o, cands):
+def _choose(scores, ch, pat, cands):
+    """The predictor of the next predicted value of (ch, pat) and which candidates it needs:
+    ``(best, -1)`` all of them (scores refreshed), ``(best, best)`` that one alone (coding 3
+    between refreshes). Counts the value in the TICK slot."""
+    best = _best_cand(scores, ch, pat, cands)
+    if cands[CAND_VERSION] < 3:
+        return best, -1
+    tick = scores[ch, pat, TICK]
+    scores[ch, pat, TICK] = tick + 1
+    if tick % REFRESH == 0:
+        return best, -1
+    return best, best
+
+
+@njit(cache=True, inline="always")
+def _update_scores(scores, ch, pat, cand_o, o, cands, only):
+    """Scores: exponentially decayed bit lengths of each candidate's residual (only candidate
+    ``only`` when that is >= 0)."""
+    if only >= 0:
+        s = scores[ch, pat, only]
+        scores[ch, pat, only] = s - (s >> SCORE_SHIFT) + (_bit_length(o - cand_o[only]) << 4)
+        return
     for q in range(cands[pat]):
         s = scores[ch, pat, q]
         scores[ch, pat, q] = s - (s >> SCORE_SHIFT) + (_bit_length(o - cand_o[q]) << 4)
@@ -823,7 +887,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
     n = vf.shape[0]
     vi = vf.view(np.int32)
     version = cands[CAND_VERSION]
-    scores = np.zeros((N_CHANNELS, N_PATTERNS, MAX_CANDS), dtype=np.int64)
+    scores = np.zeros((N_CHANNELS, N_PATTERNS, SCORE_SLOTS), dtype=np.int64)
     cand_o = np.zeros(MAX_CANDS, dtype=np.int64)
     eq_o = np.zeros(5, dtype=np.int64)
     scratch_f = np.zeros(MAX_CANDS, dtype=np.float32)
@@ -832,7 +896,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
     nbytes = np.zeros(N_CHANNELS, dtype=np.int64)
 
     tracing = trace.shape[0] == n
-    hcap = hash_capacity(n)
+    hcap = (XY_CACHE_SLOTS if version >= 3 else hash_capacity(n)) if cands[CAND_XY] != 0 else 1
     for ch in range(N_CHANNELS):
         hkeys = np.zeros(hcap if ch == 1 else 1, dtype=np.int64)
         hvals = np.zeros(hcap if ch == 1 else 1, dtype=np.uint8)
@@ -846,8 +910,8 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
             # not coded in this pass, but the next channel's contexts need its repeat symbols
             for k in range(n):
                 pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
-                                 vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS, version)
-                m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m)
+                                 vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS, version, -1)
+                m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m, cands)
                 o = ordered_int(vi[k, ch])
                 sym = FLAG_PREDICTED
                 for q in range(m):
@@ -855,7 +919,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
                         sym = q
                         break
                 was_eq[k] = sym
-                _remember_conditional(ch, k, vi, hkeys, hvals)
+                _remember_conditional(ch, k, vi, hkeys, hvals, cands)
             continue
         if mode == MODE_TABLE:
             enc_uint(stc, outc, probs, TABLE_BASE, hi - lo)
@@ -867,8 +931,8 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
         big = 0
         for k in range(n):
             pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
-                             vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS, version)
-            m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m)
+                             vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS, version, -1)
+            m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m, cands)
             o = ordered_int(vi[k, ch])
             is_eq = 0
             sym = -1
@@ -888,9 +952,9 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
                 enc_sym(stc, outc, probs, _eq_context(m, flag, near, version), _eq_bits(m), sym)
                 is_eq = 1 if sym < m else 0
             if is_eq == 0:
+                best, only = _choose(scores, ch, pat, cands)
                 pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
-                                 vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_BOTH, version)
-                best = _best_cand(scores, ch, pat, cands)
+                                 vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_BOTH, version, only)
                 ctx = _res_context(pat, big, eq_o, m)
                 if mode == MODE_TABLE:
                     rp = _search(tables, lo, hi, cand_o[best])
@@ -903,14 +967,14 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
                     _enc_residual(stc, outc, probs, RES_BASE + ctx * INT_MODEL_SIZE, res, version)
                 big = _is_big(mode, res)
                 # only predicted values train the predictor choice: repeats need no prediction
-                _update_scores(scores, ch, pat, cand_o, o, cands)
+                _update_scores(scores, ch, pat, cand_o, o, cands, only)
             if tracing:
                 trace[k, ch, 0] = sym
                 trace[k, ch, 1] = res
                 trace[k, ch, 2] = best
             last_eq = is_eq
             was_eq[k] = sym if is_eq else FLAG_PREDICTED
-            _remember_conditional(ch, k, vi, hkeys, hvals)
+            _remember_conditional(ch, k, vi, hkeys, hvals, cands)
         nbytes[ch] = enc_finish(stc, outc)
     return nbytes
 
@@ -961,8 +1025,8 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
     repetition context left by the previous channel. Returns the context for the next channel,
     or minus an error status."""
     pat, m_refs = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS,
-                          cands[CAND_VERSION])
-    m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m_refs)
+                          cands[CAND_VERSION], -1)
+    m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m_refs, cands)
     is_eq = 0
     o = np.int64(0)
     sym = 0
@@ -978,10 +1042,10 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
             return -ERR_STREAM
     if is_eq == 0:
         # the repetition candidates of the refs (eq_o[:m_refs]) are still those of the first call
+        best, only = _choose(scores, ch, pat, cands)
         pat, _ = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_PREDICTIONS,
-                         cands[CAND_VERSION])
+                         cands[CAND_VERSION], only)
         mode = modes[ch]
-        best = _best_cand(scores, ch, pat, cands)
         ctx = _res_context(pat, flags[N_CHANNELS + ch], eq_o, m_refs)
         if mode == MODE_TABLE:
             lo = tab_offs[ch]
@@ -1002,11 +1066,11 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
             if o < -(1 << 31) or o >= (1 << 31):
                 return -ERR_STREAM
         flags[N_CHANNELS + ch] = _is_big(mode, res)
-        _update_scores(scores, ch, pat, cand_o, o, cands)
+        _update_scores(scores, ch, pat, cand_o, o, cands, only)
     if dec_failed(stc):
         return -ERR_STREAM
     vi[k, ch] = ordered_to_bits(o)
-    _remember_conditional(ch, k, vi, hkeys, hvals)
+    _remember_conditional(ch, k, vi, hkeys, hvals, cands)
     flags[ch] = is_eq
     return sym if is_eq else FLAG_PREDICTED
 
@@ -1017,7 +1081,7 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, 
     """Decode vertices ``start .. start+count-1`` into ``vf`` (n, 4) float32.
 
     ``refs`` (count, 4) int32 are the refs of those vertices. ``st`` (4, 8) decoder states,
-    ``probs`` (4, MODEL_SIZE) models, ``scores`` (4, N_PATTERNS, MAX_CANDS) predictor scores,
+    ``probs`` (4, MODEL_SIZE) models, ``scores`` (4, N_PATTERNS, SCORE_SLOTS) predictor scores,
     ``cands`` the block's :func:`candidate_table`, ``flags`` (8,) context flags, ``adj`` (n, ADJ_CAP) int32 and ``deg`` (n,) uint8 or int32 (the edges seen
     so far), ``mark`` (n,) int32 scratch and ``hkeys`` int64 / ``hvals`` uint8 (a power of two above n,)
     (the x -> y table: packed key and value, slot used) carry the decoder's state from one call to the next. Every index is checked: returns
@@ -1028,11 +1092,12 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, 
     n = vf.shape[0]
     if start < 0 or count < 0 or start + count > n or refs.shape[0] < count or refs.shape[1] != 4:
         return ERR_REF
-    if (adj.shape[0] < n or deg.shape[0] < n or mark.shape[0] < n or adj.shape[1] != ADJ_CAP
-            or hkeys.shape[0] <= n or (hkeys.shape[0] & (hkeys.shape[0] - 1)) != 0
-            or hvals.shape[0] != hkeys.shape[0]):  # a power of two with a free slot after n keys
+    if cands.shape[0] != N_PATTERNS + 2 or scores.shape[2] < SCORE_SLOTS:
         return ERR_REF
-    if cands.shape[0] != N_PATTERNS + 1 or scores.shape[2] < MAX_CANDS:
+    if (adj.shape[0] < n or deg.shape[0] < n or mark.shape[0] < n or adj.shape[1] != ADJ_CAP
+            or (cands[CAND_XY] != 0 and (hkeys.shape[0] <= (n if cands[CAND_VERSION] < 3 else 1)
+                                         or (hkeys.shape[0] & (hkeys.shape[0] - 1)) != 0))
+            or hvals.shape[0] != hkeys.shape[0]):  # a power of two with a free slot after n keys
         return ERR_REF
     for pat in range(N_PATTERNS):
         if cands[pat] < 1 or cands[pat] > MAX_CANDS:

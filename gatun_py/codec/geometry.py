@@ -58,6 +58,7 @@ FORMAT_VERSION = coding_for_format(VERSION_MAJOR)
 MAX_POINTS = 1 << 29  # the decoder's scratch tags (3 per vertex) are int32
 _HEADER = struct.Struct("<BBI4I")
 HEADER_SIZE = _HEADER.size
+XY_TABLE_BIT = 1 << K.N_CHANNELS  # coding 3's modes: y uses the x -> y table (always, before)
 
 # Absurd counts are rejected before allocating: a binary decision costs at least
 # -log2(p_max) bits, p_max being the most skewed probability the range coder's adaptation reaches;
@@ -113,7 +114,7 @@ def _ordered(vf: np.ndarray) -> np.ndarray:
 _NO_TRACE = np.zeros((0, 4, 3), dtype=np.int64)
 
 
-def _run_encode(vf, refs, modes, tables, tab_offs, cands, trace=_NO_TRACE, wpar=None):
+def _run_encode(vf, refs, modes, tables, tab_offs, cands, trace=_NO_TRACE, wpar=None) -> list:
     n = vf.shape[0]
     if wpar is None:
         wpar = K.link_all(refs, vf)
@@ -232,6 +233,19 @@ def encode_geometry(points, density, refs, *, modes=None, coding: int = FORMAT_V
             modes = np.zeros(K.N_CHANNELS, dtype=np.int64)
             streams = pred
     mode_bits = sum(int(m) << ch for ch, m in enumerate(modes))
+    if coding >= 3:
+        # coding 3 says per block whether y gets the x -> y table's repetition candidate: it pays on
+        # grids, and costs the decoder a random table access per vertex and 16-24 bytes per vertex
+        # where nothing repeats. It changes y's stream, and z's (whose contexts are y's repetitions):
+        # code both again without, keep the smaller pair.
+        trial = np.full(K.N_CHANNELS, K.MODE_SKIP, dtype=np.int64)
+        trial[1:3] = modes[1:3]
+        plain = _run_encode(vf, refs, trial, tables, tab_offs, K.candidate_table(coding, xy_table=False),
+                            wpar=K.link_all(refs, vf))
+        if len(plain[1]) + len(plain[2]) <= len(streams[1]) + len(streams[2]):
+            streams[1:3] = plain[1:3]
+        else:
+            mode_bits |= XY_TABLE_BIT
     header = _HEADER.pack(coding, mode_bits, n, *(len(s) for s in streams))
     return header + b"".join(streams)
 
@@ -261,7 +275,7 @@ def check_geometry_header(data, n_points: int | None = None, *, total: int | Non
     version, mode_bits, n, *lengths = _HEADER.unpack_from(data)
     if version not in CODINGS:
         raise CorruptFileError(f"corrupt geometry block: unknown geometry format version {version}")
-    if mode_bits >> K.N_CHANNELS:
+    if mode_bits >> K.N_CHANNELS != 0 and (version < 3 or mode_bits >= 2 * XY_TABLE_BIT):
         raise CorruptFileError("corrupt geometry block: invalid channel modes")
     if n_points is not None and n != n_points:
         raise CorruptFileError(f"corrupt geometry block: {n} vertices, expected {n_points}")
@@ -301,7 +315,8 @@ class GeometryDecoder:
         buf = np.frombuffer(bytes(data), dtype=np.uint8)
         coding, mode_bits, n, lengths = check_geometry_header(buf, n_points)
         self.coding = int(coding)
-        self.cands = K.candidate_table(self.coding)
+        xy_table = self.coding < 3 or bool(mode_bits & XY_TABLE_BIT)
+        self.cands = K.candidate_table(self.coding, xy_table)
         self.n_points = int(n)
         self.modes = np.array([(mode_bits >> ch) & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64)
         self.offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
@@ -310,14 +325,14 @@ class GeometryDecoder:
         self.buf = buf
         self.st = np.stack([dec_state() for _ in range(K.N_CHANNELS)])
         self.probs = np.stack([new_model(K.MODEL_SIZE) for _ in range(K.N_CHANNELS)])
-        self.scores = np.zeros((K.N_CHANNELS, K.N_PATTERNS, K.MAX_CANDS), dtype=np.int64)
+        self.scores = np.zeros((K.N_CHANNELS, K.N_PATTERNS, K.SCORE_SLOTS), dtype=np.int64)
         self.flags = np.zeros(2 * K.N_CHANNELS, dtype=np.int64)
         self.adj = np.zeros((self.n_points, K.ADJ_CAP), dtype=np.int32)
         self.deg = np.zeros(self.n_points, dtype=np.uint8)  # at most K.ADJ_CAP
         self.mark = np.zeros(self.n_points, dtype=np.int32)
         # the x -> y table holds at most one key per vertex: at most 2/3 full (the encoder's, at most
         # half, is twice this size at 1.4 M vertices); lookups do not depend on the capacity
-        self.hkeys = np.zeros(K.hash_capacity((3 * self.n_points) // 4 + 1), dtype=np.int64)
+        self.hkeys = np.zeros(K.xy_table_slots(self.n_points, self.coding) if xy_table else 1, dtype=np.int64)
         self.hvals = np.zeros(len(self.hkeys), dtype=np.uint8)
         stream_bytes = [int(length) for length in lengths]
         table_room = sum(min(self.n_points, _MAX_TABLE_PER_BYTE * (stream_bytes[ch] + 8))

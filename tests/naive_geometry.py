@@ -433,11 +433,13 @@ def naive_symbols(values: np.ndarray, refs: np.ndarray, modes, coding: int = 1) 
                 cand_o = [_candidate_int(x) for x in cands]
                 sc = scores.setdefault(pat, [0] * len(cand_o))
                 best = min(range(len(cand_o)), key=lambda q: (sc[q], q))
-                # coding 3 scores every candidate at every 4th predicted value of the pattern,
-                # only the chosen one in between
+                # coding 3 scores every candidate at the first 256 and every 4th predicted value of the pattern, in
+                # between only the refs' own combinations and the chosen one
                 tick = ticks.get(pat, 0)
                 ticks[pat] = tick + 1
-                scored = range(len(cand_o)) if coding < 3 or tick % 4 == 0 else [best]
+                base = (1, 1, 3, 3, 4, 6)[pat]
+                scored = (range(len(cand_o)) if coding < 3 or tick < 256 or tick % 4 == 0
+                          else sorted(set(range(base)) | {best}))
                 if modes[ch] == 1:
                     rank_pred = min(bisect_left(table, cand_o[best]), len(table) - 1)
                     res = table.index(o) - rank_pred

@@ -83,6 +83,9 @@ MAX_CANDS = 15
 # (:func:`_geometric_cands`) after version 1's, so the version-1 candidates keep their indices
 N_CANDS_V1 = (1, 1, 6, 6, 10, 12)
 N_CANDS_V2 = (1, 1, 6, 8, 11, 15)
+# the first BASE_CANDS[pattern] candidates are combinations of the refs' own values (no partners,
+# no tet geometry): coding 3 computes them for every predicted value
+BASE_CANDS = (1, 1, 3, 3, 4, 6)
 CODINGS = (1, 2, 3)  # the geometry block versions these kernels decode
 CAND_VERSION = N_PATTERNS  # where candidate_table keeps the coding version
 CAND_XY = N_PATTERNS + 1  # and whether channel 1 uses the x -> y table
@@ -129,6 +132,7 @@ SCORE_SHIFT = 4  # predictor scores: exponentially decayed bit lengths, window ~
 # of it; in between it computes and scores only the candidate it predicts with. The count lives
 # in the scores array, after the candidates' scores (slot TICK).
 REFRESH = 4
+WARM_TICKS = 256  # but every value of the first 256: small meshes need the full choice
 TICK = MAX_CANDS
 SCORE_SLOTS = MAX_CANDS + 1
 
@@ -229,8 +233,41 @@ def _pick_ext(adj, deg, vf, x, e0, e1, e2):
     return best
 
 
+ALL_PARTNERS = 63
+# the partner each partner candidate reads, as link_vertex's need bit, by the candidate's index
+# from the pattern's first partner candidate: edges (par f0 f1, ext f0, ext f1), faces (par f0 f1,
+# f0 f2, f1 f2, ext f0, f1, f2); the partner candidates follow the BASE_CANDS[pattern] others
+EDGE_PARTNER_BITS = (1, 8, 16)
+
+
 @njit(cache=True, _nrt=False)
-def link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf):
+def _partners_needed(r0, r1, r2, r3, scores, cands):
+    """Coding 3: the partners (link_vertex's ``need``) the vertex's predictions can read: all
+    when a channel will refresh its scores, else those of the channels' chosen candidates."""
+    nf = (1 if r0 >= 0 else 0) + (1 if r1 >= 0 else 0) + (1 if r2 >= 0 else 0)
+    if nf < 2:
+        return 0
+    if nf == 2:
+        pat = PAT_EDGE_APEX if r3 >= 0 else PAT_EDGE
+    else:
+        pat = PAT_FACE_APEX if r3 >= 0 else PAT_FACE
+    first = BASE_CANDS[pat]
+    need = 0
+    for ch in range(N_CHANNELS):
+        tick = scores[ch, pat, TICK]
+        if tick < WARM_TICKS or tick % REFRESH == 0:
+            return ALL_PARTNERS
+        q = _best_cand(scores, ch, pat, cands) - first
+        if nf == 2:
+            if 0 <= q < 3:
+                need |= EDGE_PARTNER_BITS[q]
+        elif 0 <= q < 6:
+            need |= 1 << q
+    return need
+
+
+@njit(cache=True, _nrt=False)
+def link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf, need=ALL_PARTNERS):
     """Choose the extra predictor vertices of vertex ``k`` (refs checked) and record its edges.
 
     ``w[p, 0]``: for the pairs p = (f0, f1), (f0, f2), (f1, f2) of face refs, a common neighbour
@@ -238,7 +275,8 @@ def link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf):
     (2 f_q - w). Both are picked by 3-D closeness to a first estimate of the new vertex (the
     parallelepiped corner through the apex, or the face centroid), using only vertices < k, so
     the decoder can do the same before decoding vertex k. ``mark`` (n,) int32 scratch, zero
-    at the start.
+    at the start. ``need``: bit p asks for ``w[p, 0]``, bit 3 + q for ``w[q, 1]`` (the others
+    stay -1; coding 3's decoder picks only the partners its predictors will read).
     """
     f0 = -1
     f1 = -1
@@ -281,13 +319,19 @@ def link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf):
                 e1 = est
             else:
                 e2 = est
-        w[0, 0] = _pick_par(adj, deg, mark, 3 * k + 1, vf, f0, f1, f2, apex, e0, e1, e2)
-        w[0, 1] = _pick_ext(adj, deg, vf, f0, e0, e1, e2)
-        w[1, 1] = _pick_ext(adj, deg, vf, f1, e0, e1, e2)
+        if need & 1:
+            w[0, 0] = _pick_par(adj, deg, mark, 3 * k + 1, vf, f0, f1, f2, apex, e0, e1, e2)
+        if need & 8:
+            w[0, 1] = _pick_ext(adj, deg, vf, f0, e0, e1, e2)
+        if need & 16:
+            w[1, 1] = _pick_ext(adj, deg, vf, f1, e0, e1, e2)
         if nf == 3:
-            w[1, 0] = _pick_par(adj, deg, mark, 3 * k + 2, vf, f0, f2, f1, apex, e0, e1, e2)
-            w[2, 0] = _pick_par(adj, deg, mark, 3 * k + 3, vf, f1, f2, f0, apex, e0, e1, e2)
-            w[2, 1] = _pick_ext(adj, deg, vf, f2, e0, e1, e2)
+            if need & 2:
+                w[1, 0] = _pick_par(adj, deg, mark, 3 * k + 2, vf, f0, f2, f1, apex, e0, e1, e2)
+            if need & 4:
+                w[2, 0] = _pick_par(adj, deg, mark, 3 * k + 3, vf, f1, f2, f0, apex, e0, e1, e2)
+            if need & 32:
+                w[2, 1] = _pick_ext(adj, deg, vf, f2, e0, e1, e2)
     # every pair among the new vertex, its face and the apex is a mesh edge, except
     # new vertex - apex (they sit on either side of the face)
     _link(adj, deg, k, f0)
@@ -773,7 +817,7 @@ def _choose(scores, ch, pat, cands):
         return best, -1
     tick = scores[ch, pat, TICK]
     scores[ch, pat, TICK] = tick + 1
-    if tick % REFRESH == 0:
+    if tick < WARM_TICKS or tick % REFRESH == 0:
         return best, -1
     return best, best
 
@@ -783,8 +827,14 @@ def _update_scores(scores, ch, pat, cand_o, o, cands, only):
     """Scores: exponentially decayed bit lengths of each candidate's residual (only candidate
     ``only`` when that is >= 0)."""
     if only >= 0:
-        s = scores[ch, pat, only]
-        scores[ch, pat, only] = s - (s >> SCORE_SHIFT) + (_bit_length(o - cand_o[only]) << 4)
+        # the refs' own combinations are computed anyway: score them too
+        n_base = BASE_CANDS[pat]
+        for q in range(n_base):
+            s = scores[ch, pat, q]
+            scores[ch, pat, q] = s - (s >> SCORE_SHIFT) + (_bit_length(o - cand_o[q]) << 4)
+        if only >= n_base:
+            s = scores[ch, pat, only]
+            scores[ch, pat, only] = s - (s >> SCORE_SHIFT) + (_bit_length(o - cand_o[only]) << 4)
         return
     for q in range(cands[pat]):
         s = scores[ch, pat, q]
@@ -792,19 +842,27 @@ def _update_scores(scores, ch, pat, cand_o, o, cands, only):
 
 
 @njit(cache=True, inline="always")
-def _enc_residual(st, out, probs, base, res, version):
-    """Code a residual: coding 3 sends its unmodelled mantissa bits in wide range-coder steps."""
+def _enc_residual(st, out, probs, base, res, version, sign_context):
+    """Code a residual: coding 3 sends its unmodelled mantissa bits in wide range-coder steps and
+    codes the sign in a context (:func:`_sign_context`)."""
     if version >= 3:
-        enc_sint_wide(st, out, probs, base, res)
+        enc_sint_wide(st, out, probs, base, res, sign_context)
     else:
         enc_sint(st, out, probs, base, res)
 
 
 @njit(cache=True, inline="always")
-def _dec_residual(st, data, probs, base, version):
+def _dec_residual(st, data, probs, base, version, sign_context):
     if version >= 3:
-        return dec_sint_wide(st, data, probs, base)
+        return dec_sint_wide(st, data, probs, base, sign_context)
     return dec_sint(st, data, probs, base)
+
+
+@njit(cache=True, inline="always")
+def _sign_context(cand_o, best):
+    """Coding 3's guess of a prediction residual's sign: whether the pattern's first candidate (a
+    plain combination of the refs, always computed) lies above the chosen prediction."""
+    return 1 if cand_o[0] > cand_o[best] else 0
 
 
 @njit(cache=True, inline="always")
@@ -961,10 +1019,10 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
                     if rp >= hi:
                         rp = hi - 1
                     res = _search(tables, lo, hi, o) - rp
-                    _enc_residual(stc, outc, probs, RANK_BASE + ctx * INT_MODEL_SIZE, res, version)
+                    _enc_residual(stc, outc, probs, RANK_BASE + ctx * INT_MODEL_SIZE, res, version, _sign_context(cand_o, best))
                 else:
                     res = o - cand_o[best]
-                    _enc_residual(stc, outc, probs, RES_BASE + ctx * INT_MODEL_SIZE, res, version)
+                    _enc_residual(stc, outc, probs, RES_BASE + ctx * INT_MODEL_SIZE, res, version, _sign_context(cand_o, best))
                 big = _is_big(mode, res)
                 # only predicted values train the predictor choice: repeats need no prediction
                 _update_scores(scores, ch, pat, cand_o, o, cands, only)
@@ -1055,13 +1113,15 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
             rp = _search(tables, lo, hi, cand_o[best])
             if rp >= hi:
                 rp = hi - 1
-            res = _dec_residual(stc, data, pc, RANK_BASE + ctx * INT_MODEL_SIZE, cands[CAND_VERSION])
+            res = _dec_residual(stc, data, pc, RANK_BASE + ctx * INT_MODEL_SIZE, cands[CAND_VERSION],
+                                _sign_context(cand_o, best))
             r = rp + res
             if r < lo or r >= hi:
                 return -ERR_RANK
             o = tables[r]
         else:
-            res = _dec_residual(stc, data, pc, RES_BASE + ctx * INT_MODEL_SIZE, cands[CAND_VERSION])
+            res = _dec_residual(stc, data, pc, RES_BASE + ctx * INT_MODEL_SIZE, cands[CAND_VERSION],
+                                _sign_context(cand_o, best))
             o = cand_o[best] + res
             if o < -(1 << 31) or o >= (1 << 31):
                 return -ERR_STREAM
@@ -1131,7 +1191,8 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, 
         r3 = refs[j, 3]
         if (r0 < -1 or r0 >= k or r1 < -1 or r1 >= k or r2 < -1 or r2 >= k or r3 < -1 or r3 >= k):
             return ERR_REF
-        link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf)
+        need = ALL_PARTNERS if cands[CAND_VERSION] < 3 else _partners_needed(r0, r1, r2, r3, scores, cands)
+        link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf, need)
         # one call per channel with that channel's decoder, stream and model as arguments: picking
         # them in a loop would reassign array variables, which costs a reference count update each
         flag = 6 + flags[0]

@@ -262,12 +262,13 @@ def enc_uint_wide(st, out, probs, base, value):
 
 
 @njit(cache=True)
-def enc_sint_wide(st, out, probs, base, value):
-    """:func:`enc_sint` on :func:`enc_uint_wide` (decode with :func:`dec_sint_wide`)."""
+def enc_sint_wide(st, out, probs, base, value, sign_context):
+    """:func:`enc_sint` on :func:`enc_uint_wide`, the sign in one of two contexts (0 or 1, the
+    caller's guess of it). Decode with :func:`dec_sint_wide`."""
     mag = value if value >= 0 else -value
     enc_uint_wide(st, out, probs, base, mag)
     if mag != 0:
-        enc_bit(st, out, probs, base + _INT_SIGN_BASE, 1 if value < 0 else 0)
+        enc_bit(st, out, probs, base + _INT_SIGN_BASE + sign_context, 1 if value < 0 else 0)
 
 
 @njit(cache=True)
@@ -490,10 +491,10 @@ def dec_uint_wide(st, data, probs, base):
 
 
 @njit(cache=True, _nrt=False)
-def dec_sint_wide(st, data, probs, base):
-    """Decode a signed integer coded by :func:`enc_sint_wide`."""
+def dec_sint_wide(st, data, probs, base, sign_context):
+    """Decode a signed integer coded by :func:`enc_sint_wide` with the same sign context."""
     mag = dec_uint_wide(st, data, probs, base)
-    if mag != 0 and dec_bit(st, data, probs, base + _INT_SIGN_BASE) == 1:
+    if mag != 0 and dec_bit(st, data, probs, base + _INT_SIGN_BASE + sign_context) == 1:
         return -mag
     return mag
 

@@ -57,12 +57,14 @@ from numba.cpython.unsafe.numbers import leading_zeros
 from .rangecoder import (
     PROB_INIT,
     INT_MODEL_SIZE,
+    dec_bit,
     dec_failed,
     dec_init,
     dec_sint,
     dec_sint_wide,
     dec_sym,
     dec_uint,
+    enc_bit,
     enc_finish,
     enc_sint,
     enc_sint_wide,
@@ -904,6 +906,41 @@ def _eq_bits(m):
 
 
 @njit(cache=True, inline="always")
+def _index_bits(m):
+    """Coding 3: bits of the index of the repeated candidate among m."""
+    return 0 if m == 1 else (1 if m == 2 else (2 if m <= 4 else 3))
+
+
+@njit(cache=True)
+def _enc_repeat(st, out, probs, ctx, m, sym, version):
+    """Code the repetition symbol at ``probs[ctx:ctx + 8]``: codings 1-2 as one bit tree of the
+    m + 1 values; coding 3 as a flag "none of them" (slot 0, unused by the tree), then the index
+    of the repeated one (a tree of :func:`_index_bits` bits): a vertex that repeats nothing, as
+    every vertex of an unstructured mesh, costs one binary decision per channel instead of three."""
+    if version < 3:
+        enc_sym(st, out, probs, ctx, _eq_bits(m), sym)
+        return
+    enc_bit(st, out, probs, ctx, 1 if sym == m else 0)
+    nb = _index_bits(m)
+    if sym < m and nb > 0:
+        enc_sym(st, out, probs, ctx, nb, sym)
+
+
+@njit(cache=True, _nrt=False)
+def _dec_repeat(st, data, probs, ctx, m, version):
+    """Decode a symbol of :func:`_enc_repeat` (``m + 1`` for an index out of range: corruption)."""
+    if version < 3:
+        return dec_sym(st, data, probs, ctx, _eq_bits(m))
+    if dec_bit(st, data, probs, ctx) == 1:
+        return m
+    nb = _index_bits(m)
+    if nb == 0:
+        return 0
+    q = dec_sym(st, data, probs, ctx, nb)
+    return q if q < m else m + 1
+
+
+@njit(cache=True, inline="always")
 def _is_big(mode, res):
     if mode == MODE_TABLE:
         return 1 if (res > 2 or res < -2) else 0
@@ -1007,7 +1044,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
                 if version >= 2 and m >= 2 and ch < 3:
                     near = _nearest(eq_o, m, _first_prediction(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3],
                                                                vf, vi, ch, scratch_f, scratch_i))
-                enc_sym(stc, outc, probs, _eq_context(m, flag, near, version), _eq_bits(m), sym)
+                _enc_repeat(stc, outc, probs, _eq_context(m, flag, near, version), m, sym, version)
                 is_eq = 1 if sym < m else 0
             if is_eq == 0:
                 best, only = _choose(scores, ch, pat, cands)
@@ -1092,7 +1129,7 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
         near = 0
         if cands[CAND_VERSION] >= 2 and m >= 2 and ch < 3:
             near = _nearest(eq_o, m, _first_prediction(k, r0, r1, r2, r3, vf, vi, ch, scratch_f, scratch_i))
-        sym = dec_sym(stc, data, pc, _eq_context(m, flag, near, cands[CAND_VERSION]), _eq_bits(m))
+        sym = _dec_repeat(stc, data, pc, _eq_context(m, flag, near, cands[CAND_VERSION]), m, cands[CAND_VERSION])
         if sym < m:
             o = eq_o[sym]
             is_eq = 1

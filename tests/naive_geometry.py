@@ -203,6 +203,7 @@ def naive_extra_refs(values: np.ndarray, refs: np.ndarray):
 
 
 MAX_WEIGHT = 4.0
+XY_CACHE_SLOTS = 1 << 13  # coding 3's x -> y cache
 REGULAR_HEIGHT = 1.2408064788027995  # sqrt(8 / (3 sqrt(3))): a regular tet's height / sqrt(face area)
 
 
@@ -385,7 +386,7 @@ def _candidate_int(x) -> int:
     return ordered_int(f)
 
 
-def naive_symbols(values: np.ndarray, refs: np.ndarray, modes, coding: int = 1) -> np.ndarray:
+def naive_symbols(values: np.ndarray, refs: np.ndarray, modes, coding: int = 1, xy_table: bool = True) -> np.ndarray:
     """What the geometry encoder codes, computed the slow, obvious way.
 
     Parameters
@@ -397,8 +398,10 @@ def naive_symbols(values: np.ndarray, refs: np.ndarray, modes, coding: int = 1) 
     modes : 4 ints
         0 = residual on ordered integers, 1 = residual on ranks in the sorted table of values.
     coding : 1, 2 or 3
-        The geometry block's coding version (2 adds the tet-geometry candidates, 3 scores them
-        lazily).
+        The geometry block's coding version (2 adds the tet-geometry candidates; 3 codes the same
+        symbols with another binarisation and keeps the x -> y pairs in a direct-mapped cache).
+    xy_table : bool
+        Whether y gets the repetition candidate of the x -> y table (always in codings 1 and 2).
 
     Returns
     -------
@@ -414,16 +417,17 @@ def naive_symbols(values: np.ndarray, refs: np.ndarray, modes, coding: int = 1) 
         col = values[:, ch]
         table = sorted({ordered_int(v) for v in col})
         scores: dict = {}
-        ticks: dict = {}  # coding 3: predicted values seen per pattern
         y_of_x: dict = {}  # channel 1 only: the y last seen with each x
         for k in range(n):
             pat, cands, eq = _predictions(k, [int(r) for r in refs[k]], col, extra[k], values, ch, coding)
             o = ordered_int(col[k])
-            if ch == 1:
+            if ch == 1 and xy_table:
                 x = ordered_int(values[k, 0])
-                if x in y_of_x and y_of_x[x] not in eq:
-                    eq.append(y_of_x[x])
-                y_of_x[x] = o
+                # coding 3 keeps the pairs in a direct-mapped cache: x's slot holds the last x seen there
+                key = x if coding < 3 else ((x * -7046029254386353131) >> 32) & (XY_CACHE_SLOTS - 1)
+                if key in y_of_x and y_of_x[key][0] == x and y_of_x[key][1] not in eq:
+                    eq.append(y_of_x[key][1])
+                y_of_x[key] = (x, o)
             sym = -1
             res = 0
             best = -1
@@ -433,20 +437,13 @@ def naive_symbols(values: np.ndarray, refs: np.ndarray, modes, coding: int = 1) 
                 cand_o = [_candidate_int(x) for x in cands]
                 sc = scores.setdefault(pat, [0] * len(cand_o))
                 best = min(range(len(cand_o)), key=lambda q: (sc[q], q))
-                # coding 3 scores every candidate at the first 256 and every 4th predicted value of the pattern, in
-                # between only the refs' own combinations and the chosen one
-                tick = ticks.get(pat, 0)
-                ticks[pat] = tick + 1
-                base = (1, 1, 3, 3, 4, 6)[pat]
-                scored = (range(len(cand_o)) if coding < 3 or tick < 256 or tick % 4 == 0
-                          else sorted(set(range(base)) | {best}))
                 if modes[ch] == 1:
                     rank_pred = min(bisect_left(table, cand_o[best]), len(table) - 1)
                     res = table.index(o) - rank_pred
                 else:
                     res = o - cand_o[best]
                 # scores: exponentially decayed bit lengths of each candidate's residual
-                for q in scored:
+                for q in range(len(cand_o)):
                     sc[q] = sc[q] - (sc[q] >> 4) + (abs(o - cand_o[q]).bit_length() << 4)
             out[k, ch] = (sym, res, best)
     return out

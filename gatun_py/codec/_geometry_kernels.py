@@ -85,9 +85,6 @@ MAX_CANDS = 15
 # (:func:`_geometric_cands`) after version 1's, so the version-1 candidates keep their indices
 N_CANDS_V1 = (1, 1, 6, 6, 10, 12)
 N_CANDS_V2 = (1, 1, 6, 8, 11, 15)
-# the first BASE_CANDS[pattern] candidates are combinations of the refs' own values (no partners,
-# no tet geometry): coding 3 computes them for every predicted value
-BASE_CANDS = (1, 1, 3, 3, 4, 6)
 CODINGS = (1, 2, 3)  # the geometry block versions these kernels decode
 CAND_VERSION = N_PATTERNS  # where candidate_table keeps the coding version
 CAND_XY = N_PATTERNS + 1  # and whether channel 1 uses the x -> y table
@@ -130,13 +127,6 @@ MODEL_SIZE = EQ2_BASE + EQ_CONTEXTS * 5 * 8
 WANT_REPEATS, WANT_BOTH, WANT_PREDICTIONS = 0, 1, 2
 
 SCORE_SHIFT = 4  # predictor scores: exponentially decayed bit lengths, window ~16 vertices
-# Coding 3 scores every candidate of a (channel, pattern) only at every REFRESH-th predicted value
-# of it; in between it computes and scores only the candidate it predicts with. The count lives
-# in the scores array, after the candidates' scores (slot TICK).
-REFRESH = 4
-WARM_TICKS = 256  # but every value of the first 256: small meshes need the full choice
-TICK = MAX_CANDS
-SCORE_SLOTS = MAX_CANDS + 1
 
 # decoder status codes
 OK = 0
@@ -235,41 +225,8 @@ def _pick_ext(adj, deg, vf, x, e0, e1, e2):
     return best
 
 
-ALL_PARTNERS = 63
-# the partner each partner candidate reads, as link_vertex's need bit, by the candidate's index
-# from the pattern's first partner candidate: edges (par f0 f1, ext f0, ext f1), faces (par f0 f1,
-# f0 f2, f1 f2, ext f0, f1, f2); the partner candidates follow the BASE_CANDS[pattern] others
-EDGE_PARTNER_BITS = (1, 8, 16)
-
-
 @njit(cache=True, _nrt=False)
-def _partners_needed(r0, r1, r2, r3, scores, cands):
-    """Coding 3: the partners (link_vertex's ``need``) the vertex's predictions can read: all
-    when a channel will refresh its scores, else those of the channels' chosen candidates."""
-    nf = (1 if r0 >= 0 else 0) + (1 if r1 >= 0 else 0) + (1 if r2 >= 0 else 0)
-    if nf < 2:
-        return 0
-    if nf == 2:
-        pat = PAT_EDGE_APEX if r3 >= 0 else PAT_EDGE
-    else:
-        pat = PAT_FACE_APEX if r3 >= 0 else PAT_FACE
-    first = BASE_CANDS[pat]
-    need = 0
-    for ch in range(N_CHANNELS):
-        tick = scores[ch, pat, TICK]
-        if tick < WARM_TICKS or tick % REFRESH == 0:
-            return ALL_PARTNERS
-        q = _best_cand(scores, ch, pat, cands) - first
-        if nf == 2:
-            if 0 <= q < 3:
-                need |= EDGE_PARTNER_BITS[q]
-        elif 0 <= q < 6:
-            need |= 1 << q
-    return need
-
-
-@njit(cache=True, _nrt=False)
-def link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf, need=ALL_PARTNERS):
+def link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf):
     """Choose the extra predictor vertices of vertex ``k`` (refs checked) and record its edges.
 
     ``w[p, 0]``: for the pairs p = (f0, f1), (f0, f2), (f1, f2) of face refs, a common neighbour
@@ -277,8 +234,7 @@ def link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf, need=ALL_PARTNERS):
     (2 f_q - w). Both are picked by 3-D closeness to a first estimate of the new vertex (the
     parallelepiped corner through the apex, or the face centroid), using only vertices < k, so
     the decoder can do the same before decoding vertex k. ``mark`` (n,) int32 scratch, zero
-    at the start. ``need``: bit p asks for ``w[p, 0]``, bit 3 + q for ``w[q, 1]`` (the others
-    stay -1; coding 3's decoder picks only the partners its predictors will read).
+    at the start.
     """
     f0 = -1
     f1 = -1
@@ -321,19 +277,13 @@ def link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf, need=ALL_PARTNERS):
                 e1 = est
             else:
                 e2 = est
-        if need & 1:
-            w[0, 0] = _pick_par(adj, deg, mark, 3 * k + 1, vf, f0, f1, f2, apex, e0, e1, e2)
-        if need & 8:
-            w[0, 1] = _pick_ext(adj, deg, vf, f0, e0, e1, e2)
-        if need & 16:
-            w[1, 1] = _pick_ext(adj, deg, vf, f1, e0, e1, e2)
+        w[0, 0] = _pick_par(adj, deg, mark, 3 * k + 1, vf, f0, f1, f2, apex, e0, e1, e2)
+        w[0, 1] = _pick_ext(adj, deg, vf, f0, e0, e1, e2)
+        w[1, 1] = _pick_ext(adj, deg, vf, f1, e0, e1, e2)
         if nf == 3:
-            if need & 2:
-                w[1, 0] = _pick_par(adj, deg, mark, 3 * k + 2, vf, f0, f2, f1, apex, e0, e1, e2)
-            if need & 4:
-                w[2, 0] = _pick_par(adj, deg, mark, 3 * k + 3, vf, f1, f2, f0, apex, e0, e1, e2)
-            if need & 32:
-                w[2, 1] = _pick_ext(adj, deg, vf, f2, e0, e1, e2)
+            w[1, 0] = _pick_par(adj, deg, mark, 3 * k + 2, vf, f0, f2, f1, apex, e0, e1, e2)
+            w[2, 0] = _pick_par(adj, deg, mark, 3 * k + 3, vf, f1, f2, f0, apex, e0, e1, e2)
+            w[2, 1] = _pick_ext(adj, deg, vf, f2, e0, e1, e2)
     # every pair among the new vertex, its face and the apex is a mesh edge, except
     # new vertex - apex (they sit on either side of the face)
     _link(adj, deg, k, f0)
@@ -600,18 +550,8 @@ def _geometric_cands(k, face0, face1, face2, apex, nf, vf, ch, scratch_f, nc):
     return nc
 
 
-@njit(cache=True, inline="always")
-def _geometric_count(nf, apex, nc):
-    """The candidate count after :func:`_geometric_cands` appended its candidates to ``nc``."""
-    if nf == 3:
-        return nc + (3 if apex >= 0 else 1)
-    if nf == 2 and apex >= 0:
-        return nc + 2
-    return nc
-
-
 @njit(cache=True, _nrt=False)
-def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, need_cands, version, only):
+def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, need_cands, version):
     """Predictor candidates and distinct repetition candidates of vertex ``k`` on channel ``ch``.
 
     ``r0, r1, r2`` are the face refs and ``r3`` the apex (each ``-1`` or a checked id ``< k``).
@@ -619,9 +559,7 @@ def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_
     distinct ordered ints of the refs' values, in ref order); returns ``(pattern, m)``. ``need_cands``:
     ``WANT_REPEATS`` fills only the repetition candidates (a repeated value needs no prediction),
     ``WANT_BOTH`` both, ``WANT_PREDICTIONS`` only the predictions (m is then 0: the caller kept the
-    repetition candidates of its first call, which are the same). ``only`` >= 0: the caller needs
-    candidate ``only`` alone (coding 3 between score refreshes), so the partner and tet-geometry
-    candidates are computed only when it is one of them (the rest of ``cand_o`` is then stale).
+    repetition candidates of its first call, which are the same).
     """
     face0 = -1
     face1 = -1
@@ -679,19 +617,17 @@ def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_
             scratch_f[0] = a + b - d  # parallelogram across the edge
             scratch_f[1] = (a + b) * 0.5
             scratch_f[2] = a
-            if only < 0 or 3 <= only < 6:
-                scratch_f[3] = _par(vf, ch, face0, face1, ws[0, 0], a + b - d)
-                scratch_f[4] = _ext(vf, ch, face0, ws[0, 1], a + b - d)
-                scratch_f[5] = _ext(vf, ch, face1, ws[1, 1], a + b - d)
+            scratch_f[3] = _par(vf, ch, face0, face1, ws[0, 0], a + b - d)
+            scratch_f[4] = _ext(vf, ch, face0, ws[0, 1], a + b - d)
+            scratch_f[5] = _ext(vf, ch, face1, ws[1, 1], a + b - d)
             pat = PAT_EDGE_APEX
         else:
             scratch_f[0] = (a + b) * 0.5
             scratch_f[1] = a
             scratch_f[2] = b
-            if only < 0 or 3 <= only < 6:
-                scratch_f[3] = _par(vf, ch, face0, face1, ws[0, 0], (a + b) * 0.5)
-                scratch_f[4] = _ext(vf, ch, face0, ws[0, 1], (a + b) * 0.5)
-                scratch_f[5] = _ext(vf, ch, face1, ws[1, 1], (a + b) * 0.5)
+            scratch_f[3] = _par(vf, ch, face0, face1, ws[0, 0], (a + b) * 0.5)
+            scratch_f[4] = _ext(vf, ch, face0, ws[0, 1], (a + b) * 0.5)
+            scratch_f[5] = _ext(vf, ch, face1, ws[1, 1], (a + b) * 0.5)
             pat = PAT_EDGE
     else:
         c = np.float64(vf[face2, ch])
@@ -706,13 +642,12 @@ def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_
             scratch_f[4] = b + c - d
             scratch_f[5] = a
             h = scratch_f[0]
-            if only < 0 or 6 <= only < 12:
-                scratch_f[6] = _par(vf, ch, face0, face1, ws[0, 0], h)
-                scratch_f[7] = _par(vf, ch, face0, face2, ws[1, 0], h)
-                scratch_f[8] = _par(vf, ch, face1, face2, ws[2, 0], h)
-                scratch_f[9] = _ext(vf, ch, face0, ws[0, 1], h)
-                scratch_f[10] = _ext(vf, ch, face1, ws[1, 1], h)
-                scratch_f[11] = _ext(vf, ch, face2, ws[2, 1], h)
+            scratch_f[6] = _par(vf, ch, face0, face1, ws[0, 0], h)
+            scratch_f[7] = _par(vf, ch, face0, face2, ws[1, 0], h)
+            scratch_f[8] = _par(vf, ch, face1, face2, ws[2, 0], h)
+            scratch_f[9] = _ext(vf, ch, face0, ws[0, 1], h)
+            scratch_f[10] = _ext(vf, ch, face1, ws[1, 1], h)
+            scratch_f[11] = _ext(vf, ch, face2, ws[2, 1], h)
             pat = PAT_FACE_APEX
             nc = 12
         else:
@@ -721,21 +656,18 @@ def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_
             scratch_f[2] = b
             scratch_f[3] = c
             h = scratch_f[0]
-            if only < 0 or 4 <= only < 10:
-                scratch_f[4] = _par(vf, ch, face0, face1, ws[0, 0], h)
-                scratch_f[5] = _par(vf, ch, face0, face2, ws[1, 0], h)
-                scratch_f[6] = _par(vf, ch, face1, face2, ws[2, 0], h)
-                scratch_f[7] = _ext(vf, ch, face0, ws[0, 1], h)
-                scratch_f[8] = _ext(vf, ch, face1, ws[1, 1], h)
-                scratch_f[9] = _ext(vf, ch, face2, ws[2, 1], h)
+            scratch_f[4] = _par(vf, ch, face0, face1, ws[0, 0], h)
+            scratch_f[5] = _par(vf, ch, face0, face2, ws[1, 0], h)
+            scratch_f[6] = _par(vf, ch, face1, face2, ws[2, 0], h)
+            scratch_f[7] = _ext(vf, ch, face0, ws[0, 1], h)
+            scratch_f[8] = _ext(vf, ch, face1, ws[1, 1], h)
+            scratch_f[9] = _ext(vf, ch, face2, ws[2, 1], h)
             pat = PAT_FACE
             nc = 10
-    if version >= 2 and (only < 0 or only >= nc):
-        # int64 casts: numba would otherwise compile a copy per call site that sees a literal -1
-        _geometric_cands(k, np.int64(face0), np.int64(face1), np.int64(face2), np.int64(apex), nf, vf, ch,
-                              scratch_f, nc)
     if version >= 2:
-        nc = _geometric_count(nf, apex, nc)
+        # int64 casts: numba would otherwise compile a copy per call site that sees a literal -1
+        nc = _geometric_cands(k, np.int64(face0), np.int64(face1), np.int64(face2), np.int64(apex), nf, vf, ch,
+                              scratch_f, nc)
     for q in range(nc):
         if scratch_f[q] != scratch_f[q]:  # NaN: payload bits are not portable, predict 0
             scratch_f[q] = 0.0
@@ -810,34 +742,7 @@ def _best_cand(scores, ch, pat, cands):
 
 
 @njit(cache=True, inline="always")
-def _choose(scores, ch, pat, cands):
-    """The predictor of the next predicted value of (ch, pat) and which candidates it needs:
-    ``(best, -1)`` all of them (scores refreshed), ``(best, best)`` that one alone (coding 3
-    between refreshes). Counts the value in the TICK slot."""
-    best = _best_cand(scores, ch, pat, cands)
-    if cands[CAND_VERSION] < 3:
-        return best, -1
-    tick = scores[ch, pat, TICK]
-    scores[ch, pat, TICK] = tick + 1
-    if tick < WARM_TICKS or tick % REFRESH == 0:
-        return best, -1
-    return best, best
-
-
-@njit(cache=True, inline="always")
-def _update_scores(scores, ch, pat, cand_o, o, cands, only):
-    """Scores: exponentially decayed bit lengths of each candidate's residual (only candidate
-    ``only`` when that is >= 0)."""
-    if only >= 0:
-        # the refs' own combinations are computed anyway: score them too
-        n_base = BASE_CANDS[pat]
-        for q in range(n_base):
-            s = scores[ch, pat, q]
-            scores[ch, pat, q] = s - (s >> SCORE_SHIFT) + (_bit_length(o - cand_o[q]) << 4)
-        if only >= n_base:
-            s = scores[ch, pat, only]
-            scores[ch, pat, only] = s - (s >> SCORE_SHIFT) + (_bit_length(o - cand_o[only]) << 4)
-        return
+def _update_scores(scores, ch, pat, cand_o, o, cands):
     for q in range(cands[pat]):
         s = scores[ch, pat, q]
         scores[ch, pat, q] = s - (s >> SCORE_SHIFT) + (_bit_length(o - cand_o[q]) << 4)
@@ -982,7 +887,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
     n = vf.shape[0]
     vi = vf.view(np.int32)
     version = cands[CAND_VERSION]
-    scores = np.zeros((N_CHANNELS, N_PATTERNS, SCORE_SLOTS), dtype=np.int64)
+    scores = np.zeros((N_CHANNELS, N_PATTERNS, MAX_CANDS), dtype=np.int64)
     cand_o = np.zeros(MAX_CANDS, dtype=np.int64)
     eq_o = np.zeros(5, dtype=np.int64)
     scratch_f = np.zeros(MAX_CANDS, dtype=np.float32)
@@ -1005,7 +910,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
             # not coded in this pass, but the next channel's contexts need its repeat symbols
             for k in range(n):
                 pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
-                                 vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS, version, -1)
+                                 vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS, version)
                 m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m, cands)
                 o = ordered_int(vi[k, ch])
                 sym = FLAG_PREDICTED
@@ -1026,7 +931,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
         big = 0
         for k in range(n):
             pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
-                             vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS, version, -1)
+                             vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS, version)
             m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m, cands)
             o = ordered_int(vi[k, ch])
             is_eq = 0
@@ -1047,9 +952,9 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
                 _enc_repeat(stc, outc, probs, _eq_context(m, flag, near, version), m, sym, version)
                 is_eq = 1 if sym < m else 0
             if is_eq == 0:
-                best, only = _choose(scores, ch, pat, cands)
                 pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
-                                 vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_BOTH, version, only)
+                                 vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_BOTH, version)
+                best = _best_cand(scores, ch, pat, cands)
                 ctx = _res_context(pat, big, eq_o, m)
                 if mode == MODE_TABLE:
                     rp = _search(tables, lo, hi, cand_o[best])
@@ -1062,7 +967,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
                     _enc_residual(stc, outc, probs, RES_BASE + ctx * INT_MODEL_SIZE, res, version, _sign_context(cand_o, best))
                 big = _is_big(mode, res)
                 # only predicted values train the predictor choice: repeats need no prediction
-                _update_scores(scores, ch, pat, cand_o, o, cands, only)
+                _update_scores(scores, ch, pat, cand_o, o, cands)
             if tracing:
                 trace[k, ch, 0] = sym
                 trace[k, ch, 1] = res
@@ -1120,7 +1025,7 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
     repetition context left by the previous channel. Returns the context for the next channel,
     or minus an error status."""
     pat, m_refs = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS,
-                          cands[CAND_VERSION], -1)
+                          cands[CAND_VERSION])
     m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m_refs, cands)
     is_eq = 0
     o = np.int64(0)
@@ -1137,10 +1042,10 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
             return -ERR_STREAM
     if is_eq == 0:
         # the repetition candidates of the refs (eq_o[:m_refs]) are still those of the first call
-        best, only = _choose(scores, ch, pat, cands)
         pat, _ = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_PREDICTIONS,
-                         cands[CAND_VERSION], only)
+                         cands[CAND_VERSION])
         mode = modes[ch]
+        best = _best_cand(scores, ch, pat, cands)
         ctx = _res_context(pat, flags[N_CHANNELS + ch], eq_o, m_refs)
         if mode == MODE_TABLE:
             lo = tab_offs[ch]
@@ -1163,7 +1068,7 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
             if o < -(1 << 31) or o >= (1 << 31):
                 return -ERR_STREAM
         flags[N_CHANNELS + ch] = _is_big(mode, res)
-        _update_scores(scores, ch, pat, cand_o, o, cands, only)
+        _update_scores(scores, ch, pat, cand_o, o, cands)
     if dec_failed(stc):
         return -ERR_STREAM
     vi[k, ch] = ordered_to_bits(o)
@@ -1178,7 +1083,7 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, 
     """Decode vertices ``start .. start+count-1`` into ``vf`` (n, 4) float32.
 
     ``refs`` (count, 4) int32 are the refs of those vertices. ``st`` (4, 8) decoder states,
-    ``probs`` (4, MODEL_SIZE) models, ``scores`` (4, N_PATTERNS, SCORE_SLOTS) predictor scores,
+    ``probs`` (4, MODEL_SIZE) models, ``scores`` (4, N_PATTERNS, MAX_CANDS) predictor scores,
     ``cands`` the block's :func:`candidate_table`, ``flags`` (8,) context flags, ``adj`` (n, ADJ_CAP) int32 and ``deg`` (n,) uint8 or int32 (the edges seen
     so far), ``mark`` (n,) int32 scratch and ``hkeys`` int64 / ``hvals`` uint8 (a power of two above n,)
     (the x -> y table: packed key and value, slot used) carry the decoder's state from one call to the next. Every index is checked: returns
@@ -1189,7 +1094,7 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, 
     n = vf.shape[0]
     if start < 0 or count < 0 or start + count > n or refs.shape[0] < count or refs.shape[1] != 4:
         return ERR_REF
-    if cands.shape[0] != N_PATTERNS + 2 or scores.shape[2] < SCORE_SLOTS:
+    if cands.shape[0] != N_PATTERNS + 2 or scores.shape[2] < MAX_CANDS:
         return ERR_REF
     if (adj.shape[0] < n or deg.shape[0] < n or mark.shape[0] < n or adj.shape[1] != ADJ_CAP
             or (cands[CAND_XY] != 0 and (hkeys.shape[0] <= (n if cands[CAND_VERSION] < 3 else 1)
@@ -1228,8 +1133,7 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, 
         r3 = refs[j, 3]
         if (r0 < -1 or r0 >= k or r1 < -1 or r1 >= k or r2 < -1 or r2 >= k or r3 < -1 or r3 >= k):
             return ERR_REF
-        need = ALL_PARTNERS if cands[CAND_VERSION] < 3 else _partners_needed(r0, r1, r2, r3, scores, cands)
-        link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf, need)
+        link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf)
         # one call per channel with that channel's decoder, stream and model as arguments: picking
         # them in a loop would reassign array variables, which costs a reference count update each
         flag = 6 + flags[0]

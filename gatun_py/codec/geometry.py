@@ -325,7 +325,7 @@ class GeometryDecoder:
         self.buf = buf
         self.st = np.stack([dec_state() for _ in range(K.N_CHANNELS)])
         self.probs = np.stack([new_model(K.MODEL_SIZE) for _ in range(K.N_CHANNELS)])
-        self.scores = np.zeros((K.N_CHANNELS, K.N_PATTERNS, K.SCORE_SLOTS), dtype=np.int64)
+        self.scores = np.zeros((K.N_CHANNELS, K.N_PATTERNS, K.MAX_CANDS), dtype=np.int64)
         self.flags = np.zeros(2 * K.N_CHANNELS, dtype=np.int64)
         self.adj = np.zeros((self.n_points, K.ADJ_CAP), dtype=np.int32)
         self.deg = np.zeros(self.n_points, dtype=np.uint8)  # at most K.ADJ_CAP

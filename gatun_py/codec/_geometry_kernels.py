@@ -42,6 +42,12 @@ nearest: on a grid that is usually the repeated value (Blunt-fin 22.1 -> 21.3 bi
 fire 17.1 -> 16.1). The kernels learn the coding from the ``cands`` array of :func:`candidate_table`
 (candidate counts per pattern, then the version).
 
+Coding 3 (format 5) codes the same symbols with fewer range-coder steps: a residual's unmodelled
+mantissa bits in steps of up to 16 (:func:`gatun_py.codec.rangecoder.enc_raw_wide`), its sign in
+a context (:func:`_sign_context`), the repetition symbol as a flag "none" then an index
+(:func:`_enc_repeat`), and the x -> y table per block (``cands[CAND_XY]``) as a small
+direct-mapped cache (:data:`XY_CACHE_SLOTS`) instead of an exact table of the vertex count.
+
 All prediction arithmetic is float64 on float32 inputs, rounded to float32 once, without
 ``fastmath``; partners are chosen from vertices < k only. Encoder and decoder run the same
 kernels on the same bits, so they agree exactly. The decoder checks every ref, table index and

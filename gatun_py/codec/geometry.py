@@ -20,12 +20,15 @@ the ref tet at the vertex's decoded position, the coordinates beyond the face or
 on the rank in a table of the channel's distinct values (chosen per channel, whichever is smaller).
 
 The decoder keeps, besides the vertex table (16 bytes per vertex), its edge graph (36 bytes per
-vertex) and the x -> y table (18 to 36 bytes per vertex).
+vertex) and the x -> y table (codings 1-2: 18 to 36 bytes per vertex; coding 3: a 72 KB cache,
+or nothing where the block does without it).
 
 Byte layout of the geometry block (little endian)::
 
-    u8  coding      1 (format <= 3) or 2 (format 4: adds the tet-geometry predictors)
-    u8  modes       bit ch set: channel ch uses the value table
+    u8  coding      1 (format <= 3), 2 (format 4: adds the tet-geometry predictors) or 3
+                    (format 5: the same model, decoded with fewer range-coder steps)
+    u8  modes       bit ch set (ch < 4): channel ch uses the value table; bit 4 (coding 3
+                    only): y uses the x -> y table (codings 1-2 always do)
     u32 n_points
     u32 length[4]   byte length of each channel's range-coded stream
     ...             the four streams, channel 0 (x) to 3 (density)
@@ -48,8 +51,10 @@ CODINGS = K.CODINGS
 
 def coding_for_format(major: int) -> int:
     """The geometry block coding a file of container format ``major`` is written with: 1 up to
-    format 3, 2 from format 4 on (the tet-geometry predictors of
-    :func:`gatun_py.codec._geometry_kernels._geometric_cands`). Readers take both codings."""
+    format 3, 2 in format 4 (the tet-geometry predictors of
+    :func:`gatun_py.codec._geometry_kernels._geometric_cands`), 3 from format 5 on (coding 2's
+    model with wide raw bits, a sign context, a flag-first repetition symbol and a per-block x -> y
+    cache). Readers take every coding."""
     return 1 if major <= 3 else (2 if major == 4 else 3)
 
 
@@ -180,9 +185,9 @@ def encode_geometry(points, density, refs, *, modes=None, coding: int = FORMAT_V
     modes : sequence of 4 ints, optional
         Force the residual mode per channel (0 prediction, 1 value table); by default both are
         tried and the smaller stream is kept, channel by channel.
-    coding : {1, 2}
-        The block's coding version: 2 (the default, format 4) adds the tet-geometry predictors;
-        1 writes what format 3 and older wrote.
+    coding : {1, 2, 3}
+        The block's coding version: 3 (the default, format 5), 2 what format 4 wrote (the
+        tet-geometry predictors), 1 what format 3 and older wrote.
 
     Returns
     -------

@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-from numba.cpython.unsafe.numbers import leading_zeros
 
 from ..errors import CorruptFileError
 
@@ -207,9 +206,8 @@ def enc_sym(st, out, probs, base, nbits, sym):
         node = (node << 1) | b
 
 
-@njit(cache=True)
-def enc_uint(st, out, probs, base, value):
-    """Code an integer ``0 <= value < 2**40`` (bucket = bit length, then the mantissa)."""
+@njit(cache=True, inline="always")
+def _enc_uint(st, out, probs, base, value, wide):
     nb = 0
     v = value
     while v > 0:
@@ -228,7 +226,23 @@ def enc_uint(st, out, probs, base, value):
         node = (node << 1) | b
     rest = mbits - nmod
     if rest > 0:
-        enc_raw(st, out, value, rest)
+        if wide:
+            enc_raw_wide(st, out, value, rest)
+        else:
+            enc_raw(st, out, value, rest)
+
+
+@njit(cache=True)
+def enc_uint(st, out, probs, base, value):
+    """Code an integer ``0 <= value < 2**40`` (bucket = bit length, then the mantissa)."""
+    _enc_uint(st, out, probs, base, value, False)
+
+
+@njit(cache=True)
+def enc_uint_wide(st, out, probs, base, value):
+    """:func:`enc_uint` with the unmodelled mantissa bits in wide steps (:func:`enc_raw_wide`);
+    the same model layout. Decode with :func:`dec_uint_wide`."""
+    _enc_uint(st, out, probs, base, value, True)
 
 
 @njit(cache=True)
@@ -238,27 +252,6 @@ def enc_sint(st, out, probs, base, value):
     enc_uint(st, out, probs, base, mag)
     if mag != 0:
         enc_bit(st, out, probs, base + _INT_SIGN_BASE, 1 if value < 0 else 0)
-
-
-@njit(cache=True)
-def enc_uint_wide(st, out, probs, base, value):
-    """:func:`enc_uint` with the unmodelled mantissa bits in wide steps (:func:`enc_raw_wide`);
-    the same model layout. Decode with :func:`dec_uint_wide`."""
-    nb = 64 - leading_zeros(np.int64(value)) if value > 0 else 0
-    enc_sym(st, out, probs, base, INT_BUCKET_BITS, nb)
-    if nb <= 1:
-        return
-    mbits = nb - 1
-    nmod = mbits if mbits < INT_MODELLED_BITS else INT_MODELLED_BITS
-    mbase = base + _INT_MANT_BASE + nb * (1 << INT_MODELLED_BITS)
-    node = 1
-    for k in range(nmod):
-        b = (value >> (mbits - 1 - k)) & 1
-        enc_bit(st, out, probs, mbase + node, b)
-        node = (node << 1) | b
-    rest = mbits - nmod
-    if rest > 0:
-        enc_raw_wide(st, out, value, rest)
 
 
 @njit(cache=True)
@@ -433,9 +426,8 @@ def dec_sym(st, data, probs, base, nbits):
     return node - (1 << nbits)
 
 
-@njit(cache=True, _nrt=False)
-def dec_uint(st, data, probs, base):
-    """Decode an integer coded by :func:`enc_uint` (a corrupt bucket sets the error flag, returns 0)."""
+@njit(cache=True, _nrt=False, inline="always")
+def _dec_uint(st, data, probs, base, wide):
     nb = dec_sym(st, data, probs, base, INT_BUCKET_BITS)
     if nb == 0:
         return np.int64(0)
@@ -453,8 +445,20 @@ def dec_uint(st, data, probs, base):
         value = (value << 1) | b
     rest = mbits - nmod
     if rest > 0:
-        value = (value << rest) | dec_raw(st, data, rest)
+        value = (value << rest) | (dec_raw_wide(st, data, rest) if wide else dec_raw(st, data, rest))
     return value
+
+
+@njit(cache=True, _nrt=False)
+def dec_uint(st, data, probs, base):
+    """Decode an integer coded by :func:`enc_uint` (a corrupt bucket sets the error flag, returns 0)."""
+    return _dec_uint(st, data, probs, base, False)
+
+
+@njit(cache=True, _nrt=False)
+def dec_uint_wide(st, data, probs, base):
+    """Decode an integer coded by :func:`enc_uint_wide` (a corrupt bucket sets the error flag, returns 0)."""
+    return _dec_uint(st, data, probs, base, True)
 
 
 @njit(cache=True, _nrt=False)
@@ -464,30 +468,6 @@ def dec_sint(st, data, probs, base):
     if mag != 0 and dec_bit(st, data, probs, base + _INT_SIGN_BASE) == 1:
         return -mag
     return mag
-
-
-@njit(cache=True, _nrt=False)
-def dec_uint_wide(st, data, probs, base):
-    """Decode an integer coded by :func:`enc_uint_wide` (a corrupt bucket sets the error flag, returns 0)."""
-    nb = dec_sym(st, data, probs, base, INT_BUCKET_BITS)
-    if nb == 0:
-        return np.int64(0)
-    if nb > _INT_MAX_BUCKET - 1:
-        st[DEC_ERROR] = 1
-        return np.int64(0)
-    mbits = nb - 1
-    nmod = mbits if mbits < INT_MODELLED_BITS else INT_MODELLED_BITS
-    mbase = base + _INT_MANT_BASE + nb * (1 << INT_MODELLED_BITS)
-    value = np.int64(1)
-    node = 1
-    for _ in range(nmod):
-        b = dec_bit(st, data, probs, mbase + node)
-        node = (node << 1) | b
-        value = (value << 1) | b
-    rest = mbits - nmod
-    if rest > 0:
-        value = (value << rest) | dec_raw_wide(st, data, rest)
-    return value
 
 
 @njit(cache=True, _nrt=False)

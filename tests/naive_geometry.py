@@ -203,6 +203,7 @@ def naive_extra_refs(values: np.ndarray, refs: np.ndarray):
 
 
 MAX_WEIGHT = 4.0
+XY_CACHE_SLOTS = 1 << 13  # coding 3's x -> y cache
 REGULAR_HEIGHT = 1.2408064788027995  # sqrt(8 / (3 sqrt(3))): a regular tet's height / sqrt(face area)
 
 
@@ -385,7 +386,7 @@ def _candidate_int(x) -> int:
     return ordered_int(f)
 
 
-def naive_symbols(values: np.ndarray, refs: np.ndarray, modes, coding: int = 1) -> np.ndarray:
+def naive_symbols(values: np.ndarray, refs: np.ndarray, modes, coding: int = 1, xy_table: bool = True) -> np.ndarray:
     """What the geometry encoder codes, computed the slow, obvious way.
 
     Parameters
@@ -396,8 +397,11 @@ def naive_symbols(values: np.ndarray, refs: np.ndarray, modes, coding: int = 1) 
         Geometry refs.
     modes : 4 ints
         0 = residual on ordered integers, 1 = residual on ranks in the sorted table of values.
-    coding : 1 or 2
-        The geometry block's coding version (2 adds the tet-geometry candidates).
+    coding : 1, 2 or 3
+        The geometry block's coding version (2 adds the tet-geometry candidates; 3 codes the same
+        symbols with another binarisation and keeps the x -> y pairs in a direct-mapped cache).
+    xy_table : bool
+        Whether y gets the repetition candidate of the x -> y table (always in codings 1 and 2).
 
     Returns
     -------
@@ -417,11 +421,13 @@ def naive_symbols(values: np.ndarray, refs: np.ndarray, modes, coding: int = 1) 
         for k in range(n):
             pat, cands, eq = _predictions(k, [int(r) for r in refs[k]], col, extra[k], values, ch, coding)
             o = ordered_int(col[k])
-            if ch == 1:
+            if ch == 1 and xy_table:
                 x = ordered_int(values[k, 0])
-                if x in y_of_x and y_of_x[x] not in eq:
-                    eq.append(y_of_x[x])
-                y_of_x[x] = o
+                # coding 3 keeps the pairs in a direct-mapped cache: x's slot holds the last x seen there
+                key = x if coding < 3 else ((x * -7046029254386353131) >> 32) & (XY_CACHE_SLOTS - 1)
+                if key in y_of_x and y_of_x[key][0] == x and y_of_x[key][1] not in eq:
+                    eq.append(y_of_x[key][1])
+                y_of_x[key] = (x, o)
             sym = -1
             res = 0
             best = -1

@@ -10,13 +10,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from conftest import load_sample
-from meshgen import cavity_mesh, grid_mesh, two_components, with_unreferenced
+from meshgen import cavity_mesh, delaunay_mesh, grid_mesh, two_components, with_unreferenced
 from naive_geometry import emulate_decode_order, naive_symbols
 from gatun_py.codec import _geometry_kernels as K
 from gatun_py.codec.geometry import (
     CODINGS,
     FORMAT_VERSION,
     HEADER_SIZE,
+    XY_TABLE_BIT,
     GeometryDecoder,
     _channels,
     _ordered,
@@ -267,14 +268,57 @@ def test_both_codings_round_trip_and_say_which_they_are(coding):
     assert GeometryDecoder(blob).coding == coding
 
 
-def test_coding_2_is_smaller_on_the_samples_than_coding_1():
+def test_each_coding_is_no_larger_on_the_samples_than_the_one_before():
     mesh = load_sample("post")[0]
     points, density, refs = _in_decode_order(mesh)
     v1 = encode_geometry(points, density, refs, coding=1)
     v2 = encode_geometry(points, density, refs, coding=2)
-    assert len(v2) < len(v1)
+    v3 = encode_geometry(points, density, refs, coding=3)
+    assert len(v3) <= len(v2) < len(v1)
     with pytest.raises(ValueError, match="coding"):
-        encode_geometry(points, density, refs, coding=3)
+        encode_geometry(points, density, refs, coding=4)
+
+
+@pytest.mark.parametrize("sample, xy_table", [("bluntfin", True), ("fire", False)])
+def test_coding_3_is_no_larger_than_coding_2_and_keeps_the_x_y_table_where_it_pays(sample, xy_table):
+    mesh = load_sample(sample)[0]
+    points, density, refs = _in_decode_order(mesh)
+    v2 = encode_geometry(points, density, refs, coding=2)
+    v3 = _round_trip(points, density, refs, coding=3)
+    assert len(v3) <= len(v2)
+    # Blunt-fin's curvilinear grid repeats (x, y) columns; the fire's 41 x 18 values are cheap anyway
+    assert bool(v3[1] & XY_TABLE_BIT) == xy_table
+
+
+def test_coding_3_drops_the_x_y_table_where_nothing_repeats():
+    mesh = delaunay_mesh(600, seed=3)  # random points: no x repeats
+    points, density, refs = _in_decode_order(mesh)
+    blob = _round_trip(points, density, refs, coding=3)
+    assert not blob[1] & XY_TABLE_BIT
+    dec = GeometryDecoder(blob)
+    assert len(dec.hkeys) == 1  # no table allocated
+
+
+def test_x_y_table_bit_only_in_coding_3(post_blob):
+    blob, refs = post_blob
+    bad = bytearray(blob)
+    bad[1] |= XY_TABLE_BIT << (1 if blob[0] >= 3 else 0)  # coding 3: the bit above it; 1-2: the bit itself
+    with pytest.raises(CorruptFileError, match="modes"):
+        GeometryDecoder(bytes(bad))
+
+
+def test_coding_3_cache_of_x_y_pairs_matches_the_naive_reference_with_collisions():
+    # more distinct x than the cache has slots: pairs get evicted the same way in both
+    rng = np.random.default_rng(7)
+    n = 3 * K.XY_CACHE_SLOTS
+    xs = rng.integers(0, 2 * K.XY_CACHE_SLOTS, n).astype(np.float32)
+    ys = (xs * 0.5).astype(np.float32)  # y repeats with its x
+    vals = np.stack([xs, ys, rng.normal(size=n).astype(np.float32), rng.normal(size=n).astype(np.float32)], 1)
+    refs = np.full((n, 4), -1, np.int32)
+    refs[1:, 0] = np.arange(n - 1)
+    vf, full, trace = _kernel_trace(vals[:, :3], vals[:, 3], refs, (0, 0, 0, 0), coding=3)
+    np.testing.assert_array_equal(trace[:, 1], naive_symbols(vf, full, (0, 0, 0, 0), 3)[:, 1])
+    assert (trace[:, 1, 0] == 1).sum() > n // 4  # the cache's candidate is used
 
 
 def test_a_block_in_one_coding_read_as_the_other_is_caught_or_differs():
@@ -308,21 +352,22 @@ def post_blob(request):
     return encode_geometry(points, density, refs, coding=request.param), refs
 
 
-@pytest.fixture(scope="module")
-def smooth_blob():
-    """Coding 2 on an unstructured mesh with a smooth field: the tet-geometry predictors at work."""
+@pytest.fixture(scope="module", params=[2, 3], ids=lambda c: f"coding{c}")
+def smooth_blob(request):
+    """Codings 2 and 3 on an unstructured mesh with a smooth field: the tet-geometry predictors,
+    and coding 3's wide raw bits, at work."""
     from meshgen import delaunay_mesh
 
     mesh = delaunay_mesh(400, seed=5)
     points, _, refs = _in_decode_order(mesh)
     x, y, z = points.astype(np.float64).T
     density = (np.sin(3 * x) * np.cos(2 * y) + z).astype(np.float32)
-    blob = encode_geometry(points, density, refs, coding=2)
+    blob = encode_geometry(points, density, refs, coding=request.param)
     assert len(blob) < len(encode_geometry(points, density, refs, coding=1))
     return blob, refs
 
 
-def test_truncation_and_flips_of_coding_2_on_a_smooth_mesh(smooth_blob):
+def test_truncation_and_flips_on_a_smooth_mesh(smooth_blob):
     blob, refs = smooth_blob
     for cut in np.linspace(0, len(blob) - 1, 60).astype(int):
         with pytest.raises(CorruptFileError):
@@ -471,6 +516,14 @@ def test_hash_table_without_a_free_slot_is_refused(post_blob):
     blob, refs = post_blob
     dec = GeometryDecoder(blob)
     n = dec.n_points
+    if dec.coding >= 3:
+        # coding 3's table is a direct-mapped cache (no probing): any power of two will do, others not
+        if len(dec.hkeys) > 1:
+            assert len(dec.hkeys) == K.XY_CACHE_SLOTS
+            dec.hkeys, dec.hvals = np.zeros(3 * 16, np.int64), np.zeros(3 * 16, np.uint8)
+            with pytest.raises(CorruptFileError):
+                dec.decode(refs[:10])
+        return
     assert 1.5 * n < len(dec.hkeys) <= K.hash_capacity(n)  # at most 2/3 full, never above the encoder's
     full = 1 << (n.bit_length() - 1)  # the largest power of two <= n
     dec.hkeys, dec.hvals = np.zeros(full, np.int64), np.zeros(full, np.uint8)
@@ -484,14 +537,14 @@ def test_hash_table_without_a_free_slot_is_refused(post_blob):
 # ------------------------------------------------------------------------------ format versions
 
 
-def test_files_of_format_4_carry_geometry_coding_2_and_older_formats_coding_1(post_tetc):
+def test_files_of_format_5_carry_geometry_coding_3_format_4_coding_2_older_coding_1(post_tetc):
     from gatun_py.codec.container import VERSION_MAJOR
     from gatun_py.codec.geometry import coding_for_format
     from gatun_py.codec.tetcfile import TetcReader
 
-    assert [coding_for_format(v) for v in (1, 2, 3, 4)] == [1, 1, 1, 2]
-    assert FORMAT_VERSION == coding_for_format(VERSION_MAJOR) == 2
+    assert [coding_for_format(v) for v in (1, 2, 3, 4, 5)] == [1, 1, 1, 2, 3]
+    assert FORMAT_VERSION == coding_for_format(VERSION_MAJOR) == 3
     r = TetcReader(post_tetc)
     assert r.container.major == VERSION_MAJOR >= 4
     for lv in range(len(r.levels)):
-        assert r.read_section(f"L{lv}/geometry")[0] == 2
+        assert r.read_section(f"L{lv}/geometry")[0] == 3

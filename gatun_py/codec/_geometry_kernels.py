@@ -42,6 +42,12 @@ nearest: on a grid that is usually the repeated value (Blunt-fin 22.1 -> 21.3 bi
 fire 17.1 -> 16.1). The kernels learn the coding from the ``cands`` array of :func:`candidate_table`
 (candidate counts per pattern, then the version).
 
+Coding 3 (format 5) codes the same symbols with fewer range-coder steps: a residual's unmodelled
+mantissa bits in steps of up to 16 (:func:`gatun_py.codec.rangecoder.enc_raw_wide`), its sign in
+a context (:func:`_sign_context`), the repetition symbol as a flag "none" then an index
+(:func:`_enc_repeat`), and the x -> y table per block (``cands[CAND_XY]``) as a small
+direct-mapped cache (:data:`XY_CACHE_SLOTS`) instead of an exact table of the vertex count.
+
 All prediction arithmetic is float64 on float32 inputs, rounded to float32 once, without
 ``fastmath``; partners are chosen from vertices < k only. Encoder and decoder run the same
 kernels on the same bits, so they agree exactly. The decoder checks every ref, table index and
@@ -57,13 +63,17 @@ from numba.cpython.unsafe.numbers import leading_zeros
 from .rangecoder import (
     PROB_INIT,
     INT_MODEL_SIZE,
+    dec_bit,
     dec_failed,
     dec_init,
     dec_sint,
+    dec_sint_wide,
     dec_sym,
     dec_uint,
+    enc_bit,
     enc_finish,
     enc_sint,
+    enc_sint_wide,
     enc_sym,
     enc_uint,
 )
@@ -81,16 +91,20 @@ MAX_CANDS = 15
 # (:func:`_geometric_cands`) after version 1's, so the version-1 candidates keep their indices
 N_CANDS_V1 = (1, 1, 6, 6, 10, 12)
 N_CANDS_V2 = (1, 1, 6, 8, 11, 15)
-CODINGS = (1, 2)  # the geometry block versions these kernels decode
+CODINGS = (1, 2, 3)  # the geometry block versions these kernels decode
 CAND_VERSION = N_PATTERNS  # where candidate_table keeps the coding version
+CAND_XY = N_PATTERNS + 1  # and whether channel 1 uses the x -> y table
 
 
-def candidate_table(version: int) -> np.ndarray:
+def candidate_table(version: int, xy_table: bool = True) -> np.ndarray:
     """The ``cands`` array the kernels take: the candidate count of each ref pattern, then the
-    coding version (the one place the kernels learn which version they code)."""
+    coding version (the one place the kernels learn which version they code), then whether y
+    gets the repetition candidate of the x -> y table (always in codings 1 and 2; coding 3
+    says per block)."""
     if version not in CODINGS:
         raise ValueError(f"unknown geometry coding version {version}")
-    return np.array((N_CANDS_V1 if version == 1 else N_CANDS_V2) + (version,), dtype=np.int64)
+    xy = 1 if (version < 3 or xy_table) else 0
+    return np.array((N_CANDS_V1 if version == 1 else N_CANDS_V2) + (version, xy), dtype=np.int64)
 
 
 # the coder's own view of the mesh: the edges from every vertex to its face refs (at most
@@ -307,25 +321,40 @@ def hash_capacity(n):
     return cap
 
 
+# Coding 3's x -> y table is a direct-mapped cache of this many slots (a new x evicts whatever
+# shared its slot): a grid has few distinct x (Blunt-fin 876, fire 41), and 64 KB stay in cache
+# where the exact table, 16-24 bytes per vertex, cost a cache miss per vertex on large meshes.
+XY_CACHE_SLOTS = 1 << 13
+
+
+def xy_table_slots(n: int, version: int) -> int:
+    """Slots of the decoder's x -> y table for n vertices in this coding."""
+    return XY_CACHE_SLOTS if version >= 3 else hash_capacity((3 * n) // 4 + 1)
+
+
 @njit(cache=True, inline="always")
-def _hash_slot(slots, used, x):
-    """Slot of key x (an ordered int) in the open-addressing table: its slot or a free one."""
+def _hash_slot(slots, used, x, version):
+    """Slot of key x (an ordered int) in the open-addressing table: its slot or a free one
+    (coding 3: the one slot of x in the direct-mapped cache, whatever it holds)."""
     mask = slots.shape[0] - 1
     # multiplicative hashing, high bits: float bit patterns often end in runs of zero bits
     h = ((x * -7046029254386353131) >> 32) & mask
+    if version >= 3:
+        return h
     while used[h] != 0 and (slots[h] >> 32) != x:
         h = (h + 1) & mask
     return h
 
 
 @njit(cache=True, inline="always")
-def _add_conditional(ch, k, vi, slots, used, eq_o, m):
+def _add_conditional(ch, k, vi, slots, used, eq_o, m, cands):
     """Channel 1 (y) gets one more repetition candidate: the y last seen with this vertex's x
     (curvilinear grids repeat whole (x, y) columns). Returns the new candidate count."""
-    if ch != 1:
+    if ch != 1 or cands[CAND_XY] == 0:
         return m
-    h = _hash_slot(slots, used, ordered_int(vi[k, 0]))
-    if used[h] == 0:
+    x = ordered_int(vi[k, 0])
+    h = _hash_slot(slots, used, x, cands[CAND_VERSION])
+    if used[h] == 0 or (slots[h] >> 32) != x:
         return m
     v = ((slots[h] & 0xFFFFFFFF) ^ 0x80000000) - 0x80000000  # low half, sign-extended
     for q in range(m):
@@ -336,10 +365,10 @@ def _add_conditional(ch, k, vi, slots, used, eq_o, m):
 
 
 @njit(cache=True, inline="always")
-def _remember_conditional(ch, k, vi, slots, used):
-    if ch == 1:
+def _remember_conditional(ch, k, vi, slots, used, cands):
+    if ch == 1 and cands[CAND_XY] != 0:
         x = ordered_int(vi[k, 0])
-        h = _hash_slot(slots, used, x)
+        h = _hash_slot(slots, used, x, cands[CAND_VERSION])
         slots[h] = (x << 32) | (ordered_int(vi[k, 1]) & 0xFFFFFFFF)  # key and value in one word
         used[h] = 1
 
@@ -726,6 +755,30 @@ def _update_scores(scores, ch, pat, cand_o, o, cands):
 
 
 @njit(cache=True, inline="always")
+def _enc_residual(st, out, probs, base, res, version, sign_context):
+    """Code a residual: coding 3 sends its unmodelled mantissa bits in wide range-coder steps and
+    codes the sign in a context (:func:`_sign_context`)."""
+    if version >= 3:
+        enc_sint_wide(st, out, probs, base, res, sign_context)
+    else:
+        enc_sint(st, out, probs, base, res)
+
+
+@njit(cache=True, inline="always")
+def _dec_residual(st, data, probs, base, version, sign_context):
+    if version >= 3:
+        return dec_sint_wide(st, data, probs, base, sign_context)
+    return dec_sint(st, data, probs, base)
+
+
+@njit(cache=True, inline="always")
+def _sign_context(cand_o, best):
+    """Coding 3's guess of a prediction residual's sign: whether the pattern's first candidate (a
+    plain combination of the refs, always computed) lies above the chosen prediction."""
+    return 1 if cand_o[0] > cand_o[best] else 0
+
+
+@njit(cache=True, inline="always")
 def _search(table, lo, hi, o):
     """First index i in [lo, hi) with table[i] >= o (``hi`` if none)."""
     while lo < hi:
@@ -761,6 +814,41 @@ def _res_context(pat, big, eq_o, m):
 def _eq_bits(m):
     """Bits of the repetition symbol, which takes the m + 1 values 0 .. m (m = "none")."""
     return 1 if m == 1 else (2 if m <= 3 else 3)
+
+
+@njit(cache=True, inline="always")
+def _index_bits(m):
+    """Coding 3: bits of the index of the repeated candidate among m."""
+    return 0 if m == 1 else (1 if m == 2 else (2 if m <= 4 else 3))
+
+
+@njit(cache=True)
+def _enc_repeat(st, out, probs, ctx, m, sym, version):
+    """Code the repetition symbol at ``probs[ctx:ctx + 8]``: codings 1-2 as one bit tree of the
+    m + 1 values; coding 3 as a flag "none of them" (slot 0, unused by the tree), then the index
+    of the repeated one (a tree of :func:`_index_bits` bits): a vertex that repeats nothing, as
+    every vertex of an unstructured mesh, costs one binary decision per channel instead of three."""
+    if version < 3:
+        enc_sym(st, out, probs, ctx, _eq_bits(m), sym)
+        return
+    enc_bit(st, out, probs, ctx, 1 if sym == m else 0)
+    nb = _index_bits(m)
+    if sym < m and nb > 0:
+        enc_sym(st, out, probs, ctx, nb, sym)
+
+
+@njit(cache=True, _nrt=False)
+def _dec_repeat(st, data, probs, ctx, m, version):
+    """Decode a symbol of :func:`_enc_repeat` (``m + 1`` for an index out of range: corruption)."""
+    if version < 3:
+        return dec_sym(st, data, probs, ctx, _eq_bits(m))
+    if dec_bit(st, data, probs, ctx) == 1:
+        return m
+    nb = _index_bits(m)
+    if nb == 0:
+        return 0
+    q = dec_sym(st, data, probs, ctx, nb)
+    return q if q < m else m + 1
 
 
 @njit(cache=True, inline="always")
@@ -814,7 +902,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
     nbytes = np.zeros(N_CHANNELS, dtype=np.int64)
 
     tracing = trace.shape[0] == n
-    hcap = hash_capacity(n)
+    hcap = (XY_CACHE_SLOTS if version >= 3 else hash_capacity(n)) if cands[CAND_XY] != 0 else 1
     for ch in range(N_CHANNELS):
         hkeys = np.zeros(hcap if ch == 1 else 1, dtype=np.int64)
         hvals = np.zeros(hcap if ch == 1 else 1, dtype=np.uint8)
@@ -829,7 +917,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
             for k in range(n):
                 pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
                                  vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS, version)
-                m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m)
+                m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m, cands)
                 o = ordered_int(vi[k, ch])
                 sym = FLAG_PREDICTED
                 for q in range(m):
@@ -837,7 +925,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
                         sym = q
                         break
                 was_eq[k] = sym
-                _remember_conditional(ch, k, vi, hkeys, hvals)
+                _remember_conditional(ch, k, vi, hkeys, hvals, cands)
             continue
         if mode == MODE_TABLE:
             enc_uint(stc, outc, probs, TABLE_BASE, hi - lo)
@@ -850,7 +938,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
         for k in range(n):
             pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
                              vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS, version)
-            m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m)
+            m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m, cands)
             o = ordered_int(vi[k, ch])
             is_eq = 0
             sym = -1
@@ -867,7 +955,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
                 if version >= 2 and m >= 2 and ch < 3:
                     near = _nearest(eq_o, m, _first_prediction(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3],
                                                                vf, vi, ch, scratch_f, scratch_i))
-                enc_sym(stc, outc, probs, _eq_context(m, flag, near, version), _eq_bits(m), sym)
+                _enc_repeat(stc, outc, probs, _eq_context(m, flag, near, version), m, sym, version)
                 is_eq = 1 if sym < m else 0
             if is_eq == 0:
                 pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
@@ -879,10 +967,10 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
                     if rp >= hi:
                         rp = hi - 1
                     res = _search(tables, lo, hi, o) - rp
-                    enc_sint(stc, outc, probs, RANK_BASE + ctx * INT_MODEL_SIZE, res)
+                    _enc_residual(stc, outc, probs, RANK_BASE + ctx * INT_MODEL_SIZE, res, version, _sign_context(cand_o, best))
                 else:
                     res = o - cand_o[best]
-                    enc_sint(stc, outc, probs, RES_BASE + ctx * INT_MODEL_SIZE, res)
+                    _enc_residual(stc, outc, probs, RES_BASE + ctx * INT_MODEL_SIZE, res, version, _sign_context(cand_o, best))
                 big = _is_big(mode, res)
                 # only predicted values train the predictor choice: repeats need no prediction
                 _update_scores(scores, ch, pat, cand_o, o, cands)
@@ -892,7 +980,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
                 trace[k, ch, 2] = best
             last_eq = is_eq
             was_eq[k] = sym if is_eq else FLAG_PREDICTED
-            _remember_conditional(ch, k, vi, hkeys, hvals)
+            _remember_conditional(ch, k, vi, hkeys, hvals, cands)
         nbytes[ch] = enc_finish(stc, outc)
     return nbytes
 
@@ -944,7 +1032,7 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
     or minus an error status."""
     pat, m_refs = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS,
                           cands[CAND_VERSION])
-    m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m_refs)
+    m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m_refs, cands)
     is_eq = 0
     o = np.int64(0)
     sym = 0
@@ -952,7 +1040,7 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
         near = 0
         if cands[CAND_VERSION] >= 2 and m >= 2 and ch < 3:
             near = _nearest(eq_o, m, _first_prediction(k, r0, r1, r2, r3, vf, vi, ch, scratch_f, scratch_i))
-        sym = dec_sym(stc, data, pc, _eq_context(m, flag, near, cands[CAND_VERSION]), _eq_bits(m))
+        sym = _dec_repeat(stc, data, pc, _eq_context(m, flag, near, cands[CAND_VERSION]), m, cands[CAND_VERSION])
         if sym < m:
             o = eq_o[sym]
             is_eq = 1
@@ -973,13 +1061,15 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
             rp = _search(tables, lo, hi, cand_o[best])
             if rp >= hi:
                 rp = hi - 1
-            res = dec_sint(stc, data, pc, RANK_BASE + ctx * INT_MODEL_SIZE)
+            res = _dec_residual(stc, data, pc, RANK_BASE + ctx * INT_MODEL_SIZE, cands[CAND_VERSION],
+                                _sign_context(cand_o, best))
             r = rp + res
             if r < lo or r >= hi:
                 return -ERR_RANK
             o = tables[r]
         else:
-            res = dec_sint(stc, data, pc, RES_BASE + ctx * INT_MODEL_SIZE)
+            res = _dec_residual(stc, data, pc, RES_BASE + ctx * INT_MODEL_SIZE, cands[CAND_VERSION],
+                                _sign_context(cand_o, best))
             o = cand_o[best] + res
             if o < -(1 << 31) or o >= (1 << 31):
                 return -ERR_STREAM
@@ -988,7 +1078,7 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
     if dec_failed(stc):
         return -ERR_STREAM
     vi[k, ch] = ordered_to_bits(o)
-    _remember_conditional(ch, k, vi, hkeys, hvals)
+    _remember_conditional(ch, k, vi, hkeys, hvals, cands)
     flags[ch] = is_eq
     return sym if is_eq else FLAG_PREDICTED
 
@@ -1010,11 +1100,12 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, 
     n = vf.shape[0]
     if start < 0 or count < 0 or start + count > n or refs.shape[0] < count or refs.shape[1] != 4:
         return ERR_REF
-    if (adj.shape[0] < n or deg.shape[0] < n or mark.shape[0] < n or adj.shape[1] != ADJ_CAP
-            or hkeys.shape[0] <= n or (hkeys.shape[0] & (hkeys.shape[0] - 1)) != 0
-            or hvals.shape[0] != hkeys.shape[0]):  # a power of two with a free slot after n keys
+    if cands.shape[0] != N_PATTERNS + 2 or scores.shape[2] < MAX_CANDS:
         return ERR_REF
-    if cands.shape[0] != N_PATTERNS + 1 or scores.shape[2] < MAX_CANDS:
+    if (adj.shape[0] < n or deg.shape[0] < n or mark.shape[0] < n or adj.shape[1] != ADJ_CAP
+            or (cands[CAND_XY] != 0 and (hkeys.shape[0] <= (n if cands[CAND_VERSION] < 3 else 1)
+                                         or (hkeys.shape[0] & (hkeys.shape[0] - 1)) != 0))
+            or hvals.shape[0] != hkeys.shape[0]):  # a power of two with a free slot after n keys
         return ERR_REF
     for pat in range(N_PATTERNS):
         if cands[pat] < 1 or cands[pat] > MAX_CANDS:

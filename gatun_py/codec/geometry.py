@@ -20,12 +20,15 @@ the ref tet at the vertex's decoded position, the coordinates beyond the face or
 on the rank in a table of the channel's distinct values (chosen per channel, whichever is smaller).
 
 The decoder keeps, besides the vertex table (16 bytes per vertex), its edge graph (36 bytes per
-vertex) and the x -> y table (18 to 36 bytes per vertex).
+vertex) and the x -> y table (codings 1-2: 18 to 36 bytes per vertex; coding 3: a 72 KB cache,
+or nothing where the block does without it).
 
 Byte layout of the geometry block (little endian)::
 
-    u8  coding      1 (format <= 3) or 2 (format 4: adds the tet-geometry predictors)
-    u8  modes       bit ch set: channel ch uses the value table
+    u8  coding      1 (format <= 3), 2 (format 4: adds the tet-geometry predictors) or 3
+                    (format 5: the same model, decoded with fewer range-coder steps)
+    u8  modes       bit ch set (ch < 4): channel ch uses the value table; bit 4 (coding 3
+                    only): y uses the x -> y table (codings 1-2 always do)
     u32 n_points
     u32 length[4]   byte length of each channel's range-coded stream
     ...             the four streams, channel 0 (x) to 3 (density)
@@ -48,9 +51,11 @@ CODINGS = K.CODINGS
 
 def coding_for_format(major: int) -> int:
     """The geometry block coding a file of container format ``major`` is written with: 1 up to
-    format 3, 2 from format 4 on (the tet-geometry predictors of
-    :func:`gatun_py.codec._geometry_kernels._geometric_cands`). Readers take both codings."""
-    return 1 if major <= 3 else 2
+    format 3, 2 in format 4 (the tet-geometry predictors of
+    :func:`gatun_py.codec._geometry_kernels._geometric_cands`), 3 from format 5 on (coding 2's
+    model with wide raw bits, a sign context, a flag-first repetition symbol and a per-block x -> y
+    cache). Readers take every coding."""
+    return 1 if major <= 3 else (2 if major == 4 else 3)
 
 
 # what this version of tetc writes
@@ -58,6 +63,7 @@ FORMAT_VERSION = coding_for_format(VERSION_MAJOR)
 MAX_POINTS = 1 << 29  # the decoder's scratch tags (3 per vertex) are int32
 _HEADER = struct.Struct("<BBI4I")
 HEADER_SIZE = _HEADER.size
+XY_TABLE_BIT = 1 << K.N_CHANNELS  # coding 3's modes: y uses the x -> y table (always, before)
 
 # Absurd counts are rejected before allocating: a binary decision costs at least
 # -log2(p_max) bits, p_max being the most skewed probability the range coder's adaptation reaches;
@@ -113,7 +119,7 @@ def _ordered(vf: np.ndarray) -> np.ndarray:
 _NO_TRACE = np.zeros((0, 4, 3), dtype=np.int64)
 
 
-def _run_encode(vf, refs, modes, tables, tab_offs, cands, trace=_NO_TRACE, wpar=None):
+def _run_encode(vf, refs, modes, tables, tab_offs, cands, trace=_NO_TRACE, wpar=None) -> list:
     n = vf.shape[0]
     if wpar is None:
         wpar = K.link_all(refs, vf)
@@ -179,9 +185,9 @@ def encode_geometry(points, density, refs, *, modes=None, coding: int = FORMAT_V
     modes : sequence of 4 ints, optional
         Force the residual mode per channel (0 prediction, 1 value table); by default both are
         tried and the smaller stream is kept, channel by channel.
-    coding : {1, 2}
-        The block's coding version: 2 (the default, format 4) adds the tet-geometry predictors;
-        1 writes what format 3 and older wrote.
+    coding : {1, 2, 3}
+        The block's coding version: 3 (the default, format 5), 2 what format 4 wrote (the
+        tet-geometry predictors), 1 what format 3 and older wrote.
 
     Returns
     -------
@@ -232,6 +238,19 @@ def encode_geometry(points, density, refs, *, modes=None, coding: int = FORMAT_V
             modes = np.zeros(K.N_CHANNELS, dtype=np.int64)
             streams = pred
     mode_bits = sum(int(m) << ch for ch, m in enumerate(modes))
+    if coding >= 3:
+        # coding 3 says per block whether y gets the x -> y table's repetition candidate: it pays on
+        # grids, and costs the decoder a random table access per vertex and 16-24 bytes per vertex
+        # where nothing repeats. It changes y's stream, and z's (whose contexts are y's repetitions):
+        # code both again without, keep the smaller pair.
+        trial = np.full(K.N_CHANNELS, K.MODE_SKIP, dtype=np.int64)
+        trial[1:3] = modes[1:3]
+        plain = _run_encode(vf, refs, trial, tables, tab_offs, K.candidate_table(coding, xy_table=False),
+                            wpar=K.link_all(refs, vf))
+        if len(plain[1]) + len(plain[2]) <= len(streams[1]) + len(streams[2]):
+            streams[1:3] = plain[1:3]
+        else:
+            mode_bits |= XY_TABLE_BIT
     header = _HEADER.pack(coding, mode_bits, n, *(len(s) for s in streams))
     return header + b"".join(streams)
 
@@ -261,7 +280,7 @@ def check_geometry_header(data, n_points: int | None = None, *, total: int | Non
     version, mode_bits, n, *lengths = _HEADER.unpack_from(data)
     if version not in CODINGS:
         raise CorruptFileError(f"corrupt geometry block: unknown geometry format version {version}")
-    if mode_bits >> K.N_CHANNELS:
+    if mode_bits >> K.N_CHANNELS != 0 and (version < 3 or mode_bits >= 2 * XY_TABLE_BIT):
         raise CorruptFileError("corrupt geometry block: invalid channel modes")
     if n_points is not None and n != n_points:
         raise CorruptFileError(f"corrupt geometry block: {n} vertices, expected {n_points}")
@@ -301,7 +320,8 @@ class GeometryDecoder:
         buf = np.frombuffer(bytes(data), dtype=np.uint8)
         coding, mode_bits, n, lengths = check_geometry_header(buf, n_points)
         self.coding = int(coding)
-        self.cands = K.candidate_table(self.coding)
+        xy_table = self.coding < 3 or bool(mode_bits & XY_TABLE_BIT)
+        self.cands = K.candidate_table(self.coding, xy_table)
         self.n_points = int(n)
         self.modes = np.array([(mode_bits >> ch) & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64)
         self.offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
@@ -317,7 +337,7 @@ class GeometryDecoder:
         self.mark = np.zeros(self.n_points, dtype=np.int32)
         # the x -> y table holds at most one key per vertex: at most 2/3 full (the encoder's, at most
         # half, is twice this size at 1.4 M vertices); lookups do not depend on the capacity
-        self.hkeys = np.zeros(K.hash_capacity((3 * self.n_points) // 4 + 1), dtype=np.int64)
+        self.hkeys = np.zeros(K.xy_table_slots(self.n_points, self.coding) if xy_table else 1, dtype=np.int64)
         self.hvals = np.zeros(len(self.hkeys), dtype=np.uint8)
         stream_bytes = [int(length) for length in lengths]
         table_room = sum(min(self.n_points, _MAX_TABLE_PER_BYTE * (stream_bytes[ch] + 8))

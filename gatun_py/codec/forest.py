@@ -285,14 +285,13 @@ def decode_forest_on_mesh(data: bytes, tets: np.ndarray, n: int, *, boundary) ->
     except ValueError:
         raise CorruptFileError("merge forest: the mesh's tet ids are out of range") from None
     body = np.frombuffer(data, np.uint8, offset=_HEADER.size)
-    parent = np.empty(n, np.int64)
-    rank = np.empty(n, np.int64)
+    parent = np.empty(n, np.int32)
+    rank = np.empty(n, np.int32)
     st = dec_state()
     ok = FK.decode_forest_kernel(st, body, start, nbrs, _boundary_mask(boundary, n), k, parent, rank)
     if not ok:
         raise CorruptFileError("merge forest: the coded data is damaged or truncated")
     check_decoder(st, body, "merge forest")
-    rank = np.where(rank == k, ROOT_RANK, rank).astype(np.int32)
-    parent = parent.astype(np.int32)
+    rank[rank == k] = ROOT_RANK
     check_forest(parent, rank)
     return parent, rank

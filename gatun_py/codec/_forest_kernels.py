@@ -21,7 +21,6 @@ DEGREE_CLASSES = 7  # neighbour count // 4, capped: well-connected vertices merg
 N_BUCKET_CONTEXTS = (CONTEXT_CAP + 2) * 2 * DEGREE_CLASSES
 SMALL_LIST = 32  # candidate lists up to this long code the index with a model, longer ones uniformly
 FLAG_CONTEXTS = 16
-_SHORT_TALLY = 24  # candidate lists up to this long are counted without the per-vertex tally
 # model layout: bucket symbols | "parent is in the list" flags | index symbols, per tier (2)
 _FLAG_BASE = N_BUCKET_CONTEXTS << BUCKET_BITS
 _INDEX_BASE = _FLAG_BASE + 2 * FLAG_CONTEXTS
@@ -64,10 +63,10 @@ def adjacency(tets, n):
             t = inc[j]
             for i in range(4):
                 x = tets[t, i]
-                if seen_by[x] != v:
-                    seen_by[x] = v
-                    nbrs[out] = x
-                    out += 1
+                # without a branch: a neighbour is new about one time in five, unpredictably
+                nbrs[out] = x
+                out += seen_by[x] != v
+                seen_by[x] = v
     start[n] = out
     return start, nbrs[:out].copy()
 
@@ -191,61 +190,45 @@ def _sort_candidates(cand, count, m):
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def _tally_row(start, nbrs, uf, u, v, excluded, cand, count, m, tally):
+def _tally_row(start, nbrs, uf, u, v, stamp, mark, cand, count, m):
     """Count the live representatives of u's neighbours into the candidates ``cand[:m]`` (distinct,
-    in order of appearance) and their ``count``; v and the ``excluded`` ids are left out. Returns the
-    new m. A short list is searched in place; from ``_SHORT_TALLY`` candidates on, ``tally`` (one
-    slot per vertex) holds 1 + the candidate's position."""
+    in order of appearance) and their ``count``, leaving out v and the vertices of an earlier list.
+    Returns the new m. ``mark[2x]`` is the stamp of the list x was last counted in (a list has a
+    stamp of its own: no reset between lists), ``mark[2x + 1]`` its position there."""
     for i in range(start[u], start[u + 1]):
         x = _find(uf, nbrs[i])
-        if x == v or excluded[x]:
+        if x == v:
             continue
-        if m <= _SHORT_TALLY:
-            j = 0
-            while j < m and cand[j] != x:
-                j += 1
-            if j == m:
-                cand[m] = x
-                count[m] = 1
-                m += 1
-                if m > _SHORT_TALLY:  # the list just grew long: index it
-                    for q in range(m):
-                        tally[cand[q]] = q + 1
-            else:
-                count[j] += 1
-        else:
-            j = tally[x] - 1
-            if j < 0:
-                cand[m] = x
-                count[m] = 1
-                m += 1
-                tally[x] = m
-            else:
-                count[j] += 1
+        seen = mark[2 * x]
+        if seen == stamp:
+            count[mark[2 * x + 1]] += 1
+        elif seen < stamp - 1 or (stamp & 1) == 1:  # tier 1 (even stamps) skips tier 0's (stamp - 1)
+            mark[2 * x] = stamp
+            mark[2 * x + 1] = m
+            cand[m] = x
+            count[m] = 1
+            m += 1
     return m
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def _gather_candidates(start, nbrs, uf, v, tier, first_child, next_sibling, excluded, cand, count, tally):
-    """Candidate parents of v's merge and their counts, written to ``cand``/``count`` unordered
-    (see :func:`_candidate_at` for the order); returns their number.
+def _gather_candidates(start, nbrs, uf, v, r, tier, first_child, next_sibling, mark, cand, count):
+    """Candidate parents of the merge of rank ``r`` (of v) and their counts, written to
+    ``cand``/``count`` unordered (see :func:`_candidate_at` for the order); returns their number.
 
     Tier 0: the live representatives of v's neighbours. Tier 1: those of the neighbours of v's
-    children (vertices merged into v before), minus tier 0's (``excluded`` marks tier 0's then).
-    v itself is never a candidate. ``count`` says how many of the listed neighbours lead to the
-    candidate. ``tally`` (one zero per vertex) is left all zero.
+    children (vertices merged into v before), minus tier 0's. v itself is never a candidate.
+    ``count`` says how many of the listed neighbours lead to the candidate. ``mark`` (2 zeros per
+    vertex at the start of the replay) needs no reset: merge r's lists have stamps 2r + 1 and 2r + 2.
     """
+    stamp = 2 * r + 1 + tier
     if tier == 0:
-        m = _tally_row(start, nbrs, uf, v, v, excluded, cand, count, 0, tally)
-    else:
-        m = 0
-        c = first_child[v]
-        while c >= 0:
-            m = _tally_row(start, nbrs, uf, c, v, excluded, cand, count, m, tally)
-            c = next_sibling[c]
-    if m > _SHORT_TALLY:
-        for i in range(m):
-            tally[cand[i]] = 0
+        return _tally_row(start, nbrs, uf, v, v, stamp, mark, cand, count, 0)
+    m = 0
+    c = first_child[v]
+    while c >= 0:
+        m = _tally_row(start, nbrs, uf, c, v, stamp, mark, cand, count, m)
+        c = next_sibling[c]
     return m
 
 
@@ -302,20 +285,14 @@ def _index_base(tier, size):
 @njit(cache=True, nogil=True)
 def _replay_state(n):
     """Scratch of the rank-order replay: union-find parents, children lists (first child, next
-    sibling), tier-0 marks, the per-vertex tally, tier 0's and tier 1's candidates and counts
-    (a tier lists distinct vertices: at most n)."""
+    sibling), the candidates' stamps and positions (:func:`_gather_candidates`), tier 0's and
+    tier 1's candidates and counts (a tier lists distinct vertices: at most n)."""
     uf = np.empty(n, np.int32)
     for v in range(n):
         uf[v] = v
     size = max(1, n)
-    return (uf, np.full(n, -1, np.int32), np.full(n, -1, np.int32), np.zeros(n, np.bool_), np.zeros(n, np.int32),
+    return (uf, np.full(n, -1, np.int32), np.full(n, -1, np.int32), np.zeros(2 * n, np.int64),
             np.empty(size, np.int32), np.empty(size, np.int32), np.empty(size, np.int32), np.empty(size, np.int32))
-
-
-@njit(cache=True, nogil=True, _nrt=False)
-def _set_marks(excluded, cand, m, value):
-    for i in range(m):
-        excluded[cand[i]] = value
 
 
 @njit(cache=True, nogil=True, _nrt=False)
@@ -351,12 +328,12 @@ def encode_forest_kernel(st, out, start, nbrs, boundary, parent, rank, k):
     for v in range(n):
         if rank[v] < k:
             of_rank[rank[v]] = v
-    uf, first_child, next_sibling, excluded, tally, cand0, count0, cand1, count1 = _replay_state(n)
+    uf, first_child, next_sibling, mark, cand0, count0, cand1, count1 = _replay_state(n)
     for r in range(k):
         v = of_rank[r]
         p = parent[v]
         found = False
-        m0 = _gather_candidates(start, nbrs, uf, v, 0, first_child, next_sibling, excluded, cand0, count0, tally)
+        m0 = _gather_candidates(start, nbrs, uf, v, r, 0, first_child, next_sibling, mark, cand0, count0)
         if m0 > 0:
             idx = _index_of(cand0, count0, m0, p)
             enc_bit(st, out, probs, _flag_context(0, m0), 1 if idx >= 0 else 0)
@@ -364,9 +341,7 @@ def encode_forest_kernel(st, out, start, nbrs, boundary, parent, rank, k):
                 _enc_index(st, out, probs, 0, m0, idx)
                 found = True
         if not found:
-            _set_marks(excluded, cand0, m0, True)
-            m1 = _gather_candidates(start, nbrs, uf, v, 1, first_child, next_sibling, excluded, cand1, count1, tally)
-            _set_marks(excluded, cand0, m0, False)
+            m1 = _gather_candidates(start, nbrs, uf, v, r, 1, first_child, next_sibling, mark, cand1, count1)
             if m1 > 0:
                 idx = _index_of(cand1, count1, m1, p)
                 enc_bit(st, out, probs, _flag_context(1, m1), 1 if idx >= 0 else 0)
@@ -443,15 +418,13 @@ def decode_forest_kernel(st, data, start, nbrs, boundary, k, parent, rank):
     for s in range(n_buckets):
         if free[s] != 0:
             return False  # fewer merges than the header says
-    uf, first_child, next_sibling, excluded, tally, cand0, count0, cand1, count1 = _replay_state(n)
+    uf, first_child, next_sibling, mark, cand0, count0, cand1, count1 = _replay_state(n)
     for r in range(k):
         v = of_rank[r]
-        m0 = _gather_candidates(start, nbrs, uf, v, 0, first_child, next_sibling, excluded, cand0, count0, tally)
+        m0 = _gather_candidates(start, nbrs, uf, v, r, 0, first_child, next_sibling, mark, cand0, count0)
         p = _dec_parent(st, data, probs, 0, cand0, count0, m0)
         if p < 0:
-            _set_marks(excluded, cand0, m0, True)
-            m1 = _gather_candidates(start, nbrs, uf, v, 1, first_child, next_sibling, excluded, cand1, count1, tally)
-            _set_marks(excluded, cand0, m0, False)
+            m1 = _gather_candidates(start, nbrs, uf, v, r, 1, first_child, next_sibling, mark, cand1, count1)
             p = _dec_parent(st, data, probs, 1, cand1, count1, m1)
             if p < 0:
                 p = dec_below(st, data, n)

@@ -291,7 +291,7 @@ def _replay_state(n):
     for v in range(n):
         uf[v] = v
     size = max(1, n)
-    return (uf, np.full(n, -1, np.int32), np.full(n, -1, np.int32), np.zeros(2 * n, np.int64),
+    return (uf, np.full(n, -1, np.int32), np.full(n, -1, np.int32), np.zeros(2 * n, np.int32),
             np.empty(size, np.int32), np.empty(size, np.int32), np.empty(size, np.int32), np.empty(size, np.int32))
 
 
@@ -309,7 +309,7 @@ def encode_forest_kernel(st, out, start, nbrs, boundary, parent, rank, k):
     n = parent.shape[0]
     probs = np.full(MODEL_SIZE, 1 << 14, np.uint16)
     bounds = bucket_bounds(n, k)
-    symbol = np.empty(n, np.int64)
+    symbol = np.empty(n, np.int8)  # bucket symbols are < 64
     tree, free = _free_ranks(bounds)
     # pass 1, decode order: each vertex's rank bucket, then its place among the bucket's free ranks
     for v in range(n):
@@ -392,7 +392,7 @@ def decode_forest_kernel(st, data, start, nbrs, boundary, k, parent, rank):
     probs = np.full(MODEL_SIZE, 1 << 14, np.uint16)
     bounds = bucket_bounds(n, k)
     n_buckets = bounds.shape[0] - 1
-    symbol = np.empty(n, np.int64)
+    symbol = np.empty(n, np.int8)  # bucket symbols are < 64
     tree, free = _free_ranks(bounds)
     of_rank = np.full(max(k, 1), -1, np.int32)
     for v in range(n):

@@ -158,12 +158,22 @@ def _fen_select(tree, off, size, t):
     return pos
 
 
+# The replay's per-vertex state, interleaved so that a neighbour costs one cache line: its
+# union-find parent, the stamp of the candidate list it was last counted in and its position there
+# (:func:`_tally_row`)
+_UF, _STAMP, _POS, _NODE_WIDTH = 0, 1, 2, 4
+
+
 @njit(cache=True, nogil=True, _nrt=False)
-def _find(uf, x):
-    while uf[x] != x:
-        uf[x] = uf[uf[x]]
-        x = uf[x]
-    return x
+def _find(node, x):
+    """Live representative of x (union-find with path halving over ``node[4x + _UF]``)."""
+    while True:
+        up = node[_NODE_WIDTH * x + _UF]
+        if up == x:
+            return x
+        top = node[_NODE_WIDTH * up + _UF]
+        node[_NODE_WIDTH * x + _UF] = top
+        x = top
 
 
 @njit(cache=True, nogil=True, _nrt=False)
@@ -190,21 +200,22 @@ def _sort_candidates(cand, count, m):
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def _tally_row(start, nbrs, uf, u, v, stamp, mark, cand, count, m):
+def _tally_row(start, nbrs, node, u, v, stamp, cand, count, m):
     """Count the live representatives of u's neighbours into the candidates ``cand[:m]`` (distinct,
     in order of appearance) and their ``count``, leaving out v and the vertices of an earlier list.
-    Returns the new m. ``mark[2x]`` is the stamp of the list x was last counted in (a list has a
-    stamp of its own: no reset between lists), ``mark[2x + 1]`` its position there."""
+    Returns the new m. A vertex's ``_STAMP`` is the stamp of the list it was last counted in (a
+    list has a stamp of its own: no reset between lists), its ``_POS`` its position there."""
     for i in range(start[u], start[u + 1]):
-        x = _find(uf, nbrs[i])
+        x = _find(node, nbrs[i])
         if x == v:
             continue
-        seen = mark[2 * x]
+        at = _NODE_WIDTH * x
+        seen = node[at + _STAMP]
         if seen == stamp:
-            count[mark[2 * x + 1]] += 1
+            count[node[at + _POS]] += 1
         elif seen < stamp - 1 or (stamp & 1) == 1:  # tier 1 (even stamps) skips tier 0's (stamp - 1)
-            mark[2 * x] = stamp
-            mark[2 * x + 1] = m
+            node[at + _STAMP] = stamp
+            node[at + _POS] = m
             cand[m] = x
             count[m] = 1
             m += 1
@@ -212,22 +223,22 @@ def _tally_row(start, nbrs, uf, u, v, stamp, mark, cand, count, m):
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def _gather_candidates(start, nbrs, uf, v, r, tier, first_child, next_sibling, mark, cand, count):
+def _gather_candidates(start, nbrs, node, v, r, tier, first_child, next_sibling, cand, count):
     """Candidate parents of the merge of rank ``r`` (of v) and their counts, written to
     ``cand``/``count`` unordered (see :func:`_candidate_at` for the order); returns their number.
 
     Tier 0: the live representatives of v's neighbours. Tier 1: those of the neighbours of v's
     children (vertices merged into v before), minus tier 0's. v itself is never a candidate.
-    ``count`` says how many of the listed neighbours lead to the candidate. ``mark`` (2 zeros per
-    vertex at the start of the replay) needs no reset: merge r's lists have stamps 2r + 1 and 2r + 2.
+    ``count`` says how many of the listed neighbours lead to the candidate. The stamps (0 at the
+    start of the replay) need no reset: merge r's lists have stamps 2r + 1 and 2r + 2.
     """
     stamp = 2 * r + 1 + tier
     if tier == 0:
-        return _tally_row(start, nbrs, uf, v, v, stamp, mark, cand, count, 0)
+        return _tally_row(start, nbrs, node, v, v, stamp, cand, count, 0)
     m = 0
     c = first_child[v]
     while c >= 0:
-        m = _tally_row(start, nbrs, uf, c, v, stamp, mark, cand, count, m)
+        m = _tally_row(start, nbrs, node, c, v, stamp, cand, count, m)
         c = next_sibling[c]
     return m
 
@@ -284,14 +295,14 @@ def _index_base(tier, size):
 
 @njit(cache=True, nogil=True)
 def _replay_state(n):
-    """Scratch of the rank-order replay: union-find parents, children lists (first child, next
-    sibling), the candidates' stamps and positions (:func:`_gather_candidates`), tier 0's and
-    tier 1's candidates and counts (a tier lists distinct vertices: at most n)."""
-    uf = np.empty(n, np.int32)
+    """Scratch of the rank-order replay: the per-vertex ``node`` state (every vertex its own
+    representative, stamps 0), children lists (first child, next sibling), tier 0's and tier 1's
+    candidates and counts (a tier lists distinct vertices: at most n)."""
+    node = np.zeros(_NODE_WIDTH * n, np.int32)
     for v in range(n):
-        uf[v] = v
+        node[_NODE_WIDTH * v + _UF] = v
     size = max(1, n)
-    return (uf, np.full(n, -1, np.int32), np.full(n, -1, np.int32), np.zeros(2 * n, np.int32),
+    return (node, np.full(n, -1, np.int32), np.full(n, -1, np.int32),
             np.empty(size, np.int32), np.empty(size, np.int32), np.empty(size, np.int32), np.empty(size, np.int32))
 
 
@@ -328,12 +339,12 @@ def encode_forest_kernel(st, out, start, nbrs, boundary, parent, rank, k):
     for v in range(n):
         if rank[v] < k:
             of_rank[rank[v]] = v
-    uf, first_child, next_sibling, mark, cand0, count0, cand1, count1 = _replay_state(n)
+    node, first_child, next_sibling, cand0, count0, cand1, count1 = _replay_state(n)
     for r in range(k):
         v = of_rank[r]
         p = parent[v]
         found = False
-        m0 = _gather_candidates(start, nbrs, uf, v, r, 0, first_child, next_sibling, mark, cand0, count0)
+        m0 = _gather_candidates(start, nbrs, node, v, r, 0, first_child, next_sibling, cand0, count0)
         if m0 > 0:
             idx = _index_of(cand0, count0, m0, p)
             enc_bit(st, out, probs, _flag_context(0, m0), 1 if idx >= 0 else 0)
@@ -341,7 +352,7 @@ def encode_forest_kernel(st, out, start, nbrs, boundary, parent, rank, k):
                 _enc_index(st, out, probs, 0, m0, idx)
                 found = True
         if not found:
-            m1 = _gather_candidates(start, nbrs, uf, v, r, 1, first_child, next_sibling, mark, cand1, count1)
+            m1 = _gather_candidates(start, nbrs, node, v, r, 1, first_child, next_sibling, cand1, count1)
             if m1 > 0:
                 idx = _index_of(cand1, count1, m1, p)
                 enc_bit(st, out, probs, _flag_context(1, m1), 1 if idx >= 0 else 0)
@@ -350,7 +361,7 @@ def encode_forest_kernel(st, out, start, nbrs, boundary, parent, rank, k):
                     found = True
         if not found:
             enc_below(st, out, p, n)
-        uf[v] = p
+        node[_NODE_WIDTH * v + _UF] = p
         next_sibling[v] = first_child[p]
         first_child[p] = v
     return enc_finish(st, out)
@@ -418,20 +429,20 @@ def decode_forest_kernel(st, data, start, nbrs, boundary, k, parent, rank):
     for s in range(n_buckets):
         if free[s] != 0:
             return False  # fewer merges than the header says
-    uf, first_child, next_sibling, mark, cand0, count0, cand1, count1 = _replay_state(n)
+    node, first_child, next_sibling, cand0, count0, cand1, count1 = _replay_state(n)
     for r in range(k):
         v = of_rank[r]
-        m0 = _gather_candidates(start, nbrs, uf, v, r, 0, first_child, next_sibling, mark, cand0, count0)
+        m0 = _gather_candidates(start, nbrs, node, v, r, 0, first_child, next_sibling, cand0, count0)
         p = _dec_parent(st, data, probs, 0, cand0, count0, m0)
         if p < 0:
-            m1 = _gather_candidates(start, nbrs, uf, v, r, 1, first_child, next_sibling, mark, cand1, count1)
+            m1 = _gather_candidates(start, nbrs, node, v, r, 1, first_child, next_sibling, cand1, count1)
             p = _dec_parent(st, data, probs, 1, cand1, count1, m1)
             if p < 0:
                 p = dec_below(st, data, n)
         if dec_failed(st) or p == v or rank[p] <= r:
             return False  # the parent must still be alive when v merges into it
         parent[v] = p
-        uf[v] = p
+        node[_NODE_WIDTH * v + _UF] = p
         next_sibling[v] = first_child[p]
         first_child[p] = v
     return True

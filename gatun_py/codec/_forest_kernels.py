@@ -68,7 +68,9 @@ def adjacency(tets, n):
                 out += seen_by[x] != v
                 seen_by[x] = v
     start[n] = out
-    return start, nbrs[:out].copy()
+    # a view, not a copy: the untouched tail of the buffer is never paged in, and a copy would
+    # page in and write the rows a second time
+    return start, nbrs[:out]
 
 
 @njit(cache=True, nogil=True)

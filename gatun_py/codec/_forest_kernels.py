@@ -21,6 +21,7 @@ DEGREE_CLASSES = 7  # neighbour count // 4, capped: well-connected vertices merg
 N_BUCKET_CONTEXTS = (CONTEXT_CAP + 2) * 2 * DEGREE_CLASSES
 SMALL_LIST = 32  # candidate lists up to this long code the index with a model, longer ones uniformly
 FLAG_CONTEXTS = 16
+_SHORT_ROW = 32  # tier 0 of a vertex with at most this many neighbours is counted without a table
 # model layout: bucket symbols | "parent is in the list" flags | index symbols, per tier (2)
 _FLAG_BASE = N_BUCKET_CONTEXTS << BUCKET_BITS
 _INDEX_BASE = _FLAG_BASE + 2 * FLAG_CONTEXTS
@@ -160,22 +161,13 @@ def _fen_select(tree, off, size, t):
     return pos
 
 
-# The replay's per-vertex state, interleaved so that a neighbour costs one cache line: its
-# union-find parent, the stamp of the candidate list it was last counted in and its position there
-# (:func:`_tally_row`)
-_UF, _STAMP, _POS, _NODE_WIDTH = 0, 1, 2, 4
-
-
 @njit(cache=True, nogil=True, _nrt=False)
-def _find(node, x):
-    """Live representative of x (union-find with path halving over ``node[4x + _UF]``)."""
-    while True:
-        up = node[_NODE_WIDTH * x + _UF]
-        if up == x:
-            return x
-        top = node[_NODE_WIDTH * up + _UF]
-        node[_NODE_WIDTH * x + _UF] = top
-        x = top
+def _find(uf, x):
+    """Live representative of x (union-find with path halving)."""
+    while uf[x] != x:
+        uf[x] = uf[uf[x]]
+        x = uf[x]
+    return x
 
 
 @njit(cache=True, nogil=True, _nrt=False)
@@ -202,22 +194,43 @@ def _sort_candidates(cand, count, m):
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def _tally_row(start, nbrs, node, u, v, stamp, cand, count, m):
-    """Count the live representatives of u's neighbours into the candidates ``cand[:m]`` (distinct,
-    in order of appearance) and their ``count``, leaving out v and the vertices of an earlier list.
-    Returns the new m. A vertex's ``_STAMP`` is the stamp of the list it was last counted in (a
-    list has a stamp of its own: no reset between lists), its ``_POS`` its position there."""
-    for i in range(start[u], start[u + 1]):
-        x = _find(node, nbrs[i])
+def _tally_short(start, nbrs, uf, v, cand, count):
+    """Tier 0 of v's merge when v has at most ``_SHORT_ROW`` neighbours: the live representatives
+    of its neighbours (minus v) counted in ``cand``/``count`` by a search of the short list itself,
+    which stays in the first-level cache (a per-vertex table would cost a cache miss per
+    neighbour). Returns their number."""
+    m = 0
+    for i in range(start[v], start[v + 1]):
+        x = _find(uf, nbrs[i])
         if x == v:
             continue
-        at = _NODE_WIDTH * x
-        seen = node[at + _STAMP]
+        j = 0
+        while j < m and cand[j] != x:
+            j += 1
+        if j == m:
+            cand[m] = x
+            count[m] = 0
+            m += 1
+        count[j] += 1
+    return m
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _tally_row(start, nbrs, uf, u, v, stamp, mark, cand, count, m):
+    """Count the live representatives of u's neighbours into the candidates ``cand[:m]`` (distinct,
+    in order of appearance) and their ``count``, leaving out v and the vertices of an earlier list.
+    Returns the new m. ``mark[2x]`` is the stamp of the list x was last counted in (a list has a
+    stamp of its own: no reset between lists), ``mark[2x + 1]`` its position there."""
+    for i in range(start[u], start[u + 1]):
+        x = _find(uf, nbrs[i])
+        if x == v:
+            continue
+        seen = mark[2 * x]
         if seen == stamp:
-            count[node[at + _POS]] += 1
+            count[mark[2 * x + 1]] += 1
         elif seen < stamp - 1 or (stamp & 1) == 1:  # tier 1 (even stamps) skips tier 0's (stamp - 1)
-            node[at + _STAMP] = stamp
-            node[at + _POS] = m
+            mark[2 * x] = stamp
+            mark[2 * x + 1] = m
             cand[m] = x
             count[m] = 1
             m += 1
@@ -225,22 +238,26 @@ def _tally_row(start, nbrs, node, u, v, stamp, cand, count, m):
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def _gather_candidates(start, nbrs, node, v, r, tier, first_child, next_sibling, cand, count):
-    """Candidate parents of the merge of rank ``r`` (of v) and their counts, written to
-    ``cand``/``count`` unordered (see :func:`_candidate_at` for the order); returns their number.
+def _tier0(start, nbrs, uf, v, r, mark, cand, count):
+    """Tier 0 of the merge of rank ``r`` (of v): the live representatives of v's neighbours, minus
+    v, in ``cand``, with in ``count`` how many of the neighbours lead to each; unordered (see
+    :func:`_candidate_at` for the order). Returns their number."""
+    if start[v + 1] - start[v] <= _SHORT_ROW:
+        return _tally_short(start, nbrs, uf, v, cand, count)
+    return _tally_row(start, nbrs, uf, v, v, 2 * r + 1, mark, cand, count, 0)
 
-    Tier 0: the live representatives of v's neighbours. Tier 1: those of the neighbours of v's
-    children (vertices merged into v before), minus tier 0's. v itself is never a candidate.
-    ``count`` says how many of the listed neighbours lead to the candidate. The stamps (0 at the
-    start of the replay) need no reset: merge r's lists have stamps 2r + 1 and 2r + 2.
-    """
-    stamp = 2 * r + 1 + tier
-    if tier == 0:
-        return _tally_row(start, nbrs, node, v, v, stamp, cand, count, 0)
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _tier1(start, nbrs, uf, v, r, first_child, next_sibling, mark, cand0, m0, cand, count):
+    """Tier 1 of the merge of rank ``r`` (of v) after tier 0's ``cand0[:m0]``: the live
+    representatives of the neighbours of v's children (vertices merged into v before), minus v and
+    tier 0's, counted and unordered as :func:`_tier0`'s. Returns their number."""
+    for i in range(m0):  # tier 0's stamp, in case the short search counted it
+        mark[2 * cand0[i]] = 2 * r + 1
     m = 0
     c = first_child[v]
     while c >= 0:
-        m = _tally_row(start, nbrs, node, c, v, stamp, cand, count, m)
+        m = _tally_row(start, nbrs, uf, c, v, 2 * r + 2, mark, cand, count, m)
         c = next_sibling[c]
     return m
 
@@ -297,14 +314,14 @@ def _index_base(tier, size):
 
 @njit(cache=True, nogil=True)
 def _replay_state(n):
-    """Scratch of the rank-order replay: the per-vertex ``node`` state (every vertex its own
-    representative, stamps 0), children lists (first child, next sibling), tier 0's and tier 1's
-    candidates and counts (a tier lists distinct vertices: at most n)."""
-    node = np.zeros(_NODE_WIDTH * n, np.int32)
+    """Scratch of the rank-order replay: union-find parents, children lists (first child, next
+    sibling), the candidate lists' stamps and positions (:func:`_tally_row`: 0 = never listed),
+    tier 0's and tier 1's candidates and counts (a tier lists distinct vertices: at most n)."""
+    uf = np.empty(n, np.int32)
     for v in range(n):
-        node[_NODE_WIDTH * v + _UF] = v
+        uf[v] = v
     size = max(1, n)
-    return (node, np.full(n, -1, np.int32), np.full(n, -1, np.int32),
+    return (uf, np.full(n, -1, np.int32), np.full(n, -1, np.int32), np.zeros(2 * n, np.int32),
             np.empty(size, np.int32), np.empty(size, np.int32), np.empty(size, np.int32), np.empty(size, np.int32))
 
 
@@ -341,12 +358,12 @@ def encode_forest_kernel(st, out, start, nbrs, boundary, parent, rank, k):
     for v in range(n):
         if rank[v] < k:
             of_rank[rank[v]] = v
-    node, first_child, next_sibling, cand0, count0, cand1, count1 = _replay_state(n)
+    uf, first_child, next_sibling, mark, cand0, count0, cand1, count1 = _replay_state(n)
     for r in range(k):
         v = of_rank[r]
         p = parent[v]
         found = False
-        m0 = _gather_candidates(start, nbrs, node, v, r, 0, first_child, next_sibling, cand0, count0)
+        m0 = _tier0(start, nbrs, uf, v, r, mark, cand0, count0)
         if m0 > 0:
             idx = _index_of(cand0, count0, m0, p)
             enc_bit(st, out, probs, _flag_context(0, m0), 1 if idx >= 0 else 0)
@@ -354,7 +371,7 @@ def encode_forest_kernel(st, out, start, nbrs, boundary, parent, rank, k):
                 _enc_index(st, out, probs, 0, m0, idx)
                 found = True
         if not found:
-            m1 = _gather_candidates(start, nbrs, node, v, r, 1, first_child, next_sibling, cand1, count1)
+            m1 = _tier1(start, nbrs, uf, v, r, first_child, next_sibling, mark, cand0, m0, cand1, count1)
             if m1 > 0:
                 idx = _index_of(cand1, count1, m1, p)
                 enc_bit(st, out, probs, _flag_context(1, m1), 1 if idx >= 0 else 0)
@@ -363,7 +380,7 @@ def encode_forest_kernel(st, out, start, nbrs, boundary, parent, rank, k):
                     found = True
         if not found:
             enc_below(st, out, p, n)
-        node[_NODE_WIDTH * v + _UF] = p
+        uf[v] = p
         next_sibling[v] = first_child[p]
         first_child[p] = v
     return enc_finish(st, out)
@@ -431,20 +448,20 @@ def decode_forest_kernel(st, data, start, nbrs, boundary, k, parent, rank):
     for s in range(n_buckets):
         if free[s] != 0:
             return False  # fewer merges than the header says
-    node, first_child, next_sibling, cand0, count0, cand1, count1 = _replay_state(n)
+    uf, first_child, next_sibling, mark, cand0, count0, cand1, count1 = _replay_state(n)
     for r in range(k):
         v = of_rank[r]
-        m0 = _gather_candidates(start, nbrs, node, v, r, 0, first_child, next_sibling, cand0, count0)
+        m0 = _tier0(start, nbrs, uf, v, r, mark, cand0, count0)
         p = _dec_parent(st, data, probs, 0, cand0, count0, m0)
         if p < 0:
-            m1 = _gather_candidates(start, nbrs, node, v, r, 1, first_child, next_sibling, cand1, count1)
+            m1 = _tier1(start, nbrs, uf, v, r, first_child, next_sibling, mark, cand0, m0, cand1, count1)
             p = _dec_parent(st, data, probs, 1, cand1, count1, m1)
             if p < 0:
                 p = dec_below(st, data, n)
         if dec_failed(st) or p == v or rank[p] <= r:
             return False  # the parent must still be alive when v merges into it
         parent[v] = p
-        node[_NODE_WIDTH * v + _UF] = p
+        uf[v] = p
         next_sibling[v] = first_child[p]
         first_child[p] = v
     return True

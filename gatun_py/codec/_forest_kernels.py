@@ -194,28 +194,6 @@ def _sort_candidates(cand, count, m):
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def _tally_short(start, nbrs, uf, v, cand, count):
-    """Tier 0 of v's merge when v has at most ``_SHORT_ROW`` neighbours: the live representatives
-    of its neighbours (minus v) counted in ``cand``/``count`` by a search of the short list itself,
-    which stays in the first-level cache (a per-vertex table would cost a cache miss per
-    neighbour). Returns their number."""
-    m = 0
-    for i in range(start[v], start[v + 1]):
-        x = _find(uf, nbrs[i])
-        if x == v:
-            continue
-        j = 0
-        while j < m and cand[j] != x:
-            j += 1
-        if j == m:
-            cand[m] = x
-            count[m] = 0
-            m += 1
-        count[j] += 1
-    return m
-
-
-@njit(cache=True, nogil=True, _nrt=False)
 def _tally_row(start, nbrs, uf, u, v, stamp, mark, cand, count, m):
     """Count the live representatives of u's neighbours into the candidates ``cand[:m]`` (distinct,
     in order of appearance) and their ``count``, leaving out v and the vertices of an earlier list.
@@ -242,9 +220,24 @@ def _tier0(start, nbrs, uf, v, r, mark, cand, count):
     """Tier 0 of the merge of rank ``r`` (of v): the live representatives of v's neighbours, minus
     v, in ``cand``, with in ``count`` how many of the neighbours lead to each; unordered (see
     :func:`_candidate_at` for the order). Returns their number."""
-    if start[v + 1] - start[v] <= _SHORT_ROW:
-        return _tally_short(start, nbrs, uf, v, cand, count)
-    return _tally_row(start, nbrs, uf, v, v, 2 * r + 1, mark, cand, count, 0)
+    if start[v + 1] - start[v] > _SHORT_ROW:
+        return _tally_row(start, nbrs, uf, v, v, 2 * r + 1, mark, cand, count, 0)
+    # a short row: the list itself is searched, which stays in the first-level cache (the
+    # per-vertex table would cost a cache miss per neighbour)
+    m = 0
+    for i in range(start[v], start[v + 1]):
+        x = _find(uf, nbrs[i])
+        if x == v:
+            continue
+        j = 0
+        while j < m and cand[j] != x:
+            j += 1
+        if j == m:
+            cand[m] = x
+            count[m] = 0
+            m += 1
+        count[j] += 1
+    return m
 
 
 @njit(cache=True, nogil=True, _nrt=False)

@@ -365,22 +365,11 @@ def encode_forest_kernel(st, out, start, nbrs, boundary, parent, rank, k):
     for r in range(k):
         v = of_rank[r]
         p = parent[v]
-        found = False
         m0 = _tier0(start, nbrs, uf, v, r, mark, cand0, count0)
-        if m0 > 0:
-            idx = _index_of(cand0, count0, m0, p)
-            enc_bit(st, out, probs, _flag_context(0, m0), 1 if idx >= 0 else 0)
-            if idx >= 0:
-                _enc_index(st, out, probs, 0, m0, idx)
-                found = True
+        found = _enc_parent(st, out, probs, 0, cand0, count0, m0, p)
         if not found:
             m1 = _tier1(start, nbrs, uf, v, r, first_child, next_sibling, mark, cand0, m0, cand1, count1)
-            if m1 > 0:
-                idx = _index_of(cand1, count1, m1, p)
-                enc_bit(st, out, probs, _flag_context(1, m1), 1 if idx >= 0 else 0)
-                if idx >= 0:
-                    _enc_index(st, out, probs, 1, m1, idx)
-                    found = True
+            found = _enc_parent(st, out, probs, 1, cand1, count1, m1, p)
         if not found:
             enc_below(st, out, p, n)
         uf[v] = p
@@ -390,11 +379,20 @@ def encode_forest_kernel(st, out, start, nbrs, boundary, parent, rank, k):
 
 
 @njit(cache=True)
-def _enc_index(st, out, probs, tier, m, idx):
+def _enc_parent(st, out, probs, tier, cand, count, m, p):
+    """Code whether parent ``p`` is in a tier's list ``cand[:m]`` and, if so, its index there
+    (nothing for an empty list). Returns whether it was."""
+    if m == 0:
+        return False
+    idx = _index_of(cand, count, m, p)
+    enc_bit(st, out, probs, _flag_context(tier, m), 1 if idx >= 0 else 0)
+    if idx < 0:
+        return False
     if m <= SMALL_LIST:
         enc_sym(st, out, probs, _index_base(tier, m), 5, idx)
     else:
         enc_below(st, out, idx, m)
+    return True
 
 
 @njit(cache=True, nogil=True, _nrt=False)

@@ -64,7 +64,9 @@ def adjacency(tets, n):
             inc[fill[a]] = t
             fill[a] += 1
     start = np.empty(n + 1, np.int64)
-    nbrs = np.empty(max(1, 12 * m), np.int32)
+    # every incidence lists 3 neighbours, and a row also writes (without counting) the vertex
+    # itself one slot past the last counted entry: 12m + 1 slots
+    nbrs = np.empty(12 * m + 1, np.int32)
     seen_by = np.full(n, -1, np.int32)
     out = 0
     for v in range(n):

@@ -193,12 +193,15 @@ def test_decode_kernels_release_the_gil():
 
 
 def test_adjacency_rows_are_the_distinct_neighbours():
-    """The CSR adjacency (rows in no set order) against Python sets, on a mesh and on tets that
-    list a pair in many tets (a fan around one vertex)."""
+    """The CSR adjacency (rows in no set order) against Python sets, on a mesh, on tets that list
+    a pair in many tets (a fan around one vertex) and on disjoint tets (run the tests with
+    NUMBA_BOUNDSCHECK=1 and a fresh NUMBA_CACHE_DIR to check the kernels' indexing too)."""
     from gatun_py.codec._forest_kernels import adjacency
 
     fan = np.array([[0, i, i + 1, i + 2] for i in range(1, 60)], np.int32)
-    for tets, n in ((np.asarray(delaunay_mesh(80, 3).tets, np.int32), 80), (fan, 62), (np.zeros((0, 4), np.int32), 5)):
+    disjoint = np.arange(8, dtype=np.int32).reshape(2, 4)  # every slot of the row buffer used (12 per tet)
+    for tets, n in ((np.asarray(delaunay_mesh(80, 3).tets, np.int32), 80), (fan, 62), (disjoint, 8),
+                    (np.zeros((0, 4), np.int32), 5)):
         start, nbrs = adjacency(tets, n)
         expect = [set() for _ in range(n)]
         for t in tets.tolist():

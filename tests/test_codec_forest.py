@@ -190,3 +190,62 @@ def test_decode_kernels_release_the_gil():
                _forest_kernels.adjacency, _forest_kernels.decode_forest_kernel]
     assert all(k.targetoptions.get("nogil") for k in kernels), [k.__name__ for k in kernels
                                                                if not k.targetoptions.get("nogil")]
+
+
+def test_adjacency_rows_are_the_distinct_neighbours():
+    """The CSR adjacency (rows in no set order) against Python sets, on a mesh, on tets that list
+    a pair in many tets (a fan around one vertex) and on disjoint tets (run the tests with
+    NUMBA_BOUNDSCHECK=1 and a fresh NUMBA_CACHE_DIR to check the kernels' indexing too)."""
+    from gatun_py.codec._forest_kernels import adjacency
+
+    fan = np.array([[0, i, i + 1, i + 2] for i in range(1, 60)], np.int32)
+    disjoint = np.arange(8, dtype=np.int32).reshape(2, 4)  # every slot of the row buffer used (12 per tet)
+    for tets, n in ((np.asarray(delaunay_mesh(80, 3).tets, np.int32), 80), (fan, 62), (disjoint, 8),
+                    (np.zeros((0, 4), np.int32), 5)):
+        start, nbrs = adjacency(tets, n)
+        expect = [set() for _ in range(n)]
+        for t in tets.tolist():
+            for a in t:
+                expect[a].update(b for b in t if b != a)
+        assert start.shape == (n + 1,) and start[0] == 0 and start[-1] == len(nbrs)
+        for v in range(n):
+            row = nbrs[start[v]:start[v + 1]].tolist()
+            assert len(row) == len(set(row)) and set(row) == expect[v]
+
+
+def test_candidate_order_kernels_match_a_sort():
+    """The replay's selection of the idx-th candidate (a partial selection sort, or a full sort from
+    index 8) and the encoder's index of a parent agree with sorting by (count descending, id)."""
+    from gatun_py.codec._forest_kernels import _candidate_at, _index_of
+
+    rng = np.random.default_rng(1)
+    for m in (1, 2, 5, 9, 31, 33, 200):
+        cand0 = rng.permutation(10 * m)[:m].astype(np.int32)
+        count0 = rng.integers(1, 4, m).astype(np.int32)
+        order = sorted(range(m), key=lambda i: (-count0[i], cand0[i]))
+        for idx in range(m):
+            assert _index_of(cand0, count0, m, cand0[order[idx]]) == idx
+            cand, count = cand0.copy(), count0.copy()
+            assert _candidate_at(cand, count, m, idx) == cand0[order[idx]]
+            assert sorted(zip(cand.tolist(), count.tolist())) == sorted(zip(cand0.tolist(), count0.tolist()))
+        assert _index_of(cand0, count0, m, 10 * m) == -1
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_long_candidate_lists_match_reference(seed):
+    """A fan (one vertex with 70 neighbours: tier 0 counted with the per-vertex table, not the
+    short search) and an arbitrary forest on a larger mesh (tier-1 lists past 32 entries: uniform
+    indices, and indices from 8 on: the full sort) give the reference's bytes and round-trip."""
+    fan = np.array([[0, i, i + 1, i + 2] for i in range(1, 71)], np.int32)
+    parent, rank = _random_forest(73, seed)
+    _round_trip(parent, rank, fan, 73)
+    # the fan's centre merged last, into a ring vertex: its whole star is tier 0
+    order = np.r_[np.arange(1, 72), 0]
+    rank = np.full(73, ROOT_RANK, np.int64)
+    rank[order] = np.arange(72)
+    parent = np.full(73, 72)
+    parent[72] = 72
+    _round_trip(parent, rank, fan, 73)
+    mesh = delaunay_mesh(300, seed)
+    parent, rank = _random_forest(mesh.n_points, seed + 10, 2)
+    _round_trip(parent, rank, mesh.tets, mesh.n_points)

@@ -3,8 +3,18 @@
 The encoder and the decoder share every model decision through the same helpers: the vertex
 adjacency of the level's mesh (:func:`adjacency`), the rank buckets (:func:`bucket_bounds`), the
 bucket context of a vertex from its already decoded neighbours (:func:`_bucket_context`) and the
-candidate parents of a merge (:func:`_candidates`). ``tests/naive_forest.py`` is the slow
-reference that produces the same bytes with Python sets and integers.
+candidate parents of a merge (:func:`_tier0`, :func:`_tier1`, ordered by :func:`_precedes`).
+``tests/naive_forest.py`` is the slow reference that produces the same bytes with Python sets and
+integers.
+
+Decode speed (the same bytes as the first kernels of format 3, about 1.3-1.5 times faster): the
+replay of the merges in rank order is memory-bound, so the kernels keep its working set small and
+its work proportional to what a merge needs: a candidate list is counted unordered (searching the
+short list itself, or with per-list stamps that need no reset) and only the decoded index is
+selected from it; tier 1 is built only after a tier-0 miss; the free ranks are one Fenwick tree
+per bucket; the adjacency comes from the vertex-to-tet incidence, rows unsorted. The small helpers
+are compiled without NRT (``_nrt=False``): they never allocate, and a call then skips the atomic
+reference counting of each array argument.
 """
 
 from __future__ import annotations
@@ -12,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .rangecoder import dec_below, dec_bit, dec_failed, dec_init, dec_sym, enc_below, enc_bit, enc_finish, enc_sym
+from .rangecoder import DEC_ERROR, dec_below, dec_bit, dec_failed, dec_init, dec_sym, enc_below, enc_bit, enc_finish, enc_sym
 
 ROOT_SYMBOL = 63  # bucket symbol of a vertex that is never merged
 BUCKET_BITS = 6
@@ -21,6 +31,7 @@ DEGREE_CLASSES = 7  # neighbour count // 4, capped: well-connected vertices merg
 N_BUCKET_CONTEXTS = (CONTEXT_CAP + 2) * 2 * DEGREE_CLASSES
 SMALL_LIST = 32  # candidate lists up to this long code the index with a model, longer ones uniformly
 FLAG_CONTEXTS = 16
+_SHORT_ROW = 32  # tier 0 of a vertex with at most this many neighbours is counted without a table
 # model layout: bucket symbols | "parent is in the list" flags | index symbols, per tier (2)
 _FLAG_BASE = N_BUCKET_CONTEXTS << BUCKET_BITS
 _INDEX_BASE = _FLAG_BASE + 2 * FLAG_CONTEXTS
@@ -29,41 +40,50 @@ MODEL_SIZE = _INDEX_BASE + 2 * (SMALL_LIST + 1) * SMALL_LIST
 
 @njit(cache=True, nogil=True)
 def adjacency(tets, n):
-    """Vertex neighbours of a tet mesh as CSR ``(start, nbrs)``, each row sorted and unique.
+    """Vertex neighbours of a tet mesh as CSR ``(start, nbrs)``, each row unique (in no set order:
+    every model decision of the coding is independent of the order inside a row).
 
     Ids are not checked here: the callers pass tets that the connectivity coder produced or
     checked (``0 <= id < n``).
     """
-    count = np.zeros(n + 1, np.int64)
-    for t in range(tets.shape[0]):
+    # vertex -> incident tets first (4 scattered writes per tet instead of 12 neighbour entries),
+    # then each vertex's row straight from its tets, a neighbour listed once (the tag says which
+    # vertex saw it last)
+    m = tets.shape[0]
+    inc_start = np.zeros(n + 1, np.int64)
+    for t in range(m):
         for i in range(4):
-            count[tets[t, i] + 1] += 3
-    start = np.cumsum(count)
-    fill = start[:-1].copy()
-    nbrs = np.empty(start[n], np.int32)
-    for t in range(tets.shape[0]):
+            inc_start[tets[t, i] + 1] += 1
+    for v in range(n):
+        inc_start[v + 1] += inc_start[v]
+    fill = inc_start[:-1].copy()
+    inc = np.empty(4 * m, np.int32)
+    for t in range(m):
         for i in range(4):
             a = tets[t, i]
-            for j in range(4):
-                if j != i:
-                    nbrs[fill[a]] = tets[t, j]
-                    fill[a] += 1
-    # deduplicate every row (a vertex is listed once per tet it shares), then sort the short
-    # unique row, compacting in place
+            inc[fill[a]] = t
+            fill[a] += 1
+    start = np.empty(n + 1, np.int64)
+    # every incidence lists 3 neighbours, and a row also writes (without counting) the vertex
+    # itself one slot past the last counted entry: 12m + 1 slots
+    nbrs = np.empty(12 * m + 1, np.int32)
+    seen_by = np.full(n, -1, np.int32)
     out = 0
-    row_start = np.zeros(n + 1, np.int64)
-    seen_by = np.full(n, -1, np.int64)
     for v in range(n):
-        row_start[v] = out
-        for i in range(start[v], start[v + 1]):
-            x = nbrs[i]
-            if seen_by[x] != v:
-                seen_by[x] = v
+        start[v] = out
+        seen_by[v] = v
+        for j in range(inc_start[v], inc_start[v + 1]):
+            t = inc[j]
+            for i in range(4):
+                x = tets[t, i]
+                # without a branch: a neighbour is new about one time in five, unpredictably
                 nbrs[out] = x
-                out += 1
-        _sort_small(nbrs[row_start[v]:out], out - row_start[v])
-    row_start[n] = out
-    return row_start, nbrs[:out].copy()
+                out += seen_by[x] != v
+                seen_by[x] = v
+    start[n] = out
+    # a view, not a copy: the untouched tail of the buffer is never paged in, and a copy would
+    # page in and write the rows a second time
+    return start, nbrs[:out]
 
 
 @njit(cache=True, nogil=True)
@@ -79,166 +99,243 @@ def bucket_bounds(n, k):
     return b[:nb + 1].copy()
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def _bucket_context(start, nbrs, boundary, v, symbol):
     """Context of v's bucket symbol: whether v is on the boundary, its degree class, and the
     smallest bucket symbol among its decoded (smaller-id) neighbours, capped (0: none)."""
     lowest = CONTEXT_CAP + 1
+    seen = False
     for i in range(start[v], start[v + 1]):
         u = nbrs[i]
-        if u >= v:
-            break  # rows are sorted
-        if symbol[u] < lowest:
-            lowest = symbol[u]
-    seen = 0 if start[v] == start[v + 1] or nbrs[start[v]] >= v else 1 + min(lowest, CONTEXT_CAP)
+        if u < v:
+            seen = True
+            if symbol[u] < lowest:
+                lowest = symbol[u]
     degree = start[v + 1] - start[v]
     own = (1 if boundary[v] else 0) * DEGREE_CLASSES + min(degree >> 2, DEGREE_CLASSES - 1)
-    return own * (CONTEXT_CAP + 2) + seen
+    return own * (CONTEXT_CAP + 2) + (1 + min(lowest, CONTEXT_CAP) if seen else 0)
+
+
+# Free ranks: one Fenwick tree of 0/1 counts per rank bucket, all in one array (bucket s's tree is
+# ``tree[bounds[s] + s : bounds[s + 1] + s + 1]``, 1-based inside), plus the free count of every
+# bucket. A rank's position among its bucket's free ranks then costs two walks over a tree of the
+# bucket's size, instead of four over the tree of all ranks.
 
 
 @njit(cache=True, nogil=True)
-def _fen_add(tree, i, delta):
+def _free_ranks(bounds):
+    """(tree, free count per bucket) with every rank of every bucket free."""
+    nb = bounds.shape[0] - 1
+    tree = np.empty(bounds[nb] + nb, np.int32)
+    free = np.empty(nb, np.int64)
+    for s in range(nb):
+        off = bounds[s] + s
+        size = bounds[s + 1] - bounds[s]
+        tree[off] = 0
+        for i in range(1, size + 1):
+            tree[off + i] = i & -i
+        free[s] = size
+    return tree, free
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _fen_take(tree, off, size, i):
+    """Mark position ``i`` (0-based) of the tree at ``off`` of ``size`` positions as taken."""
     i += 1
-    while i < tree.shape[0]:
-        tree[i] += delta
+    while i <= size:
+        tree[off + i] -= 1
         i += i & -i
 
 
-@njit(cache=True, nogil=True)
-def _fen_prefix(tree, i):
-    """Sum over positions [0, i)."""
+@njit(cache=True, nogil=True, _nrt=False)
+def _fen_prefix(tree, off, i):
+    """Free positions in [0, i) of the tree at ``off``."""
     s = 0
     while i > 0:
-        s += tree[i]
+        s += tree[off + i]
         i -= i & -i
     return s
 
 
-@njit(cache=True, nogil=True)
-def _fen_select(tree, t, high_bit):
-    """Smallest position p with prefix(p + 1) > t (t-th one, 0-based); counts are 0/1."""
+@njit(cache=True, nogil=True, _nrt=False)
+def _fen_select(tree, off, size, t):
+    """Position of the ``t``-th free position (0-based) of the tree at ``off`` of ``size`` positions."""
     pos = 0
-    step = high_bit
+    step = 1
+    while step * 2 <= size:
+        step *= 2
     while step > 0:
         nxt = pos + step
-        if nxt < tree.shape[0] and tree[nxt] <= t:
+        if nxt <= size and tree[off + nxt] <= t:
             pos = nxt
-            t -= tree[nxt]
+            t -= tree[off + nxt]
         step >>= 1
     return pos
 
 
-@njit(cache=True, nogil=True)
-def _free_ranks(k):
-    """Fenwick tree of k free ranks (all ones) and its highest power of two."""
-    tree = np.zeros(k + 1, np.int64)
-    for i in range(1, k + 1):
-        tree[i] = i & -i
-    high = 1
-    while high * 2 <= k:
-        high *= 2
-    return tree, high
-
-
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def _find(uf, x):
+    """Live representative of x (union-find with path halving)."""
     while uf[x] != x:
         uf[x] = uf[uf[x]]
         x = uf[x]
     return x
 
 
-@njit(cache=True, nogil=True)
-def _sort_small(a, m):
-    """Sort ``a[:m]`` in place (np.sort would allocate a copy per call)."""
-    # Shell sort (gaps 1, 4, 13, ...): insertion sort for the usual rows, and no quadratic blow-up
-    # for the long lists of a vertex that absorbed many others (np.sort would cost seconds of
-    # compilation on a cold first run)
+@njit(cache=True, nogil=True, _nrt=False)
+def _sort_candidates(cand, count, m):
+    """Sort ``cand[:m]`` (distinct ids) by ``count`` descending, then by id, in place."""
+    # Shell sort (gaps 1, 4, 13, ...): insertion sort for the usual short lists, and no quadratic
+    # blow-up for the long lists of a vertex that absorbed many others (np.argsort would allocate
+    # per call and cost seconds of compilation on a cold first run)
     gap = 1
     while gap < m // 3:
         gap = 3 * gap + 1
     while gap > 0:
         for i in range(gap, m):
-            x = a[i]
+            x = cand[i]
+            c = count[i]
             j = i - gap
-            while j >= 0 and a[j] > x:
-                a[j + gap] = a[j]
+            while j >= 0 and (count[j] < c or (count[j] == c and cand[j] > x)):  # x precedes j
+                cand[j + gap] = cand[j]
+                count[j + gap] = count[j]
                 j -= gap
-            a[j + gap] = x
+            cand[j + gap] = x
+            count[j + gap] = c
         gap //= 3
 
 
-@njit(cache=True, nogil=True)
-def _candidates(start, nbrs, uf, v, tier, first_child, next_sibling, exclude, out, count):
-    """Candidate parents of v's merge, written to ``out``; returns their number.
-
-    Tier 0: the live representatives of v's neighbours. Tier 1: those of the neighbours of v's
-    children (vertices merged into v before), minus tier 0's (``exclude[:]`` marks tier 0's then).
-    v itself is never a candidate. Order: by how many of the listed neighbours lead to the
-    candidate (most first: the merge target usually shares the most of v's star), then by id.
-    """
-    m = 0
-    if tier == 0:
-        for i in range(start[v], start[v + 1]):
-            out[m] = _find(uf, nbrs[i])
+@njit(cache=True, nogil=True, _nrt=False)
+def _tally_row(start, nbrs, uf, u, v, stamp, mark, cand, count, m):
+    """Count the live representatives of u's neighbours into the candidates ``cand[:m]`` (distinct,
+    in order of appearance) and their ``count``, leaving out v and the vertices of an earlier list.
+    Returns the new m. ``mark[2x]`` is the stamp of the list x was last counted in (a list has a
+    stamp of its own: no reset between lists), ``mark[2x + 1]`` its position there."""
+    for i in range(start[u], start[u + 1]):
+        x = _find(uf, nbrs[i])
+        if x == v:
+            continue
+        seen = mark[2 * x]
+        if seen == stamp:
+            count[mark[2 * x + 1]] += 1
+        elif seen < stamp - 1 or (stamp & 1) == 1:  # tier 1 (even stamps) skips tier 0's (stamp - 1)
+            mark[2 * x] = stamp
+            mark[2 * x + 1] = m
+            cand[m] = x
+            count[m] = 1
             m += 1
-    else:
-        c = first_child[v]
-        while c >= 0:
-            for i in range(start[c], start[c + 1]):
-                out[m] = _find(uf, nbrs[i])  # out holds every neighbour of every vertex: no overflow
-                m += 1
-            c = next_sibling[c]
-    _sort_small(out, m)
-    k = 0
-    i = 0
-    while i < m:
-        x = out[i]
-        j = i
-        while j < m and out[j] == x:
-            j += 1
-        if x != v and not (tier == 1 and exclude[x]):
-            out[k] = x
-            count[k] = j - i
-            k += 1
-        i = j
-    # stable insertion sort by count, descending
-    for i in range(1, k):
-        x = out[i]
-        c = count[i]
-        j = i - 1
-        while j >= 0 and count[j] < c:
-            out[j + 1] = out[j]
-            count[j + 1] = count[j]
-            j -= 1
-        out[j + 1] = x
-        count[j + 1] = c
-    return k
+    return m
 
 
-@njit(cache=True, nogil=True)
-def _clear_marks(start, nbrs, uf, v, exclude):
-    """Undo tier 0's marks in ``exclude`` (the representatives of v's neighbours)."""
+@njit(cache=True, nogil=True, _nrt=False)
+def _tier0(start, nbrs, uf, v, r, mark, cand, count):
+    """Tier 0 of the merge of rank ``r`` (of v): the live representatives of v's neighbours, minus
+    v, in ``cand``, with in ``count`` how many of the neighbours lead to each; unordered (see
+    :func:`_candidate_at` for the order). Returns their number."""
+    if start[v + 1] - start[v] > _SHORT_ROW:
+        return _tally_row(start, nbrs, uf, v, v, 2 * r + 1, mark, cand, count, 0)
+    # a short row: the list itself is searched, which stays in the first-level cache (the
+    # per-vertex table would cost a cache miss per neighbour)
+    m = 0
     for i in range(start[v], start[v + 1]):
-        exclude[_find(uf, nbrs[i])] = False
+        x = _find(uf, nbrs[i])
+        if x == v:
+            continue
+        j = 0
+        while j < m and cand[j] != x:
+            j += 1
+        if j == m:
+            cand[m] = x
+            count[m] = 0
+            m += 1
+        count[j] += 1
+    return m
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
+def _tier1(start, nbrs, uf, v, r, first_child, next_sibling, mark, cand0, m0, cand, count):
+    """Tier 1 of the merge of rank ``r`` (of v) after tier 0's ``cand0[:m0]``: the live
+    representatives of the neighbours of v's children (vertices merged into v before), minus v and
+    tier 0's, counted and unordered as :func:`_tier0`'s. Returns their number."""
+    for i in range(m0):  # tier 0's stamp, in case the short search counted it
+        mark[2 * cand0[i]] = 2 * r + 1
+    m = 0
+    c = first_child[v]
+    while c >= 0:
+        m = _tally_row(start, nbrs, uf, c, v, 2 * r + 2, mark, cand, count, m)
+        c = next_sibling[c]
+    return m
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _precedes(cand, count, i, j):
+    """Whether candidate i comes before candidate j: more listed neighbours lead to it (the merge
+    target usually shares the most of v's star), or as many and a smaller id."""
+    return count[i] > count[j] or (count[i] == count[j] and cand[i] < cand[j])
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _index_of(cand, count, m, p):
+    """Position of ``p`` in the ordered list ``cand[:m]``, or -1 when it is not listed."""
+    at = -1
+    for i in range(m):
+        if cand[i] == p:
+            at = i
+            break
+    if at < 0:
+        return -1
+    before = 0
+    for i in range(m):
+        if _precedes(cand, count, i, at):
+            before += 1
+    return before
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _candidate_at(cand, count, m, idx):
+    """The candidate at position ``idx < m`` of the ordered list (reorders ``cand[:m]``)."""
+    if idx >= 8:
+        _sort_candidates(cand, count, m)
+        return cand[idx]
+    for j in range(idx + 1):  # a partial selection sort: the usual index is 0 or 1
+        best = j
+        for i in range(j + 1, m):
+            if _precedes(cand, count, i, best):
+                best = i
+        cand[j], cand[best] = cand[best], cand[j]
+        count[j], count[best] = count[best], count[j]
+    return cand[idx]
+
+
+@njit(cache=True, nogil=True, _nrt=False)
 def _flag_context(tier, size):
     return _FLAG_BASE + tier * FLAG_CONTEXTS + (size if size < FLAG_CONTEXTS - 1 else FLAG_CONTEXTS - 1)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def _index_base(tier, size):
     return _INDEX_BASE + (tier * (SMALL_LIST + 1) + size) * SMALL_LIST
 
 
 @njit(cache=True, nogil=True)
-def _replay_state(n, n_nbrs):
+def _replay_state(n):
     """Scratch of the rank-order replay: union-find parents, children lists (first child, next
-    sibling), tier-0 marks, candidate ids and their counts (room for every adjacency entry)."""
-    return (np.arange(n), np.full(n, -1, np.int64), np.full(n, -1, np.int64), np.zeros(n, np.bool_),
-            np.empty(max(1, n_nbrs), np.int64), np.empty(max(1, n_nbrs), np.int64))
+    sibling), the candidate lists' stamps and positions (:func:`_tally_row`: 0 = never listed),
+    tier 0's and tier 1's candidates and counts (a tier lists distinct vertices: at most n)."""
+    uf = np.empty(n, np.int32)
+    for v in range(n):
+        uf[v] = v
+    size = max(1, n)
+    return (uf, np.full(n, -1, np.int32), np.full(n, -1, np.int32), np.zeros(2 * n, np.int32),
+            np.empty(size, np.int32), np.empty(size, np.int32), np.empty(size, np.int32), np.empty(size, np.int32))
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _bucket_of(bounds, r):
+    s = 0
+    while bounds[s + 1] <= r:
+        s += 1
+    return s
 
 
 @njit(cache=True)
@@ -247,56 +344,34 @@ def encode_forest_kernel(st, out, start, nbrs, boundary, parent, rank, k):
     n = parent.shape[0]
     probs = np.full(MODEL_SIZE, 1 << 14, np.uint16)
     bounds = bucket_bounds(n, k)
-    symbol = np.empty(n, np.int64)
-    tree, _ = _free_ranks(k)
+    symbol = np.empty(n, np.int8)  # bucket symbols are < 64
+    tree, free = _free_ranks(bounds)
     # pass 1, decode order: each vertex's rank bucket, then its place among the bucket's free ranks
     for v in range(n):
         r = rank[v]
-        if r >= k:
-            s = ROOT_SYMBOL
-        else:
-            s = 0
-            while bounds[s + 1] <= r:
-                s += 1
+        s = ROOT_SYMBOL if r >= k else _bucket_of(bounds, r)
         ctx = _bucket_context(start, nbrs, boundary, v, symbol)
         enc_sym(st, out, probs, ctx << BUCKET_BITS, BUCKET_BITS, s)
         symbol[v] = s
         if s != ROOT_SYMBOL:
-            lo = _fen_prefix(tree, bounds[s])
-            free = _fen_prefix(tree, bounds[s + 1]) - lo
-            enc_below(st, out, _fen_prefix(tree, r) - lo, free)
-            _fen_add(tree, r, -1)
+            off = bounds[s] + s
+            enc_below(st, out, _fen_prefix(tree, off, r - bounds[s]), free[s])
+            _fen_take(tree, off, bounds[s + 1] - bounds[s], r - bounds[s])
+            free[s] -= 1
     # pass 2, rank order: each merge's parent among candidates built from the mesh so far
     of_rank = np.empty(k, np.int64)
     for v in range(n):
         if rank[v] < k:
             of_rank[rank[v]] = v
-    uf, first_child, next_sibling, exclude, cand, cand_count = _replay_state(n, nbrs.shape[0])
+    uf, first_child, next_sibling, mark, cand0, count0, cand1, count1 = _replay_state(n)
     for r in range(k):
         v = of_rank[r]
         p = parent[v]
-        found = False
-        for tier in range(2):
-            m = _candidates(start, nbrs, uf, v, tier, first_child, next_sibling, exclude, cand, cand_count)
-            if tier == 0:
-                for i in range(m):
-                    exclude[cand[i]] = True
-            if m > 0:
-                idx = -1
-                for i in range(m):
-                    if cand[i] == p:
-                        idx = i
-                        break
-                enc_bit(st, out, probs, _flag_context(tier, m), 1 if idx >= 0 else 0)
-                if idx >= 0:
-                    if m <= SMALL_LIST:
-                        enc_sym(st, out, probs, _index_base(tier, m), 5, idx)
-                    else:
-                        enc_below(st, out, idx, m)
-                    found = True
-            if found:
-                break
-        _clear_marks(start, nbrs, uf, v, exclude)
+        m0 = _tier0(start, nbrs, uf, v, r, mark, cand0, count0)
+        found = _enc_parent(st, out, probs, 0, cand0, count0, m0, p)
+        if not found:
+            m1 = _tier1(start, nbrs, uf, v, r, first_child, next_sibling, mark, cand0, m0, cand1, count1)
+            found = _enc_parent(st, out, probs, 1, cand1, count1, m1, p)
         if not found:
             enc_below(st, out, p, n)
         uf[v] = p
@@ -305,9 +380,42 @@ def encode_forest_kernel(st, out, start, nbrs, boundary, parent, rank, k):
     return enc_finish(st, out)
 
 
+@njit(cache=True)
+def _enc_parent(st, out, probs, tier, cand, count, m, p):
+    """Code whether parent ``p`` is in a tier's list ``cand[:m]`` and, if so, its index there
+    (nothing for an empty list). Returns whether it was."""
+    if m == 0:
+        return False
+    idx = _index_of(cand, count, m, p)
+    enc_bit(st, out, probs, _flag_context(tier, m), 1 if idx >= 0 else 0)
+    if idx < 0:
+        return False
+    if m <= SMALL_LIST:
+        enc_sym(st, out, probs, _index_base(tier, m), 5, idx)
+    else:
+        enc_below(st, out, idx, m)
+    return True
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _dec_parent(st, data, probs, tier, cand, count, m):
+    """The parent a tier's list codes, or -1 (not in the list, or an index past its end)."""
+    if m == 0 or dec_bit(st, data, probs, _flag_context(tier, m)) == 0:
+        return -1
+    if m <= SMALL_LIST:
+        idx = dec_sym(st, data, probs, _index_base(tier, m), 5)
+    else:
+        idx = dec_below(st, data, m)
+    if idx >= m:
+        st[DEC_ERROR] = 1  # a damaged stream: only 5-bit symbols can point past a short list
+        return -1
+    return _candidate_at(cand, count, m, idx)
+
+
 @njit(cache=True, nogil=True)
 def decode_forest_kernel(st, data, start, nbrs, boundary, k, parent, rank):
-    """Inverse of :func:`encode_forest_kernel`: fills ``parent`` and ``rank`` (roots: ``rank = k``).
+    """Inverse of :func:`encode_forest_kernel`: fills ``parent`` and ``rank`` (int32; roots:
+    ``rank = k``).
 
     Returns False on a damaged stream (then the arrays are garbage but every index stayed in
     bounds); the caller also checks the decoder state and the forest itself.
@@ -317,56 +425,42 @@ def decode_forest_kernel(st, data, start, nbrs, boundary, k, parent, rank):
     probs = np.full(MODEL_SIZE, 1 << 14, np.uint16)
     bounds = bucket_bounds(n, k)
     n_buckets = bounds.shape[0] - 1
-    symbol = np.empty(n, np.int64)
-    tree, high = _free_ranks(k)
-    of_rank = np.full(max(k, 1), -1, np.int64)
+    symbol = np.empty(n, np.int8)  # bucket symbols are < 64
+    tree, free = _free_ranks(bounds)
+    of_rank = np.full(max(k, 1), -1, np.int32)
     for v in range(n):
         ctx = _bucket_context(start, nbrs, boundary, v, symbol)
         s = dec_sym(st, data, probs, ctx << BUCKET_BITS, BUCKET_BITS)
-        if dec_failed(st):
-            return False
         symbol[v] = s
         if s == ROOT_SYMBOL:
             rank[v] = k
             parent[v] = v
             continue
-        if s >= n_buckets:
+        if s >= n_buckets or free[s] <= 0:
             return False
-        lo = _fen_prefix(tree, bounds[s])
-        free = _fen_prefix(tree, bounds[s + 1]) - lo
-        if free <= 0:
+        size = bounds[s + 1] - bounds[s]
+        off = bounds[s] + s
+        pos = _fen_select(tree, off, size, dec_below(st, data, free[s]))
+        if dec_failed(st) or pos >= size:
             return False
-        r = _fen_select(tree, lo + dec_below(st, data, free), high)
-        if r >= k or of_rank[r] >= 0:
-            return False
-        _fen_add(tree, r, -1)
+        _fen_take(tree, off, size, pos)
+        free[s] -= 1
+        r = bounds[s] + pos
         rank[v] = r
         of_rank[r] = v
-    for r in range(k):
-        if of_rank[r] < 0:
+    for s in range(n_buckets):
+        if free[s] != 0:
             return False  # fewer merges than the header says
-    uf, first_child, next_sibling, exclude, cand, cand_count = _replay_state(n, nbrs.shape[0])
+    uf, first_child, next_sibling, mark, cand0, count0, cand1, count1 = _replay_state(n)
     for r in range(k):
         v = of_rank[r]
-        p = -1
-        for tier in range(2):
-            m = _candidates(start, nbrs, uf, v, tier, first_child, next_sibling, exclude, cand, cand_count)
-            if tier == 0:
-                for i in range(m):
-                    exclude[cand[i]] = True
-            if m > 0 and dec_bit(st, data, probs, _flag_context(tier, m)) == 1:
-                if m <= SMALL_LIST:
-                    idx = dec_sym(st, data, probs, _index_base(tier, m), 5)
-                else:
-                    idx = dec_below(st, data, m)
-                if idx >= m:
-                    return False
-                p = cand[idx]
-            if p >= 0:
-                break
-        _clear_marks(start, nbrs, uf, v, exclude)
+        m0 = _tier0(start, nbrs, uf, v, r, mark, cand0, count0)
+        p = _dec_parent(st, data, probs, 0, cand0, count0, m0)
         if p < 0:
-            p = dec_below(st, data, n)
+            m1 = _tier1(start, nbrs, uf, v, r, first_child, next_sibling, mark, cand0, m0, cand1, count1)
+            p = _dec_parent(st, data, probs, 1, cand1, count1, m1)
+            if p < 0:
+                p = dec_below(st, data, n)
         if dec_failed(st) or p == v or rank[p] <= r:
             return False  # the parent must still be alive when v merges into it
         parent[v] = p

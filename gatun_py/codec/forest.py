@@ -185,7 +185,12 @@ def decode_forest(data: bytes, n: int) -> tuple[np.ndarray, np.ndarray]:
     return parent, rank
 
 
+MAX_VERTICES = 1 << 30  # the replay's int32 list stamps reach 2n
+
+
 def _mesh_adjacency(tets, n: int):
+    if n >= MAX_VERTICES:
+        raise ValueError(f"a forest of {n} vertices: at most {MAX_VERTICES - 1}")
     tets = np.ascontiguousarray(tets, dtype=np.int32).reshape(-1, 4)
     if tets.size and (tets.min() < 0 or tets.max() >= n):
         raise ValueError("tet ids out of range")
@@ -280,19 +285,20 @@ def decode_forest_on_mesh(data: bytes, tets: np.ndarray, n: int, *, boundary) ->
         if len(data) != _HEADER.size:
             raise CorruptFileError("merge forest: trailing bytes")
         return np.arange(n, dtype=np.int32), np.full(n, ROOT_RANK, np.int32)
+    if n >= MAX_VERTICES:
+        raise CorruptFileError(f"merge forest: {n} vertices, at most {MAX_VERTICES - 1}")
     try:
         start, nbrs = _mesh_adjacency(tets, n)
     except ValueError:
         raise CorruptFileError("merge forest: the mesh's tet ids are out of range") from None
     body = np.frombuffer(data, np.uint8, offset=_HEADER.size)
-    parent = np.empty(n, np.int64)
-    rank = np.empty(n, np.int64)
+    parent = np.empty(n, np.int32)
+    rank = np.empty(n, np.int32)
     st = dec_state()
     ok = FK.decode_forest_kernel(st, body, start, nbrs, _boundary_mask(boundary, n), k, parent, rank)
     if not ok:
         raise CorruptFileError("merge forest: the coded data is damaged or truncated")
     check_decoder(st, body, "merge forest")
-    rank = np.where(rank == k, ROOT_RANK, rank).astype(np.int32)
-    parent = parent.astype(np.int32)
+    rank[rank == k] = ROOT_RANK
     check_forest(parent, rank)
     return parent, rank

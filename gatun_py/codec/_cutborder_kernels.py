@@ -1147,6 +1147,7 @@ def _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets, scr
 CLS_VD_DIV, CLS_VD_LEVELS = 3, 16  # decoded tets on the candidate, /3, capped
 CLS_EV_DIV, CLS_EV_LEVELS = 6, 16  # decoded tets on the ends of its fullest gate edge, /6, capped
 N_CLASS = 3 * CLS_VD_LEVELS * 2 * CLS_EV_LEVELS
+VDEC_MAX = 255
 RANK_SHIFT = 5  # adaptation rate of a class's probability (as the range coder's models)
 RANK_INIT = (rc.PROB_ONE // 4, (rc.PROB_ONE * 15) // 16, rc.PROB_ONE - 64)  # by score 1, 2, 3
 P_LEVELS = 8  # a candidate probability's quantisation in the index context (+1: no candidate)
@@ -1168,14 +1169,19 @@ def new_rank_model() -> np.ndarray:
 
 
 @njit(cache=True, _nrt=False)
-def _rank_candidates2(cand, cscore, cseq, cface, n1, vdec, nbv, a, b, c, rankp, perm, ccls, prev_esc):
-    """Class (``ccls``) of each gathered candidate and their ranking (``perm``: gather positions,
-    best first, by class probability, then score, then age). Returns the index symbol's context."""
+def _rank_candidates2(cand, cscore, cseq, cface, n1, vdec, nbv, a, b, c, rankp, ckey, ccls, prev_esc):
+    """Class (``ccls``) and ranking key (``ckey``: the class probability, then the score, then the
+    age; distinct, higher = better) of each gathered candidate. Returns (the index symbol's context,
+    gather position of the best candidate, of the second best; -1 where there is none). The
+    decoder needs the full order only for an index past 1 (:func:`_nth_candidate`)."""
     va = np.int64(vdec[a])
     vb = np.int64(vdec[b])
     vc = np.int64(vdec[c])
+    best = -1
+    second = -1
+    kbest = np.int64(-1)
+    ksecond = np.int64(-1)
     for i in range(n1):
-        x = cand[i]
         ev = np.int64(0)
         if cface[i, EDGE_BC] != -1:
             ev = vb + vc
@@ -1186,44 +1192,66 @@ def _rank_candidates2(cand, cscore, cseq, cface, n1, vdec, nbv, a, b, c, rankp, 
         sc = cscore[i]
         if sc > 3:
             sc = 3
-        q = np.int64(vdec[x]) // CLS_VD_DIV
+        q = np.int64(vdec[cand[i]]) // CLS_VD_DIV
         if q >= CLS_VD_LEVELS:
             q = CLS_VD_LEVELS - 1
         e = ev // CLS_EV_DIV
         if e >= CLS_EV_LEVELS:
             e = CLS_EV_LEVELS - 1
-        cls = (((sc - 1) * CLS_VD_LEVELS + q) * 2 + (1 if x < nbv else 0)) * CLS_EV_LEVELS + e
+        cls = (((sc - 1) * CLS_VD_LEVELS + q) * 2 + (1 if cand[i] < nbv else 0)) * CLS_EV_LEVELS + e
         ccls[i] = cls
-        p = rankp[cls]
-        j = i
-        while j > 0:
-            k = perm[j - 1]
-            pk = rankp[ccls[k]]
-            if pk > p or (pk == p and (cscore[k] > cscore[i] or (cscore[k] == cscore[i] and cseq[k] < cseq[i]))):
-                break
-            perm[j] = k
-            j -= 1
-        perm[j] = i
+        # sequence numbers are below 2**31 and distinct per face, hence per candidate
+        key = (np.int64(rankp[cls]) << 40) | (sc << 32) | (MAX_SEQ - cseq[i])
+        ckey[i] = key
+        if key > kbest:
+            second = best
+            ksecond = kbest
+            best = i
+            kbest = key
+        elif key > ksecond:
+            second = i
+            ksecond = key
     q0 = 0
     q1 = 0
-    if n1 > 0:
-        q0 = 1 + (np.int64(rankp[ccls[perm[0]]]) * P_LEVELS >> rc.PROB_BITS)
-    if n1 > 1:
-        q1 = 1 + (np.int64(rankp[ccls[perm[1]]]) * P_LEVELS >> rc.PROB_BITS)
+    if best >= 0:
+        q0 = 1 + (np.int64(rankp[ccls[best]]) * P_LEVELS >> rc.PROB_BITS)
+    if second >= 0:
+        q1 = 1 + (np.int64(rankp[ccls[second]]) * P_LEVELS >> rc.PROB_BITS)
     nn = n1 if n1 < 4 else 4
-    return ((nn * (P_LEVELS + 1) + q0) * (P_LEVELS + 1) + q1) * 2 + prev_esc
+    return ((nn * (P_LEVELS + 1) + q0) * (P_LEVELS + 1) + q1) * 2 + prev_esc, best, second
 
 
 @njit(cache=True, _nrt=False)
-def _learn_ranks2(rankp, ccls, n1, hit):
-    """After a tet: the class of gather position ``hit`` (-1: none) was the fourth vertex, the
-    others were not."""
+def _rank_of(ckey, n1, i):
+    """Rank (0 = best) of gather position ``i`` among the candidates' keys."""
+    r = 0
+    for j in range(n1):
+        if ckey[j] > ckey[i]:
+            r += 1
+    return r
+
+
+@njit(cache=True, _nrt=False)
+def _nth_candidate(ckey, n1, r):
+    """Gather position of the candidate of rank ``r`` (< n1)."""
     for i in range(n1):
-        p = np.int64(rankp[ccls[i]])
-        if i == hit:
-            rankp[ccls[i]] = p + ((rc.PROB_ONE - p) >> RANK_SHIFT)
-        else:
+        if _rank_of(ckey, n1, i) == r:
+            return i
+    return -1
+
+
+@njit(cache=True, _nrt=False)
+def _learn_ranks2(rankp, ckey, ccls, n1, hit):
+    """After a tet: the class of gather position ``hit`` (-1: none) was the fourth vertex, the
+    others were not. Each update starts from the probability the ranking read (in ``ckey``), and
+    the hit's is written last: a class held by several candidates ends the same in any order."""
+    for i in range(n1):
+        if i != hit:
+            p = ckey[i] >> 40
             rankp[ccls[i]] = p - (p >> RANK_SHIFT)
+    if hit >= 0:
+        p = ckey[hit] >> 40
+        rankp[ccls[hit]] = p + ((rc.PROB_ONE - p) >> RANK_SHIFT)
 
 
 @njit(cache=True, _nrt=False)
@@ -1241,24 +1269,25 @@ def _order_by_decoded(c2, n2, vdec):
 
 @njit(cache=True, _nrt=False)
 def _count_decoded(vdec, a, b, c, d):
-    vdec[a] += 1
-    vdec[b] += 1
-    vdec[c] += 1
-    vdec[d] += 1
+    """One more decoded tet on each of its vertices (uint8 counts, saturating: the classes look
+    no further than 47, and a byte per vertex keeps the counts in cache)."""
+    for v in (a, b, c, d):
+        if vdec[v] < VDEC_MAX:
+            vdec[v] += 1
 
 
 @njit(cache=True)
 def encode_tets2(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, syms, rankp, vdec):
     """:func:`encode_tets` with coding 2's ranking and case (c) order (same arguments, plus the
     class probabilities ``rankp`` from :func:`new_rank_model` and zeroed decoded-tet counts
-    ``vdec`` by decode id; ``syms`` holds each tet's rank in coding 2's order)."""
+    ``vdec`` (uint8) by decode id; ``syms`` holds each tet's rank in coding 2's order)."""
     m = tets.shape[0]
     probs = np.full(TM2_SIZE, rc.PROB_INIT, np.uint16)
     tvisited = np.zeros(m, np.bool_)
     cand = np.empty(MAX_C1, np.int64)
     cscore = np.empty(MAX_C1, np.int64)
     cseq = np.empty(MAX_C1, np.int64)
-    perm = np.empty(MAX_C1, np.int64)
+    ckey = np.empty(MAX_C1, np.int64)
     ccls = np.empty(MAX_C1, np.int64)
     c2 = np.empty(MAX_C2, np.int64)
     c2seq = np.empty(MAX_C2, np.int64)
@@ -1292,14 +1321,15 @@ def encode_tets2(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets,
         d = dec_of[do]
         n1 = _gather_face(B, s, cand, cscore, cseq, cface, cface_full)
         _remove(B, 3, s)
-        ctx = _rank_candidates2(cand, cscore, cseq, cface, n1, vdec, nv0, a, b, c, rankp, perm, ccls, prev_esc)
+        ctx, best, second = _rank_candidates2(cand, cscore, cseq, cface, n1, vdec, nv0, a, b, c, rankp, ckey, ccls,
+                                              prev_esc)
         sym = ESC
         hit = -1
         if d != -1:
             for i in range(n1):
-                if cand[perm[i]] == d:
-                    sym = i
-                    hit = perm[i]
+                if cand[i] == d:
+                    hit = i
+                    sym = _rank_of(ckey, n1, i)
                     break
         flip = _tet_flip(tets, t, ao, bo, co, do)
         rc.enc_sym(st, out, probs, TM2_C1 + ctx * 16, 4, sym)
@@ -1335,7 +1365,7 @@ def encode_tets2(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets,
             prev_esc = 1
         else:
             prev_esc = 0
-        _learn_ranks2(rankp, ccls, n1, hit)
+        _learn_ranks2(rankp, ckey, ccls, n1, hit)
         rc.enc_bit(st, out, probs, TM2_FLIP + prev_flip, flip)
         prev_flip = flip
         t1 = b if flip else c
@@ -1383,18 +1413,18 @@ def _tet_flip(tets, t, ao, bo, co, do):
 def decode_tets2(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate, out_tets):
     """Resumable inverse of :func:`encode_tets2`: as :func:`decode_tets`, with the class
     probabilities ``rankp`` (:func:`new_rank_model`) and the decoded-tet counts ``vdec`` (int32
-    per vertex, zeros at the start) persisting between calls, ``nbv`` the boundary vertices."""
+    uint8 per vertex, zeros at the start) persisting between calls, ``nbv`` the boundary vertices."""
     cand = np.empty(MAX_C1, np.int64)
     cscore = np.empty(MAX_C1, np.int64)
     cseq = np.empty(MAX_C1, np.int64)
     c2 = np.empty(MAX_C2, np.int64)
     c2seq = np.empty(MAX_C2, np.int64)
     cface = np.empty((MAX_C1, 3), np.int64)
-    perm = np.empty(MAX_C1, np.int64)
+    ckey = np.empty(MAX_C1, np.int64)
     ccls = np.empty(MAX_C1, np.int64)
     cface_full = np.zeros(1, np.int64)
     return _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate, out_tets,
-                             (cand, cscore, cseq, c2, c2seq, cface, perm, ccls, cface_full))
+                             (cand, cscore, cseq, c2, c2seq, cface, ckey, ccls, cface_full))
 
 
 _rank_candidates2_inlined = njit(cache=True, _nrt=False, inline="always")(_rank_candidates2.py_func)
@@ -1403,7 +1433,7 @@ _rank_candidates2_inlined = njit(cache=True, _nrt=False, inline="always")(_rank_
 @njit(cache=True, nogil=True, _nrt=False)
 def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate, out_tets, scratch):
     """The loop of :func:`decode_tets2` (as :func:`_decode_tets_run`)."""
-    cand, cscore, cseq, c2, c2seq, cface, perm, ccls, cface_full = scratch
+    cand, cscore, cseq, c2, c2seq, cface, ckey, ccls, cface_full = scratch
     nv = tstate[0]
     done = tstate[1]
     prev_esc = tstate[2]
@@ -1443,8 +1473,8 @@ def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, ts
         cface_full[0] = 0
         n1 = _gather_face_inlined(B, s, cand, cscore, cseq, cface, cface_full)
         _remove(B, 3, s)
-        ctx = _rank_candidates2_inlined(cand, cscore, cseq, cface, n1, vdec, nbv, a, b, c, rankp, perm, ccls,
-                                        prev_esc)
+        ctx, best, second = _rank_candidates2_inlined(cand, cscore, cseq, cface, n1, vdec, nbv, a, b, c, rankp,
+                                                      ckey, ccls, prev_esc)
         sym = rc.dec_sym(st, data, probs, TM2_C1 + ctx * 16, 4)
         d = -1
         hit = -1
@@ -1452,7 +1482,7 @@ def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, ts
             if sym >= n1:
                 status = ST_ERROR
                 break
-            hit = perm[sym]
+            hit = best if sym == 0 else (second if sym == 1 else _nth_candidate(ckey, n1, sym))
             d = cand[hit]
             prev_esc = 0
         else:
@@ -1493,7 +1523,7 @@ def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, ts
         if d == a or d == b or d == c:
             status = ST_ERROR
             break
-        _learn_ranks2(rankp, ccls, n1, hit if sym < ESC else -1)
+        _learn_ranks2(rankp, ckey, ccls, n1, hit if sym < ESC else -1)
         flip = rc.dec_bit(st, data, probs, TM2_FLIP + prev_flip)
         prev_flip = flip
         t1 = b if flip else c

@@ -77,7 +77,10 @@ class EncodedConnectivity:
     symbols : (n_tets,) int16
         Each tet's case, for statistics and tests: the index of its fourth vertex among the
         edge-adjacent candidates (paper case a), or 15 + 0 / 1 / 2 for a new vertex (b), an index
-        into the vertex-adjacent list (c), a vertex-table index (d).
+        into the vertex-adjacent list (c), a vertex-table index (d); coding 2 ranks the candidates
+        its own way (:mod:`gatun_py.codec._cutborder_kernels`).
+    coding : int
+        The tet stream's coding (1 or 2).
     """
 
     boundary_code: bytes
@@ -93,6 +96,7 @@ class EncodedConnectivity:
     tets: np.ndarray
     peak_border: int
     symbols: np.ndarray
+    coding: int = 1
 
 
 def _sorted_halfedges(faces: np.ndarray):
@@ -198,7 +202,7 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None, *,
             res = K.encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nbv, out_tets, symbols)
         else:
             res = K.encode_tets2(st, out, tets, nbr, tgt, B, dec_of, order, pred, nbv, out_tets, symbols,
-                                 K.new_rank_model(), np.zeros(max(n, 1), np.int32))
+                                 K.new_rank_model(), np.zeros(max(n, 1), np.uint8))
         run_tets.result = res
         run_tets.peak = int(B[3][K.BS_PEAK])
 
@@ -215,7 +219,7 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None, *,
         boundary_code=boundary_code, tet_code=tet_code, n_points=n, n_tets=m, n_boundary_faces=nf,
         n_boundary_vertices=int(nbv), n_referenced=int(nref), vertex_order=order[:n].copy(),
         predictors=pred[:n].copy(), boundary=out_faces, tets=out_tets, peak_border=run_tets.peak,
-        symbols=symbols,
+        symbols=symbols, coding=coding,
     )
 
 
@@ -311,7 +315,7 @@ class ConnectivityDecoder:
         else:  # the class probabilities and decoded-tet counts persist between batches too
             self._probs = np.full(K.TM2_SIZE, rc.PROB_INIT, np.uint16)
             self._rankp = K.new_rank_model()
-            self._vdec = np.zeros(max(self.n_points, 1), np.int32)
+            self._vdec = np.zeros(max(self.n_points, 1), np.uint8)
         if self.n_tets:
             rc.dec_init(self._tst, self._tdata)
         elif len(self._tdata):

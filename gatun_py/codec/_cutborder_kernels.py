@@ -917,19 +917,7 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
                     sym = i
                     break
         # orientation: (a, c, b, d) unless the mesh is folded here (zero-volume tets)
-        w0 = tets[t, 0]
-        w1 = tets[t, 1]
-        w2 = tets[t, 2]
-        inv = 0
-        for i in range(4):
-            wi = ao if i == 0 else (co if i == 1 else (bo if i == 2 else do))
-            pi = 0 if wi == w0 else (1 if wi == w1 else (2 if wi == w2 else 3))
-            for j in range(i + 1, 4):
-                wj = ao if j == 0 else (co if j == 1 else (bo if j == 2 else do))
-                pj = 0 if wj == w0 else (1 if wj == w1 else (2 if wj == w2 else 3))
-                if pi > pj:
-                    inv += 1
-        flip = inv & 1
+        flip = _tet_flip(tets, t, ao, bo, co, do)
         rc.enc_sym(st, out, probs, TM_C1 + ctx * 16, 4, sym)
         syms[done] = sym
         if sym == ESC:

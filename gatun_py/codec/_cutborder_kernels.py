@@ -1136,6 +1136,9 @@ CLS_VD_DIV, CLS_VD_LEVELS = 3, 16  # decoded tets on the candidate, /3, capped
 CLS_EV_DIV, CLS_EV_LEVELS = 6, 16  # decoded tets on the ends of its fullest gate edge, /6, capped
 N_CLASS = 3 * CLS_VD_LEVELS * 2 * CLS_EV_LEVELS
 VDEC_MAX = 255
+# the class's levels of a count (division by a constant, as tables: one load instead)
+VD_LEVEL = np.minimum(np.arange(VDEC_MAX + 1) // CLS_VD_DIV, CLS_VD_LEVELS - 1).astype(np.int64)
+EV_LEVEL = np.minimum(np.arange(CLS_EV_DIV * CLS_EV_LEVELS) // CLS_EV_DIV, CLS_EV_LEVELS - 1).astype(np.int64)
 RANK_SHIFT = 5  # adaptation rate of a class's probability (as the range coder's models)
 RANK_INIT = (rc.PROB_ONE // 4, (rc.PROB_ONE * 15) // 16, rc.PROB_ONE - 64)  # by score 1, 2, 3
 P_LEVELS = 8  # a candidate probability's quantisation in the index context (+1: no candidate)
@@ -1169,36 +1172,29 @@ def _rank_candidates2(cand, cscore, cseq, cface, n1, vdec, nbv, a, b, c, rankp, 
     second = -1
     kbest = np.int64(-1)
     ksecond = np.int64(-1)
+    ev_bc = vb + vc
+    ev_ab = va + vb
+    ev_ac = va + vc
     for i in range(n1):
-        ev = np.int64(0)
-        if cface[i, EDGE_BC] != -1:
-            ev = vb + vc
-        if cface[i, EDGE_AB] != -1 and va + vb > ev:
-            ev = va + vb
-        if cface[i, EDGE_AC] != -1 and va + vc > ev:
-            ev = va + vc
-        sc = cscore[i]
-        if sc > 3:
-            sc = 3
-        q = np.int64(vdec[cand[i]]) // CLS_VD_DIV
-        if q >= CLS_VD_LEVELS:
-            q = CLS_VD_LEVELS - 1
-        e = ev // CLS_EV_DIV
-        if e >= CLS_EV_LEVELS:
-            e = CLS_EV_LEVELS - 1
-        cls = (((sc - 1) * CLS_VD_LEVELS + q) * 2 + (1 if cand[i] < nbv else 0)) * CLS_EV_LEVELS + e
+        # branch-free: which gate edges hold the candidate is data, not a predictable pattern
+        e0 = ev_bc if cface[i, EDGE_BC] != -1 else 0
+        e1 = ev_ab if cface[i, EDGE_AB] != -1 else 0
+        e2 = ev_ac if cface[i, EDGE_AC] != -1 else 0
+        ev = max(e0, max(e1, e2))
+        sc = min(cscore[i], 3)
+        x = cand[i]
+        cls = (((sc - 1) * CLS_VD_LEVELS + VD_LEVEL[vdec[x]]) * 2 + (1 if x < nbv else 0)) * CLS_EV_LEVELS \
+            + (EV_LEVEL[ev] if ev < EV_LEVEL.shape[0] else CLS_EV_LEVELS - 1)
         ccls[i] = cls
         # sequence numbers are below 2**31 and distinct per face, hence per candidate
         key = (np.int64(rankp[cls]) << 40) | (sc << 32) | (MAX_SEQ - cseq[i])
         ckey[i] = key
-        if key > kbest:
-            second = best
-            ksecond = kbest
-            best = i
-            kbest = key
-        elif key > ksecond:
-            second = i
-            ksecond = key
+        gt1 = key > kbest
+        gt2 = key > ksecond
+        second = best if gt1 else (i if gt2 else second)
+        ksecond = kbest if gt1 else (key if gt2 else ksecond)
+        best = i if gt1 else best
+        kbest = key if gt1 else kbest
     q0 = 0
     q1 = 0
     if best >= 0:
@@ -1233,10 +1229,9 @@ def _learn_ranks2(rankp, ckey, ccls, n1, hit):
     """After a tet: the class of gather position ``hit`` (-1: none) was the fourth vertex, the
     others were not. Each update starts from the probability the ranking read (in ``ckey``), and
     the hit's is written last: a class held by several candidates ends the same in any order."""
-    for i in range(n1):
-        if i != hit:
-            p = ckey[i] >> 40
-            rankp[ccls[i]] = p - (p >> RANK_SHIFT)
+    for i in range(n1):  # the hit's miss update too: overwritten below
+        p = ckey[i] >> 40
+        rankp[ccls[i]] = p - (p >> RANK_SHIFT)
     if hit >= 0:
         p = ckey[hit] >> 40
         rankp[ccls[hit]] = p + ((rc.PROB_ONE - p) >> RANK_SHIFT)
@@ -1259,9 +1254,10 @@ def _order_by_decoded(c2, n2, vdec):
 def _count_decoded(vdec, a, b, c, d):
     """One more decoded tet on each of its vertices (uint8 counts, saturating: the classes look
     no further than 47, and a byte per vertex keeps the counts in cache)."""
-    for v in (a, b, c, d):
-        if vdec[v] < VDEC_MAX:
-            vdec[v] += 1
+    vdec[a] += vdec[a] < VDEC_MAX
+    vdec[b] += vdec[b] < VDEC_MAX
+    vdec[c] += vdec[c] < VDEC_MAX
+    vdec[d] += vdec[d] < VDEC_MAX
 
 
 @njit(cache=True)

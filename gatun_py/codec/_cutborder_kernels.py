@@ -1467,6 +1467,9 @@ def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, ts
                 status = ST_ERROR
                 break
             hit = best if sym == 0 else (second if sym == 1 else _nth_candidate(ckey, n1, sym))
+            if hit < 0:  # no candidate of that rank (keys are distinct in any border: never)
+                status = ST_ERROR
+                break
             d = cand[hit]
             prev_esc = 0
         else:

@@ -327,10 +327,12 @@ CODING2_NOTE = (
     ' 2.1 bits ordered by decoded tets instead of age). It takes the flanges to 1.73 and 1.59 bits/tet '
     '(target ≤ 2.0 and stretch 1.8 met) and the grid samples to 0.28–0.78 bits/tet (post 1.56). Its '
     "decoder pays for it per tet: classifying, ranking and teaching the candidates' classes and the per-"
-    "vertex counts cost 1.3 × coding 1's connectivity decode time on the flanges and about 2 × on the "
-    "grids (where coding 1's loop is fastest); the whole-file rates above are format 5's (coding 2), "
-    "taken with a load average of 6–12 on 2 cores. Coding 1's decoder is unchanged (the format ≤ 4 "
-    'files).'
+    "vertex counts cost 1.15–1.25 × coding 1's connectivity decode time on the flanges and about 1.5 × on"
+    " the grids (where coding 1's loop is fastest; 2 × before the classification and the choice of the "
+    "best two went branch-free); the whole-file rates above are format 5's (coding 2), taken with a load "
+    'average of 6–12 on 2 cores. Against main as branched (format 4 file, coding 1), `decode_mesh` of '
+    'flange-1m costs 1.17 × (0.53 against 0.45 CPU s per decode: whole-process medians of 5 alternating '
+    "runs of 5 and of 1 decodes, differenced). Coding 1's decoder is unchanged (the format ≤ 4 files)."
 )
 
 

@@ -189,14 +189,27 @@ def naive_traversal_check(boundary, tets) -> None:
     assert not live, "faces left on T after the last tet"
 
 
-def naive_tet_symbols(boundary, tets, n_boundary_vertices) -> list:
+# coding 2's candidate classes (docs/format.md): decoded tets on the candidate / 3 and on the
+# ends of its fullest gate edge / 6, each capped at 15, the boundary flag and the score
+CODING2_PROB_ONE, CODING2_SHIFT, CODING2_INIT = 1 << 15, 5, {1: (1 << 15) // 4, 2: (15 << 15) // 16, 3: (1 << 15) - 64}
+
+
+def _coding2_class(score, decoded_x, edge_decoded, boundary_x):
+    q = min(decoded_x // 3, 15)
+    e = min(edge_decoded // 6, 15)
+    return (((min(score, 3) - 1) * 16 + q) * 2 + int(boundary_x)) * 16 + e
+
+
+def naive_tet_symbols(boundary, tets, n_boundary_vertices, coding=1) -> list:
     """The case of every tet (decode order, decode ids), recomputed from the paper's rules.
 
     Returns per tet: the rank of its fourth vertex among the apexes of faces of T adjacent to an
-    edge of the current face (ranked by how many of those faces contain it, then by the age of
-    the oldest), or 15 for a new vertex, 16 for a vertex of a face sharing only a vertex with the
-    current face, 17 for any other vertex; None where the kernel's list caps (15 / 64 entries)
-    make the case depend on list order.
+    edge of the current face, or 15 for a new vertex, 16 for a vertex of a face sharing only a
+    vertex with the current face, 17 for any other vertex; None where the kernel's list caps (15 /
+    64 entries) make the case depend on list order. Coding 1 ranks the candidates by how many of
+    those faces contain them, then by the age of the oldest; coding 2 first by its class's
+    adaptive probability of being the fourth vertex (learnt from the tets before; after a capped
+    list the learning depends on list order, so every later tet is None).
     """
     live: dict[frozenset, int] = {}
     by_vertex: dict[int, set] = {}
@@ -220,6 +233,9 @@ def naive_tet_symbols(boundary, tets, n_boundary_vertices) -> list:
         add(frozenset(int(x) for x in f))
     known = int(n_boundary_vertices)
     out = []
+    decoded: dict[int, int] = {}  # coding 2: decoded tets on each vertex (saturating at 255)
+    prob: dict[int, int] = {}  # coding 2: class probabilities
+    diverged = False
     for t in tets:
         t = [int(x) for x in t]
         while True:
@@ -235,9 +251,21 @@ def naive_tet_symbols(boundary, tets, n_boundary_vertices) -> list:
                 (x,) = g - cur
                 score[x] = score.get(x, 0) + 1
                 age[x] = min(age.get(x, live[g]), live[g])
-        ranked = sorted(score, key=lambda x: (-score[x], age[x]))
+        if coding == 1:
+            ranked = sorted(score, key=lambda x: (-score[x], age[x]))
+        else:
+            cls = {}
+            for x in score:
+                edges = [g & cur for g in near if len(g & cur) == 2 and x in g]
+                ev = max(sum(decoded.get(v, 0) for v in e) for e in edges)
+                cls[x] = _coding2_class(score[x], decoded.get(x, 0), ev, x < int(n_boundary_vertices))
+            p = {x: prob.get(cls[x], CODING2_INIT[min(score[x], 3)]) for x in score}
+            ranked = sorted(score, key=lambda x: (-p[x], -min(score[x], 3), age[x]))
         remove(cur)
         if len(ranked) > 15:
+            diverged = diverged or coding == 2
+            out.append(None)
+        elif diverged:
             out.append(None)
         elif d in ranked:
             out.append(ranked.index(d))
@@ -248,6 +276,15 @@ def naive_tet_symbols(boundary, tets, n_boundary_vertices) -> list:
             out.append(None if len(ring) > 64 else (16 if d in ring else 17))
         if d == known:
             known += 1
+        if coding == 2 and len(ranked) <= 15:
+            # the classes learn from this tet, each from the probability the ranking read
+            for x in ranked:
+                if x != d:
+                    prob[cls[x]] = p[x] - (p[x] >> CODING2_SHIFT)
+            if d in ranked:
+                prob[cls[d]] = p[d] + ((CODING2_PROB_ONE - p[d]) >> CODING2_SHIFT)
+            for v in t:
+                decoded[v] = min(decoded.get(v, 0) + 1, 255)
         for k in range(3):
             f = frozenset(t[:k] + t[k + 1:])
             if f in live:

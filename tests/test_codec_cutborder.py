@@ -8,17 +8,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from conftest import load_sample
-from gatun_py.codec.cutborder import ConnectivityDecoder, encode_connectivity
+from gatun_py.codec.cutborder import CODINGS, ConnectivityDecoder, coding_for_format, encode_connectivity
 from gatun_py.errors import CorruptFileError
 from gatun_py.mesh import TetMesh
 from meshgen import AWKWARD, degenerate_grid, grid_mesh, mesh_strategy
 from naive_codec import canonical_tets, naive_tet_symbols, naive_traversal_check
 
 
-def _decoder(e, boundary_code=None, tet_code=None):
+def _decoder(e, boundary_code=None, tet_code=None, coding=None):
     return ConnectivityDecoder(e.boundary_code if boundary_code is None else boundary_code,
                                e.tet_code if tet_code is None else tet_code, n_points=e.n_points,
-                               n_tets=e.n_tets, n_boundary_faces=e.n_boundary_faces, n_referenced=e.n_referenced)
+                               n_tets=e.n_tets, n_boundary_faces=e.n_boundary_faces, n_referenced=e.n_referenced,
+                               coding=e.coding if coding is None else coding)
 
 
 def _decode_all(d, batch=37):
@@ -31,9 +32,9 @@ def _decode_all(d, batch=37):
     return faces, nbv, tets
 
 
-def check_round_trip(mesh: TetMesh, batch=37):
-    e = encode_connectivity(mesh.n_points, mesh.tets)
-    d = _decoder(e)
+def check_round_trip(mesh: TetMesh, batch=37, coding=1):
+    e = encode_connectivity(mesh.n_points, mesh.tets, coding=coding)
+    d = _decoder(e, coding=coding)
     faces, nbv, tets = _decode_all(d, batch)
     # the decoder reproduces the encoder's view exactly, including the geometry refs
     assert np.array_equal(faces, e.boundary) and np.array_equal(tets, e.tets)
@@ -54,9 +55,9 @@ def check_round_trip(mesh: TetMesh, batch=37):
     used = first_use < np.iinfo(np.int64).max
     assert np.all(np.diff(first_use[nbv:][used[nbv:]]) >= 0)  # interior ids in order of first use
     naive_traversal_check(faces, tets)
-    expected = naive_tet_symbols(faces, tets, nbv)
+    expected = naive_tet_symbols(faces, tets, nbv, coding)
     checked = [i for i, x in enumerate(expected) if x is not None]
-    assert len(checked) >= 0.9 * len(expected)
+    assert len(checked) >= (0.9 if coding == 1 else 0.5) * len(expected)
     assert [int(e.symbols[i]) for i in checked] == [expected[i] for i in checked]
     return e
 
@@ -69,15 +70,25 @@ def canonical_faces(faces):
     return sorted(out)
 
 
+def test_coding_for_format():
+    """Files up to format 4 hold coding 1 (decoded exactly as before), format 5 coding 2."""
+    assert [coding_for_format(v) for v in (1, 2, 3, 4, 5)] == [1, 1, 1, 1, 2]
+    with pytest.raises(ValueError, match="coding"):
+        encode_connectivity(4, np.array([[0, 1, 2, 3]]), coding=3)
+    with pytest.raises(CorruptFileError, match="coding"):
+        ConnectivityDecoder(b"", b"", n_points=1, n_tets=0, n_boundary_faces=0, n_referenced=0, coding=0)
+
+
+@pytest.mark.parametrize("coding", CODINGS)
 @pytest.mark.parametrize("name", sorted(AWKWARD))
-def test_awkward_meshes_round_trip(name):
-    check_round_trip(AWKWARD[name]())
+def test_awkward_meshes_round_trip(name, coding):
+    check_round_trip(AWKWARD[name](), coding=coding)
 
 
 @settings(max_examples=150, deadline=None)
-@given(mesh_strategy(), st.integers(1, 500))
-def test_random_meshes_round_trip(mesh, batch):
-    check_round_trip(mesh, batch)
+@given(mesh_strategy(), st.integers(1, 500), st.sampled_from(CODINGS))
+def test_random_meshes_round_trip(mesh, batch, coding):
+    check_round_trip(mesh, batch, coding)
 
 
 def _book_of_tets(pages: int, *, closed: bool) -> TetMesh:
@@ -97,29 +108,32 @@ def _book_of_tets(pages: int, *, closed: bool) -> TetMesh:
     return TetMesh(points, mesh.density, tets)
 
 
+@pytest.mark.parametrize("coding", CODINGS)
 @pytest.mark.parametrize("pages,closed", [(8, False), (40, False), (40, True)])
-def test_tets_around_one_edge_round_trip(pages, closed):
+def test_tets_around_one_edge_round_trip(pages, closed, coding):
     """Many border faces on one edge (a ring of tets, or tets meeting only there): the decoder
     takes the faces a tet closes from its gather's notes, the encoder walks the fourth vertex's
     list for them; the round trip compares the two."""
-    check_round_trip(_book_of_tets(pages, closed=closed))
+    check_round_trip(_book_of_tets(pages, closed=closed), coding=coding)
 
 
-def test_folded_zero_volume_tets_round_trip():
+@pytest.mark.parametrize("coding", CODINGS)
+def test_folded_zero_volume_tets_round_trip(coding):
     """Zero-volume tets may be wound either way (as in Blunt-fin): the coder keeps each one's winding."""
     mesh = degenerate_grid()
     zero = np.flatnonzero(mesh.signed_volumes() == 0)
     assert len(zero) > 0
     tets = mesh.tets.copy()
     tets[zero[::2]] = tets[zero[::2]][:, [1, 0, 2, 3]]
-    check_round_trip(TetMesh(mesh.points, mesh.density, tets))
+    check_round_trip(TetMesh(mesh.points, mesh.density, tets), coding=coding)
 
 
-def test_single_tet_and_no_tets():
-    e = check_round_trip(AWKWARD["single_tet"]())
+@pytest.mark.parametrize("coding", CODINGS)
+def test_single_tet_and_no_tets(coding):
+    e = check_round_trip(AWKWARD["single_tet"](), coding=coding)
     assert e.n_boundary_faces == 4
     empty = TetMesh(np.zeros((3, 3), np.float32), np.zeros(3, np.float32), np.zeros((0, 4), np.int32))
-    e = check_round_trip(empty)
+    e = check_round_trip(empty, coding=coding)
     assert e.n_referenced == 0 and list(e.vertex_order) == [0, 1, 2]
 
 
@@ -128,6 +142,10 @@ def test_post_sample_bits_per_tet():
     e = check_round_trip(mesh, batch=1000)
     bits = 8 * (len(e.boundary_code) + len(e.tet_code)) / mesh.n_tets
     assert bits < 2.3  # the bar for every sample (the average target is 2.0)
+    e2 = check_round_trip(mesh, batch=1000, coding=2)
+    bits2 = 8 * (len(e2.boundary_code) + len(e2.tet_code)) / mesh.n_tets
+    assert e2.boundary_code == e.boundary_code  # coding 2 changes the tet stream only
+    assert bits2 < 0.95 * bits  # 1.78 -> 1.55 when it was written
 
 
 def test_decode_order_does_not_depend_on_input_tet_order():
@@ -139,11 +157,11 @@ def test_decode_order_does_not_depend_on_input_tet_order():
     assert abs(len(a.tet_code) - len(b.tet_code)) <= 0.2 * len(a.tet_code) + 8
 
 
-@settings(max_examples=100, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.sampled_from(["boundary", "tets"]), st.integers(1, 4))
-def test_damaged_streams_raise_or_decode_consistently(seed, which, n_flips):
+@settings(max_examples=150, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.sampled_from(["boundary", "tets"]), st.integers(1, 4), st.sampled_from(CODINGS))
+def test_damaged_streams_raise_or_decode_consistently(seed, which, n_flips, coding):
     mesh = AWKWARD["jittered_grid"]()
-    e = encode_connectivity(mesh.n_points, mesh.tets)
+    e = encode_connectivity(mesh.n_points, mesh.tets, coding=coding)
     rng = np.random.default_rng(seed)
     code = bytearray(e.boundary_code if which == "boundary" else e.tet_code)
     mode = rng.integers(0, 3)
@@ -154,7 +172,8 @@ def test_damaged_streams_raise_or_decode_consistently(seed, which, n_flips):
         code = code[: rng.integers(0, len(code) + 1)]
     else:
         code = bytearray(rng.integers(0, 256, rng.integers(0, 2 * len(code) + 2), dtype=np.uint8).tobytes())
-    d = _decoder(e, boundary_code=bytes(code)) if which == "boundary" else _decoder(e, tet_code=bytes(code))
+    d = (_decoder(e, boundary_code=bytes(code), coding=coding) if which == "boundary"
+         else _decoder(e, tet_code=bytes(code), coding=coding))
     try:
         faces, nbv, tets = _decode_all(d)
     except CorruptFileError:
@@ -210,14 +229,15 @@ def test_decoder_border_grows_from_a_tight_start(monkeypatch):
     assert d._B is None  # and was let go after the last tet
 
 
+@pytest.mark.parametrize("coding", CODINGS)
 @pytest.mark.parametrize("batch", [1, 37, 100_000])
-def test_streaming_refs_window_matches_the_kept_predictors(small_sample, batch):
+def test_streaming_refs_window_matches_the_kept_predictors(small_sample, batch, coding):
     """Without ``keep_predictors`` the decoder holds only the last batch's refs: batch after batch
     they are the rows of the full table, and the tets are the same."""
-    e = encode_connectivity(small_sample.n_points, small_sample.tets)
+    e = encode_connectivity(small_sample.n_points, small_sample.tets, coding=coding)
     d = ConnectivityDecoder(e.boundary_code, e.tet_code, n_points=e.n_points, n_tets=e.n_tets,
                             n_boundary_faces=e.n_boundary_faces, n_referenced=e.n_referenced,
-                            keep_predictors=False)
+                            keep_predictors=False, coding=coding)
     faces, nbv = d.boundary()
     refs = [d.last_refs.copy()]
     d.start_tets()
@@ -232,12 +252,13 @@ def test_streaming_refs_window_matches_the_kept_predictors(small_sample, batch):
     assert np.array_equal(np.concatenate(refs), e.predictors[:e.n_referenced])
 
 
-def test_refs_window_overflow_is_an_error_not_a_write(small_sample):
+@pytest.mark.parametrize("coding", CODINGS)
+def test_refs_window_overflow_is_an_error_not_a_write(small_sample, coding):
     """The tet kernel writes a new vertex's refs at row ``id - pred_base``: a window too small, or a
     base past the vertex, ends the decode with an error (no write out of bounds)."""
     from gatun_py.codec import _cutborder_kernels as K
 
-    e = encode_connectivity(small_sample.n_points, small_sample.tets)
+    e = encode_connectivity(small_sample.n_points, small_sample.tets, coding=coding)
     assert e.n_referenced > e.n_boundary_vertices  # the sample has interior vertices
     for rows, base in [(0, 0), (2, e.n_boundary_vertices + 1)]:
         d = _decoder(e)
@@ -245,9 +266,29 @@ def test_refs_window_overflow_is_an_error_not_a_write(small_sample):
         d.start_tets()
         d._tstate[4] = base
         out = np.zeros((e.n_tets, 4), np.int32)
-        _, status = K.decode_tets(d._tst, d._tdata, d._probs, d.n_tets, d.n_referenced, d._B,
-                                  np.full((rows, 4), -1, np.int32), d._tstate, out)
+        window = np.full((rows, 4), -1, np.int32)
+        if coding == 1:
+            _, status = K.decode_tets(d._tst, d._tdata, d._probs, d.n_tets, d.n_referenced, d._B, window,
+                                      d._tstate, out)
+        else:
+            _, status = K.decode_tets2(d._tst, d._tdata, d._probs, d._rankp, d._vdec, d._nbv, d.n_tets,
+                                       d.n_referenced, d._B, window, d._tstate, out)
         assert status == K.ST_ERROR
+
+
+def test_coding2_decoded_counts_shorter_than_the_vertices_is_an_error():
+    """Coding 2's per-vertex decoded-tet counts bound the new vertex ids as the refs window does."""
+    from gatun_py.codec import _cutborder_kernels as K
+
+    mesh = load_sample("post")[0]
+    e = encode_connectivity(mesh.n_points, mesh.tets, coding=2)
+    d = _decoder(e)
+    d.boundary()
+    d.start_tets()
+    out = np.zeros((e.n_tets, 4), np.int32)
+    _, status = K.decode_tets2(d._tst, d._tdata, d._probs, d._rankp, d._vdec[:e.n_boundary_vertices + 1], d._nbv,
+                               d.n_tets, d.n_referenced, d._B, d.predictors, d._tstate, out)
+    assert status == K.ST_ERROR
 
 
 def test_header_counts_past_int32_sequence_numbers_are_corruption():

@@ -431,6 +431,25 @@ def test_rewritten_section_bytes(worker, files, data):
     check(worker, _build(meta, sections), f"{name} {action}")
 
 
+@HYPO
+@given(st.data())
+def test_rewritten_tet_streams(worker, files, data):
+    """A level's tet stream changed behind a valid CRC, in a file that says format 5 (coding 2) or
+    format 4 (the coding-1 decoder then reads coding-2 data): a clean error or a consistent mesh."""
+    meta, sections = _split(files[data.draw(st.integers(0, len(files) - 1))])
+    tets = [i for i, (name, _) in enumerate(sections) if name.endswith("/tets")]
+    i = data.draw(st.sampled_from(tets))
+    p = bytearray(sections[i][1])
+    for _ in range(data.draw(st.integers(0, 3))):
+        if p:
+            p[data.draw(st.integers(0, len(p) - 1))] ^= 1 << data.draw(st.integers(0, 7))
+    if data.draw(st.booleans()):
+        p = p[: data.draw(st.integers(0, len(p)))]
+    sections[i] = (sections[i][0], bytes(p))
+    major = data.draw(st.sampled_from([None, 4]))
+    check(worker, _build(meta, sections, major=major), f"{sections[i][0]} format {major}")
+
+
 def test_crc_is_what_catches_plain_damage(files):
     """Sanity of the harness: a flipped payload byte without a new CRC is a CRC error."""
     from gatun_py.codec import TetcReader

@@ -917,19 +917,7 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
                     sym = i
                     break
         # orientation: (a, c, b, d) unless the mesh is folded here (zero-volume tets)
-        w0 = tets[t, 0]
-        w1 = tets[t, 1]
-        w2 = tets[t, 2]
-        inv = 0
-        for i in range(4):
-            wi = ao if i == 0 else (co if i == 1 else (bo if i == 2 else do))
-            pi = 0 if wi == w0 else (1 if wi == w1 else (2 if wi == w2 else 3))
-            for j in range(i + 1, 4):
-                wj = ao if j == 0 else (co if j == 1 else (bo if j == 2 else do))
-                pj = 0 if wj == w0 else (1 if wj == w1 else (2 if wj == w2 else 3))
-                if pi > pj:
-                    inv += 1
-        flip = inv & 1
+        flip = _tet_flip(tets, t, ao, bo, co, do)
         rc.enc_sym(st, out, probs, TM_C1 + ctx * 16, 4, sym)
         syms[done] = sym
         if sym == ESC:
@@ -1118,6 +1106,425 @@ def _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets, scr
         if i < n1:  # faces opposite a, t1, t2: on edges (t1, t2) = (b, c), (a, t2) and (a, t1)
             _attach_tet_inlined(B, a, t1, t2, d, cface[i, EDGE_BC],
                                 cface[i, EDGE_AC if flip else EDGE_AB], cface[i, EDGE_AB if flip else EDGE_AC])
+        elif cface_full[0] == 0:
+            _attach_tet_inlined(B, a, t1, t2, d, -1, -1, -1)
+        else:
+            _apply_tet_inlined(B, a, t1, t2, d)
+    if status == ST_DONE and (B[3][BS_LIVE] != 0 or rc.dec_failed(st)):
+        status = ST_ERROR
+    tstate[0] = nv
+    tstate[1] = done
+    tstate[2] = prev_esc
+    tstate[3] = prev_flip
+    return n_out, status
+
+
+# ------------------------------------------------------------------ tet phase, coding 2 (format 5)
+#
+# Coding 1 ranks the candidates by score (faces of T the tet would close), then by age. On an
+# unstructured mesh a score-1 candidate is the fourth vertex 0.3 % to 66 % of the time depending
+# on how full the stars already are (measured on the gmsh flange: bench/conn_study.py), which the
+# score does not see. Coding 2 gives each candidate a *class* from what the decoder knows: its
+# score, how many decoded tets already hold it, whether it is a boundary vertex, and how many
+# decoded tets hold the ends of the gate edges it is adjacent across (the fuller the edge's star,
+# the likelier the tet closes it). Each class has an adaptive probability of being the fourth
+# vertex (updated after every tet, the same way in encoder and decoder); candidates are ranked by
+# it, and the index is coded in a context of the two best candidates' probabilities. An escape's
+# vertex-adjacent list (case c) is ordered by decoded tets, fewest first, instead of by age.
+
+CLS_VD_DIV, CLS_VD_LEVELS = 3, 16  # decoded tets on the candidate, /3, capped
+CLS_EV_DIV, CLS_EV_LEVELS = 6, 16  # decoded tets on the ends of its fullest gate edge, /6, capped
+N_CLASS = 3 * CLS_VD_LEVELS * 2 * CLS_EV_LEVELS
+VDEC_MAX = 255
+# the class's levels of a count (division by a constant, as tables: one load instead)
+VD_LEVEL = np.minimum(np.arange(VDEC_MAX + 1) // CLS_VD_DIV, CLS_VD_LEVELS - 1).astype(np.int64)
+EV_LEVEL = np.minimum(np.arange(CLS_EV_DIV * CLS_EV_LEVELS) // CLS_EV_DIV, CLS_EV_LEVELS - 1).astype(np.int64)
+RANK_SHIFT = 5  # adaptation rate of a class's probability (as the range coder's models)
+RANK_INIT = (rc.PROB_ONE // 4, (rc.PROB_ONE * 15) // 16, rc.PROB_ONE - 64)  # by score 1, 2, 3
+P_LEVELS = 8  # a candidate probability's quantisation in the index context (+1: no candidate)
+N_C1_CTX2 = 5 * (P_LEVELS + 1) * (P_LEVELS + 1) * 2
+TM2_C1 = 0
+TM2_KIND = TM2_C1 + N_C1_CTX2 * 16
+TM2_C2 = TM2_KIND + 8 * 4
+TM2_FLIP = TM2_C2 + 2 * rc.INT_MODEL_SIZE
+TM2_SIZE = TM2_FLIP + 4
+
+
+def new_rank_model() -> np.ndarray:
+    """The class probabilities of coding 2 at the start of a tet stream."""
+    p = np.empty(N_CLASS, np.uint16)
+    per_score = N_CLASS // 3
+    for k in range(3):
+        p[k * per_score:(k + 1) * per_score] = RANK_INIT[k]
+    return p
+
+
+@njit(cache=True, _nrt=False)
+def _rank_candidates2(cand, cscore, cseq, cface, n1, vdec, nbv, a, b, c, rankp, ckey, ccls, prev_esc):
+    """Class (``ccls``) and ranking key (``ckey``: the class probability, then the score, then the
+    age; distinct, higher = better) of each gathered candidate. Returns (the index symbol's context,
+    gather position of the best candidate, of the second best; -1 where there is none). The
+    decoder needs the full order only for an index past 1 (:func:`_nth_candidate`)."""
+    va = np.int64(vdec[a])
+    vb = np.int64(vdec[b])
+    vc = np.int64(vdec[c])
+    best = -1
+    second = -1
+    kbest = np.int64(-1)
+    ksecond = np.int64(-1)
+    ev_bc = vb + vc
+    ev_ab = va + vb
+    ev_ac = va + vc
+    for i in range(n1):
+        # branch-free: which gate edges hold the candidate is data, not a predictable pattern
+        e0 = ev_bc if cface[i, EDGE_BC] != -1 else 0
+        e1 = ev_ab if cface[i, EDGE_AB] != -1 else 0
+        e2 = ev_ac if cface[i, EDGE_AC] != -1 else 0
+        ev = max(e0, max(e1, e2))
+        sc = min(cscore[i], 3)
+        x = cand[i]
+        cls = (((sc - 1) * CLS_VD_LEVELS + VD_LEVEL[vdec[x]]) * 2 + (1 if x < nbv else 0)) * CLS_EV_LEVELS \
+            + (EV_LEVEL[ev] if ev < EV_LEVEL.shape[0] else CLS_EV_LEVELS - 1)
+        ccls[i] = cls
+        # sequence numbers are below 2**31 and distinct per face, hence per candidate
+        key = (np.int64(rankp[cls]) << 40) | (sc << 32) | (MAX_SEQ - cseq[i])
+        ckey[i] = key
+        gt1 = key > kbest
+        gt2 = key > ksecond
+        second = best if gt1 else (i if gt2 else second)
+        ksecond = kbest if gt1 else (key if gt2 else ksecond)
+        best = i if gt1 else best
+        kbest = key if gt1 else kbest
+    q0 = 0
+    q1 = 0
+    if best >= 0:
+        q0 = 1 + (np.int64(rankp[ccls[best]]) * P_LEVELS >> rc.PROB_BITS)
+    if second >= 0:
+        q1 = 1 + (np.int64(rankp[ccls[second]]) * P_LEVELS >> rc.PROB_BITS)
+    nn = n1 if n1 < 4 else 4
+    return ((nn * (P_LEVELS + 1) + q0) * (P_LEVELS + 1) + q1) * 2 + prev_esc, best, second
+
+
+@njit(cache=True, _nrt=False)
+def _rank_of(ckey, n1, i):
+    """Rank (0 = best) of gather position ``i`` among the candidates' keys."""
+    r = 0
+    for j in range(n1):
+        if ckey[j] > ckey[i]:
+            r += 1
+    return r
+
+
+@njit(cache=True, _nrt=False)
+def _nth_candidate(ckey, n1, r):
+    """Gather position of the candidate of rank ``r`` (< n1)."""
+    for i in range(n1):
+        if _rank_of(ckey, n1, i) == r:
+            return i
+    return -1
+
+
+@njit(cache=True, _nrt=False)
+def _learn_ranks2(rankp, ckey, ccls, n1, hit):
+    """After a tet: the class of gather position ``hit`` (-1: none) was the fourth vertex, the
+    others were not. Each update starts from the probability the ranking read (in ``ckey``), and
+    the hit's is written last: a class held by several candidates ends the same in any order."""
+    for i in range(n1):  # the hit's miss update too: overwritten below
+        p = ckey[i] >> 40
+        rankp[ccls[i]] = p - (p >> RANK_SHIFT)
+    if hit >= 0:
+        p = ckey[hit] >> 40
+        rankp[ccls[hit]] = p + ((rc.PROB_ONE - p) >> RANK_SHIFT)
+
+
+@njit(cache=True, _nrt=False)
+def _order_by_decoded(c2, n2, vdec):
+    """Stable re-order of the vertex-adjacent list (by age) by decoded tets, fewest first."""
+    for i in range(1, n2):
+        x = c2[i]
+        vx = vdec[x]
+        j = i - 1
+        while j >= 0 and vdec[c2[j]] > vx:
+            c2[j + 1] = c2[j]
+            j -= 1
+        c2[j + 1] = x
+
+
+@njit(cache=True, _nrt=False)
+def _count_decoded(vdec, a, b, c, d):
+    """One more decoded tet on each of its vertices (uint8 counts, saturating: the classes look
+    no further than 47, and a byte per vertex keeps the counts in cache)."""
+    vdec[a] += vdec[a] < VDEC_MAX
+    vdec[b] += vdec[b] < VDEC_MAX
+    vdec[c] += vdec[c] < VDEC_MAX
+    vdec[d] += vdec[d] < VDEC_MAX
+
+
+@njit(cache=True)
+def encode_tets2(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, syms, rankp, vdec):
+    """:func:`encode_tets` with coding 2's ranking and case (c) order (same arguments, plus the
+    class probabilities ``rankp`` from :func:`new_rank_model` and zeroed decoded-tet counts
+    ``vdec`` (uint8) by decode id; ``syms`` holds each tet's rank in coding 2's order)."""
+    m = tets.shape[0]
+    probs = np.full(TM2_SIZE, rc.PROB_INIT, np.uint16)
+    tvisited = np.zeros(m, np.bool_)
+    cand = np.empty(MAX_C1, np.int64)
+    cscore = np.empty(MAX_C1, np.int64)
+    cseq = np.empty(MAX_C1, np.int64)
+    ckey = np.empty(MAX_C1, np.int64)
+    ccls = np.empty(MAX_C1, np.int64)
+    c2 = np.empty(MAX_C2, np.int64)
+    c2seq = np.empty(MAX_C2, np.int64)
+    cface = np.empty((MAX_C1, 3), np.int64)
+    cface_full = np.zeros(1, np.int64)
+    nv = nv0
+    prev_esc = 0
+    prev_flip = 0
+    E, vhead, Q, bs = B
+    qcap = Q.shape[0]
+    for done in range(m):
+        s = _pop(B)
+        if s == -1:
+            return nv, 1
+        a = np.int64(E[s * E_COLS + 0])
+        b = np.int64(E[s * E_COLS + 1])
+        c = np.int64(E[s * E_COLS + 2])
+        behind = np.int64(E[s * E_COLS + 3])
+        ao = order[a]
+        bo = order[b]
+        co = order[c]
+        t = tgt[s]
+        if t < 0 or tvisited[t]:
+            return nv, 2
+        tvisited[t] = True
+        do = -1
+        for k in range(4):
+            w = tets[t, k]
+            if w != ao and w != bo and w != co:
+                do = w
+        d = dec_of[do]
+        n1 = _gather_face(B, s, cand, cscore, cseq, cface, cface_full)
+        _remove(B, 3, s)
+        ctx, best, second = _rank_candidates2(cand, cscore, cseq, cface, n1, vdec, nv0, a, b, c, rankp, ckey, ccls,
+                                              prev_esc)
+        sym = ESC
+        hit = -1
+        if d != -1:
+            for i in range(n1):
+                if cand[i] == d:
+                    hit = i
+                    sym = _rank_of(ckey, n1, i)
+                    break
+        flip = _tet_flip(tets, t, ao, bo, co, do)
+        rc.enc_sym(st, out, probs, TM2_C1 + ctx * 16, 4, sym)
+        syms[done] = sym
+        if sym == ESC:
+            kctx = TM2_KIND + 4 * ((1 if n1 > 0 else 0) + 2 * prev_esc)
+            if d == -1:
+                rc.enc_sym(st, out, probs, kctx, 2, KIND_NEW)
+                d = nv
+                dec_of[do] = nv
+                order[nv] = do
+                pred[nv, 0] = a
+                pred[nv, 1] = b
+                pred[nv, 2] = c
+                pred[nv, 3] = behind
+                nv += 1
+            else:
+                n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq)
+                _order_by_decoded(c2, n2, vdec)
+                j = -1
+                for i in range(n2):
+                    if c2[i] == d:
+                        j = i
+                        break
+                if j >= 0:
+                    rc.enc_sym(st, out, probs, kctx, 2, KIND_VERTEX_ADJACENT)
+                    syms[done] = SYM_VERTEX_ADJACENT
+                    rc.enc_uint(st, out, probs, TM2_C2 + (rc.INT_MODEL_SIZE if n2 > 8 else 0), j)
+                else:
+                    rc.enc_sym(st, out, probs, kctx, 2, KIND_TABLE)
+                    syms[done] = SYM_TABLE
+                    rc.enc_raw(st, out, d, _bitlen(nv - 1))
+            prev_esc = 1
+        else:
+            prev_esc = 0
+        _learn_ranks2(rankp, ckey, ccls, n1, hit)
+        rc.enc_bit(st, out, probs, TM2_FLIP + prev_flip, flip)
+        prev_flip = flip
+        t1 = b if flip else c
+        t2 = c if flip else b
+        out_tets[done, 0] = a
+        out_tets[done, 1] = t1
+        out_tets[done, 2] = t2
+        out_tets[done, 3] = d
+        _count_decoded(vdec, a, b, c, d)
+        s0, s1, s2 = _apply_tet(B, a, t1, t2, d)
+        for k in range(3):
+            slot = s0 if k == 0 else (s1 if k == 1 else s2)
+            if slot >= 0:
+                wo = order[a] if k == 0 else (order[t1] if k == 1 else order[t2])
+                kk = 0 if tets[t, 0] == wo else (1 if tets[t, 1] == wo else (2 if tets[t, 2] == wo else 3))
+                tgt[slot] = nbr[t, kk]
+        if bs[BS_NFREE] < 4 or qcap - (bs[BS_QTAIL] - bs[BS_QHEAD]) < 4:
+            return nv, 4
+    if B[3][BS_LIVE] != 0:
+        return nv, 5
+    rc.enc_finish(st, out)
+    return nv, 0
+
+
+@njit(cache=True, _nrt=False)
+def _tet_flip(tets, t, ao, bo, co, do):
+    """Parity of tet t's vertex order against (a, c, b, d) (original ids): 1 where the mesh is
+    folded (zero-volume tets), else 0."""
+    w0 = tets[t, 0]
+    w1 = tets[t, 1]
+    w2 = tets[t, 2]
+    inv = 0
+    for i in range(4):
+        wi = ao if i == 0 else (co if i == 1 else (bo if i == 2 else do))
+        pi = 0 if wi == w0 else (1 if wi == w1 else (2 if wi == w2 else 3))
+        for j in range(i + 1, 4):
+            wj = ao if j == 0 else (co if j == 1 else (bo if j == 2 else do))
+            pj = 0 if wj == w0 else (1 if wj == w1 else (2 if wj == w2 else 3))
+            if pi > pj:
+                inv += 1
+    return inv & 1
+
+
+@njit(cache=True, nogil=True)
+def decode_tets2(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate, out_tets):
+    """Resumable inverse of :func:`encode_tets2`: as :func:`decode_tets`, with the class
+    probabilities ``rankp`` (:func:`new_rank_model`) and the decoded-tet counts ``vdec`` (int32
+    uint8 per vertex, zeros at the start) persisting between calls, ``nbv`` the boundary vertices."""
+    cand = np.empty(MAX_C1, np.int64)
+    cscore = np.empty(MAX_C1, np.int64)
+    cseq = np.empty(MAX_C1, np.int64)
+    c2 = np.empty(MAX_C2, np.int64)
+    c2seq = np.empty(MAX_C2, np.int64)
+    cface = np.empty((MAX_C1, 3), np.int64)
+    ckey = np.empty(MAX_C1, np.int64)
+    ccls = np.empty(MAX_C1, np.int64)
+    cface_full = np.zeros(1, np.int64)
+    return _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate, out_tets,
+                             (cand, cscore, cseq, c2, c2seq, cface, ckey, ccls, cface_full))
+
+
+_rank_candidates2_inlined = njit(cache=True, _nrt=False, inline="always")(_rank_candidates2.py_func)
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate, out_tets, scratch):
+    """The loop of :func:`decode_tets2` (as :func:`_decode_tets_run`)."""
+    cand, cscore, cseq, c2, c2seq, cface, ckey, ccls, cface_full = scratch
+    nv = tstate[0]
+    done = tstate[1]
+    prev_esc = tstate[2]
+    prev_flip = tstate[3]
+    pred_base = tstate[4]
+    limit = min(n_limit, pred_base + pred.shape[0], vdec.shape[0])
+    if pred_base > nv:
+        return 0, ST_ERROR
+    n_out = 0
+    status = ST_DONE
+    E, vhead, Q, bs = B
+    qcap = Q.shape[0]
+    while done < m:
+        if st[rc.DEC_ERROR] != 0 or st[rc.DEC_OVERRUN] != 0:
+            status = ST_ERROR
+            break
+        if n_out >= out_tets.shape[0]:
+            status = ST_BATCH
+            break
+        if bs[BS_NFREE] < 4 or qcap - (bs[BS_QTAIL] - bs[BS_QHEAD]) < 4:
+            status = ST_GROW
+            break
+        s = -1
+        while bs[BS_QHEAD] < bs[BS_QTAIL]:
+            h = bs[BS_QHEAD] & (qcap - 1)
+            bs[BS_QHEAD] += 1
+            if E[Q[h, 0] * E_COLS + E_SEQ] == Q[h, 1]:
+                s = Q[h, 0]
+                break
+        if s == -1:
+            status = ST_ERROR
+            break
+        a = np.int64(E[s * E_COLS + 0])
+        b = np.int64(E[s * E_COLS + 1])
+        c = np.int64(E[s * E_COLS + 2])
+        behind = np.int64(E[s * E_COLS + 3])
+        cface_full[0] = 0
+        n1 = _gather_face_inlined(B, s, cand, cscore, cseq, cface, cface_full)
+        _remove(B, 3, s)
+        ctx, best, second = _rank_candidates2_inlined(cand, cscore, cseq, cface, n1, vdec, nbv, a, b, c, rankp,
+                                                      ckey, ccls, prev_esc)
+        sym = rc.dec_sym(st, data, probs, TM2_C1 + ctx * 16, 4)
+        d = -1
+        hit = -1
+        if sym < ESC:
+            if sym >= n1:
+                status = ST_ERROR
+                break
+            hit = best if sym == 0 else (second if sym == 1 else _nth_candidate(ckey, n1, sym))
+            if hit < 0:  # no candidate of that rank (keys are distinct in any border: never)
+                status = ST_ERROR
+                break
+            d = cand[hit]
+            prev_esc = 0
+        else:
+            kctx = TM2_KIND + 4 * ((1 if n1 > 0 else 0) + 2 * prev_esc)
+            kind = rc.dec_sym(st, data, probs, kctx, 2)
+            if kind == KIND_NEW:
+                if nv >= limit:
+                    status = ST_ERROR
+                    break
+                d = nv
+                pred[nv - pred_base, 0] = a
+                pred[nv - pred_base, 1] = b
+                pred[nv - pred_base, 2] = c
+                pred[nv - pred_base, 3] = behind
+                nv += 1
+            elif kind == KIND_VERTEX_ADJACENT:
+                n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq)
+                _order_by_decoded(c2, n2, vdec)
+                j = rc.dec_uint(st, data, probs, TM2_C2 + (rc.INT_MODEL_SIZE if n2 > 8 else 0))
+                if j >= n2:
+                    status = ST_ERROR
+                    break
+                d = c2[j]
+            elif kind == KIND_TABLE:
+                d = rc.dec_raw(st, data, _bitlen(nv - 1))
+                if d >= nv:
+                    status = ST_ERROR
+                    break
+            else:
+                status = ST_ERROR
+                break
+            prev_esc = 1
+            # a corrupt stream may escape to a candidate: attach it by its gathered faces
+            for i in range(n1):
+                if cand[i] == d:
+                    hit = i
+                    break
+        if d == a or d == b or d == c:
+            status = ST_ERROR
+            break
+        _learn_ranks2(rankp, ckey, ccls, n1, hit if sym < ESC else -1)
+        flip = rc.dec_bit(st, data, probs, TM2_FLIP + prev_flip)
+        prev_flip = flip
+        t1 = b if flip else c
+        t2 = c if flip else b
+        out_tets[n_out, 0] = a
+        out_tets[n_out, 1] = t1
+        out_tets[n_out, 2] = t2
+        out_tets[n_out, 3] = d
+        n_out += 1
+        done += 1
+        _count_decoded(vdec, a, b, c, d)
+        if hit >= 0:  # faces opposite a, t1, t2: on edges (t1, t2) = (b, c), (a, t2) and (a, t1)
+            _attach_tet_inlined(B, a, t1, t2, d, cface[hit, EDGE_BC],
+                                cface[hit, EDGE_AC if flip else EDGE_AB], cface[hit, EDGE_AB if flip else EDGE_AC])
         elif cface_full[0] == 0:
             _attach_tet_inlined(B, a, t1, t2, d, -1, -1, -1)
         else:

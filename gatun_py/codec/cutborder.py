@@ -35,6 +35,21 @@ import numpy as np
 from ..errors import CorruptFileError, MeshError
 from . import _cutborder_kernels as K
 from . import rangecoder as rc
+from .container import VERSION_MAJOR
+
+CODINGS = (1, 2)
+
+
+def coding_for_format(major: int) -> int:
+    """The tet-stream coding a file of container format ``major`` is written with: 1 up to format
+    4, 2 from format 5 on (candidates ranked by adaptive class probabilities, see
+    :mod:`gatun_py.codec._cutborder_kernels`). The boundary stream is the same in both; readers
+    take both codings."""
+    return 1 if major <= 4 else 2
+
+
+# what this version of tetc writes
+FORMAT_CODING = coding_for_format(VERSION_MAJOR)
 
 
 @dataclass
@@ -62,7 +77,10 @@ class EncodedConnectivity:
     symbols : (n_tets,) int16
         Each tet's case, for statistics and tests: the index of its fourth vertex among the
         edge-adjacent candidates (paper case a), or 15 + 0 / 1 / 2 for a new vertex (b), an index
-        into the vertex-adjacent list (c), a vertex-table index (d).
+        into the vertex-adjacent list (c), a vertex-table index (d); coding 2 ranks the candidates
+        its own way (:mod:`gatun_py.codec._cutborder_kernels`).
+    coding : int
+        The tet stream's coding (1 or 2).
     """
 
     boundary_code: bytes
@@ -78,6 +96,7 @@ class EncodedConnectivity:
     tets: np.ndarray
     peak_border: int
     symbols: np.ndarray
+    coding: int = 1
 
 
 def _sorted_halfedges(faces: np.ndarray):
@@ -99,7 +118,8 @@ _ENCODER_ERRORS = {
 }
 
 
-def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> EncodedConnectivity:
+def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None, *,
+                        coding: int = FORMAT_CODING) -> EncodedConnectivity:
     """Code the connectivity of a valid tet mesh.
 
     Parameters
@@ -111,6 +131,9 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> E
         is the set of faces used by one tet, as ``TetMesh.boundary_faces``.
     boundary : ignored
         Accepted for compatibility; the boundary is always derived from ``tets``.
+    coding : {1, 2}
+        The tet stream's coding (:func:`coding_for_format`); the default is what this version
+        writes.
 
     Returns
     -------
@@ -121,6 +144,8 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> E
     MeshError
         If a face is shared by more than two tets (validation rejects such meshes earlier).
     """
+    if coding not in CODINGS:
+        raise ValueError(f"coding must be one of {CODINGS}, got {coding!r}")
     n = int(points_count)
     tets = np.asarray(tets).reshape(-1, 4)
     m = len(tets)
@@ -173,7 +198,11 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> E
         B = K.new_border(n, nf + 2 * m + 8, nf + 3 * m + 8)
         tgt = np.full(nf + 3 * m + 8, -1, np.int32)
         tgt[K.add_faces(B, out_faces, -1)] = bowner
-        res = K.encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nbv, out_tets, symbols)
+        if coding == 1:
+            res = K.encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nbv, out_tets, symbols)
+        else:
+            res = K.encode_tets2(st, out, tets, nbr, tgt, B, dec_of, order, pred, nbv, out_tets, symbols,
+                                 K.new_rank_model(), np.zeros(max(n, 1), np.uint8))
         run_tets.result = res
         run_tets.peak = int(B[3][K.BS_PEAK])
 
@@ -190,7 +219,7 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None) -> E
         boundary_code=boundary_code, tet_code=tet_code, n_points=n, n_tets=m, n_boundary_faces=nf,
         n_boundary_vertices=int(nbv), n_referenced=int(nref), vertex_order=order[:n].copy(),
         predictors=pred[:n].copy(), boundary=out_faces, tets=out_tets, peak_border=run_tets.peak,
-        symbols=symbols,
+        symbols=symbols, coding=coding,
     )
 
 
@@ -203,6 +232,8 @@ class ConnectivityDecoder:
         The streams written by :func:`encode_connectivity`.
     n_points, n_tets, n_boundary_faces, n_referenced : int
         Counts from the section header (checked against what the streams produce).
+    coding : {1, 2}, default 1
+        The tet stream's coding (:func:`coding_for_format` of the file's format).
     keep_predictors : bool, default True
         Keep the geometry refs of every vertex in :attr:`predictors`. A streaming reader that
         takes each batch's refs from :attr:`last_refs` passes False: the tet phase then holds
@@ -219,7 +250,10 @@ class ConnectivityDecoder:
     """
 
     def __init__(self, boundary_code, tet_code, *, n_points, n_tets, n_boundary_faces, n_referenced,
-                 keep_predictors: bool = True):
+                 coding: int = 1, keep_predictors: bool = True):
+        if coding not in CODINGS:
+            raise CorruptFileError(f"unknown connectivity coding {coding!r}")
+        self.coding = int(coding)
         self.n_points = int(n_points)
         self.n_tets = int(n_tets)
         self.n_boundary_faces = int(n_boundary_faces)
@@ -276,7 +310,12 @@ class ConnectivityDecoder:
             self.predictors = None
             self._window = np.empty((0, 4), np.int32)
         self.last_refs = np.empty((0, 4), np.int32)
-        self._probs = np.full(K.TM_SIZE, rc.PROB_INIT, np.uint16)
+        if self.coding == 1:
+            self._probs = np.full(K.TM_SIZE, rc.PROB_INIT, np.uint16)
+        else:  # the class probabilities and decoded-tet counts persist between batches too
+            self._probs = np.full(K.TM2_SIZE, rc.PROB_INIT, np.uint16)
+            self._rankp = K.new_rank_model()
+            self._vdec = np.zeros(max(self.n_points, 1), np.uint8)
         if self.n_tets:
             rc.dec_init(self._tst, self._tdata)
         elif len(self._tdata):
@@ -306,8 +345,12 @@ class ConnectivityDecoder:
             self._tstate[4] = first
         filled = 0
         while filled < len(out):
-            n, status = K.decode_tets(self._tst, self._tdata, self._probs, self.n_tets, self.n_referenced,
-                                      self._B, pred, self._tstate, out[filled:])
+            if self.coding == 1:
+                n, status = K.decode_tets(self._tst, self._tdata, self._probs, self.n_tets, self.n_referenced,
+                                          self._B, pred, self._tstate, out[filled:])
+            else:
+                n, status = K.decode_tets2(self._tst, self._tdata, self._probs, self._rankp, self._vdec, self._nbv,
+                                           self.n_tets, self.n_referenced, self._B, pred, self._tstate, out[filled:])
             filled += n
             if status == K.ST_GROW:
                 if len(self._B[0]) // K.E_COLS + 64 >= K.MAX_SLOTS:

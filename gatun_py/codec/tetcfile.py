@@ -27,7 +27,7 @@ from ..mesh.validate import check_tet_ids
 from .brickindex import BrickView, brick_levels_summary, parse_brick_index
 from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
 from .container import Container, build_container
-from .cutborder import ConnectivityDecoder, encode_connectivity
+from .cutborder import ConnectivityDecoder, coding_for_format, encode_connectivity
 from .decoded_connectivity import DecodedConnectivity
 from .dependencies import decode_dependencies, dependencies_header, encode_dependencies
 from .forest import ROOT_RANK, decode_forest, decode_forest_on_mesh, encode_forest_on_mesh, forest_header
@@ -446,7 +446,8 @@ class TetcReader:
         lv = self.level_meta(level)
         return ConnectivityDecoder(self.read_section(f"L{level}/boundary"), self.read_section(f"L{level}/tets"),
                                    n_points=lv["points"], n_tets=lv["tets"], n_boundary_faces=lv["boundary_faces"],
-                                   n_referenced=lv["referenced_points"], keep_predictors=keep_predictors)
+                                   n_referenced=lv["referenced_points"], keep_predictors=keep_predictors,
+                                   coding=coding_for_format(self.container.major))
 
     def _connectivity(self, level: int):
         """The level's connectivity for one decode: the one :meth:`_level_tets` kept (handed over

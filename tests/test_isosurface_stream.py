@@ -129,8 +129,8 @@ def test_tables_scale_with_the_band_not_the_boundary(monkeypatch):
     border = int(ex.sizes[0])  # boundary faces that touch the surface
     assert border < nb / 4
     # room for what is in the table plus one chunk's worst case, not for every boundary face
-    assert len(ex.fa) <= iso_extract._pow2(4 * (2 * border + 64))
-    assert len(ex.fa) < 4 * nb
+    assert len(ex.ftab) <= iso_extract._pow2(4 * (2 * border + 64))
+    assert len(ex.ftab) < 4 * nb
 
 
 def test_tetc_stream_lends_its_values_and_gives_the_mesh_files_surface():

@@ -239,10 +239,8 @@ class _Extractor:
         self.grad_scale = grad_scale
         self.check = check
         self.tets_done = 0
-        self.fa, self.fb, self.fc = (np.full(16, marching.EMPTY, np.int32) for _ in range(3))
-        self.ek = np.full(16, marching.EMPTY, np.int64)
-        self.evid = np.full(16, marching.EMPTY, np.int32)
-        self.ecount = np.zeros(16, np.int32)
+        self.ftab = marching.new_face_table(16)
+        self.etab = marching.new_edge_table(16)
         self.sizes = np.zeros(2, np.int64)
         self.nv = 0
         self.nt = 0
@@ -270,11 +268,11 @@ class _Extractor:
 
     def _reserve(self, n_tets: int, n_faces: int):
         need_f = int(self.sizes[0]) + 4 * n_tets + n_faces
-        if 2 * need_f > self.fa.shape[0]:
-            self.fa, self.fb, self.fc = marching.rehash_faces(self.fa, self.fb, self.fc, _pow2(4 * need_f))
+        if 2 * need_f > self.ftab.shape[0]:
+            self.ftab = marching.rehash_faces(self.ftab, _pow2(4 * need_f))
         need_e = int(self.sizes[1]) + 6 * n_tets + 3 * n_faces
-        if 2 * need_e > self.ek.shape[0]:
-            self.ek, self.evid, self.ecount = marching.rehash_edges(self.ek, self.evid, self.ecount, _pow2(4 * need_e))
+        if 2 * need_e > self.etab.shape[0]:
+            self.etab = marching.rehash_edges(self.etab, _pow2(4 * need_e))
         if self.nv + 4 * n_tets > self.vpos.shape[0]:
             self._alloc_vertices(max(2 * self.vpos.shape[0], self.nv + 4 * n_tets))
         if self.nt + 2 * n_tets > self.tris.shape[0]:
@@ -311,7 +309,7 @@ class _Extractor:
         nt0 = self.nt
         self.nv, self.nt, _ = marching.extract_batch(
             vals, tets, boundary, self.iso, marching.CASE_COUNT, marching.CASE_TRIS, marching.TET_EDGES,
-            self.fa, self.fb, self.fc, self.ek, self.evid, self.ecount, self.vpos, self.vgrad, self.vkey,
+            self.ftab, self.etab, self.vpos, self.vgrad, self.vkey,
             self.vlock, self.nv, self.tris, self.nt, zero, self.sizes)
         new = self.nt - nt0
         self.extracted += new
@@ -361,8 +359,9 @@ class _Extractor:
             arr[:self.nv] = arr[:n][live]
             if fresh is not None:  # the freed slots are reused by the next batch's new vertices
                 arr[self.nv:n] = fresh
-        used = (self.ek != marching.EMPTY) & (self.evid >= 0)
-        self.evid[used] = remap[self.evid[used]].astype(np.int32)
+        vid = self.etab["vid"]
+        used = (self.etab["key"] != marching.EMPTY) & (vid >= 0)
+        vid[used] = remap[vid[used]].astype(np.int32)
         self.nq = self.nt
         self.since = 0
         self.qem_s += time.perf_counter() - t0

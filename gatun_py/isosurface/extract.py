@@ -32,6 +32,7 @@ from ..errors import CorruptFileError, OptionError, ReadError
 from ..mesh import TetMesh, mesh_batches, read_mesh
 from ..simplify.filter import SimplifyFilter
 from ..simplify.levels import resolve_target, target_ancestors
+from . import _numba_setup  # noqa: F401  (first, before any kernel is loaded: see the module)
 from . import marching, qem
 from .io import write_surface
 

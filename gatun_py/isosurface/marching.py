@@ -218,17 +218,23 @@ def _edge_key(a, b):
     return (np.int64(a) << 32) | np.int64(b)
 
 
-@njit(cache=True)
-def _touch_face(ft, et, zero, nzero, vals, iso, a, b, c, sizes):
-    """Toggle face (a, b, c) in the border if it touches the surface; update its edges' counts.
-    Returns the new number of recorded count-hits-zero keys."""
-    # sort the triple
+@njit(cache=True, inline="always")
+def _sorted3(a, b, c):
+    """A face's vertex ids in increasing order (its key in the face table)."""
     if a > b:
         a, b = b, a
     if b > c:
         b, c = c, b
     if a > b:
         a, b = b, a
+    return a, b, c
+
+
+@njit(cache=True)
+def _touch_face(ft, et, zero, nzero, vals, iso, a, b, c, sizes):
+    """Toggle face (a, b, c) in the border if it touches the surface; update its edges' counts.
+    Returns the new number of recorded count-hits-zero keys."""
+    a, b, c = _sorted3(a, b, c)
     sa = vals[a, 3] >= iso
     sb = vals[b, 3] >= iso
     sc = vals[c, 3] >= iso
@@ -412,13 +418,7 @@ def extract_batch(vals, tets, boundary, iso, case_count, case_tris, tet_edges,
             if rest == 0 or rest == (15 ^ (1 << f)):
                 toggled[f] = 0
                 continue
-            a, b, c = tets[t, _FACES[f, 0]], tets[t, _FACES[f, 1]], tets[t, _FACES[f, 2]]
-            if a > b:
-                a, b = b, a
-            if b > c:
-                b, c = c, b
-            if a > b:
-                a, b = b, a
+            a, b, c = _sorted3(tets[t, _FACES[f, 0]], tets[t, _FACES[f, 1]], tets[t, _FACES[f, 2]])
             toggled[f] = _face_toggle(ft, a, b, c)
             sizes[0] += toggled[f]
         for e in range(6):

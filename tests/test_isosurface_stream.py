@@ -129,8 +129,8 @@ def test_tables_scale_with_the_band_not_the_boundary(monkeypatch):
     border = int(ex.sizes[0])  # boundary faces that touch the surface
     assert border < nb / 4
     # room for what is in the table plus one chunk's worst case, not for every boundary face
-    assert len(ex.fa) <= iso_extract._pow2(4 * (2 * border + 64))
-    assert len(ex.fa) < 4 * nb
+    assert len(ex.ftab) <= iso_extract._pow2(4 * (2 * border + 64))
+    assert len(ex.ftab) < 4 * nb
 
 
 def test_tetc_stream_lends_its_values_and_gives_the_mesh_files_surface():
@@ -153,3 +153,30 @@ def test_tetc_stream_lends_its_values_and_gives_the_mesh_files_surface():
         assert a.n_triangles == b.n_triangles > 0
         if ratio is None:
             assert np.array_equal(a.points, b.points) and np.array_equal(a.triangles, b.triangles)
+
+
+def test_an_extraction_does_not_load_scipy_linalg_and_blas_still_works():
+    """numba's array library loads without its BLAS probe (scipy.linalg and its OpenBLAS stay out of
+    the process: time and memory), and jitted np.dot still finds BLAS afterwards. In a fresh
+    interpreter: this one has loaded numba's library long ago."""
+    import subprocess
+    import sys
+
+    code = """if True:
+        import sys
+        import numpy as np
+        from gatun_py.isosurface import isosurface
+        from gatun_py.warmup import SHIPPED_TETC
+        from gatun_py.codec import TetcReader
+        lo, hi = TetcReader(SHIPPED_TETC).meta["scalar_range"]
+        s = isosurface(SHIPPED_TETC, values=(lo + hi) / 2, ratio=0.5)
+        assert s.n_triangles > 0
+        assert "scipy.linalg" not in sys.modules, "scipy.linalg loaded"
+        from numba import njit
+        dot = njit(lambda a, b: np.dot(a, b))
+        assert dot(np.arange(3.0), np.ones(3)) == 3.0
+        print("ok")
+    """
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip() == "ok"

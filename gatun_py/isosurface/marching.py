@@ -89,6 +89,28 @@ CASE_COUNT, CASE_TRIS = _case_table()
 
 
 # -- hash tables (linear probing, backward-shift deletion, power-of-two capacity) ----------------
+# Each table is one array of rows (a face: its three sorted vertex ids; an edge: key, vertex id and
+# open-face count in one 16-byte record), so a probe touches one cache line, not one per column:
+# the tables outgrow the caches on a large mesh, and their probes were most of the extraction's time.
+
+#: one slot of the edge table: the key (a << 32 | b, a <= b; EMPTY when free), the surface vertex on
+#: that edge (EMPTY until a tet creates it) and the count of open border faces around the edge
+EDGE_SLOT = np.dtype([("key", np.int64), ("vid", np.int32), ("count", np.int32)])
+
+
+def new_face_table(cap: int) -> np.ndarray:
+    """An empty face table of ``cap`` (a power of two) rows."""
+    return np.full((cap, 3), EMPTY, np.int32)
+
+
+def new_edge_table(cap: int) -> np.ndarray:
+    """An empty edge table of ``cap`` (a power of two) slots."""
+    t = np.empty(cap, EDGE_SLOT)
+    t["key"] = EMPTY
+    t["vid"] = EMPTY
+    t["count"] = 0
+    return t
+
 
 @njit(cache=True, inline="always")
 def _mix(x):
@@ -103,95 +125,88 @@ def _face_home(a, b, c, mask):
 
 
 @njit(cache=True)
-def _face_toggle(fa, fb, fc, a, b, c):
+def _face_toggle(ft, a, b, c):
     """Insert face (a < b < c) if absent (returns +1), remove it if present (returns -1)."""
-    mask = fa.shape[0] - 1
+    mask = ft.shape[0] - 1
     i = _face_home(a, b, c, mask)
-    while fa[i] != EMPTY:
-        if fa[i] == a and fb[i] == b and fc[i] == c:
+    while ft[i, 0] != EMPTY:
+        if ft[i, 0] == a and ft[i, 1] == b and ft[i, 2] == c:
             # backward-shift deletion keeps every probe chain unbroken, no tombstones
             j = i
             while True:
                 j = (j + 1) & mask
-                if fa[j] == EMPTY:
+                if ft[j, 0] == EMPTY:
                     break
-                h = _face_home(fa[j], fb[j], fc[j], mask)
+                h = _face_home(ft[j, 0], ft[j, 1], ft[j, 2], mask)
                 if (j > i and (h <= i or h > j)) or (j < i and (h <= i and h > j)):
-                    fa[i] = fa[j]
-                    fb[i] = fb[j]
-                    fc[i] = fc[j]
+                    ft[i, 0] = ft[j, 0]
+                    ft[i, 1] = ft[j, 1]
+                    ft[i, 2] = ft[j, 2]
                     i = j
-            fa[i] = EMPTY
+            ft[i, 0] = EMPTY
             return -1
         i = (i + 1) & mask
-    fa[i] = a
-    fb[i] = b
-    fc[i] = c
+    ft[i, 0] = a
+    ft[i, 1] = b
+    ft[i, 2] = c
     return 1
 
 
 @njit(cache=True)
-def _edge_find(ek, key):
+def _edge_find(et, key):
     """Slot of ``key`` in the edge table, or the empty slot where it would go."""
-    mask = ek.shape[0] - 1
+    mask = et.shape[0] - 1
     i = _mix(key) & mask
-    while ek[i] != EMPTY and ek[i] != key:
+    while et[i].key != EMPTY and et[i].key != key:
         i = (i + 1) & mask
     return i
 
 
 @njit(cache=True)
-def _edge_slot(ek, evid, ecount, key, sizes):
+def _edge_slot(et, key, sizes):
     """Slot of ``key``, inserted (no vertex yet, count 0) if absent."""
-    i = _edge_find(ek, key)
-    if ek[i] == EMPTY:
-        ek[i] = key
-        evid[i] = EMPTY
-        ecount[i] = 0
+    i = _edge_find(et, key)
+    if et[i].key == EMPTY:
+        et[i].key = key
+        et[i].vid = EMPTY
+        et[i].count = 0
         sizes[1] += 1
     return i
 
 
 @njit(cache=True)
-def _edge_delete(ek, evid, ecount, i):
-    mask = ek.shape[0] - 1
+def _edge_delete(et, i):
+    mask = et.shape[0] - 1
     j = i
     while True:
         j = (j + 1) & mask
-        if ek[j] == EMPTY:
+        if et[j].key == EMPTY:
             break
-        h = _mix(ek[j]) & mask
+        h = _mix(et[j].key) & mask
         if (j > i and (h <= i or h > j)) or (j < i and (h <= i and h > j)):
-            ek[i] = ek[j]
-            evid[i] = evid[j]
-            ecount[i] = ecount[j]
+            et[i] = et[j]
             i = j
-    ek[i] = EMPTY
+    et[i].key = EMPTY
 
 
 @njit(cache=True, nogil=True)
-def rehash_faces(fa, fb, fc, cap):
-    na = np.full(cap, EMPTY, np.int32)
-    nb = np.full(cap, EMPTY, np.int32)
-    nc = np.full(cap, EMPTY, np.int32)
-    for i in range(fa.shape[0]):
-        if fa[i] != EMPTY:
-            _face_toggle(na, nb, nc, fa[i], fb[i], fc[i])
-    return na, nb, nc
+def rehash_faces(ft, cap):
+    new = np.full((cap, 3), EMPTY, np.int32)
+    for i in range(ft.shape[0]):
+        if ft[i, 0] != EMPTY:
+            _face_toggle(new, ft[i, 0], ft[i, 1], ft[i, 2])
+    return new
 
 
 @njit(cache=True, nogil=True)
-def rehash_edges(ek, evid, ecount, cap):
-    nk = np.full(cap, EMPTY, np.int64)
-    nv = np.full(cap, EMPTY, np.int32)
-    nn = np.zeros(cap, np.int32)
-    for i in range(ek.shape[0]):
-        if ek[i] != EMPTY:
-            j = _edge_find(nk, ek[i])
-            nk[j] = ek[i]
-            nv[j] = evid[i]
-            nn[j] = ecount[i]
-    return nk, nv, nn
+def rehash_edges(et, cap):
+    new = np.empty(cap, EDGE_SLOT)
+    for i in range(cap):
+        new[i].key = EMPTY
+    for i in range(et.shape[0]):
+        if et[i].key != EMPTY:
+            new[_edge_find(new, et[i].key)] = et[i]
+    return new
 
 
 # -- the kernel ------------------------------------------------------------------------------------
@@ -203,17 +218,23 @@ def _edge_key(a, b):
     return (np.int64(a) << 32) | np.int64(b)
 
 
-@njit(cache=True)
-def _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, vals, iso, a, b, c, sizes):
-    """Toggle face (a, b, c) in the border if it touches the surface; update its edges' counts.
-    Returns the new number of recorded count-hits-zero keys."""
-    # sort the triple
+@njit(cache=True, inline="always")
+def _sorted3(a, b, c):
+    """A face's vertex ids in increasing order (its key in the face table)."""
     if a > b:
         a, b = b, a
     if b > c:
         b, c = c, b
     if a > b:
         a, b = b, a
+    return a, b, c
+
+
+@njit(cache=True)
+def _touch_face(ft, et, zero, nzero, vals, iso, a, b, c, sizes):
+    """Toggle face (a, b, c) in the border if it touches the surface; update its edges' counts.
+    Returns the new number of recorded count-hits-zero keys."""
+    a, b, c = _sorted3(a, b, c)
     sa = vals[a, 3] >= iso
     sb = vals[b, 3] >= iso
     sc = vals[c, 3] >= iso
@@ -222,7 +243,7 @@ def _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, vals, iso, a, b, c, s
     ec = vals[c, 3] == iso
     if sa == sb and sb == sc and not (ea or eb or ec):
         return nzero
-    d = _face_toggle(fa, fb, fc, a, b, c)
+    d = _face_toggle(ft, a, b, c)
     sizes[0] += d
     for k in range(6):
         # three straddling-edge keys, then three vertex keys
@@ -250,24 +271,24 @@ def _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, vals, iso, a, b, c, s
             if not ec:
                 continue
             key = _edge_key(c, c)
-        i = _edge_slot(ek, evid, ecount, key, sizes)
-        ecount[i] += d
-        if ecount[i] == 0:
+        i = _edge_slot(et, key, sizes)
+        et[i].count += d
+        if et[i].count == 0:
             zero[nzero] = key
             nzero += 1
     return nzero
 
 
 @njit(cache=True)
-def _surface_vertex(ek, evid, ecount, vals, iso, a, b, vpos, vgrad, vkey, nv, gmag, sizes):
-    """Id of the surface vertex on edge (a, b) (a above, b below), created if new."""
+def _surface_vertex(et, vals, iso, a, b, vpos, vgrad, vkey, nv, gmag, sizes):
+    """(slot of its key, id) of the surface vertex on edge (a, b) (a above, b below), created if new."""
     if vals[a, 3] == iso:
         key = _edge_key(a, a)
     else:
         key = _edge_key(a, b)
-    i = _edge_slot(ek, evid, ecount, key, sizes)
-    if evid[i] == EMPTY:
-        evid[i] = nv
+    i = _edge_slot(et, key, sizes)
+    if et[i].vid == EMPTY:
+        et[i].vid = nv
         vkey[nv] = key
         if vals[a, 3] == iso:
             for k in range(3):
@@ -282,19 +303,24 @@ def _surface_vertex(ek, evid, ecount, vals, iso, a, b, vpos, vgrad, vkey, nv, gm
         vgrad[nv, 0] = 0.0
         vgrad[nv, 1] = 0.0
         nv += 1
-    v = evid[i]
+    v = et[i].vid
     vgrad[v, 0] += gmag
     vgrad[v, 1] += 1.0
-    return v, nv
+    return i, v, nv
+
+
+#: for each tet edge, the two local vertices off it: the edge lies in the faces opposite them
+_OFF_EDGE = np.array([[2, 3], [1, 3], [1, 2], [0, 3], [0, 2], [0, 1]], np.int64)
 
 
 @njit(cache=True, nogil=True)
 def extract_batch(vals, tets, boundary, iso, case_count, case_tris, tet_edges,
-                  fa, fb, fc, ek, evid, ecount, vpos, vgrad, vkey, vlock, nv, tris, nt, zero, sizes):
+                  ft, et, vpos, vgrad, vkey, vlock, nv, tris, nt, zero, sizes):
     """Marching tetrahedra on one batch; border bookkeeping; unlock complete edges.
 
     ``vals`` (n, 4) float32 holds x, y, z and the scalar of every vertex streamed so far (one
-    array, so a ``.tetc`` stream can lend the decoder's own instead of a copy).
+    array, so a ``.tetc`` stream can lend the decoder's own instead of a copy). ``ft`` and ``et``
+    are the face and edge tables (:func:`new_face_table`, :func:`new_edge_table`).
     Capacities (checked by the caller): the tables hold at least twice their entries after the
     batch, ``vpos``/``vgrad``/``vlock`` room for 4 new vertices per tet, ``tris`` 2 per tet,
     ``zero`` 12 per tet + 3 per boundary face.
@@ -306,11 +332,12 @@ def extract_batch(vals, tets, boundary, iso, case_count, case_tris, tet_edges,
     """
     nzero = 0
     for f in range(boundary.shape[0]):
-        nzero = _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, vals, iso,
-                            boundary[f, 0], boundary[f, 1], boundary[f, 2], sizes)
+        nzero = _touch_face(ft, et, zero, nzero, vals, iso, boundary[f, 0], boundary[f, 1], boundary[f, 2], sizes)
     g = np.empty(3)
     m = np.empty((3, 3))
     vid = np.empty(6, np.int64)
+    slot = np.empty(6, np.int64)
+    toggled = np.zeros(4, np.int64)
     for t in range(tets.shape[0]):
         case = 0
         on_iso = False
@@ -348,6 +375,7 @@ def extract_batch(vals, tets, boundary, iso, case_count, case_tris, tet_edges,
                 gmag = np.sqrt(gx * gx + gy * gy + gz * gz)
             for e in range(6):
                 vid[e] = EMPTY
+                slot[e] = EMPTY
             for k in range(case_count[case]):
                 tri0 = EMPTY
                 tri1 = EMPTY
@@ -360,8 +388,8 @@ def extract_batch(vals, tets, boundary, iso, case_count, case_tris, tet_edges,
                         if vals[b, 3] >= iso:
                             a, b = b, a
                         nv0 = nv
-                        vid[e], nv = _surface_vertex(ek, evid, ecount, vals, iso, a, b, vpos, vgrad, vkey,
-                                                     nv, gmag, sizes)
+                        slot[e], vid[e], nv = _surface_vertex(et, vals, iso, a, b, vpos, vgrad, vkey, nv, gmag,
+                                                              sizes)
                         if nv > nv0:
                             vlock[nv0] = 1
                     if c == 0:
@@ -376,17 +404,40 @@ def extract_batch(vals, tets, boundary, iso, case_count, case_tris, tet_edges,
                     tris[nt, 1] = tri1
                     tris[nt, 2] = tri2
                     nt += 1
+        if on_iso:
+            # an iso-valued corner keys its vertex by the mesh vertex: the general path, face by face
+            for f in range(4):
+                nzero = _touch_face(ft, et, zero, nzero, vals, iso, tets[t, _FACES[f, 0]], tets[t, _FACES[f, 1]],
+                                    tets[t, _FACES[f, 2]], sizes)
+            continue
+        # No corner on the isovalue: a face touches the surface when its corners are not all on
+        # one side, and each straddling edge (it has a vertex: slot[e]) lies in two of the faces,
+        # so its count changes by the sum of their toggles: one look-up per edge, not per face
         for f in range(4):
-            nzero = _touch_face(fa, fb, fc, ek, evid, ecount, zero, nzero, vals, iso,
-                                tets[t, _FACES[f, 0]], tets[t, _FACES[f, 1]], tets[t, _FACES[f, 2]], sizes)
+            rest = case & (15 ^ (1 << f))  # the side bits of face f's corners (face f is opposite f)
+            if rest == 0 or rest == (15 ^ (1 << f)):
+                toggled[f] = 0
+                continue
+            a, b, c = _sorted3(tets[t, _FACES[f, 0]], tets[t, _FACES[f, 1]], tets[t, _FACES[f, 2]])
+            toggled[f] = _face_toggle(ft, a, b, c)
+            sizes[0] += toggled[f]
+        for e in range(6):
+            i = slot[e]
+            if i == EMPTY:
+                continue
+            d = toggled[_OFF_EDGE[e, 0]] + toggled[_OFF_EDGE[e, 1]]
+            if d != 0:
+                et[i].count += d
+                if et[i].count == 0:
+                    zero[nzero] = et[i].key
+                    nzero += 1
     unlocked = 0
     for z in range(nzero):
-        i = _edge_find(ek, zero[z])
-        if ek[i] != EMPTY and ecount[i] == 0:
-            if evid[i] != EMPTY:
-                vlock[evid[i]] = 0
+        i = _edge_find(et, zero[z])
+        if et[i].key != EMPTY and et[i].count == 0:
+            if et[i].vid != EMPTY:
+                vlock[et[i].vid] = 0
                 unlocked += 1
-            _edge_delete(ek, evid, ecount, i)
+            _edge_delete(et, i)
             sizes[1] -= 1
     return nv, nt, unlocked
-

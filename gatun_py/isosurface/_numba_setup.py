@@ -25,7 +25,10 @@ _HIDDEN = "scipy.linalg"
 SKIPPED_BLAS_PROBE = "numba.np.arraymath" not in sys.modules and _HIDDEN not in sys.modules
 if SKIPPED_BLAS_PROBE:
     sys.modules[_HIDDEN] = None  # an import of it (or of a submodule) raises ImportError meanwhile
-import numba.np.arraymath  # noqa: E402,F401  (numba's array library: the point of this module)
-
-if SKIPPED_BLAS_PROBE and sys.modules.get(_HIDDEN, 0) is None:
-    del sys.modules[_HIDDEN]
+try:
+    import numba.np.arraymath  # noqa: F401  (numba's array library: the point of this module)
+except ImportError:  # a numba that lays its modules out otherwise: nothing saved, nothing broken
+    SKIPPED_BLAS_PROBE = False
+finally:
+    if sys.modules.get(_HIDDEN, 0) is None:
+        del sys.modules[_HIDDEN]

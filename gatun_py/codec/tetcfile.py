@@ -237,9 +237,12 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
         raise OptionError("nothing to write: no levels")
     mesh0 = levels[0].mesh
     for lv in levels:
-        check_mesh(lv.mesh)
+        if not isinstance(lv.mesh, TetMesh):
+            raise MeshError(f"expected a TetMesh, got {type(lv.mesh).__name__}")
         if _arrays_meta(lv.mesh) != _arrays_meta(mesh0) or lv.mesh.points.dtype != mesh0.points.dtype:
             raise OptionError(f"level {lv.level} does not carry the arrays of level 0")
+    # every level's mesh is checked (check_mesh) by encode_level; a mesh encoded beforehand was
+    # checked there, and _with_forest holds it to the level's counts
     mesh_codes = mesh_codes or {}
 
     def encode(lv):

@@ -12,7 +12,8 @@ from conftest import load_sample
 import gatun_py
 from gatun_py.codec import LevelPayload, encode_tetc
 from gatun_py.codec.tetcfile import encode_level
-from gatun_py.errors import OptionError
+from gatun_py.errors import MeshError, OptionError
+from gatun_py.mesh import TetMesh
 from gatun_py.simplify import build_levels, decimate, storage_forests
 
 
@@ -62,3 +63,16 @@ def test_compress_bytes_do_not_depend_on_jobs(tmp_path):
         gatun_py.compress(mesh, tmp_path / "bad.tetc", jobs=0)
     assert not (tmp_path / "bad.tetc").exists()
     assert np.isfinite(mesh.points).all()
+
+
+def test_a_failing_level_in_a_thread_raises_its_error():
+    mesh = load_sample("post")[0]
+    payload = _payload(mesh)
+    bad = payload[3]
+    tets = bad.mesh.tets.copy()
+    tets[0, 0] = bad.mesh.n_points + 5  # an id out of range: check_mesh refuses it in the level's thread
+    payload[3] = LevelPayload(bad.level, bad.ratio, bad.merges_before,
+                              TetMesh(bad.mesh.points, None, tets, bad.mesh.scalar_name,
+                                      point_data=dict(bad.mesh.point_data)), bad.forest)
+    with pytest.raises(MeshError):
+        encode_tetc(payload, threads=2)

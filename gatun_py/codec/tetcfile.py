@@ -253,10 +253,15 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
         with ThreadPoolExecutor(min(int(threads), len(levels)), thread_name_prefix="tetc-level") as pool:
             futures = [pool.submit(encode, lv) for lv in levels]
             encoded = []
-            for lv, fut in zip(levels, futures):  # in level order, whichever finishes first
-                encoded.append(fut.result())
-                if progress is not None:
-                    progress(lv.level)
+            try:
+                for lv, fut in zip(levels, futures):  # in level order, whichever finishes first
+                    encoded.append(fut.result())
+                    if progress is not None:
+                        progress(lv.level)
+            except BaseException:
+                for fut in futures:  # a level failed (or an interrupt): the levels not started are not coded
+                    fut.cancel()
+                raise
     else:
         encoded = []
         for lv in levels:

@@ -85,7 +85,8 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, n_bricks
     Unless --mesh-only, the mesh is also decimated (Van Gelder) into a merge forest stored with it,
     plus pre-simplified levels, for `tetc decompress --ratio` and time-critical rendering.
     With --bricks K, each brick is decimated and coded on its own (on --jobs processes), its
-    vertices shared with other bricks locked so simplified bricks still meet.
+    vertices shared with other bricks locked so simplified bricks still meet. Without bricks,
+    --jobs threads code the levels (level 0 while the decimation runs); the file is the same.
     """
     with progress_reporter("decimating", quiet, min_total=1) as progress:
         gatun_py.compress(input, output, levels=n_levels, mesh_only=mesh_only, force=force, w_density=w_density,

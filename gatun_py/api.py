@@ -19,6 +19,7 @@ import glob
 import math
 import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,7 +28,9 @@ import numpy as np
 from ._atomic import check_output_path, write_bytes_atomic
 from ._resources import peak_rss_mb
 from .codec import LevelPayload, TetcReader, write_tetc
+from .codec.bricks import check_jobs
 from .codec.info import tetc_info
+from .codec.tetcfile import encode_level
 from .errors import OptionError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.io import mesh_output_format
@@ -120,7 +123,8 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
         count), each coded on its own with its own forest and levels (its vertices shared with other
         bricks locked), so that they decode in parallel and render apart. 1: one plain stream.
     jobs : int, optional
-        Processes that decimate and encode bricks (default: all cores).
+        Processes that decimate and encode bricks; without bricks, threads that encode the levels
+        (and level 0 beside the decimation). Default: all cores. The bytes do not depend on it.
     dependencies : bool
         Also store the merge dependencies that selective refinement needs (``render(...,
         selective=True)``): every cut closed under them is flip-free. They cost 20-30 % of the file
@@ -152,6 +156,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
             raise OptionError(f"{name} must be a finite number >= 0, got {w!r}")
     if isinstance(bricks, bool) or not isinstance(bricks, (int, np.integer)) or bricks < 1:
         raise OptionError(f"bricks must be a positive integer, got {bricks!r}")
+    threads = check_jobs(jobs)
     _check_output(source, output, force=force)  # fail before the (long) work
     t0 = time.perf_counter()
     mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point,
@@ -161,6 +166,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     if dependencies and (mesh_only or bricks > 1):
         raise OptionError("merge dependencies need a merge forest of one plain stream: not with mesh_only or bricks")
     deps = None
+    mesh_codes = {}
     if bricks > 1 and mesh.n_tets == 0:
         log("note: a mesh without tets is stored as one brick")
     if bricks > 1 and mesh.n_tets > 0:
@@ -171,17 +177,25 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     elif mesh_only:
         payload = mesh
     else:
-        forest = decimate(mesh, w_density=w_density, w_geometry=w_geometry, progress=_counter(progress, mesh.n_points))
-        lv = build_levels(mesh, forest, levels)
-        log(f"merge forest: {forest.n_merges} merges (max ratio {forest.max_ratio:.5f}); "
-            f"levels {', '.join(str(x.level) for x in lv)}")
-        payload = [LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
-                   for x, f in zip(lv, storage_forests(lv))]
-        if dependencies:
-            deps = merge_dependencies(mesh, forest)
-            log(f"merge dependencies: {deps.idx.size} ({deps.idx.size / max(deps.n_merges, 1):.1f} per merge)")
-            deps = (deps.ptr, deps.idx, deps.removed)
-    n = len(data) if payload is None else write_tetc(output, payload, source=name, force=force, dependencies=deps)
+        with ThreadPoolExecutor(1, thread_name_prefix="tetc-level0") as pool:
+            # Level 0's mesh does not depend on the forest: with a second core it is encoded beside
+            # the decimation (whose driver kernel releases the GIL); its forest is added afterwards.
+            level0 = pool.submit(encode_level, LevelPayload(0, 0.0, 0, mesh)) if threads > 1 else None
+            forest = decimate(mesh, w_density=w_density, w_geometry=w_geometry,
+                              progress=_counter(progress, mesh.n_points))
+            lv = build_levels(mesh, forest, levels)
+            log(f"merge forest: {forest.n_merges} merges (max ratio {forest.max_ratio:.5f}); "
+                f"levels {', '.join(str(x.level) for x in lv)}")
+            payload = [LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
+                       for x, f in zip(lv, storage_forests(lv))]
+            if dependencies:
+                deps = merge_dependencies(mesh, forest)
+                log(f"merge dependencies: {deps.idx.size} ({deps.idx.size / max(deps.n_merges, 1):.1f} per merge)")
+                deps = (deps.ptr, deps.idx, deps.removed)
+            mesh_codes = {} if level0 is None else {0: level0.result()}
+    n = (len(data) if payload is None else
+         write_tetc(output, payload, source=name, force=force, dependencies=deps, mesh_codes=mesh_codes,
+                    threads=threads))
     out = TetcFile(output)
     info = out.info
     log(f"wrote {output}: {n} bytes ({8.0 * n / max(mesh.n_tets, 1):.2f} bits/tet overall, "

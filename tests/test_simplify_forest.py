@@ -15,6 +15,7 @@ from gatun_py.codec.forest import decode_forest, encode_forest
 from gatun_py.errors import CorruptFileError, OptionError
 from gatun_py.simplify import (ROOT_RANK, MergeForest, ancestors, available_levels, build_levels, decimate,
                                level_merges, simplified_mesh)
+from gatun_py.simplify.levels import level_forest
 
 _FORESTS: dict = {}
 
@@ -61,6 +62,34 @@ def test_continuing_from_a_level_is_exact(mesh, data):
         n = data.draw(st.integers(lv.n_merges, forest.n_merges))
         _same_state(mesh, forest, lv, n)
         _same_state(mesh, forest, lv, forest.n_merges)
+
+
+def _assert_levels_equal_direct(mesh, forest, levels):
+    """Each level (built from the previous one) equals the level built from the input directly."""
+    for lv in levels:
+        m, ids = simplified_mesh(mesh, forest, lv.n_merges, return_ids=True)
+        assert np.array_equal(lv.vertex_ids, ids)
+        assert np.array_equal(lv.mesh.tets, m.tets)
+        assert lv.mesh.points.tobytes() == m.points.tobytes()
+        assert lv.mesh.density.tobytes() == m.density.tobytes()
+        direct = level_forest(forest, lv.n_merges, ids)
+        assert np.array_equal(lv.forest.parent, direct.parent) and np.array_equal(lv.forest.rank, direct.rank)
+        assert lv.forest.n_merges == direct.n_merges
+
+
+@settings(max_examples=25, deadline=None)
+@given(mesh_strategy())
+def test_levels_built_in_a_chain_equal_levels_from_the_input(mesh):
+    forest = decimate(mesh)
+    _assert_levels_equal_direct(mesh, forest, build_levels(mesh, forest))
+
+
+def test_sample_levels_built_in_a_chain_equal_levels_from_the_input():
+    mesh = load_sample("bluntfin")[0]
+    forest = decimate(mesh)
+    levels = build_levels(mesh, forest)
+    assert len(levels) >= 10
+    _assert_levels_equal_direct(mesh, forest, levels)
 
 
 @settings(max_examples=40, deadline=None)

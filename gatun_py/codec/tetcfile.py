@@ -14,6 +14,7 @@ a reader seeks straight to one level.
 from __future__ import annotations
 
 import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Iterator
 
@@ -209,7 +210,8 @@ def file_meta(mesh0, n_boundary_faces: int, source: str = "", *, render_step: fl
     }
 
 
-def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, dependencies=None) -> bytes:
+def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, dependencies=None,
+                mesh_codes: dict | None = None, threads: int = 1) -> bytes:
     """Build a whole ``.tetc`` file from levels (level 0 first).
 
     Parameters
@@ -218,23 +220,54 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
     source : str
         Source file name, recorded in the metadata.
     progress : callable, optional
-        Called with each finished level number.
+        Called with each finished level number, in level order.
     dependencies : (ptr, idx, removed), optional
         The full forest's merge dependencies (:mod:`gatun_py.simplify.dependencies`), stored as
         the section ``deps`` for selective refinement.
+    mesh_codes : dict, optional
+        Level number -> :class:`EncodedLevel` of that level's mesh alone, already encoded by
+        ``encode_level(LevelPayload(level, ratio, merges_before, mesh))`` (no forest), e.g. level 0
+        beside the decimation; only its forest section is added here.
+    threads : int
+        Levels encoded at once in threads (the connectivity kernels release the GIL); every level
+        is coded on its own and the sections are assembled in level order, so the bytes do not
+        depend on it.
     """
     if not levels:
         raise OptionError("nothing to write: no levels")
     mesh0 = levels[0].mesh
     for lv in levels:
-        check_mesh(lv.mesh)
+        if not isinstance(lv.mesh, TetMesh):
+            raise MeshError(f"expected a TetMesh, got {type(lv.mesh).__name__}")
         if _arrays_meta(lv.mesh) != _arrays_meta(mesh0) or lv.mesh.points.dtype != mesh0.points.dtype:
             raise OptionError(f"level {lv.level} does not carry the arrays of level 0")
-    encoded = []
-    for lv in levels:
-        encoded.append(encode_level(lv))
-        if progress is not None:
-            progress(lv.level)
+    # every level's mesh is checked (check_mesh) by encode_level; a mesh encoded beforehand was
+    # checked there, and _with_forest holds it to the level's counts
+    mesh_codes = mesh_codes or {}
+
+    def encode(lv):
+        done = mesh_codes.get(lv.level)
+        return encode_level(lv) if done is None else _with_forest(done, lv)
+
+    if threads > 1 and len(levels) > 1:
+        with ThreadPoolExecutor(min(int(threads), len(levels)), thread_name_prefix="tetc-level") as pool:
+            futures = [pool.submit(encode, lv) for lv in levels]
+            encoded = []
+            try:
+                for lv, fut in zip(levels, futures):  # in level order, whichever finishes first
+                    encoded.append(fut.result())
+                    if progress is not None:
+                        progress(lv.level)
+            except BaseException:
+                for fut in futures:  # a level failed (or an interrupt): the levels not started are not coded
+                    fut.cancel()
+                raise
+    else:
+        encoded = []
+        for lv in levels:
+            encoded.append(encode(lv))
+            if progress is not None:
+                progress(lv.level)
     meta = file_meta(mesh0, encoded[0].meta["boundary_faces"], source, render_step=encoded[0].render_step)
     meta["levels"] = [e.meta for e in encoded]
     sections = [(name, data) for e in encoded for name, data in e.sections.items()]
@@ -242,6 +275,26 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
         meta["dependencies"], deps = _dependency_section(dependencies, levels[0])
         sections.append(("deps", deps))
     return build_container(meta, sections)
+
+
+def _with_forest(done: EncodedLevel, payload: LevelPayload) -> EncodedLevel:
+    """A level whose mesh ``encode_level`` coded without a forest, with the payload's forest added:
+    the same sections and metadata as ``encode_level(payload)`` in one go."""
+    mesh, i = payload.mesh, int(payload.level)
+    meta = dict(done.meta)
+    if (done.level != i or meta["points"] != mesh.n_points or meta["tets"] != mesh.n_tets
+            or meta["has_forest"] or len(done.vertex_order) != mesh.n_points):
+        raise OptionError(f"level {i}: the encoded mesh given does not match the level's mesh")
+    sections = dict(done.sections)
+    if payload.forest is not None:
+        parent, rank = (np.asarray(a) for a in payload.forest)
+        if parent.shape != (mesh.n_points,) or rank.shape != (mesh.n_points,):
+            raise OptionError(f"level {i}: forest does not match the mesh ({mesh.n_points} points)")
+        sections[f"L{i}/forest"] = _encode_level_forest(mesh, done.vertex_order, parent, rank,
+                                                        meta["boundary_vertices"])
+    meta.update(ratio=float(payload.ratio), merges_before=int(payload.merges_before),
+                has_forest=payload.forest is not None)
+    return EncodedLevel(i, sections, meta, done.vertex_order, done.peak_border, done.render_step)
 
 
 def _dependency_section(dependencies, level0: LevelPayload) -> tuple[dict, bytes]:
@@ -255,10 +308,12 @@ def _dependency_section(dependencies, level0: LevelPayload) -> tuple[dict, bytes
 
 
 def write_tetc(path, mesh_or_levels, *, source: str = "", force: bool = False, progress=None,
-               dependencies=None) -> int:
-    """Compress a mesh (or a list of :class:`LevelPayload`) into ``path`` atomically; returns bytes written."""
+               dependencies=None, mesh_codes: dict | None = None, threads: int = 1) -> int:
+    """Compress a mesh (or a list of :class:`LevelPayload`) into ``path`` atomically; returns bytes
+    written. ``mesh_codes``, ``threads``: as :func:`encode_tetc`."""
     levels = mesh_or_levels if isinstance(mesh_or_levels, list) else [LevelPayload(0, 0.0, 0, mesh_or_levels)]
-    data = encode_tetc(levels, source=source, progress=progress, dependencies=dependencies)
+    data = encode_tetc(levels, source=source, progress=progress, dependencies=dependencies,
+                       mesh_codes=mesh_codes, threads=threads)
     write_bytes_atomic(path, data, force=force)
     return len(data)
 

@@ -1214,7 +1214,7 @@ def _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, de
         out_e[i] = e
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # compress encodes level 0's mesh in a thread meanwhile
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks, marks_b, marks_ab, tcount,
          counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pdat, tp_head, tp_count, p_next,
          vw, p_orig):

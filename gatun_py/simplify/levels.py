@@ -115,9 +115,17 @@ def build_levels(mesh: TetMesh, forest: MergeForest, levels=None) -> list[LevelM
     out = []
     for i in wanted:
         n = level_merges(mesh.n_points, i)
-        m, ids = simplified_mesh(mesh, forest, n, return_ids=True)
-        out.append(LevelMesh(i, n, n / mesh.n_points if mesh.n_points else 0.0, m,
-                             level_forest(forest, n, ids), ids))
+        if not out:
+            m, ids = simplified_mesh(mesh, forest, n, return_ids=True)
+            rest = level_forest(forest, n, ids)
+        else:
+            # from the previous level (half its size), not from the input: its remaining forest
+            # continues the same merges, so the tets, their order and the vertices are the same
+            prev = out[-1]
+            m, local = simplified_mesh(prev.mesh, prev.forest, n - prev.n_merges, return_ids=True)
+            ids = prev.vertex_ids[local]
+            rest = level_forest(prev.forest, n - prev.n_merges, local)
+        out.append(LevelMesh(i, n, n / mesh.n_points if mesh.n_points else 0.0, m, rest, ids))
     return out
 
 

@@ -17,6 +17,7 @@ array library or ``scipy.linalg`` is already loaded there is nothing to save and
 
 from __future__ import annotations
 
+import importlib
 import sys
 
 _HIDDEN = "scipy.linalg"
@@ -25,8 +26,8 @@ _HIDDEN = "scipy.linalg"
 SKIPPED_BLAS_PROBE = "numba.np.arraymath" not in sys.modules and _HIDDEN not in sys.modules
 if SKIPPED_BLAS_PROBE:
     sys.modules[_HIDDEN] = None  # an import of it (or of a submodule) raises ImportError meanwhile
-try:
-    import numba.np.arraymath  # noqa: F401  (numba's array library: the point of this module)
+try:  # numba's array library: the point of this module
+    importlib.import_module("numba.np.arraymath")
 except ImportError:  # a numba that lays its modules out otherwise: nothing saved, nothing broken
     SKIPPED_BLAS_PROBE = False
 finally:

@@ -82,6 +82,13 @@ class EncodedLevel:
 
 def encode_level(payload: LevelPayload) -> EncodedLevel:
     """Compress one level: connectivity, geometry (in decode order) and the optional forest."""
+    return _with_forest(_encode_level_mesh(payload), payload)
+
+
+def _encode_level_mesh(payload: LevelPayload) -> EncodedLevel:
+    """One level's mesh sections (connectivity, geometry, point arrays) and metadata, without the
+    forest: :func:`_with_forest` adds it (at once in :func:`encode_level`, or later for a level
+    whose mesh was coded while its forest was being built)."""
     mesh = payload.mesh
     check_mesh(mesh)
     conn = encode_connectivity(mesh.n_points, mesh.tets)
@@ -103,11 +110,6 @@ def encode_level(payload: LevelPayload) -> EncodedLevel:
             continue  # the geometry section holds it exactly
         sections[f"L{i}/array/{j}"] = encode_array(values[vo], refs, external=d32 if name == mesh.scalar_name else None,
                                                    positions=p32)
-    if payload.forest is not None:
-        parent, rank = (np.asarray(a) for a in payload.forest)
-        if parent.shape != (mesh.n_points,) or rank.shape != (mesh.n_points,):
-            raise OptionError(f"level {i}: forest does not match the mesh ({mesh.n_points} points)")
-        sections[f"L{i}/forest"] = _encode_level_forest(mesh, vo, parent, rank, conn.n_boundary_vertices)
     lo, hi = mesh.bbox
     meta = {
         "level": i,
@@ -120,7 +122,7 @@ def encode_level(payload: LevelPayload) -> EncodedLevel:
         "referenced_points": int(conn.n_referenced),
         "bbox": [lo.tolist(), hi.tolist()],
         "scalar_range": [float(x) for x in mesh.scalar_range],
-        "has_forest": payload.forest is not None,
+        "has_forest": False,
     }
     return EncodedLevel(i, sections, meta, vo, conn.peak_border, render_step)
 
@@ -278,8 +280,9 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
 
 
 def _with_forest(done: EncodedLevel, payload: LevelPayload) -> EncodedLevel:
-    """A level whose mesh ``encode_level`` coded without a forest, with the payload's forest added:
-    the same sections and metadata as ``encode_level(payload)`` in one go."""
+    """A level whose mesh was coded without a forest (``encode_level`` of a payload without one),
+    with the payload's forest and its metadata (ratio, merges before, has_forest) added; the one
+    place a level's forest section is made."""
     mesh, i = payload.mesh, int(payload.level)
     meta = dict(done.meta)
     if (done.level != i or meta["points"] != mesh.n_points or meta["tets"] != mesh.n_tets

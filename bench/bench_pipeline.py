@@ -2,7 +2,9 @@
 generic vs streaming over ratio (Figure 9), stored levels (Table 3 / Figure 10), image quality over
 ratio (Figure 11), peak memory, and the time-budget flag.
 
-Run: ``python bench/bench_pipeline.py [--quick] [--only table3|memory]`` → ``bench/sections/pipeline.md`` + ``bench/figures/``.
+Run: ``python bench/bench_pipeline.py [--quick] [--only table3|memory|quality] [--flange MESH.vtu]`` →
+``bench/sections/pipeline.md`` + ``bench/figures/``. ``--flange`` adds the gmsh flange (issue 12's
+unstructured mesh, ``bench/gmsh_meshes.py``) to the image-quality table against VTK.
 All timings in-process with a warm JIT cache (interpreter start-up excluded, as ``--stats``'s
 ``total_s``): from opening the .tetc file to the PNG written.
 """
@@ -22,8 +24,22 @@ from common import FIGURES, ROOT, WORK, code_state, load, table, write_section
 
 QUICK = "--quick" in sys.argv
 DATASETS = ["bluntfin", "combustion"]
-TF = {"bluntfin": "bluntfin", "combustion": "combustion"}
-ANGLES = {"bluntfin": (30.0, 20.0), "combustion": (30.0, 20.0)}
+TF = {"bluntfin": "bluntfin", "combustion": "combustion", "flange": "default"}
+ANGLES = {"bluntfin": (30.0, 20.0), "combustion": (30.0, 20.0), "flange": (30.0, 20.0)}
+FLANGE = sys.argv[sys.argv.index("--flange") + 1] if "--flange" in sys.argv else None
+
+
+def load_mesh(name):
+    """A sample by name, or the gmsh flange from ``--flange``."""
+    if name == "flange":
+        from gatun_py.mesh import read_mesh
+
+        return read_mesh(FLANGE)
+    return load(name)
+
+
+def quality_datasets() -> list[str]:
+    return DATASETS + (["flange"] if FLANGE else [])
 RATIOS = [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.99]
 REPEATS = 1 if QUICK else 3
 
@@ -37,7 +53,7 @@ def build_files(name):
     lv_path, one_path = WORK / f"{name}_levels.tetc", WORK / f"{name}_one.tetc"
     if lv_path.exists() and one_path.exists():
         return lv_path, one_path
-    mesh, _ = load(name)
+    mesh, _ = load_mesh(name)
     forest = decimate(mesh)
     levels = build_levels(mesh, forest)
     pay = [LevelPayload(lv.level, lv.ratio, lv.n_merges, lv.mesh, (lv.forest.parent, lv.forest.rank)) for lv in levels]
@@ -176,7 +192,7 @@ def main():
     text.append(table(["data set", "mode", "ratio", "RMSE", "PSNR dB", "SSIM"], q_rows) + "\n")
 
     # -- our forest vs VTK's quadric decimation at equal tet counts, rendered the same way -----------
-    text.append(vtk_quality_section(files))
+    text.append(vtk_quality_section({n: build_files(n) for n in quality_datasets()}))
 
     # -- peak memory: streaming (no-lean, lean) vs generic, whole processes ------------------------
     text.append(memory_section(files))
@@ -574,9 +590,9 @@ def vtk_quality_section(files) -> str:
                + ", ".join(f"({a:g}, {e:g})" for a, e in QUALITY_VIEWS) + ". Code: " + code_state() + ".\n")
     rows = []
     wins = 0
-    for n in DATASETS:
+    for n in files:
         path = files[n][0]
-        mesh, _ = load(n)
+        mesh, _ = load_mesh(n)
         reader = TetcReader(path)
         lo, hi, rng, step = file_render_defaults(reader)
         ug = to_vtk(mesh)
@@ -586,7 +602,7 @@ def vtk_quality_section(files) -> str:
             for rep in range(VTK_RUNS):
                 if n_ours is None:
                     n_ours = frame(path, view(n, 64), ratio=r)[1].stats["tets_rendered"]
-                dec, _ = vtk_quadric(ug, 1.0 - n_ours / mesh.n_tets)
+                dec = vtk_quadric(ug, 1.0 - n_ours / mesh.n_tets)[0]
                 pts, tets, dens = vtk_arrays(dec)
                 try:
                     vm, _ = validate_tets(pts.astype(np.float32), dens.astype(np.float32), tets)
@@ -617,7 +633,7 @@ def vtk_quality_section(files) -> str:
 
 def only_quality():
     """Re-measure the VTK quality block and replace it in the existing section (the other tables stay)."""
-    files = {n: build_files(n) for n in DATASETS}
+    files = {n: build_files(n) for n in quality_datasets()}
     replace_block(QUALITY_HEAD, vtk_quality_section(files))
 
 

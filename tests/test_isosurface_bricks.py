@@ -238,3 +238,21 @@ def test_cli_on_a_bricked_file(tmp_path):
     assert st["bricks"]["jobs"] == 2 and out.exists()
     res = run("isosurface", src, "--value", str(v), "-o", tmp_path / "x.ply", "--jobs", "0")
     assert res.exit_code == 2
+
+
+def test_point_table_finds_adds_and_bounds():
+    from gatun_py.isosurface.bricked import _TAKEN, _new_point_table, _point_slots
+
+    bits, ids = _new_point_table(5)
+    keys = np.array([[1, 2, 3], [3, 2, 1], [1, 2, 3], [0, 0, 0]], np.uint32)
+    out = np.empty(4, np.int64)
+    assert _point_slots(bits, ids, keys, out, 5) == 3
+    assert out[0] < 0 and out[1] < 0 and out[3] < 0 and out[2] == -1 - out[0]  # the repeat finds its slot taken
+    assert ids[out[2]] == _TAKEN
+    ids[-1 - out[[0, 1, 3]]] = [7, 8, 9]
+    again = np.empty(3, np.int64)
+    assert _point_slots(bits, ids, keys[[3, 1, 0]], again, 2) == 0
+    assert ids[again].tolist() == [9, 8, 7]
+    more = np.array([[5, 5, 5], [6, 6, 6], [7, 7, 7]], np.uint32)
+    assert _point_slots(bits, ids, more, np.empty(3, np.int64), 2) == -1  # more than the room: damage
+    assert (ids != -1).sum() <= 5 < len(ids)

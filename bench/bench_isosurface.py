@@ -265,6 +265,52 @@ def part_quality(quick: bool):
     return exact_rows, rows, curves
 
 
+BRICKS_QUALITY = 8
+
+
+def part_bricked_quality(quick: bool):
+    """Ours from a bricked file (K = 8, skipping the bricks the isovalue misses) against ours from
+    the one-stream file, at every ratio of the quality table: faces, RMS and Hausdorff distance to
+    the full-resolution surface."""
+    from gatun_py.codec import TetcReader
+    from gatun_py.isosurface import isosurface
+    from gatun_py.isosurface.metrics import surface_distance
+    from gatun_py.pipeline.bricks import compress_bricks
+
+    rows = []
+    samples = 60_000 if quick else 150_000
+    for name, (src, kw) in list(datasets(True).items()):
+        mesh, tetc, _ = prepared(name, src, kw)
+        bricked = OUT / f"{tetc.stem}_k{BRICKS_QUALITY}.tetc"
+        if not bricked.exists():
+            bricked.write_bytes(compress_bricks(mesh, BRICKS_QUALITY, mesh_only=True))
+        lo, hi = mesh.bbox
+        diag = float(np.linalg.norm(hi - lo))
+        for q in (0.3, 0.7):
+            v = isovalue(mesh.density, q)
+            full = isosurface(tetc, values=v)
+            full_b = isosurface(TetcReader(bricked), values=v)
+            for r in RATIOS:
+                one = isosurface(tetc, values=v, ratio=r)
+                t0 = time.perf_counter()
+                br = isosurface(TetcReader(bricked), values=v, ratio=r)
+                dt = time.perf_counter() - t0
+                e1 = surface_distance(full.points, full.triangles, one.points, one.triangles, diagonal=diag,
+                                      n_samples=samples)
+                eb = surface_distance(full.points, full.triangles, br.points, br.triangles, diagonal=diag,
+                                      n_samples=samples)
+                b = br.stats["bricks"]
+                rows.append([name, f"{v:.4g}", r, f"{full.n_triangles} / {full_b.n_triangles}",
+                             f"{b['bricks_decoded']} of {b['bricks']}", one.n_triangles, f"{e1['rms']:.4f}",
+                             f"{e1['hausdorff']:.3f}", br.n_triangles, f"{eb['rms']:.4f}", f"{eb['hausdorff']:.3f}",
+                             f"{eb['rms'] / e1['rms']:.2f}" if e1["rms"] > 0 else "-",
+                             f"{eb['hausdorff'] / e1['hausdorff']:.2f}" if e1["hausdorff"] > 0 else "-",
+                             f"{one.stats['peak_locked']} / {br.stats['peak_locked']}", br.stats["locked_at_end"]])
+                print(f"{name} {v:.4g} R={r}: one stream {one.n_triangles} rms {e1['rms']:.4f}, bricked "
+                      f"{br.n_triangles} rms {eb['rms']:.4f} ({dt:.2f} s)", flush=True)
+    return rows
+
+
 def part_importance():
     from gatun_py.isosurface import isosurface
     from gatun_py.isosurface.metrics import one_sided
@@ -678,7 +724,7 @@ def main(argv=None) -> int:
     ap.add_argument("--big-value2", type=float, default=None,
                     help="a second isovalue for the large mesh (one fewer bricks hold): ours and two cascades")
     ap.add_argument("--runs", type=int, default=3)
-    ap.add_argument("--only", choices=["quality", "levels", "big", "stages", "report"], default=None,
+    ap.add_argument("--only", choices=["quality", "bricks", "levels", "big", "stages", "report"], default=None,
                     help="run one part (stages: where the large run's memory goes, also part of big; report: "
                          "only rewrite the section and figures from the saved results)")
     ap.add_argument("--peer", choices=PEERS)
@@ -698,6 +744,8 @@ def main(argv=None) -> int:
         exact, quality, curves = part_quality(args.quick)
         saved.update(exact=exact, quality=quality, importance=part_importance(),
                      curves=[[list(k), v] for k, v in curves.items()])
+    if args.only in (None, "bricks"):
+        saved["bricks_quality"] = part_bricked_quality(args.quick)
     if args.only in (None, "levels"):
         saved["levels"] = part_levels()
     if args.only in (None, "big") and args.big:
@@ -717,11 +765,33 @@ def main(argv=None) -> int:
     old = SECTIONS / "isosurface.md"
     if "quality" not in saved and old.exists():  # a partial run (--only big): keep the other tables
         text = _splice_big(old.read_text(), text)
+        text = _splice_part(text, report({"bricks_quality": saved.get("bricks_quality")}), _BRICKS_HEADING,
+                            before=_LEVELS_HEADING)
     write_section("isosurface", text)
     return 0
 
 
 _BIG_HEADING = "### Time and memory on a large mesh"
+_BRICKS_HEADING = "### From a bricked file"
+_LEVELS_HEADING = "### Starting from a pre-simplified level"
+
+
+def _splice_part(old: str, new: str, heading: str, *, before: str) -> str:
+    """``old`` with its part under ``heading`` (to the next ``### ``) replaced by ``new``'s, or
+    inserted before the part under ``before`` (appended when there is none)."""
+    if heading not in new:
+        return old
+    part = new[new.index(heading):]
+    nxt = part.find("\n### ")
+    part = (part[:nxt] if nxt >= 0 else part).rstrip() + "\n\n"
+    if heading in old:
+        head, rest = old.split(heading, 1)
+        nxt = rest.find("\n### ")
+        return head + part + (rest[nxt + 1:] if nxt >= 0 else "")
+    if before in old:
+        head, rest = old.split(before, 1)
+        return head + part + before + rest
+    return old.rstrip() + "\n\n" + part
 
 
 def _splice_big(old: str, new: str) -> str:
@@ -775,6 +845,15 @@ def report(s) -> str:
                 "weighted (high-gradient) region and in the rest.", "",
                 table(["iso", "R", "plain faces", "plain RMS important", "plain RMS rest", "weighted faces",
                        "weighted RMS important", "weighted RMS rest"], s["importance"]), ""]
+    if s.get("bricks_quality"):
+        out += [f"### From a bricked file (K = {BRICKS_QUALITY}) against the one-stream file", "",
+                f"`tetc compress --bricks {BRICKS_QUALITY} --mesh-only`; the bricks whose stored scalar range "
+                "misses the isovalue are not decoded. Distance to the full-resolution surface (% of the "
+                "diagonal); ratios: bricked / one stream. Full faces: one stream / bricked (equal: the same "
+                "surface, one vertex per cut edge).", "",
+                table(["data set", "iso", "R", "full faces", "bricks decoded", "one-stream faces", "RMS",
+                       "Hausdorff", "bricked faces", "RMS", "Hausdorff", "RMS ratio", "Hausdorff ratio",
+                       "peak locked (one / bricked)", "locked at end (bricked)"], s["bricks_quality"]), ""]
     if s.get("levels"):
         lv = s["levels"]
         out += [f"### Starting from a pre-simplified level (Blunt-fin, isovalue {lv['value']:.4g}, full surface "

@@ -208,11 +208,16 @@ class BrickedStream:
         if self._iterated:
             raise RuntimeError("a BrickedStream is iterated once")
         self._iterated = True
-        return self._stream()
+        self._gen = self._stream()
+        return self._gen
 
     def close(self) -> None:
-        """Stop the decoding threads (iteration ended early)."""
+        """End the iteration early: the decoding threads stop after their current batch, and are
+        joined."""
         self._stop.set()
+        gen = getattr(self, "_gen", None)
+        if gen is not None:
+            gen.close()
 
     # -- decoding threads --------------------------------------------------------------------------
 

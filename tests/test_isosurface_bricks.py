@@ -215,6 +215,18 @@ def test_a_cut_vertex_that_differs_between_bricks_is_a_corrupt_file():
         isosurface(TetcReader(bad), values=v, jobs=2)
 
 
+def test_a_stored_level_of_a_bricked_file():
+    mesh = mesh_of("grid")
+    data = compress_bricks(mesh, 3, jobs=1, levels=2)
+    reader = TetcReader(data)
+    v = iso_values(mesh)[1]
+    for level in (0, 1):
+        s = isosurface(reader, values=v, level=level)
+        whole = isosurface(decode_bricked(reader, level, jobs=1), values=v)
+        assert s.stats["level"] == level and s.n_triangles == whole.n_triangles > 0
+        assert canonical(s.points, s.triangles) == canonical(whole.points, whole.triangles)
+
+
 def test_options_of_a_bricked_file():
     data = bricked("grid", 3)
     v = iso_values(mesh_of("grid"))[0]

@@ -474,16 +474,15 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
     stream, info = _open_stream(source, level=level, ratio_mesh=ratio_mesh, read_kwargs=read_kwargs, values=vals,
                                 jobs=jobs)
     try:
-        return _extract(stream, info, vals, ratio=ratio, faces=faces, batch_faces=batch_faces, importance=imp,
-                        check=check, progress=progress, t_start=t_start)
+        return _extract(stream, info, vals, ratio=ratio, faces=faces, batch_faces=batch_faces, imp=imp, check=check,
+                        progress=progress, t_start=t_start)
     finally:
         if isinstance(stream, BrickedStream):
             stream.close()  # its decoding threads stop if the extraction failed
 
 
-def _extract(stream, info, vals, *, ratio, faces, batch_faces, importance, check, progress, t_start) -> Surface:
-    """The driver of :func:`isosurface` over an opened stream."""
-    imp = importance
+def _extract(stream, info, vals, *, ratio, faces, batch_faces, imp, check, progress, t_start) -> Surface:
+    """The driver of :func:`isosurface` over an opened stream (``imp``: the importance function or None)."""
     lo, hi, (smin, smax) = info["bbox_lo"], info["bbox_hi"], info["scalar_range"]
     diag = float(np.linalg.norm(np.asarray(hi, float) - np.asarray(lo, float)))
     grad_scale = diag / (smax - smin) if smax > smin else 1.0

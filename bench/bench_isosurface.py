@@ -867,7 +867,9 @@ def report(s) -> str:
         st = b["stats"] or {}
         out += [f"### Time and memory on a large mesh ({b['tets']:,} tets, isovalue {b['value']:.4g}, R = {b['ratio']})", "",
                 f"`python bench/bench_isosurface.py --only big --big {b.get('file', '?')} --big-value {b['value']:.4g} "
-                f"--runs {b.get('runs', '?')}` ({b.get('code', '?')}). "
+                + "".join(f"--big-bricked {f} " for f in b.get("bricked", []))
+                + (f"--big-value2 {b['value2']:.4g} " if b.get("value2") is not None else "")
+                + f"--runs {b.get('runs', '?')}` ({b.get('code', '?')}). "
                 "Each line is a whole process (median of the runs, interleaved, after one warm-up run each); "
                 "ours reads the `.tetc`, the cascades VTK's `.vtu`; peak RSS from the kernel's accounting of the "
                 "child. Ratios: ours / that line. The bare lines only import, for what each peak holds beyond "

@@ -685,8 +685,8 @@ def _file_box_and_range(reader: TetcReader):
 def _open_bricked(reader: TetcReader, *, level, ratio_mesh, values, jobs):
     """(stream, info) of a bricked file: the bricks an isovalue inside the file's range cuts."""
     if ratio_mesh is not None:
-        raise OptionError("ratio_mesh (simplifying the tet mesh on the fly) is not supported on a bricked file; "
-                          "use a stored level instead")
+        raise OptionError("simplifying the tet mesh on the fly (ratio_mesh, --mesh-ratio) is not supported on a "
+                          "bricked file; start from a stored level instead (level, --level)")
     lo, hi, rng = _file_box_and_range(reader)
     inside = [v for v in values if rng[0] <= v <= rng[1]]
     stream = BrickedStream(reader, values=inside, level=0 if level is None else level, jobs=jobs)

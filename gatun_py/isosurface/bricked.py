@@ -26,7 +26,11 @@ Every brick that holds a tet around such an edge is decoded (its tets straddle t
 the lock is released when the last of them has been streamed. The price: a face of the mesh
 boundary whose three vertices all lie on cuts (rare: the corner of a cut at the boundary) is never
 closed, and the surface vertices around it wait for the final round of collapses
-(``locked_at_end`` in the stats).
+(``locked_at_end`` in the stats). And a brick's boundary enters the border with the brick, not at
+the start: an edge whose star is two fans that meet only along the edge (a non-manifold edge of
+the mesh boundary), in two bricks, unlocks when the first fan is done; a later triangle on it
+then makes a second vertex at the same place (a seam, never an error). The one-stream extractor
+has the whole boundary up front and no such case.
 
 Memory: at most ``jobs`` bricks decode at once, and at most ``jobs + 1`` bricks' batches (decoded,
 not yet extracted) are held; the extractor's tables and the shared vertex array (x, y, z, scalar of

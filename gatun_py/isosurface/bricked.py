@@ -59,7 +59,8 @@ _DONE = object()
 
 
 # -- cut vertices matched by their coordinates: a hash table of their bits --------------------------
-# (position-only cut sections; a dict of bytes held ~115 B per cut vertex, 17 MB on flange-10m)
+# (position-only cut sections; a dict of bytes held ~115 B per cut vertex, 17 MB on flange-10m; this
+# table 20 B a slot, 5 MB there)
 
 def _new_point_table(n: int) -> tuple[np.ndarray, np.ndarray]:
     """An empty table for ``n`` points: (bits (cap, 3) uint32, id (cap,) int64, -1 when free)."""

@@ -265,6 +265,52 @@ def part_quality(quick: bool):
     return exact_rows, rows, curves
 
 
+BRICKS_QUALITY = 8
+
+
+def part_bricked_quality(quick: bool):
+    """Ours from a bricked file (K = 8, skipping the bricks the isovalue misses) against ours from
+    the one-stream file, at every ratio of the quality table: faces, RMS and Hausdorff distance to
+    the full-resolution surface."""
+    from gatun_py.codec import TetcReader
+    from gatun_py.isosurface import isosurface
+    from gatun_py.isosurface.metrics import surface_distance
+    from gatun_py.pipeline.bricks import compress_bricks
+
+    rows = []
+    samples = 60_000 if quick else 150_000
+    for name, (src, kw) in list(datasets(True).items()):
+        mesh, tetc, _ = prepared(name, src, kw)
+        bricked = OUT / f"{tetc.stem}_k{BRICKS_QUALITY}.tetc"
+        if not bricked.exists():
+            bricked.write_bytes(compress_bricks(mesh, BRICKS_QUALITY, mesh_only=True))
+        lo, hi = mesh.bbox
+        diag = float(np.linalg.norm(hi - lo))
+        for q in (0.3, 0.7):
+            v = isovalue(mesh.density, q)
+            full = isosurface(tetc, values=v)
+            full_b = isosurface(TetcReader(bricked), values=v)
+            for r in RATIOS:
+                one = isosurface(tetc, values=v, ratio=r)
+                t0 = time.perf_counter()
+                br = isosurface(TetcReader(bricked), values=v, ratio=r)
+                dt = time.perf_counter() - t0
+                e1 = surface_distance(full.points, full.triangles, one.points, one.triangles, diagonal=diag,
+                                      n_samples=samples)
+                eb = surface_distance(full.points, full.triangles, br.points, br.triangles, diagonal=diag,
+                                      n_samples=samples)
+                b = br.stats["bricks"]
+                rows.append([name, f"{v:.4g}", r, f"{full.n_triangles} / {full_b.n_triangles}",
+                             f"{b['bricks_decoded']} of {b['bricks']}", one.n_triangles, f"{e1['rms']:.4f}",
+                             f"{e1['hausdorff']:.3f}", br.n_triangles, f"{eb['rms']:.4f}", f"{eb['hausdorff']:.3f}",
+                             f"{eb['rms'] / e1['rms']:.2f}" if e1["rms"] > 0 else "-",
+                             f"{eb['hausdorff'] / e1['hausdorff']:.2f}" if e1["hausdorff"] > 0 else "-",
+                             f"{one.stats['peak_locked']} / {br.stats['peak_locked']}", br.stats["locked_at_end"]])
+                print(f"{name} {v:.4g} R={r}: one stream {one.n_triangles} rms {e1['rms']:.4f}, bricked "
+                      f"{br.n_triangles} rms {eb['rms']:.4f} ({dt:.2f} s)", flush=True)
+    return rows
+
+
 def part_importance():
     from gatun_py.isosurface import isosurface
     from gatun_py.isosurface.metrics import one_sided
@@ -341,11 +387,71 @@ BARE = {"bare: import vtk": [sys.executable, "-c", "import vtk"],
                                                     "import gatun_py, gatun_py.isosurface, numba"]}
 
 
-def part_big(tetc: Path, vtu: Path, runs: int, value: float | None = None):
+def _timed(cmds: dict, runs: int) -> tuple[dict, dict]:
+    """Run every command once (warm-up, not counted), then ``runs`` times, interleaved so that drift
+    hits everyone alike: ({name: [(wall, rss, cpu), ...]}, {name: the --stats JSON of its last run})."""
+    res = {k: [] for k in cmds}
+    stats = {}
+    for i in range(runs + 1):
+        for k, cmd in cmds.items():
+            try:
+                wall, rss, out, cpu = _child(cmd)
+            except RuntimeError as e:
+                print(e, file=sys.stderr)
+                continue
+            if "--stats" in cmd:
+                stats[k] = json.loads(out)
+            if i == 0:
+                print(f"  (warm-up) {k}: {wall:.2f} s {rss:.0f} MB", flush=True)
+                continue
+            res[k].append((wall, rss, cpu))
+            print(f"  {k}: {wall:.2f} s {rss:.0f} MB", flush=True)
+    return res, stats
+
+
+def _rows(res: dict, ours_k: str, peers=()) -> list:
+    """Table rows (median of the runs): each line's time and memory, and ours / it. With ``peers``,
+    also ours / each of them (the ratios to the cascades of the bricked lines)."""
+    med = {k: (statistics.median(x[0] for x in r), statistics.median(x[1] for x in r),
+               statistics.median(x[2] for x in r)) for k, r in res.items() if r}
+    rows = []
+    for k, (w, m, c) in med.items():
+        samples = ", ".join(f"{x[0]:.2f}" for x in res[k])
+        bare = k in BARE
+        row = [k, f"{w:.2f}", samples, f"{c:.2f}", f"{m:.0f}", "" if bare or ours_k not in med else f"{med[ours_k][0] / w:.2f}",
+               "" if bare or ours_k not in med else f"{med[ours_k][1] / m:.2f}"]
+        for p in peers:
+            ok = not bare and k.startswith("ours") and p in med
+            row += [f"{w / med[p][0]:.2f} / {m / med[p][1]:.2f}" if ok else ""]
+        rows.append(row)
+    return rows
+
+
+def _ours_cmd(tetc: Path, v: float, ratio: float, out: str) -> list:
+    return TETC + ["isosurface", str(tetc), "--value", str(v), "--ratio", str(ratio), "-o", str(OUT / out), "--force",
+                   "--quiet", "--stats"]
+
+
+def _bricked_name(path: Path) -> str:
+    from gatun_py.codec import TetcReader
+
+    return f"ours, bricked K={TetcReader(path).n_bricks}"
+
+
+def _brick_summary(name: str, st: dict, size: int) -> list:
+    b = st.get("bricks") or {}
+    return [name, f"{size / 1e6:.1f}", f"{b.get('bricks_decoded', '?')} of {b.get('bricks', '?')}",
+            f"{b.get('tets', 0):,}", b.get("peak_bricks_decoding", "?"), b.get("peak_bricks_held", "?"),
+            f"{st.get('peak_locked', 0):,}", f"{st.get('locked_at_end', 0):,}", f"{st.get('faces_extracted', 0):,}",
+            f"{st.get('faces', 0):,}", f"{st.get('decode_s', 0):.2f}", f"{st.get('peak_rss_mb', 0):.0f}"]
+
+
+def part_big(tetc: Path, vtu: Path, runs: int, value: float | None = None, bricked=(), value2: float | None = None):
     """Time and memory of one isosurface at R = 0.05 on a large mesh: ours against every cascade.
 
     Every pipeline runs once first, not counted (numba's cache, the page cache), then ``runs``
-    times, interleaved.
+    times, interleaved. ``bricked``: the same mesh in bricked files, a line each; ``value2``: a
+    second isovalue (one that fewer bricks hold), ours and the two fastest cascades again.
     """
     from gatun_py.codec import TetcReader
 
@@ -354,41 +460,37 @@ def part_big(tetc: Path, vtu: Path, runs: int, value: float | None = None):
     lo_s, hi_s = reader.meta["scalar_range"]
     v = lo_s + 0.35 * (hi_s - lo_s) if value is None else float(value)
     ratio = 0.05
-    cmds = {"ours (tetc isosurface)": TETC + ["isosurface", str(tetc), "--value", str(v), "--ratio", str(ratio), "-o",
-                                             str(OUT / "big_ours.ply"), "--force", "--quiet", "--stats"]}
+    bricked = [Path(b) for b in bricked]
+    cmds = {"ours (tetc isosurface)": _ours_cmd(tetc, v, ratio, "big_ours.ply")}
+    for b in bricked:
+        cmds[_bricked_name(b)] = _ours_cmd(b, v, ratio, f"big_{b.stem}.ply")
     for peer in PEERS:
         cmds[f"VTK read + contour + {PEER_NAMES[peer]}"] = [sys.executable, __file__, "--peer", peer, "--vtu", str(vtu),
                                                             "--value", str(v), "--ratio", str(ratio),
                                                             "-o", str(OUT / f"big_{peer}.ply")]
     cmds.update(BARE)
     load0 = os.getloadavg()[0]
-    res = {k: [] for k in cmds}
-    stats = None
-    for i in range(runs + 1):
-        for k, cmd in cmds.items():  # interleaved, so drift hits everyone alike
-            try:
-                wall, rss, out, cpu = _child(cmd)
-            except RuntimeError as e:
-                print(e, file=sys.stderr)
-                continue
-            if k.startswith("ours"):
-                stats = json.loads(out)
-            if i == 0:
-                print(f"  (warm-up) {k}: {wall:.2f} s {rss:.0f} MB", flush=True)
-                continue
-            res[k].append((wall, rss, cpu))
-            print(f"  {k}: {wall:.2f} s {rss:.0f} MB", flush=True)
-    rows = []
-    med = {k: (statistics.median(x[0] for x in r), statistics.median(x[1] for x in r),
-               statistics.median(x[2] for x in r)) for k, r in res.items() if r}
     ours_k = next(iter(cmds))
-    for k, (w, m, c) in med.items():
-        samples = ", ".join(f"{x[0]:.2f}" for x in res[k])
-        bare = k in BARE
-        rows.append([k, f"{w:.2f}", samples, f"{c:.2f}", f"{m:.0f}", "" if bare else f"{med[ours_k][0] / w:.2f}",
-                     "" if bare else f"{med[ours_k][1] / m:.2f}"])
-    return {"value": v, "ratio": ratio, "rows": rows, "stats": stats, "tets": int(reader.level_meta(0)["tets"]),
-            "file": tetc.name, "runs": runs, "code": code_state(), "load": [load0, os.getloadavg()[0]]}
+    cascades = [f"VTK read + contour + {PEER_NAMES[p]}" for p in ("vtk", "meshopt")]
+    res, stats = _timed(cmds, runs)
+    out = {"value": v, "ratio": ratio, "rows": _rows(res, ours_k, cascades if bricked else ()),
+           "stats": stats.get(ours_k), "tets": int(reader.level_meta(0)["tets"]), "file": tetc.name, "runs": runs,
+           "code": code_state(), "size_mb": tetc.stat().st_size / 1e6,
+           "bricked": [b.name for b in bricked],
+           "bricks": [_brick_summary(_bricked_name(b), stats.get(_bricked_name(b), {}), b.stat().st_size)
+                      for b in bricked],
+           "bricked_bands": {_bricked_name(b): (stats.get(_bricked_name(b)) or {}).get("band", []) for b in bricked}}
+    if value2 is not None:
+        cmds2 = {k: c for k, c in cmds.items() if k.startswith("ours") or k in cascades}
+        cmds2 = {k: [str(value2) if x == str(v) else x for x in c] for k, c in cmds2.items()}
+        res2, stats2 = _timed(cmds2, runs)
+        out["value2"] = float(value2)
+        out["rows2"] = _rows(res2, ours_k, cascades if bricked else ())
+        out["bricks2"] = [_brick_summary(_bricked_name(b), stats2.get(_bricked_name(b), {}), b.stat().st_size)
+                          for b in bricked]
+        out["stats2"] = stats2.get(ours_k)
+    out["load"] = [load0, os.getloadavg()[0]]
+    return out
 
 
 def _rss_now() -> float:
@@ -574,8 +676,10 @@ def _plot_memory(plt, big):
             ax[0].axvspan(a, b_, color="orange", alpha=0.2, lw=0)
         if "floor" in st:
             ax[0].axhline(st["floor"], ls=":", lw=1, color="black", label="floor: the same run on 90 tets")
+    for name, bband in big.get("bricked_bands", {}).items():
+        ax[0].plot([b["t_s"] for b in bband], [b["rss_mb"] for b in bband], lw=1, label=f"{name}: RSS at each batch")
     for row in big["rows"][1:]:
-        if row[0] in BARE:
+        if row[0] in BARE or row[0].startswith("ours"):
             continue
         ax[0].axhline(float(row[4]), ls="--", lw=1, label=f"{row[0].split(' + ')[-1]} cascade peak", color="grey")
     ax[0].set_xlabel("seconds (orange: rounds of collapses)")
@@ -615,8 +719,12 @@ def main(argv=None) -> int:
                          "from the shared cache when it is there)")
     ap.add_argument("--big-value", type=float, default=None,
                     help="isovalue for the large mesh (default: 35 %% of its scalar range)")
+    ap.add_argument("--big-bricked", action="append", default=[], metavar="FILE",
+                    help="the large mesh as a bricked .tetc (repeat for several K): a line each")
+    ap.add_argument("--big-value2", type=float, default=None,
+                    help="a second isovalue for the large mesh (one fewer bricks hold): ours and two cascades")
     ap.add_argument("--runs", type=int, default=3)
-    ap.add_argument("--only", choices=["quality", "levels", "big", "stages", "report"], default=None,
+    ap.add_argument("--only", choices=["quality", "bricks", "levels", "big", "stages", "report"], default=None,
                     help="run one part (stages: where the large run's memory goes, also part of big; report: "
                          "only rewrite the section and figures from the saved results)")
     ap.add_argument("--peer", choices=PEERS)
@@ -636,11 +744,14 @@ def main(argv=None) -> int:
         exact, quality, curves = part_quality(args.quick)
         saved.update(exact=exact, quality=quality, importance=part_importance(),
                      curves=[[list(k), v] for k, v in curves.items()])
+    if args.only in (None, "bricks"):
+        saved["bricks_quality"] = part_bricked_quality(args.quick)
     if args.only in (None, "levels"):
         saved["levels"] = part_levels()
     if args.only in (None, "big") and args.big:
         big = Path(args.big)
-        saved["big"] = part_big(big, big.with_suffix(".vtu"), args.runs, args.big_value)
+        saved["big"] = part_big(big, big.with_suffix(".vtu"), args.runs, args.big_value, args.big_bricked,
+                                args.big_value2)
         OUT.mkdir(parents=True, exist_ok=True)
         cache.write_text(json.dumps(saved))  # the timed runs are kept even if the stages fail
         saved["big"]["stages"] = part_memory_stages(big, saved["big"]["value"])
@@ -654,11 +765,33 @@ def main(argv=None) -> int:
     old = SECTIONS / "isosurface.md"
     if "quality" not in saved and old.exists():  # a partial run (--only big): keep the other tables
         text = _splice_big(old.read_text(), text)
+        text = _splice_part(text, report({"bricks_quality": saved.get("bricks_quality")}), _BRICKS_HEADING,
+                            before=_LEVELS_HEADING)
     write_section("isosurface", text)
     return 0
 
 
 _BIG_HEADING = "### Time and memory on a large mesh"
+_BRICKS_HEADING = "### From a bricked file"
+_LEVELS_HEADING = "### Starting from a pre-simplified level"
+
+
+def _splice_part(old: str, new: str, heading: str, *, before: str) -> str:
+    """``old`` with its part under ``heading`` (to the next ``### ``) replaced by ``new``'s, or
+    inserted before the part under ``before`` (appended when there is none)."""
+    if heading not in new:
+        return old
+    part = new[new.index(heading):]
+    nxt = part.find("\n### ")
+    part = (part[:nxt] if nxt >= 0 else part).rstrip() + "\n\n"
+    if heading in old:
+        head, rest = old.split(heading, 1)
+        nxt = rest.find("\n### ")
+        return head + part + (rest[nxt + 1:] if nxt >= 0 else "")
+    if before in old:
+        head, rest = old.split(before, 1)
+        return head + part + before + rest
+    return old.rstrip() + "\n\n" + part
 
 
 def _splice_big(old: str, new: str) -> str:
@@ -712,6 +845,15 @@ def report(s) -> str:
                 "weighted (high-gradient) region and in the rest.", "",
                 table(["iso", "R", "plain faces", "plain RMS important", "plain RMS rest", "weighted faces",
                        "weighted RMS important", "weighted RMS rest"], s["importance"]), ""]
+    if s.get("bricks_quality"):
+        out += [f"### From a bricked file (K = {BRICKS_QUALITY}) against the one-stream file", "",
+                f"`tetc compress --bricks {BRICKS_QUALITY} --mesh-only`; the bricks whose stored scalar range "
+                "misses the isovalue are not decoded. Distance to the full-resolution surface (% of the "
+                "diagonal); ratios: bricked / one stream. Full faces: one stream / bricked (equal: the same "
+                "surface, one vertex per cut edge).", "",
+                table(["data set", "iso", "R", "full faces", "bricks decoded", "one-stream faces", "RMS",
+                       "Hausdorff", "bricked faces", "RMS", "Hausdorff", "RMS ratio", "Hausdorff ratio",
+                       "peak locked (one / bricked)", "locked at end (bricked)"], s["bricks_quality"]), ""]
     if s.get("levels"):
         lv = s["levels"]
         out += [f"### Starting from a pre-simplified level (Blunt-fin, isovalue {lv['value']:.4g}, full surface "
@@ -725,13 +867,16 @@ def report(s) -> str:
         st = b["stats"] or {}
         out += [f"### Time and memory on a large mesh ({b['tets']:,} tets, isovalue {b['value']:.4g}, R = {b['ratio']})", "",
                 f"`python bench/bench_isosurface.py --only big --big {b.get('file', '?')} --big-value {b['value']:.4g} "
-                f"--runs {b.get('runs', '?')}` ({b.get('code', '?')}). "
+                + "".join(f"--big-bricked {f} " for f in b.get("bricked", []))
+                + (f"--big-value2 {b['value2']:.4g} " if b.get("value2") is not None else "")
+                + f"--runs {b.get('runs', '?')}` ({b.get('code', '?')}). "
                 "Each line is a whole process (median of the runs, interleaved, after one warm-up run each); "
                 "ours reads the `.tetc`, the cascades VTK's `.vtu`; peak RSS from the kernel's accounting of the "
                 "child. Ratios: ours / that line. The bare lines only import, for what each peak holds beyond "
                 "its interpreter.", "",
                 table(["pipeline", "wall s (median)", "samples", "CPU s (median)", "peak RSS MB", "time ratio",
-                       "memory ratio"], b["rows"]), ""]
+                       "memory ratio"] + _cascade_columns(b), b["rows"]), ""]
+        out += _bricked_report(b)
         if b.get("load"):
             out += [f"Load average (1 min) {b['load'][0]:.1f} at the start and {b['load'][1]:.1f} at the end, on 2 "
                     "cores: wall times on a busy machine favour the single-threaded cascades (ours keeps three "
@@ -746,6 +891,35 @@ def report(s) -> str:
         if b.get("stages"):
             out += _stages_report(b)
     return "\n".join(out)
+
+
+def _cascade_columns(b) -> list:
+    return (["ours / VTK quadric cascade (time / memory)", "ours / meshoptimizer cascade (time / memory)"]
+            if b.get("bricked") else [])
+
+
+_BRICK_COLUMNS = ["file", "MB", "bricks decoded", "tets decoded", "peak bricks decoding", "peak bricks held",
+                  "peak locked", "locked at end", "faces extracted", "faces", "decode wait s", "peak RSS MB"]
+
+
+def _bricked_report(b) -> list:
+    """The bricked lines' own figures, and the second isovalue's table."""
+    if not b.get("bricked"):
+        return []
+    one = ["ours (tetc isosurface), one stream", f"{b.get('size_mb', 0):.1f}", "1 of 1", f"{b['tets']:,}", "", "",
+           f"{(b.get('stats') or {}).get('peak_locked', 0):,}", f"{(b.get('stats') or {}).get('locked_at_end', 0):,}",
+           f"{(b.get('stats') or {}).get('faces_extracted', 0):,}", f"{(b.get('stats') or {}).get('faces', 0):,}",
+           f"{(b.get('stats') or {}).get('decode_s', 0):.2f}", f"{(b.get('stats') or {}).get('peak_rss_mb', 0):.0f}"]
+    out = [f"Bricked files of the same mesh (`tetc compress --bricks K --mesh-only`), isovalue {b['value']:.4g}: "
+           "only the bricks whose stored scalar range holds the isovalue are decoded, on 2 threads; the "
+           "last columns of the table above are a bricked line's time and memory over the two cascades'. "
+           "Stats of the last run of each:", "", table(_BRICK_COLUMNS, [one] + b["bricks"]), ""]
+    if b.get("rows2"):
+        out += [f"Second isovalue {b['value2']:.4g} (fewer bricks hold it), the same runs:", "",
+                table(["pipeline", "wall s (median)", "samples", "CPU s (median)", "peak RSS MB", "time ratio",
+                       "memory ratio"] + _cascade_columns(b), b["rows2"]), "",
+                table(_BRICK_COLUMNS, b["bricks2"]), ""]
+    return out
 
 
 def _timeline_line(st) -> str:

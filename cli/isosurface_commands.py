@@ -7,7 +7,8 @@ import math
 import click
 
 from gatun_py._resources import peak_rss_mb
-from .options import camera_options, echo_json, force_option, mesh_input_options, progress_bar, quiet_option, read_kwargs, status
+from .options import (camera_options, echo_json, force_option, jobs_option, mesh_input_options, progress_bar, quiet_option,
+                      read_kwargs, status)
 
 
 def _finite(ctx, param, values):
@@ -46,15 +47,21 @@ def _finite(ctx, param, values):
 @click.option("--stats", "show_stats", is_flag=True,
               help="Print one JSON object on stdout: timings, counts, peak memory and the locked band per batch.")
 @mesh_input_options
+@jobs_option
 @force_option
 @quiet_option
 def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_ratio, importance_tf, png, size,
-               azimuth, elevation, zoom, show_stats, scalar, q_file, q_var, cell_to_point, time_step, force, quiet):
+               azimuth, elevation, zoom, show_stats, scalar, q_file, q_var, cell_to_point, time_step, jobs, force,
+               quiet):
     """Extract the isosurface(s) of INPUT (a .tetc file or any mesh file) at --value V.
 
     Marching tetrahedra on each decoded batch, so the surface is exact (no ambiguous cases) and
     crack-free; with --ratio or --faces it is simplified while it is extracted, and the
     full-resolution surface is never held in memory. Normals point toward lower scalar values.
+
+    Of a bricked file (tetc compress --bricks K), only the bricks whose stored scalar range
+    contains an isovalue are decoded, --jobs at a time; the surface is the whole mesh's, one
+    piece across the cuts.
 
     \b
     Examples:
@@ -81,7 +88,7 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
             raise click.BadParameter(f"{w}x{h} is more than {MAX_PREVIEW_PIXELS} pixels", param_hint="--size")
         check_output_path(png, force=force)
         image_format(png)
-    total = _expected_tets(input)
+    total = _expected_tets(input, values, level)
     with progress_bar("extracting", total if total >= 200_000 else 0, quiet) as update:
         last = [0]
 
@@ -91,7 +98,8 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
 
         surf = extract(input, values=list(values), ratio=ratio, faces=faces, batch_faces=batch_faces, level=level,
                        ratio_mesh=mesh_ratio, importance_tf=importance_tf,
-                       read_kwargs=read_kwargs(scalar, q_file, q_var, cell_to_point, time_step), progress=progress)
+                       read_kwargs=read_kwargs(scalar, q_file, q_var, cell_to_point, time_step), jobs=jobs,
+                       progress=progress)
     st = surf.stats
     lo_s, hi_s = st["scalar_range"]
     for v in st["values_outside_range"]:
@@ -104,16 +112,24 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
     if show_stats:
         echo_json(st)
     else:
-        status(f"wrote {output} ({surf.n_triangles} triangles from {st['faces_extracted']} extracted, "
+        bricks = st.get("bricks")
+        of_bricks = (f", {bricks['bricks_decoded']} of {bricks['bricks']} bricks decoded" if bricks else "")
+        status(f"wrote {output} ({surf.n_triangles} triangles from {st['faces_extracted']} extracted{of_bricks}, "
                f"{st['total_s']:.2f} s)", quiet)
 
 
-def _expected_tets(path) -> int:
-    """Tets the stream will carry, for the progress bar (0 when not cheaply known)."""
+def _expected_tets(path, values, level) -> int:
+    """Tets the stream will carry, for the progress bar (0 when not cheaply known): of a bricked
+    file, those of the bricks an isovalue cuts."""
     try:
         from gatun_py.codec import TetcReader
+        from gatun_py.isosurface.bricked import bricks_to_decode
 
-        return int(TetcReader(path).level_meta(0)["tets"])
+        reader = TetcReader(path)
+        level = level or 0
+        if reader.n_bricks > 1:
+            return sum(int(reader.brick(k).level_meta(level)["tets"]) for k in bricks_to_decode(reader, values, level))
+        return int(reader.level_meta(level)["tets"])
     except Exception:  # not a .tetc (or unreadable: the extraction reports that properly)
         return 0
 

@@ -26,6 +26,7 @@ import numpy as np
 from .._atomic import check_output_path
 from .._resources import peak_rss_mb
 from ..codec import TetcReader
+from ..codec.bricks import check_jobs
 from ..codec.container import MAGIC
 from ..codec.prefetch import PrefetchedDecode
 from ..errors import CorruptFileError, OptionError, ReadError
@@ -34,6 +35,7 @@ from ..simplify.filter import SimplifyFilter
 from ..simplify.levels import resolve_target, target_ancestors
 from . import _numba_setup  # noqa: F401  (first, before any kernel is loaded: see the module)
 from . import marching, qem
+from .bricked import BrickedStream
 from .io import write_surface
 
 DEFAULT_BATCH_FACES = 100_000
@@ -415,14 +417,17 @@ def _check_options(values, ratio, faces, batch_faces):
 
 def isosurface(source, *, values, ratio: float | None = None, faces: int | None = None,
                batch_faces: int = DEFAULT_BATCH_FACES, level: int | None = None, ratio_mesh: float | None = None,
-               importance_tf=None, read_kwargs: dict | None = None, progress=None, check=None) -> Surface:
+               importance_tf=None, read_kwargs: dict | None = None, jobs: int | None = None, progress=None,
+               check=None) -> Surface:
     """Extract (and simplify on the fly) the isosurfaces of a tet mesh, streaming.
 
     Parameters
     ----------
     source : path, TetcReader or TetMesh
         A ``.tetc`` file (decoded in a stream), any mesh file :func:`gatun_py.mesh.read_mesh` reads,
-        or an in-memory mesh.
+        or an in-memory mesh. Of a bricked ``.tetc`` file, only the bricks whose stored scalar
+        range contains an isovalue are decoded, on ``jobs`` threads (:mod:`.bricked`); the surface
+        is the one of the whole mesh.
     values : float or sequence of float
         Isovalues (finite).
     ratio : float in (0, 1], optional
@@ -439,6 +444,9 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
         Importance over the gradient magnitude at the surface (:func:`load_importance`).
     read_kwargs : dict, optional
         Passed to :func:`gatun_py.mesh.read_mesh` for a mesh file.
+    jobs : int, optional
+        Bricks decoded at once, for a bricked file (default: all cores). The surface does not
+        depend on it.
     progress : callable, optional
         Called with the number of tets processed so far.
     check : callable, optional
@@ -460,9 +468,21 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
     (1, [0.5, 0.5, 0.5])
     """
     vals, ratio = _check_options(values, ratio, faces, batch_faces)
+    jobs = check_jobs(jobs)
     imp = load_importance(importance_tf) if importance_tf is not None else None
     t_start = time.perf_counter()
-    stream, info = _open_stream(source, level=level, ratio_mesh=ratio_mesh, read_kwargs=read_kwargs)
+    stream, info = _open_stream(source, level=level, ratio_mesh=ratio_mesh, read_kwargs=read_kwargs, values=vals,
+                                jobs=jobs)
+    try:
+        return _extract(stream, info, vals, ratio=ratio, faces=faces, batch_faces=batch_faces, imp=imp, check=check,
+                        progress=progress, t_start=t_start)
+    finally:
+        if isinstance(stream, BrickedStream):
+            stream.close()  # its decoding threads stop if the extraction failed
+
+
+def _extract(stream, info, vals, *, ratio, faces, batch_faces, imp, check, progress, t_start) -> Surface:
+    """The driver of :func:`isosurface` over an opened stream (``imp``: the importance function or None)."""
     lo, hi, (smin, smax) = info["bbox_lo"], info["bbox_hi"], info["scalar_range"]
     diag = float(np.linalg.norm(np.asarray(hi, float) - np.asarray(lo, float)))
     grad_scale = diag / (smax - smin) if smax > smin else 1.0
@@ -568,6 +588,8 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
         "level": info.get("level", 0), "mesh_ratio": info.get("mesh_ratio", 0.0),
         "peak_rss_mb": peak_rss_mb(), "band": band,
     }
+    if isinstance(stream, BrickedStream):
+        stats["bricks"] = stream.stats
     return Surface(surf_pts, surf_tris, point_data, stats)
 
 
@@ -607,9 +629,10 @@ def _rss_mb() -> float:
         return 0.0
 
 
-def _open_stream(source, *, level, ratio_mesh, read_kwargs):
+def _open_stream(source, *, level, ratio_mesh, read_kwargs, values=(), jobs=1):
     """(batches, info) for any source; info has points, bbox_lo/hi, scalar_range and, for a
-    simplified start, the boundary of the simplified mesh (see below)."""
+    simplified start, the boundary of the simplified mesh (see below). ``values`` and ``jobs``
+    choose and decode the bricks of a bricked file."""
     if isinstance(getattr(source, "reader", None), TetcReader):  # an open gatun_py.TetcFile
         source = source.reader
     if isinstance(source, TetMesh) or (not isinstance(source, TetcReader) and not _is_tetc(source)):
@@ -621,13 +644,11 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs):
                 "tets": mesh.n_tets}
         return mesh_batches(mesh), info
     reader = source if isinstance(source, TetcReader) else TetcReader(source)
+    if reader.n_bricks > 1:
+        return _open_bricked(reader, level=level, ratio_mesh=ratio_mesh, values=values, jobs=jobs)
     target = resolve_target(reader, ratio=ratio_mesh, level=level)
     lv = reader.level_meta(target.level)
-    try:
-        lo, hi = (np.asarray(x, np.float64).reshape(3) for x in reader.meta["bbox"])
-        rng = tuple(float(x) for x in reader.meta["scalar_range"])
-    except (KeyError, TypeError, ValueError):
-        raise CorruptFileError("corrupt metadata: bad bounding box or scalar range") from None
+    lo, hi, rng = _file_box_and_range(reader)
     info = {"points": int(lv["points"]), "bbox_lo": lo, "bbox_hi": hi, "scalar_range": rng,
             "level": target.level, "mesh_ratio": target.ratio}
     batches = PrefetchedDecode(reader, target.level, depth=PREFETCH_DEPTH)
@@ -650,6 +671,28 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs):
         yield from stream
 
     return SimplifyFilter(anc).filter(chained()), info
+
+
+def _file_box_and_range(reader: TetcReader):
+    try:
+        lo, hi = (np.asarray(x, np.float64).reshape(3) for x in reader.meta["bbox"])
+        rng = tuple(float(x) for x in reader.meta["scalar_range"])
+    except (KeyError, TypeError, ValueError):
+        raise CorruptFileError("corrupt metadata: bad bounding box or scalar range") from None
+    return lo, hi, rng
+
+
+def _open_bricked(reader: TetcReader, *, level, ratio_mesh, values, jobs):
+    """(stream, info) of a bricked file: the bricks an isovalue inside the file's range cuts."""
+    if ratio_mesh is not None:
+        raise OptionError("simplifying the tet mesh on the fly (ratio_mesh, --mesh-ratio) is not supported on a "
+                          "bricked file; start from a stored level instead (level, --level)")
+    lo, hi, rng = _file_box_and_range(reader)
+    inside = [v for v in values if rng[0] <= v <= rng[1]]
+    stream = BrickedStream(reader, values=inside, level=0 if level is None else level, jobs=jobs)
+    info = {"points": len(stream.values), "bbox_lo": lo, "bbox_hi": hi, "scalar_range": rng,
+            "level": stream.level, "mesh_ratio": 0.0, "shared_values": stream, "tets": stream.stats["tets"]}
+    return stream, info
 
 
 def _is_tetc(path) -> bool:

@@ -75,10 +75,12 @@ from ..mesh import TetMesh
 from ..mesh.model import TET_FACES
 from . import _decimate_kernels as K
 from .forest import MergeForest
+from .levels import level_merges
 
 __all__ = ["decimate", "DEFAULT_W_DENSITY", "DEFAULT_W_GEOMETRY", "SWEPT_WEIGHT", "INTERP_WEIGHT", "MASS_WEIGHT",
            "QUADRIC_WEIGHT", "SCALAR_SCALE", "SAMPLE_WEIGHT", "COLLAPSE_POWER",
-           "MAX_SAMPLES", "CENTROID_WEIGHT", "DecimationState", "tet_quadrics"]
+           "MAX_SAMPLES", "CENTROID_WEIGHT", "DecimationState", "tet_quadrics", "ROUNDS_PER_LEVEL",
+           "canonical_key"]
 
 DEFAULT_W_DENSITY = 1.0
 DEFAULT_W_GEOMETRY = 1.0
@@ -143,6 +145,8 @@ COLLAPSE_POWER = 1.5
 MAX_SAMPLES = 256
 # Weight of the input tets' centroids among the sample points (the merged vertices have 1).
 CENTROID_WEIGHT = 1.0
+# Rounds of independent merges per level (see decimate's ``rounds``).
+ROUNDS_PER_LEVEL = 32
 # Tets per chunk of the vectorised set-up (bounds its temporaries).
 _CHUNK = 1 << 16
 
@@ -260,6 +264,11 @@ class DecimationState:
         self.h_ver = np.zeros(cap, np.int32)
         self.parent = np.arange(n, dtype=np.int32)
         self.rank = np.full(n, K.ROOT_RANK, np.int32)
+        # rounds of independent merges: the vertices locked by the round stamped in ``lock`` (a
+        # merge's star) and ``lock_b`` (its target)
+        self.lock = np.zeros(n, np.int64)
+        self.lock_b = np.zeros(n, np.int64)
+        self.round = 0
 
     def _mesh_args(self):
         return (self.T, self.alive, self.nbr, self.head, self.nxt, self.pts, self.dens, self.isb, self.pinned,
@@ -275,11 +284,19 @@ class DecimationState:
         """Evaluate every vertex's best merge (the first :meth:`run` does it too)."""
         self.run(0)
 
-    def run(self, max_merges: int) -> bool:
-        """Merge until ``max_merges`` in total; True when no legal merge is left."""
+    def run(self, max_merges: int, *, one_round: bool = False) -> bool:
+        """Merge until ``max_merges`` in total; True when no legal merge is left.
+
+        With ``one_round`` the merges are one round of independent merges, which may end before
+        ``max_merges`` (when every candidate left is blocked by the round's earlier merges).
+        """
+        stamp = 0
+        if one_round:
+            self.round += 1
+            stamp = self.round
         return bool(K._run(*self._mesh_args(), self.marks, self.marks_b, self.marks_ab, self.tcount, self.counters,
                            *self._heap_args(), self.parent, self.rank, np.int64(max_merges), *self._sample_args(),
-                           self.vw, self.p_orig))
+                           self.vw, self.p_orig, self.lock, self.lock_b, np.int64(stamp)))
 
     def evaluate(self, a: int, b: int):
         """(legal, error) of merging a into b in the current state (for tests against the reference)."""
@@ -314,8 +331,67 @@ class DecimationState:
         return self.T[self.alive].copy()
 
 
+def canonical_key(mesh: TetMesh) -> np.ndarray:
+    """Every vertex's place in the order that ranks follow inside a round: the float32 bit
+    patterns of x, y, z and the scalar, compared in that order (as unsigned integers).
+
+    Returns an (n,) int64 array of dense key ranks (equal points and values share a rank): what
+    a decoder computes from the geometry it has decoded, in any numbering of the vertices.
+    """
+    bits = np.empty((mesh.n_points, 4), np.uint32)
+    bits[:, :3] = np.ascontiguousarray(mesh.points, np.float32).view(np.uint32)
+    bits[:, 3] = np.ascontiguousarray(mesh.density, np.float32).view(np.uint32)
+    order = np.lexsort(bits.T[::-1])
+    dense = np.empty(mesh.n_points, np.int64)
+    if mesh.n_points:
+        s = bits[order]
+        step = np.concatenate([[0], np.any(s[1:] != s[:-1], axis=1).astype(np.int64)])
+        dense[order] = np.cumsum(step)
+    return dense
+
+
+def _canonical_ranks(rank: np.ndarray, n_merges: int, round_starts: list[int], key: np.ndarray):
+    """Ranks re-assigned inside every round in ``key`` order; a round holding two vertices of
+    equal key is split between them (in execution order) first. Returns (rank, round_starts)."""
+    by_rank = np.empty(n_merges, np.int64)
+    merged = np.flatnonzero(rank < n_merges)
+    by_rank[rank[merged]] = merged
+    k = key[by_rank]
+    starts = np.array(sorted({s for s in round_starts if s < n_merges} | {0}), np.int64) if n_merges \
+        else np.zeros(0, np.int64)
+    while True:
+        rid = np.searchsorted(starts, np.arange(n_merges), side="right") - 1
+        perm = np.lexsort((k, rid))
+        tie = (rid[perm[1:]] == rid[perm[:-1]]) & (k[perm[1:]] == k[perm[:-1]])
+        if not tie.any():
+            break
+        cut = np.maximum(perm[1:][tie], perm[:-1][tie])
+        starts = np.union1d(starts, cut)
+    out = rank.copy()
+    out[by_rank[perm]] = np.arange(n_merges, dtype=out.dtype)
+    return out, [int(x) for x in starts]
+
+
+def _round_ends(n_points: int, limit: int, rounds: int) -> list[int]:
+    """Where the rounds of each level's interval [N_i, N_i+1) end at the latest (the last is ``limit``)."""
+    ends = []
+    lo = 0
+    i = 1
+    while lo < limit:
+        hi = min(limit, level_merges(n_points, i)) if i < 63 else limit
+        i += 1
+        if hi <= lo:
+            continue
+        quota = -(-(hi - lo) // rounds)
+        ends.extend(range(lo + quota, hi, quota))
+        ends.append(hi)
+        lo = hi
+    return ends
+
+
 def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry: float = DEFAULT_W_GEOMETRY,
-             progress=None, max_merges: int | None = None, locked=None) -> MergeForest:
+             progress=None, max_merges: int | None = None, locked=None, rounds: int = ROUNDS_PER_LEVEL,
+             return_rounds: bool = False):
     """Greedy Van Gelder decimation of a tetrahedral mesh into a merge forest.
 
     Parameters
@@ -335,11 +411,21 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
         them (that keeps every boundary triangle, so the cut faces stay as they are); boundary
         vertices may not.
 
+    rounds : int
+        Rounds of independent merges per level (0: the plain greedy order, one merge at a time).
+        Every level's merges [N_i, N_i+1) are split into at most this many rounds of equal
+        quota (a round also ends when every candidate left is blocked by its earlier merges);
+        ranks inside a round follow :func:`canonical_key`.
+    return_rounds : bool
+        Also return the first rank of every round.
+
     Returns
     -------
     MergeForest
         Every prefix of its merges is a state the decimator checked: positive tets (except the
         input's own flat ones), boundary orientation kept, manifold with a closed boundary.
+    round_starts : list of int
+        Only with ``return_rounds``: the first rank of every round (ascending, from 0).
     """
     for name, w in (("w_density", w_density), ("w_geometry", w_geometry)):
         if not np.isfinite(w) or w < 0:
@@ -351,16 +437,35 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
             raise OptionError(f"locked must be a bool array of one value per point ({mesh.n_points}), "
                               f"got {locked.dtype} {locked.shape}")
         state.pinned[locked] |= K.PIN_KEEP
+    if isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 0:
+        raise OptionError(f"rounds must be an integer >= 0, got {rounds!r}")
     limit = mesh.n_points if max_merges is None else max(0, min(int(max_merges), mesh.n_points))
     state.start()
     done = 0
-    chunk = max(1024, mesh.n_points // 50)
-    while True:
-        target = min(limit, state.n_merges + chunk) if progress is not None else limit
-        finished = state.run(target)
-        if progress is not None:
-            progress(state.n_merges - done)
-        done = state.n_merges
-        if finished or done >= limit:
-            break
-    return MergeForest(state.parent.copy(), state.rank.copy(), state.n_merges)
+    starts = []
+    if rounds:
+        for end in _round_ends(mesh.n_points, limit, int(rounds)):
+            finished = False
+            while state.n_merges < end and not finished:
+                starts.append(state.n_merges)
+                finished = state.run(end, one_round=True)
+            if progress is not None:
+                progress(state.n_merges - done)
+            done = state.n_merges
+            if finished:
+                break
+    else:
+        chunk = max(1024, mesh.n_points // 50)
+        while True:
+            target = min(limit, state.n_merges + chunk) if progress is not None else limit
+            finished = state.run(target)
+            if progress is not None:
+                progress(state.n_merges - done)
+            done = state.n_merges
+            if finished or done >= limit:
+                break
+    rank = state.rank.copy()
+    if rounds:
+        rank, starts = _canonical_ranks(rank, state.n_merges, starts, canonical_key(mesh))
+    forest = MergeForest(state.parent.copy(), rank, state.n_merges)
+    return (forest, starts) if return_rounds else forest

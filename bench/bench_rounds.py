@@ -83,7 +83,7 @@ def main(argv=None):
         key = canonical_key(mesh)
         lo, hi = mesh.points.min(axis=0), mesh.points.max(axis=0)
         rng = mesh.scalar_range
-        step = default_step(mesh.points, mesh.boundary_faces)
+        step = default_step(mesh.points, mesh.boundary_faces())
         cams = []
         for az, el in QUALITY_VIEWS:
             v = View(Camera(256, 256, az, el), view(name, 256).tf, "volume")

@@ -373,18 +373,19 @@ def _canonical_ranks(rank: np.ndarray, n_merges: int, round_starts: list[int], k
 
 
 def _round_ends(n_points: int, limit: int, rounds: int) -> list[int]:
-    """Where the rounds of each level's interval [N_i, N_i+1) end at the latest (the last is ``limit``)."""
+    """Where the rounds end at the latest: each level's interval [N_i, N_i+1) in ``rounds`` equal
+    quotas (of the whole interval, so that ``max_merges`` does not move them), cut at ``limit``."""
     ends = []
     lo = 0
     i = 1
     while lo < limit:
-        hi = min(limit, level_merges(n_points, i)) if i < 63 else limit
+        hi = level_merges(n_points, i) if i < 63 else n_points
         i += 1
         if hi <= lo:
             continue
         quota = -(-(hi - lo) // rounds)
-        ends.extend(range(lo + quota, hi, quota))
-        ends.append(hi)
+        ends.extend(e for e in range(lo + quota, hi, quota) if e < limit)
+        ends.append(min(hi, limit))
         lo = hi
     return ends
 

@@ -98,9 +98,11 @@ def test_ranks_ascend_in_the_key_inside_rounds_and_levels_end_rounds(rounds):
     # at most `rounds` rounds per level when no round ends early
     assert len(starts) >= min(rounds, 2)
     # a parent is merged in a later round than its child
-    rid = np.searchsorted(starts, forest.rank[forest.rank < forest.n_merges], side="right")
-    prid = np.searchsorted(starts, forest.rank[forest.parent[forest.rank < forest.n_merges]], side="right")
-    assert np.all(prid > rid)
+    child = np.flatnonzero(forest.rank < forest.n_merges)
+    child = child[forest.rank[forest.parent[child]] < forest.n_merges]  # parents merged too
+    rid = np.searchsorted(starts, forest.rank[child], side="right")
+    prid = np.searchsorted(starts, forest.rank[forest.parent[child]], side="right")
+    assert child.size and np.all(prid > rid)
 
 
 def test_canonical_key_orders_float_bits_then_value():

@@ -70,6 +70,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from ..codec.forest import canonical_key as forest_key
 from ..errors import OptionError
 from ..mesh import TetMesh
 from ..mesh.model import TET_FACES
@@ -333,21 +334,10 @@ class DecimationState:
 
 def canonical_key(mesh: TetMesh) -> np.ndarray:
     """Every vertex's place in the order that ranks follow inside a round: the float32 bit
-    patterns of x, y, z and the scalar, compared in that order (as unsigned integers).
-
-    Returns an (n,) int64 array of dense key ranks (equal points and values share a rank): what
-    a decoder computes from the geometry it has decoded, in any numbering of the vertices.
-    """
-    bits = np.empty((mesh.n_points, 4), np.uint32)
-    bits[:, :3] = np.ascontiguousarray(mesh.points, np.float32).view(np.uint32)
-    bits[:, 3] = np.ascontiguousarray(mesh.density, np.float32).view(np.uint32)
-    order = np.lexsort(bits.T[::-1])
-    dense = np.empty(mesh.n_points, np.int64)
-    if mesh.n_points:
-        s = bits[order]
-        step = np.concatenate([[0], np.any(s[1:] != s[:-1], axis=1).astype(np.int64)])
-        dense[order] = np.cumsum(step)
-    return dense
+    patterns of x, y, z and the scalar, compared in that order (dense key ranks, equal points and
+    values share one; :func:`gatun_py.codec.forest.canonical_key`, which the forest's decoder
+    computes from the level's geometry)."""
+    return forest_key(mesh.points, mesh.density)
 
 
 def _canonical_ranks(rank: np.ndarray, n_merges: int, round_starts: list[int], key: np.ndarray):

@@ -1249,7 +1249,7 @@ def _set_aside(d_err, d_v, d_b, d_ver, n_def, e, a, b, v_a, ver):
 @njit(cache=True, nogil=True)  # compress encodes level 0's mesh in a thread meanwhile
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks, marks_b, marks_ab, tcount,
          counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pdat, tp_head, tp_count, p_next,
-         vw, p_orig, lock, lock_b, round_stamp):
+         vw, p_orig, lock, lock_b, round_stamp, max_blocked):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left.
 
     ``marks*`` and ``tcount`` have one row per thread (stamps, evaluation counts); the sequential
@@ -1260,8 +1260,8 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
     of a's star (a and b included) and ``lock_b[b]``; a popped candidate a' -> b' is accepted only
     when neither a' nor b' is locked and no vertex of a''s star is a target of the round (checked
     with the star walk the link test makes anyway); otherwise the entry is set aside unchanged and
-    goes back into the heap when the round ends: at ``max_merges``, or when every candidate left
-    is blocked (False either way). ``round_stamp == 0`` is the plain greedy order.
+    goes back into the heap when the round ends: at ``max_merges``, when every candidate left
+    is blocked, or when more than ``max_blocked`` entries were set aside (False either way). ``round_stamp == 0`` is the plain greedy order.
     """
     n = head.shape[0]
     # entries set aside in this round (at most one live entry per vertex, see _heap_push)
@@ -1309,7 +1309,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         if sweeping and not found:
             return True
         sweeping = False
-        if counters[C_MERGES] >= max_merges or (n_def > 0 and counters[C_HEAP] == 0):
+        if counters[C_MERGES] >= max_merges or (n_def > 0 and (counters[C_HEAP] == 0 or n_def > max_blocked)):
             # the round is over: what it set aside goes back with its error unchanged
             for i in range(n_def):
                 if d_ver[i] == ver[d_v[i]]:

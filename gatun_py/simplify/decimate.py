@@ -148,6 +148,7 @@ MAX_SAMPLES = 256
 CENTROID_WEIGHT = 1.0
 # Rounds of independent merges per level (see decimate's ``rounds``).
 ROUNDS_PER_LEVEL = 32
+ROUND_BLOCKED = None
 # Tets per chunk of the vectorised set-up (bounds its temporaries).
 _CHUNK = 1 << 16
 
@@ -285,11 +286,12 @@ class DecimationState:
         """Evaluate every vertex's best merge (the first :meth:`run` does it too)."""
         self.run(0)
 
-    def run(self, max_merges: int, *, one_round: bool = False) -> bool:
+    def run(self, max_merges: int, *, one_round: bool = False, max_blocked: int = 2**62) -> bool:
         """Merge until ``max_merges`` in total; True when no legal merge is left.
 
         With ``one_round`` the merges are one round of independent merges, which may end before
-        ``max_merges`` (when every candidate left is blocked by the round's earlier merges).
+        ``max_merges``: when every candidate left is blocked by the round's earlier merges, or
+        when more than ``max_blocked`` candidates were.
         """
         stamp = 0
         if one_round:
@@ -297,7 +299,7 @@ class DecimationState:
             stamp = self.round
         return bool(K._run(*self._mesh_args(), self.marks, self.marks_b, self.marks_ab, self.tcount, self.counters,
                            *self._heap_args(), self.parent, self.rank, np.int64(max_merges), *self._sample_args(),
-                           self.vw, self.p_orig, self.lock, self.lock_b, np.int64(stamp)))
+                           self.vw, self.p_orig, self.lock, self.lock_b, np.int64(stamp), np.int64(max_blocked)))
 
     def evaluate(self, a: int, b: int):
         """(legal, error) of merging a into b in the current state (for tests against the reference)."""
@@ -363,8 +365,8 @@ def _canonical_ranks(rank: np.ndarray, n_merges: int, round_starts: list[int], k
 
 
 def _round_ends(n_points: int, limit: int, rounds: int) -> list[int]:
-    """Where the rounds end at the latest: each level's interval [N_i, N_i+1) in ``rounds`` equal
-    quotas (of the whole interval, so that ``max_merges`` does not move them), cut at ``limit``."""
+    """(end, quota) of every round at the latest: each level's interval [N_i, N_i+1) in ``rounds``
+    equal quotas (of the whole interval, so that ``max_merges`` does not move them), cut at ``limit``."""
     ends = []
     lo = 0
     i = 1
@@ -374,15 +376,15 @@ def _round_ends(n_points: int, limit: int, rounds: int) -> list[int]:
         if hi <= lo:
             continue
         quota = -(-(hi - lo) // rounds)
-        ends.extend(e for e in range(lo + quota, hi, quota) if e < limit)
-        ends.append(min(hi, limit))
+        ends.extend((e, quota) for e in range(lo + quota, hi, quota) if e < limit)
+        ends.append((min(hi, limit), quota))
         lo = hi
     return ends
 
 
 def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry: float = DEFAULT_W_GEOMETRY,
              progress=None, max_merges: int | None = None, locked=None, rounds: int = ROUNDS_PER_LEVEL,
-             return_rounds: bool = False):
+             round_blocked: float | None = ROUND_BLOCKED, return_rounds: bool = False):
     """Greedy Van Gelder decimation of a tetrahedral mesh into a merge forest.
 
     Parameters
@@ -407,6 +409,9 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
         Every level's merges [N_i, N_i+1) are split into at most this many rounds of equal
         quota (a round also ends when every candidate left is blocked by its earlier merges);
         ranks inside a round follow :func:`canonical_key`.
+    round_blocked : float or None
+        A round also ends once more than this fraction of its quota of candidates was blocked
+        (None: only at its quota).
     return_rounds : bool
         Also return the first rank of every round.
 
@@ -430,16 +435,19 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
         state.pinned[locked] |= K.PIN_KEEP
     if isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 0:
         raise OptionError(f"rounds must be an integer >= 0, got {rounds!r}")
+    if round_blocked is not None and not (np.isfinite(round_blocked) and round_blocked >= 0):
+        raise OptionError(f"round_blocked must be a finite number >= 0 or None, got {round_blocked!r}")
     limit = mesh.n_points if max_merges is None else max(0, min(int(max_merges), mesh.n_points))
     state.start()
     done = 0
     starts = []
     if rounds:
-        for end in _round_ends(mesh.n_points, limit, int(rounds)):
+        for end, quota in _round_ends(mesh.n_points, limit, int(rounds)):
             finished = False
+            max_blocked = 2**62 if round_blocked is None else int(np.ceil(round_blocked * quota))
             while state.n_merges < end and not finished:
                 starts.append(state.n_merges)
-                finished = state.run(end, one_round=True)
+                finished = state.run(end, one_round=True, max_blocked=max_blocked)
             if progress is not None:
                 progress(state.n_merges - done)
             done = state.n_merges

@@ -149,8 +149,8 @@ CENTROID_WEIGHT = 1.0
 # Rounds of independent merges per level (see decimate's ``rounds``), and the fraction of a round's
 # quota of blocked candidates that ends it early. Combustion, RMSE at ratio 0.9 of the three views
 # of bench_rounds (greedy 0.867 / 0.792 / 0.902, VTK's median 0.881 / 0.821 / 0.907) and the rounds'
-# entropy in bits per vertex: 32 rounds 0.932 / 0.842 / 0.930 (5.0 bits), 64 0.895 / 0.819 / 0.917
-# (6.0), 128 0.886 / 0.810 / 0.902 (7.0); with the early end: 32 and 0.25 0.894 / 0.804 / 0.911
+# entropy in bits per vertex: 16 rounds 0.932 / 0.842 / 0.930 (4.0 bits), 32 0.907 / 0.818 / 0.914
+# (5.0), 64 0.895 / 0.819 / 0.917 (6.0), 128 0.886 / 0.810 / 0.902 (7.0); with the early end: 32 and 0.25 0.894 / 0.804 / 0.911
 # (6.4), 32 and 0.1 0.886 / 0.812 / 0.909 (7.0), 16 and 0.05 0.878 / 0.790 / 0.909 (7.0), 64 and
 # 0.25 0.872 / 0.813 / 0.894 (6.9, these defaults: every view below VTK's median). At ratio 0.5
 # every setting is within 0.002 of the greedy order.

@@ -144,3 +144,13 @@ def test_bad_bytes_raise_typed_errors_never_out_of_bounds():
             check_forest(*decode(data[:12] + body))
         except CorruptFileError:
             pass
+
+
+def test_warmup_section_is_what_the_encoder_writes():
+    from gatun_py.warmup import FOREST_PARENT_RANK, FOREST_POINTS, FOREST_SECTION_ROUNDS, FOREST_TETS
+
+    parent, rank = (np.array(x) for x in FOREST_PARENT_RANK)
+    geo = dict(points=FOREST_POINTS, density=np.zeros(5, np.float32))
+    assert encode_forest_rounds(parent, rank, FOREST_TETS, boundary=np.ones(5, bool), **geo) == FOREST_SECTION_ROUNDS
+    p, r = decode_forest_rounds(FOREST_SECTION_ROUNDS, FOREST_TETS, 5, boundary=np.ones(5, bool), **geo)
+    assert p.tolist() == parent.tolist() and r.tolist() == rank.tolist()

@@ -75,7 +75,12 @@ def main(argv=None):
     from gatun_py.simplify import decimate, simplified_mesh
     from gatun_py.simplify.decimate import canonical_key
 
+    from bench_pipeline import DATASETS
+
     rounds = [int(x) for x in args.rounds.split(",")]
+    unknown = set(args.meshes.split(",")) - set(DATASETS)
+    if unknown:
+        ap.error(f"no view and transfer function for {', '.join(sorted(unknown))}: choose among {', '.join(DATASETS)}")
     decimate(load("post")[0], rounds=rounds[-1])  # load / compile the kernels
     cost_rows, rmse_rows = [], []
     for name in args.meshes.split(","):

@@ -37,6 +37,26 @@ def _bounds(n, k):
     return b
 
 
+def _neighbours(tets, n):
+    nbrs = [set() for _ in range(n)]
+    for t in tets:
+        for a in t:
+            nbrs[int(a)].update(int(b) for b in t if b != a)
+    return [sorted(s) for s in nbrs]
+
+
+def _bucket_symbol(enc, bucket_model, nbrs, boundary, symbol, b, v, r):
+    """Code vertex v's bucket symbol in its context (boundary, degree class, smallest symbol of
+    the neighbours decoded before); appends it to ``symbol`` and returns it."""
+    seen = [symbol[u] for u in nbrs[v] if u < v]
+    own = int(bool(boundary[v])) * DEGREE_CLASSES + min(len(nbrs[v]) // 4, DEGREE_CLASSES - 1)
+    ctx = own * (CAP + 2) + (1 + min(min(seen), CAP) if seen else 0)
+    s = ROOT_SYMBOL if r == ROOT_RANK else next(j for j in range(len(b) - 1) if b[j] <= r < b[j + 1])
+    enc.sym(bucket_model.setdefault(ctx, [1 << 14] * 64), 0, 6, s)
+    symbol.append(s)
+    return s
+
+
 def naive_encode_forest_on_mesh(parent, rank, tets, boundary) -> bytes:
     parent, rank = [int(x) for x in parent], [int(x) for x in rank]
     n = len(parent)
@@ -44,11 +64,7 @@ def naive_encode_forest_on_mesh(parent, rank, tets, boundary) -> bytes:
     head = struct.pack("<4sII", b"GFR3", n, k)
     if k == 0:
         return head
-    nbrs = [set() for _ in range(n)]
-    for t in tets:
-        for a in t:
-            nbrs[int(a)].update(int(b) for b in t if b != a)
-    nbrs = [sorted(s) for s in nbrs]
+    nbrs = _neighbours(tets, n)
     enc = _Encoder()
     bucket_model = {}  # context -> probabilities of its bit tree
     flag_model = [1 << 14] * (2 * FLAG_CONTEXTS)
@@ -57,17 +73,11 @@ def naive_encode_forest_on_mesh(parent, rank, tets, boundary) -> bytes:
     free = set(range(k))
     symbol = []
     for v in range(n):
-        seen = [symbol[u] for u in nbrs[v] if u < v]
-        own = int(bool(boundary[v])) * DEGREE_CLASSES + min(len(nbrs[v]) // 4, DEGREE_CLASSES - 1)
-        ctx = own * (CAP + 2) + (1 + min(min(seen), CAP) if seen else 0)
-        r = rank[v]
-        s = ROOT_SYMBOL if r == ROOT_RANK else next(j for j in range(len(b) - 1) if b[j] <= r < b[j + 1])
-        enc.sym(bucket_model.setdefault(ctx, [1 << 14] * 64), 0, 6, s)
-        symbol.append(s)
+        s = _bucket_symbol(enc, bucket_model, nbrs, boundary, symbol, b, v, rank[v])
         if s != ROOT_SYMBOL:
             in_bucket = sorted(x for x in free if b[s] <= x < b[s + 1])
-            enc.below(in_bucket.index(r), len(in_bucket))
-            free.remove(r)
+            enc.below(in_bucket.index(rank[v]), len(in_bucket))
+            free.remove(rank[v])
     _parents(enc, parent, rank, k, n, nbrs, flag_model, index_model)
     return head + enc.finish()
 
@@ -90,11 +100,7 @@ def naive_encode_forest_rounds(parent, rank, tets, boundary, points, density) ->
     head = struct.pack("<4sII", b"GFR6", n, k)
     if k == 0:
         return head
-    nbrs = [set() for _ in range(n)]
-    for t in tets:
-        for a in t:
-            nbrs[int(a)].update(int(b) for b in t if b != a)
-    nbrs = [sorted(s) for s in nbrs]
+    nbrs = _neighbours(tets, n)
     key = naive_key(points, density)
     b = _bounds(n, k)
     by_rank = sorted((v for v in range(n) if rank[v] != ROOT_RANK), key=lambda v: rank[v])
@@ -115,13 +121,7 @@ def naive_encode_forest_rounds(parent, rank, tets, boundary, points, density) ->
     index_model = {}
     symbol = []
     for v in range(n):
-        seen = [symbol[u] for u in nbrs[v] if u < v]
-        own = int(bool(boundary[v])) * DEGREE_CLASSES + min(len(nbrs[v]) // 4, DEGREE_CLASSES - 1)
-        ctx = own * (CAP + 2) + (1 + min(min(seen), CAP) if seen else 0)
-        r = rank[v]
-        s = ROOT_SYMBOL if r == ROOT_RANK else next(j for j in range(len(b) - 1) if b[j] <= r < b[j + 1])
-        enc.sym(bucket_model.setdefault(ctx, [1 << 14] * 64), 0, 6, s)
-        symbol.append(s)
+        s = _bucket_symbol(enc, bucket_model, nbrs, boundary, symbol, b, v, rank[v])
         if s != ROOT_SYMBOL and n_rounds[s] > 1:
             enc.below(rounds[v], n_rounds[s])
     _parents(enc, parent, rank, k, n, nbrs, flag_model, index_model)

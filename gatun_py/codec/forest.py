@@ -228,6 +228,25 @@ def _boundary_mask(boundary, n: int) -> np.ndarray:
     return mask
 
 
+def _prelude(data: bytes, magic: bytes, tets, n: int):
+    """(k, start, nbrs) of a section coded after its level's mesh: header and counts checked,
+    the adjacency built; ``start`` None for a forest without merges (nothing else may follow)."""
+    k = _checked_header(data, magic, n)
+    if n and k >= n:
+        raise CorruptFileError("merge forest: as many merges as vertices")
+    if k == 0:
+        if len(data) != _HEADER.size:
+            raise CorruptFileError("merge forest: trailing bytes")
+        return 0, None, None
+    if n >= MAX_VERTICES:
+        raise CorruptFileError(f"merge forest: {n} vertices, at most {MAX_VERTICES - 1}")
+    try:
+        start, nbrs = _mesh_adjacency(tets, n)
+    except ValueError:
+        raise CorruptFileError("merge forest: the mesh's tet ids are out of range") from None
+    return k, start, nbrs
+
+
 def encode_forest_on_mesh(parent: np.ndarray, rank: np.ndarray, tets: np.ndarray, *, boundary) -> bytes:
     """Code a merge forest knowing the mesh it belongs to (the format-3 ``L{i}/forest`` section).
 
@@ -302,19 +321,9 @@ def decode_forest_on_mesh(data: bytes, tets: np.ndarray, n: int, *, boundary) ->
         invalid forest. Every index the kernel computes is checked before use.
     """
     data = bytes(data)
-    k = _checked_header(data, _MAGIC_ON_MESH, n)
-    if n and k >= n:
-        raise CorruptFileError("merge forest: as many merges as vertices")
-    if k == 0:
-        if len(data) != _HEADER.size:
-            raise CorruptFileError("merge forest: trailing bytes")
+    k, start, nbrs = _prelude(data, _MAGIC_ON_MESH, tets, n)
+    if start is None:
         return np.arange(n, dtype=np.int32), np.full(n, ROOT_RANK, np.int32)
-    if n >= MAX_VERTICES:
-        raise CorruptFileError(f"merge forest: {n} vertices, at most {MAX_VERTICES - 1}")
-    try:
-        start, nbrs = _mesh_adjacency(tets, n)
-    except ValueError:
-        raise CorruptFileError("merge forest: the mesh's tet ids are out of range") from None
     body = np.frombuffer(data, np.uint8, offset=_HEADER.size)
     parent = np.empty(n, np.int32)
     rank = np.empty(n, np.int32)
@@ -428,19 +437,9 @@ def decode_forest_rounds(data: bytes, tets: np.ndarray, n: int, *, boundary, poi
         trailing bytes, an invalid forest.
     """
     data = bytes(data)
-    k = _checked_header(data, _MAGIC_ROUNDS, n)
-    if n and k >= n:
-        raise CorruptFileError("merge forest: as many merges as vertices")
-    if k == 0:
-        if len(data) != _HEADER.size:
-            raise CorruptFileError("merge forest: trailing bytes")
+    k, start, nbrs = _prelude(data, _MAGIC_ROUNDS, tets, n)
+    if start is None:
         return np.arange(n, dtype=np.int32), np.full(n, ROOT_RANK, np.int32)
-    if n >= MAX_VERTICES:
-        raise CorruptFileError(f"merge forest: {n} vertices, at most {MAX_VERTICES - 1}")
-    try:
-        start, nbrs = _mesh_adjacency(tets, n)
-    except ValueError:
-        raise CorruptFileError("merge forest: the mesh's tet ids are out of range") from None
     points = np.asarray(points)
     density = np.asarray(density)
     if points.shape != (n, 3) or density.shape != (n,):

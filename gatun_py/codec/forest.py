@@ -228,6 +228,20 @@ def _boundary_mask(boundary, n: int) -> np.ndarray:
     return mask
 
 
+def _encode_prelude(parent, rank, magic: bytes, tets):
+    """(header, parent, ranks with roots at k, k, start, nbrs) of a forest coded after its
+    level's mesh (no adjacency when k = 0: the header is the whole section)."""
+    parent = np.asarray(parent, np.int64)
+    rank = np.asarray(rank, np.int64)
+    k = check_forest(parent, rank)
+    n = parent.shape[0]
+    head = _HEADER.pack(magic, n, k)
+    if k == 0:
+        return head, parent, rank, 0, None, None
+    start, nbrs = _mesh_adjacency(tets, n)
+    return head, parent, np.where(rank == ROOT_RANK, k, rank), k, start, nbrs
+
+
 def _prelude(data: bytes, magic: bytes, tets, n: int):
     """(k, start, nbrs) of a section coded after its level's mesh: header and counts checked,
     the adjacency built; ``start`` None for a forest without merges (nothing else may follow)."""
@@ -284,15 +298,10 @@ def encode_forest_on_mesh(parent: np.ndarray, rank: np.ndarray, tets: np.ndarray
     >>> p.tolist(), r.tolist() == rank.tolist()
     ([1, 2, 2, 2, 3], True)
     """
-    parent = np.asarray(parent, np.int64)
-    rank = np.asarray(rank, np.int64)
-    k = check_forest(parent, rank)
-    n = parent.shape[0]
-    head = _HEADER.pack(_MAGIC_ON_MESH, n, k)
+    head, parent, ranks, k, start, nbrs = _encode_prelude(parent, rank, _MAGIC_ON_MESH, tets)
     if k == 0:
         return head
-    start, nbrs = _mesh_adjacency(tets, n)
-    ranks = np.where(rank == ROOT_RANK, k, rank)
+    n = len(parent)
     return head + run_encoder(FK.encode_forest_kernel, start, nbrs, _boundary_mask(boundary, n), parent, ranks, k,
                               capacity=capacity_hint(16 * n))
 
@@ -406,16 +415,11 @@ def encode_forest_rounds(parent: np.ndarray, rank: np.ndarray, tets: np.ndarray,
     >>> p.tolist(), r.tolist() == rank.tolist()
     ([1, 2, 2, 2, 3], True)
     """
-    parent = np.asarray(parent, np.int64)
-    rank = np.asarray(rank, np.int64)
-    k = check_forest(parent, rank)
-    n = parent.shape[0]
-    head = _HEADER.pack(_MAGIC_ROUNDS, n, k)
+    head, parent, ranks, k, start, nbrs = _encode_prelude(parent, rank, _MAGIC_ROUNDS, tets)
     if k == 0:
         return head
-    start, nbrs = _mesh_adjacency(tets, n)
-    ranks = np.where(rank == ROOT_RANK, k, rank)
     rid, n_rounds = rank_rounds(ranks, k, canonical_key(np.asarray(points), np.asarray(density)))
+    n = len(parent)
     return head + run_encoder(FK.encode_rounds_kernel, start, nbrs, _boundary_mask(boundary, n), parent, ranks, k,
                               rid, n_rounds, capacity=capacity_hint(16 * n))
 

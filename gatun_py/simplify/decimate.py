@@ -57,6 +57,36 @@ quarter of those stop early). The first evaluation of every vertex and the sweep
 (each evaluation only reads the mesh), and their results are pushed in vertex order, so the forest
 does not depend on the thread count either.
 
+Rounds of independent merges (issue 12: what makes the ranks cheap to store). Every level's
+interval of ranks [N_i, N_i+1) is split into rounds (``ROUNDS_PER_LEVEL`` equal quotas; a round also
+ends early once more than ``ROUND_BLOCKED`` x its quota of popped candidates were blocked, or when
+every candidate left is). A merge a -> b locks every vertex of a's star St(a) (the vertices of the
+tets around a, a and b included) and marks b as a target; a popped candidate a' -> b' whose a' or
+b' is locked, or whose star holds a target, waits for the next round with its heap entry (error)
+unchanged. So for any two merges a -> b and a' -> b' of a round: a' and b' are not in St(a), and
+b is not in St(a') (whichever came first). Why that makes them commute, every prefix in any order
+legal and the end mesh the same:
+
+* no tet contains both a and a' (that would put a' in St(a)), so the two merges relabel and
+  collapse disjoint sets of tets, and the sample points they move live in disjoint stars;
+* a merge a -> b changes only the tets around a (relabelled or collapsed) and the face adjacency
+  of their neighbours across the collapsed tets: those contain b or a; the tets around a' and b'
+  contain neither a (a' and b' are not in St(a)) nor, for the gluing across a collapsed tet, the
+  pair b and a vertex of St(a) with a' (b is not in St(a')); so St(a'), the boundary faces at a'
+  and b', and the links Lk(a'), Lk(b'), Lk(a'b') are the same before and after a -> b;
+* the legality of a' -> b' (positive tets of its star, boundary orientation, boundary vertices
+  into boundary vertices, the link condition) reads only those, so it holds after a -> b as it
+  did before, and symmetrically; by induction every order of a round's merges, and every prefix
+  of every order, passes every check, and the relabelled tets are the same in any order.
+
+``tests/test_simplify_rounds.py`` replays every round in random orders with the slow reference
+(legal at every step, the same mesh at the round's end). Inside a round the ranks are then
+re-assigned by :func:`canonical_key` (float32 bits of position, then value: what the forest's
+decoder computes in every level's numbering), a round holding two equal keys being split between
+them first; a level's interval stays a union of whole rounds, so level i's forest is still the full
+forest's ranks >= N_i minus N_i. Parents always land in a later round than their children (b is
+locked by a -> b), so a parent still outranks its child.
+
 Where the time goes (perf on the kernels' code, Blunt-fin, one thread, after the speed work of
 issue 12): the star context of an evaluation (chiefly walking the star's sample points: memory
 bound) ~20 %, the sampled errors of the exact evaluations ~15 %, moving the points after a merge

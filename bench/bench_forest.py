@@ -256,8 +256,8 @@ def main(argv=None):
                 f"{r['enc']:.3f}", f"{r['dec']:.3f}", f"{r['geo']:.3f}", f"{r['dec'] - r['geo']:.3f}",
                 f"{r['c1_dec']:.3f}", f"{r['old_dec']:.3f}"]
                for r in rows]), "",
-        "Reading: see the closing note of the forest work in the report (bits per vertex against the 12 target; "
-        "*all / level 0* against 2.0 depends on the meshes alone, which no forest coding changes).", "",
+        "Reading: rounds cut a rank's cost from log2 of its bucket's free ranks (the *rank bound*, 7.7–13.9 bits/vertex here) to log2 of its bucket's rounds (64 a level, more where a round ends early: about 7 bits). The level-0 forest drops by 0.9–5.7 bits/vertex (Blunt-fin 16.21 → 11.91, Combustion 16.44 → 11.52, flange 18.83 → 13.12): ≤ 12 on Blunt-fin and Combustion, not on the small meshes (LOX post, Room fire, gmsh block 50k: a level of a few thousand merges still has 64 rounds of a few merges, so a round costs nearly the place it replaces) nor on flange 1M (13.12: its levels hold more rounds that ended early). What is left per vertex is the round (~7 bits, offline: the decoded neighbours' rounds predict it by < 0.1 bit), the parent (~3.5 bits) and the bucket (~1.2 bits). *all / level 0* moves further from 2.0, as a smaller level-0 forest must (the meshes alone are above 2.0 on five of the six meshes). Decode: coding 2 needs the level's geometry before the forest, so `read_forest` pays the geometry decode (*of which mesh*: connectivity + geometry) on top of coding 1's connectivity; the forest alone decodes in about coding 1's time (same parent pass; a sort by (bucket, round, key) instead of the Fenwick trees). Decimation: the two forests ran one after the other on a machine loaded 11–15 on 2 cores, wall seconds are only indicative (`bench_rounds.py` has both in the same run: process CPU within 8 %).",
+        "",
     ]
     labels = list(rows[0]["predictability"])
     lines += ["Can the order inside a rank bucket be predicted? (issue 12: code the rank as its place in a predicted "
@@ -267,14 +267,7 @@ def main(argv=None):
               "geometry columns need the forest coded after the geometry.", "",
               table(["mesh"] + labels, [[r["name"]] + [f"{r['predictability'][x]:.2f}" for x in labels] for r in rows]),
               "",
-              "Reading: every predictor saves a fraction of a bit per vertex, far from the 1.5 bits/vertex that would pay "
-              "for a new coding (and for moving the forest after the geometry, which a render at a ratio would then have "
-              "to decode before its first frame): the greedy order inside a bucket follows errors that change with every "
-              "merge around a vertex, so the format keeps the uniform place. Decode speed comes from the decoder alone "
-              "(same bytes): candidates counted in place, the idx-th selected instead of sorting the list, tier 1 only "
-              "after a tier-0 miss, a Fenwick tree per bucket, the adjacency from the vertex-to-tet incidence without "
-              "sorting its rows; what remains is memory-bound (a merge's candidates are the live representatives of "
-              "about 13 neighbours scattered over the level, in rank order).", ""]
+              "Reading: every predictor saves a fraction of a bit per vertex of the greedy order's place, far from what would pay for a new coding: the greedy order inside a bucket follows errors that change with every merge around a vertex. Hence coding 2 changes the order itself (rounds of independent merges numbered by a key the decoder computes) instead of predicting it.", ""]
     r0 = rows[0]
     lines += [f"Per level ({r0['name']}): bytes of the mesh (rounds forest), of the forest in coding 2 and of the "
               "greedy forest in coding 1.", "",

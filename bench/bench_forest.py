@@ -30,10 +30,12 @@ import gmsh_meshes  # noqa: E402
 from common import table  # noqa: E402
 from conftest import SAMPLE_FILES, load_sample  # noqa: E402
 
-from gatun_py.codec.forest import ROOT_RANK, decode_forest, encode_forest, encode_forest_on_mesh  # noqa: E402
+from gatun_py.codec.forest import (ROOT_RANK, decode_forest, decode_forest_on_mesh, encode_forest,  # noqa: E402
+                                   encode_forest_on_mesh, encode_forest_rounds)
 from gatun_py.codec.tetcfile import LevelPayload, TetcReader, encode_level, encode_tetc  # noqa: E402
 from gatun_py.mesh import read_mesh  # noqa: E402
 from gatun_py.simplify import MergeForest, build_levels, decimate, storage_forests  # noqa: E402
+from gatun_py.simplify.decimate import ROUNDS_PER_LEVEL  # noqa: E402
 
 NAMES = {"bluntfin": "Blunt-fin", "combustion": "Combustion", "fire": "Room fire", "post": "LOX post",
          "block-50k": "gmsh block 50k", "flange-1m": "gmsh flange 1M"}
@@ -46,16 +48,19 @@ def load(name):
     return read_mesh(gmsh_meshes.mesh_path(name, log=lambda m: print(m, file=sys.stderr, flush=True)))[0]
 
 
-def forest_of(name, mesh):
-    path = CACHE / f"{name}.npz"
+def forest_of(name, mesh, rounds=ROUNDS_PER_LEVEL):
+    """(forest, decimation seconds or None when cached) with ``rounds`` rounds per level (0: greedy)."""
+    path = CACHE / f"{name}-r{rounds}.npz"
     if path.exists():
         d = np.load(path)
         if len(d["parent"]) == mesh.n_points:
-            return MergeForest(d["parent"], d["rank"], int((d["rank"] != ROOT_RANK).sum()))
-    f = decimate(mesh)
+            return MergeForest(d["parent"], d["rank"], int((d["rank"] != ROOT_RANK).sum())), None
+    t0 = time.perf_counter()
+    f = decimate(mesh, rounds=rounds)
+    dt = time.perf_counter() - t0
     CACHE.mkdir(parents=True, exist_ok=True)
     np.savez(path, parent=f.parent, rank=f.rank)
-    return f
+    return f, dt
 
 
 def cpu_best(fn, repeat: int = 3) -> float:
@@ -139,53 +144,72 @@ def rank_predictability(mesh, forest, vertex_order):
     return {label: bits / n for label, bits in saved.items()}
 
 
-def measure(name):
-    mesh = load(name)
-    n = mesh.n_points
-    t0 = time.perf_counter()
-    forest = forest_of(name, mesh)
-    t_forest = time.perf_counter() - t0
+def _level_forest_bytes(forest, mesh):
+    """Bytes of every level's mesh and forest section as ``tetc compress`` writes them (format 6),
+    the same forests in coding 1 (format 3 to 5) and LZMA (format 2), and the payloads."""
     levels = build_levels(mesh, forest)
     payloads = [LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
                 for x, f in zip(levels, storage_forests(levels))]
-    mesh_bytes, new_f, old_f = [], [], []
-    enc_s = None
+    mesh_bytes, new_f, c1_f, old_f = [], [], [], []
     for p in payloads:
-        t0 = time.perf_counter()
         e = encode_level(p)
-        dt = time.perf_counter() - t0
-        fsec = e.sections.get(f"L{p.level}/forest", b"")
         mesh_bytes.append(sum(len(v) for k, v in e.sections.items() if not k.endswith("/forest")))
-        new_f.append(len(fsec))
+        new_f.append(len(e.sections.get(f"L{p.level}/forest", b"")))
         if p.forest is not None:
             vo = e.vertex_order
             dec_of = np.empty(len(vo), np.int64)
             dec_of[vo] = np.arange(len(vo))
             parent, rank = (np.asarray(a) for a in p.forest)
-            old_f.append(len(encode_forest(dec_of[parent[vo]], rank[vo])))
+            parent, rank = dec_of[parent[vo]], rank[vo]
+            old_f.append(len(encode_forest(parent, rank)))
+            bnd = np.arange(len(vo)) < e.meta["boundary_vertices"]
+            c1_f.append(len(encode_forest_on_mesh(parent, rank, dec_of[p.mesh.tets], boundary=bnd)))
         else:
             old_f.append(0)
-        if p.level == 0:
-            enc_s = dt
-    # encode time of level 0's forest alone, decode time through the reader, and the old coding's decode
+            c1_f.append(0)
+    return levels, payloads, mesh_bytes, new_f, c1_f, old_f
+
+
+def measure(name):
+    """Coding 2 of the rounds forest (what format 6 writes) against coding 1 of the greedy forest
+    (what formats 3 to 5 wrote), same run."""
+    mesh = load(name)
+    n = mesh.n_points
+    greedy, t_greedy = forest_of(name, mesh, 0)
+    forest, t_forest = forest_of(name, mesh)
+    levels, payloads, mesh_bytes, new_f, _, old_f = _level_forest_bytes(forest, mesh)
+    _, _, g_mesh_bytes, _, g_c1_f, _ = _level_forest_bytes(greedy, mesh)
     on_boundary = np.zeros(mesh.n_points, bool)
     on_boundary[mesh.boundary_faces().ravel()] = True
-    enc_forest_s = cpu_best(lambda: encode_forest_on_mesh(forest.parent, forest.rank, mesh.tets, boundary=on_boundary))
+    enc_forest_s = cpu_best(lambda: encode_forest_rounds(forest.parent, forest.rank, mesh.tets, boundary=on_boundary,
+                                                         points=mesh.points, density=mesh.density))
     reader = TetcReader(encode_tetc(payloads[:1]))
     dec_s = cpu_best(lambda: reader.read_forest(0))
+    geo_s = cpu_best(lambda: reader._level_geometry(0))
     conn_s = cpu_best(lambda: reader._level_tets(0))
+    # coding 1 of the greedy forest, decoded as a format-5 reader does (connectivity, then the forest)
+    g_reader = TetcReader(encode_tetc(_level_forest_bytes(greedy, mesh)[1][:1]))
+    tets0 = g_reader._level_tets(0)
+    lv0 = g_reader.levels[0]
+    g_bnd = np.arange(n) < lv0["boundary_vertices"]
+    gp, gr = g_reader.read_forest(0)
+    c1_bytes = encode_forest_on_mesh(gp, gr, tets0, boundary=g_bnd)
+    c1_dec_s = conn_s + cpu_best(lambda: decode_forest_on_mesh(c1_bytes, tets0, n, boundary=g_bnd))
     old_bytes = encode_forest(*reader.read_forest(0))
     old_dec_s = cpu_best(lambda: decode_forest(old_bytes, n))
     k = forest.n_merges
-    predictability = rank_predictability(mesh, forest, encode_level(payloads[0]).vertex_order)
+    predictability = rank_predictability(mesh, greedy, encode_level(payloads[0]).vertex_order)
     lvl0_new = mesh_bytes[0] + new_f[0]
-    lvl0_old = mesh_bytes[0] + old_f[0]
+    lvl0_c1 = g_mesh_bytes[0] + g_c1_f[0]
     return dict(name=NAMES.get(name, name), points=n, tets=mesh.n_tets, levels=len(levels),
-                new_bpv=8 * new_f[0] / n, old_bpv=8 * old_f[0] / n, bound=(rank_bound_bits(n, k)) / n,
-                ratio_new=(sum(mesh_bytes) + sum(new_f)) / lvl0_new, ratio_old=(sum(mesh_bytes) + sum(old_f)) / lvl0_old,
-                mesh_ratio=sum(mesh_bytes) / mesh_bytes[0], forests_new=sum(new_f), forests_old=sum(old_f),
-                lvl0_new=lvl0_new, all_new=sum(mesh_bytes) + sum(new_f), enc=enc_forest_s, dec=dec_s, conn=conn_s, old_dec=old_dec_s,
-                t_forest=t_forest, level_bytes=list(zip(mesh_bytes, new_f, old_f)), predictability=predictability)
+                new_bpv=8 * new_f[0] / n, c1_bpv=8 * g_c1_f[0] / n, old_bpv=8 * old_f[0] / n,
+                bound=(rank_bound_bits(n, k)) / n,
+                ratio_new=(sum(mesh_bytes) + sum(new_f)) / lvl0_new,
+                ratio_c1=(sum(g_mesh_bytes) + sum(g_c1_f)) / lvl0_c1,
+                mesh_ratio=sum(mesh_bytes) / mesh_bytes[0], forests_new=sum(new_f), forests_c1=sum(g_c1_f),
+                forests_old=sum(old_f), enc=enc_forest_s, dec=dec_s, conn=conn_s, geo=geo_s, c1_dec=c1_dec_s,
+                old_dec=old_dec_s, t_forest=t_forest, t_greedy=t_greedy,
+                level_bytes=list(zip(mesh_bytes, new_f, g_c1_f)), predictability=predictability)
 
 
 def main(argv=None):
@@ -198,38 +222,42 @@ def main(argv=None):
     rows = []
     for name in args.names:
         r = measure(name)
-        print(f"{r['name']}: {r['new_bpv']:.2f} bits/vertex (was {r['old_bpv']:.2f}), all/level0 "
-              f"{r['ratio_new']:.3f} (was {r['ratio_old']:.3f}), decode {r['dec']:.3f} s", flush=True)
+        print(f"{r['name']}: {r['new_bpv']:.2f} bits/vertex (coding 1 of the greedy forest {r['c1_bpv']:.2f}), "
+              f"all/level0 {r['ratio_new']:.3f} (was {r['ratio_c1']:.3f}), decode {r['dec']:.3f} s", flush=True)
         rows.append(r)
+
+    def secs(x):
+        return "cached" if x is None else f"{x:.1f}"
+
     lines = [
         "## Merge forest coding (issue 12)", "",
         f"Command: `python bench/bench_forest.py` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load average "
-        + ", ".join(f"{x:.2f}" for x in os.getloadavg()) + ", 2 cores shared). Forest from `decimate` (cached), levels "
-        "from `build_levels`, every level encoded with `encode_level` as `tetc compress` writes it. *format 3* = the "
-        "forest coded after the level's mesh (parents among live neighbours, ranks as a context-modelled 1−1/2^i "
-        "bucket + the position among the bucket's free ranks: `docs/format.md`); *format 2* = the same forest "
-        "LZMA-coded as before. *bound* = log2 of the orders inside the buckets per vertex: what any coding pays "
-        "that cannot predict the decimator's order inside a bucket (so ≤ 12 bits/vertex is out of reach for an exact "
-        "greedy order once log2(n) is above about 15). Decode = `TetcReader.read_forest(0)` (decodes the level's "
-        "connectivity, then the forest), *connectivity* = that first part alone (a render at a ratio then reuses it for the stream instead of decoding it again), *format 2 decode* = `decode_forest` of the LZMA coding; encode = `encode_forest_on_mesh`; all best of 3, process CPU seconds (single-threaded). Targets: ≤ 12 bits/vertex, "
-        "all levels ≤ 2.0 × level 0.", "",
-        table(["mesh", "points", "tets", "levels", "level-0 forest bits/vertex, format 3", "format 2", "rank bound",
-               "all / level 0, format 3", "format 2", "meshes alone: all / level 0", "forests bytes, format 3",
-               "format 2", "encode CPU s", "decode CPU s", "of which connectivity", "forest alone",
+        + ", ".join(f"{x:.2f}" for x in os.getloadavg()) + ", 2 cores shared). Two forests per mesh from `decimate` "
+        f"(cached in `bench/out/forests/`): *rounds* ({ROUNDS_PER_LEVEL} rounds of independent merges per level, the "
+        "default) and *greedy* (`rounds=0`, the forest of formats 3 to 5); levels from `build_levels`, every level "
+        "encoded with `encode_level` as `tetc compress` writes it. *coding 2* = format 6: the rounds forest coded "
+        "after the level's mesh and geometry (bucket + round per vertex, ranks inside a round by the float32 bits of "
+        "position and value, parents among live neighbours: `docs/format.md`); *coding 1* = the greedy forest as "
+        "formats 3 to 5 code it (bucket + place among the bucket's free ranks); *format 2* = the rounds forest "
+        "LZMA-coded. *bound* = log2 of the orders inside the buckets per vertex: what coding 1 pays for the greedy "
+        "order. Decode = `TetcReader.read_forest(0)`: coding 2 decodes the level's connectivity and geometry "
+        "(*of which mesh*), then the forest; coding 1 the connectivity, then the forest (a render at a ratio "
+        "reuses that connectivity); encode = `encode_forest_rounds`; best of 3, process CPU seconds "
+        "(single-threaded). Decimation: wall seconds of the whole `decimate` (2 threads; *cached* when the forest "
+        "came from the cache). Targets: ≤ 12 bits/vertex, all levels ≤ 2.0 × level 0.", "",
+        table(["mesh", "points", "tets", "levels", "level-0 forest bits/vertex, coding 2", "coding 1 (greedy)",
+               "format 2", "rank bound (greedy)", "all / level 0, coding 2", "coding 1", "meshes alone: all / level 0",
+               "forests bytes, coding 2", "coding 1", "decimate s, rounds", "greedy", "encode CPU s",
+               "decode CPU s, coding 2", "of which mesh", "forest alone", "coding 1 decode CPU s",
                "format 2 decode CPU s"],
-              [[r["name"], r["points"], r["tets"], r["levels"], f"{r['new_bpv']:.2f}", f"{r['old_bpv']:.2f}",
-                f"{r['bound']:.2f}", f"{r['ratio_new']:.3f}", f"{r['ratio_old']:.3f}", f"{r['mesh_ratio']:.3f}",
-                r["forests_new"], r["forests_old"], f"{r['enc']:.3f}", f"{r['dec']:.3f}", f"{r['conn']:.3f}",
-                f"{r['dec'] - r['conn']:.3f}", f"{r['old_dec']:.3f}"]
+              [[r["name"], r["points"], r["tets"], r["levels"], f"{r['new_bpv']:.2f}", f"{r['c1_bpv']:.2f}",
+                f"{r['old_bpv']:.2f}", f"{r['bound']:.2f}", f"{r['ratio_new']:.3f}", f"{r['ratio_c1']:.3f}",
+                f"{r['mesh_ratio']:.3f}", r["forests_new"], r["forests_c1"], secs(r["t_forest"]), secs(r["t_greedy"]),
+                f"{r['enc']:.3f}", f"{r['dec']:.3f}", f"{r['geo']:.3f}", f"{r['dec'] - r['geo']:.3f}",
+                f"{r['c1_dec']:.3f}", f"{r['old_dec']:.3f}"]
                for r in rows]), "",
-        "Reading: the forests shrink by 35–38 %, but *all / level 0* moves the wrong way, because a smaller "
-        "level-0 forest shrinks the denominator: (all) ≤ 2 × (level 0) needs level 0's forest to exceed the other "
-        "levels' forests by (meshes alone − 2) × level 0's mesh bytes. Where the meshes alone are above 2.0 × "
-        "(Blunt-fin 2.52, Combustion 2.39, LOX post 2.68, Room fire 2.16, gmsh block 2.16) no forest coding reaches "
-        "the target, and a better one moves further away from it; the levels' meshes have to shrink (decimated "
-        "meshes code at more bits per tet than the grids they come from). The 12 bits/vertex target is below the "
-        "*rank bound* plus any parent coding on every mesh above ~10 k vertices: the exact greedy order costs about "
-        "log2(n) − 3.4 bits per vertex by itself.", "",
+        "Reading: rounds cut a rank's cost from log2 of its bucket's free ranks (the *rank bound*, 7.7–13.9 bits/vertex here) to log2 of its bucket's rounds (64 a level, more where a round ends early: about 7 bits). The level-0 forest drops by 0.9–5.7 bits/vertex (Blunt-fin 16.21 → 11.91, Combustion 16.44 → 11.52, flange 18.83 → 13.12): ≤ 12 on Blunt-fin and Combustion, not on the small meshes (LOX post, Room fire, gmsh block 50k: a level of a few thousand merges still has 64 rounds of a few merges, so a round costs nearly the place it replaces) nor on flange 1M (13.12: its levels hold more rounds that ended early). What is left per vertex is the round (~7 bits, offline: the decoded neighbours' rounds predict it by < 0.1 bit), the parent (~3.5 bits) and the bucket (~1.2 bits). *all / level 0* moves further from 2.0, as a smaller level-0 forest must (the meshes alone are above 2.0 on five of the six meshes). Decode: coding 2 needs the level's geometry before the forest, so `read_forest` pays the geometry decode (*of which mesh*: connectivity + geometry) on top of coding 1's connectivity; the forest alone decodes in about coding 1's time (same parent pass; a sort by (bucket, round, key) instead of the Fenwick trees). Decimation: the two forests ran one after the other on a machine loaded 11–15 on 2 cores, wall seconds are only indicative (`bench_rounds.py` has both in the same run: process CPU within 8 %).",
+        "",
     ]
     labels = list(rows[0]["predictability"])
     lines += ["Can the order inside a rank bucket be predicted? (issue 12: code the rank as its place in a predicted "
@@ -239,17 +267,11 @@ def main(argv=None):
               "geometry columns need the forest coded after the geometry.", "",
               table(["mesh"] + labels, [[r["name"]] + [f"{r['predictability'][x]:.2f}" for x in labels] for r in rows]),
               "",
-              "Reading: every predictor saves a fraction of a bit per vertex, far from the 1.5 bits/vertex that would pay "
-              "for a new coding (and for moving the forest after the geometry, which a render at a ratio would then have "
-              "to decode before its first frame): the greedy order inside a bucket follows errors that change with every "
-              "merge around a vertex, so the format keeps the uniform place. Decode speed comes from the decoder alone "
-              "(same bytes): candidates counted in place, the idx-th selected instead of sorting the list, tier 1 only "
-              "after a tier-0 miss, a Fenwick tree per bucket, the adjacency from the vertex-to-tet incidence without "
-              "sorting its rows; what remains is memory-bound (a merge's candidates are the live representatives of "
-              "about 13 neighbours scattered over the level, in rank order).", ""]
+              "Reading: every predictor saves a fraction of a bit per vertex of the greedy order's place, far from what would pay for a new coding: the greedy order inside a bucket follows errors that change with every merge around a vertex. Hence coding 2 changes the order itself (rounds of independent merges numbered by a key the decoder computes) instead of predicting it.", ""]
     r0 = rows[0]
-    lines += [f"Per level ({r0['name']}): bytes of the mesh, of the forest in format 3 and in format 2.", "",
-              table(["level", "mesh bytes", "forest bytes, format 3", "format 2"],
+    lines += [f"Per level ({r0['name']}): bytes of the mesh (rounds forest), of the forest in coding 2 and of the "
+              "greedy forest in coding 1.", "",
+              table(["level", "mesh bytes", "forest bytes, coding 2", "coding 1 (greedy)"],
                     [[i, a, b, c] for i, (a, b, c) in enumerate(r0["level_bytes"])]), ""]
     out = ROOT / "bench" / "sections" / "forest.md"
     out.write_text("\n".join(lines))

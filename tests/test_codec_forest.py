@@ -14,7 +14,7 @@ from meshgen import delaunay_mesh, grid_mesh, mesh_strategy, with_unreferenced
 from naive_forest import naive_encode_forest_on_mesh
 
 from gatun_py.codec import container
-from gatun_py.codec.forest import (ROOT_RANK, check_forest, decode_forest_on_mesh, encode_forest,
+from gatun_py.codec.forest import (ROOT_RANK, check_forest, coding_for_format, decode_forest_on_mesh, encode_forest,
                                    encode_forest_on_mesh, forest_header)
 from gatun_py.codec.tetcfile import LevelPayload, TetcReader, encode_tetc
 from gatun_py.errors import CorruptFileError
@@ -148,9 +148,10 @@ def test_files_are_format_3_and_store_the_new_coding():
     r = TetcReader(encode_tetc([LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (g.parent, g.rank))
                                 for x, g in zip(lv, storage_forests(lv))]))
     assert r.container.major == container.VERSION_MAJOR >= 3
+    magic = {1: b"GFR3", 2: b"GFR6"}[coding_for_format(r.container.major)]
     for lv in r.levels:
         if lv["has_forest"]:
-            assert r.read_section(f"L{lv['level']}/forest")[:4] == b"GFR3"
+            assert r.read_section(f"L{lv['level']}/forest")[:4] == magic
     p, rank = r.read_forest(0)
     mesh0 = r.decode_mesh(0)
     # same forest as the decimator's, in decode order: compare (merged vertex, parent) by position
@@ -167,7 +168,9 @@ def test_the_stream_after_the_forest_reuses_its_connectivity_and_equals_a_fresh_
     fresh = list(TetcReader(data).iter_decode(0, batch_tets=97))
     r = TetcReader(data)
     r.read_forest(0)
-    assert r._decoded is not None
+    # coding 1 keeps the connectivity it decoded; coding 2 decodes the whole level (geometry too)
+    # and keeps nothing
+    assert (r._decoded is not None) == (coding_for_format(r.container.major) == 1)
     replayed = list(r.iter_decode(0, batch_tets=97))
     assert r._decoded is None  # handed over once
     assert len(fresh) == len(replayed)

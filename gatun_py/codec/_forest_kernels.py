@@ -358,7 +358,15 @@ def encode_forest_kernel(st, out, start, nbrs, boundary, parent, rank, k):
             enc_below(st, out, _fen_prefix(tree, off, r - bounds[s]), free[s])
             _fen_take(tree, off, bounds[s + 1] - bounds[s], r - bounds[s])
             free[s] -= 1
-    # pass 2, rank order: each merge's parent among candidates built from the mesh so far
+    _enc_parents(st, out, probs, start, nbrs, parent, rank, k)
+    return enc_finish(st, out)
+
+
+@njit(cache=True)
+def _enc_parents(st, out, probs, start, nbrs, parent, rank, k):
+    """Pass 2 of both codings, merges in rank order: each merge's parent among candidates built
+    from the mesh so far."""
+    n = parent.shape[0]
     of_rank = np.empty(k, np.int64)
     for v in range(n):
         if rank[v] < k:
@@ -377,7 +385,6 @@ def encode_forest_kernel(st, out, start, nbrs, boundary, parent, rank, k):
         uf[v] = p
         next_sibling[v] = first_child[p]
         first_child[p] = v
-    return enc_finish(st, out)
 
 
 @njit(cache=True)
@@ -451,6 +458,15 @@ def decode_forest_kernel(st, data, start, nbrs, boundary, k, parent, rank):
     for s in range(n_buckets):
         if free[s] != 0:
             return False  # fewer merges than the header says
+    return decode_parents_kernel(st, data, probs, start, nbrs, k, parent, rank, of_rank)
+
+
+@njit(cache=True, nogil=True)
+def decode_parents_kernel(st, data, probs, start, nbrs, k, parent, rank, of_rank):
+    """Pass 2 of both codings: every merge's parent, in rank order (``of_rank``: the vertex of
+    every rank, all of them set; ``rank``: k for the roots, whose ``parent`` is already set).
+    False on a damaged stream."""
+    n = parent.shape[0]
     uf, first_child, next_sibling, mark, cand0, count0, cand1, count1 = _replay_state(n)
     for r in range(k):
         v = of_rank[r]
@@ -468,3 +484,63 @@ def decode_forest_kernel(st, data, start, nbrs, boundary, k, parent, rank):
         next_sibling[v] = first_child[p]
         first_child[p] = v
     return True
+
+
+# -- forest coding 2 (format 6): rounds instead of places -------------------------------------------
+# Pass 1 codes, per merged vertex, its bucket (as coding 1) and its round inside the bucket; the
+# ranks inside a round follow the vertices' canonical key (:func:`gatun_py.codec.forest.canonical_key`),
+# which the decoder computes from the level's geometry between the two passes.
+
+
+def new_model():
+    """The adaptive bit probabilities of both passes, all at 1/2 (shared by the pass kernels)."""
+    return np.full(MODEL_SIZE, 1 << 14, np.uint16)
+
+
+@njit(cache=True)
+def encode_rounds_kernel(st, out, start, nbrs, boundary, parent, rank, k, rid, n_rounds):
+    """Code a forest (decode order; roots have rank >= k) as bucket + round per vertex (``rid``,
+    ``n_rounds`` per bucket, see :func:`gatun_py.codec.forest.rank_rounds`), then the parents."""
+    n = parent.shape[0]
+    probs = np.full(MODEL_SIZE, 1 << 14, np.uint16)
+    bounds = bucket_bounds(n, k)
+    for s in range(bounds.shape[0] - 1):
+        enc_below(st, out, n_rounds[s] - 1, bounds[s + 1] - bounds[s])
+    symbol = np.empty(n, np.int8)
+    for v in range(n):
+        r = rank[v]
+        s = ROOT_SYMBOL if r >= k else _bucket_of(bounds, r)
+        ctx = _bucket_context(start, nbrs, boundary, v, symbol)
+        enc_sym(st, out, probs, ctx << BUCKET_BITS, BUCKET_BITS, s)
+        symbol[v] = s
+        if s != ROOT_SYMBOL and n_rounds[s] > 1:
+            enc_below(st, out, rid[v], n_rounds[s])
+    _enc_parents(st, out, probs, start, nbrs, parent, rank, k)
+    return enc_finish(st, out)
+
+
+@njit(cache=True, nogil=True)
+def decode_rounds_kernel(st, data, probs, start, nbrs, boundary, k, symbol, rid):
+    """Pass 1 of coding 2: every vertex's bucket symbol (``ROOT_SYMBOL`` for a root) and round
+    (-1 for a root). False on a damaged stream (a symbol past the last bucket, a round past the
+    bucket's count); the caller checks the counts and builds the ranks."""
+    n = symbol.shape[0]
+    dec_init(st, data)
+    bounds = bucket_bounds(n, k)
+    n_buckets = bounds.shape[0] - 1
+    n_rounds = np.empty(n_buckets, np.int64)
+    for s in range(n_buckets):
+        n_rounds[s] = dec_below(st, data, bounds[s + 1] - bounds[s]) + 1
+    for v in range(n):
+        ctx = _bucket_context(start, nbrs, boundary, v, symbol)
+        s = dec_sym(st, data, probs, ctx << BUCKET_BITS, BUCKET_BITS)
+        symbol[v] = s
+        if s == ROOT_SYMBOL:
+            rid[v] = -1
+            continue
+        if s >= n_buckets:
+            return False
+        rid[v] = dec_below(st, data, n_rounds[s]) if n_rounds[s] > 1 else 0
+        if dec_failed(st) or rid[v] >= n_rounds[s]:
+            return False
+    return not dec_failed(st)

@@ -16,6 +16,15 @@ merge's parent is coded as an index among the live neighbours of the merged vert
 as a bucket (the 1 - 1/2^i level it falls in, context-modelled from the neighbours' buckets) plus
 its place among the bucket's free ranks. ``<4sII`` header (magic, vertices n, merges k), then,
 when k > 0, one range-coded stream (:mod:`._forest_kernels`, ``docs/format.md``).
+
+Files of format 6 code the forest after the level's mesh *and geometry* (magic ``GFR6``,
+forest coding 2, :func:`encode_forest_rounds`): the decimator merges in rounds of independent
+merges and numbers the merges of a round by the merged vertices' :func:`canonical_key` (their
+float32 position bits, then value), so a rank is coded as its bucket plus its round inside the
+bucket (``log2`` of the bucket's rounds instead of ``log2`` of its free ranks); the decoder
+rebuilds the ranks by sorting (bucket, round, key). Parents as in format 3. Any valid forest
+codes this way (a round is a maximal run of ranks whose keys ascend; a greedy forest just has
+many short runs).
 """
 
 from __future__ import annotations
@@ -27,12 +36,26 @@ import numpy as np
 
 from ..errors import CorruptFileError
 from . import _forest_kernels as FK
+from .container import VERSION_MAJOR
 from .rangecoder import capacity_hint, check_decoder, dec_state, run_encoder
 
 __all__ = ["ROOT_RANK", "check_forest", "encode_forest", "decode_forest", "forest_header",
-           "encode_forest_on_mesh", "decode_forest_on_mesh"]
+           "encode_forest_on_mesh", "decode_forest_on_mesh", "encode_forest_rounds", "decode_forest_rounds",
+           "canonical_key", "rank_rounds", "coding_for_format", "FOREST_CODING"]
 
 ROOT_RANK = 2**31 - 1  # the rank of a vertex that is never merged
+
+
+def coding_for_format(major: int) -> int:
+    """The forest coding a file of container format ``major`` is written with: 0 (LZMA, magic
+    ``GFR1``) in formats 1 and 2, 1 (after the level's mesh, ``GFR3``) in formats 3 to 5, 2
+    (rounds, after the level's mesh and geometry, ``GFR6``) from format 6 on. Readers take every
+    coding."""
+    return 0 if major <= 2 else (1 if major <= 5 else 2)
+
+
+# what this version of tetc writes
+FOREST_CODING = coding_for_format(VERSION_MAJOR)
 
 
 def check_forest(parent: np.ndarray, rank: np.ndarray) -> int:
@@ -66,6 +89,7 @@ def check_forest(parent: np.ndarray, rank: np.ndarray) -> int:
 
 _MAGIC = b"GFR1"
 _MAGIC_ON_MESH = b"GFR3"
+_MAGIC_ROUNDS = b"GFR6"
 _HEADER = struct.Struct("<4sII")
 
 
@@ -133,7 +157,7 @@ def forest_header(data: bytes) -> tuple[int, int]:
     if len(data) < _HEADER.size:
         raise CorruptFileError("merge forest: truncated header")
     magic, n, k = _HEADER.unpack(data)
-    if magic not in (_MAGIC, _MAGIC_ON_MESH) or k > n:
+    if magic not in (_MAGIC, _MAGIC_ON_MESH, _MAGIC_ROUNDS) or k > n:
         raise CorruptFileError("merge forest: bad header")
     return int(n), int(k)
 
@@ -204,6 +228,39 @@ def _boundary_mask(boundary, n: int) -> np.ndarray:
     return mask
 
 
+def _encode_prelude(parent, rank, magic: bytes, tets):
+    """(header, parent, ranks with roots at k, k, start, nbrs) of a forest coded after its
+    level's mesh (no adjacency when k = 0: the header is the whole section)."""
+    parent = np.asarray(parent, np.int64)
+    rank = np.asarray(rank, np.int64)
+    k = check_forest(parent, rank)
+    n = parent.shape[0]
+    head = _HEADER.pack(magic, n, k)
+    if k == 0:
+        return head, parent, rank, 0, None, None
+    start, nbrs = _mesh_adjacency(tets, n)
+    return head, parent, np.where(rank == ROOT_RANK, k, rank), k, start, nbrs
+
+
+def _prelude(data: bytes, magic: bytes, tets, n: int):
+    """(k, start, nbrs) of a section coded after its level's mesh: header and counts checked,
+    the adjacency built; ``start`` None for a forest without merges (nothing else may follow)."""
+    k = _checked_header(data, magic, n)
+    if n and k >= n:
+        raise CorruptFileError("merge forest: as many merges as vertices")
+    if k == 0:
+        if len(data) != _HEADER.size:
+            raise CorruptFileError("merge forest: trailing bytes")
+        return 0, None, None
+    if n >= MAX_VERTICES:
+        raise CorruptFileError(f"merge forest: {n} vertices, at most {MAX_VERTICES - 1}")
+    try:
+        start, nbrs = _mesh_adjacency(tets, n)
+    except ValueError:
+        raise CorruptFileError("merge forest: the mesh's tet ids are out of range") from None
+    return k, start, nbrs
+
+
 def encode_forest_on_mesh(parent: np.ndarray, rank: np.ndarray, tets: np.ndarray, *, boundary) -> bytes:
     """Code a merge forest knowing the mesh it belongs to (the format-3 ``L{i}/forest`` section).
 
@@ -241,15 +298,10 @@ def encode_forest_on_mesh(parent: np.ndarray, rank: np.ndarray, tets: np.ndarray
     >>> p.tolist(), r.tolist() == rank.tolist()
     ([1, 2, 2, 2, 3], True)
     """
-    parent = np.asarray(parent, np.int64)
-    rank = np.asarray(rank, np.int64)
-    k = check_forest(parent, rank)
-    n = parent.shape[0]
-    head = _HEADER.pack(_MAGIC_ON_MESH, n, k)
+    head, parent, ranks, k, start, nbrs = _encode_prelude(parent, rank, _MAGIC_ON_MESH, tets)
     if k == 0:
         return head
-    start, nbrs = _mesh_adjacency(tets, n)
-    ranks = np.where(rank == ROOT_RANK, k, rank)
+    n = len(parent)
     return head + run_encoder(FK.encode_forest_kernel, start, nbrs, _boundary_mask(boundary, n), parent, ranks, k,
                               capacity=capacity_hint(16 * n))
 
@@ -278,19 +330,9 @@ def decode_forest_on_mesh(data: bytes, tets: np.ndarray, n: int, *, boundary) ->
         invalid forest. Every index the kernel computes is checked before use.
     """
     data = bytes(data)
-    k = _checked_header(data, _MAGIC_ON_MESH, n)
-    if n and k >= n:
-        raise CorruptFileError("merge forest: as many merges as vertices")
-    if k == 0:
-        if len(data) != _HEADER.size:
-            raise CorruptFileError("merge forest: trailing bytes")
+    k, start, nbrs = _prelude(data, _MAGIC_ON_MESH, tets, n)
+    if start is None:
         return np.arange(n, dtype=np.int32), np.full(n, ROOT_RANK, np.int32)
-    if n >= MAX_VERTICES:
-        raise CorruptFileError(f"merge forest: {n} vertices, at most {MAX_VERTICES - 1}")
-    try:
-        start, nbrs = _mesh_adjacency(tets, n)
-    except ValueError:
-        raise CorruptFileError("merge forest: the mesh's tet ids are out of range") from None
     body = np.frombuffer(data, np.uint8, offset=_HEADER.size)
     parent = np.empty(n, np.int32)
     rank = np.empty(n, np.int32)
@@ -298,6 +340,145 @@ def decode_forest_on_mesh(data: bytes, tets: np.ndarray, n: int, *, boundary) ->
     ok = FK.decode_forest_kernel(st, body, start, nbrs, _boundary_mask(boundary, n), k, parent, rank)
     if not ok:
         raise CorruptFileError("merge forest: the coded data is damaged or truncated")
+    check_decoder(st, body, "merge forest")
+    rank[rank == k] = ROOT_RANK
+    check_forest(parent, rank)
+    return parent, rank
+
+
+def canonical_key(points: np.ndarray, density: np.ndarray) -> np.ndarray:
+    """Every vertex's place in the order of the ranks inside a round (forest coding 2): the
+    float32 bit patterns of x, y, z and the value, compared in that order as unsigned integers.
+
+    Returns an (n,) int64 array of dense key ranks (equal points and values share one): what a
+    decoder computes from the geometry it has decoded, in any numbering of the vertices.
+
+    Examples
+    --------
+    >>> canonical_key(np.array([[1, 0, 0], [0, 0, 0], [-1, 0, 0]], np.float32), np.zeros(3, np.float32)).tolist()
+    [1, 0, 2]
+    """
+    n = points.shape[0]
+    bits = np.empty((n, 4), np.uint32)
+    bits[:, :3] = np.ascontiguousarray(points, np.float32).reshape(n, 3).view(np.uint32)
+    bits[:, 3] = np.ascontiguousarray(density, np.float32).reshape(n).view(np.uint32)
+    order = np.lexsort(bits.T[::-1])
+    dense = np.zeros(n, np.int64)
+    if n:
+        s = bits[order]
+        step = np.concatenate([[0], np.any(s[1:] != s[:-1], axis=1).astype(np.int64)])
+        dense[order] = np.cumsum(step)
+    return dense
+
+
+def rank_rounds(rank: np.ndarray, k: int, key: np.ndarray):
+    """(round of every vertex, rounds per bucket) of a forest's ranks (roots: rank >= k): inside
+    each rank bucket, a round is a maximal run of consecutive ranks whose vertices' keys strictly
+    ascend, numbered from 0. Sorting a bucket's vertices by (round, key) gives back their ranks."""
+    n = rank.shape[0]
+    bounds = FK.bucket_bounds(n, k)
+    by_rank = np.empty(k, np.int64)
+    merged = np.flatnonzero(rank < k)
+    by_rank[rank[merged]] = merged
+    kk = key[by_rank]
+    new = np.ones(k, bool)
+    new[1:] = kk[1:] <= kk[:-1]
+    new[bounds[:-1]] = True
+    run = np.cumsum(new) - 1  # global run index
+    first_run = run[bounds[:-1]]
+    bucket = np.searchsorted(bounds, np.arange(k), side="right") - 1
+    rid = np.full(n, -1, np.int64)
+    rid[by_rank] = run - first_run[bucket]
+    n_rounds = np.diff(np.append(first_run, run[-1] + 1)) if k else np.zeros(0, np.int64)
+    return rid, n_rounds.astype(np.int64)
+
+
+def encode_forest_rounds(parent: np.ndarray, rank: np.ndarray, tets: np.ndarray, *, boundary, points,
+                         density) -> bytes:
+    """Code a merge forest knowing its level's mesh and geometry (the format-6 ``L{i}/forest``
+    section, forest coding 2).
+
+    As :func:`encode_forest_on_mesh`, but a rank is coded as its bucket and its round inside the
+    bucket (:func:`rank_rounds`), uniformly among the bucket's rounds; the ranks inside a round
+    follow :func:`canonical_key` of ``points`` and ``density`` (the level's float32 geometry in
+    the numbering of ``tets``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> tets = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])
+    >>> pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], np.float32)
+    >>> parent, rank = np.array([1, 2, 2, 2, 3]), np.array([0, 2, ROOT_RANK, 3, 1])
+    >>> on_boundary = np.ones(5, bool)
+    >>> data = encode_forest_rounds(parent, rank, tets, boundary=on_boundary, points=pts, density=np.zeros(5))
+    >>> p, r = decode_forest_rounds(data, tets, 5, boundary=on_boundary, points=pts, density=np.zeros(5))
+    >>> p.tolist(), r.tolist() == rank.tolist()
+    ([1, 2, 2, 2, 3], True)
+    """
+    head, parent, ranks, k, start, nbrs = _encode_prelude(parent, rank, _MAGIC_ROUNDS, tets)
+    if k == 0:
+        return head
+    rid, n_rounds = rank_rounds(ranks, k, canonical_key(np.asarray(points), np.asarray(density)))
+    n = len(parent)
+    return head + run_encoder(FK.encode_rounds_kernel, start, nbrs, _boundary_mask(boundary, n), parent, ranks, k,
+                              rid, n_rounds, capacity=capacity_hint(16 * n))
+
+
+def decode_forest_rounds(data: bytes, tets: np.ndarray, n: int, *, boundary, points,
+                         density) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of :func:`encode_forest_rounds`, given the level's tets, boundary vertices and
+    geometry in decode order.
+
+    Returns
+    -------
+    parent, rank : (n,) int32
+
+    Raises
+    ------
+    CorruptFileError
+        On any inconsistency: wrong header, a damaged or truncated stream, a bucket with more or
+        fewer vertices than its ranks, an empty round, two vertices of equal key in one round,
+        trailing bytes, an invalid forest.
+    """
+    data = bytes(data)
+    k, start, nbrs = _prelude(data, _MAGIC_ROUNDS, tets, n)
+    if start is None:
+        return np.arange(n, dtype=np.int32), np.full(n, ROOT_RANK, np.int32)
+    points = np.asarray(points)
+    density = np.asarray(density)
+    if points.shape != (n, 3) or density.shape != (n,):
+        raise ValueError(f"geometry of shapes {points.shape}, {density.shape} for {n} vertices")
+    body = np.frombuffer(data, np.uint8, offset=_HEADER.size)
+    st = dec_state()
+    probs = FK.new_model()
+    symbol = np.empty(n, np.int8)
+    rid = np.empty(n, np.int64)
+    damaged = CorruptFileError("merge forest: the coded data is damaged or truncated")
+    if not FK.decode_rounds_kernel(st, body, probs, start, nbrs, _boundary_mask(boundary, n), k, symbol, rid):
+        raise damaged
+    merged = np.flatnonzero(symbol != FK.ROOT_SYMBOL)
+    bounds = FK.bucket_bounds(n, k)
+    sizes = np.bincount(symbol[merged].astype(np.int64), minlength=len(bounds) - 1)
+    if merged.size != k or not np.array_equal(sizes, np.diff(bounds)):
+        raise CorruptFileError("merge forest: the buckets do not hold the merges the header says")
+    key = canonical_key(points, density)
+    s, r, kk = symbol[merged].astype(np.int64), rid[merged], key[merged]
+    order = np.lexsort((kk, r, s))
+    s, r, kk = s[order], r[order], kk[order]
+    same_round = (s[1:] == s[:-1]) & (r[1:] == r[:-1])
+    if np.any(same_round & (kk[1:] == kk[:-1])):
+        raise CorruptFileError("merge forest: two vertices of one round have the same position and value")
+    # rounds numbered 0, 1, ... without gaps in every bucket
+    first = np.ones(k, bool)
+    first[1:] = s[1:] != s[:-1]
+    if np.any(r[first] != 0) or np.any(~first[1:] & (r[1:] != r[:-1]) & (r[1:] != r[:-1] + 1)):
+        raise CorruptFileError("merge forest: a bucket has an empty round")
+    of_rank = merged[order].astype(np.int32)
+    rank = np.full(n, k, np.int32)
+    rank[of_rank] = np.arange(k, dtype=np.int32)
+    parent = np.arange(n, dtype=np.int32)
+    if not FK.decode_parents_kernel(st, body, probs, start, nbrs, k, parent, rank, of_rank):
+        raise damaged
     check_decoder(st, body, "merge forest")
     rank[rank == k] = ROOT_RANK
     check_forest(parent, rank)

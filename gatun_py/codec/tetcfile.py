@@ -31,7 +31,9 @@ from .container import Container, build_container
 from .cutborder import ConnectivityDecoder, coding_for_format, encode_connectivity
 from .decoded_connectivity import DecodedConnectivity
 from .dependencies import decode_dependencies, dependencies_header, encode_dependencies
-from .forest import ROOT_RANK, decode_forest, decode_forest_on_mesh, encode_forest_on_mesh, forest_header
+from .forest import (FOREST_CODING, ROOT_RANK, coding_for_format as forest_coding_for_format, decode_forest,
+                     decode_forest_on_mesh, decode_forest_rounds, encode_forest_on_mesh, encode_forest_rounds,
+                     forest_header)
 from .geometry import HEADER_SIZE, GeometryDecoder, check_geometry_header, encode_geometry
 
 FORMAT_NAME = "tetc"
@@ -129,11 +131,16 @@ def _encode_level_mesh(payload: LevelPayload) -> EncodedLevel:
 
 def _encode_level_forest(mesh, vertex_order, parent, rank, n_boundary_vertices) -> bytes:
     """The ``L{i}/forest`` section: the forest renumbered to decode order, coded after the level's
-    mesh (format 3; in decode order the boundary vertices come first)."""
+    mesh (format 3 to 5) or mesh and geometry (format 6: forest coding 2); in decode order the
+    boundary vertices come first."""
     dec_of = np.empty(mesh.n_points, np.int64)
     dec_of[vertex_order] = np.arange(mesh.n_points)
-    return encode_forest_on_mesh(dec_of[parent[vertex_order]], rank[vertex_order], dec_of[mesh.tets],
-                                 boundary=np.arange(mesh.n_points) < n_boundary_vertices)
+    args = (dec_of[parent[vertex_order]], rank[vertex_order], dec_of[mesh.tets])
+    boundary = np.arange(mesh.n_points) < n_boundary_vertices
+    if FOREST_CODING == 2:
+        return encode_forest_rounds(*args, boundary=boundary, points=mesh.points[vertex_order],
+                                    density=mesh.density[vertex_order])
+    return encode_forest_on_mesh(*args, boundary=boundary)
 
 
 def check_mesh(mesh) -> None:
@@ -488,10 +495,31 @@ class TetcReader:
         if n != lv["points"]:
             raise CorruptFileError(f"{name}: covers {n} vertices, the level has {lv['points']}")
         n = self._checked_points(level)
-        if self.container.major < 3:
+        coding = forest_coding_for_format(self.container.major)
+        if coding == 0:
             return decode_forest(data, n)
-        return decode_forest_on_mesh(data, self._level_tets(level), n,
-                                     boundary=np.arange(n) < lv["boundary_vertices"])
+        boundary = np.arange(n) < lv["boundary_vertices"]
+        if coding == 1:
+            return decode_forest_on_mesh(data, self._level_tets(level), n, boundary=boundary)
+        tets, points, density = self._level_geometry(level)
+        return decode_forest_rounds(data, tets, n, boundary=boundary, points=points, density=density)
+
+    def _level_geometry(self, level: int):
+        """(tets, float32 points, density) of ``level`` in decode order: what forest coding 2 is
+        coded after (connectivity and geometry sections, no other point array)."""
+        lv = self.level_meta(level)
+        n = self._checked_points(level)
+        points = np.empty((n, 3), np.float32)
+        density = np.empty(n, np.float32)
+        tets = np.empty((lv["tets"], 4), np.int32)
+        t = 0
+        for b, _ in self._batches(level, DEFAULT_BATCH_TETS, {}):
+            k = len(b.points)
+            points[b.first:b.first + k] = b.points
+            density[b.first:b.first + k] = b.density
+            tets[t:t + len(b.tets)] = b.tets
+            t += len(b.tets)
+        return tets, points, density
 
     def _level_tets(self, level: int) -> np.ndarray:
         """The tets of ``level`` in decode order, from its connectivity sections alone (what the

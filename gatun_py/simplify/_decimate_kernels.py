@@ -1214,16 +1214,62 @@ def _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, de
         out_e[i] = e
 
 
+@njit(cache=True, _nrt=False)
+def _touches_target(st, T, lock_b, stamp):
+    """Whether a vertex of the star ``st`` is the target of a merge of the current round."""
+    for i in range(st.shape[0]):
+        t = st[i] >> 2
+        for j in range(4):
+            if lock_b[T[t, j]] == stamp:
+                return True
+    return False
+
+
+@njit(cache=True, _nrt=False)
+def _set_aside(d_err, d_v, d_b, d_ver, n_def, e, a, b, v_a, ver):
+    """Keep a blocked heap entry for the next round; returns the new count. Full: the stale
+    entries are dropped first (the live ones, one per vertex at most, always fit)."""
+    if n_def >= d_err.shape[0]:
+        k = 0
+        for i in range(n_def):
+            if d_ver[i] == ver[d_v[i]]:
+                d_err[k] = d_err[i]
+                d_v[k] = d_v[i]
+                d_b[k] = d_b[i]
+                d_ver[k] = d_ver[i]
+                k += 1
+        n_def = k
+    d_err[n_def] = e
+    d_v[n_def] = a
+    d_b[n_def] = b
+    d_ver[n_def] = v_a
+    return n_def + 1
+
+
 @njit(cache=True, nogil=True)  # compress encodes level 0's mesh in a thread meanwhile
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks, marks_b, marks_ab, tcount,
          counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pdat, tp_head, tp_count, p_next,
-         vw, p_orig):
+         vw, p_orig, lock, lock_b, round_stamp, max_blocked):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left.
 
     ``marks*`` and ``tcount`` have one row per thread (stamps, evaluation counts); the sequential
     steps use row 0.
+
+    With ``round_stamp > 0`` the call is one round of independent merges (see
+    :mod:`gatun_py.simplify.decimate`): a merge a -> b sets ``lock`` to ``round_stamp`` on every vertex
+    of a's star (a and b included) and ``lock_b[b]``; a popped candidate a' -> b' is accepted only
+    when neither a' nor b' is locked and no vertex of a''s star is a target of the round (checked
+    with the star walk the link test makes anyway); otherwise the entry is set aside unchanged and
+    goes back into the heap when the round ends: at ``max_merges``, when every candidate left
+    is blocked, or when more than ``max_blocked`` entries were set aside (False either way). ``round_stamp == 0`` is the plain greedy order.
     """
     n = head.shape[0]
+    # entries set aside in this round (at most one live entry per vertex, see _heap_push)
+    d_err = np.empty(h_err.shape[0] if round_stamp > 0 else 0)
+    d_v = np.empty(d_err.shape[0], np.int32)
+    d_b = np.empty(d_err.shape[0], np.int32)
+    d_ver = np.empty(d_err.shape[0], np.int32)
+    n_def = 0
     compact_every = _compact_every(n)
     mark = marks[0]
     mark_b = marks_b[0]
@@ -1263,7 +1309,11 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         if sweeping and not found:
             return True
         sweeping = False
-        if counters[C_MERGES] >= max_merges:
+        if counters[C_MERGES] >= max_merges or (n_def > 0 and (counters[C_HEAP] == 0 or n_def > max_blocked)):
+            # the round is over: what it set aside goes back with its error unchanged
+            for i in range(n_def):
+                if d_ver[i] == ver[d_v[i]]:
+                    _heap_push(h_err, h_v, h_b, h_ver, counters, d_err[i], d_v[i], d_b[i], d_ver[i], ver)
             return False
         if counters[C_HEAP] == 0:
             # neighbourhoods two rings away from a merge may have become legal: look again
@@ -1279,6 +1329,9 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         if v_a != ver[a] or parent[a] != a:
             tc[C_STALE] += 1
             continue
+        if round_stamp > 0 and (lock[a] == round_stamp or (b >= 0 and lock[b] == round_stamp)):
+            n_def = _set_aside(d_err, d_v, d_b, d_ver, n_def, e, a, b, v_a, ver)
+            continue
         if b < 0:
             tc[C_LAZY] += 1
             # a's neighbourhood changed since its last evaluation: evaluate now (lazily, so a vertex
@@ -1289,6 +1342,9 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         if parent[b] != b:
             continue
         st_a = _star(a, head, nxt, T, alive)
+        if round_stamp > 0 and _touches_target(st_a, T, lock_b, round_stamp):
+            n_def = _set_aside(d_err, d_v, d_b, d_ver, n_def, e, a, b, v_a, ver)
+            continue
         tc[C_LINK] += 1
         # a's star is unchanged since the entry was made (that would have bumped its version),
         # but b's may have changed: check the link condition again
@@ -1316,6 +1372,11 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         if params[P_WS] > 0.0 and counters[C_MERGES] % compact_every == 0:
             _compact_points(alive, pdat, p_orig, tp_head, p_next, counters)
         ver[a] += 1
+        if round_stamp > 0:
+            lock[a] = round_stamp
+            lock_b[b] = round_stamp
+            for i in range(k):
+                lock[nb[i]] = round_stamp
         for i in range(k):
             w = nb[i]
             if parent[w] == w and not pinned[w]:

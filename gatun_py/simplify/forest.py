@@ -1,9 +1,11 @@
 """The merge forest: parents and ranks of the decimation, ancestors after N merges.
 
 Conventions (``docs/architecture.md``): ``parent[v]`` is v itself for a root, ``rank[v]`` the
-0-based execution order of v's merge (``ROOT_RANK`` for roots). The first N merges are those with
-rank < N; a parent always has a larger rank than its children (it was still alive when they were
-merged into it).
+0-based execution order of v's merge (``ROOT_RANK`` for roots; inside a round of independent
+merges any order executes the same, and the ranks follow
+:func:`gatun_py.simplify.decimate.canonical_key`). The first N merges are those with rank < N; a
+parent always has a larger rank than its children (it was still alive when they were merged into
+it).
 """
 
 from __future__ import annotations

@@ -1,0 +1,156 @@
+"""Forest coding 2 (format 6: bucket + round per vertex, ranks inside a round by the canonical key of
+the level's geometry): bytes equal to the slow reference, round trips of decimated and arbitrary
+forests, ties, and bad input (truncations, flips, absurd counts, geometry that does not match)."""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from meshgen import delaunay_mesh, grid_mesh, mesh_strategy, with_unreferenced
+from naive_forest import naive_encode_forest_rounds
+from test_codec_forest import _boundary, _random_forest
+
+from gatun_py.codec._forest_kernels import bucket_bounds
+from gatun_py.codec.forest import (ROOT_RANK, canonical_key, check_forest, decode_forest_rounds, encode_forest_on_mesh,
+                                   encode_forest_rounds, forest_header, rank_rounds)
+from gatun_py.errors import CorruptFileError
+from gatun_py.simplify import decimate
+
+
+def _round_trip(parent, rank, tets, n, points, density):
+    b = _boundary(tets, n)
+    data = encode_forest_rounds(parent, rank, tets, boundary=b, points=points, density=density)
+    assert data == naive_encode_forest_rounds(parent, rank, tets, b, points, density)
+    p, r = decode_forest_rounds(data, tets, n, boundary=b, points=points, density=density)
+    assert np.array_equal(p, parent) and np.array_equal(r, rank)
+    assert p.dtype == np.int32 and r.dtype == np.int32
+    return data
+
+
+@settings(max_examples=30, deadline=None)
+@given(mesh_strategy(), st.integers(0, 8))
+def test_decimated_forest_matches_reference_and_round_trips(mesh, rounds):
+    f = decimate(mesh, rounds=rounds)
+    _round_trip(f.parent, f.rank, mesh.tets, mesh.n_points, mesh.points, mesh.density)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(1, 60), st.integers(0, 2**31), st.integers(1, 4))
+def test_arbitrary_forest_round_trips(n_points, seed, roots):
+    """Any valid forest codes (a greedy order just has many short rounds), duplicate points too."""
+    mesh = delaunay_mesh(max(n_points, 5), seed % 1000)
+    n = mesh.n_points
+    parent, rank = _random_forest(n, seed, min(roots, n))
+    _round_trip(parent, rank, mesh.tets, n, mesh.points, mesh.density)
+    pts = mesh.points.copy()
+    pts[n // 2] = pts[0]  # two vertices of equal key (a tie splits a round)
+    _round_trip(parent, rank, mesh.tets, n, pts, np.zeros(n, np.float32))
+
+
+def test_unreferenced_vertices_no_tets_and_empty():
+    mesh = with_unreferenced(grid_mesh(3, 3, 3, jitter=0.1, seed=2), 5, seed=1)
+    f = decimate(mesh)
+    _round_trip(f.parent, f.rank, mesh.tets, mesh.n_points, mesh.points, mesh.density)
+    parent, rank = _random_forest(9, 4)
+    rng = np.random.default_rng(0)
+    _round_trip(parent, rank, np.zeros((0, 4), np.int32), 9, rng.random((9, 3)).astype(np.float32), np.zeros(9))
+    data = _round_trip(np.arange(4), np.full(4, ROOT_RANK), np.array([[0, 1, 2, 3]]), 4, np.eye(4, 3), np.zeros(4))
+    assert len(data) == 12 and forest_header(data) == (4, 0)
+    _round_trip(np.zeros(0, int), np.zeros(0, int), np.zeros((0, 4), int), 0, np.zeros((0, 3)), np.zeros(0))
+
+
+def test_rounds_of_a_forest_give_back_its_ranks():
+    mesh = delaunay_mesh(200, 3)
+    f = decimate(mesh, rounds=4)
+    key = canonical_key(mesh.points, mesh.density)
+    k = f.n_merges
+    ranks = np.where(f.rank == ROOT_RANK, k, f.rank)
+    rid, n_rounds = rank_rounds(ranks, k, key)
+    bounds = bucket_bounds(mesh.n_points, k)
+    assert len(n_rounds) == len(bounds) - 1 and np.all(n_rounds >= 1) and np.all(n_rounds <= np.diff(bounds))
+    merged = np.flatnonzero(ranks < k)
+    bucket = np.searchsorted(bounds, ranks[merged], side="right") - 1
+    order = merged[np.lexsort((key[merged], rid[merged], bucket))]
+    assert np.array_equal(ranks[order], np.arange(k))
+    for s in range(len(n_rounds)):  # rounds numbered 0 .. n_rounds - 1, none empty
+        assert np.array_equal(np.unique(rid[merged[bucket == s]]), np.arange(n_rounds[s]))
+    assert np.all(rid[ranks >= k] == -1)
+    # the decimator's rounds (4 a level) are what the coder finds, or fewer (runs may join)
+    assert n_rounds.sum() <= len(decimate(mesh, rounds=4, return_rounds=True)[1])
+
+
+def test_fewer_bits_than_coding_1_with_rounds():
+    mesh = grid_mesh(14, 13, 12, jitter=0.2, seed=3)
+    f = decimate(mesh)
+    b = _boundary(mesh.tets, mesh.n_points)
+    new = encode_forest_rounds(f.parent, f.rank, mesh.tets, boundary=b, points=mesh.points, density=mesh.density)
+    old = encode_forest_on_mesh(f.parent, f.rank, mesh.tets, boundary=b)
+    assert len(new) < 0.95 * len(old)  # 64 rounds a level on 2,184 vertices: rounds of a few merges
+
+
+def test_bad_bytes_raise_typed_errors_never_out_of_bounds():
+    mesh = grid_mesh(6, 5, 4, jitter=0.1, seed=5)
+    f = decimate(mesh, rounds=4)
+    n, tets = mesh.n_points, mesh.tets
+    bnd = _boundary(tets, n)
+    geo = dict(points=mesh.points, density=mesh.density)
+    data = encode_forest_rounds(f.parent, f.rank, tets, boundary=bnd, **geo)
+
+    def decode(d, **kw):
+        args = dict(boundary=bnd, **geo)
+        args.update(kw)
+        return decode_forest_rounds(d, tets, n, **args)
+
+    for other in (dict(boundary=~bnd), dict(points=mesh.points[::-1].copy()), dict(density=-mesh.density)):
+        try:  # other inputs than the encoder's: an error or some other valid forest, never a crash
+            check_forest(*decode(data, **other))
+        except CorruptFileError:
+            pass
+    with pytest.raises(CorruptFileError):  # every vertex at one point: ties inside rounds
+        decode(data, points=np.zeros((n, 3), np.float32), density=np.zeros(n, np.float32))
+    with pytest.raises(CorruptFileError):
+        decode_forest_rounds(data, tets, n + 1, boundary=np.zeros(n + 1, bool), points=np.zeros((n + 1, 3)),
+                             density=np.zeros(n + 1))
+    for cut in (0, 5, 11, 12, 13, len(data) // 2, len(data) - 1):
+        with pytest.raises(CorruptFileError):
+            decode(data[:cut])
+    with pytest.raises(CorruptFileError):
+        decode(data + b"x")
+    with pytest.raises(CorruptFileError):  # coding 1's magic
+        decode(encode_forest_on_mesh(f.parent, f.rank, tets, boundary=bnd))
+    for k in (n, n + 1, 2**32 - 1):  # absurd merge counts
+        with pytest.raises(CorruptFileError):
+            decode(struct.pack("<4sII", b"GFR6", n, k) + data[12:])
+    with pytest.raises(CorruptFileError):
+        decode_forest_rounds(data, np.full((2, 4), n, np.int32), n, boundary=bnd, **geo)
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        b = bytearray(data)
+        for _ in range(int(rng.integers(1, 4))):
+            i = int(rng.integers(12, len(b)))
+            b[i] ^= 1 << int(rng.integers(0, 8))
+        try:
+            p, r = decode(bytes(b))
+        except CorruptFileError:
+            continue
+        check_forest(p, r)
+    for _ in range(100):  # random garbage after a valid header
+        body = rng.integers(0, 256, int(rng.integers(0, 64)), dtype=np.uint8).tobytes()
+        try:
+            check_forest(*decode(data[:12] + body))
+        except CorruptFileError:
+            pass
+
+
+def test_warmup_section_is_what_the_encoder_writes():
+    from gatun_py.warmup import FOREST_PARENT_RANK, FOREST_POINTS, FOREST_SECTION_ROUNDS, FOREST_TETS
+
+    parent, rank = (np.array(x) for x in FOREST_PARENT_RANK)
+    geo = dict(points=FOREST_POINTS, density=np.zeros(5, np.float32))
+    assert encode_forest_rounds(parent, rank, FOREST_TETS, boundary=np.ones(5, bool), **geo) == FOREST_SECTION_ROUNDS
+    p, r = decode_forest_rounds(FOREST_SECTION_ROUNDS, FOREST_TETS, 5, boundary=np.ones(5, bool), **geo)
+    assert p.tolist() == parent.tolist() and r.tolist() == rank.tolist()

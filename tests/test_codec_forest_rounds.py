@@ -154,3 +154,28 @@ def test_warmup_section_is_what_the_encoder_writes():
     assert encode_forest_rounds(parent, rank, FOREST_TETS, boundary=np.ones(5, bool), **geo) == FOREST_SECTION_ROUNDS
     p, r = decode_forest_rounds(FOREST_SECTION_ROUNDS, FOREST_TETS, 5, boundary=np.ones(5, bool), **geo)
     assert p.tolist() == parent.tolist() and r.tolist() == rank.tolist()
+
+
+def test_a_decode_after_read_forest_reuses_the_geometry_it_decoded():
+    """Forest coding 2 is decoded after the level's connectivity and geometry; the next decode of
+    that level (a render at a ratio) takes both over instead of decoding them again, with the
+    same batches as a fresh reader's."""
+    from gatun_py.codec import TetcReader
+    from gatun_py.codec.decoded_connectivity import DecodedGeometry
+    from gatun_py.warmup import SHIPPED_TETC
+
+    data = SHIPPED_TETC.read_bytes()
+    fresh = list(TetcReader(data).iter_decode(batch_tets=40))
+    r = TetcReader(data)
+    assert r.read_forest(0) is not None
+    assert r._decoded_geometry is not None and r._decoded_geometry[0] == 0
+    geo = r._geometry(0, r.level_meta(0)["points"])
+    assert isinstance(geo, DecodedGeometry) and r._decoded_geometry is None
+    r._decoded_geometry = (0, geo.values)
+    again = list(r.iter_decode(batch_tets=40))
+    assert r._decoded_geometry is None
+    assert len(again) == len(fresh)
+    for a, b in zip(again, fresh):
+        assert a.first == b.first
+        assert np.array_equal(a.tets, b.tets) and np.array_equal(a.points, b.points)
+        assert np.array_equal(a.density, b.density)

@@ -1,10 +1,12 @@
-"""A level's connectivity decoded once and replayed: the format-3 forest needs the level's tets
-before the mesh is streamed, and the stream then reuses them instead of decoding them again."""
+"""A level's connectivity (and geometry) decoded once and replayed: the forest of format 3 to 5
+needs the level's tets before the mesh is streamed, the forest of format 6 its tets and float32
+positions and values, and the stream then reuses them instead of decoding them again."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..errors import CorruptFileError
 from .cutborder import ConnectivityDecoder
 
 
@@ -37,6 +39,11 @@ class DecodedConnectivity:
     def boundary(self):
         return self._faces, self._nbv
 
+    @property
+    def vertices_referenced(self) -> int:
+        """Vertices the tets reference (the ids 0 .. this - 1, in decode order)."""
+        return self._known_end
+
     def start_tets(self):
         self._done = 0
         self._known = self._nbv
@@ -61,3 +68,35 @@ class DecodedConnectivity:
             self._known = self._known_end
         self.last_refs = self.predictors[first:self._known]
         return out
+
+
+class DecodedGeometry:
+    """The values of a finished :class:`~gatun_py.codec.geometry.GeometryDecoder` (x, y, z and the
+    default scalar of every vertex, in decode order), served through the decoder's interface:
+    ``decode(refs)`` gives the next ``len(refs)`` rows, ``finish()`` checks that all were served.
+
+    Parameters
+    ----------
+    values : (n, 4) float32
+        The decoder's :attr:`~gatun_py.codec.geometry.GeometryDecoder.values`, fully decoded.
+    """
+
+    def __init__(self, values: np.ndarray):
+        self.values = values
+        self.n_points = len(values)
+        self.n_decoded = 0
+
+    def __repr__(self) -> str:
+        return f"DecodedGeometry(points={self.n_points}, served={self.n_decoded})"
+
+    def decode(self, refs) -> tuple[np.ndarray, np.ndarray]:
+        start, count = self.n_decoded, len(refs)
+        if start + count > self.n_points:
+            raise CorruptFileError(
+                f"corrupt geometry block: {start + count} vertices requested, the block holds {self.n_points}")
+        self.n_decoded = start + count
+        return self.values[start:start + count, :3], self.values[start:start + count, 3]
+
+    def finish(self) -> None:
+        if self.n_decoded != self.n_points:
+            raise CorruptFileError(f"corrupt geometry block: {self.n_decoded} of {self.n_points} vertices decoded")

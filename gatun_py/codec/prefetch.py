@@ -20,7 +20,6 @@ import numpy as np
 
 from ..errors import CorruptFileError
 from ..mesh import TetBatch
-from .geometry import GeometryDecoder
 from .tetcfile import DEFAULT_BATCH_TETS, TetcReader
 
 _DONE = object()
@@ -107,7 +106,7 @@ class PrefetchedDecode:
         worker = threading.Thread(target=produce, name="tetc-connectivity", daemon=True)
         worker.start()
         try:
-            geo = GeometryDecoder(reader.read_section(f"L{level}/geometry"), n_points=n)
+            geo = reader._geometry(level, n)
             self.values = geo.values
             faces, nbv, boundary_refs = take()
             if nbv != lv["boundary_vertices"]:

@@ -29,7 +29,7 @@ from .brickindex import BrickView, brick_levels_summary, parse_brick_index
 from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
 from .container import Container, build_container
 from .cutborder import ConnectivityDecoder, coding_for_format, encode_connectivity
-from .decoded_connectivity import DecodedConnectivity
+from .decoded_connectivity import DecodedConnectivity, DecodedGeometry
 from .dependencies import decode_dependencies, dependencies_header, encode_dependencies
 from .forest import (FOREST_CODING, ROOT_RANK, coding_for_format as forest_coding_for_format, decode_forest,
                      decode_forest_on_mesh, decode_forest_rounds, encode_forest_on_mesh, encode_forest_rounds,
@@ -506,20 +506,34 @@ class TetcReader:
 
     def _level_geometry(self, level: int):
         """(tets, float32 points, density) of ``level`` in decode order: what forest coding 2 is
-        coded after (connectivity and geometry sections, no other point array)."""
+        coded after (connectivity and geometry sections, no other point array). Both decodes are
+        kept for the next decode of the level (:meth:`_connectivity`, :meth:`_geometry`), which a
+        render at a ratio runs right after."""
         lv = self.level_meta(level)
         n = self._checked_points(level)
-        points = np.empty((n, 3), np.float32)
-        density = np.empty(n, np.float32)
-        tets = np.empty((lv["tets"], 4), np.int32)
-        t = 0
-        for b, _ in self._batches(level, DEFAULT_BATCH_TETS, {}):
-            k = len(b.points)
-            points[b.first:b.first + k] = b.points
-            density[b.first:b.first + k] = b.density
-            tets[t:t + len(b.tets)] = b.tets
-            t += len(b.tets)
-        return tets, points, density
+        tets = self._level_tets(level)
+        conn = self._decoded[1]
+        if conn.boundary()[1] != lv["boundary_vertices"]:
+            raise CorruptFileError("corrupt boundary section: vertex count does not match the metadata")
+        known = conn.vertices_referenced
+        if known != lv["referenced_points"]:
+            raise CorruptFileError("corrupt tet section: vertex count does not match the metadata")
+        geo = GeometryDecoder(self.read_section(f"L{level}/geometry"), n_points=n)
+        geo.decode(conn.predictors[:known])
+        if known < n:  # vertices no tet references: no refs
+            geo.decode(np.full((n - known, 4), -1, np.int32))
+        geo.finish()
+        self._decoded_geometry = (level, geo.values)
+        return tets, geo.values[:, :3], geo.values[:, 3]
+
+    def _geometry(self, level: int, n: int):
+        """The level's geometry for one decode: the values :meth:`_level_geometry` kept (handed
+        over once, then dropped), else a fresh decoder of the section."""
+        kept = getattr(self, "_decoded_geometry", None)
+        self._decoded_geometry = None
+        if kept is not None and kept[0] == level:
+            return DecodedGeometry(kept[1])
+        return GeometryDecoder(self.read_section(f"L{level}/geometry"), n_points=n)
 
     def _level_tets(self, level: int) -> np.ndarray:
         """The tets of ``level`` in decode order, from its connectivity sections alone (what the
@@ -601,7 +615,7 @@ class TetcReader:
         lv = self.level_meta(level)
         n, m, nf = lv["points"], lv["tets"], lv["boundary_faces"]
         self._checked_points(level)
-        geo = GeometryDecoder(self.read_section(f"L{level}/geometry"), n_points=n)
+        geo = self._geometry(level, n)
         conn = self._connectivity(level)
 
         def exact(refs, pts, dens):

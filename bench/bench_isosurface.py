@@ -654,6 +654,8 @@ def main(argv=None) -> int:
     old = SECTIONS / "isosurface.md"
     if "quality" not in saved and old.exists():  # a partial run (--only big): keep the other tables
         text = _splice_big(old.read_text(), text)
+    elif "big" not in saved and old.exists():  # a run without the large mesh: keep its part
+        text = _splice_big(text, old.read_text())
     write_section("isosurface", text)
     return 0
 

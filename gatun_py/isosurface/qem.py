@@ -22,6 +22,14 @@ Blunt-fin, Combustion and the gmsh flange at R = 0.2 / 0.05 / 0.01 (bench/bench_
 against the best cascade this took the geometric mean RMS ratio from 0.98 (accumulated quadric
 alone) to 0.80 and the cells with both RMS and Hausdorff ratios <= 1 from 5 of 18 to 13.
 
+The heap key divides that cost by the square root of the quadric's total weight
+(:data:`COST_WEIGHT_POWER`): between Garland's area-weighted sum, which lets a small feature (a thin
+lip, little area) go for next to nothing, and meshoptimizer's weighted mean squared distance, which
+gave up RMS. The original border's constraint planes enter the history ten times heavier than the
+current quadric's (:data:`BOUNDARY_HISTORY_WEIGHT`), so the border's shape survives the memoryless
+rebuilds. At the extreme reductions these two took the worst Hausdorff ratio from 1.87 (Blunt-fin
+1.193 at 161 faces, where the curl of the surface along the plate was planed off) to 1.34.
+
 Placement: the quadric's minimum, solved as an offset from the edge's midpoint with a tiny ridge
 (so a flat or cylindrical quadric does not throw the vertex along its free directions) and kept
 within two edge lengths of the midpoint; else, or when cheaper, the cheapest point of the segment

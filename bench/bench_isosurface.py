@@ -767,6 +767,8 @@ def main(argv=None) -> int:
         text = _splice_big(old.read_text(), text)
         text = _splice_part(text, report({"bricks_quality": saved.get("bricks_quality")}), _BRICKS_HEADING,
                             before=_LEVELS_HEADING)
+    elif "big" not in saved and old.exists():  # a run without the large mesh: keep its part
+        text = _splice_big(text, old.read_text())
     write_section("isosurface", text)
     return 0
 

@@ -63,6 +63,17 @@ def naive_placement(q, pu, pv, *, ridge: float, reach: float):
     return max(best[0], 0.0), best[1]
 
 
+def naive_edge_cost(q, pu, pv, imp_u, imp_v, *, ridge: float, reach: float, weight_power: float):
+    """The heap key of collapsing u-v under the edge's quadric ``q``: the placement's cost over the
+    quadric's total weight (the sum of its planes' weights, its trace) to ``weight_power``, times the
+    larger importance of the two ends."""
+    cost, _ = naive_placement(q, pu, pv, ridge=ridge, reach=reach)
+    weight = float(np.trace(quadric_matrix(q)[0]))
+    if weight > 0:
+        cost /= weight ** weight_power
+    return cost * max(imp_u, imp_v)
+
+
 def naive_face_quadrics(points, triangles, importance=None):
     """Per face (unit normal n, offset d, weight): the plane n . x + d = 0 and the face's area times
     the mean importance of its corners (weight 0 for a degenerate face)."""

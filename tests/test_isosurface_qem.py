@@ -7,8 +7,8 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from naive_qem import (DET_FLOOR, naive_border_planes, naive_current_quadric, naive_face_quadrics, naive_placement,
-                       naive_segment_min, plane_quadric, quadric_cost)
+from naive_qem import (DET_FLOOR, naive_border_planes, naive_current_quadric, naive_edge_cost, naive_face_quadrics,
+                       naive_placement, naive_segment_min, plane_quadric, quadric_cost)
 
 from gatun_py.isosurface import qem
 
@@ -145,13 +145,13 @@ def test_current_quadrics_are_the_faces_as_they_are(seed, keep):
 def test_history_quadrics_are_conserved():
     """A collapse adds the removed vertex's history to the survivor's: over the live vertices the
     history sums to every original face's quadric (three corners each) plus the original border's
-    planes, whatever was collapsed."""
+    planes (at their history weight), whatever was collapsed."""
     pts, tris = _wavy_patch(seed=3)
     expect = np.zeros(10)
     for n, d, w in naive_face_quadrics(pts, tris):
         expect += 3 * plane_quadric(n, d, w)
     for v in range(len(pts)):
-        expect += naive_border_planes(pts, tris, v, qem.BOUNDARY_WEIGHT)
+        expect += naive_border_planes(pts, tris, v, qem.BOUNDARY_HISTORY_WEIGHT)
     st = _state(pts, tris)
     _, done = _decimate(st, len(tris) // 10)
     assert done > 0
@@ -176,6 +176,31 @@ def test_cost_weighs_current_and_history():
         scale = max(abs(q[9]), quadric_cost(q, pu), quadric_cost(q, pv), 1e-12)
         assert cost == pytest.approx(max(quadric_cost(q, np.array([x, y, z])), 0.0), rel=1e-7, abs=1e-9 * scale)
         assert abs(cost - ref_cost) <= 1e-6 * scale + 1e-12
+
+
+def test_edge_cost_is_the_reference_key():
+    """The heap key: the placement's cost over the quadric's weight to COST_WEIGHT_POWER, times the
+    larger importance of the ends; a quadric with ten times the weight of the same planes (a region
+    ten times larger) costs more, but less than ten times more, and importance scales the key."""
+    rng = np.random.default_rng(12)
+    for _ in range(30):
+        pu, pv = rng.normal(size=3), rng.normal(size=3)
+        cur = [_random_quadric(rng, 3, 0.5 * (pu + pv), 0.3) for _ in range(2)]
+        hist = [_random_quadric(rng, 3, 0.5 * (pu + pv), 0.3) for _ in range(2)]
+        imp = rng.uniform(0.5, 3.0, 2)
+        vq = np.zeros((2, qem.QUADRIC_WIDTH))
+        for i in range(2):
+            vq[i, qem.CURRENT], vq[i, qem.HISTORY] = cur[i], hist[i]
+        vpos = np.array([pu, pv])
+        key = qem._edge_cost(vq, vpos, np.zeros(2, np.uint8), imp, 0, 1, np.empty(10))
+        q = cur[0] + cur[1] + qem.HISTORY_WEIGHT * (hist[0] + hist[1])
+        ref = naive_edge_cost(q, pu, pv, imp[0], imp[1], ridge=qem.PLACE_RIDGE, reach=qem.PLACE_REACH,
+                              weight_power=qem.COST_WEIGHT_POWER)
+        assert key == pytest.approx(ref, rel=1e-6, abs=1e-12 * max(abs(q[9]), 1.0))
+        heavy = qem._edge_cost(10 * vq, vpos, np.zeros(2, np.uint8), imp, 0, 1, np.empty(10))
+        if key > 1e-9:
+            assert key < heavy < 10 * key
+            assert heavy == pytest.approx(key * 10 ** (1 - qem.COST_WEIGHT_POWER), rel=1e-6)
 
 
 def test_border_survives_on_an_open_patch():

@@ -383,29 +383,14 @@ def _attach_tet(B, t0, t1, t2, t3, f0, f1, f2):
 
 
 # The tet decoders' copies of the per-tet helpers, inlined into them by numba: called, each call
-# passed the border's arrays and the candidate lists as some forty words on the stack. Each
-# decoder attaches a tet at one place only, so that the inlined code (additions and removals
-# written out) is compiled once per decoder.
-_closing_faces_inlined = njit(cache=True, _nrt=False, inline="always")(_closing_faces.py_func)
+# passed the border's arrays and the candidate lists as some forty words on the stack.
+_apply_tet_inlined = njit(cache=True, _nrt=False, inline="always")(_apply_tet.py_func)
+_attach_tet_inlined = njit(cache=True, _nrt=False, inline="always")(_attach_tet.py_func)
+# Coding 2's decoder writes the attachment out with these (a loop over the tet's three faces, so
+# that each is compiled once: numba's inlining costs compile time per call site).
 _add_inlined = njit(cache=True, _nrt=False, inline="always")(_add.py_func)
 _remove_inlined = njit(cache=True, _nrt=False, inline="always")(_remove.py_func)
 
-
-@njit(cache=True, _nrt=False, inline="always")
-def _attach_tet_inlined(B, t0, t1, t2, t3, f0, f1, f2):
-    """:func:`_attach_tet` with the additions and removals written out; returns nothing."""
-    if f0 != -1:
-        _remove_inlined(B, 3, f0)
-    else:
-        _add_inlined(B, 3, t1, t3, t2, t0)
-    if f1 != -1:
-        _remove_inlined(B, 3, f1)
-    else:
-        _add_inlined(B, 3, t0, t2, t3, t1)
-    if f2 != -1:
-        _remove_inlined(B, 3, f2)
-    else:
-        _add_inlined(B, 3, t0, t3, t1, t2)
 
 # edges of the current face (a, b, c) in the tet decoder's record of the faces on them
 EDGE_BC, EDGE_AB, EDGE_AC = 0, 1, 2
@@ -1131,14 +1116,12 @@ def _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets, scr
         while i < n1 and cfirst[i] != d:
             i += 1
         if i < n1:  # faces opposite a, t1, t2: on edges (t1, t2) = (b, c), (a, t2) and (a, t1)
-            f0 = cface[i, EDGE_BC]
-            f1 = cface[i, EDGE_AC if flip else EDGE_AB]
-            f2 = cface[i, EDGE_AB if flip else EDGE_AC]
+            _attach_tet_inlined(B, a, t1, t2, d, cface[i, EDGE_BC],
+                                cface[i, EDGE_AC if flip else EDGE_AB], cface[i, EDGE_AB if flip else EDGE_AC])
         elif cface_full[0] == 0:
-            f0 = f1 = f2 = -1
+            _attach_tet_inlined(B, a, t1, t2, d, -1, -1, -1)
         else:
-            f0, f1, f2 = _closing_faces_inlined(B, a, t1, t2, d)
-        _attach_tet_inlined(B, a, t1, t2, d, f0, f1, f2)
+            _apply_tet_inlined(B, a, t1, t2, d)
     if status == ST_DONE and (B[3][BS_LIVE] != 0 or rc.dec_failed(st)):
         status = ST_ERROR
     tstate[0] = nv
@@ -1558,8 +1541,16 @@ def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, ts
         elif cface_full[0] == 0:
             f0 = f1 = f2 = -1
         else:
-            f0, f1, f2 = _closing_faces_inlined(B, a, t1, t2, d)
-        _attach_tet_inlined(B, a, t1, t2, d, f0, f1, f2)
+            f0, f1, f2 = _closing_faces(B, a, t1, t2, d)  # rare: a call
+        # as _attach_tet, the additions and removals written out (once each: a loop over the
+        # three faces, so that the inlined code compiles once)
+        for j in range(3):
+            f = f0 if j == 0 else (f1 if j == 1 else f2)
+            if f != -1:
+                _remove_inlined(B, 3, f)
+            else:  # (t1, t3, t2, t0), (t0, t2, t3, t1), (t0, t3, t1, t2): reversed outward faces
+                _add_inlined(B, 3, t1 if j == 0 else a, d if j != 1 else t2, t2 if j == 0 else (d if j == 1 else t1),
+                             a if j == 0 else (t1 if j == 1 else t2))
     if status == ST_DONE and (B[3][BS_LIVE] != 0 or rc.dec_failed(st)):
         status = ST_ERROR
     tstate[0] = nv

@@ -341,7 +341,8 @@ CODING2_NOTE = (
     "decoder pays for it per tet: classifying, ranking and teaching the candidates' classes and the per-"
     "vertex counts cost 1.15–1.25 × coding 1's connectivity decode time on the flanges and about 1.5 × on"
     " the grids (where coding 1's loop is fastest; 2 × before the classification and the choice of the "
-    "best two went branch-free); the whole-file rates above are format 5's (coding 2), taken with a load "
+    "best two went branch-free), 1.01–1.04 × on the flanges since its attach writes the border's "
+    "additions and removals out instead of calling them (the table above); the whole-file rates above are format 5's (coding 2), taken with a load "
     'average of 6–12 on 2 cores. Against main as branched (format 4 file, coding 1), `decode_mesh` of '
     'flange-1m costs 1.17 × (0.53 against 0.45 CPU s per decode: whole-process medians of 5 alternating '
     "runs of 5 and of 1 decodes, differenced). Coding 1's decoder is unchanged (the format ≤ 4 files)."

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cutborder import ConnectivityDecoder, _tets_out
+from .cutborder import ConnectivityDecoder
+from .cutborder import _tets_out  # the check of a caller's output array, shared with the decoder
 
 
 class DecodedConnectivity:

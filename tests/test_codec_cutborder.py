@@ -302,3 +302,26 @@ def test_header_counts_past_int32_sequence_numbers_are_corruption():
     # the largest legal counts are accepted (no allocation by the border yet)
     nf = (K.MAX_SEQ - 64 - 3 * 1000) // 3 - 1
     ConnectivityDecoder(b"", b"", n_points=10, n_tets=1000, n_boundary_faces=nf, n_referenced=10)
+
+
+@pytest.mark.parametrize("coding", CODINGS)
+def test_next_tets_into_callers_array(coding):
+    """Decoding into the caller's array (what decode_mesh does) gives the same tets, in place."""
+    mesh = grid_mesh(4, 3, 3)
+    e = encode_connectivity(mesh.n_points, mesh.tets, coding=coding)
+    d = _decoder(e)
+    d.boundary()
+    d.start_tets()
+    whole = np.full((e.n_tets + 5, 4), -7, np.int32)
+    while d.tets_done < d.n_tets:
+        done = d.tets_done
+        got = d.next_tets(29, out=whole[done:])
+        assert np.shares_memory(got, whole) and len(got) == min(29, e.n_tets - done)
+    assert np.array_equal(whole[:e.n_tets], e.tets) and np.all(whole[e.n_tets:] == -7)
+    d = _decoder(e)
+    d.boundary()
+    d.start_tets()
+    for bad in (np.zeros((e.n_tets, 4), np.int64), np.zeros((3, 4), np.int32), np.zeros((e.n_tets, 3), np.int32),
+                np.zeros((e.n_tets, 8), np.int32)[:, ::2]):
+        with pytest.raises(ValueError, match="out must be"):
+            d.next_tets(e.n_tets, out=bad)

@@ -119,6 +119,10 @@ def test_levels_and_forest_sections(tmp_path):
     k = int(np.flatnonzero(vo == 5)[0])
     assert vo[fp[k]] == 6 and fr[k] == 0 and np.sum(fr != 2**31 - 1) == 1
     assert r.read_forest(1) is None
+    # the forest's decode kept level 0's connectivity: decode_mesh takes it over (copied into its array)
+    assert r._decoded[0] == 0
+    assert np.array_equal(r.decode_mesh(0).tets, TetcReader(path).decode_mesh(0).tets)
+    assert r._decoded is None
     with pytest.raises(OptionError):
         r.decode_mesh(2)
     with pytest.raises(OutputError):

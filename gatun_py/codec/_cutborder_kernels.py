@@ -330,6 +330,13 @@ def _apply_tet(B, t0, t1, t2, t3):
     already removed): each other face closes a face of the border or joins it, wound as the
     consistently oriented tet on its other side would see it from outside. Returns the slots of
     the faces opposite t0, t1, t2 that joined the border (-1 where a face was closed)."""
+    f0, f1, f2 = _closing_faces(B, t0, t1, t2, t3)
+    return _attach_tet(B, t0, t1, t2, t3, f0, f1, f2)
+
+
+@njit(cache=True, _nrt=False)
+def _closing_faces(B, t0, t1, t2, t3):
+    """The border faces (slots, -1: none) that the faces opposite t0, t1, t2 of the new tet close."""
     E, vhead, Q, bs = B
     # all three faces hold t3 (the apex just attached, often new with an empty list): one walk
     # of its list finds those already on the border
@@ -349,7 +356,7 @@ def _apply_tet(B, t0, t1, t2, t3):
             f1 = g
         elif (x == t0 and y == t1) or (x == t1 and y == t0):
             f2 = g
-    return _attach_tet(B, t0, t1, t2, t3, f0, f1, f2)
+    return f0, f1, f2
 
 
 @njit(cache=True, _nrt=False)
@@ -375,10 +382,15 @@ def _attach_tet(B, t0, t1, t2, t3, f0, f1, f2):
     return added0, added1, added2
 
 
-# The tet decoder's copies of the per-tet helpers, inlined into it by numba: called, each call
+# The tet decoders' copies of the per-tet helpers, inlined into them by numba: called, each call
 # passed the border's arrays and the candidate lists as some forty words on the stack.
 _apply_tet_inlined = njit(cache=True, _nrt=False, inline="always")(_apply_tet.py_func)
 _attach_tet_inlined = njit(cache=True, _nrt=False, inline="always")(_attach_tet.py_func)
+# Coding 2's decoder writes the attachment out with these (a loop over the tet's three faces, so
+# that each is compiled once: numba's inlining costs compile time per call site).
+_add_inlined = njit(cache=True, _nrt=False, inline="always")(_add.py_func)
+_remove_inlined = njit(cache=True, _nrt=False, inline="always")(_remove.py_func)
+
 
 # edges of the current face (a, b, c) in the tet decoder's record of the faces on them
 EDGE_BC, EDGE_AB, EDGE_AC = 0, 1, 2
@@ -1523,12 +1535,22 @@ def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, ts
         done += 1
         _count_decoded(vdec, a, b, c, d)
         if hit >= 0:  # faces opposite a, t1, t2: on edges (t1, t2) = (b, c), (a, t2) and (a, t1)
-            _attach_tet_inlined(B, a, t1, t2, d, cface[hit, EDGE_BC],
-                                cface[hit, EDGE_AC if flip else EDGE_AB], cface[hit, EDGE_AB if flip else EDGE_AC])
+            f0 = cface[hit, EDGE_BC]
+            f1 = cface[hit, EDGE_AC if flip else EDGE_AB]
+            f2 = cface[hit, EDGE_AB if flip else EDGE_AC]
         elif cface_full[0] == 0:
-            _attach_tet_inlined(B, a, t1, t2, d, -1, -1, -1)
+            f0 = f1 = f2 = -1
         else:
-            _apply_tet_inlined(B, a, t1, t2, d)
+            f0, f1, f2 = _closing_faces(B, a, t1, t2, d)  # rare: a call
+        # as _attach_tet, the additions and removals written out (once each: a loop over the
+        # three faces, so that the inlined code compiles once)
+        for j in range(3):
+            f = f0 if j == 0 else (f1 if j == 1 else f2)
+            if f != -1:
+                _remove_inlined(B, 3, f)
+            else:  # (t1, t3, t2, t0), (t0, t2, t3, t1), (t0, t3, t1, t2): reversed outward faces
+                _add_inlined(B, 3, t1 if j == 0 else a, d if j != 1 else t2, t2 if j == 0 else (d if j == 1 else t1),
+                             a if j == 0 else (t1 if j == 1 else t2))
     if status == ST_DONE and (B[3][BS_LIVE] != 0 or rc.dec_failed(st)):
         status = ST_ERROR
     tstate[0] = nv

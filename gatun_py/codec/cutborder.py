@@ -223,6 +223,14 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None, *,
     )
 
 
+def _tets_out(out: np.ndarray, k: int) -> np.ndarray:
+    """The first ``k`` rows of a caller's output array, checked (the kernels write it unchecked)."""
+    if (not isinstance(out, np.ndarray) or out.dtype != np.int32 or out.ndim != 2 or out.shape[1] != 4
+            or len(out) < k or not out.flags.c_contiguous or not out.flags.writeable):
+        raise ValueError(f"out must be a writeable C-contiguous (>= {k}, 4) int32 array")
+    return out[:k]
+
+
 class ConnectivityDecoder:
     """Streaming decoder of the two connectivity streams.
 
@@ -331,9 +339,16 @@ class ConnectivityDecoder:
     def tets_done(self) -> int:
         return int(self._tstate[1])
 
-    def next_tets(self, max_tets: int) -> np.ndarray:
-        """Decode up to ``max_tets`` more tets (fewer only at the end); (j, 4) int32 decode ids."""
-        out = np.zeros((min(max_tets, self.n_tets - self.tets_done), 4), np.int32)
+    def next_tets(self, max_tets: int, *, out: np.ndarray | None = None) -> np.ndarray:
+        """Decode up to ``max_tets`` more tets (fewer only at the end); (j, 4) int32 decode ids.
+
+        ``out``, a C-contiguous (k, 4) int32 array with k >= j, receives them (its first j rows are
+        returned): a caller assembling the whole level decodes into its own array, uncopied."""
+        k = min(max_tets, self.n_tets - self.tets_done)
+        if out is None:
+            out = np.zeros((k, 4), np.int32)
+        else:
+            out = _tets_out(out, k)
         first = self.vertices_known
         if self.keep_predictors:
             pred = self.predictors

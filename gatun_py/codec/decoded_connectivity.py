@@ -8,6 +8,7 @@ import numpy as np
 
 from ..errors import CorruptFileError
 from .cutborder import ConnectivityDecoder
+from .cutborder import _tets_out  # the check of a caller's output array, shared with the decoder
 
 
 class DecodedConnectivity:
@@ -52,14 +53,21 @@ class DecodedConnectivity:
     def tets_done(self) -> int:
         return self._done
 
+    def _copy_to(self, out, max_tets):
+        part = self.tets[self._done:self._done + max_tets]
+        out = _tets_out(out, len(part))
+        out[:] = part
+        return out
+
     @property
     def vertices_known(self) -> int:
         return self._known
 
-    def next_tets(self, max_tets: int) -> np.ndarray:
+    def next_tets(self, max_tets: int, *, out: np.ndarray | None = None) -> np.ndarray:
         """The next up to ``max_tets`` tets; the vertices they introduce are the next ids in order
-        (the decoder numbers new vertices as they appear), so the count known is the largest id + 1."""
-        out = self.tets[self._done:self._done + max_tets]
+        (the decoder numbers new vertices as they appear), so the count known is the largest id + 1.
+        ``out``: as :meth:`ConnectivityDecoder.next_tets` (they are copied there)."""
+        out = self.tets[self._done:self._done + max_tets] if out is None else self._copy_to(out, max_tets)
         first = self._known
         self._done += len(out)
         if len(out):

@@ -605,12 +605,13 @@ class TetcReader:
             return None
         return ArrayDecoder(self.read_section(section), n_points=n, dtype="float64", components=3)
 
-    def _batches(self, level: int, batch_tets: int, extra: dict):
+    def _batches(self, level: int, batch_tets: int, extra: dict, tets_out: np.ndarray | None = None):
         """Decode ``level``: yields (TetBatch, {key: exact values of the batch's new vertices}).
 
         ``extra`` maps keys to :class:`ArrayDecoder`s fed alongside the geometry; a decoder under the
         key ``_POINTS`` is predicted from the float32 coordinates, the default scalar's from the
-        float32 density.
+        float32 density. ``tets_out``, an (m, 4) int32 array for all the level's tets, receives
+        them in order (the batches' tets are views of it).
         """
         lv = self.level_meta(level)
         n, m, nf = lv["points"], lv["tets"], lv["boundary_faces"]
@@ -634,7 +635,8 @@ class TetcReader:
         conn.start_tets()
         known = nbv
         while conn.tets_done < m:
-            tets = conn.next_tets(batch_tets)
+            out = None if tets_out is None else tets_out[conn.tets_done:]
+            tets = conn.next_tets(batch_tets, out=out)
             refs = conn.last_refs  # the batch's new vertices (a window the next call rewrites)
             pts, dens = geo.decode(refs)
             yield TetBatch.of_tets(known, tets, pts, dens), exact(refs, pts, dens)
@@ -703,14 +705,11 @@ class TetcReader:
                 extra[name] = dec
         points = np.empty((n, 3), np.float32)
         density = np.empty(n, np.float32)
-        tets = np.empty((lv["tets"], 4), np.int32)
-        t = 0
-        for b, _ in self._batches(level, DEFAULT_BATCH_TETS, extra):
+        tets = np.empty((lv["tets"], 4), np.int32)  # decoded into in place, batch by batch
+        for b, _ in self._batches(level, DEFAULT_BATCH_TETS, extra, tets_out=tets):
             k = len(b.points)
             points[b.first:b.first + k] = b.points
             density[b.first:b.first + k] = b.density
-            tets[t:t + len(b.tets)] = b.tets
-            t += len(b.tets)
         point_data = {}
         for name, dt, _ in self.arrays:
             point_data[name] = extra[name].values if name in extra else density

@@ -168,11 +168,11 @@ def test_the_stream_after_the_forest_reuses_its_connectivity_and_equals_a_fresh_
     fresh = list(TetcReader(data).iter_decode(0, batch_tets=97))
     r = TetcReader(data)
     r.read_forest(0)
-    # coding 1 keeps the connectivity it decoded; coding 2 decodes the whole level (geometry too)
-    # and keeps nothing
-    assert (r._decoded is not None) == (coding_for_format(r.container.major) == 1)
+    # both codings keep the connectivity they decoded; coding 2 decodes (and keeps) the geometry too
+    assert r._decoded is not None
+    assert (getattr(r, "_decoded_geometry", None) is not None) == (coding_for_format(r.container.major) == 2)
     replayed = list(r.iter_decode(0, batch_tets=97))
-    assert r._decoded is None  # handed over once
+    assert r._decoded is None and getattr(r, "_decoded_geometry", None) is None  # handed over once
     assert len(fresh) == len(replayed)
     for a, b in zip(fresh, replayed):
         assert a.first == b.first

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .codec import LevelPayload, TetcReader, encode_tetc
-from .codec.forest import decode_forest_on_mesh, decode_forest_rounds
+from .codec.forest import FOREST_CODING, decode_forest_on_mesh, decode_forest_rounds
 from .errors import TetcError
 from .isosurface.extract import isosurface
 from .mesh import mesh_batches
@@ -122,9 +122,13 @@ FOREST_SECTION_ROUNDS = b"GFR6\x05\x00\x00\x00\x04\x00\x00\x00\x00\x01\xf7\xfe\x
 
 
 def _forest_decoder() -> str:
-    decode_forest_on_mesh(FOREST_SECTION, FOREST_TETS, 5, boundary=np.ones(5, bool))
-    decode_forest_rounds(FOREST_SECTION_ROUNDS, FOREST_TETS, 5, boundary=np.ones(5, bool), points=FOREST_POINTS,
-                         density=np.zeros(5, np.float32))
+    # the coding tetc writes today only: a file of an older format compiles its own forest coding
+    # when a render first needs it, instead of every first render paying for both
+    if FOREST_CODING == 2:
+        decode_forest_rounds(FOREST_SECTION_ROUNDS, FOREST_TETS, 5, boundary=np.ones(5, bool), points=FOREST_POINTS,
+                             density=np.zeros(5, np.float32))
+    else:
+        decode_forest_on_mesh(FOREST_SECTION, FOREST_TETS, 5, boundary=np.ones(5, bool))
     return "the merge-forest decoder"
 
 

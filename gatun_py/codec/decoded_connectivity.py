@@ -38,12 +38,8 @@ class DecodedConnectivity:
         return f"DecodedConnectivity(tets={self.n_tets}, boundary_faces={len(self._faces)}, served={self._done})"
 
     def boundary(self):
+        self.last_refs = self.predictors[:self._nbv]  # a replay starts again from the boundary's
         return self._faces, self._nbv
-
-    @property
-    def vertices_referenced(self) -> int:
-        """Vertices the tets reference (the ids 0 .. this - 1, in decode order)."""
-        return self._known_end
 
     def start_tets(self):
         self._done = 0

@@ -509,22 +509,15 @@ class TetcReader:
         coded after (connectivity and geometry sections, no other point array). Both decodes are
         kept for the next decode of the level (:meth:`_connectivity`, :meth:`_geometry`), which a
         render at a ratio runs right after."""
-        lv = self.level_meta(level)
         n = self._checked_points(level)
-        tets = self._level_tets(level)
-        conn = self._decoded[1]
-        if conn.boundary()[1] != lv["boundary_vertices"]:
-            raise CorruptFileError("corrupt boundary section: vertex count does not match the metadata")
-        known = conn.vertices_referenced
-        if known != lv["referenced_points"]:
-            raise CorruptFileError("corrupt tet section: vertex count does not match the metadata")
+        conn = DecodedConnectivity(self._connectivity_decoder(level))
         geo = GeometryDecoder(self.read_section(f"L{level}/geometry"), n_points=n)
-        geo.decode(conn.predictors[:known])
-        if known < n:  # vertices no tet references: no refs
-            geo.decode(np.full((n - known, 4), -1, np.int32))
-        geo.finish()
+        self._decoded = (level, conn)
+        for _ in self._batches(level, max(1, conn.n_tets), {}, geometry=geo):  # with every decode's checks
+            pass
+        self._decoded = (level, conn)  # served once here, kept for the next decode
         self._decoded_geometry = (level, geo.values)
-        return tets, geo.values[:, :3], geo.values[:, 3]
+        return conn.tets, geo.values[:, :3], geo.values[:, 3]
 
     def _geometry(self, level: int, n: int):
         """The level's geometry for one decode: the values :meth:`_level_geometry` kept (handed
@@ -605,18 +598,20 @@ class TetcReader:
             return None
         return ArrayDecoder(self.read_section(section), n_points=n, dtype="float64", components=3)
 
-    def _batches(self, level: int, batch_tets: int, extra: dict, tets_out: np.ndarray | None = None):
+    def _batches(self, level: int, batch_tets: int, extra: dict, tets_out: np.ndarray | None = None,
+                 geometry=None):
         """Decode ``level``: yields (TetBatch, {key: exact values of the batch's new vertices}).
 
         ``extra`` maps keys to :class:`ArrayDecoder`s fed alongside the geometry; a decoder under the
         key ``_POINTS`` is predicted from the float32 coordinates, the default scalar's from the
         float32 density. ``tets_out``, an (m, 4) int32 array for all the level's tets, receives
-        them in order (the batches' tets are views of it).
+        them in order (the batches' tets are views of it). ``geometry``: a fresh geometry decoder
+        of the level to use (default: :meth:`_geometry`'s).
         """
         lv = self.level_meta(level)
         n, m, nf = lv["points"], lv["tets"], lv["boundary_faces"]
         self._checked_points(level)
-        geo = self._geometry(level, n)
+        geo = self._geometry(level, n) if geometry is None else geometry
         conn = self._connectivity(level)
 
         def exact(refs, pts, dens):

@@ -544,3 +544,350 @@ def decode_rounds_kernel(st, data, probs, start, nbrs, boundary, k, symbol, rid)
         if dec_failed(st) or rid[v] >= n_rounds[s]:
             return False
     return not dec_failed(st)
+
+
+# -- forest coding 3 (format 7): the level's geometry ranks the parents and gives every vertex a context
+# Both passes read an error proxy of the decimator's that the decoder computes from the level's
+# mesh and geometry: every vertex's quadric (the volume-weighted squared distances of a point in
+# (x, y, z, value) to the hyperplanes of the vertex's tets, positions over the bounding-box diagonal,
+# values over their range times QUADRIC_SCALAR_SCALE, as the decimator's quadric). Pass 1 codes
+# a vertex's bucket as coding 2 does and its round's phase in a context of the quantile of its
+# cheapest merge's quadric error (early merges are cheap; the quantiles in the bucket symbol's
+# context too measured worse: too many contexts for the small meshes); pass 2 orders the candidate parents by the merged vertex's
+# quadric (accumulated over the vertices merged into it, as the decimator does) at the candidate:
+# the decimator picked the target of least error, so the parent is usually first. Every float is
+# computed by the same sequence of IEEE double operations in the encoder and the decoder (no
+# fastmath: no reassociation, no fused multiply-add), and candidates compare by (score, id), a
+# total order (a NaN score counts as the largest).
+
+QUADRIC_SCALAR_SCALE = 0.01
+QUADRIC_TERMS = 15  # A's upper triangle (00 01 02 03 11 12 13 22 23 33), b (4), c
+PROXY_BINS = 16  # quantiles of the cheapest merge's quadric error: the context of a round's phase
+PHASES = 16  # a round is coded as its phase (which sixteenth of the bucket's rounds) and its place in it
+BUCKET_CLASSES3 = 8  # buckets above 7 share the round phases' context
+_PHASE_BASE3 = N_BUCKET_CONTEXTS << BUCKET_BITS
+PASS1_MODEL_SIZE3 = _PHASE_BASE3 + BUCKET_CLASSES3 * PROXY_BINS * PHASES
+_BOUNDARY_MISMATCH = 1e300  # added to the score of an interior candidate of a boundary vertex
+
+
+@njit(cache=True, nogil=True)
+def vertex_quadrics(tets, points, density):
+    """(q, u): the (n, 15) quadric of every vertex over its tets (see the section comment) and the
+    (n, 4) normalised (x, y, z, value) of every vertex, float64.
+
+    ``points`` (n, 3) and ``density`` (n,) float32; tet ids are in range (checked by the caller)."""
+    n = points.shape[0]
+    q = np.zeros((n, QUADRIC_TERMS))
+    u = np.zeros((n, 4))
+    if n == 0:
+        return q, u
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for c in range(3):
+        lo[c] = points[0, c]
+        hi[c] = points[0, c]
+    s_lo = np.float64(density[0])
+    s_hi = s_lo
+    for v in range(n):
+        for c in range(3):
+            x = np.float64(points[v, c])
+            if x < lo[c]:
+                lo[c] = x
+            if x > hi[c]:
+                hi[c] = x
+        s = np.float64(density[v])
+        if s < s_lo:
+            s_lo = s
+        if s > s_hi:
+            s_hi = s
+    diag = np.sqrt((hi[0] - lo[0]) ** 2 + (hi[1] - lo[1]) ** 2 + (hi[2] - lo[2]) ** 2)
+    if not diag > 0 or not np.isfinite(diag):
+        diag = 1.0
+    srange = s_hi - s_lo
+    if not srange > 0 or not np.isfinite(srange):
+        srange = 1.0
+    for v in range(n):
+        for c in range(3):
+            u[v, c] = (np.float64(points[v, c]) - lo[c]) / diag
+        u[v, 3] = QUADRIC_SCALAR_SCALE * ((np.float64(density[v]) - s_lo) / srange)
+    e = np.empty((3, 4))
+    nrm = np.empty(4)
+    for t in range(tets.shape[0]):
+        a = tets[t, 0]
+        for r in range(3):
+            b = tets[t, r + 1]
+            for c in range(4):
+                e[r, c] = u[b, c] - u[a, c]
+        # the generalised cross product of the three edges: the hyperplane's normal in 4D
+        for j in range(4):
+            c0 = 0 if j > 0 else 1
+            c1 = 1 if j > 1 else 2
+            c2 = 2 if j > 2 else 3
+            det = (e[0, c0] * (e[1, c1] * e[2, c2] - e[1, c2] * e[2, c1])
+                   - e[0, c1] * (e[1, c0] * e[2, c2] - e[1, c2] * e[2, c0])
+                   + e[0, c2] * (e[1, c0] * e[2, c1] - e[1, c1] * e[2, c0]))
+            nrm[j] = -det if (j & 1) == 1 else det
+        length = np.sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2] + nrm[3] * nrm[3])
+        # weight: the tet's volume (|det| of its spatial edges, up to a constant)
+        w = abs(e[0, 0] * (e[1, 1] * e[2, 2] - e[1, 2] * e[2, 1])
+                - e[0, 1] * (e[1, 0] * e[2, 2] - e[1, 2] * e[2, 0])
+                + e[0, 2] * (e[1, 0] * e[2, 1] - e[1, 1] * e[2, 0]))
+        if not (length > 0 and w > 0 and np.isfinite(length)):
+            continue
+        for j in range(4):
+            nrm[j] /= length
+        d = -(nrm[0] * u[a, 0] + nrm[1] * u[a, 1] + nrm[2] * u[a, 2] + nrm[3] * u[a, 3])
+        for i in range(4):
+            x = tets[t, i]
+            k = 0
+            for r in range(4):
+                for c in range(r, 4):
+                    q[x, k] += w * nrm[r] * nrm[c]
+                    k += 1
+            for r in range(4):
+                q[x, 10 + r] += w * d * nrm[r]
+            q[x, 14] += w * d * d
+    return q, u
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _quadric_at(q, v, u, x):
+    """Vertex v's quadric at vertex x's (x, y, z, value): u^T A u + 2 b.u + c; NaN -> the largest."""
+    a0, a1, a2, a3 = u[x, 0], u[x, 1], u[x, 2], u[x, 3]
+    s = (q[v, 0] * a0 * a0 + q[v, 4] * a1 * a1 + q[v, 7] * a2 * a2 + q[v, 9] * a3 * a3
+         + 2.0 * (q[v, 1] * a0 * a1 + q[v, 2] * a0 * a2 + q[v, 3] * a0 * a3
+                  + q[v, 5] * a1 * a2 + q[v, 6] * a1 * a3 + q[v, 8] * a2 * a3)
+         + 2.0 * (q[v, 10] * a0 + q[v, 11] * a1 + q[v, 12] * a2 + q[v, 13] * a3) + q[v, 14])
+    if s != s:
+        return np.inf
+    return s
+
+
+@njit(cache=True, nogil=True)
+def cheapest_merge(start, nbrs, boundary, q, u):
+    """Every vertex's least quadric error over its neighbours it may merge into (a boundary vertex
+    only into boundary ones); inf when there is none."""
+    n = start.shape[0] - 1
+    best = np.full(n, np.inf)
+    for v in range(n):
+        for i in range(start[v], start[v + 1]):
+            x = nbrs[i]
+            if boundary[v] and not boundary[x]:
+                continue
+            s = _quadric_at(q, v, u, x)
+            if s < best[v]:
+                best[v] = s
+    return best
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _phase_range(phase, n_rounds):
+    """The rounds [lo, hi) of ``phase`` out of min(PHASES, n_rounds): those with round * P // R = phase."""
+    p = PHASES if n_rounds > PHASES else n_rounds
+    return (phase * n_rounds + p - 1) // p, ((phase + 1) * n_rounds + p - 1) // p
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _phase_base(s, bin_):
+    return _PHASE_BASE3 + ((s if s < BUCKET_CLASSES3 else BUCKET_CLASSES3 - 1) * PROXY_BINS + bin_) * PHASES
+
+
+@njit(cache=True)
+def encode_rounds3_kernel(st, out, start, nbrs, boundary, parent, rank, k, rid, n_rounds, proxy_bin, q, u):
+    """Coding 3: the round counts, then per vertex its bucket and round in the context of its proxy
+    bin, then the parents ordered by the quadric."""
+    n = parent.shape[0]
+    probs = np.full(PASS1_MODEL_SIZE3, 1 << 14, np.uint16)
+    bounds = bucket_bounds(n, k)
+    for s in range(bounds.shape[0] - 1):
+        enc_below(st, out, n_rounds[s] - 1, bounds[s + 1] - bounds[s])
+    symbol = np.empty(n, np.int8)
+    for v in range(n):
+        r = rank[v]
+        s = ROOT_SYMBOL if r >= k else _bucket_of(bounds, r)
+        ctx = _bucket_context(start, nbrs, boundary, v, symbol)
+        enc_sym(st, out, probs, ctx << BUCKET_BITS, BUCKET_BITS, s)
+        symbol[v] = s
+        if s != ROOT_SYMBOL and n_rounds[s] > 1:
+            p = PHASES if n_rounds[s] > PHASES else n_rounds[s]
+            phase = rid[v] * p // n_rounds[s]
+            enc_sym(st, out, probs, _phase_base(s, proxy_bin[v]), 4, phase)
+            lo, hi = _phase_range(phase, n_rounds[s])
+            if hi - lo > 1:
+                enc_below(st, out, rid[v] - lo, hi - lo)
+    _enc_parents3(st, out, start, nbrs, boundary, parent, rank, k, q, u)
+    return enc_finish(st, out)
+
+
+@njit(cache=True, nogil=True)
+def decode_rounds3_kernel(st, data, start, nbrs, boundary, k, proxy_bin, symbol, rid):
+    """Pass 1 of coding 3 (see :func:`decode_rounds_kernel`)."""
+    n = symbol.shape[0]
+    dec_init(st, data)
+    probs = np.full(PASS1_MODEL_SIZE3, 1 << 14, np.uint16)
+    bounds = bucket_bounds(n, k)
+    n_buckets = bounds.shape[0] - 1
+    n_rounds = np.empty(n_buckets, np.int64)
+    for s in range(n_buckets):
+        n_rounds[s] = dec_below(st, data, bounds[s + 1] - bounds[s]) + 1
+    for v in range(n):
+        ctx = _bucket_context(start, nbrs, boundary, v, symbol)
+        s = dec_sym(st, data, probs, ctx << BUCKET_BITS, BUCKET_BITS)
+        symbol[v] = s
+        if s == ROOT_SYMBOL:
+            rid[v] = -1
+            continue
+        if s >= n_buckets:
+            return False
+        rid[v] = 0
+        if n_rounds[s] > 1:
+            phase = dec_sym(st, data, probs, _phase_base(s, proxy_bin[v]), 4)
+            if phase >= (PHASES if n_rounds[s] > PHASES else n_rounds[s]):
+                return False
+            lo, hi = _phase_range(phase, n_rounds[s])
+            rid[v] = lo + (dec_below(st, data, hi - lo) if hi - lo > 1 else 0)
+        if dec_failed(st):
+            return False
+    return not dec_failed(st)
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _score_candidates(q, u, boundary, v, cand, m, score):
+    """score[i] of candidate cand[i] for v's merge: v's quadric at it, plus a penalty that puts an
+    interior candidate of a boundary vertex after every boundary one."""
+    for i in range(m):
+        x = cand[i]
+        s = _quadric_at(q, v, u, x)
+        if boundary[v] and not boundary[x]:
+            s += _BOUNDARY_MISMATCH
+        score[i] = s
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _first(cand, score, i, j):
+    """Whether candidate i comes before candidate j in coding 3: smaller score, then smaller id."""
+    return score[i] < score[j] or (score[i] == score[j] and cand[i] < cand[j])
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _index_of3(cand, score, m, p):
+    """Position of ``p`` in coding 3's order of ``cand[:m]``, or -1 when it is not listed."""
+    at = -1
+    for i in range(m):
+        if cand[i] == p:
+            at = i
+            break
+    if at < 0:
+        return -1
+    before = 0
+    for i in range(m):
+        if _first(cand, score, i, at):
+            before += 1
+    return before
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _candidate_at3(cand, score, m, idx):
+    """The candidate at position ``idx < m`` of coding 3's order (a selection of the idx + 1 first)."""
+    for j in range(idx + 1):
+        best = j
+        for i in range(j + 1, m):
+            if _first(cand, score, i, best):
+                best = i
+        cand[j], cand[best] = cand[best], cand[j]
+        score[j], score[best] = score[best], score[j]
+    return cand[idx]
+
+
+@njit(cache=True)
+def _enc_parent3(st, out, probs, tier, cand, score, m, p):
+    if m == 0:
+        return False
+    idx = _index_of3(cand, score, m, p)
+    enc_bit(st, out, probs, _flag_context(tier, m), 1 if idx >= 0 else 0)
+    if idx < 0:
+        return False
+    if m <= SMALL_LIST:
+        enc_sym(st, out, probs, _index_base(tier, m), 5, idx)
+    else:
+        enc_below(st, out, idx, m)
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _dec_parent3(st, data, probs, tier, cand, score, m):
+    if m == 0 or dec_bit(st, data, probs, _flag_context(tier, m)) == 0:
+        return -1
+    if m <= SMALL_LIST:
+        idx = dec_sym(st, data, probs, _index_base(tier, m), 5)
+    else:
+        idx = dec_below(st, data, m)
+    if idx >= m:
+        st[DEC_ERROR] = 1
+        return -1
+    return _candidate_at3(cand, score, m, idx)
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _absorb(q, p, v):
+    """p's quadric += v's (the decimator's quadric of a merge target)."""
+    for j in range(QUADRIC_TERMS):
+        q[p, j] += q[v, j]
+
+
+@njit(cache=True)
+def _enc_parents3(st, out, start, nbrs, boundary, parent, rank, k, q, u):
+    """Pass 2 of coding 3: as :func:`_enc_parents`, the lists ordered by the quadric (``q`` is
+    updated in place as the merges are replayed)."""
+    n = parent.shape[0]
+    probs = np.full(MODEL_SIZE, 1 << 14, np.uint16)
+    of_rank = np.empty(k, np.int64)
+    for v in range(n):
+        if rank[v] < k:
+            of_rank[rank[v]] = v
+    uf, first_child, next_sibling, mark, cand0, count0, cand1, count1 = _replay_state(n)
+    score = np.empty(max(1, n))
+    for r in range(k):
+        v = of_rank[r]
+        p = parent[v]
+        m0 = _tier0(start, nbrs, uf, v, r, mark, cand0, count0)
+        _score_candidates(q, u, boundary, v, cand0, m0, score)
+        found = _enc_parent3(st, out, probs, 0, cand0, score, m0, p)
+        if not found:
+            m1 = _tier1(start, nbrs, uf, v, r, first_child, next_sibling, mark, cand0, m0, cand1, count1)
+            _score_candidates(q, u, boundary, v, cand1, m1, score)
+            found = _enc_parent3(st, out, probs, 1, cand1, score, m1, p)
+        if not found:
+            enc_below(st, out, p, n)
+        uf[v] = p
+        next_sibling[v] = first_child[p]
+        first_child[p] = v
+        _absorb(q, p, v)
+
+
+@njit(cache=True, nogil=True)
+def decode_parents3_kernel(st, data, start, nbrs, boundary, k, parent, rank, of_rank, q, u):
+    """Pass 2 of coding 3 (see :func:`decode_parents_kernel`); ``q`` is updated in place."""
+    n = parent.shape[0]
+    probs = np.full(MODEL_SIZE, 1 << 14, np.uint16)
+    uf, first_child, next_sibling, mark, cand0, count0, cand1, count1 = _replay_state(n)
+    score = np.empty(max(1, n))
+    for r in range(k):
+        v = of_rank[r]
+        m0 = _tier0(start, nbrs, uf, v, r, mark, cand0, count0)
+        _score_candidates(q, u, boundary, v, cand0, m0, score)
+        p = _dec_parent3(st, data, probs, 0, cand0, score, m0)
+        if p < 0:
+            m1 = _tier1(start, nbrs, uf, v, r, first_child, next_sibling, mark, cand0, m0, cand1, count1)
+            _score_candidates(q, u, boundary, v, cand1, m1, score)
+            p = _dec_parent3(st, data, probs, 1, cand1, score, m1)
+            if p < 0:
+                p = dec_below(st, data, n)
+        if dec_failed(st) or p == v or rank[p] <= r:
+            return False
+        parent[v] = p
+        uf[v] = p
+        next_sibling[v] = first_child[p]
+        first_child[p] = v
+        _absorb(q, p, v)
+    return True

@@ -25,6 +25,12 @@ bucket (``log2`` of the bucket's rounds instead of ``log2`` of its free ranks); 
 rebuilds the ranks by sorting (bucket, round, key). Parents as in format 3. Any valid forest
 codes this way (a round is a maximal run of ranks whose keys ascend; a greedy forest just has
 many short runs).
+
+Files of format 7 (magic ``GFR7``, forest coding 3, :func:`encode_forest_on_geometry`) code the
+same rounds and parents with what the level's geometry says about the decimator's errors: every
+vertex's quadric over its tets (as the decimator's, from the level's mesh) ranks a merge's
+candidate parents (least error first: the decimator's choice is usually first), and the quantile
+of a vertex's cheapest merge is the context of its bucket and round (cheap merges come early).
 """
 
 from __future__ import annotations
@@ -41,7 +47,8 @@ from .rangecoder import capacity_hint, check_decoder, dec_state, run_encoder
 
 __all__ = ["ROOT_RANK", "check_forest", "encode_forest", "decode_forest", "forest_header",
            "encode_forest_on_mesh", "decode_forest_on_mesh", "encode_forest_rounds", "decode_forest_rounds",
-           "canonical_key", "rank_rounds", "coding_for_format", "FOREST_CODING"]
+           "encode_forest_on_geometry", "decode_forest_on_geometry", "canonical_key", "rank_rounds",
+           "coding_for_format", "FOREST_CODING"]
 
 ROOT_RANK = 2**31 - 1  # the rank of a vertex that is never merged
 
@@ -49,9 +56,9 @@ ROOT_RANK = 2**31 - 1  # the rank of a vertex that is never merged
 def coding_for_format(major: int) -> int:
     """The forest coding a file of container format ``major`` is written with: 0 (LZMA, magic
     ``GFR1``) in formats 1 and 2, 1 (after the level's mesh, ``GFR3``) in formats 3 to 5, 2
-    (rounds, after the level's mesh and geometry, ``GFR6``) from format 6 on. Readers take every
-    coding."""
-    return 0 if major <= 2 else (1 if major <= 5 else 2)
+    (rounds, after the level's mesh and geometry, ``GFR6``) in format 6, 3 (rounds and parents in
+    contexts of the level's quadrics, ``GFR7``) from format 7 on. Readers take every coding."""
+    return 0 if major <= 2 else (1 if major <= 5 else (2 if major == 6 else 3))
 
 
 # what this version of tetc writes
@@ -90,6 +97,7 @@ def check_forest(parent: np.ndarray, rank: np.ndarray) -> int:
 _MAGIC = b"GFR1"
 _MAGIC_ON_MESH = b"GFR3"
 _MAGIC_ROUNDS = b"GFR6"
+_MAGIC_GEOMETRY = b"GFR7"
 _HEADER = struct.Struct("<4sII")
 
 
@@ -157,7 +165,7 @@ def forest_header(data: bytes) -> tuple[int, int]:
     if len(data) < _HEADER.size:
         raise CorruptFileError("merge forest: truncated header")
     magic, n, k = _HEADER.unpack(data)
-    if magic not in (_MAGIC, _MAGIC_ON_MESH, _MAGIC_ROUNDS) or k > n:
+    if magic not in (_MAGIC, _MAGIC_ON_MESH, _MAGIC_ROUNDS, _MAGIC_GEOMETRY) or k > n:
         raise CorruptFileError("merge forest: bad header")
     return int(n), int(k)
 
@@ -393,6 +401,33 @@ def rank_rounds(rank: np.ndarray, k: int, key: np.ndarray):
     return rid, n_rounds.astype(np.int64)
 
 
+
+def _ranks_of_rounds(symbol, rid, k: int, points, density):
+    """(rank with roots at k, vertex of every rank) from pass 1 of codings 2 and 3: every merged
+    vertex's bucket symbol and round; the ranks follow (bucket, round, canonical key)."""
+    n = symbol.shape[0]
+    merged = np.flatnonzero(symbol != FK.ROOT_SYMBOL)
+    bounds = FK.bucket_bounds(n, k)
+    sizes = np.bincount(symbol[merged].astype(np.int64), minlength=len(bounds) - 1)
+    if merged.size != k or not np.array_equal(sizes, np.diff(bounds)):
+        raise CorruptFileError("merge forest: the buckets do not hold the merges the header says")
+    key = canonical_key(points, density)
+    s, r, kk = symbol[merged].astype(np.int64), rid[merged], key[merged]
+    order = np.lexsort((kk, r, s))
+    s, r, kk = s[order], r[order], kk[order]
+    same_round = (s[1:] == s[:-1]) & (r[1:] == r[:-1])
+    if np.any(same_round & (kk[1:] == kk[:-1])):
+        raise CorruptFileError("merge forest: two vertices of one round have the same position and value")
+    # rounds numbered 0, 1, ... without gaps in every bucket
+    first = np.ones(k, bool)
+    first[1:] = s[1:] != s[:-1]
+    if np.any(r[first] != 0) or np.any(~first[1:] & (r[1:] != r[:-1]) & (r[1:] != r[:-1] + 1)):
+        raise CorruptFileError("merge forest: a bucket has an empty round")
+    of_rank = merged[order].astype(np.int32)
+    rank = np.full(n, k, np.int32)
+    rank[of_rank] = np.arange(k, dtype=np.int32)
+    return rank, of_rank
+
 def encode_forest_rounds(parent: np.ndarray, rank: np.ndarray, tets: np.ndarray, *, boundary, points,
                          density) -> bytes:
     """Code a merge forest knowing its level's mesh and geometry (the format-6 ``L{i}/forest``
@@ -456,28 +491,101 @@ def decode_forest_rounds(data: bytes, tets: np.ndarray, n: int, *, boundary, poi
     damaged = CorruptFileError("merge forest: the coded data is damaged or truncated")
     if not FK.decode_rounds_kernel(st, body, probs, start, nbrs, _boundary_mask(boundary, n), k, symbol, rid):
         raise damaged
-    merged = np.flatnonzero(symbol != FK.ROOT_SYMBOL)
-    bounds = FK.bucket_bounds(n, k)
-    sizes = np.bincount(symbol[merged].astype(np.int64), minlength=len(bounds) - 1)
-    if merged.size != k or not np.array_equal(sizes, np.diff(bounds)):
-        raise CorruptFileError("merge forest: the buckets do not hold the merges the header says")
-    key = canonical_key(points, density)
-    s, r, kk = symbol[merged].astype(np.int64), rid[merged], key[merged]
-    order = np.lexsort((kk, r, s))
-    s, r, kk = s[order], r[order], kk[order]
-    same_round = (s[1:] == s[:-1]) & (r[1:] == r[:-1])
-    if np.any(same_round & (kk[1:] == kk[:-1])):
-        raise CorruptFileError("merge forest: two vertices of one round have the same position and value")
-    # rounds numbered 0, 1, ... without gaps in every bucket
-    first = np.ones(k, bool)
-    first[1:] = s[1:] != s[:-1]
-    if np.any(r[first] != 0) or np.any(~first[1:] & (r[1:] != r[:-1]) & (r[1:] != r[:-1] + 1)):
-        raise CorruptFileError("merge forest: a bucket has an empty round")
-    of_rank = merged[order].astype(np.int32)
-    rank = np.full(n, k, np.int32)
-    rank[of_rank] = np.arange(k, dtype=np.int32)
+    rank, of_rank = _ranks_of_rounds(symbol, rid, k, points, density)
     parent = np.arange(n, dtype=np.int32)
     if not FK.decode_parents_kernel(st, body, probs, start, nbrs, k, parent, rank, of_rank):
+        raise damaged
+    check_decoder(st, body, "merge forest")
+    rank[rank == k] = ROOT_RANK
+    check_forest(parent, rank)
+    return parent, rank
+
+
+def _geometry_terms(tets, points, density, n: int):
+    """(quadrics, normalised (x, y, z, value)) of the level's vertices: coding 3's error proxy."""
+    points = np.ascontiguousarray(points, dtype=np.float32)
+    density = np.ascontiguousarray(density, dtype=np.float32)
+    if points.shape != (n, 3) or density.shape != (n,):
+        raise ValueError(f"geometry of shapes {points.shape}, {density.shape} for {n} vertices")
+    return FK.vertex_quadrics(np.ascontiguousarray(tets, dtype=np.int32).reshape(-1, 4), points, density)
+
+
+def _proxy_bins(start, nbrs, boundary, q, u) -> np.ndarray:
+    """Every vertex's quantile (of ``FK.PROXY_BINS``) of its cheapest merge's quadric error, ties
+    by vertex id."""
+    best = FK.cheapest_merge(start, nbrs, boundary, q, u)
+    n = best.shape[0]
+    bins = np.empty(n, np.int64)
+    bins[np.argsort(best, kind="stable")] = np.arange(n, dtype=np.int64) * FK.PROXY_BINS // max(n, 1)
+    return bins
+
+
+def encode_forest_on_geometry(parent: np.ndarray, rank: np.ndarray, tets: np.ndarray, *, boundary, points,
+                              density) -> bytes:
+    """Code a merge forest knowing its level's mesh and geometry (the format-7 ``L{i}/forest``
+    section, forest coding 3).
+
+    As :func:`encode_forest_rounds` (bucket and round per vertex, ranks inside a round by
+    :func:`canonical_key`, parents among the live neighbours), with the decimator's error proxy
+    the decoder computes from the level: a vertex's bucket and round are coded in the context of
+    the quantile of its cheapest merge's quadric error, and a merge's candidate parents are ordered
+    by the merged vertex's quadric at them (``docs/format.md``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> tets = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])
+    >>> pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], np.float32)
+    >>> parent, rank = np.array([1, 2, 2, 2, 3]), np.array([0, 2, ROOT_RANK, 3, 1])
+    >>> on_boundary = np.ones(5, bool)
+    >>> data = encode_forest_on_geometry(parent, rank, tets, boundary=on_boundary, points=pts, density=np.zeros(5))
+    >>> p, r = decode_forest_on_geometry(data, tets, 5, boundary=on_boundary, points=pts, density=np.zeros(5))
+    >>> p.tolist(), r.tolist() == rank.tolist()
+    ([1, 2, 2, 2, 3], True)
+    """
+    head, parent, ranks, k, start, nbrs = _encode_prelude(parent, rank, _MAGIC_GEOMETRY, tets)
+    if k == 0:
+        return head
+    n = len(parent)
+    q, u = _geometry_terms(tets, points, density, n)
+    rid, n_rounds = rank_rounds(ranks, k, canonical_key(np.asarray(points), np.asarray(density)))
+    mask = _boundary_mask(boundary, n)
+    bins = _proxy_bins(start, nbrs, mask, q, u)
+    return head + run_encoder(FK.encode_rounds3_kernel, start, nbrs, mask, parent, ranks, k, rid, n_rounds, bins,
+                              q, u, capacity=capacity_hint(16 * n))
+
+
+def decode_forest_on_geometry(data: bytes, tets: np.ndarray, n: int, *, boundary, points,
+                              density) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of :func:`encode_forest_on_geometry`, given the level's tets, boundary vertices and
+    geometry in decode order.
+
+    Returns
+    -------
+    parent, rank : (n,) int32
+
+    Raises
+    ------
+    CorruptFileError
+        As :func:`decode_forest_rounds`.
+    """
+    data = bytes(data)
+    k, start, nbrs = _prelude(data, _MAGIC_GEOMETRY, tets, n)
+    if start is None:
+        return np.arange(n, dtype=np.int32), np.full(n, ROOT_RANK, np.int32)
+    q, u = _geometry_terms(tets, points, density, n)
+    mask = _boundary_mask(boundary, n)
+    bins = _proxy_bins(start, nbrs, mask, q, u)
+    body = np.frombuffer(data, np.uint8, offset=_HEADER.size)
+    st = dec_state()
+    symbol = np.empty(n, np.int8)
+    rid = np.empty(n, np.int64)
+    damaged = CorruptFileError("merge forest: the coded data is damaged or truncated")
+    if not FK.decode_rounds3_kernel(st, body, start, nbrs, mask, k, bins, symbol, rid):
+        raise damaged
+    rank, of_rank = _ranks_of_rounds(symbol, rid, k, points, density)
+    parent = np.arange(n, dtype=np.int32)
+    if not FK.decode_parents3_kernel(st, body, start, nbrs, mask, k, parent, rank, of_rank, q, u):
         raise damaged
     check_decoder(st, body, "merge forest")
     rank[rank == k] = ROOT_RANK

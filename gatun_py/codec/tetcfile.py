@@ -32,8 +32,8 @@ from .cutborder import ConnectivityDecoder, coding_for_format, encode_connectivi
 from .decoded_connectivity import DecodedConnectivity, DecodedGeometry
 from .dependencies import decode_dependencies, dependencies_header, encode_dependencies
 from .forest import (FOREST_CODING, ROOT_RANK, coding_for_format as forest_coding_for_format, decode_forest,
-                     decode_forest_on_mesh, decode_forest_rounds, encode_forest_on_mesh, encode_forest_rounds,
-                     forest_header)
+                     decode_forest_on_geometry, decode_forest_on_mesh, decode_forest_rounds, encode_forest_on_geometry,
+                     encode_forest_on_mesh, encode_forest_rounds, forest_header)
 from .geometry import HEADER_SIZE, GeometryDecoder, check_geometry_header, encode_geometry
 
 FORMAT_NAME = "tetc"
@@ -131,16 +131,16 @@ def _encode_level_mesh(payload: LevelPayload) -> EncodedLevel:
 
 def _encode_level_forest(mesh, vertex_order, parent, rank, n_boundary_vertices) -> bytes:
     """The ``L{i}/forest`` section: the forest renumbered to decode order, coded after the level's
-    mesh (format 3 to 5) or mesh and geometry (format 6: forest coding 2); in decode order the
-    boundary vertices come first."""
+    mesh (format 3 to 5) or mesh and geometry (format 6: forest coding 2; format 7: coding 3); in
+    decode order the boundary vertices come first."""
     dec_of = np.empty(mesh.n_points, np.int64)
     dec_of[vertex_order] = np.arange(mesh.n_points)
     args = (dec_of[parent[vertex_order]], rank[vertex_order], dec_of[mesh.tets])
     boundary = np.arange(mesh.n_points) < n_boundary_vertices
-    if FOREST_CODING == 2:
-        return encode_forest_rounds(*args, boundary=boundary, points=mesh.points[vertex_order],
-                                    density=mesh.density[vertex_order])
-    return encode_forest_on_mesh(*args, boundary=boundary)
+    if FOREST_CODING == 1:
+        return encode_forest_on_mesh(*args, boundary=boundary)
+    encode = encode_forest_on_geometry if FOREST_CODING == 3 else encode_forest_rounds
+    return encode(*args, boundary=boundary, points=mesh.points[vertex_order], density=mesh.density[vertex_order])
 
 
 def check_mesh(mesh) -> None:
@@ -502,10 +502,11 @@ class TetcReader:
         if coding == 1:
             return decode_forest_on_mesh(data, self._level_tets(level), n, boundary=boundary)
         tets, points, density = self._level_geometry(level)
-        return decode_forest_rounds(data, tets, n, boundary=boundary, points=points, density=density)
+        decode = decode_forest_rounds if coding == 2 else decode_forest_on_geometry
+        return decode(data, tets, n, boundary=boundary, points=points, density=density)
 
     def _level_geometry(self, level: int):
-        """(tets, float32 points, density) of ``level`` in decode order: what forest coding 2 is
+        """(tets, float32 points, density) of ``level`` in decode order: what forest codings 2 and 3 are
         coded after (connectivity and geometry sections, no other point array). Both decodes are
         kept for the next decode of the level (:meth:`_connectivity`, :meth:`_geometry`), which a
         render at a ratio runs right after."""

@@ -610,43 +610,52 @@ def vertex_quadrics(tets, points, density):
         for c in range(3):
             u[v, c] = (np.float64(points[v, c]) - lo[c]) / diag
         u[v, 3] = QUADRIC_SCALAR_SCALE * ((np.float64(density[v]) - s_lo) / srange)
-    e = np.empty((3, 4))
-    nrm = np.empty(4)
     for t in range(tets.shape[0]):
         a = tets[t, 0]
-        for r in range(3):
-            b = tets[t, r + 1]
-            for c in range(4):
-                e[r, c] = u[b, c] - u[a, c]
-        # the generalised cross product of the three edges: the hyperplane's normal in 4D
-        for j in range(4):
-            c0 = 0 if j > 0 else 1
-            c1 = 1 if j > 1 else 2
-            c2 = 2 if j > 2 else 3
-            det = (e[0, c0] * (e[1, c1] * e[2, c2] - e[1, c2] * e[2, c1])
-                   - e[0, c1] * (e[1, c0] * e[2, c2] - e[1, c2] * e[2, c0])
-                   + e[0, c2] * (e[1, c0] * e[2, c1] - e[1, c1] * e[2, c0]))
-            nrm[j] = -det if (j & 1) == 1 else det
-        length = np.sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2] + nrm[3] * nrm[3])
-        # weight: the tet's volume (|det| of its spatial edges, up to a constant)
-        w = abs(e[0, 0] * (e[1, 1] * e[2, 2] - e[1, 2] * e[2, 1])
-                - e[0, 1] * (e[1, 0] * e[2, 2] - e[1, 2] * e[2, 0])
-                + e[0, 2] * (e[1, 0] * e[2, 1] - e[1, 1] * e[2, 0]))
-        if not (length > 0 and w > 0 and np.isfinite(length)):
+        b, c, d = tets[t, 1], tets[t, 2], tets[t, 3]
+        # the three edges from corner a in (x, y, z, value)
+        p0, p1, p2, p3 = u[b, 0] - u[a, 0], u[b, 1] - u[a, 1], u[b, 2] - u[a, 2], u[b, 3] - u[a, 3]
+        q0, q1, q2, q3 = u[c, 0] - u[a, 0], u[c, 1] - u[a, 1], u[c, 2] - u[a, 2], u[c, 3] - u[a, 3]
+        r0, r1, r2, r3 = u[d, 0] - u[a, 0], u[d, 1] - u[a, 1], u[d, 2] - u[a, 2], u[d, 3] - u[a, 3]
+        # 2x2 minors of the last two edges, then the generalised cross product (the hyperplane's
+        # normal in 4D: n_j = (-1)^j det of the edges without column j)
+        m01 = q0 * r1 - q1 * r0
+        m02 = q0 * r2 - q2 * r0
+        m03 = q0 * r3 - q3 * r0
+        m12 = q1 * r2 - q2 * r1
+        m13 = q1 * r3 - q3 * r1
+        m23 = q2 * r3 - q3 * r2
+        n0 = p1 * m23 - p2 * m13 + p3 * m12
+        n1 = -(p0 * m23 - p2 * m03 + p3 * m02)
+        n2 = p0 * m13 - p1 * m03 + p3 * m01
+        n3 = -(p0 * m12 - p1 * m02 + p2 * m01)
+        # weight: the tet's volume (|det| of its spatial edges, up to a constant) = |n3|
+        w = abs(n3)
+        length = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2 + n3 * n3)
+        if not (length > 0 and w > 0 and length < np.inf):
             continue
-        for j in range(4):
-            nrm[j] /= length
-        d = -(nrm[0] * u[a, 0] + nrm[1] * u[a, 1] + nrm[2] * u[a, 2] + nrm[3] * u[a, 3])
-        for i in range(4):
-            x = tets[t, i]
-            k = 0
-            for r in range(4):
-                for c in range(r, 4):
-                    q[x, k] += w * nrm[r] * nrm[c]
-                    k += 1
-            for r in range(4):
-                q[x, 10 + r] += w * d * nrm[r]
-            q[x, 14] += w * d * d
+        n0 /= length
+        n1 /= length
+        n2 /= length
+        n3 /= length
+        e = -(n0 * u[a, 0] + n1 * u[a, 1] + n2 * u[a, 2] + n3 * u[a, 3])
+        w0, w1, w2, w3, we = w * n0, w * n1, w * n2, w * n3, w * e
+        for x in (a, b, c, d):  # the same terms to the tet's four corners
+            q[x, 0] += w0 * n0
+            q[x, 1] += w0 * n1
+            q[x, 2] += w0 * n2
+            q[x, 3] += w0 * n3
+            q[x, 4] += w1 * n1
+            q[x, 5] += w1 * n2
+            q[x, 6] += w1 * n3
+            q[x, 7] += w2 * n2
+            q[x, 8] += w2 * n3
+            q[x, 9] += w3 * n3
+            q[x, 10] += we * n0
+            q[x, 11] += we * n1
+            q[x, 12] += we * n2
+            q[x, 13] += we * n3
+            q[x, 14] += we * e
     return q, u
 
 
@@ -754,7 +763,11 @@ def decode_rounds3_kernel(st, data, start, nbrs, boundary, k, proxy_bin, symbol,
 @njit(cache=True, nogil=True, _nrt=False)
 def _score_candidates(q, u, boundary, v, cand, m, score):
     """score[i] of candidate cand[i] for v's merge: v's quadric at it, plus a penalty that puts an
-    interior candidate of a boundary vertex after every boundary one."""
+    interior candidate of a boundary vertex after every boundary one (nothing to order in a list
+    of one)."""
+    if m < 2:
+        score[0] = 0.0
+        return
     for i in range(m):
         x = cand[i]
         s = _quadric_at(q, v, u, x)

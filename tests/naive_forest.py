@@ -1,4 +1,4 @@
-"""Slow, obviously correct reference of the merge-forest codings 1 (format 3) and 2 (format 6).
+"""Slow, obviously correct reference of the merge-forest codings 1 (format 3), 2 (format 6) and 3 (format 7).
 
 :func:`naive_encode_forest_on_mesh` and :func:`naive_encode_forest_rounds` write the bytes of
 :func:`gatun_py.codec.forest.encode_forest_on_mesh` and
@@ -9,6 +9,7 @@ the kernels' bytes can be compared one for one.
 
 from __future__ import annotations
 
+import math
 import struct
 
 from naive_codec import NaiveRangeEncoder
@@ -91,6 +92,22 @@ def naive_key(points, density):
     return [tuple(_float_bits(c) for c in p) + (_float_bits(d),) for p, d in zip(points, density)]
 
 
+
+def _rounds(rank, key, b, n):
+    """(vertex -> round inside its bucket, rounds per bucket): a round is a maximal run of ranks
+    whose keys ascend."""
+    by_rank = sorted((v for v in range(n) if rank[v] != ROOT_RANK), key=lambda v: rank[v])
+    rounds = {}
+    n_rounds = []
+    for j in range(len(b) - 1):
+        rid = 0
+        for i in range(b[j], b[j + 1]):
+            if i > b[j] and not key[by_rank[i]] > key[by_rank[i - 1]]:
+                rid += 1
+            rounds[by_rank[i]] = rid
+        n_rounds.append(rid + 1)
+    return rounds, n_rounds
+
 def naive_encode_forest_rounds(parent, rank, tets, boundary, points, density) -> bytes:
     """Forest coding 2 (format 6): rounds per bucket, then per vertex its bucket as in coding 1
     and its round uniformly among the bucket's rounds; the parents as in coding 1."""
@@ -103,16 +120,7 @@ def naive_encode_forest_rounds(parent, rank, tets, boundary, points, density) ->
     nbrs = _neighbours(tets, n)
     key = naive_key(points, density)
     b = _bounds(n, k)
-    by_rank = sorted((v for v in range(n) if rank[v] != ROOT_RANK), key=lambda v: rank[v])
-    rounds = {}  # vertex -> round inside its bucket
-    n_rounds = []
-    for j in range(len(b) - 1):
-        rid = 0
-        for i in range(b[j], b[j + 1]):
-            if i > b[j] and not key[by_rank[i]] > key[by_rank[i - 1]]:
-                rid += 1
-            rounds[by_rank[i]] = rid
-        n_rounds.append(rid + 1)
+    rounds, n_rounds = _rounds(rank, key, b, n)
     enc = _Encoder()
     for j, count in enumerate(n_rounds):
         enc.below(count - 1, b[j + 1] - b[j])
@@ -128,8 +136,10 @@ def naive_encode_forest_rounds(parent, rank, tets, boundary, points, density) ->
     return head + enc.finish()
 
 
-def _parents(enc, parent, rank, k, n, nbrs, flag_model, index_model):
-    """Pass 2 of both codings: every merge's parent among the live neighbours, in rank order."""
+def _parents(enc, parent, rank, k, n, nbrs, flag_model, index_model, order=None, absorb=None):
+    """Pass 2 of every coding: every merge's parent among the live neighbours, in rank order
+    (``order(v, candidates)``: coding 3's order instead of the count's; ``absorb(v, p)`` after the
+    merge of v into p)."""
     rep = list(range(n))  # representative (live ancestor) of every vertex, updated after each merge
     children = [[] for _ in range(n)]
     for v in sorted(range(n), key=lambda x: rank[x])[:k]:
@@ -140,6 +150,8 @@ def _parents(enc, parent, rank, k, n, nbrs, flag_model, index_model):
         for tier, listed in enumerate((tier0, tier1)):
             skip = {v} | (set(tier0) if tier == 1 else set())
             cand = sorted({x for x in listed if x not in skip}, key=lambda x: (-listed.count(x), x))
+            if order is not None:
+                cand = order(v, cand)
             if not cand:
                 continue
             m = len(cand)
@@ -155,3 +167,114 @@ def _parents(enc, parent, rank, k, n, nbrs, flag_model, index_model):
             enc.below(p, n)
         children[p].append(v)
         rep = [p if x == v else x for x in rep]
+        if absorb is not None:
+            absorb(v, p)
+
+
+# -- forest coding 3 (format 7) ----------------------------------------------------------------------
+# Every float as the kernels compute it: the same IEEE double operations in the same order
+# (Python evaluates a - b + c as (a - b) + c, as the kernels do without fastmath).
+
+QUADRIC_SCALAR_SCALE, PROXY_BINS, PHASES, BUCKET_CLASSES = 0.01, 16, 16, 8
+
+
+def naive_quadrics(tets, points, density):
+    """(q, u): every vertex's 15 quadric terms over its tets and its normalised (x, y, z, value)."""
+    pts = [[float(c) for c in p] for p in points]
+    val = [float(d) for d in density]
+    n = len(pts)
+    if n == 0:
+        return [], []
+    lo = [min(p[c] for p in pts) for c in range(3)]
+    hi = [max(p[c] for p in pts) for c in range(3)]
+    dx, dy, dz = hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]
+    diag = math.sqrt(dx * dx + dy * dy + dz * dz)
+    diag = diag if diag > 0 and math.isfinite(diag) else 1.0
+    s_lo, s_hi = min(val), max(val)
+    srange = s_hi - s_lo
+    srange = srange if srange > 0 and math.isfinite(srange) else 1.0
+    u = [[(p[c] - lo[c]) / diag for c in range(3)] + [QUADRIC_SCALAR_SCALE * ((s - s_lo) / srange)]
+         for p, s in zip(pts, val)]
+    q = [[0.0] * 15 for _ in range(n)]
+    for t in tets:
+        a, b, c, d = (int(x) for x in t)
+        p0, p1, p2, p3 = (u[b][i] - u[a][i] for i in range(4))
+        q0, q1, q2, q3 = (u[c][i] - u[a][i] for i in range(4))
+        r0, r1, r2, r3 = (u[d][i] - u[a][i] for i in range(4))
+        m01, m02, m03 = q0 * r1 - q1 * r0, q0 * r2 - q2 * r0, q0 * r3 - q3 * r0
+        m12, m13, m23 = q1 * r2 - q2 * r1, q1 * r3 - q3 * r1, q2 * r3 - q3 * r2
+        nrm = [p1 * m23 - p2 * m13 + p3 * m12, -(p0 * m23 - p2 * m03 + p3 * m02),
+               p0 * m13 - p1 * m03 + p3 * m01, -(p0 * m12 - p1 * m02 + p2 * m01)]
+        w = abs(nrm[3])
+        length = math.sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2] + nrm[3] * nrm[3])
+        if not (length > 0 and w > 0 and length < math.inf):
+            continue
+        nrm = [x / length for x in nrm]
+        e = -(nrm[0] * u[a][0] + nrm[1] * u[a][1] + nrm[2] * u[a][2] + nrm[3] * u[a][3])
+        wn = [w * x for x in nrm]
+        we = w * e
+        terms = [wn[r] * nrm[c] for r in range(4) for c in range(r, 4)] + [we * x for x in nrm] + [we * e]
+        for x in (a, b, c, d):
+            for j in range(15):
+                q[x][j] += terms[j]
+    return q, u
+
+
+def naive_quadric_at(qv, ux):
+    a0, a1, a2, a3 = ux
+    s = (qv[0] * a0 * a0 + qv[4] * a1 * a1 + qv[7] * a2 * a2 + qv[9] * a3 * a3
+         + 2.0 * (qv[1] * a0 * a1 + qv[2] * a0 * a2 + qv[3] * a0 * a3
+                  + qv[5] * a1 * a2 + qv[6] * a1 * a3 + qv[8] * a2 * a3)
+         + 2.0 * (qv[10] * a0 + qv[11] * a1 + qv[12] * a2 + qv[13] * a3) + qv[14])
+    return math.inf if s != s else s
+
+
+def naive_encode_forest_on_geometry(parent, rank, tets, boundary, points, density) -> bytes:
+    """Forest coding 3 (format 7): coding 2's rounds and parents; a round is coded as its phase in
+    the context of (bucket, quantile of the vertex's cheapest merge), then its place in the phase;
+    the candidate parents are ordered by the merged vertex's quadric at them (boundary vertices:
+    boundary candidates first), the quadrics summed along the replay."""
+    parent, rank = [int(x) for x in parent], [int(x) for x in rank]
+    n = len(parent)
+    k = sum(r != ROOT_RANK for r in rank)
+    head = struct.pack("<4sII", b"GFR7", n, k)
+    if k == 0:
+        return head
+    nbrs = _neighbours(tets, n)
+    q, u = naive_quadrics(tets, points, density)
+    boundary = [bool(x) for x in boundary]
+    cheapest = [min([naive_quadric_at(q[v], u[x]) for x in nbrs[v] if not (boundary[v] and not boundary[x])],
+                    default=math.inf) for v in range(n)]
+    proxy_bin = [0] * n
+    for place, v in enumerate(sorted(range(n), key=lambda v: (cheapest[v], v))):
+        proxy_bin[v] = place * PROXY_BINS // n
+    key = naive_key(points, density)
+    b = _bounds(n, k)
+    rounds, n_rounds = _rounds(rank, key, b, n)
+    enc = _Encoder()
+    for j, count in enumerate(n_rounds):
+        enc.below(count - 1, b[j + 1] - b[j])
+    bucket_model, phase_model = {}, {}
+    symbol = []
+    for v in range(n):
+        s = _bucket_symbol(enc, bucket_model, nbrs, boundary, symbol, b, v, rank[v])
+        if s != ROOT_SYMBOL and n_rounds[s] > 1:
+            big_r = n_rounds[s]
+            p = min(PHASES, big_r)
+            phase = rounds[v] * p // big_r
+            enc.sym(phase_model.setdefault((min(s, BUCKET_CLASSES - 1), proxy_bin[v]), [1 << 14] * 16), 0, 4, phase)
+            lo, hi = -(-phase * big_r // p), -(-(phase + 1) * big_r // p)
+            if hi - lo > 1:
+                enc.below(rounds[v] - lo, hi - lo)
+
+    def order(v, cand):
+        if len(cand) < 2:
+            return list(cand)
+        score = {x: naive_quadric_at(q[v], u[x]) + (1e300 if boundary[v] and not boundary[x] else 0.0) for x in cand}
+        return sorted(cand, key=lambda x: (score[x], x))
+
+    def absorb(v, p):
+        q[p] = [a + c for a, c in zip(q[p], q[v])]
+
+    _parents(enc, parent, rank, k, n, nbrs, [1 << 14] * (2 * FLAG_CONTEXTS), {}, order=order, absorb=absorb)
+    return head + enc.finish()

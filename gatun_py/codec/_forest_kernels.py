@@ -600,7 +600,8 @@ def vertex_quadrics(tets, points, density):
             s_lo = s
         if s > s_hi:
             s_hi = s
-    diag = np.sqrt((hi[0] - lo[0]) ** 2 + (hi[1] - lo[1]) ** 2 + (hi[2] - lo[2]) ** 2)
+    dx, dy, dz = hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]
+    diag = np.sqrt(dx * dx + dy * dy + dz * dz)
     if not diag > 0 or not np.isfinite(diag):
         diag = 1.0
     srange = s_hi - s_lo

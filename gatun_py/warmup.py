@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .codec import LevelPayload, TetcReader, encode_tetc
-from .codec.forest import FOREST_CODING, decode_forest_on_mesh, decode_forest_rounds
+from .codec.forest import FOREST_CODING, decode_forest_on_geometry, decode_forest_on_mesh, decode_forest_rounds
 from .errors import TetcError
 from .isosurface.extract import isosurface
 from .mesh import mesh_batches
@@ -116,17 +116,20 @@ FOREST_PARENT_RANK = ([1, 1, 1, 2, 2], [0, ROOT_RANK, 3, 1, 2])
 FOREST_SECTION = b"GFR3\x05\x00\x00\x00\x04\x00\x00\x00\x00\x01\xf8\x1c\x03\x1a\xb7z\x90\x00\x00"
 
 
-# The same forest in coding 2 (format 6, what tetc writes), over these points and zero values.
+# The same forest in coding 2 (format 6), over these points and zero values, and in coding 3
+# (format 7, what tetc writes).
 FOREST_POINTS = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], np.float32)
 FOREST_SECTION_ROUNDS = b"GFR6\x05\x00\x00\x00\x04\x00\x00\x00\x00\x01\xf7\xfe\x03\x1a\xb7z\x90\x00\x00"
+FOREST_SECTION_GEOMETRY = b"GFR7\x05\x00\x00\x00\x04\x00\x00\x00\x00\x01\xf7\xfe\x03\x1a\xb8\x0f\x10\x00\x00"
 
 
 def _forest_decoder() -> str:
     # the coding tetc writes today only: a file of an older format compiles its own forest coding
     # when a render first needs it, instead of every first render paying for both
-    if FOREST_CODING == 2:
-        decode_forest_rounds(FOREST_SECTION_ROUNDS, FOREST_TETS, 5, boundary=np.ones(5, bool), points=FOREST_POINTS,
-                             density=np.zeros(5, np.float32))
+    if FOREST_CODING >= 2:
+        decode, data = ((decode_forest_on_geometry, FOREST_SECTION_GEOMETRY) if FOREST_CODING == 3
+                        else (decode_forest_rounds, FOREST_SECTION_ROUNDS))
+        decode(data, FOREST_TETS, 5, boundary=np.ones(5, bool), points=FOREST_POINTS, density=np.zeros(5, np.float32))
     else:
         decode_forest_on_mesh(FOREST_SECTION, FOREST_TETS, 5, boundary=np.ones(5, bool))
     return "the merge-forest decoder"

@@ -195,9 +195,12 @@ def naive_quadrics(tets, points, density):
     srange = srange if srange > 0 and math.isfinite(srange) else 1.0
     u = [[(p[c] - lo[c]) / diag for c in range(3)] + [QUADRIC_SCALAR_SCALE * ((s - s_lo) / srange)]
          for p, s in zip(pts, val)]
-    q = [[0.0] * 15 for _ in range(n)]
-    for t in tets:
-        a, b, c, d = (int(x) for x in t)
+    def volume(a, b, c, d):
+        (p0, p1, p2), (q0, q1, q2), (r0, r1, r2) = ([u[x][i] - u[a][i] for i in range(3)] for x in (b, c, d))
+        w = abs(p0 * (q1 * r2 - q2 * r1) - p1 * (q0 * r2 - q2 * r0) + p2 * (q0 * r1 - q1 * r0))
+        return w if w < math.inf else 0.0
+
+    def terms(a, b, c, d):
         p0, p1, p2, p3 = (u[b][i] - u[a][i] for i in range(4))
         q0, q1, q2, q3 = (u[c][i] - u[a][i] for i in range(4))
         r0, r1, r2, r3 = (u[d][i] - u[a][i] for i in range(4))
@@ -205,28 +208,52 @@ def naive_quadrics(tets, points, density):
         m12, m13, m23 = q1 * r2 - q2 * r1, q1 * r3 - q3 * r1, q2 * r3 - q3 * r2
         nrm = [p1 * m23 - p2 * m13 + p3 * m12, -(p0 * m23 - p2 * m03 + p3 * m02),
                p0 * m13 - p1 * m03 + p3 * m01, -(p0 * m12 - p1 * m02 + p2 * m01)]
-        w = abs(nrm[3])
+        w = volume(a, b, c, d)
         length = math.sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2] + nrm[3] * nrm[3])
         if not (length > 0 and w > 0 and length < math.inf):
-            continue
+            return None
         nrm = [x / length for x in nrm]
-        e = -(nrm[0] * u[a][0] + nrm[1] * u[a][1] + nrm[2] * u[a][2] + nrm[3] * u[a][3])
         wn = [w * x for x in nrm]
-        we = w * e
-        terms = [wn[r] * nrm[c] for r in range(4) for c in range(r, 4)] + [we * x for x in nrm] + [we * e]
-        for x in (a, b, c, d):
-            for j in range(15):
-                q[x][j] += terms[j]
+        return [wn[r] * nrm[c] for r in range(4) for c in range(r, 4)]
+
+    # per vertex: integer sums in units of 2^-36 of its largest tet weight (any tet order gives them)
+    corners = [sorted(int(x) for x in t) for t in tets]
+    wmax = [0.0] * n
+    for t in corners:
+        w = volume(*t)
+        for x in t:
+            wmax[x] = max(wmax[x], w)
+    unit = [2.0**36 / w if w > 0 and 2.0**36 / w < math.inf else 0.0 for w in wmax]
+    fixed = [[0] * 10 for _ in range(n)]
+    for t in corners:
+        tt = terms(*t)
+        if tt is None:
+            continue
+        for x in t:
+            fixed[x] = [acc + int(term * unit[x]) for acc, term in zip(fixed[x], tt)]
+    q = [[float(acc) * (wmax[v] / 2.0**36) for acc in fixed[v]] + [0.0] * 5 for v in range(n)]
     return q, u
 
 
-def naive_quadric_at(qv, ux):
-    a0, a1, a2, a3 = ux
+def naive_quadric_at(qv, uv, ux):
+    """A quadric kept about its vertex (at uv) evaluated at ux."""
+    a0, a1, a2, a3 = (x - y for x, y in zip(ux, uv))
     s = (qv[0] * a0 * a0 + qv[4] * a1 * a1 + qv[7] * a2 * a2 + qv[9] * a3 * a3
          + 2.0 * (qv[1] * a0 * a1 + qv[2] * a0 * a2 + qv[3] * a0 * a3
                   + qv[5] * a1 * a2 + qv[6] * a1 * a3 + qv[8] * a2 * a3)
          + 2.0 * (qv[10] * a0 + qv[11] * a1 + qv[12] * a2 + qv[13] * a3) + qv[14])
     return math.inf if s != s else s
+
+
+def naive_absorb(qv, qp, uv, up):
+    """qp + qv, qv moved from about uv to about up (e = up - uv: b += A e, c += e^T A e + 2 b.e)."""
+    e = [x - y for x, y in zip(up, uv)]
+    rows = ((0, 1, 2, 3), (1, 4, 5, 6), (2, 5, 7, 8), (3, 6, 8, 9))
+    ae = [qv[r[0]] * e[0] + qv[r[1]] * e[1] + qv[r[2]] * e[2] + qv[r[3]] * e[3] for r in rows]
+    c = (qv[14] + (ae[0] * e[0] + ae[1] * e[1] + ae[2] * e[2] + ae[3] * e[3])
+         + 2.0 * (qv[10] * e[0] + qv[11] * e[1] + qv[12] * e[2] + qv[13] * e[3]))
+    return ([a + b for a, b in zip(qp[:10], qv[:10])] + [qp[10 + i] + (qv[10 + i] + ae[i]) for i in range(4)]
+            + [qp[14] + c])
 
 
 def naive_encode_forest_on_geometry(parent, rank, tets, boundary, points, density) -> bytes:
@@ -243,7 +270,7 @@ def naive_encode_forest_on_geometry(parent, rank, tets, boundary, points, densit
     nbrs = _neighbours(tets, n)
     q, u = naive_quadrics(tets, points, density)
     boundary = [bool(x) for x in boundary]
-    cheapest = [min([naive_quadric_at(q[v], u[x]) for x in nbrs[v] if not (boundary[v] and not boundary[x])],
+    cheapest = [min([naive_quadric_at(q[v], u[v], u[x]) for x in nbrs[v] if not (boundary[v] and not boundary[x])],
                     default=math.inf) for v in range(n)]
     proxy_bin = [0] * n
     for place, v in enumerate(sorted(range(n), key=lambda v: (cheapest[v], v))):
@@ -270,11 +297,11 @@ def naive_encode_forest_on_geometry(parent, rank, tets, boundary, points, densit
     def order(v, cand):
         if len(cand) < 2:
             return list(cand)
-        score = {x: naive_quadric_at(q[v], u[x]) + (1e300 if boundary[v] and not boundary[x] else 0.0) for x in cand}
+        score = {x: naive_quadric_at(q[v], u[v], u[x]) + (1e300 if boundary[v] and not boundary[x] else 0.0) for x in cand}
         return sorted(cand, key=lambda x: (score[x], x))
 
     def absorb(v, p):
-        q[p] = [a + c for a, c in zip(q[p], q[v])]
+        q[p] = naive_absorb(q[v], q[p], u[v], u[p])
 
     _parents(enc, parent, rank, k, n, nbrs, [1 << 14] * (2 * FLAG_CONTEXTS), {}, order=order, absorb=absorb)
     return head + enc.finish()

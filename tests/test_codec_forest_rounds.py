@@ -166,13 +166,17 @@ def test_bad_bytes_raise_typed_errors_never_out_of_bounds(coding):
             pass
 
 
-def test_warmup_section_is_what_the_encoder_writes():
-    from gatun_py.warmup import FOREST_PARENT_RANK, FOREST_POINTS, FOREST_SECTION_ROUNDS, FOREST_TETS
+@pytest.mark.parametrize("coding", sorted(CODINGS))
+def test_warmup_section_is_what_the_encoder_writes(coding):
+    from gatun_py.warmup import (FOREST_PARENT_RANK, FOREST_POINTS, FOREST_SECTION_GEOMETRY, FOREST_SECTION_ROUNDS,
+                                 FOREST_TETS)
 
+    encode, decode, _, _ = CODINGS[coding]
+    section = FOREST_SECTION_ROUNDS if coding == 2 else FOREST_SECTION_GEOMETRY
     parent, rank = (np.array(x) for x in FOREST_PARENT_RANK)
     geo = dict(points=FOREST_POINTS, density=np.zeros(5, np.float32))
-    assert encode_forest_rounds(parent, rank, FOREST_TETS, boundary=np.ones(5, bool), **geo) == FOREST_SECTION_ROUNDS
-    p, r = decode_forest_rounds(FOREST_SECTION_ROUNDS, FOREST_TETS, 5, boundary=np.ones(5, bool), **geo)
+    assert encode(parent, rank, FOREST_TETS, boundary=np.ones(5, bool), **geo) == section
+    p, r = decode(section, FOREST_TETS, 5, boundary=np.ones(5, bool), **geo)
     assert p.tolist() == parent.tolist() and r.tolist() == rank.tolist()
 
 
@@ -199,3 +203,20 @@ def test_a_decode_after_read_forest_reuses_the_geometry_it_decoded():
         assert a.first == b.first
         assert np.array_equal(a.tets, b.tets) and np.array_equal(a.points, b.points)
         assert np.array_equal(a.density, b.density)
+
+
+@settings(max_examples=20, deadline=None)
+@given(mesh=mesh_strategy(), seed=st.integers(0, 2**31))
+def test_coding_3_ignores_the_tets_order_and_orientation(mesh, seed):
+    """The decoder sees the level's tets in the connectivity decoder's order and corner order, the
+    encoder in the input's: the quadrics (float sums) must not depend on either."""
+    f = decimate(mesh, rounds=4)
+    b = _boundary(mesh.tets, mesh.n_points)
+    geo = dict(boundary=b, points=mesh.points, density=mesh.density)
+    data = encode_forest_on_geometry(f.parent, f.rank, mesh.tets, **geo)
+    rng = np.random.default_rng(seed)
+    shuffled = mesh.tets[rng.permutation(mesh.n_tets)]
+    shuffled = np.take_along_axis(shuffled, np.argsort(rng.random(shuffled.shape), axis=1), axis=1)
+    assert encode_forest_on_geometry(f.parent, f.rank, shuffled, **geo) == data
+    p, r = decode_forest_on_geometry(data, shuffled, mesh.n_points, **geo)
+    assert np.array_equal(p, f.parent) and np.array_equal(r, f.rank)

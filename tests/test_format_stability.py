@@ -1,6 +1,6 @@
 """Files written by earlier versions of the format still decode bit-exactly, and reference renders hold.
 
-``tests/data/post_v{2,3,4,5,6}.tetc`` (formats 2 to 6, each written by ``tests/data/make_golden.py N``
+``tests/data/post_v{2,3,4,5,6,7}.tetc`` (formats 2 to 7, each written by ``tests/data/make_golden.py N``
 with the code of its time: format 3 at commit e8af4f5) hold float64 coordinates and point arrays of
 four dtypes/shapes; ``post_v{N}.json`` the hashes of every level's decoded points, arrays, tets and
 forest.
@@ -59,7 +59,7 @@ def test_format_1_decodes_bit_exactly(level):
     _check_forest(r, level, want)
 
 
-GOLDEN_VERSIONS = (2, 3, 4, 5, 6)  # one golden file per format version since 2, each written when it came
+GOLDEN_VERSIONS = (2, 3, 4, 5, 6, 7)  # one golden file per format version since 2, each written when it came
 GOLDEN_OF = {v: DATA / f"post_v{v}.tetc" for v in GOLDEN_VERSIONS}
 EXPECTED_OF = {v: json.loads((DATA / f"post_v{v}.json").read_text()) for v in GOLDEN_VERSIONS}
 
@@ -85,15 +85,28 @@ def test_each_format_decodes_bit_exactly(version, level):
     _check_forest(r, level, want)
 
 
-@pytest.mark.parametrize("old, new", [(3, 4), (4, 5), (5, 6)])
+@pytest.mark.parametrize("old, new", [(3, 4), (4, 5), (5, 6), (6, 7)])
 def test_consecutive_formats_hold_the_same_mesh(old, new):
-    """Formats 4 to 6 changed only how the sections are coded (4: geometry; 5: connectivity and
-    geometry; 6: the forest): the same mesh decodes from the golden file of each."""
+    """Formats 4 to 7 changed only how the sections are coded (4: geometry; 5: connectivity and
+    geometry; 6 and 7: the forest): the same mesh decodes from the golden file of each."""
     a, b = (TetcReader(GOLDEN_OF[v]).decode_mesh(0) for v in (old, new))
     np.testing.assert_array_equal(a.tets, b.tets)
     np.testing.assert_array_equal(a.points.view(np.int64), b.points.view(np.int64))
     for name in a.point_data:
         np.testing.assert_array_equal(a.point_data[name], b.point_data[name])
+
+
+def test_forest_codings_2_and_3_hold_the_same_forest():
+    """Formats 6 and 7 store the same decimation (rounds forest) in forest codings 2 and 3, and the
+    same connectivity, so every level's forest decodes to the same arrays from both."""
+    a, b = (TetcReader(GOLDEN_OF[v]) for v in (6, 7))
+    assert len(a.levels) == len(b.levels)
+    for level in range(len(a.levels)):
+        fa, fb = a.read_forest(level), b.read_forest(level)
+        assert (fa is None) == (fb is None)
+        if fa is not None:
+            np.testing.assert_array_equal(fa[0], fb[0])
+            np.testing.assert_array_equal(fa[1], fb[1])
 
 
 @pytest.mark.parametrize("version", GOLDEN_VERSIONS)

@@ -561,13 +561,86 @@ def decode_rounds_kernel(st, data, probs, start, nbrs, boundary, k, symbol, rid)
 # total order (a NaN score counts as the largest).
 
 QUADRIC_SCALAR_SCALE = 0.01
-QUADRIC_TERMS = 15  # A's upper triangle (00 01 02 03 11 12 13 22 23 33), b (4), c
+QUADRIC_TERMS = 15  # A's upper triangle (00 01 02 03 11 12 13 22 23 33), b (4), c: about the vertex itself
+QUADRIC_A_TERMS = 10
 PROXY_BINS = 16  # quantiles of the cheapest merge's quadric error: the context of a round's phase
 PHASES = 16  # a round is coded as its phase (which sixteenth of the bucket's rounds) and its place in it
 BUCKET_CLASSES3 = 8  # buckets above 7 share the round phases' context
 _PHASE_BASE3 = N_BUCKET_CONTEXTS << BUCKET_BITS
 PASS1_MODEL_SIZE3 = _PHASE_BASE3 + BUCKET_CLASSES3 * PROXY_BINS * PHASES
 _BOUNDARY_MISMATCH = 1e300  # added to the score of an interior candidate of a boundary vertex
+
+
+FIXED_ONE = 2.0**36  # a vertex's largest tet weight in the integer sums (terms <= 4 weights: room for 2^20 tets)
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _sorted4(a, b, c, d):
+    """The four ids in ascending order (a sorting network)."""
+    if a > b:
+        a, b = b, a
+    if c > d:
+        c, d = d, c
+    if a > c:
+        a, c = c, a
+    if b > d:
+        b, d = d, b
+    if b > c:
+        b, c = c, b
+    return a, b, c, d
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _spatial_volume(u, a, b, c, d):
+    """|det| of the tet's spatial edges from corner a (6 x its volume, in normalised units)."""
+    p0, p1, p2 = u[b, 0] - u[a, 0], u[b, 1] - u[a, 1], u[b, 2] - u[a, 2]
+    q0, q1, q2 = u[c, 0] - u[a, 0], u[c, 1] - u[a, 1], u[c, 2] - u[a, 2]
+    r0, r1, r2 = u[d, 0] - u[a, 0], u[d, 1] - u[a, 1], u[d, 2] - u[a, 2]
+    w = abs(p0 * (q1 * r2 - q2 * r1) - p1 * (q0 * r2 - q2 * r0) + p2 * (q0 * r1 - q1 * r0))
+    return w if w < np.inf else 0.0  # NaN and inf: no weight
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _tet_terms(u, a, b, c, d, terms):
+    """The 10 terms of A of one tet's quadric (corners in id order): its volume times the squared
+    distance to the hyperplane through its corners in (x, y, z, value), about any of its corners
+    (the plane passes through them: no b, no c). False for a flat tet."""
+    # the three edges from corner a in (x, y, z, value)
+    p0, p1, p2, p3 = u[b, 0] - u[a, 0], u[b, 1] - u[a, 1], u[b, 2] - u[a, 2], u[b, 3] - u[a, 3]
+    q0, q1, q2, q3 = u[c, 0] - u[a, 0], u[c, 1] - u[a, 1], u[c, 2] - u[a, 2], u[c, 3] - u[a, 3]
+    r0, r1, r2, r3 = u[d, 0] - u[a, 0], u[d, 1] - u[a, 1], u[d, 2] - u[a, 2], u[d, 3] - u[a, 3]
+    # 2x2 minors of the last two edges, then the generalised cross product (the hyperplane's
+    # normal in 4D: n_j = (-1)^j det of the edges without column j)
+    m01 = q0 * r1 - q1 * r0
+    m02 = q0 * r2 - q2 * r0
+    m03 = q0 * r3 - q3 * r0
+    m12 = q1 * r2 - q2 * r1
+    m13 = q1 * r3 - q3 * r1
+    m23 = q2 * r3 - q3 * r2
+    n0 = p1 * m23 - p2 * m13 + p3 * m12
+    n1 = -(p0 * m23 - p2 * m03 + p3 * m02)
+    n2 = p0 * m13 - p1 * m03 + p3 * m01
+    n3 = -(p0 * m12 - p1 * m02 + p2 * m01)
+    w = _spatial_volume(u, a, b, c, d)
+    length = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2 + n3 * n3)
+    if not (length > 0 and w > 0 and length < np.inf):
+        return False
+    n0 /= length
+    n1 /= length
+    n2 /= length
+    n3 /= length
+    w0, w1, w2, w3 = w * n0, w * n1, w * n2, w * n3
+    terms[0] = w0 * n0
+    terms[1] = w0 * n1
+    terms[2] = w0 * n2
+    terms[3] = w0 * n3
+    terms[4] = w1 * n1
+    terms[5] = w1 * n2
+    terms[6] = w1 * n3
+    terms[7] = w2 * n2
+    terms[8] = w2 * n3
+    terms[9] = w3 * n3
+    return True
 
 
 @njit(cache=True, nogil=True)
@@ -611,59 +684,44 @@ def vertex_quadrics(tets, points, density):
         for c in range(3):
             u[v, c] = (np.float64(points[v, c]) - lo[c]) / diag
         u[v, 3] = QUADRIC_SCALAR_SCALE * ((np.float64(density[v]) - s_lo) / srange)
+    # Sums over a vertex's tets, independent of the tets' order and orientation (the encoder has
+    # the input's, the decoder the connectivity decoder's): every tet's terms from its corners in
+    # id order, summed as integers (exact, so in any order) in units of 2^-FIXED_BITS of the
+    # vertex's largest tet weight (the first pass), then back to floats.
+    wmax = np.zeros(n)
     for t in range(tets.shape[0]):
-        a = tets[t, 0]
-        b, c, d = tets[t, 1], tets[t, 2], tets[t, 3]
-        # the three edges from corner a in (x, y, z, value)
-        p0, p1, p2, p3 = u[b, 0] - u[a, 0], u[b, 1] - u[a, 1], u[b, 2] - u[a, 2], u[b, 3] - u[a, 3]
-        q0, q1, q2, q3 = u[c, 0] - u[a, 0], u[c, 1] - u[a, 1], u[c, 2] - u[a, 2], u[c, 3] - u[a, 3]
-        r0, r1, r2, r3 = u[d, 0] - u[a, 0], u[d, 1] - u[a, 1], u[d, 2] - u[a, 2], u[d, 3] - u[a, 3]
-        # 2x2 minors of the last two edges, then the generalised cross product (the hyperplane's
-        # normal in 4D: n_j = (-1)^j det of the edges without column j)
-        m01 = q0 * r1 - q1 * r0
-        m02 = q0 * r2 - q2 * r0
-        m03 = q0 * r3 - q3 * r0
-        m12 = q1 * r2 - q2 * r1
-        m13 = q1 * r3 - q3 * r1
-        m23 = q2 * r3 - q3 * r2
-        n0 = p1 * m23 - p2 * m13 + p3 * m12
-        n1 = -(p0 * m23 - p2 * m03 + p3 * m02)
-        n2 = p0 * m13 - p1 * m03 + p3 * m01
-        n3 = -(p0 * m12 - p1 * m02 + p2 * m01)
-        # weight: the tet's volume (|det| of its spatial edges, up to a constant) = |n3|
-        w = abs(n3)
-        length = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2 + n3 * n3)
-        if not (length > 0 and w > 0 and length < np.inf):
+        a, b, c, d = _sorted4(tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3])
+        w = _spatial_volume(u, a, b, c, d)
+        for x in (a, b, c, d):
+            if w > wmax[x]:
+                wmax[x] = w
+    unit = np.empty(n)
+    for v in range(n):
+        unit[v] = FIXED_ONE / wmax[v] if wmax[v] > 0 else 0.0
+        if not unit[v] < np.inf:
+            unit[v] = 0.0
+    fixed = np.zeros((n, QUADRIC_A_TERMS), np.int64)
+    terms = np.empty(QUADRIC_A_TERMS)
+    for t in range(tets.shape[0]):
+        a, b, c, d = _sorted4(tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3])
+        if not _tet_terms(u, a, b, c, d, terms):
             continue
-        n0 /= length
-        n1 /= length
-        n2 /= length
-        n3 /= length
-        e = -(n0 * u[a, 0] + n1 * u[a, 1] + n2 * u[a, 2] + n3 * u[a, 3])
-        w0, w1, w2, w3, we = w * n0, w * n1, w * n2, w * n3, w * e
-        for x in (a, b, c, d):  # the same terms to the tet's four corners
-            q[x, 0] += w0 * n0
-            q[x, 1] += w0 * n1
-            q[x, 2] += w0 * n2
-            q[x, 3] += w0 * n3
-            q[x, 4] += w1 * n1
-            q[x, 5] += w1 * n2
-            q[x, 6] += w1 * n3
-            q[x, 7] += w2 * n2
-            q[x, 8] += w2 * n3
-            q[x, 9] += w3 * n3
-            q[x, 10] += we * n0
-            q[x, 11] += we * n1
-            q[x, 12] += we * n2
-            q[x, 13] += we * n3
-            q[x, 14] += we * e
+        for x in (a, b, c, d):
+            f = unit[x]
+            for j in range(QUADRIC_A_TERMS):
+                fixed[x, j] += np.int64(terms[j] * f)
+    for v in range(n):
+        back = wmax[v] / FIXED_ONE
+        for j in range(QUADRIC_A_TERMS):
+            q[v, j] = np.float64(fixed[v, j]) * back
     return q, u
 
 
 @njit(cache=True, nogil=True, _nrt=False)
 def _quadric_at(q, v, u, x):
-    """Vertex v's quadric at vertex x's (x, y, z, value): u^T A u + 2 b.u + c; NaN -> the largest."""
-    a0, a1, a2, a3 = u[x, 0], u[x, 1], u[x, 2], u[x, 3]
+    """Vertex v's quadric at vertex x: d^T A d + 2 b.d + c with d = u[x] - u[v] (quadrics are kept
+    about their own vertex: no cancellation of large terms); NaN -> the largest."""
+    a0, a1, a2, a3 = u[x, 0] - u[v, 0], u[x, 1] - u[v, 1], u[x, 2] - u[v, 2], u[x, 3] - u[v, 3]
     s = (q[v, 0] * a0 * a0 + q[v, 4] * a1 * a1 + q[v, 7] * a2 * a2 + q[v, 9] * a3 * a3
          + 2.0 * (q[v, 1] * a0 * a1 + q[v, 2] * a0 * a2 + q[v, 3] * a0 * a3
                   + q[v, 5] * a1 * a2 + q[v, 6] * a1 * a3 + q[v, 8] * a2 * a3)
@@ -843,10 +901,23 @@ def _dec_parent3(st, data, probs, tier, cand, score, m):
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def _absorb(q, p, v):
-    """p's quadric += v's (the decimator's quadric of a merge target)."""
-    for j in range(QUADRIC_TERMS):
+def _absorb(q, u, p, v):
+    """p's quadric += v's (the decimator's quadric of a merge target), v's moved from about v to
+    about p: with e = u[p] - u[v], A stays, b += A e, c += e^T A e + 2 b.e."""
+    e0, e1, e2, e3 = u[p, 0] - u[v, 0], u[p, 1] - u[v, 1], u[p, 2] - u[v, 2], u[p, 3] - u[v, 3]
+    ae0 = q[v, 0] * e0 + q[v, 1] * e1 + q[v, 2] * e2 + q[v, 3] * e3
+    ae1 = q[v, 1] * e0 + q[v, 4] * e1 + q[v, 5] * e2 + q[v, 6] * e3
+    ae2 = q[v, 2] * e0 + q[v, 5] * e1 + q[v, 7] * e2 + q[v, 8] * e3
+    ae3 = q[v, 3] * e0 + q[v, 6] * e1 + q[v, 8] * e2 + q[v, 9] * e3
+    for j in range(QUADRIC_A_TERMS):
         q[p, j] += q[v, j]
+    c = (q[v, 14] + (ae0 * e0 + ae1 * e1 + ae2 * e2 + ae3 * e3)
+         + 2.0 * (q[v, 10] * e0 + q[v, 11] * e1 + q[v, 12] * e2 + q[v, 13] * e3))
+    q[p, 10] += q[v, 10] + ae0
+    q[p, 11] += q[v, 11] + ae1
+    q[p, 12] += q[v, 12] + ae2
+    q[p, 13] += q[v, 13] + ae3
+    q[p, 14] += c
 
 
 @njit(cache=True)
@@ -876,7 +947,7 @@ def _enc_parents3(st, out, start, nbrs, boundary, parent, rank, k, q, u):
         uf[v] = p
         next_sibling[v] = first_child[p]
         first_child[p] = v
-        _absorb(q, p, v)
+        _absorb(q, u, p, v)
 
 
 @njit(cache=True, nogil=True)
@@ -903,5 +974,5 @@ def decode_parents3_kernel(st, data, start, nbrs, boundary, k, parent, rank, of_
         uf[v] = p
         next_sibling[v] = first_child[p]
         first_child[p] = v
-        _absorb(q, p, v)
+        _absorb(q, u, p, v)
     return True

@@ -4,11 +4,12 @@ Run as ``python bench/bench_forest.py [--quick] [names...]``; writes ``bench/sec
 
 For each mesh (samples, then the gmsh meshes of ``bench/gmsh_meshes.py``): the forest is built
 once with ``decimate`` (cached in ``bench/out/forests/``, never committed) and its levels with
-``build_levels``; every level is encoded as ``tetc compress`` writes it (``encode_level``), and its
-forest section is compared with the format-2 coding of the same forest (LZMA, ``encode_forest``).
-Also the lower bound of any coding that treats the order inside a rank bucket as arbitrary
-(log2 of the bucket sizes' factorials), and the time to encode and to decode level 0's forest
-(decode = ``TetcReader.read_forest``: the level's connectivity, then the forest).
+``build_levels``; every level is encoded as ``tetc compress`` writes it (``encode_level``: forest
+coding 3), and its forest section is compared with codings 2 and 1 and the format-2 coding of the
+same forest (LZMA, ``encode_forest``). Also the lower bound of any coding that treats the order
+inside a rank bucket as arbitrary (log2 of the bucket sizes' factorials), and the time to encode
+and to decode level 0's forest (decode = ``TetcReader.read_forest``: the level's connectivity and
+geometry, then the forest).
 """
 
 from __future__ import annotations
@@ -30,7 +31,8 @@ import gmsh_meshes  # noqa: E402
 from common import table  # noqa: E402
 from conftest import SAMPLE_FILES, load_sample  # noqa: E402
 
-from gatun_py.codec.forest import (ROOT_RANK, decode_forest, decode_forest_on_mesh, encode_forest,  # noqa: E402
+from gatun_py.codec.forest import (ROOT_RANK, decode_forest, decode_forest_on_geometry,  # noqa: E402
+                                   decode_forest_on_mesh, decode_forest_rounds, encode_forest, encode_forest_on_geometry,
                                    encode_forest_on_mesh, encode_forest_rounds)
 from gatun_py.codec.tetcfile import LevelPayload, TetcReader, encode_level, encode_tetc  # noqa: E402
 from gatun_py.mesh import read_mesh  # noqa: E402
@@ -145,12 +147,13 @@ def rank_predictability(mesh, forest, vertex_order):
 
 
 def _level_forest_bytes(forest, mesh):
-    """Bytes of every level's mesh and forest section as ``tetc compress`` writes them (format 6),
-    the same forests in coding 1 (format 3 to 5) and LZMA (format 2), and the payloads."""
+    """Bytes of every level's mesh and forest section as ``tetc compress`` writes them (format 7:
+    forest coding 3), the same forests in coding 2 (format 6), coding 1 (format 3 to 5) and LZMA
+    (format 2), and the payloads."""
     levels = build_levels(mesh, forest)
     payloads = [LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
                 for x, f in zip(levels, storage_forests(levels))]
-    mesh_bytes, new_f, c1_f, old_f = [], [], [], []
+    mesh_bytes, new_f, c2_f, c1_f, old_f = [], [], [], [], []
     for p in payloads:
         e = encode_level(p)
         mesh_bytes.append(sum(len(v) for k, v in e.sections.items() if not k.endswith("/forest")))
@@ -160,33 +163,47 @@ def _level_forest_bytes(forest, mesh):
             dec_of = np.empty(len(vo), np.int64)
             dec_of[vo] = np.arange(len(vo))
             parent, rank = (np.asarray(a) for a in p.forest)
-            parent, rank = dec_of[parent[vo]], rank[vo]
+            parent, rank, tets = dec_of[parent[vo]], rank[vo], dec_of[p.mesh.tets]
             old_f.append(len(encode_forest(parent, rank)))
             bnd = np.arange(len(vo)) < e.meta["boundary_vertices"]
-            c1_f.append(len(encode_forest_on_mesh(parent, rank, dec_of[p.mesh.tets], boundary=bnd)))
+            c1_f.append(len(encode_forest_on_mesh(parent, rank, tets, boundary=bnd)))
+            c2_f.append(len(encode_forest_rounds(parent, rank, tets, boundary=bnd, points=p.mesh.points[vo],
+                                                 density=p.mesh.density[vo])))
         else:
             old_f.append(0)
             c1_f.append(0)
-    return levels, payloads, mesh_bytes, new_f, c1_f, old_f
+            c2_f.append(0)
+    return levels, payloads, mesh_bytes, new_f, c2_f, c1_f, old_f
 
 
 def measure(name):
-    """Coding 2 of the rounds forest (what format 6 writes) against coding 1 of the greedy forest
-    (what formats 3 to 5 wrote), same run."""
+    """Coding 3 of the rounds forest (what format 7 writes) against coding 2 of the same forest
+    (format 6) and coding 1 of the greedy forest (formats 3 to 5), same run."""
     mesh = load(name)
     n = mesh.n_points
     greedy, t_greedy = forest_of(name, mesh, 0)
     forest, t_forest = forest_of(name, mesh)
-    levels, payloads, mesh_bytes, new_f, _, old_f = _level_forest_bytes(forest, mesh)
-    _, _, g_mesh_bytes, _, g_c1_f, _ = _level_forest_bytes(greedy, mesh)
+    levels, payloads, mesh_bytes, new_f, c2_f, _, old_f = _level_forest_bytes(forest, mesh)
+    _, _, g_mesh_bytes, _, _, g_c1_f, _ = _level_forest_bytes(greedy, mesh)
     on_boundary = np.zeros(mesh.n_points, bool)
     on_boundary[mesh.boundary_faces().ravel()] = True
-    enc_forest_s = cpu_best(lambda: encode_forest_rounds(forest.parent, forest.rank, mesh.tets, boundary=on_boundary,
-                                                         points=mesh.points, density=mesh.density))
+    enc_forest_s = cpu_best(lambda: encode_forest_on_geometry(forest.parent, forest.rank, mesh.tets,
+                                                              boundary=on_boundary, points=mesh.points,
+                                                              density=mesh.density))
     reader = TetcReader(encode_tetc(payloads[:1]))
     dec_s = cpu_best(lambda: reader.read_forest(0))
     geo_s = cpu_best(lambda: reader._level_geometry(0))
     conn_s = cpu_best(lambda: reader._level_tets(0))
+    # the forest alone in codings 3 and 2, from the decoded level (decode order)
+    tets, points, density = reader._level_geometry(0)
+    lv = reader.levels[0]
+    bnd = np.arange(n) < lv["boundary_vertices"]
+    geo = dict(boundary=bnd, points=points, density=density)
+    p0, r0 = reader.read_forest(0)
+    c3_bytes = encode_forest_on_geometry(p0, r0, tets, **geo)
+    c2_bytes = encode_forest_rounds(p0, r0, tets, **geo)
+    c3_alone = cpu_best(lambda: decode_forest_on_geometry(c3_bytes, tets, n, **geo))
+    c2_alone = cpu_best(lambda: decode_forest_rounds(c2_bytes, tets, n, **geo))
     # coding 1 of the greedy forest, decoded as a format-5 reader does (connectivity, then the forest)
     g_reader = TetcReader(encode_tetc(_level_forest_bytes(greedy, mesh)[1][:1]))
     tets0 = g_reader._level_tets(0)
@@ -200,16 +217,19 @@ def measure(name):
     k = forest.n_merges
     predictability = rank_predictability(mesh, greedy, encode_level(payloads[0]).vertex_order)
     lvl0_new = mesh_bytes[0] + new_f[0]
+    lvl0_c2 = mesh_bytes[0] + c2_f[0]
     lvl0_c1 = g_mesh_bytes[0] + g_c1_f[0]
     return dict(name=NAMES.get(name, name), points=n, tets=mesh.n_tets, levels=len(levels),
-                new_bpv=8 * new_f[0] / n, c1_bpv=8 * g_c1_f[0] / n, old_bpv=8 * old_f[0] / n,
+                new_bpv=8 * new_f[0] / n, c2_bpv=8 * c2_f[0] / n, c1_bpv=8 * g_c1_f[0] / n, old_bpv=8 * old_f[0] / n,
                 bound=(rank_bound_bits(n, k)) / n,
                 ratio_new=(sum(mesh_bytes) + sum(new_f)) / lvl0_new,
+                ratio_c2=(sum(mesh_bytes) + sum(c2_f)) / lvl0_c2,
                 ratio_c1=(sum(g_mesh_bytes) + sum(g_c1_f)) / lvl0_c1,
-                mesh_ratio=sum(mesh_bytes) / mesh_bytes[0], forests_new=sum(new_f), forests_c1=sum(g_c1_f),
-                forests_old=sum(old_f), enc=enc_forest_s, dec=dec_s, conn=conn_s, geo=geo_s, c1_dec=c1_dec_s,
-                old_dec=old_dec_s, t_forest=t_forest, t_greedy=t_greedy,
-                level_bytes=list(zip(mesh_bytes, new_f, g_c1_f)), predictability=predictability)
+                mesh_ratio=sum(mesh_bytes) / mesh_bytes[0], forests_new=sum(new_f), forests_c2=sum(c2_f),
+                forests_c1=sum(g_c1_f), forests_old=sum(old_f), enc=enc_forest_s, dec=dec_s, conn=conn_s, geo=geo_s,
+                c3_alone=c3_alone, c2_alone=c2_alone, c1_dec=c1_dec_s, old_dec=old_dec_s, t_forest=t_forest,
+                t_greedy=t_greedy, level_bytes=list(zip(mesh_bytes, new_f, c2_f, g_c1_f)),
+                predictability=predictability)
 
 
 def main(argv=None):
@@ -222,8 +242,9 @@ def main(argv=None):
     rows = []
     for name in args.names:
         r = measure(name)
-        print(f"{r['name']}: {r['new_bpv']:.2f} bits/vertex (coding 1 of the greedy forest {r['c1_bpv']:.2f}), "
-              f"all/level0 {r['ratio_new']:.3f} (was {r['ratio_c1']:.3f}), decode {r['dec']:.3f} s", flush=True)
+        print(f"{r['name']}: {r['new_bpv']:.2f} bits/vertex (coding 2 {r['c2_bpv']:.2f}), all/level0 "
+              f"{r['ratio_new']:.3f} (coding 2 {r['ratio_c2']:.3f}), forest alone decode {r['c3_alone']:.3f} s "
+              f"(coding 2 {r['c2_alone']:.3f})", flush=True)
         rows.append(r)
 
     def secs(x):
@@ -235,28 +256,31 @@ def main(argv=None):
         + ", ".join(f"{x:.2f}" for x in os.getloadavg()) + ", 2 cores shared). Two forests per mesh from `decimate` "
         f"(cached in `bench/out/forests/`): *rounds* ({ROUNDS_PER_LEVEL} rounds of independent merges per level, the "
         "default) and *greedy* (`rounds=0`, the forest of formats 3 to 5); levels from `build_levels`, every level "
-        "encoded with `encode_level` as `tetc compress` writes it. *coding 2* = format 6: the rounds forest coded "
-        "after the level's mesh and geometry (bucket + round per vertex, ranks inside a round by the float32 bits of "
-        "position and value, parents among live neighbours: `docs/format.md`); *coding 1* = the greedy forest as "
-        "formats 3 to 5 code it (bucket + place among the bucket's free ranks); *format 2* = the rounds forest "
-        "LZMA-coded. *bound* = log2 of the orders inside the buckets per vertex: what coding 1 pays for the greedy "
-        "order. Decode = `TetcReader.read_forest(0)`: coding 2 decodes the level's connectivity and geometry "
-        "(*of which mesh*), then the forest; coding 1 the connectivity, then the forest (a render at a ratio "
-        "reuses that connectivity); encode = `encode_forest_rounds`; best of 3, process CPU seconds "
-        "(single-threaded). Decimation: wall seconds of the whole `decimate` (2 threads; *cached* when the forest "
-        "came from the cache). Targets: ≤ 12 bits/vertex, all levels ≤ 2.0 × level 0.", "",
-        table(["mesh", "points", "tets", "levels", "level-0 forest bits/vertex, coding 2", "coding 1 (greedy)",
-               "format 2", "rank bound (greedy)", "all / level 0, coding 2", "coding 1", "meshes alone: all / level 0",
-               "forests bytes, coding 2", "coding 1", "decimate s, rounds", "greedy", "encode CPU s",
-               "decode CPU s, coding 2", "of which mesh", "forest alone", "coding 1 decode CPU s",
-               "format 2 decode CPU s"],
-              [[r["name"], r["points"], r["tets"], r["levels"], f"{r['new_bpv']:.2f}", f"{r['c1_bpv']:.2f}",
-                f"{r['old_bpv']:.2f}", f"{r['bound']:.2f}", f"{r['ratio_new']:.3f}", f"{r['ratio_c1']:.3f}",
-                f"{r['mesh_ratio']:.3f}", r["forests_new"], r["forests_c1"], secs(r["t_forest"]), secs(r["t_greedy"]),
-                f"{r['enc']:.3f}", f"{r['dec']:.3f}", f"{r['geo']:.3f}", f"{r['dec'] - r['geo']:.3f}",
+        "encoded with `encode_level` as `tetc compress` writes it. *coding 3* = format 7: the rounds forest coded "
+        "after the level's mesh and geometry, as coding 2 with the level's quadrics (parents ordered by the merged "
+        "vertex's quadric at them, a round's phase in the context of the vertex's cheapest merge: `docs/format.md`); "
+        "*coding 2* = format 6, the same forests (bucket + round per vertex, parents ordered by how many neighbours "
+        "lead to them); *coding 1* = the greedy forest as formats 3 to 5 code it (bucket + place among the bucket's "
+        "free ranks); *format 2* = the rounds forest LZMA-coded. *bound* = log2 of the orders inside the buckets per "
+        "vertex: what coding 1 pays for the greedy order. Decode = `TetcReader.read_forest(0)` (coding 3): the "
+        "level's connectivity and geometry (*of which mesh*), then the forest; *forest alone* = the forest section's "
+        "decode from the decoded level, codings 3 and 2 of the same forest; coding 1: the connectivity, then the "
+        "forest; encode = `encode_forest_on_geometry`; best of 3, process CPU seconds (single-threaded). "
+        "Decimation: wall seconds of the whole `decimate` (2 threads; *cached* when the forest came from the cache). "
+        "Targets: ≤ 12 bits/vertex, all levels ≤ 2.0 × level 0.", "",
+        table(["mesh", "points", "tets", "levels", "level-0 forest bits/vertex, coding 3", "coding 2",
+               "coding 1 (greedy)", "format 2", "rank bound (greedy)", "all / level 0, coding 3", "coding 2",
+               "coding 1", "meshes alone: all / level 0", "forests bytes, coding 3", "coding 2", "coding 1",
+               "decimate s, rounds", "greedy", "encode CPU s", "decode CPU s, coding 3", "of which mesh",
+               "forest alone, coding 3", "coding 2", "coding 1 decode CPU s", "format 2 decode CPU s"],
+              [[r["name"], r["points"], r["tets"], r["levels"], f"{r['new_bpv']:.2f}", f"{r['c2_bpv']:.2f}",
+                f"{r['c1_bpv']:.2f}", f"{r['old_bpv']:.2f}", f"{r['bound']:.2f}", f"{r['ratio_new']:.3f}",
+                f"{r['ratio_c2']:.3f}", f"{r['ratio_c1']:.3f}", f"{r['mesh_ratio']:.3f}", r["forests_new"],
+                r["forests_c2"], r["forests_c1"], secs(r["t_forest"]), secs(r["t_greedy"]), f"{r['enc']:.3f}",
+                f"{r['dec']:.3f}", f"{r['geo']:.3f}", f"{r['c3_alone']:.3f}", f"{r['c2_alone']:.3f}",
                 f"{r['c1_dec']:.3f}", f"{r['old_dec']:.3f}"]
                for r in rows]), "",
-        "Reading: rounds cut a rank's cost from log2 of its bucket's free ranks (the *rank bound*, 7.7–13.9 bits/vertex here) to log2 of its bucket's rounds (64 a level, more where a round ends early: about 7 bits). The level-0 forest drops by 0.9–5.7 bits/vertex (Blunt-fin 16.21 → 11.91, Combustion 16.44 → 11.52, flange 18.83 → 13.12): ≤ 12 on Blunt-fin and Combustion, not on the small meshes (LOX post, Room fire, gmsh block 50k: a level of a few thousand merges still has 64 rounds of a few merges, so a round costs nearly the place it replaces) nor on flange 1M (13.12: its levels hold more rounds that ended early). What is left per vertex is the round (~7 bits, offline: the decoded neighbours' rounds predict it by < 0.1 bit), the parent (~3.5 bits) and the bucket (~1.2 bits). *all / level 0* moves further from 2.0, as a smaller level-0 forest must (the meshes alone are above 2.0 on five of the six meshes). Decode: coding 2 needs the level's geometry before the forest, so `read_forest` pays the geometry decode (*of which mesh*: connectivity + geometry) on top of coding 1's connectivity; the forest alone decodes in about coding 1's time (same parent pass; a sort by (bucket, round, key) instead of the Fenwick trees). Decimation: the two forests ran one after the other on a machine loaded 11–15 on 2 cores, wall seconds are only indicative (`bench_rounds.py` has both in the same run: process CPU within 8 %).",
+        "Reading: READING_PLACEHOLDER",
         "",
     ]
     labels = list(rows[0]["predictability"])
@@ -269,10 +293,10 @@ def main(argv=None):
               "",
               "Reading: every predictor saves a fraction of a bit per vertex of the greedy order's place, far from what would pay for a new coding: the greedy order inside a bucket follows errors that change with every merge around a vertex. Hence coding 2 changes the order itself (rounds of independent merges numbered by a key the decoder computes) instead of predicting it.", ""]
     r0 = rows[0]
-    lines += [f"Per level ({r0['name']}): bytes of the mesh (rounds forest), of the forest in coding 2 and of the "
-              "greedy forest in coding 1.", "",
-              table(["level", "mesh bytes", "forest bytes, coding 2", "coding 1 (greedy)"],
-                    [[i, a, b, c] for i, (a, b, c) in enumerate(r0["level_bytes"])]), ""]
+    lines += [f"Per level ({r0['name']}): bytes of the mesh (rounds forest), of the forest in codings 3 and 2 and "
+              "of the greedy forest in coding 1.", "",
+              table(["level", "mesh bytes", "forest bytes, coding 3", "coding 2", "coding 1 (greedy)"],
+                    [[i, a, b, c, d] for i, (a, b, c, d) in enumerate(r0["level_bytes"])]), ""]
     out = ROOT / "bench" / "sections" / "forest.md"
     out.write_text("\n".join(lines))
     print(f"wrote {out}")

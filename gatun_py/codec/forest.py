@@ -30,7 +30,9 @@ Files of format 7 (magic ``GFR7``, forest coding 3, :func:`encode_forest_on_geom
 same rounds and parents with what the level's geometry says about the decimator's errors: every
 vertex's quadric over its tets (as the decimator's, from the level's mesh) ranks a merge's
 candidate parents (least error first: the decimator's choice is usually first), and the quantile
-of a vertex's cheapest merge is the context of its bucket and round (cheap merges come early).
+of a vertex's cheapest merge is the context of its round's phase (cheap merges come early). The
+quadrics are independent of the order of the tets and of their corners (the encoder has the input's,
+the decoder the connectivity decoder's).
 """
 
 from __future__ import annotations

@@ -601,8 +601,9 @@ def _spatial_volume(u, a, b, c, d):
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def _tet_terms(u, a, b, c, d, terms):
-    """The 10 terms of A of one tet's quadric (corners in id order): its volume times the squared
+def _tet_terms(u, a, b, c, d, w, terms):
+    """The 10 terms of A of one tet's quadric (corners in id order, ``w`` its
+    :func:`_spatial_volume`): its volume times the squared
     distance to the hyperplane through its corners in (x, y, z, value), about any of its corners
     (the plane passes through them: no b, no c). False for a flat tet."""
     # the three edges from corner a in (x, y, z, value)
@@ -621,7 +622,6 @@ def _tet_terms(u, a, b, c, d, terms):
     n1 = -(p0 * m23 - p2 * m03 + p3 * m02)
     n2 = p0 * m13 - p1 * m03 + p3 * m01
     n3 = -(p0 * m12 - p1 * m02 + p2 * m01)
-    w = _spatial_volume(u, a, b, c, d)
     length = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2 + n3 * n3)
     if not (length > 0 and w > 0 and length < np.inf):
         return False
@@ -644,16 +644,18 @@ def _tet_terms(u, a, b, c, d, terms):
 
 
 @njit(cache=True, nogil=True)
-def vertex_quadrics(tets, points, density):
-    """(q, u): the (n, 15) quadric of every vertex over its tets (see the section comment) and the
-    (n, 4) normalised (x, y, z, value) of every vertex, float64.
+def level_quadrics(tets, points, density, start, nbrs, boundary):
+    """(q, u, best): the (n, 15) quadric of every vertex over its tets (see the section comment),
+    the (n, 4) normalised (x, y, z, value) of every vertex and every vertex's cheapest merge, float64.
 
-    ``points`` (n, 3) and ``density`` (n,) float32; tet ids are in range (checked by the caller)."""
+    ``points`` (n, 3) and ``density`` (n,) float32, ``(start, nbrs)`` the adjacency; tet ids are in
+    range (checked by the caller). One kernel for all three: one compilation on a cold start."""
     n = points.shape[0]
     q = np.zeros((n, QUADRIC_TERMS))
     u = np.zeros((n, 4))
+    best = np.full(n, np.inf)
     if n == 0:
-        return q, u
+        return q, u, best
     lo = np.empty(3)
     hi = np.empty(3)
     for c in range(3):
@@ -688,10 +690,13 @@ def vertex_quadrics(tets, points, density):
     # the input's, the decoder the connectivity decoder's): every tet's terms from its corners in
     # id order, summed as integers (exact, so in any order) in units of 2^-FIXED_BITS of the
     # vertex's largest tet weight (the first pass), then back to floats.
+    m = tets.shape[0]
+    weight = np.empty(m)
     wmax = np.zeros(n)
-    for t in range(tets.shape[0]):
+    for t in range(m):
         a, b, c, d = _sorted4(tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3])
         w = _spatial_volume(u, a, b, c, d)
+        weight[t] = w
         for x in (a, b, c, d):
             if w > wmax[x]:
                 wmax[x] = w
@@ -702,9 +707,9 @@ def vertex_quadrics(tets, points, density):
             unit[v] = 0.0
     fixed = np.zeros((n, QUADRIC_A_TERMS), np.int64)
     terms = np.empty(QUADRIC_A_TERMS)
-    for t in range(tets.shape[0]):
+    for t in range(m):
         a, b, c, d = _sorted4(tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3])
-        if not _tet_terms(u, a, b, c, d, terms):
+        if not _tet_terms(u, a, b, c, d, weight[t], terms):
             continue
         for x in (a, b, c, d):
             f = unit[x]
@@ -714,7 +719,18 @@ def vertex_quadrics(tets, points, density):
         back = wmax[v] / FIXED_ONE
         for j in range(QUADRIC_A_TERMS):
             q[v, j] = np.float64(fixed[v, j]) * back
-    return q, u
+    # every vertex's cheapest merge: the least quadric error over the neighbours it may merge into
+    # (a boundary vertex only into boundary ones), inf when there is none
+    best = np.full(n, np.inf)
+    for v in range(n):
+        for i in range(start[v], start[v + 1]):
+            x = nbrs[i]
+            if boundary[v] and not boundary[x]:
+                continue
+            e = _quadric_at(q, v, u, x)
+            if e < best[v]:
+                best[v] = e
+    return q, u, best
 
 
 @njit(cache=True, nogil=True, _nrt=False)
@@ -729,23 +745,6 @@ def _quadric_at(q, v, u, x):
     if s != s:
         return np.inf
     return s
-
-
-@njit(cache=True, nogil=True)
-def cheapest_merge(start, nbrs, boundary, q, u):
-    """Every vertex's least quadric error over its neighbours it may merge into (a boundary vertex
-    only into boundary ones); inf when there is none."""
-    n = start.shape[0] - 1
-    best = np.full(n, np.inf)
-    for v in range(n):
-        for i in range(start[v], start[v + 1]):
-            x = nbrs[i]
-            if boundary[v] and not boundary[x]:
-                continue
-            s = _quadric_at(q, v, u, x)
-            if s < best[v]:
-                best[v] = s
-    return best
 
 
 @njit(cache=True, nogil=True, _nrt=False)

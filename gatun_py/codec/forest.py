@@ -510,23 +510,20 @@ def decode_forest_rounds(data: bytes, tets: np.ndarray, n: int, *, boundary, poi
     return parent, rank
 
 
-def _geometry_terms(tets, points, density, n: int):
-    """(quadrics, normalised (x, y, z, value)) of the level's vertices: coding 3's error proxy."""
+def _geometry_terms(tets, points, density, start, nbrs, boundary):
+    """(quadrics, normalised (x, y, z, value), proxy bins) of the level's vertices: coding 3's error
+    proxy; the bins are every vertex's quantile (of ``FK.PROXY_BINS``) of its cheapest merge's
+    quadric error, ties by vertex id."""
+    n = boundary.shape[0]
     points = np.ascontiguousarray(points, dtype=np.float32)
     density = np.ascontiguousarray(density, dtype=np.float32)
     if points.shape != (n, 3) or density.shape != (n,):
         raise ValueError(f"geometry of shapes {points.shape}, {density.shape} for {n} vertices")
-    return FK.vertex_quadrics(np.ascontiguousarray(tets, dtype=np.int32).reshape(-1, 4), points, density)
-
-
-def _proxy_bins(start, nbrs, boundary, q, u) -> np.ndarray:
-    """Every vertex's quantile (of ``FK.PROXY_BINS``) of its cheapest merge's quadric error, ties
-    by vertex id."""
-    best = FK.cheapest_merge(start, nbrs, boundary, q, u)
-    n = best.shape[0]
+    q, u, best = FK.level_quadrics(np.ascontiguousarray(tets, dtype=np.int32).reshape(-1, 4), points, density,
+                                   start, nbrs, boundary)
     bins = np.empty(n, np.int64)
     bins[np.argsort(best, kind="stable")] = np.arange(n, dtype=np.int64) * FK.PROXY_BINS // max(n, 1)
-    return bins
+    return q, u, bins
 
 
 def encode_forest_on_geometry(parent: np.ndarray, rank: np.ndarray, tets: np.ndarray, *, boundary, points,
@@ -556,10 +553,9 @@ def encode_forest_on_geometry(parent: np.ndarray, rank: np.ndarray, tets: np.nda
     if k == 0:
         return head
     n = len(parent)
-    q, u = _geometry_terms(tets, points, density, n)
-    rid, n_rounds = rank_rounds(ranks, k, canonical_key(np.asarray(points), np.asarray(density)))
     mask = _boundary_mask(boundary, n)
-    bins = _proxy_bins(start, nbrs, mask, q, u)
+    q, u, bins = _geometry_terms(tets, points, density, start, nbrs, mask)
+    rid, n_rounds = rank_rounds(ranks, k, canonical_key(np.asarray(points), np.asarray(density)))
     return head + run_encoder(FK.encode_rounds3_kernel, start, nbrs, mask, parent, ranks, k, rid, n_rounds, bins,
                               q, u, capacity=capacity_hint(16 * n))
 
@@ -582,9 +578,8 @@ def decode_forest_on_geometry(data: bytes, tets: np.ndarray, n: int, *, boundary
     k, start, nbrs = _prelude(data, _MAGIC_GEOMETRY, tets, n)
     if start is None:
         return np.arange(n, dtype=np.int32), np.full(n, ROOT_RANK, np.int32)
-    q, u = _geometry_terms(tets, points, density, n)
     mask = _boundary_mask(boundary, n)
-    bins = _proxy_bins(start, nbrs, mask, q, u)
+    q, u, bins = _geometry_terms(tets, points, density, start, nbrs, mask)
     body = np.frombuffer(data, np.uint8, offset=_HEADER.size)
     st = dec_state()
     symbol = np.empty(n, np.int8)

@@ -533,9 +533,10 @@ def encode_forest_on_geometry(parent: np.ndarray, rank: np.ndarray, tets: np.nda
 
     As :func:`encode_forest_rounds` (bucket and round per vertex, ranks inside a round by
     :func:`canonical_key`, parents among the live neighbours), with the decimator's error proxy
-    the decoder computes from the level: a vertex's bucket and round are coded in the context of
-    the quantile of its cheapest merge's quadric error, and a merge's candidate parents are ordered
-    by the merged vertex's quadric at them (``docs/format.md``).
+    the decoder computes from the level: a vertex's round is coded as its phase (which sixteenth of
+    its bucket's rounds) in the context of the quantile of its cheapest merge's quadric error, then
+    its place in the phase, and a merge's candidate parents are ordered by the merged vertex's
+    quadric at them (``docs/format.md``). The tets' order and orientation do not matter.
 
     Examples
     --------

@@ -148,7 +148,7 @@ def test_files_are_format_3_and_store_the_new_coding():
     r = TetcReader(encode_tetc([LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (g.parent, g.rank))
                                 for x, g in zip(lv, storage_forests(lv))]))
     assert r.container.major == container.VERSION_MAJOR >= 3
-    magic = {1: b"GFR3", 2: b"GFR6"}[coding_for_format(r.container.major)]
+    magic = {1: b"GFR3", 2: b"GFR6", 3: b"GFR7"}[coding_for_format(r.container.major)]
     for lv in r.levels:
         if lv["has_forest"]:
             assert r.read_section(f"L{lv['level']}/forest")[:4] == magic
@@ -168,9 +168,9 @@ def test_the_stream_after_the_forest_reuses_its_connectivity_and_equals_a_fresh_
     fresh = list(TetcReader(data).iter_decode(0, batch_tets=97))
     r = TetcReader(data)
     r.read_forest(0)
-    # both codings keep the connectivity they decoded; coding 2 decodes (and keeps) the geometry too
+    # every coding keeps the connectivity it decoded; codings 2 and 3 decode (and keep) the geometry too
     assert r._decoded is not None
-    assert (getattr(r, "_decoded_geometry", None) is not None) == (coding_for_format(r.container.major) == 2)
+    assert (getattr(r, "_decoded_geometry", None) is not None) == (coding_for_format(r.container.major) >= 2)
     replayed = list(r.iter_decode(0, batch_tets=97))
     assert r._decoded is None and getattr(r, "_decoded_geometry", None) is None  # handed over once
     assert len(fresh) == len(replayed)
@@ -190,7 +190,9 @@ def test_decode_kernels_release_the_gil():
     kernels = [_cutborder_kernels.decode_boundary, _cutborder_kernels.decode_tets, _cutborder_kernels.add_faces,
                _geometry_kernels.decode_tables_kernel, _geometry_kernels.decode_vertices,
                _array_kernels.decode_component, _array_kernels.reconstruct,
-               _forest_kernels.adjacency, _forest_kernels.decode_forest_kernel]
+               _forest_kernels.adjacency, _forest_kernels.decode_forest_kernel, _forest_kernels.decode_rounds_kernel,
+               _forest_kernels.decode_parents_kernel, _forest_kernels.level_quadrics,
+               _forest_kernels.decode_rounds3_kernel, _forest_kernels.decode_parents3_kernel]
     assert all(k.targetoptions.get("nogil") for k in kernels), [k.__name__ for k in kernels
                                                                if not k.targetoptions.get("nogil")]
 

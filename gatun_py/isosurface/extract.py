@@ -303,7 +303,7 @@ class _Extractor:
         call). The result is the same as in one call: a boundary face only enters the border,
         so no count falls to zero between the chunks that would not at the end of the batch.
 
-        ``batch_len``, ``chunk_ends``: ``tets`` are the surface's tets (:func:`_surface_tets`) of a
+        ``batch_len``, ``chunk_ends``: ``tets`` are the surface's tets (:class:`_SurfaceTets`) of a
         batch of ``batch_len`` tets, and ``chunk_ends[i]`` is how many of them lie in its first
         i + 1 chunks of ``CHUNK_TETS`` tets; the chunks, the unlocks at their ends and the rounds
         between them are then those of the whole batch. None: ``tets`` is the whole batch.
@@ -440,6 +440,7 @@ def load_kernels(source=None, *, simplify: bool = True) -> float:
         source = reader if decoder else reader.decode_mesh(0)
     except (OSError, TetcError, KeyError, TypeError, ValueError):
         return 0.0
+    release_code_pages()  # those our imports touched: the loading below then peaks lower
     # two isovalues and tiny rounds: the driver's every path (several extractors, rounds mid-stream)
     isosurface(source, values=[lo + 0.4 * (hi - lo), lo + 0.6 * (hi - lo)], ratio=0.5 if simplify else None,
                batch_faces=4)
@@ -544,6 +545,7 @@ def _extract(stream, info, vals, *, ratio, faces, batch_faces, imp, check, progr
                              grad_scale=grad_scale, check=check, expected_tets=info.get("tets")) for v in inside]
     n = int(info["points"])
     isos = [np.float64(e.iso) for e in extractors]
+    sieve = None  # _SurfaceTets, made with the first batch (the vertex array's length is known then)
     # x, y, z, scalar of every vertex streamed so far: the decoder's own array when it offers one
     # (a .tetc stream: no copy of O(vertices)), else ours, filled batch by batch
     shared = info.get("shared_values")
@@ -601,7 +603,9 @@ def _extract(stream, info, vals, *, ratio, faces, batch_faces, imp, check, progr
             # only the tets the surfaces cut wait for the worker (a few per cent of them; a new
             # array, so the worker owns its input even if a producer reuses its buffers)
             batch_len = len(batch.tets)
-            tets, chunk_ends = _surface_tets(vdata[:, 3], batch.tets, isos)
+            if sieve is None:
+                sieve = _SurfaceTets(len(vdata), isos)
+            tets, chunk_ends = sieve(vdata[:, 3], batch.tets)
             bnd = np.array(bnd, dtype=np.int32, order="C", copy=True)
             n_batches += 1
             in_flight.append(pool.submit(work, vdata, tets, chunk_ends, batch_len, bnd, tets_done, decoded_s,
@@ -653,28 +657,53 @@ def _extract(stream, info, vals, *, ratio, faces, batch_faces, imp, check, progr
     return Surface(surf_pts, surf_tris, point_data, stats)
 
 
-def _surface_tets(scalar, tets, isos) -> tuple[np.ndarray, np.ndarray]:
-    """(the tets of a batch that an isosurface cuts, their counts at the ends of its chunks).
+class _SurfaceTets:
+    """Picks the tets of a batch that an isosurface cuts, and counts them per chunk (``_Extractor.add``).
 
     A tet is cut by the surface at ``iso`` when its corners are not all on one side (above: s >=
     iso, as :func:`.marching.extract_batch` classifies them) or a corner lies on it. Every other
-    tet is one :func:`.marching.extract_batch` passes over (it adds no triangle and none of its
-    faces touches the surface, so it changes no lock): it is left out here, in the decoding thread,
-    instead of waiting with its batch for the extraction thread (~97 % of the tets, and of the
-    memory of the batches waiting while a round of collapses runs). ``chunk_ends[i]``: how many of
-    the kept tets lie in the first i + 1 chunks of ``CHUNK_TETS`` tets (see ``_Extractor.add``).
+    tet is one ``extract_batch`` passes over (it adds no triangle and none of its faces touches the
+    surface, so it changes no lock): it is left out here, in the decoding thread, instead of
+    waiting with its batch for the extraction thread (~97 % of the tets on the flange, and of the
+    memory of the batches waiting while a round of collapses runs).
+
+    Each vertex gets a byte per four isovalues, two bits each (above, on), once, when a tet first
+    names it (vertex ids follow the stream, so every id below a named one has its values); a tet's
+    four bytes are then one uint32: 2 ms for a batch of 262,144 tets, where gathering the four
+    scalars from the strided (n, 4) array took 15.
     """
-    tets = np.asarray(tets)
-    n = len(tets)
-    keep = np.zeros(n, np.bool_)
-    if n and isos:
-        s = scalar[tets]  # (n, 4) float32; compared with a float64 isovalue in float64, as the kernel
-        for iso in isos:
-            above = np.count_nonzero(s >= iso, axis=1)
-            keep |= ((above > 0) & (above < 4)) | np.any(s == iso, axis=1)
-    kept = np.ascontiguousarray(tets[keep], dtype=np.int32)
-    last = np.minimum(np.arange(1, -(-n // CHUNK_TETS) + 1) * CHUNK_TETS, n) - 1
-    return kept, np.cumsum(keep)[last] if n else np.zeros(0, np.int64)
+
+    _ABOVE = np.uint32(0x01010101)
+
+    def __init__(self, n_points: int, isos):
+        self.groups = [list(isos[i:i + 4]) for i in range(0, len(isos), 4)]
+        self.codes = np.zeros((len(self.groups), n_points), np.uint8)
+        self.coded = 0  # vertices 0 .. coded - 1 have their bytes
+
+    def __call__(self, scalar, tets) -> tuple[np.ndarray, np.ndarray]:
+        """(the cut tets, ``chunk_ends``: how many of them lie in the first i + 1 chunks of
+        ``CHUNK_TETS`` tets of the batch)."""
+        tets = np.ascontiguousarray(tets, dtype=np.int32)
+        n = len(tets)
+        keep = np.zeros(n, np.bool_)
+        if n and self.groups:
+            top = int(tets.max()) + 1
+            if top > self.coded:
+                s = scalar[self.coded:top]
+                for code, group in zip(self.codes, self.groups):
+                    for j, iso in enumerate(group):  # float64 isovalue: compared in float64, as the kernel
+                        code[self.coded:top] |= ((s >= iso).view(np.uint8) << (2 * j)) | ((s == iso).view(np.uint8)
+                                                                                        << (2 * j + 1))
+                self.coded = top
+            for code, group in zip(self.codes, self.groups):
+                word = code[tets].view(np.uint32).ravel()  # the tet's four corners' bytes
+                for j in range(len(group)):
+                    above = word & (self._ABOVE << np.uint32(2 * j))
+                    keep |= ((word & (self._ABOVE << np.uint32(2 * j + 1))) != 0) | (
+                        (above != 0) & (above != (self._ABOVE << np.uint32(2 * j))))
+        kept = tets[keep]
+        last = np.minimum(np.arange(1, -(-n // CHUNK_TETS) + 1) * CHUNK_TETS, n) - 1
+        return kept, np.cumsum(keep)[last] if n else np.zeros(0, np.int64)
 
 
 @functools.cache

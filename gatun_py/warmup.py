@@ -18,6 +18,7 @@ from .codec import LevelPayload, TetcReader, encode_tetc
 from .codec.forest import FOREST_CODING, decode_forest_on_mesh, decode_forest_rounds
 from .errors import TetcError
 from .isosurface.extract import TINY_TETC, isosurface
+from .isosurface.extract import load_kernels as load_isosurface_kernels
 from .mesh import mesh_batches
 from .mesh.synthetic import jittered_grid
 from .pipeline.stream import View, render_tetc
@@ -187,10 +188,8 @@ def _render_and_filter() -> str:
 
 
 def _isosurface_on_mesh() -> str:
-    """Marching tetrahedra and QEM on the tiny mesh in memory (no decoder needed)."""
-    mesh = tiny_mesh()
-    lo, hi = mesh.scalar_range
-    isosurface(mesh, values=[lo + 0.4 * (hi - lo), lo + 0.6 * (hi - lo)], ratio=0.5, batch_faces=4)
+    """Marching tetrahedra and QEM on a tiny mesh in memory (no decoder needed)."""
+    load_isosurface_kernels(tiny_mesh())
     return "isosurfaces"
 
 

@@ -31,6 +31,7 @@ from ..codec.container import MAGIC
 from ..codec.prefetch import PrefetchedDecode
 from ..errors import CorruptFileError, OptionError, ReadError, TetcError
 from ..mesh import TetMesh, mesh_batches, read_mesh
+from ..mesh.synthetic import jittered_grid
 from ..simplify.filter import SimplifyFilter
 from ..simplify.levels import resolve_target, target_ancestors
 from . import _numba_setup  # noqa: F401  (first, before any kernel is loaded: see the module)
@@ -418,9 +419,9 @@ def load_kernels(source=None, *, simplify: bool = True) -> float:
     """Load the kernels an extraction of ``source`` runs into this process, then hand back the
     LLVM code pages that loading touched; returns the seconds it took.
 
-    The kernels load (from numba's cache) with an isosurface of the tiny shipped file: the
-    streaming decoder unless ``source`` is a mesh file or an in-memory mesh (the tiny file's mesh
-    is then extracted in memory), marching tetrahedra, and QEM unless ``simplify=False``. The CLI
+    The kernels load (from numba's cache, or compile) with an isosurface of the tiny shipped file:
+    the streaming decoder unless ``source`` is a mesh file or an in-memory mesh (a tiny mesh is
+    then extracted in memory), marching tetrahedra, and QEM unless ``simplify=False``. The CLI
     calls this before it opens the user's file, so that the peak memory of a large extraction is
     its arrays over a floor without LLVM's linker pages (see
     :func:`gatun_py._resources.release_code_pages`; 90 MB of the 7.8 M-tet flange's peak), and
@@ -434,15 +435,18 @@ def load_kernels(source=None, *, simplify: bool = True) -> float:
     """
     t0 = time.perf_counter()
     decoder = source is None or isinstance(source, TetcReader) or (not isinstance(source, TetMesh) and _is_tetc(source))
-    try:
-        reader = TetcReader(TINY_TETC)
-        lo, hi = (float(x) for x in reader.meta["scalar_range"])
-        source = reader if decoder else reader.decode_mesh(0)
-    except (OSError, TetcError, KeyError, TypeError, ValueError):
-        return 0.0
+    if decoder:
+        try:
+            tiny = TetcReader(TINY_TETC)
+            lo, hi = (float(x) for x in tiny.meta["scalar_range"])
+        except (OSError, TetcError, KeyError, TypeError, ValueError):
+            return 0.0
+    else:
+        tiny = jittered_grid((4, 4, 3), jitter=0.15)
+        lo, hi = tiny.scalar_range
     release_code_pages()  # those our imports touched: the loading below then peaks lower
     # two isovalues and tiny rounds: the driver's every path (several extractors, rounds mid-stream)
-    isosurface(source, values=[lo + 0.4 * (hi - lo), lo + 0.6 * (hi - lo)], ratio=0.5 if simplify else None,
+    isosurface(tiny, values=[lo + 0.4 * (hi - lo), lo + 0.6 * (hi - lo)], ratio=0.5 if simplify else None,
                batch_faces=4)
     release_code_pages()
     return time.perf_counter() - t0

@@ -7,9 +7,8 @@ import math
 import click
 
 from gatun_py._resources import peak_rss_mb
-
-from .options import (camera_options, echo_json, force_option, jobs_option, kernels_cached, mesh_input_options,
-                      progress_bar, quiet_option, read_kwargs, status)
+from .options import (camera_options, echo_json, force_option, jobs_option, mesh_input_options, progress_bar, quiet_option,
+                      read_kwargs, status)
 
 
 def _finite(ctx, param, values):
@@ -91,12 +90,6 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
         check_output_path(png, force=force)
         image_format(png)
     total = _expected_tets(input, values, level)
-    if _is_tetc(input) and not _kernels_cached():
-        status("compiling the decoder and the isosurface kernels on two cores (first run only, under a minute; "
-               "`make install` does it ahead)...", quiet)
-        from gatun_py.warmup import compile_for_isosurface  # start-up time: only a first run loads the warm-up
-
-        compile_for_isosurface()
     # the kernels first, on a tiny file: LLVM's pages that loading them touched are then handed
     # back before the data arrives (see load_kernels)
     load_kernels(input, simplify=ratio not in (None, 1.0) or faces is not None)
@@ -127,24 +120,6 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
         of_bricks = (f", {bricks['bricks_decoded']} of {bricks['bricks']} bricks decoded" if bricks else "")
         status(f"wrote {output} ({surf.n_triangles} triangles from {st['faces_extracted']} extracted{of_bricks}, "
                f"{st['total_s']:.2f} s)", quiet)
-
-
-def _is_tetc(path) -> bool:
-    from gatun_py.codec.container import MAGIC  # start-up time: the codec package loads numba
-
-    try:
-        with open(path, "rb") as fh:
-            return fh.read(len(MAGIC)) == MAGIC
-    except OSError:  # the extraction reports it
-        return False
-
-
-def _kernels_cached() -> bool:
-    """Whether numba has compiled the decoder's and the extraction's kernels into its cache already."""
-    from gatun_py.codec import _cutborder_kernels, _geometry_kernels
-    from gatun_py.isosurface import marching, qem
-
-    return kernels_cached(_cutborder_kernels, _geometry_kernels, marching, qem)
 
 
 def _expected_tets(path, values, level) -> int:

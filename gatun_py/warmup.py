@@ -18,7 +18,6 @@ from .codec import LevelPayload, TetcReader, encode_tetc
 from .codec.forest import FOREST_CODING, decode_forest_on_mesh, decode_forest_rounds
 from .errors import TetcError
 from .isosurface.extract import TINY_TETC, isosurface
-from .isosurface.extract import load_kernels as load_isosurface_kernels
 from .mesh import mesh_batches
 from .mesh.synthetic import jittered_grid
 from .pipeline.stream import View, render_tetc
@@ -185,25 +184,6 @@ def _render_and_filter() -> str:
     _render_kernels(lean=False)
     _filter_on_mesh()
     return "rendering and the run-time filter"
-
-
-def _isosurface_on_mesh() -> str:
-    """Marching tetrahedra and QEM on a tiny mesh in memory (no decoder needed)."""
-    load_isosurface_kernels(tiny_mesh())
-    return "isosurfaces"
-
-
-def compile_for_isosurface() -> float:
-    """Compile what ``tetc isosurface`` of a ``.tetc`` file needs into numba's cache (the first run
-    on a fresh install) in two processes side by side, the decoder in one and marching tetrahedra
-    and QEM in the other (about as long: numba compiles one function at a time per process);
-    returns the seconds it took. A mesh file's extraction needs no decoder: it compiles in the
-    run itself."""
-    t0 = time.perf_counter()
-    with ProcessPoolExecutor(max_workers=2) as pool:
-        for job in [pool.submit(_decoder_only), pool.submit(_isosurface_on_mesh)]:
-            job.result()
-    return time.perf_counter() - t0
 
 
 def compile_for_render(*, decoder: bool = True) -> float:

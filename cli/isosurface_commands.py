@@ -70,6 +70,7 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
       tetc isosurface big.tetc --value 0.3 --faces 50000 --stats -o iso.ply
     """
     from gatun_py.isosurface import isosurface as extract
+    from gatun_py.isosurface.extract import load_kernels
     from gatun_py.isosurface.io import check_surface_path
 
     if ratio is not None and faces is not None:
@@ -89,6 +90,9 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
         check_output_path(png, force=force)
         image_format(png)
     total = _expected_tets(input, values, level)
+    # the kernels first, on a tiny file: LLVM's pages that loading them touched are then handed
+    # back before the data arrives (see load_kernels)
+    load_kernels(input, simplify=ratio not in (None, 1.0) or faces is not None)
     with progress_bar("extracting", total if total >= 200_000 else 0, quiet) as update:
         last = [0]
 

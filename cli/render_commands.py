@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import click
 
@@ -12,27 +11,17 @@ from gatun_py._atomic import check_output_path
 from gatun_py._resources import peak_rss_mb
 
 from .options import (POSITIVE, RATIO, Colour, camera_options, echo_json, force_option, interruptible, logger,
-                      mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
-                      require_file, selective_options, status, transfer_function_options)
+                      kernels_cached, mesh_input_options, output_option, progress_reporter, quiet_option,
+                      read_kwargs, require_file, selective_options, status, transfer_function_options)
 
 
 def _kernels_cached(*, decoder: bool) -> bool:
     """Whether numba has compiled the render kernels (and with ``decoder`` the decoder's) into its
     cache already."""
-    import numba  # start-up time: options are parsed, and usage errors reported, before numba loads
-
     from gatun_py.codec import _cutborder_kernels
     from gatun_py.render import _walk
 
-    def cached(module) -> bool:
-        src = Path(module.__file__)
-        if numba.config.CACHE_DIR:  # NUMBA_CACHE_DIR: one folder per source folder, "<name>_<hash>"
-            dirs = list(Path(numba.config.CACHE_DIR).glob(f"{src.parent.name}_*"))
-        else:
-            dirs = [src.parent / "__pycache__"]
-        return any(any(d.glob(f"{src.stem}.*.nbc")) for d in dirs)
-
-    return cached(_walk) and (not decoder or cached(_cutborder_kernels))
+    return kernels_cached(_walk, *((_cutborder_kernels,) if decoder else ()))
 
 
 def _component(text):

@@ -24,13 +24,14 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import check_output_path
-from .._resources import peak_rss_mb
+from .._resources import peak_rss_mb, release_code_pages
 from ..codec import TetcReader
 from ..codec.bricks import check_jobs
 from ..codec.container import MAGIC
 from ..codec.prefetch import PrefetchedDecode
-from ..errors import CorruptFileError, OptionError, ReadError
+from ..errors import CorruptFileError, OptionError, ReadError, TetcError
 from ..mesh import TetMesh, mesh_batches, read_mesh
+from ..mesh.synthetic import jittered_grid
 from ..simplify.filter import SimplifyFilter
 from ..simplify.levels import resolve_target, target_ancestors
 from . import _numba_setup  # noqa: F401  (first, before any kernel is loaded: see the module)
@@ -59,6 +60,10 @@ KEEP_SHARE = 0.5
 KEEP_TAIL = 0.5
 #: hand the C heap's free pages back to the system after every this many batches (see _trim_heap)
 TRIM_EVERY = 4
+#: the worker unmaps LLVM's code pages (``release_code_pages``) after this many batches, by when the
+#: decoders' and the marching kernels are loaded (the boundary, then the first batch of tets), and
+#: again after the first round of collapses (which loads theirs); LLVM is not used after that
+RELEASE_CODE_AFTER = 2
 #: the per-vertex columns of an extractor: name -> (shape after the vertex axis, dtype, value of a
 #: fresh slot, both when allocated and when freed by a round's compaction, or None where marching
 #: writes the value of every vertex it adds); a stale quadric, border flag or importance in a reused
@@ -290,7 +295,7 @@ class _Extractor:
             t[:self.nt] = self.tris[:self.nt]
             self.tris = t
 
-    def add(self, vals, tets, boundary, tets_before: int):
+    def add(self, vals, tets, boundary, tets_before: int, *, batch_len=None, chunk_ends=None):
         """Feed one batch, in chunks small enough that a round runs close to every B faces.
 
         Boundary faces go first, in chunks of their own: the tables are reserved for the worst
@@ -298,18 +303,28 @@ class _Extractor:
         (535,922 faces on the 7.8 M-tet flange, which reserved ~190 MB of hash slots in one
         call). The result is the same as in one call: a boundary face only enters the border,
         so no count falls to zero between the chunks that would not at the end of the batch.
+
+        ``batch_len``, ``chunk_ends``: ``tets`` are the surface's tets (:class:`_SurfaceTets`) of a
+        batch of ``batch_len`` tets, and ``chunk_ends[i]`` is how many of them lie in its first
+        i + 1 chunks of ``CHUNK_TETS`` tets; the chunks, the unlocks at their ends and the rounds
+        between them are then those of the whole batch. None: ``tets`` is the whole batch.
         """
         step = CHUNK_TETS
         if len(boundary) > BOUNDARY_CHUNK:
             for i in range(0, len(boundary), BOUNDARY_CHUNK):
                 self._add(vals, tets[:0], boundary[i:i + BOUNDARY_CHUNK], tets_before)
             boundary = boundary[:0]
-        if len(tets) <= step:
-            self._add(vals, tets, boundary, tets_before + len(tets))
+        n_tets = len(tets) if batch_len is None else int(batch_len)
+        if chunk_ends is None:
+            chunk_ends = np.minimum(np.arange(1, -(-n_tets // step) + 1) * step, n_tets)
+        if n_tets <= step:
+            self._add(vals, tets, boundary, tets_before + n_tets)
             return
-        for i in range(0, len(tets), step):
-            self._add(vals, tets[i:i + step], boundary if i == 0 else boundary[:0],
-                      tets_before + min(i + step, len(tets)))
+        start = 0
+        for i, end in enumerate(chunk_ends.tolist()):
+            self._add(vals, tets[start:end], boundary if i == 0 else boundary[:0],
+                      tets_before + min((i + 1) * step, n_tets))
+            start = end
 
     def _add(self, vals, tets, boundary, tets_done):
         self.tets_done = tets_done
@@ -392,6 +407,49 @@ class _Extractor:
         if self.importance is not None:
             data["importance"] = self.vimp[:self.nv].astype(np.float32)
         return points, tris, data
+
+
+# -- loading the kernels ahead of the data --------------------------------------------------------
+
+#: a tiny ``.tetc`` file shipped with the package (:mod:`gatun_py.warmup` writes and tests it)
+TINY_TETC = Path(__file__).resolve().parent.parent / "warmup.tetc"
+
+
+def load_kernels(source=None, *, simplify: bool = True) -> float:
+    """Load the kernels an extraction of ``source`` runs into this process, then hand back the
+    LLVM code pages that loading touched; returns the seconds it took.
+
+    The kernels load (from numba's cache, or compile) with an isosurface of the tiny shipped file:
+    the streaming decoder unless ``source`` is a mesh file or an in-memory mesh (a tiny mesh is
+    then extracted in memory), marching tetrahedra, and QEM unless ``simplify=False``. The CLI
+    calls this before it opens the user's file, so that the peak memory of a large extraction is
+    its arrays over a floor without LLVM's linker pages (see
+    :func:`gatun_py._resources.release_code_pages`; 90 MB of the 7.8 M-tet flange's peak), and
+    no kernel loads in the middle of the stream. Nothing is done (0.0) when the tiny file is not
+    there or not readable: the kernels then load when first used.
+
+    Examples
+    --------
+    >>> load_kernels() >= 0.0
+    True
+    """
+    t0 = time.perf_counter()
+    decoder = source is None or isinstance(source, TetcReader) or (not isinstance(source, TetMesh) and _is_tetc(source))
+    if decoder:
+        try:
+            tiny = TetcReader(TINY_TETC)
+            lo, hi = (float(x) for x in tiny.meta["scalar_range"])
+        except (OSError, TetcError, KeyError, TypeError, ValueError):
+            return 0.0
+    else:
+        tiny = jittered_grid((4, 4, 3), jitter=0.15)
+        lo, hi = tiny.scalar_range
+    release_code_pages()  # those our imports touched: the loading below then peaks lower
+    # two isovalues and tiny rounds: the driver's every path (several extractors, rounds mid-stream)
+    isosurface(tiny, values=[lo + 0.4 * (hi - lo), lo + 0.6 * (hi - lo)], ratio=0.5 if simplify else None,
+               batch_faces=4)
+    release_code_pages()
+    return time.perf_counter() - t0
 
 
 # -- the public verb -------------------------------------------------------------------------------
@@ -490,6 +548,8 @@ def _extract(stream, info, vals, *, ratio, faces, batch_faces, imp, check, progr
     extractors = [_Extractor(v, ratio=ratio, faces=faces, batch_faces=batch_faces, importance=imp,
                              grad_scale=grad_scale, check=check, expected_tets=info.get("tets")) for v in inside]
     n = int(info["points"])
+    isos = [np.float64(e.iso) for e in extractors]
+    sieve = None  # _SurfaceTets, made with the first batch (the vertex array's length is known then)
     # x, y, z, scalar of every vertex streamed so far: the decoder's own array when it offers one
     # (a .tetc stream: no copy of O(vertices)), else ours, filled batch by batch
     shared = info.get("shared_values")
@@ -501,11 +561,14 @@ def _extract(stream, info, vals, *, ratio, faces, batch_faces, imp, check, progr
     n_batches = 0
     wait_s = 0.0
 
-    def work(vdata, tets, bnd, before, decoded_s):
+    def work(vdata, tets, chunk_ends, batch_len, bnd, before, decoded_s, batch_no):
+        rounds = sum(e.rounds for e in extractors)
         for ex in extractors:
-            ex.add(vdata, tets, bnd, before)
-        done = before + len(tets)
-        if extractors and (len(tets) or len(bnd)):
+            ex.add(vdata, tets, bnd, before, batch_len=batch_len, chunk_ends=chunk_ends)
+        if batch_no == RELEASE_CODE_AFTER or (rounds == 0 and any(e.rounds for e in extractors)):
+            release_code_pages()
+        done = before + batch_len
+        if extractors and (batch_len or len(bnd)):
             band.append({"tets": done, "decoded_s": round(decoded_s, 4),
                          "t_s": round(time.perf_counter() - t_start, 4), "rounds": sum(e.rounds for e in extractors),
                          "faces_extracted": sum(e.extracted for e in extractors),
@@ -541,12 +604,17 @@ def _extract(stream, info, vals, *, ratio, faces, batch_faces, imp, check, progr
             else:
                 bnd = batch.boundary
             first_batch = False
-            # copies: the worker must own its input even if a producer reuses its buffers
-            tets = np.array(batch.tets, dtype=np.int32, order="C", copy=True)
+            # only the tets the surfaces cut wait for the worker (a few per cent of them; a new
+            # array, so the worker owns its input even if a producer reuses its buffers)
+            batch_len = len(batch.tets)
+            if sieve is None:
+                sieve = _SurfaceTets(len(vdata), isos)
+            tets, chunk_ends = sieve(vdata[:, 3], batch.tets)
             bnd = np.array(bnd, dtype=np.int32, order="C", copy=True)
-            in_flight.append(pool.submit(work, vdata, tets, bnd, tets_done, decoded_s))
-            tets_done += len(tets)
             n_batches += 1
+            in_flight.append(pool.submit(work, vdata, tets, chunk_ends, batch_len, bnd, tets_done, decoded_s,
+                                         n_batches))
+            tets_done += batch_len
             if n_batches % TRIM_EVERY == 0:
                 _trim_heap()
             while len(in_flight) > MAX_IN_FLIGHT:
@@ -591,6 +659,55 @@ def _extract(stream, info, vals, *, ratio, faces, batch_faces, imp, check, progr
     if isinstance(stream, BrickedStream):
         stats["bricks"] = stream.stats
     return Surface(surf_pts, surf_tris, point_data, stats)
+
+
+class _SurfaceTets:
+    """Picks the tets of a batch that an isosurface cuts, and counts them per chunk (``_Extractor.add``).
+
+    A tet is cut by the surface at ``iso`` when its corners are not all on one side (above: s >=
+    iso, as :func:`.marching.extract_batch` classifies them) or a corner lies on it. Every other
+    tet is one ``extract_batch`` passes over (it adds no triangle and none of its faces touches the
+    surface, so it changes no lock): it is left out here, in the decoding thread, instead of
+    waiting with its batch for the extraction thread (~97 % of the tets on the flange, and of the
+    memory of the batches waiting while a round of collapses runs).
+
+    Each vertex gets a byte per four isovalues, two bits each (above, on), once, when a tet first
+    names it (vertex ids follow the stream, so every id below a named one has its values); a tet's
+    four bytes are then one uint32: 2 ms for a batch of 262,144 tets, where gathering the four
+    scalars from the strided (n, 4) array took 15.
+    """
+
+    _ABOVE = np.uint32(0x01010101)
+
+    def __init__(self, n_points: int, isos):
+        self.groups = [list(isos[i:i + 4]) for i in range(0, len(isos), 4)]
+        self.codes = np.zeros((len(self.groups), n_points), np.uint8)
+        self.coded = 0  # vertices 0 .. coded - 1 have their bytes
+
+    def __call__(self, scalar, tets) -> tuple[np.ndarray, np.ndarray]:
+        """(the cut tets, ``chunk_ends``: how many of them lie in the first i + 1 chunks of
+        ``CHUNK_TETS`` tets of the batch)."""
+        tets = np.ascontiguousarray(tets, dtype=np.int32)
+        n = len(tets)
+        keep = np.zeros(n, np.bool_)
+        if n and self.groups:
+            top = int(tets.max()) + 1
+            if top > self.coded:
+                s = scalar[self.coded:top]
+                for code, group in zip(self.codes, self.groups):
+                    for j, iso in enumerate(group):  # float64 isovalue: compared in float64, as the kernel
+                        code[self.coded:top] |= ((s >= iso).view(np.uint8) << (2 * j)) | ((s == iso).view(np.uint8)
+                                                                                        << (2 * j + 1))
+                self.coded = top
+            for code, group in zip(self.codes, self.groups):
+                word = code[tets].view(np.uint32).ravel()  # the tet's four corners' bytes
+                for j in range(len(group)):
+                    above = word & (self._ABOVE << np.uint32(2 * j))
+                    keep |= ((word & (self._ABOVE << np.uint32(2 * j + 1))) != 0) | (
+                        (above != 0) & (above != (self._ABOVE << np.uint32(2 * j))))
+        kept = tets[keep]
+        last = np.minimum(np.arange(1, -(-n // CHUNK_TETS) + 1) * CHUNK_TETS, n) - 1
+        return kept, np.cumsum(keep)[last] if n else np.zeros(0, np.int64)
 
 
 @functools.cache

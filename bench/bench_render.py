@@ -660,14 +660,14 @@ def cold_start_section(load) -> list[str]:
     """The first ``tetc render`` of a fresh install that skipped ``make install``'s warm-up: an
     empty numba cache, so the run compiles what it needs itself; then the next run. A mesh file
     (post.vtk) needs the renderer only; a ``.tetc`` also the decoder, compiled side by side in two
-    worker processes: post_v6.tetc is what ``tetc compress`` writes today (the codings the warm-up
+    worker processes: post_v7.tetc is what ``tetc compress`` writes today (the codings the warm-up
     compiles), post_v1.tetc a file of the first format, whose older codings compile on top. Wall and CPU seconds (all processes), median of
     3 fresh caches; the CPU time says what the wall time would be on a quiet machine when the load
     average is high."""
     import resource
 
     inputs = [("post.vtk (a mesh file: the renderer)", ROOT / "sample_meshes/lox_post_tets/post.vtk"),
-              ("post_v6.tetc (the decoder and the renderer; today's format)", ROOT / "tests/data/post_v6.tetc"),
+              ("post_v7.tetc (the decoder and the renderer; today's format)", ROOT / "tests/data/post_v7.tetc"),
               ("post_v1.tetc (the decoder and the renderer; format 1's codings too)", ROOT / "tests/data/post_v1.tetc")]
     rows, said = [], []
     for label, sample in inputs:

@@ -78,6 +78,7 @@ HISTORY_WEIGHT = 0.3
 COST_WEIGHT_POWER = 0.5
 PLACE_RIDGE = 1e-6  # ridge on the placement solve, relative to the trace of the quadric
 PLACE_REACH = 4.0  # the optimum may lie within 2 edge lengths of the midpoint (squared ratio)
+HAUSDORFF_WEIGHT = 0.3
 
 
 @njit(cache=True)
@@ -207,6 +208,91 @@ def _placement(vq, vpos, vbnd, u, v, qs):
     if c < best:
         best, bx, by, bz = c, x, y, z
     return max(best, 0.0), bx, by, bz
+
+
+@njit(cache=True, inline="always")
+def _point_triangle2(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
+    """Squared distance from point p to triangle abc (Ericson, Real-Time Collision Detection 5.1.5)."""
+    abx, aby, abz = bx - ax, by - ay, bz - az
+    acx, acy, acz = cx - ax, cy - ay, cz - az
+    apx, apy, apz = px - ax, py - ay, pz - az
+    d1 = abx * apx + aby * apy + abz * apz
+    d2 = acx * apx + acy * apy + acz * apz
+    if d1 <= 0.0 and d2 <= 0.0:
+        return apx * apx + apy * apy + apz * apz
+    bpx, bpy, bpz = px - bx, py - by, pz - bz
+    d3 = abx * bpx + aby * bpy + abz * bpz
+    d4 = acx * bpx + acy * bpy + acz * bpz
+    if d3 >= 0.0 and d4 <= d3:
+        return bpx * bpx + bpy * bpy + bpz * bpz
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        t = d1 / (d1 - d3)
+        qx, qy, qz = ax + t * abx, ay + t * aby, az + t * abz
+        return (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
+    cpx, cpy, cpz = px - cx, py - cy, pz - cz
+    d5 = abx * cpx + aby * cpy + abz * cpz
+    d6 = acx * cpx + acy * cpy + acz * cpz
+    if d6 >= 0.0 and d5 <= d6:
+        return cpx * cpx + cpy * cpy + cpz * cpz
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        t = d2 / (d2 - d6)
+        qx, qy, qz = ax + t * acx, ay + t * acy, az + t * acz
+        return (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        qx, qy, qz = bx + t * (cx - bx), by + t * (cy - by), bz + t * (cz - bz)
+        return (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
+    den = va + vb + vc
+    if den <= 0.0:  # a flat triangle: its corners were tried above
+        return min(apx * apx + apy * apy + apz * apz, min(bpx * bpx + bpy * bpy + bpz * bpz,
+                                                          cpx * cpx + cpy * cpy + cpz * cpz))
+    v = vb / den
+    w = vc / den
+    qx, qy, qz = ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w
+    return (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
+
+
+@njit(cache=True)
+def _fan_distance(x, y, z, u, v, start, cnt, refs, tris, vpos, opos, nxt):
+    """The largest squared distance from the points that u and v stand for (their chains in ``nxt``,
+    positions in ``opos``) to the fan of faces around them after u and v merge at (x, y, z)."""
+    worst = 0.0
+    for end in (u, v):
+        p = end
+        while p >= 0:
+            px, py, pz = opos[p, 0], opos[p, 1], opos[p, 2]
+            best = np.inf
+            for side in (u, v):
+                for i in range(cnt[side]):
+                    f = refs[start[side] + i]
+                    a, b, c = tris[f, 0], tris[f, 1], tris[f, 2]
+                    if a < 0:
+                        continue
+                    hu = (a == u) + (b == u) + (c == u)
+                    hv = (a == v) + (b == v) + (c == v)
+                    if hu and hv:
+                        continue  # on the edge: it dies
+                    if side == u and hv:
+                        continue
+                    if side == v and hu:
+                        continue
+                    ax, ay, az = (x, y, z) if (a == u or a == v) else (vpos[a, 0], vpos[a, 1], vpos[a, 2])
+                    bx, by, bz = (x, y, z) if (b == u or b == v) else (vpos[b, 0], vpos[b, 1], vpos[b, 2])
+                    cx, cy, cz = (x, y, z) if (c == u or c == v) else (vpos[c, 0], vpos[c, 1], vpos[c, 2])
+                    d = _point_triangle2(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz)
+                    if d < best:
+                        best = d
+                        if best <= worst:
+                            break
+                if best <= worst:
+                    break
+            if best > worst and best < np.inf:
+                worst = best
+            p = nxt[p]
+    return worst
 
 
 # -- 4-ary min-heap of collapse candidates ---------------------------------------------------------
@@ -487,9 +573,14 @@ def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, m
     changed = np.zeros(nv, np.int32)  # collapse count when a vertex's current quadric last changed
     ring = np.empty(64, np.int64)
     done = 0
+    # the points each live vertex stands for (itself and the vertices it absorbed this call), as
+    # chains: the one-sided distance of a collapse is the farthest of them from the new fan
+    opos = vpos[:nv].copy()
+    nxt = np.full(nv, -1, np.int64)
+    tail = np.arange(nv)
     while alive > target and hn > 0:
         top = heap[0]
-        u, v, t = top.u, top.v, top.t
+        u, v, t, key0 = top.u, top.v, top.t, top.cost
         hn = _heap_pop(heap, hn)
         if vdead[u] or vdead[v] or moved[u] > t or moved[v] > t:
             continue
@@ -501,6 +592,7 @@ def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, m
             if hn > 0 and cost > heap[0].cost:
                 heap, hn = _heap_push(heap, hn, cost, u, v, done)
                 continue
+            key0 = cost
         # keep the boundary vertex when there is one
         if vbnd[u] and not vbnd[v]:
             u, v = v, u
@@ -549,6 +641,13 @@ def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, m
             continue
         if _flips(x, y, z, v, u, start, cnt, refs, tris, vpos, min_dot):
             continue
+        if HAUSDORFF_WEIGHT > 0.0:
+            d2 = _fan_distance(x, y, z, u, v, start, cnt, refs, tris, vpos, opos, nxt)
+            weight = qs[0] + qs[4] + qs[7]
+            hkey = HAUSDORFF_WEIGHT * d2 * np.sqrt(max(weight, 0.0)) * max(vimp[u], vimp[v])
+            if hkey > key0 and hn > 0 and hkey > heap[0].cost:
+                heap, hn = _heap_push(heap, hn, hkey, u, v, done)
+                continue
         # collapse u into v
         if touched.shape[0] > 0:
             touched[2 * done] = u
@@ -559,6 +658,8 @@ def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, m
             vq[v, k] += vq[u, k]
         vdead[u] = 1
         moved[v] = done
+        nxt[tail[v]] = u
+        tail[v] = tail[u]
         need = cnt[u] + cnt[v]
         if used + need > refs.shape[0]:
             start, cnt, refs, used = _build_adjacency(nv, tris, nt, 4 * nt + 64)

@@ -289,7 +289,9 @@ def _fan_distance(x, y, z, u, v, start, cnt, refs, tris, vpos, opos, nxt):
                             break
                 if best <= worst:
                     break
-            if best > worst and best < np.inf:
+            if best == np.inf:  # no face left around them (a small closed piece collapsing): the new vertex
+                best = (px - x) ** 2 + (py - y) ** 2 + (pz - z) ** 2
+            if best > worst:
                 worst = best
             p = nxt[p]
     return worst

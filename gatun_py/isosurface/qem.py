@@ -256,45 +256,56 @@ def _point_triangle2(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
 
 
 @njit(cache=True)
-def _fan_distance(x, y, z, u, v, start, cnt, refs, tris, vpos, opos, nxt):
+def _fan_distance(x, y, z, u, v, start, cnt, refs, tris, vpos, opos, nxt, fan, floor, ceiling):
     """The largest squared distance from the points that u and v stand for (their chains in ``nxt``,
-    positions in ``opos``) to the fan of faces around them after u and v merge at (x, y, z)."""
-    worst = 0.0
+    positions in ``opos``) to the fan of faces around them after u and v merge at (x, y, z), or
+    ``floor`` if that is larger; the search stops as soon as it passes ``ceiling`` (the caller only
+    needs to know that). ``fan`` (rows of 9 coordinates) is scratch space, grown when too small.
+    Returns (distance squared, fan)."""
+    nf = 0
+    for side in (u, v):
+        for i in range(cnt[side]):
+            f = refs[start[side] + i]
+            a, b, c = tris[f, 0], tris[f, 1], tris[f, 2]
+            if a < 0:
+                continue
+            hu = a == u or b == u or c == u
+            hv = a == v or b == v or c == v
+            if (hu and hv) or (side == u and hv):
+                continue  # on the edge (it dies), or already taken from v's list
+            if nf == fan.shape[0]:
+                grown = np.empty((2 * nf, 9))
+                grown[:nf] = fan
+                fan = grown
+            for k in range(3):
+                w = tris[f, k]
+                if w == u or w == v:
+                    fan[nf, 3 * k], fan[nf, 3 * k + 1], fan[nf, 3 * k + 2] = x, y, z
+                else:
+                    fan[nf, 3 * k], fan[nf, 3 * k + 1], fan[nf, 3 * k + 2] = vpos[w, 0], vpos[w, 1], vpos[w, 2]
+            nf += 1
+    worst = floor
     for end in (u, v):
         p = end
         while p >= 0:
             px, py, pz = opos[p, 0], opos[p, 1], opos[p, 2]
-            best = np.inf
-            for side in (u, v):
-                for i in range(cnt[side]):
-                    f = refs[start[side] + i]
-                    a, b, c = tris[f, 0], tris[f, 1], tris[f, 2]
-                    if a < 0:
-                        continue
-                    hu = (a == u) + (b == u) + (c == u)
-                    hv = (a == v) + (b == v) + (c == v)
-                    if hu and hv:
-                        continue  # on the edge: it dies
-                    if side == u and hv:
-                        continue
-                    if side == v and hu:
-                        continue
-                    ax, ay, az = (x, y, z) if (a == u or a == v) else (vpos[a, 0], vpos[a, 1], vpos[a, 2])
-                    bx, by, bz = (x, y, z) if (b == u or b == v) else (vpos[b, 0], vpos[b, 1], vpos[b, 2])
-                    cx, cy, cz = (x, y, z) if (c == u or c == v) else (vpos[c, 0], vpos[c, 1], vpos[c, 2])
-                    d = _point_triangle2(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz)
-                    if d < best:
-                        best = d
-                        if best <= worst:
-                            break
-                if best <= worst:
-                    break
-            if best == np.inf:  # no face left around them (a small closed piece collapsing): the new vertex
-                best = (px - x) ** 2 + (py - y) ** 2 + (pz - z) ** 2
+            p = nxt[p]
+            # the new vertex is on the fan: a point this close to it cannot raise the maximum
+            best = (px - x) ** 2 + (py - y) ** 2 + (pz - z) ** 2
+            if best <= worst:
+                continue
+            for g in range(nf):  # none left (a small closed piece collapsing): the new vertex
+                d = _point_triangle2(px, py, pz, fan[g, 0], fan[g, 1], fan[g, 2], fan[g, 3], fan[g, 4], fan[g, 5],
+                                     fan[g, 6], fan[g, 7], fan[g, 8])
+                if d < best:
+                    best = d
+                    if best <= worst:
+                        break
             if best > worst:
                 worst = best
-            p = nxt[p]
-    return worst
+                if worst > ceiling:
+                    return worst, fan
+    return worst, fan
 
 
 # -- 4-ary min-heap of collapse candidates ---------------------------------------------------------
@@ -580,6 +591,7 @@ def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, m
     opos = vpos[:nv].copy()
     nxt = np.full(nv, -1, np.int64)
     tail = np.arange(nv)
+    fan = np.empty((32, 9))
     while alive > target and hn > 0:
         top = heap[0]
         u, v, t, key0 = top.u, top.v, top.t, top.cost
@@ -644,12 +656,21 @@ def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, m
         if _flips(x, y, z, v, u, start, cnt, refs, tris, vpos, min_dot):
             continue
         if HAUSDORFF_WEIGHT > 0.0:
-            d2 = _fan_distance(x, y, z, u, v, start, cnt, refs, tris, vpos, opos, nxt)
-            weight = qs[0] + qs[4] + qs[7]
-            hkey = HAUSDORFF_WEIGHT * d2 * np.sqrt(max(weight, 0.0)) * max(vimp[u], vimp[v])
-            if hkey > key0 and hn > 0 and hkey > heap[0].cost:
-                heap, hn = _heap_push(heap, hn, hkey, u, v, done)
-                continue
+            # the one-sided distance term of the key: HAUSDORFF_WEIGHT x (farthest point)^2 x the same
+            # sqrt(weight) x importance as the quadric's. Points within the distance where it is below
+            # the quadric's key change nothing (the floor), and past the next entry's key the
+            # collapse goes back to the heap: its key there is a lower bound, recomputed when it
+            # surfaces again, so the order is the exact keys'.
+            scale = HAUSDORFF_WEIGHT * np.sqrt(max(qs[0] + qs[4] + qs[7], 0.0)) * max(vimp[u], vimp[v])
+            if scale > 0.0 and hn > 0:
+                # (a relative margin, so that an entry pushed back here is taken when it surfaces
+                # with the same distance, whatever the rounding of key / scale x scale)
+                ceiling = max(key0, heap[0].cost) * (1.0 + 1e-9)
+                d2, fan = _fan_distance(x, y, z, u, v, start, cnt, refs, tris, vpos, opos, nxt, fan, key0 / scale,
+                                        ceiling / scale)
+                if scale * d2 > ceiling:
+                    heap, hn = _heap_push(heap, hn, scale * d2, u, v, done)
+                    continue
         # collapse u into v
         if touched.shape[0] > 0:
             touched[2 * done] = u

@@ -255,12 +255,15 @@ def _point_triangle2(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
     return (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
 
 
+FAN_WIDTH = 13
+
+
 @njit(cache=True)
 def _fan_distance(x, y, z, u, v, start, cnt, refs, tris, vpos, opos, nxt, fan, floor, ceiling):
     """The largest squared distance from the points that u and v stand for (their chains in ``nxt``,
     positions in ``opos``) to the fan of faces around them after u and v merge at (x, y, z), or
     ``floor`` if that is larger; the search stops as soon as it passes ``ceiling`` (the caller only
-    needs to know that). ``fan`` (rows of 9 coordinates) is scratch space, grown when too small.
+    needs to know that). ``fan`` (rows of ``FAN_WIDTH``: 9 coordinates, unit normal, offset) is scratch space, grown when too small.
     Returns (distance squared, fan)."""
     nf = 0
     for side in (u, v):
@@ -274,7 +277,7 @@ def _fan_distance(x, y, z, u, v, start, cnt, refs, tris, vpos, opos, nxt, fan, f
             if (hu and hv) or (side == u and hv):
                 continue  # on the edge (it dies), or already taken from v's list
             if nf == fan.shape[0]:
-                grown = np.empty((2 * nf, 9))
+                grown = np.empty((2 * nf, FAN_WIDTH))
                 grown[:nf] = fan
                 fan = grown
             for k in range(3):
@@ -283,8 +286,18 @@ def _fan_distance(x, y, z, u, v, start, cnt, refs, tris, vpos, opos, nxt, fan, f
                     fan[nf, 3 * k], fan[nf, 3 * k + 1], fan[nf, 3 * k + 2] = x, y, z
                 else:
                     fan[nf, 3 * k], fan[nf, 3 * k + 1], fan[nf, 3 * k + 2] = vpos[w, 0], vpos[w, 1], vpos[w, 2]
+            # its plane (unit normal, offset; zero for a flat face): a point whose distance to the
+            # plane is already no nearer than the best face so far skips the exact test
+            nx, ny, nz = _cross(fan[nf, 0], fan[nf, 1], fan[nf, 2], fan[nf, 3], fan[nf, 4], fan[nf, 5],
+                                fan[nf, 6], fan[nf, 7], fan[nf, 8])
+            ln = np.sqrt(nx * nx + ny * ny + nz * nz)
+            if ln > 0.0:
+                nx, ny, nz = nx / ln, ny / ln, nz / ln
+            fan[nf, 9], fan[nf, 10], fan[nf, 11] = nx, ny, nz
+            fan[nf, 12] = -(nx * fan[nf, 0] + ny * fan[nf, 1] + nz * fan[nf, 2])
             nf += 1
     worst = floor
+    near = 0  # the face that was near enough for the last point: a chain's points are neighbours
     for end in (u, v):
         p = end
         while p >= 0:
@@ -294,12 +307,19 @@ def _fan_distance(x, y, z, u, v, start, cnt, refs, tris, vpos, opos, nxt, fan, f
             best = (px - x) ** 2 + (py - y) ** 2 + (pz - z) ** 2
             if best <= worst:
                 continue
-            for g in range(nf):  # none left (a small closed piece collapsing): the new vertex
+            for i in range(nf):  # none left (a small closed piece collapsing): the new vertex
+                g = near + i
+                if g >= nf:
+                    g -= nf
+                h = fan[g, 9] * px + fan[g, 10] * py + fan[g, 11] * pz + fan[g, 12]
+                if h * h >= best:
+                    continue
                 d = _point_triangle2(px, py, pz, fan[g, 0], fan[g, 1], fan[g, 2], fan[g, 3], fan[g, 4], fan[g, 5],
                                      fan[g, 6], fan[g, 7], fan[g, 8])
                 if d < best:
                     best = d
                     if best <= worst:
+                        near = g
                         break
             if best > worst:
                 worst = best
@@ -591,7 +611,7 @@ def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, m
     opos = vpos[:nv].copy()
     nxt = np.full(nv, -1, np.int64)
     tail = np.arange(nv)
-    fan = np.empty((32, 9))
+    fan = np.empty((32, FAN_WIDTH))
     while alive > target and hn > 0:
         top = heap[0]
         u, v, t, key0 = top.u, top.v, top.t, top.cost

@@ -127,3 +127,20 @@ def naive_current_quadric(points, triangles, v, *, border_weight, importance=Non
         if w > 0:
             q += plane_quadric(n, d, w)
     return q + naive_border_planes(points, t, v, border_weight)
+
+
+def naive_fan_distance(points, triangles, u, v, new_pos, samples):
+    """The largest squared distance from ``samples`` to the faces around u and v once u and v merge
+    at ``new_pos`` (the faces on edge uv gone), or to ``new_pos`` when no face is left. Exact
+    point-to-triangle distances from the metric module's own routine (a separate implementation)."""
+    from gatun_py.isosurface.metrics import _point_triangle
+
+    p = np.asarray(points, np.float64).copy()
+    p[u] = p[v] = new_pos
+    fan = [f for f in np.asarray(triangles) if (u in f) != (v in f)]
+    worst = 0.0
+    for s in np.asarray(samples, np.float64):
+        d = [float(_point_triangle(s[0], s[1], s[2], p[a], p[b], p[c])) for a, b, c in fan]
+        d = [x for x in d if np.isfinite(x)]  # a flat face: its edges belong to the others
+        worst = max(worst, min(d) if d else float(np.sum((s - new_pos) ** 2)))
+    return worst

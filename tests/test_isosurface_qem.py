@@ -8,7 +8,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from naive_qem import (DET_FLOOR, naive_border_planes, naive_current_quadric, naive_edge_cost, naive_face_quadrics,
-                       naive_placement, naive_segment_min, plane_quadric, quadric_cost)
+                       naive_fan_distance, naive_placement, naive_segment_min, plane_quadric, quadric_cost)
 
 from gatun_py.isosurface import qem
 
@@ -217,3 +217,61 @@ def test_border_survives_on_an_open_patch():
     on_side = np.minimum(np.minimum(np.abs(xy[:, 0]), np.abs(xy[:, 0] - 1)),
                          np.minimum(np.abs(xy[:, 1]), np.abs(xy[:, 1] - 1)))
     assert on_side.max() < 0.05 / 23  # grid spacing 1/23
+
+
+def _fan_case(rng, pts, tris):
+    """An interior edge (u, v) of the patch, chains of points for u and v, a new position near the edge."""
+    e = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    edges, count = np.unique(e, axis=0, return_counts=True)
+    u, v = edges[rng.choice(np.flatnonzero(count == 2))]
+    new = 0.5 * (pts[u] + pts[v]) + 0.02 * rng.normal(size=3)
+    others = rng.choice(np.setdiff1d(np.arange(len(pts)), [u, v]), size=rng.integers(0, 12), replace=False)
+    # u stands for itself and some of the points; v for itself and the rest (chains through nxt)
+    nxt = np.full(len(pts), -1, np.int64)
+    cut = len(others) // 2
+    for head, members in ((u, others[:cut]), (v, others[cut:])):
+        prev = head
+        for m in members:
+            nxt[prev] = m
+            prev = m
+    return int(u), int(v), new, nxt, np.concatenate([[u, v], others])
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_fan_distance_is_the_reference(seed):
+    """The one-sided distance of a collapse: the farthest of the points that u and v stand for from
+    the faces around them after the merge, against exact distances from the metric module's routine;
+    with a floor it reports max(floor, distance), and past a ceiling it may stop early (between the
+    ceiling and the true distance)."""
+    rng = np.random.default_rng(seed)
+    pts, tris = _wavy_patch(n=8, seed=seed % 1000)
+    pts = pts + 0.05 * rng.normal(size=pts.shape)  # the points the chains stand for are off the surface
+    u, v, new, nxt, members = _fan_case(rng, pts, tris)
+    nv, nt = len(pts), len(tris)
+    start, cnt, refs, _ = qem._build_adjacency(nv, tris.astype(np.int32), nt, 0)
+    args = (new[0], new[1], new[2], u, v, start, cnt, refs, tris.astype(np.int32), pts, pts, nxt,
+            np.empty((1, qem.FAN_WIDTH)))
+    ref = naive_fan_distance(pts, tris, u, v, new, pts[members])
+    got, _ = qem._fan_distance(*args, 0.0, np.inf)
+    assert got == pytest.approx(ref, rel=1e-9, abs=1e-15)
+    floor = rng.uniform(0, 2) * ref
+    assert qem._fan_distance(*args, floor, np.inf)[0] == pytest.approx(max(floor, ref), rel=1e-9, abs=1e-15)
+    if ref > 0:
+        ceiling = rng.uniform(0, 1) * ref
+        early, _ = qem._fan_distance(*args, 0.0, ceiling)
+        assert ceiling < early <= ref * (1 + 1e-9)
+
+
+def test_a_closed_piece_is_not_removed_for_free():
+    """The last collapse of a closed piece (two faces back to back on edge uv: both die) leaves no
+    face for its points: they are measured to the new vertex, not counted as distance 0."""
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float64)
+    tris = np.array([[0, 1, 2], [1, 0, 2]], np.int32)
+    start, cnt, refs, _ = qem._build_adjacency(4, tris, 2, 0)
+    nxt = np.array([2, 3, -1, -1], np.int64)  # u = 0 stands for 0 and 2, v = 1 for 1 and 3
+    new = np.array([0.5, 0.0, 0.0])
+    d, _ = qem._fan_distance(new[0], new[1], new[2], 0, 1, start, cnt, refs, tris, pts, pts, nxt,
+                             np.empty((1, qem.FAN_WIDTH)), 0.0, np.inf)
+    assert d == pytest.approx(np.max(np.sum((pts - new) ** 2, axis=1)))
+    assert d == pytest.approx(naive_fan_distance(pts, tris, 0, 1, new, pts))

@@ -17,10 +17,13 @@ kernel costs reference-count updates on each call, which dominated the per-tet c
 ``E (cap * E_COLS,) int32`` one row of ``E_COLS`` per slot, flat so that a row's offset is a
 multiplication by a constant (a 2-D array's row stride is a run-time value: one more multiply on
 the list walks' chain of dependent loads): vertices (+ apex data) in columns 0-3, sequence number
-(``E_SEQ``, -1: free slot), incidence-list links per corner (``E_NEXT``, ``E_PREV``; node id =
-4 * slot + corner, taken apart with a shift and a mask rather than a floor division by 3),
-free-list link (``E_FREE``; slots never used are handed out in order past ``BS_BUMP``, so the
-table needs no initialisation); ``vhead (nv) int32`` list heads;
+(``E_SEQ``, -1: free slot), incidence-list links per corner (``E_NEXT``, ``E_PREV``; a node id is
+the offset in E of the node's next link, ``slot * E_COLS + E_NEXT + corner``, stored as an
+unsigned 32-bit value in the int32 table (-1, all ones: none), so that a list walk's chain of
+dependent loads is ``node = E[np.uint32(node)]`` with no arithmetic between the loads (the slot,
+needed beside the chain, is a multiply and a shift: :func:`_node_slot`), free-list link
+(``E_FREE``; slots never used are handed out in order past ``BS_BUMP``, so the table needs no
+initialisation); ``vhead (nv) int32`` list heads;
 ``Q (qcap, 2) int64`` (the decoders: int32) FIFO ring of (slot, sequence), ``qcap`` a power of
 two; ``bs int64`` scalars (see ``BS_*``).
 
@@ -40,10 +43,25 @@ from . import rangecoder as rc
 BS_NFREE, BS_QHEAD, BS_QTAIL, BS_SEQ, BS_LIVE, BS_PEAK, BS_FREE_HEAD, BS_BUMP = 0, 1, 2, 3, 4, 5, 6, 7
 # columns of the element table E: vertices/apex 0-3, sequence, list links per corner, free list
 E_SEQ, E_NEXT, E_PREV, E_FREE, E_COLS = 4, 5, 8, 11, 12
-MAX_SLOTS = 1 << 29  # node ids 4 * slot + corner are int32
+MAX_SLOTS = 1 << 28  # node ids slot * E_COLS + E_NEXT + corner are below 2**32 - 1 (all ones: none)
+E_LINK = E_PREV - E_NEXT  # a node's previous-node link, this far past its next link
 # sequence numbers are int32 (E_SEQ, and the decoders' queue): one per element ever added, so a
 # stream adds fewer than this many elements (the decoders check it from the header's counts)
 MAX_SEQ = (1 << 31) - 1
+
+
+@njit(cache=True, inline="always")
+def _node_slot(node):
+    """The slot of node id ``node`` (as stored, int32): ``node // E_COLS`` on its unsigned value,
+    as the multiply and shift a compiler makes of an unsigned 32-bit division by 12 (E_COLS)."""
+    return np.int64((np.uint64(np.uint32(node)) * np.uint64(0xAAAAAAAB)) >> np.uint64(35))
+
+
+@njit(cache=True, inline="always")
+def _node_corner(node, slot):
+    """The corner of node id ``node`` in its slot."""
+    return np.int64(np.uint32(node)) - slot * E_COLS - E_NEXT
+
 
 MAX_C1 = 15  # coded edge-adjacent candidates (symbol 15 = escape)
 MAX_C2 = 64  # vertex-adjacent candidates
@@ -154,12 +172,12 @@ def _add(B, k, v0, v1, v2, v3):
     E[s * E_COLS + E_SEQ] = seq
     for c in range(k):
         v = E[s * E_COLS + c]
-        node = 4 * s + c
+        node = s * E_COLS + E_NEXT + c
         h = vhead[v]
-        E[s * E_COLS + E_NEXT + c] = h
-        E[s * E_COLS + E_PREV + c] = -1
+        E[node] = h
+        E[node + E_LINK] = -1
         if h != -1:
-            E[(h >> 2) * E_COLS + E_PREV + (h & 3)] = node
+            E[np.int64(np.uint32(h)) + E_LINK] = node
         vhead[v] = node
     t = bs[BS_QTAIL] & (Q.shape[0] - 1)
     Q[t, 0] = s
@@ -178,11 +196,11 @@ def _remove(B, k, s):
         p = E[s * E_COLS + E_PREV + c]
         n = E[s * E_COLS + E_NEXT + c]
         if p != -1:
-            E[(p >> 2) * E_COLS + E_NEXT + (p & 3)] = n
+            E[np.uint32(p)] = n
         else:
             vhead[E[s * E_COLS + c]] = n
         if n != -1:
-            E[(n >> 2) * E_COLS + E_PREV + (n & 3)] = p
+            E[np.int64(np.uint32(n)) + E_LINK] = p
     E[s * E_COLS + E_SEQ] = -1
     E[s * E_COLS + E_FREE] = bs[BS_FREE_HEAD]
     bs[BS_FREE_HEAD] = s
@@ -212,13 +230,13 @@ def _find_edge(B, p, r):
     best = -1
     best_seq = np.int64(-1)
     while node != -1:
-        s = node >> 2
-        c = node & 3
+        s = _node_slot(node)
+        c = _node_corner(node, s)
         if c < 2 and E[s * E_COLS + 1 - c] == r:
             if best == -1 or E[s * E_COLS + E_SEQ] < best_seq:
                 best = s
                 best_seq = E[s * E_COLS + E_SEQ]
-        node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+        node = E[np.uint32(node)]  # an unsigned index: no wrap-around arithmetic on the chain
     return best
 
 
@@ -289,8 +307,8 @@ def _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq, seen):
         u = a if k == 0 else (b if k == 1 else c)
         node = vhead[u]
         while node != -1:
-            g = node >> 2
-            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+            g = _node_slot(node)
+            node = E[np.uint32(node)]  # an unsigned index: no wrap-around arithmetic on the chain
             shared = 0
             for cj in range(3):
                 w = E[g * E_COLS + cj]
@@ -362,9 +380,9 @@ def _closing_faces(B, t0, t1, t2, t3):
     f2 = -1
     node = vhead[t3]
     while node != -1:
-        g = node >> 2
-        c0 = node & 3
-        node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+        g = _node_slot(node)
+        c0 = _node_corner(node, g)
+        node = E[np.uint32(node)]  # an unsigned index: no wrap-around arithmetic on the chain
         x = E[g * E_COLS + (0 if c0 == 2 else c0 + 1)]
         y = E[g * E_COLS + (2 if c0 == 0 else c0 - 1)]
         if (x == t1 and y == t2) or (x == t2 and y == t1):
@@ -436,8 +454,8 @@ def _gather_face(B, s, cand, cscore, cseq, cface, cface_full):
         u = a if k == 0 else b
         node = vhead[u]
         while node != -1:
-            g = node >> 2
-            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+            g = _node_slot(node)
+            node = E[np.uint32(node)]  # an unsigned index: no wrap-around arithmetic on the chain
             if g == s:
                 continue
             g0 = np.int64(E[g * E_COLS + 0])
@@ -513,13 +531,13 @@ def _gather_edge(B, s, cand, cscore, cseq):
         other = p if k == 0 else r
         node = vhead[u]
         while node != -1:
-            g = node >> 2
-            c = node & 3
+            g = _node_slot(node)
+            c = _node_corner(node, g)
             if c < 2 and g != s:
                 x = np.int64(E[g * E_COLS + 1 - c])
                 if x != other:
                     n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g * E_COLS + E_SEQ])
-            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+            node = E[np.uint32(node)]  # an unsigned index: no wrap-around arithmetic on the chain
     _sort_candidates(cand, cscore, cseq, n1)
     return n1
 

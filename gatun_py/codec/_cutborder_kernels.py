@@ -36,7 +36,10 @@ so every round trip compares the two.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from . import rangecoder as rc
 
@@ -61,6 +64,36 @@ def _node_slot(node):
 def _node_corner(node, slot):
     """The corner of node id ``node`` in its slot."""
     return np.int64(np.uint32(node)) - slot * E_COLS - E_NEXT
+
+
+@intrinsic
+def _prefetch(typingctx, arr, i):
+    """Hint the CPU to bring ``arr[i]`` (1-D) into cache: LLVM's ``prefetch``, which reads
+    nothing architecturally and never faults, so ``i`` need not be checked. Numba has no
+    prefetch of its own."""
+    if not (isinstance(arr, types.Array) and arr.ndim == 1 and isinstance(i, types.Integer)):
+        return None
+    sig = types.void(arr, i)
+
+    def codegen(context, builder, signature, args):
+        aryty = signature.args[0]
+        ary = context.make_array(aryty)(context, builder, args[0])
+        ii = context.cast(builder, args[1], signature.args[1], types.intp)
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [ii], wraparound=False)
+        i8p = ir.IntType(8).as_pointer()
+        i32 = ir.IntType(32)
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32]),
+                                            "llvm.prefetch.p0")
+        builder.call(fn, [builder.bitcast(ptr, i8p), i32(0), i32(3), i32(1)])  # read, keep, data
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+# How far ahead in the FIFO the tet decoder prefetches: the row of the face PF_ROW entries on,
+# the list heads of the vertices of the face PF_HEAD entries on (whose row is in by then), and
+# the first nodes of the lists of the face PF_NODE entries on (whose heads are in by then).
+PF_ROW, PF_HEAD, PF_NODE, PF_NODE2 = 32, 16, 8, 4
 
 
 MAX_C1 = 15  # coded edge-adjacent candidates (symbol 15 = escape)
@@ -1501,6 +1534,24 @@ def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, ts
         if s == -1:
             status = ST_ERROR
             break
+        # the faces to come are known (FIFO): fetch their rows and list heads ahead of the walks
+        hq = bs[BS_QHEAD]
+        _prefetch(E, Q[(hq + PF_ROW) & (qcap - 1), 0] * E_COLS)
+        s_next = Q[(hq + PF_HEAD) & (qcap - 1), 0]  # a handed-out slot (or 0): a row within E
+        _prefetch(vhead, E[s_next * E_COLS + 0])
+        _prefetch(vhead, E[s_next * E_COLS + 1])
+        s_next = Q[(hq + PF_NODE) & (qcap - 1), 0]
+        for corner in range(2):
+            v = E[s_next * E_COLS + corner]
+            if v >= 0 and v < vhead.shape[0]:
+                _prefetch(E, np.uint32(vhead[v]))  # a node id is an offset in E
+        s_next = Q[(hq + PF_NODE2) & (qcap - 1), 0]
+        for corner in range(2):
+            v = E[s_next * E_COLS + corner]
+            if v >= 0 and v < vhead.shape[0]:
+                node = vhead[v]
+                if node != -1 and np.uint32(node) < E.shape[0]:
+                    _prefetch(E, np.uint32(E[np.uint32(node)]))
         a = np.int64(E[s * E_COLS + 0])
         b = np.int64(E[s * E_COLS + 1])
         c = np.int64(E[s * E_COLS + 2])

@@ -231,6 +231,10 @@ def _pick_ext(adj, deg, vf, x, e0, e1, e2):
     return best
 
 
+_pick_par_inlined = njit(cache=True, _nrt=False, inline="always")(_pick_par.py_func)
+_pick_ext_inlined = njit(cache=True, _nrt=False, inline="always")(_pick_ext.py_func)
+
+
 @njit(cache=True, _nrt=False)
 def link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf):
     """Choose the extra predictor vertices of vertex ``k`` (refs checked) and record its edges.
@@ -283,13 +287,17 @@ def link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf):
                 e1 = est
             else:
                 e2 = est
-        w[0, 0] = _pick_par(adj, deg, mark, 3 * k + 1, vf, f0, f1, f2, apex, e0, e1, e2)
-        w[0, 1] = _pick_ext(adj, deg, vf, f0, e0, e1, e2)
-        w[1, 1] = _pick_ext(adj, deg, vf, f1, e0, e1, e2)
-        if nf == 3:
-            w[1, 0] = _pick_par(adj, deg, mark, 3 * k + 2, vf, f0, f2, f1, apex, e0, e1, e2)
-            w[2, 0] = _pick_par(adj, deg, mark, 3 * k + 3, vf, f1, f2, f0, apex, e0, e1, e2)
-            w[2, 1] = _pick_ext(adj, deg, vf, f2, e0, e1, e2)
+        # pairs (f0, f1), (f0, f2), (f1, f2) and face refs f0, f1, f2 in loops around one inlined
+        # copy of each pick (called, each passed four arrays: a fifth of the geometry decode);
+        # the picks are independent (each pair's tag is its own), so their order is free
+        for p in range(1 if nf == 2 else 3):
+            x = f0 if p < 2 else f1
+            y = f1 if p == 0 else f2
+            other = f2 if p == 0 else (f1 if p == 1 else f0)
+            w[p, 0] = _pick_par_inlined(adj, deg, mark, 3 * k + 1 + p, vf, x, y, other, apex, e0, e1, e2)
+        for q in range(nf):
+            x = f0 if q == 0 else (f1 if q == 1 else f2)
+            w[q, 1] = _pick_ext_inlined(adj, deg, vf, x, e0, e1, e2)
     # every pair among the new vertex, its face and the apex is a mesh edge, except
     # new vertex - apex (they sit on either side of the face)
     _link(adj, deg, k, f0)
@@ -1035,7 +1043,9 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
     """Decode channel ``ch`` of vertex ``k`` (see :func:`decode_vertices`); ``flag`` is the
     repetition context left by the previous channel. Returns the context for the next channel,
     or minus an error status."""
-    pat, m_refs = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS,
+    # the two requests as run-time values (int64 casts): as literals they compiled _gather twice,
+    # some 1.5 s of a cold start, for no measurable speed
+    pat, m_refs = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, np.int64(WANT_REPEATS),
                           cands[CAND_VERSION])
     m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m_refs, cands)
     is_eq = 0
@@ -1053,7 +1063,7 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
             return -ERR_STREAM
     if is_eq == 0:
         # the repetition candidates of the refs (eq_o[:m_refs]) are still those of the first call
-        pat, _ = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_PREDICTIONS,
+        pat, _ = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, np.int64(WANT_PREDICTIONS),
                          cands[CAND_VERSION])
         mode = modes[ch]
         best = _best_cand(scores, ch, pat, cands)

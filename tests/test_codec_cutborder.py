@@ -186,7 +186,8 @@ def test_damaged_streams_raise_or_decode_consistently(seed, which, n_flips, codi
 
 def test_border_beyond_the_slot_limit_is_refused(monkeypatch):
     """Border node ids are slot * E_COLS + E_NEXT + corner, unsigned 32-bit: the encoder refuses a mesh
-    whose border could outgrow the slot limit and the decoder refuses to grow past it (a clear error, not a wrapped id)."""
+    whose border could outgrow the slot limit and the decoder refuses to grow past it (a clear error,
+    not a wrapped id)."""
     from gatun_py.codec import _cutborder_kernels as K
     from gatun_py.errors import MeshError
 

@@ -1045,8 +1045,8 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
     or minus an error status."""
     # the two requests as run-time values (int64 casts): as literals they compiled _gather twice,
     # some 1.5 s of a cold start, for no measurable speed
-    pat, m_refs = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, np.int64(WANT_REPEATS),
-                          cands[CAND_VERSION])
+    pat, m_refs = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i,
+                          np.int64(WANT_REPEATS), cands[CAND_VERSION])
     m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m_refs, cands)
     is_eq = 0
     o = np.int64(0)
@@ -1063,8 +1063,8 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
             return -ERR_STREAM
     if is_eq == 0:
         # the repetition candidates of the refs (eq_o[:m_refs]) are still those of the first call
-        pat, _ = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, np.int64(WANT_PREDICTIONS),
-                         cands[CAND_VERSION])
+        pat, _ = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i,
+                         np.int64(WANT_PREDICTIONS), cands[CAND_VERSION])
         mode = modes[ch]
         best = _best_cand(scores, ch, pat, cands)
         ctx = _res_context(pat, flags[N_CHANNELS + ch], eq_o, m_refs)

@@ -185,8 +185,9 @@ def test_damaged_streams_raise_or_decode_consistently(seed, which, n_flips, codi
 
 
 def test_border_beyond_the_slot_limit_is_refused(monkeypatch):
-    """Border node ids are 4 * slot + corner in int32: the encoder refuses a mesh whose border could
-    outgrow the slot limit and the decoder refuses to grow past it (a clear error, not a wrapped id)."""
+    """Border node ids are slot * E_COLS + E_NEXT + corner, unsigned 32-bit: the encoder refuses a mesh
+    whose border could outgrow the slot limit and the decoder refuses to grow past it (a clear error,
+    not a wrapped id)."""
     from gatun_py.codec import _cutborder_kernels as K
     from gatun_py.errors import MeshError
 
@@ -206,6 +207,33 @@ def test_border_beyond_the_slot_limit_is_refused(monkeypatch):
     monkeypatch.setattr(K, "MAX_SLOTS", 2 * mesh.n_tets)
     with pytest.raises(MeshError, match="too large"):
         encode_connectivity(mesh.n_points, mesh.tets)
+
+
+def test_node_ids_map_back_to_slot_and_corner_up_to_the_slot_limit():
+    """A node id is the offset of its next link in the border table; the list walks take the slot
+    back with a multiply and a shift. Exact for every id below the limit, none of which is the
+    all-ones "no node" value, also where the stored int32 is negative."""
+    from numba import njit
+
+    from gatun_py.codec import _cutborder_kernels as K
+
+    @njit
+    def split(stored):
+        slots = np.empty(len(stored), np.int64)
+        corners = np.empty(len(stored), np.int64)
+        for i in range(len(stored)):
+            slots[i] = K._node_slot(stored[i])
+            corners[i] = K._node_corner(stored[i], slots[i])
+        return slots, corners
+
+    rng = np.random.default_rng(5)
+    slots = np.concatenate([np.arange(4096), K.MAX_SLOTS - 1 - np.arange(4096),
+                            rng.integers(0, K.MAX_SLOTS, 100_000)]).astype(np.int64)
+    corners = rng.integers(0, 3, len(slots))
+    node = slots * K.E_COLS + K.E_NEXT + corners
+    assert node.max() < (1 << 32) - 1 and (node >= 1 << 31).any()
+    got_slots, got_corners = split(node.astype(np.uint32).view(np.int32))
+    assert np.array_equal(got_slots, slots) and np.array_equal(got_corners, corners)
 
 
 def test_decoder_border_grows_from_a_tight_start(monkeypatch):

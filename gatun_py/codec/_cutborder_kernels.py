@@ -17,10 +17,13 @@ kernel costs reference-count updates on each call, which dominated the per-tet c
 ``E (cap * E_COLS,) int32`` one row of ``E_COLS`` per slot, flat so that a row's offset is a
 multiplication by a constant (a 2-D array's row stride is a run-time value: one more multiply on
 the list walks' chain of dependent loads): vertices (+ apex data) in columns 0-3, sequence number
-(``E_SEQ``, -1: free slot), incidence-list links per corner (``E_NEXT``, ``E_PREV``; node id =
-4 * slot + corner, taken apart with a shift and a mask rather than a floor division by 3),
-free-list link (``E_FREE``; slots never used are handed out in order past ``BS_BUMP``, so the
-table needs no initialisation); ``vhead (nv) int32`` list heads;
+(``E_SEQ``, -1: free slot), incidence-list links per corner (``E_NEXT``, ``E_PREV``; a node id is
+the offset in E of the node's next link, ``slot * E_COLS + E_NEXT + corner``, stored as an
+unsigned 32-bit value in the int32 table (-1, all ones: none), so that a list walk's chain of
+dependent loads is ``node = E[np.uint32(node)]`` with no arithmetic between the loads (the slot,
+needed beside the chain, is a multiply and a shift: :func:`_node_slot`), free-list link
+(``E_FREE``; slots never used are handed out in order past ``BS_BUMP``, so the table needs no
+initialisation); ``vhead (nv) int32`` list heads;
 ``Q (qcap, 2) int64`` (the decoders: int32) FIFO ring of (slot, sequence), ``qcap`` a power of
 two; ``bs int64`` scalars (see ``BS_*``).
 
@@ -33,17 +36,65 @@ so every round trip compares the two.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from . import rangecoder as rc
 
 BS_NFREE, BS_QHEAD, BS_QTAIL, BS_SEQ, BS_LIVE, BS_PEAK, BS_FREE_HEAD, BS_BUMP = 0, 1, 2, 3, 4, 5, 6, 7
 # columns of the element table E: vertices/apex 0-3, sequence, list links per corner, free list
 E_SEQ, E_NEXT, E_PREV, E_FREE, E_COLS = 4, 5, 8, 11, 12
-MAX_SLOTS = 1 << 29  # node ids 4 * slot + corner are int32
+MAX_SLOTS = 1 << 28  # node ids slot * E_COLS + E_NEXT + corner are below 2**32 - 1 (all ones: none)
+E_LINK = E_PREV - E_NEXT  # a node's previous-node link, this far past its next link
 # sequence numbers are int32 (E_SEQ, and the decoders' queue): one per element ever added, so a
 # stream adds fewer than this many elements (the decoders check it from the header's counts)
 MAX_SEQ = (1 << 31) - 1
+
+
+@njit(cache=True, inline="always")
+def _node_slot(node):
+    """The slot of node id ``node`` (as stored, int32): ``node // E_COLS`` on its unsigned value,
+    as the multiply and shift a compiler makes of an unsigned 32-bit division by 12 (E_COLS)."""
+    return np.int64((np.uint64(np.uint32(node)) * np.uint64(0xAAAAAAAB)) >> np.uint64(35))
+
+
+@njit(cache=True, inline="always")
+def _node_corner(node, slot):
+    """The corner of node id ``node`` in its slot."""
+    return np.int64(np.uint32(node)) - slot * E_COLS - E_NEXT
+
+
+@intrinsic
+def _prefetch(typingctx, arr, i):
+    """Hint the CPU to bring ``arr[i]`` (1-D) into cache: LLVM's ``prefetch``, which reads
+    nothing architecturally and never faults, so ``i`` need not be checked. Numba has no
+    prefetch of its own."""
+    if not (isinstance(arr, types.Array) and arr.ndim == 1 and isinstance(i, types.Integer)):
+        return None
+    sig = types.void(arr, i)
+
+    def codegen(context, builder, signature, args):
+        aryty = signature.args[0]
+        ary = context.make_array(aryty)(context, builder, args[0])
+        ii = context.cast(builder, args[1], signature.args[1], types.intp)
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [ii], wraparound=False)
+        i8p = ir.IntType(8).as_pointer()
+        i32 = ir.IntType(32)
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32]),
+                                            "llvm.prefetch.p0")
+        builder.call(fn, [builder.bitcast(ptr, i8p), i32(0), i32(3), i32(1)])  # read, keep, data
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+# How far ahead in the FIFO the tet decoder prefetches: the row of the face PF_ROW entries on,
+# the list heads of the vertices of the face PF_HEAD entries on (whose row is in by then), and
+# the first nodes of the lists of the face PF_NODE entries on (whose heads are in by then).
+PF_ROW, PF_HEAD, PF_NODE, PF_NODE2 = 32, 16, 8, 4
+
 
 MAX_C1 = 15  # coded edge-adjacent candidates (symbol 15 = escape)
 MAX_C2 = 64  # vertex-adjacent candidates
@@ -154,12 +205,12 @@ def _add(B, k, v0, v1, v2, v3):
     E[s * E_COLS + E_SEQ] = seq
     for c in range(k):
         v = E[s * E_COLS + c]
-        node = 4 * s + c
+        node = s * E_COLS + E_NEXT + c
         h = vhead[v]
-        E[s * E_COLS + E_NEXT + c] = h
-        E[s * E_COLS + E_PREV + c] = -1
+        E[node] = h
+        E[node + E_LINK] = -1
         if h != -1:
-            E[(h >> 2) * E_COLS + E_PREV + (h & 3)] = node
+            E[np.int64(np.uint32(h)) + E_LINK] = node
         vhead[v] = node
     t = bs[BS_QTAIL] & (Q.shape[0] - 1)
     Q[t, 0] = s
@@ -178,11 +229,11 @@ def _remove(B, k, s):
         p = E[s * E_COLS + E_PREV + c]
         n = E[s * E_COLS + E_NEXT + c]
         if p != -1:
-            E[(p >> 2) * E_COLS + E_NEXT + (p & 3)] = n
+            E[np.uint32(p)] = n
         else:
             vhead[E[s * E_COLS + c]] = n
         if n != -1:
-            E[(n >> 2) * E_COLS + E_PREV + (n & 3)] = p
+            E[np.int64(np.uint32(n)) + E_LINK] = p
     E[s * E_COLS + E_SEQ] = -1
     E[s * E_COLS + E_FREE] = bs[BS_FREE_HEAD]
     bs[BS_FREE_HEAD] = s
@@ -212,13 +263,13 @@ def _find_edge(B, p, r):
     best = -1
     best_seq = np.int64(-1)
     while node != -1:
-        s = node >> 2
-        c = node & 3
+        s = _node_slot(node)
+        c = _node_corner(node, s)
         if c < 2 and E[s * E_COLS + 1 - c] == r:
             if best == -1 or E[s * E_COLS + E_SEQ] < best_seq:
                 best = s
                 best_seq = E[s * E_COLS + E_SEQ]
-        node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+        node = E[np.uint32(node)]  # an unsigned index: no wrap-around arithmetic on the chain
     return best
 
 
@@ -255,19 +306,42 @@ def _sort_candidates(cand, cscore, cseq, n):
         cseq[j + 1] = sq
 
 
+# The case (c) gather's table of the vertices it has met (open addressing, linear probing): row 0
+# the vertex (-1: free), row 1 its position in the list (-1: an edge candidate, left out). At most
+# MAX_C1 + MAX_C2 keys, so it stays under a third full and a lookup is a probe or two, where
+# scanning both lists for every vertex met cost the decoder 7 % of its time on the gmsh flange.
+SEEN_SLOTS = 256
+
+
+@njit(cache=True, inline="always")
+def _seen_slot(seen, w):
+    """Slot of vertex ``w`` in the table, or the free slot where it goes."""
+    h = ((w * -7046029254386353131) >> 40) & (SEEN_SLOTS - 1)  # multiplicative hash, high bits
+    while seen[0, h] != -1 and seen[0, h] != w:
+        h = (h + 1) & (SEEN_SLOTS - 1)
+    return h
+
+
 @njit(cache=True, _nrt=False)
-def _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq):
+def _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq, seen):
     """The paper's case (c) list: vertices of faces of T sharing exactly one vertex with the
     current face (a, b, c) (already removed from T), except the edge candidates, in traversal
-    order (oldest face first). Only needed after an escape, so computed lazily."""
+    order (oldest face first). Only needed after an escape, so computed lazily. ``seen``
+    ``(2, SEEN_SLOTS)`` int64 is scratch."""
     E, vhead, Q, bs = B
+    for h in range(SEEN_SLOTS):
+        seen[0, h] = -1
+    for i in range(n1):
+        h = _seen_slot(seen, cand[i])
+        seen[0, h] = cand[i]
+        seen[1, h] = -1
     n2 = 0
     for k in range(3):
         u = a if k == 0 else (b if k == 1 else c)
         node = vhead[u]
         while node != -1:
-            g = node >> 2
-            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+            g = _node_slot(node)
+            node = E[np.uint32(node)]  # an unsigned index: no wrap-around arithmetic on the chain
             shared = 0
             for cj in range(3):
                 w = E[g * E_COLS + cj]
@@ -275,27 +349,21 @@ def _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq):
                     shared += 1
             if shared != 1:
                 continue
+            seq = np.int64(E[g * E_COLS + E_SEQ])
             for cj in range(3):
                 w = np.int64(E[g * E_COLS + cj])
                 if w == a or w == b or w == c:
                     continue
-                skip = False
-                for i in range(n1):
-                    if cand[i] == w:
-                        skip = True
-                        break
-                if skip:
-                    continue
-                dup = False
-                for i in range(n2):
-                    if c2[i] == w:
-                        dup = True
-                        if E[g * E_COLS + E_SEQ] < c2seq[i]:
-                            c2seq[i] = E[g * E_COLS + E_SEQ]
-                        break
-                if not dup and n2 < c2.shape[0]:
+                h = _seen_slot(seen, w)
+                if seen[0, h] == w:
+                    i = seen[1, h]
+                    if i >= 0 and seq < c2seq[i]:
+                        c2seq[i] = seq
+                elif n2 < c2.shape[0]:
+                    seen[0, h] = w
+                    seen[1, h] = n2
                     c2[n2] = w
-                    c2seq[n2] = E[g * E_COLS + E_SEQ]
+                    c2seq[n2] = seq
                     n2 += 1
     # stable insertion sort by sequence
     for i in range(1, n2):
@@ -345,9 +413,9 @@ def _closing_faces(B, t0, t1, t2, t3):
     f2 = -1
     node = vhead[t3]
     while node != -1:
-        g = node >> 2
-        c0 = node & 3
-        node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+        g = _node_slot(node)
+        c0 = _node_corner(node, g)
+        node = E[np.uint32(node)]  # an unsigned index: no wrap-around arithmetic on the chain
         x = E[g * E_COLS + (0 if c0 == 2 else c0 + 1)]
         y = E[g * E_COLS + (2 if c0 == 0 else c0 - 1)]
         if (x == t1 and y == t2) or (x == t2 and y == t1):
@@ -419,8 +487,8 @@ def _gather_face(B, s, cand, cscore, cseq, cface, cface_full):
         u = a if k == 0 else b
         node = vhead[u]
         while node != -1:
-            g = node >> 2
-            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+            g = _node_slot(node)
+            node = E[np.uint32(node)]  # an unsigned index: no wrap-around arithmetic on the chain
             if g == s:
                 continue
             g0 = np.int64(E[g * E_COLS + 0])
@@ -496,13 +564,13 @@ def _gather_edge(B, s, cand, cscore, cseq):
         other = p if k == 0 else r
         node = vhead[u]
         while node != -1:
-            g = node >> 2
-            c = node & 3
+            g = _node_slot(node)
+            c = _node_corner(node, g)
             if c < 2 and g != s:
                 x = np.int64(E[g * E_COLS + 1 - c])
                 if x != other:
                     n1 = _insert_candidate(cand, cscore, cseq, n1, x, E[g * E_COLS + E_SEQ])
-            node = E[(node >> 2) * E_COLS + E_NEXT + (node & 3)]
+            node = E[np.uint32(node)]  # an unsigned index: no wrap-around arithmetic on the chain
     _sort_candidates(cand, cscore, cseq, n1)
     return n1
 
@@ -883,6 +951,7 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
     cseq = np.empty(MAX_C1, np.int64)
     c2 = np.empty(MAX_C2, np.int64)
     c2seq = np.empty(MAX_C2, np.int64)
+    seen = np.empty((2, SEEN_SLOTS), np.int64)
     cface = np.empty((MAX_C1, 3), np.int64)  # the encoder attaches by _apply_tet's walk
     cface_full = np.zeros(1, np.int64)
     nv = nv0
@@ -945,7 +1014,7 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
                 pred[nv, 3] = behind
                 nv += 1
             else:
-                n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq)
+                n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq, seen)
                 j = -1
                 for i in range(n2):
                     if c2[i] == d:
@@ -1002,11 +1071,12 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
     cseq = np.empty(MAX_C1, np.int64)
     c2 = np.empty(MAX_C2, np.int64)
     c2seq = np.empty(MAX_C2, np.int64)
+    seen = np.empty((2, SEEN_SLOTS), np.int64)
     cface = np.empty((MAX_C1, 3), np.int64)
     cfirst = np.empty(MAX_C1, np.int64)  # the candidates in gather order (cface's rows)
     cface_full = np.zeros(1, np.int64)
     return _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets,
-                            (cand, cscore, cseq, c2, c2seq, cface, cfirst, cface_full))
+                            (cand, cscore, cseq, c2, c2seq, seen, cface, cfirst, cface_full))
 
 
 # compiled without the runtime's reference counting (it allocates nothing): the helpers inlined
@@ -1014,7 +1084,7 @@ def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
 @njit(cache=True, nogil=True, _nrt=False)
 def _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets, scratch):
     """The loop of :func:`decode_tets`, with its candidate lists in ``scratch``."""
-    cand, cscore, cseq, c2, c2seq, cface, cfirst, cface_full = scratch
+    cand, cscore, cseq, c2, c2seq, seen, cface, cfirst, cface_full = scratch
     nv = tstate[0]
     done = tstate[1]
     prev_esc = tstate[2]
@@ -1082,7 +1152,7 @@ def _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets, scr
                 pred[nv - pred_base, 3] = behind
                 nv += 1
             elif kind == KIND_VERTEX_ADJACENT:
-                n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq)
+                n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq, seen)
                 j = rc.dec_uint(st, data, probs, TM_C2 + (rc.INT_MODEL_SIZE if n2 > 8 else 0))
                 if j >= n2:
                     status = ST_ERROR
@@ -1287,6 +1357,7 @@ def encode_tets2(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets,
     ccls = np.empty(MAX_C1, np.int64)
     c2 = np.empty(MAX_C2, np.int64)
     c2seq = np.empty(MAX_C2, np.int64)
+    seen = np.empty((2, SEEN_SLOTS), np.int64)
     cface = np.empty((MAX_C1, 3), np.int64)
     cface_full = np.zeros(1, np.int64)
     nv = nv0
@@ -1343,7 +1414,7 @@ def encode_tets2(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets,
                 pred[nv, 3] = behind
                 nv += 1
             else:
-                n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq)
+                n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq, seen)
                 _order_by_decoded(c2, n2, vdec)
                 j = -1
                 for i in range(n2):
@@ -1415,12 +1486,13 @@ def decode_tets2(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate,
     cseq = np.empty(MAX_C1, np.int64)
     c2 = np.empty(MAX_C2, np.int64)
     c2seq = np.empty(MAX_C2, np.int64)
+    seen = np.empty((2, SEEN_SLOTS), np.int64)
     cface = np.empty((MAX_C1, 3), np.int64)
     ckey = np.empty(MAX_C1, np.int64)
     ccls = np.empty(MAX_C1, np.int64)
     cface_full = np.zeros(1, np.int64)
     return _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate, out_tets,
-                             (cand, cscore, cseq, c2, c2seq, cface, ckey, ccls, cface_full))
+                             (cand, cscore, cseq, c2, c2seq, seen, cface, ckey, ccls, cface_full))
 
 
 _rank_candidates2_inlined = njit(cache=True, _nrt=False, inline="always")(_rank_candidates2.py_func)
@@ -1429,7 +1501,7 @@ _rank_candidates2_inlined = njit(cache=True, _nrt=False, inline="always")(_rank_
 @njit(cache=True, nogil=True, _nrt=False)
 def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate, out_tets, scratch):
     """The loop of :func:`decode_tets2` (as :func:`_decode_tets_run`)."""
-    cand, cscore, cseq, c2, c2seq, cface, ckey, ccls, cface_full = scratch
+    cand, cscore, cseq, c2, c2seq, seen, cface, ckey, ccls, cface_full = scratch
     nv = tstate[0]
     done = tstate[1]
     prev_esc = tstate[2]
@@ -1462,6 +1534,24 @@ def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, ts
         if s == -1:
             status = ST_ERROR
             break
+        # the faces to come are known (FIFO): fetch their rows and list heads ahead of the walks
+        hq = bs[BS_QHEAD]
+        _prefetch(E, Q[(hq + PF_ROW) & (qcap - 1), 0] * E_COLS)
+        s_next = Q[(hq + PF_HEAD) & (qcap - 1), 0]  # a handed-out slot (or 0): a row within E
+        _prefetch(vhead, E[s_next * E_COLS + 0])
+        _prefetch(vhead, E[s_next * E_COLS + 1])
+        s_next = Q[(hq + PF_NODE) & (qcap - 1), 0]
+        for corner in range(2):
+            v = E[s_next * E_COLS + corner]
+            if v >= 0 and v < vhead.shape[0]:
+                _prefetch(E, np.uint32(vhead[v]))  # a node id is an offset in E
+        s_next = Q[(hq + PF_NODE2) & (qcap - 1), 0]
+        for corner in range(2):
+            v = E[s_next * E_COLS + corner]
+            if v >= 0 and v < vhead.shape[0]:
+                node = vhead[v]
+                if node != -1 and np.uint32(node) < E.shape[0]:
+                    _prefetch(E, np.uint32(E[np.uint32(node)]))
         a = np.int64(E[s * E_COLS + 0])
         b = np.int64(E[s * E_COLS + 1])
         c = np.int64(E[s * E_COLS + 2])
@@ -1498,7 +1588,7 @@ def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, ts
                 pred[nv - pred_base, 3] = behind
                 nv += 1
             elif kind == KIND_VERTEX_ADJACENT:
-                n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq)
+                n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq, seen)
                 _order_by_decoded(c2, n2, vdec)
                 j = rc.dec_uint(st, data, probs, TM2_C2 + (rc.INT_MODEL_SIZE if n2 > 8 else 0))
                 if j >= n2:

@@ -231,6 +231,10 @@ def _pick_ext(adj, deg, vf, x, e0, e1, e2):
     return best
 
 
+_pick_par_inlined = njit(cache=True, _nrt=False, inline="always")(_pick_par.py_func)
+_pick_ext_inlined = njit(cache=True, _nrt=False, inline="always")(_pick_ext.py_func)
+
+
 @njit(cache=True, _nrt=False)
 def link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf):
     """Choose the extra predictor vertices of vertex ``k`` (refs checked) and record its edges.
@@ -283,13 +287,17 @@ def link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf):
                 e1 = est
             else:
                 e2 = est
-        w[0, 0] = _pick_par(adj, deg, mark, 3 * k + 1, vf, f0, f1, f2, apex, e0, e1, e2)
-        w[0, 1] = _pick_ext(adj, deg, vf, f0, e0, e1, e2)
-        w[1, 1] = _pick_ext(adj, deg, vf, f1, e0, e1, e2)
-        if nf == 3:
-            w[1, 0] = _pick_par(adj, deg, mark, 3 * k + 2, vf, f0, f2, f1, apex, e0, e1, e2)
-            w[2, 0] = _pick_par(adj, deg, mark, 3 * k + 3, vf, f1, f2, f0, apex, e0, e1, e2)
-            w[2, 1] = _pick_ext(adj, deg, vf, f2, e0, e1, e2)
+        # pairs (f0, f1), (f0, f2), (f1, f2) and face refs f0, f1, f2 in loops around one inlined
+        # copy of each pick (called, each passed four arrays: a fifth of the geometry decode);
+        # the picks are independent (each pair's tag is its own), so their order is free
+        for p in range(1 if nf == 2 else 3):
+            x = f0 if p < 2 else f1
+            y = f1 if p == 0 else f2
+            other = f2 if p == 0 else (f1 if p == 1 else f0)
+            w[p, 0] = _pick_par_inlined(adj, deg, mark, 3 * k + 1 + p, vf, x, y, other, apex, e0, e1, e2)
+        for q in range(nf):
+            x = f0 if q == 0 else (f1 if q == 1 else f2)
+            w[q, 1] = _pick_ext_inlined(adj, deg, vf, x, e0, e1, e2)
     # every pair among the new vertex, its face and the apex is a mesh edge, except
     # new vertex - apex (they sit on either side of the face)
     _link(adj, deg, k, f0)
@@ -740,18 +748,23 @@ def _eq_context(m, flag, near, version):
 
 @njit(cache=True, inline="always")
 def _best_cand(scores, ch, pat, cands):
+    """The candidate with the lowest score (the first of equals)."""
+    row = scores[ch, pat]
     best = 0
+    lowest = row[0]
     for q in range(1, cands[pat]):
-        if scores[ch, pat, q] < scores[ch, pat, best]:
+        if row[q] < lowest:
+            lowest = row[q]
             best = q
     return best
 
 
 @njit(cache=True, inline="always")
 def _update_scores(scores, ch, pat, cand_o, o, cands):
+    row = scores[ch, pat]
     for q in range(cands[pat]):
-        s = scores[ch, pat, q]
-        scores[ch, pat, q] = s - (s >> SCORE_SHIFT) + (_bit_length(o - cand_o[q]) << 4)
+        s = row[q]
+        row[q] = s - (s >> SCORE_SHIFT) + (_bit_length(o - cand_o[q]) << 4)
 
 
 @njit(cache=True, inline="always")
@@ -1030,8 +1043,10 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
     """Decode channel ``ch`` of vertex ``k`` (see :func:`decode_vertices`); ``flag`` is the
     repetition context left by the previous channel. Returns the context for the next channel,
     or minus an error status."""
-    pat, m_refs = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS,
-                          cands[CAND_VERSION])
+    # the two requests as run-time values (int64 casts): as literals they compiled _gather twice,
+    # some 1.5 s of a cold start, for no measurable speed
+    pat, m_refs = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i,
+                          np.int64(WANT_REPEATS), cands[CAND_VERSION])
     m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m_refs, cands)
     is_eq = 0
     o = np.int64(0)
@@ -1048,8 +1063,8 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
             return -ERR_STREAM
     if is_eq == 0:
         # the repetition candidates of the refs (eq_o[:m_refs]) are still those of the first call
-        pat, _ = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_PREDICTIONS,
-                         cands[CAND_VERSION])
+        pat, _ = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i,
+                         np.int64(WANT_PREDICTIONS), cands[CAND_VERSION])
         mode = modes[ch]
         best = _best_cand(scores, ch, pat, cands)
         ctx = _res_context(pat, flags[N_CHANNELS + ch], eq_o, m_refs)
@@ -1096,7 +1111,6 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, 
     ``OK``, ``ERR_REF`` (a ref not in ``[-1, k)``), ``ERR_RANK`` (a table index out of range) or
     ``ERR_STREAM`` (the range decoder failed).
     """
-    vi = vf.view(np.int32)
     n = vf.shape[0]
     if start < 0 or count < 0 or start + count > n or refs.shape[0] < count or refs.shape[1] != 4:
         return ERR_REF
@@ -1113,24 +1127,25 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, 
     cand_o = np.zeros(MAX_CANDS, dtype=np.int64)
     eq_o = np.zeros(5, dtype=np.int64)
     scratch_f = np.zeros(MAX_CANDS, dtype=np.float32)
-    scratch_i = scratch_f.view(np.int32)
     w = np.zeros((3, NW), dtype=np.int32)
-    # the four channel streams, hoisted out of the loop
-    d0 = buf[offs[0]:offs[1]]
-    d1 = buf[offs[1]:offs[2]]
-    d2 = buf[offs[2]:offs[3]]
-    d3 = buf[offs[3]:offs[4]]
-    s0 = st[0]
-    s1 = st[1]
-    s2 = st[2]
-    s3 = st[3]
-    p0 = probs[0]
-    p1 = probs[1]
-    p2 = probs[2]
-    p3 = probs[3]
-    # the channel numbers as run-time values: literals 0..3 would compile _decode_channel (and what
-    # it calls) once per channel, 55 s instead of 33 s on a cold cache, for no speed
-    channel = np.arange(N_CHANNELS)
+    return _decode_vertices_run(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, hvals, modes, tables,
+                                tab_offs, cands, refs, vf, start, count, (cand_o, eq_o, scratch_f, w))
+
+
+_decode_channel_inlined = njit(cache=True, _nrt=False, inline="always")(_decode_channel.py_func)
+
+
+# Compiled without the runtime's reference counting (it allocates nothing): the channel's decoder
+# state, stream and model are views picked per channel in a loop around the one (inlined) copy of
+# the channel decoder, where four calls passing them as arguments, some hundred words each, were
+# a third of the geometry kernels' own time.
+@njit(cache=True, nogil=True, _nrt=False)
+def _decode_vertices_run(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, hvals, modes, tables, tab_offs,
+                         cands, refs, vf, start, count, scratch):
+    """The loop of :func:`decode_vertices` (arguments checked), its scratch arrays in ``scratch``."""
+    cand_o, eq_o, scratch_f, w = scratch
+    vi = vf.view(np.int32)
+    scratch_i = scratch_f.view(np.int32)
     for j in range(count):
         k = start + j
         r0 = refs[j, 0]
@@ -1140,23 +1155,11 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, 
         if (r0 < -1 or r0 >= k or r1 < -1 or r1 >= k or r2 < -1 or r2 >= k or r3 < -1 or r3 >= k):
             return ERR_REF
         link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf)
-        # one call per channel with that channel's decoder, stream and model as arguments: picking
-        # them in a loop would reassign array variables, which costs a reference count update each
         flag = 6 + flags[0]
-        flag = _decode_channel(channel[0], k, r0, r1, r2, r3, w, s0, d0, p0, scores, flags, flag, hkeys, hvals, modes,
-                               tables, tab_offs, cands, vf, vi, cand_o, eq_o, scratch_f, scratch_i)
-        if flag < 0:
-            return -flag
-        flag = _decode_channel(channel[1], k, r0, r1, r2, r3, w, s1, d1, p1, scores, flags, flag, hkeys, hvals, modes,
-                               tables, tab_offs, cands, vf, vi, cand_o, eq_o, scratch_f, scratch_i)
-        if flag < 0:
-            return -flag
-        flag = _decode_channel(channel[2], k, r0, r1, r2, r3, w, s2, d2, p2, scores, flags, flag, hkeys, hvals, modes,
-                               tables, tab_offs, cands, vf, vi, cand_o, eq_o, scratch_f, scratch_i)
-        if flag < 0:
-            return -flag
-        flag = _decode_channel(channel[3], k, r0, r1, r2, r3, w, s3, d3, p3, scores, flags, flag, hkeys, hvals, modes,
-                               tables, tab_offs, cands, vf, vi, cand_o, eq_o, scratch_f, scratch_i)
-        if flag < 0:
-            return -flag
+        for ch in range(N_CHANNELS):
+            flag = _decode_channel_inlined(ch, k, r0, r1, r2, r3, w, st[ch], buf[offs[ch]:offs[ch + 1]], probs[ch],
+                                           scores, flags, flag, hkeys, hvals, modes, tables, tab_offs, cands, vf, vi,
+                                           cand_o, eq_o, scratch_f, scratch_i)
+            if flag < 0:
+                return -flag
     return OK

@@ -269,8 +269,10 @@ def _tier1(start, nbrs, uf, v, r, first_child, next_sibling, mark, cand0, m0, ca
 
 @njit(cache=True, nogil=True, _nrt=False)
 def _precedes(cand, count, i, j):
-    """Whether candidate i comes before candidate j: more listed neighbours lead to it (the merge
-    target usually shares the most of v's star), or as many and a smaller id."""
+    """Whether candidate i comes before candidate j: a larger ``count``, or an equal one and a
+    smaller id. Codings 1 and 2 count the listed neighbours that lead to it (the merge target
+    usually shares the most of v's star); coding 3 passes minus its score
+    (:func:`_score_candidates`)."""
     return count[i] > count[j] or (count[i] == count[j] and cand[i] < cand[j])
 
 
@@ -819,84 +821,22 @@ def decode_rounds3_kernel(st, data, start, nbrs, boundary, k, proxy_bin, symbol,
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def _score_candidates(q, u, boundary, v, cand, m, score):
-    """score[i] of candidate cand[i] for v's merge: v's quadric at it, plus a penalty that puts an
-    interior candidate of a boundary vertex after every boundary one (nothing to order in a list
-    of one)."""
+def _score_candidates(q, u, boundary, v, cand, m, priority):
+    """priority[i] of candidate cand[i] for v's merge: minus its score, v's quadric at it plus a
+    penalty that puts an interior candidate of a boundary vertex after every boundary one (nothing
+    to order in a list of one). Negated so that coding 1's order (:func:`_precedes`: larger first,
+    then smaller id) is coding 3's (smaller score first, then smaller id) and its list helpers serve
+    both: scores are never NaN (:func:`_quadric_at`), so the order is total and the candidate at an
+    index is the same however it is found."""
     if m < 2:
-        score[0] = 0.0
+        priority[0] = 0.0
         return
     for i in range(m):
         x = cand[i]
         s = _quadric_at(q, v, u, x)
         if boundary[v] and not boundary[x]:
             s += _BOUNDARY_MISMATCH
-        score[i] = s
-
-
-@njit(cache=True, nogil=True, _nrt=False)
-def _first(cand, score, i, j):
-    """Whether candidate i comes before candidate j in coding 3: smaller score, then smaller id."""
-    return score[i] < score[j] or (score[i] == score[j] and cand[i] < cand[j])
-
-
-@njit(cache=True, nogil=True, _nrt=False)
-def _index_of3(cand, score, m, p):
-    """Position of ``p`` in coding 3's order of ``cand[:m]``, or -1 when it is not listed."""
-    at = -1
-    for i in range(m):
-        if cand[i] == p:
-            at = i
-            break
-    if at < 0:
-        return -1
-    before = 0
-    for i in range(m):
-        if _first(cand, score, i, at):
-            before += 1
-    return before
-
-
-@njit(cache=True, nogil=True, _nrt=False)
-def _candidate_at3(cand, score, m, idx):
-    """The candidate at position ``idx < m`` of coding 3's order (a selection of the idx + 1 first)."""
-    for j in range(idx + 1):
-        best = j
-        for i in range(j + 1, m):
-            if _first(cand, score, i, best):
-                best = i
-        cand[j], cand[best] = cand[best], cand[j]
-        score[j], score[best] = score[best], score[j]
-    return cand[idx]
-
-
-@njit(cache=True)
-def _enc_parent3(st, out, probs, tier, cand, score, m, p):
-    if m == 0:
-        return False
-    idx = _index_of3(cand, score, m, p)
-    enc_bit(st, out, probs, _flag_context(tier, m), 1 if idx >= 0 else 0)
-    if idx < 0:
-        return False
-    if m <= SMALL_LIST:
-        enc_sym(st, out, probs, _index_base(tier, m), 5, idx)
-    else:
-        enc_below(st, out, idx, m)
-    return True
-
-
-@njit(cache=True, nogil=True)
-def _dec_parent3(st, data, probs, tier, cand, score, m):
-    if m == 0 or dec_bit(st, data, probs, _flag_context(tier, m)) == 0:
-        return -1
-    if m <= SMALL_LIST:
-        idx = dec_sym(st, data, probs, _index_base(tier, m), 5)
-    else:
-        idx = dec_below(st, data, m)
-    if idx >= m:
-        st[DEC_ERROR] = 1
-        return -1
-    return _candidate_at3(cand, score, m, idx)
+        priority[i] = -s
 
 
 @njit(cache=True, nogil=True, _nrt=False)
@@ -930,17 +870,17 @@ def _enc_parents3(st, out, start, nbrs, boundary, parent, rank, k, q, u):
         if rank[v] < k:
             of_rank[rank[v]] = v
     uf, first_child, next_sibling, mark, cand0, count0, cand1, count1 = _replay_state(n)
-    score = np.empty(max(1, n))
+    priority = np.empty(max(1, n))
     for r in range(k):
         v = of_rank[r]
         p = parent[v]
         m0 = _tier0(start, nbrs, uf, v, r, mark, cand0, count0)
-        _score_candidates(q, u, boundary, v, cand0, m0, score)
-        found = _enc_parent3(st, out, probs, 0, cand0, score, m0, p)
+        _score_candidates(q, u, boundary, v, cand0, m0, priority)
+        found = _enc_parent(st, out, probs, 0, cand0, priority, m0, p)
         if not found:
             m1 = _tier1(start, nbrs, uf, v, r, first_child, next_sibling, mark, cand0, m0, cand1, count1)
-            _score_candidates(q, u, boundary, v, cand1, m1, score)
-            found = _enc_parent3(st, out, probs, 1, cand1, score, m1, p)
+            _score_candidates(q, u, boundary, v, cand1, m1, priority)
+            found = _enc_parent(st, out, probs, 1, cand1, priority, m1, p)
         if not found:
             enc_below(st, out, p, n)
         uf[v] = p
@@ -955,16 +895,16 @@ def decode_parents3_kernel(st, data, start, nbrs, boundary, k, parent, rank, of_
     n = parent.shape[0]
     probs = np.full(MODEL_SIZE, 1 << 14, np.uint16)
     uf, first_child, next_sibling, mark, cand0, count0, cand1, count1 = _replay_state(n)
-    score = np.empty(max(1, n))
+    priority = np.empty(max(1, n))
     for r in range(k):
         v = of_rank[r]
         m0 = _tier0(start, nbrs, uf, v, r, mark, cand0, count0)
-        _score_candidates(q, u, boundary, v, cand0, m0, score)
-        p = _dec_parent3(st, data, probs, 0, cand0, score, m0)
+        _score_candidates(q, u, boundary, v, cand0, m0, priority)
+        p = _dec_parent(st, data, probs, 0, cand0, priority, m0)
         if p < 0:
             m1 = _tier1(start, nbrs, uf, v, r, first_child, next_sibling, mark, cand0, m0, cand1, count1)
-            _score_candidates(q, u, boundary, v, cand1, m1, score)
-            p = _dec_parent3(st, data, probs, 1, cand1, score, m1)
+            _score_candidates(q, u, boundary, v, cand1, m1, priority)
+            p = _dec_parent(st, data, probs, 1, cand1, priority, m1)
             if p < 0:
                 p = dec_below(st, data, n)
         if dec_failed(st) or p == v or rank[p] <= r:

@@ -93,17 +93,11 @@ def _tiny_tetc() -> bytes:
         return tiny_tetc_bytes()
 
 
-def _decode_and_filter(data: bytes | None = None, *, forest: bool = True) -> str:
-    """Decode a tiny file and filter it; ``forest=False`` leaves the forest decoder out (the
-    filter then runs on a one-merge forest made here) for :func:`_forest_decoder` to compile."""
-    reader = TetcReader(_tiny_tetc() if data is None else data)
+def _decode_and_filter(data: bytes) -> str:
+    """Decode a tiny file, its forest too, and filter it."""
+    reader = TetcReader(data)
     reader.decode_mesh(0)
-    if forest:
-        p, r = reader.read_forest(0)
-    else:
-        n = reader.levels[0]["points"]
-        p, r = np.arange(n, dtype=np.int32), np.full(n, ROOT_RANK, np.int32)
-        p[1], r[1] = 0, 0
+    p, r = reader.read_forest(0)
     list(SimplifyFilter(ancestors(p, r, 1)).filter(reader.iter_decode(0, batch_tets=5)))
     return "decompression and the run-time filter"
 

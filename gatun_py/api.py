@@ -47,7 +47,7 @@ from .render.transfer import load_transfer_function
 from .simplify import build_levels, decimate, storage_forests
 from .simplify.dependencies import merge_dependencies
 from .simplify.filter import SimplifyFilter
-from .simplify.levels import resolve_target, target_ancestors
+from .simplify.levels import MAX_LEVEL, next_level, resolve_target, target_ancestors
 
 __all__ = ["compress", "decompress", "convert", "info", "open", "render", "render_frames", "TetcFile", "Frame"]
 
@@ -177,13 +177,17 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     elif mesh_only:
         payload = mesh
     else:
-        with ThreadPoolExecutor(1, thread_name_prefix="tetc-level0") as pool:
+        with ThreadPoolExecutor(1, thread_name_prefix="tetc-level") as pool:
             # Level 0's mesh does not depend on the forest: with a second core it is encoded beside
             # the decimation (whose driver kernel releases the GIL); its forest is added afterwards.
+            # So is every other level's mesh, as soon as the merges before it are done.
+            beside = _LevelsBeside(mesh, pool, MAX_LEVEL if levels is None else min(int(levels), MAX_LEVEL))
             level0 = pool.submit(encode_level, LevelPayload(0, 0.0, 0, mesh)) if threads > 1 else None
             forest = decimate(mesh, w_density=w_density, w_geometry=w_geometry,
-                              progress=_counter(progress, mesh.n_points))
+                              progress=_counter(progress, mesh.n_points),
+                              on_level=beside.submit if threads > 1 else None)
             lv = build_levels(mesh, forest, levels)
+            mesh_codes = beside.codes(lv)
             log(f"merge forest: {forest.n_merges} merges (max ratio {forest.max_ratio:.5f}); "
                 f"levels {', '.join(str(x.level) for x in lv)}")
             payload = [LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
@@ -192,7 +196,8 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
                 deps = merge_dependencies(mesh, forest)
                 log(f"merge dependencies: {deps.idx.size} ({deps.idx.size / max(deps.n_merges, 1):.1f} per merge)")
                 deps = (deps.ptr, deps.idx, deps.removed)
-            mesh_codes = {} if level0 is None else {0: level0.result()}
+            if level0 is not None:
+                mesh_codes[0] = level0.result()
     n = (len(data) if payload is None else
          write_tetc(output, payload, source=name, force=force, dependencies=deps, mesh_codes=mesh_codes,
                     threads=threads))
@@ -202,6 +207,48 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
         f"connectivity {info['bits_per_tet_connectivity']:.2f} bits/tet, "
         f"geometry {info['bits_per_vertex_geometry']:.1f} bits/vertex) in {time.perf_counter() - t0:.1f} s")
     return out
+
+
+class _LevelsBeside:
+    """Levels 1.. built and their meshes encoded in ``pool`` (one worker: in level order, each
+    from the one before) while the decimation goes on: :meth:`submit` is its ``on_level``."""
+
+    def __init__(self, mesh: TetMesh, pool: ThreadPoolExecutor, max_level: int):
+        self.mesh, self.pool, self.max_level = mesh, pool, max_level
+        self.prev = None  # the last level built (the worker's chain)
+        self.jobs = {}
+
+    def submit(self, i: int, prefix) -> None:
+        if i <= self.max_level:
+            self.jobs[i] = self.pool.submit(self._encode, i, prefix)
+
+    def _encode(self, i: int, prefix):
+        lv = next_level(self.mesh, prefix, i, self.prev)
+        self.prev = lv
+        return lv.mesh, encode_level(LevelPayload(i, lv.ratio, lv.n_merges, lv.mesh))
+
+    def codes(self, levels) -> dict:
+        """{level: its encoded mesh} for the levels of ``levels`` coded beside the decimation. Each
+        was built from a prefix of the forest and is checked against the level's mesh made from
+        the whole forest (the same by construction: a level's mesh depends only on the set of
+        merges before it); a level that differed would be coded again from ``levels``."""
+        out = {}
+        for lv in levels[1:]:
+            job = self.jobs.get(lv.level)
+            if job is None:
+                continue
+            m, code = job.result()
+            same = (_same_bits(m.tets, lv.mesh.tets) and _same_bits(m.points, lv.mesh.points)
+                    and m.point_data.keys() == lv.mesh.point_data.keys()
+                    and all(_same_bits(a, lv.mesh.point_data[k]) for k, a in m.point_data.items()))
+            if same:
+                out[lv.level] = code
+        return out
+
+
+def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    """Equal dtype, shape and bytes (NaNs included)."""
+    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
 
 
 def _counter(progress, total: int):

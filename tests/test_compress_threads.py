@@ -10,11 +10,13 @@ import pytest
 from conftest import load_sample
 
 import gatun_py
+from gatun_py import api
 from gatun_py.codec import LevelPayload, encode_tetc
 from gatun_py.codec.tetcfile import encode_level
 from gatun_py.errors import MeshError, OptionError
 from gatun_py.mesh import TetMesh
-from gatun_py.simplify import build_levels, decimate, storage_forests
+from gatun_py.simplify import (ROOT_RANK, available_levels, build_levels, decimate, level_merges, next_level,
+                               storage_forests)
 
 
 def _payload(mesh):
@@ -76,3 +78,62 @@ def test_a_failing_level_in_a_thread_raises_its_error():
                                       point_data=dict(bad.mesh.point_data)), bad.forest)
     with pytest.raises(MeshError):
         encode_tetc(payload, threads=2)
+
+
+@pytest.mark.parametrize("name", ["post", "fire", "combustion"])
+def test_levels_built_from_forest_prefixes_during_the_decimation_are_the_levels(name):
+    # decimate hands on_level a prefix as each level's merges are done; the chain of levels built
+    # from those prefixes (what compress encodes beside the decimation) is build_levels' own
+    mesh = load_sample(name)[0]
+    heard = []
+    forest = decimate(mesh, on_level=lambda i, prefix: heard.append((i, prefix)))
+    final = build_levels(mesh, forest)
+    assert [i for i, _ in heard][:len(final) - 1] == [x.level for x in final[1:]]
+    prev = None
+    for (i, prefix), want in zip(heard, final[1:]):
+        assert prefix.n_merges == want.n_merges  # the merges so far, no more
+        assert (prefix.rank[prefix.rank != ROOT_RANK] < prefix.n_merges).all()
+        got = next_level(mesh, prefix, i, prev)
+        prev = got
+        assert got.n_merges == want.n_merges and got.ratio == want.ratio
+        assert np.array_equal(got.mesh.tets, want.mesh.tets)
+        assert np.array_equal(got.vertex_ids, want.vertex_ids)
+        assert got.mesh.points.tobytes() == want.mesh.points.tobytes()
+        for k, a in want.mesh.point_data.items():
+            assert got.mesh.point_data[k].tobytes() == a.tobytes()
+    # the forest itself does not depend on being heard
+    again = decimate(mesh)
+    assert np.array_equal(again.parent, forest.parent) and np.array_equal(again.rank, forest.rank)
+
+
+def test_plain_order_also_reports_levels_and_keeps_its_forest():
+    mesh = load_sample("post")[0]
+    heard = []
+    forest = decimate(mesh, rounds=0, on_level=lambda i, prefix: heard.append((i, prefix.n_merges)))
+    plain = decimate(mesh, rounds=0)
+    assert np.array_equal(plain.parent, forest.parent) and np.array_equal(plain.rank, forest.rank)
+    reach = available_levels(forest, 62)[1:]
+    assert [i for i, _ in heard][:len(reach)] == reach
+    assert all(n == level_merges(mesh.n_points, i) for i, n in heard)
+
+
+def test_compress_encodes_every_level_beside_the_decimation(tmp_path, monkeypatch):
+    mesh = load_sample("fire")[0]
+    used = []
+    codes = api._LevelsBeside.codes
+
+    def spy(self, levels):
+        out = codes(self, levels)
+        used.append((sorted(out), [x.level for x in levels[1:]]))
+        return out
+
+    monkeypatch.setattr(api._LevelsBeside, "codes", spy)
+    two = gatun_py.compress(mesh, tmp_path / "two.tetc", jobs=2)
+    assert used and used[0][0] == used[0][1] and len(used[0][0]) > 3  # every level came from beside
+    gatun_py.compress(mesh, tmp_path / "one.tetc", jobs=1)
+    assert len(used) == 1  # one thread: nothing beside
+    assert (tmp_path / "two.tetc").read_bytes() == (tmp_path / "one.tetc").read_bytes()
+    assert len(two.reader.levels) == len(used[0][1]) + 1
+    used.clear()
+    gatun_py.compress(mesh, tmp_path / "l2.tetc", jobs=2, levels=2)
+    assert used[0][0] == used[0][1] == [1, 2]

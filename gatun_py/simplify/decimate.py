@@ -346,6 +346,10 @@ class DecimationState:
                            self.vw, self.p_orig, self.lock, self.lock_b, np.int64(stamp), np.int64(max_blocked),
                            np.int64(self.spec_batch), np.int64(SPECULATE_SCAN)))
 
+    def prefix(self) -> MergeForest:
+        """The merges so far as a forest (copies; ranks in merge order)."""
+        return MergeForest(self.parent.copy(), self.rank.copy(), self.n_merges)
+
     def evaluate(self, a: int, b: int):
         """(legal, error) of merging a into b in the current state (for tests against the reference)."""
         st = K._star(a, self.head, self.nxt, self.T, self.alive)
@@ -409,6 +413,18 @@ def _canonical_ranks(rank: np.ndarray, n_merges: int, round_starts: list[int], k
     return out, [int(x) for x in starts]
 
 
+def _level_ends(n_points: int) -> dict[int, int]:
+    """{N_i: i} for the levels i >= 1 with N_i > N_(i-1) > 0 or i == 1 (the first i of equal N_i)."""
+    out = {}
+    prev = 0
+    for i in range(1, 63):
+        n = level_merges(n_points, i)
+        if n > prev:
+            out[n] = i
+            prev = n
+    return out
+
+
 def _round_ends(n_points: int, limit: int, rounds: int) -> list[int]:
     """(end, quota) of every round at the latest: each level's interval [N_i, N_i+1) in ``rounds``
     equal quotas (of the whole interval, so that ``max_merges`` does not move them), cut at ``limit``."""
@@ -429,7 +445,7 @@ def _round_ends(n_points: int, limit: int, rounds: int) -> list[int]:
 
 def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry: float = DEFAULT_W_GEOMETRY,
              progress=None, max_merges: int | None = None, locked=None, rounds: int = ROUNDS_PER_LEVEL,
-             round_blocked: float | None = ROUND_BLOCKED, return_rounds: bool = False):
+             round_blocked: float | None = ROUND_BLOCKED, return_rounds: bool = False, on_level=None):
     """Greedy Van Gelder decimation of a tetrahedral mesh into a merge forest.
 
     Parameters
@@ -459,6 +475,14 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
         (None: only at its quota).
     return_rounds : bool
         Also return the first rank of every round.
+    on_level : callable, optional
+        Called as ``on_level(i, prefix)`` (in the calling thread) as soon as level i's N_i merges
+        are done (each level the forest reaches, i >= 1, once, in order; a level whose N_i
+        equals the previous one's is skipped, as in
+        :func:`~gatun_py.simplify.levels.available_levels`): ``prefix`` is a MergeForest of the
+        merges so far, whose first N_i merges are final as a set (the ranks inside a round are
+        re-ordered at the end), so level i's mesh can be built from it
+        (:func:`~gatun_py.simplify.levels.next_level`) while the decimation goes on.
 
     Returns
     -------
@@ -486,6 +510,8 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
     state.start()
     done = 0
     starts = []
+    # N_i -> i for the levels on_level hears of (the first i of equal N_i)
+    level_ends = _level_ends(mesh.n_points) if on_level is not None else {}
     if rounds:
         for end, quota in _round_ends(mesh.n_points, limit, int(rounds)):
             finished = False
@@ -496,16 +522,22 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
             if progress is not None:
                 progress(state.n_merges - done)
             done = state.n_merges
+            if done in level_ends:
+                on_level(level_ends[done], state.prefix())
             if finished:
                 break
     else:
         chunk = max(1024, mesh.n_points // 50)
         while True:
             target = min(limit, state.n_merges + chunk) if progress is not None else limit
+            if level_ends:  # stop at the next level's end too
+                target = min(target, min((e for e in level_ends if e > state.n_merges), default=target))
             finished = state.run(target)
             if progress is not None:
                 progress(state.n_merges - done)
             done = state.n_merges
+            if done in level_ends:
+                on_level(level_ends[done], state.prefix())
             if finished or done >= limit:
                 break
     rank = state.rank.copy()

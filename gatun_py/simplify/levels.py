@@ -12,7 +12,7 @@ from ..errors import CorruptFileError, OptionError
 from ..mesh import TetMesh
 from .forest import ROOT_RANK, MergeForest, ancestors, forest_prefix, mesh_from_ancestors, simplified_mesh
 
-__all__ = ["MAX_LEVEL", "LevelMesh", "level_merges", "available_levels", "build_levels", "level_forest",
+__all__ = ["MAX_LEVEL", "LevelMesh", "level_merges", "available_levels", "build_levels", "next_level", "level_forest",
            "read_simplified", "forest_merges", "storage_forests", "Target", "resolve_target", "stored_levels",
            "target_ancestors"]
 
@@ -114,19 +114,53 @@ def build_levels(mesh: TetMesh, forest: MergeForest, levels=None) -> list[LevelM
                               f"{', '.join(map(str, reach))}")
     out = []
     for i in wanted:
-        n = level_merges(mesh.n_points, i)
-        if not out:
-            m, ids = simplified_mesh(mesh, forest, n, return_ids=True)
-            rest = level_forest(forest, n, ids)
-        else:
-            # from the previous level (half its size), not from the input: its remaining forest
-            # continues the same merges, so the tets, their order and the vertices are the same
-            prev = out[-1]
-            m, local = simplified_mesh(prev.mesh, prev.forest, n - prev.n_merges, return_ids=True)
-            ids = prev.vertex_ids[local]
-            rest = level_forest(prev.forest, n - prev.n_merges, local)
-        out.append(LevelMesh(i, n, n / mesh.n_points if mesh.n_points else 0.0, m, rest, ids))
+        out.append(next_level(mesh, forest, i, out[-1] if out else None))
     return out
+
+
+def next_level(mesh: TetMesh, forest: MergeForest, level: int, prev: LevelMesh | None = None) -> LevelMesh:
+    """Level ``level`` of ``mesh``, from the previous level ``prev`` when given.
+
+    Parameters
+    ----------
+    mesh : TetMesh
+        The input (level 0).
+    forest : MergeForest
+        Its decimation, or any prefix of it holding at least the level's N_i merges (what
+        :func:`~gatun_py.simplify.decimate` hands its ``on_level`` callback): the level's mesh
+        depends only on those. The level's ``forest`` is this one restricted (a prefix's
+        restriction is a prefix too).
+    level : int
+        i >= 0.
+    prev : LevelMesh, optional
+        A coarser-numbered level of the same mesh and forest (or of a shorter prefix of it).
+
+    Returns
+    -------
+    LevelMesh
+
+    Examples
+    --------
+    >>> from gatun_py.mesh import TetMesh
+    >>> from gatun_py.simplify import decimate
+    >>> import numpy as np
+    >>> pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], np.float32)
+    >>> mesh = TetMesh(pts, np.arange(5, dtype=np.float32), np.array([[0, 1, 2, 3], [1, 2, 3, 4]], np.int32))
+    >>> next_level(mesh, decimate(mesh), 0).mesh.n_tets
+    2
+    """
+    n = level_merges(mesh.n_points, level)
+    if prev is None:
+        m, ids = simplified_mesh(mesh, forest, n, return_ids=True)
+        rest = level_forest(forest, n, ids)
+    else:
+        # from the previous level (half its size), not from the input: its remaining forest
+        # continues the same merges, so the tets, their order and the vertices are the same
+        sub = level_forest(forest, prev.n_merges, prev.vertex_ids)
+        m, local = simplified_mesh(prev.mesh, sub, n - prev.n_merges, return_ids=True)
+        ids = prev.vertex_ids[local]
+        rest = level_forest(sub, n - prev.n_merges, local)
+    return LevelMesh(level, n, n / mesh.n_points if mesh.n_points else 0.0, m, rest, ids)
 
 
 def storage_forests(levels: list[LevelMesh]) -> list[MergeForest]:

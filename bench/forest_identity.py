@@ -83,11 +83,6 @@ def main(argv=None) -> int:
                      f"{c[K.C_PRUNED] / m:.2f}), sample points summed {c[K.C_POINTS] / m:.0f}, points moved "
                      f"{c[K.C_MOVED] / m:.0f}, link tests {c[K.C_LINK] / m:.2f}, heap pops {c[K.C_POPS] / m:.2f} "
                      f"(stale {c[K.C_STALE] / m:.2f}); sweeps {int(c[K.C_SWEEPS])}")
-            if hasattr(K, "C_SPEC"):
-                lazy = max(1, int(c[K.C_LAZY]))
-                line += (f"\n  speculation: lazy pops {lazy / m:.2f} per merge, {c[K.C_SPEC_HIT] / lazy:.1%} of them "
-                         f"served by a speculative result; speculative evaluations {c[K.C_SPEC] / m:.2f} per merge, "
-                         f"{c[K.C_SPEC_HIT] / max(1, int(c[K.C_SPEC])):.1%} used")
         print(line, flush=True)
     if args.out:
         Path(args.out).write_text(json.dumps(result, indent=1))

@@ -57,9 +57,7 @@ C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS, C_STARTED, C_EXACT, C_PTOP = 0, 1,
 # evaluations stopped by their bound, sample points summed by exact evaluations, heap pops and the
 # stale ones, evaluations of one vertex on its pop, sample points moved by merges
 C_LINK, C_PRUNED, C_POINTS, C_POPS, C_STALE, C_LAZY, C_MOVED = 8, 9, 10, 11, 12, 13, 14
-# speculative evaluations (beside the one of the popped vertex) and those whose result was used
-C_SPEC, C_SPEC_HIT = 15, 16
-N_COUNTERS = 18
+N_COUNTERS = 16
 # bits of a vertex's ``pinned`` flags: PIN_KEEP never merged away, PIN_NO_TARGET nothing merges into
 # it. A non-manifold vertex has both (PIN_ALL); a locked vertex (a brick's cut vertex) only
 # PIN_KEEP, and only interior vertices merge into it: an interior vertex's merge keeps every
@@ -1248,45 +1246,10 @@ def _set_aside(d_err, d_v, d_b, d_ver, n_def, e, a, b, v_a, ver):
     return n_def + 1
 
 
-@njit(cache=True, _nrt=False)
-def _peek_lazy(a, h_err, h_v, h_b, h_ver, counters, ver, parent, lock, round_stamp, scan, spec_v, spec_ver,
-               spec_key, n_max):
-    """Put a and up to ``n_max - 1`` other live lazy entries of unlocked vertices from the first
-    ``scan`` heap slots into ``spec_v[:k]`` (their versions into ``spec_ver``); returns k. Of those
-    the smallest by (error, vertex), the likeliest to come up next. Only reads the heap."""
-    spec_v[0] = a
-    spec_ver[0] = ver[a]
-    k = 1
-    if n_max <= 1:
-        return k
-    for i in range(min(scan, counters[C_HEAP])):
-        v = h_v[i]
-        if h_b[i] >= 0 or h_ver[i] != ver[v] or parent[v] != v or v == a:
-            continue
-        if round_stamp > 0 and lock[v] == round_stamp:
-            continue
-        e = h_err[i]
-        # insertion by (error, vertex) into slots 1..k-1, the largest dropped when full
-        j = k if k < n_max else n_max - 1
-        if j == k - 1 and j >= 1 and not (e < spec_key[j] or (e == spec_key[j] and v < spec_v[j])):
-            continue
-        while j > 1 and (e < spec_key[j - 1] or (e == spec_key[j - 1] and v < spec_v[j - 1])):
-            spec_key[j] = spec_key[j - 1]
-            spec_v[j] = spec_v[j - 1]
-            spec_ver[j] = spec_ver[j - 1]
-            j -= 1
-        spec_key[j] = e
-        spec_v[j] = v
-        spec_ver[j] = h_ver[i]
-        if k < n_max:
-            k += 1
-    return k
-
-
 @njit(cache=True, nogil=True)  # compress encodes level 0's mesh in a thread meanwhile
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks, marks_b, marks_ab, tcount,
          counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pdat, tp_head, tp_count, p_next,
-         vw, p_orig, lock, lock_b, round_stamp, max_blocked, spec_batch, spec_scan):
+         vw, p_orig, lock, lock_b, round_stamp, max_blocked):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left.
 
     ``marks*`` and ``tcount`` have one row per thread (stamps, evaluation counts); the sequential
@@ -1299,15 +1262,6 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
     with the star walk the link test makes anyway); otherwise the entry is set aside unchanged and
     goes back into the heap when the round ends: at ``max_merges``, when every candidate left
     is blocked, or when more than ``max_blocked`` entries were set aside (False either way). ``round_stamp == 0`` is the plain greedy order.
-
-    Speculation (``spec_batch > 1``): a lazy entry that comes up is evaluated together with up to
-    ``spec_batch - 1`` other lazy entries from the first ``spec_scan`` heap slots (in parallel,
-    :func:`_evaluate_many`); their results are kept with the vertex's version and the merge count
-    at the time, and used when the vertex's entry comes up with the same version before any
-    merge. Until a merge the mesh is the same (an evaluation only reads it; the list tidying of
-    :func:`_star` removes only slots every walk skips), so a kept result is the one evaluating
-    then would give, and results are consumed in the sequential order: the forest does not
-    depend on the batch or the thread count.
     """
     n = head.shape[0]
     # entries set aside in this round (at most one live entry per vertex, see _heap_push)
@@ -1328,16 +1282,6 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
     out_e = np.empty(n)
     n_todo = 0
     sweeping = False
-    # the single evaluation of todo[0] is already in out_b[0], out_e[0] (speculated)
-    ready = False
-    # speculative results: vertex, version, target, error, valid while counters[C_MERGES] == spec_epoch
-    spec_v = np.empty(max(spec_batch, 1), np.int64)
-    spec_ver = np.empty(spec_v.shape[0], np.int64)
-    spec_key = np.empty(spec_v.shape[0])
-    spec_b = np.empty(spec_v.shape[0], np.int64)
-    spec_e = np.empty(spec_v.shape[0])
-    n_spec = 0
-    spec_epoch = -1
     if counters[C_STARTED] == 0:
         counters[C_STARTED] = 1
         for v in range(n):
@@ -1345,7 +1289,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         n_todo = n
     while True:
         found = False
-        if n_todo == 1 and not ready:
+        if n_todo == 1:
             out_b[0], out_e[0] = _evaluate(todo[0], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
                                            u4, mark, mark_b, mark_ab, tc, pdat, tp_head, tp_count, p_next)
         elif n_todo > 1:
@@ -1362,7 +1306,6 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
             else:
                 last_err[v] = -1.0
         n_todo = 0
-        ready = False
         if sweeping and not found:
             return True
         sweeping = False
@@ -1395,27 +1338,6 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
             # touched by several merges before its turn is evaluated once)
             todo[0] = a
             n_todo = 1
-            if spec_batch > 1:
-                if spec_epoch == counters[C_MERGES]:
-                    for i in range(n_spec):
-                        if spec_v[i] == a and spec_ver[i] == v_a:
-                            tc[C_SPEC_HIT] += 1
-                            out_b[0] = spec_b[i]
-                            out_e[0] = spec_e[i]
-                            ready = True
-                            break
-                if not ready:
-                    n_spec = _peek_lazy(a, h_err, h_v, h_b, h_ver, counters, ver, parent, lock, round_stamp,
-                                        spec_scan, spec_v, spec_ver, spec_key, spec_batch)
-                    if n_spec > 1:
-                        tc[C_SPEC] += n_spec - 1
-                        _evaluate_many(spec_v, n_spec, spec_b, spec_e, T, alive, nbr, head, nxt, pts, dens, isb,
-                                       pinned, params, quad, u4, marks, marks_b, marks_ab, tcount, pdat, tp_head,
-                                       tp_count, p_next)
-                        spec_epoch = counters[C_MERGES]
-                        out_b[0] = spec_b[0]
-                        out_e[0] = spec_e[0]
-                        ready = True
             continue
         if parent[b] != b:
             continue

@@ -185,11 +185,6 @@ CENTROID_WEIGHT = 1.0
 # 0.25 0.872 / 0.813 / 0.894 (6.9, these defaults: every view below VTK's median). At ratio 0.5
 # every setting is within 0.002 of the greedy order.
 ROUNDS_PER_LEVEL = 64
-# Speculative evaluation (see ``_decimate_kernels._run``): a lazy entry that comes up is evaluated
-# with up to SPECULATE_BATCH - 1 other lazy entries found among the first SPECULATE_SCAN heap
-# slots, in parallel; their results are used if they come up before the next merge.
-SPECULATE_BATCH = 2
-SPECULATE_SCAN = 15
 ROUND_BLOCKED = 0.25
 # Tets per chunk of the vectorised set-up (bounds its temporaries).
 _CHUNK = 1 << 16
@@ -296,8 +291,6 @@ class DecimationState:
         self.marks_b = np.zeros((threads, n), np.int64)
         self.marks_ab = np.zeros((threads, n), np.int64)
         self.tcount = np.zeros((threads, K.N_COUNTERS), np.int64)
-        # lazy evaluations done together (speculatively): one per thread, none on one thread
-        self.spec_batch = SPECULATE_BATCH if numba.get_num_threads() > 1 else 1
         self.counters = np.zeros(K.N_COUNTERS, np.int64)
         self.counters[K.C_PTOP] = m
         self.ver = np.zeros(n, np.int32)
@@ -343,8 +336,7 @@ class DecimationState:
             stamp = self.round
         return bool(K._run(*self._mesh_args(), self.marks, self.marks_b, self.marks_ab, self.tcount, self.counters,
                            *self._heap_args(), self.parent, self.rank, np.int64(max_merges), *self._sample_args(),
-                           self.vw, self.p_orig, self.lock, self.lock_b, np.int64(stamp), np.int64(max_blocked),
-                           np.int64(self.spec_batch), np.int64(SPECULATE_SCAN)))
+                           self.vw, self.p_orig, self.lock, self.lock_b, np.int64(stamp), np.int64(max_blocked)))
 
     def prefix(self) -> MergeForest:
         """The merges so far as a forest (copies; ranks in merge order)."""

@@ -1384,6 +1384,29 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
                 _heap_push(h_err, h_v, h_b, h_ver, counters, max(e, last_err[w]), w, -1, ver[w], ver)
 
 
+@njit(cache=True, nogil=True)
+def _run_rounds(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks, marks_b, marks_ab, tcount,
+                counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, pdat, tp_head, tp_count, p_next, vw,
+                p_orig, lock, lock_b, ends, max_blocked, round_no, starts):
+    """Rounds of :func:`_run` up to every ``ends[r]`` in turn (its ``max_blocked[r]``), in one call
+    without the GIL: the round loop of :func:`gatun_py.simplify.decimate.decimate` (a return to
+    Python between rounds waits for the GIL, which a numba encoder in another thread may hold for
+    seconds). ``round_no[0]``: the last round's stamp (updated); the first merge count of every
+    round goes to ``starts``. Returns (rounds started, True when no legal merge is left, the last
+    index of ``ends`` worked on)."""
+    k = 0
+    for r in range(ends.shape[0]):
+        while counters[C_MERGES] < ends[r]:
+            starts[k] = counters[C_MERGES]
+            k += 1
+            round_no[0] += 1
+            if _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks, marks_b, marks_ab,
+                    tcount, counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, ends[r], pdat, tp_head,
+                    tp_count, p_next, vw, p_orig, lock, lock_b, round_no[0], max_blocked[r]):
+                return k, True, r
+    return k, False, ends.shape[0] - 1
+
+
 @njit(cache=True)
 def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, vw, p_orig, tp_head, tp_count,
            p_next, counters):

@@ -338,6 +338,20 @@ class DecimationState:
                            *self._heap_args(), self.parent, self.rank, np.int64(max_merges), *self._sample_args(),
                            self.vw, self.p_orig, self.lock, self.lock_b, np.int64(stamp), np.int64(max_blocked)))
 
+    def run_rounds(self, ends: np.ndarray, max_blocked: np.ndarray):
+        """Rounds of independent merges (as :meth:`run` with ``one_round``) up to every ``ends[r]``
+        in turn, each round with ``max_blocked[r]``, in one kernel call. Returns (the first merge
+        count of every round started, finished, the last index of ``ends`` worked on)."""
+        ends = np.ascontiguousarray(ends, np.int64)
+        starts = np.empty(max(0, int(ends[-1]) - self.n_merges) + 1 if ends.size else 0, np.int64)
+        round_no = np.array([self.round], np.int64)
+        k, finished, r = K._run_rounds(*self._mesh_args(), self.marks, self.marks_b, self.marks_ab, self.tcount,
+                                       self.counters, *self._heap_args(), self.parent, self.rank,
+                                       *self._sample_args(), self.vw, self.p_orig, self.lock, self.lock_b, ends,
+                                       np.ascontiguousarray(max_blocked, np.int64), round_no, starts)
+        self.round = int(round_no[0])
+        return [int(x) for x in starts[:k]], bool(finished), int(r)
+
     def prefix(self) -> MergeForest:
         """The merges so far as a forest (copies; ranks in merge order)."""
         return MergeForest(self.parent.copy(), self.rank.copy(), self.n_merges)
@@ -505,19 +519,27 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
     # N_i -> i for the levels on_level hears of (the first i of equal N_i)
     level_ends = _level_ends(mesh.n_points) if on_level is not None else {}
     if rounds:
-        for end, quota in _round_ends(mesh.n_points, limit, int(rounds)):
-            finished = False
-            max_blocked = 2**62 if round_blocked is None else int(np.ceil(round_blocked * quota))
-            while state.n_merges < end and not finished:
-                starts.append(state.n_merges)
-                finished = state.run(end, one_round=True, max_blocked=max_blocked)
+        plan = _round_ends(mesh.n_points, limit, int(rounds))
+        ends = np.array([e for e, _ in plan], np.int64)
+        blocked = np.array([2**62 if round_blocked is None else int(np.ceil(round_blocked * q)) for _, q in plan],
+                           np.int64)
+        # kernel calls of about an eighth of a level's rounds: progress, and on_level at a level's end
+        step = max(1, int(rounds) // 8)
+        lo = 0
+        while lo < ends.size:
+            hi = min(lo + step, ends.size)
+            ahead = [j for j in range(lo, hi) if int(ends[j]) in level_ends]
+            hi = ahead[0] + 1 if ahead else hi  # stop at a level's end
+            new_starts, finished, r = state.run_rounds(ends[lo:hi], blocked[lo:hi])
+            starts.extend(new_starts)
             if progress is not None:
                 progress(state.n_merges - done)
             done = state.n_merges
-            if done in level_ends:
+            if done in level_ends and done == ends[lo + r]:
                 on_level(level_ends[done], state.prefix())
             if finished:
                 break
+            lo = hi
     else:
         chunk = max(1024, mesh.n_points // 50)
         while True:

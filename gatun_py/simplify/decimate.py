@@ -87,6 +87,14 @@ them first; a level's interval stays a union of whole rounds, so level i's fores
 forest's ranks >= N_i minus N_i. Parents always land in a later round than their children (b is
 locked by a -> b), so a parent still outranks its child.
 
+The rounds run in one kernel call (``_run_rounds``, no GIL) per eighth of a level: ``tetc compress``
+encodes the levels' meshes in a thread meanwhile (level 0 at once, level i once ``on_level`` says
+its merges are done), and the encoder's kernels hold the GIL, so a return to Python after every
+round waited for one of them (flange-1m: the decimation phase 19.1 s wall for 19.1 s CPU with
+level 0 beside it, 18.1 s for 20.5 s with every level beside it). Speculative evaluation of the
+next lazy heap entries on the second thread was tried and measured slower (see bench/sections/
+simplify.md).
+
 Where the time goes (perf on the kernels' code, Blunt-fin, one thread, after the speed work of
 issue 12): the star context of an evaluation (chiefly walking the star's sample points: memory
 bound) ~20 %, the sampled errors of the exact evaluations ~15 %, moving the points after a merge

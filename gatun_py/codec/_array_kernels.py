@@ -172,7 +172,7 @@ def _predict(o, refs, row, k, kind, ext, lo, hi, lin):
     return p
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def residuals(o, refs, kind, ext, lo, hi, lin):
     """Zigzagged residuals (as int64 bit patterns of uint64) of every vertex for one predictor."""
     n = o.shape[0]
@@ -226,7 +226,7 @@ def _context(lens, refs, row, k):
     return np.int64(lens[k - 1]) if k > 0 else np.int64(0)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def encode_residuals(st, out, zz, refs, probs, lens):
     """Range-code the zigzagged residuals ``zz`` of one component (refs give the contexts)."""
     for k in range(zz.shape[0]):

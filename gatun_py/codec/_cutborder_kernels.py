@@ -614,7 +614,7 @@ def _lookup_halfedge(hkey, hface, fvisited, p, r):
     return -1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pred, out_faces, face_src):
     """Code the boundary surface ``faces`` (original ids). Fills ``dec_of`` (original -> decode id),
     ``order`` (decode -> original), ``pred`` (geometry predictors, decode ids) and ``out_faces``
@@ -828,7 +828,7 @@ def _face_min_key(tets, t, k):
     return x, (y << 32) | z
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def tet_neighbours(tets, nbr):
     """Fill ``nbr[t, k]`` with the tet across face k (opposite vertex k) of tet t, -1 on the
     boundary. Returns the number of faces shared by more than two tets (0 for a valid mesh).
@@ -904,7 +904,7 @@ def tet_neighbours(tets, nbr):
     return bad
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def boundary_from_neighbours(tets, nbr, faces, owner):
     """Boundary faces (outward, in tet order: the order of ``TetMesh.boundary_faces``) and the
     tet owning each; returns their number."""
@@ -934,7 +934,7 @@ def add_faces(B, faces, apex):
     return slots
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, syms):
     """Code the tets growing inward from the border ``B`` (the boundary, in decode ids).
 
@@ -1342,7 +1342,7 @@ def _count_decoded(vdec, a, b, c, d):
     vdec[d] += vdec[d] < VDEC_MAX
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def encode_tets2(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, syms, rankp, vdec):
     """:func:`encode_tets` with coding 2's ranking and case (c) order (same arguments, plus the
     class probabilities ``rankp`` from :func:`new_rank_model` and zeroed decoded-tet counts

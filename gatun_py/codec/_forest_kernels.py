@@ -340,7 +340,7 @@ def _bucket_of(bounds, r):
     return s
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def encode_forest_kernel(st, out, start, nbrs, boundary, parent, rank, k):
     """Code a forest (decode order; roots have rank >= k) after the level's adjacency."""
     n = parent.shape[0]
@@ -499,7 +499,7 @@ def new_model():
     return np.full(MODEL_SIZE, 1 << 14, np.uint16)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def encode_rounds_kernel(st, out, start, nbrs, boundary, parent, rank, k, rid, n_rounds):
     """Code a forest (decode order; roots have rank >= k) as bucket + round per vertex (``rid``,
     ``n_rounds`` per bucket, see :func:`gatun_py.codec.forest.rank_rounds`), then the parents."""
@@ -761,7 +761,7 @@ def _phase_base(s, bin_):
     return _PHASE_BASE3 + ((s if s < BUCKET_CLASSES3 else BUCKET_CLASSES3 - 1) * PROXY_BINS + bin_) * PHASES
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def encode_rounds3_kernel(st, out, start, nbrs, boundary, parent, rank, k, rid, n_rounds, proxy_bin, q, u):
     """Coding 3: the round counts, then per vertex its bucket and round in the context of its proxy
     bin, then the parents ordered by the quadric."""

@@ -874,7 +874,7 @@ def _is_big(mode, res):
 # ------------------------------------------------------------------------------------ encoder
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def link_all(refs, vf):
     """:func:`link_vertex` for every vertex in turn (the encoder knows all values up front)."""
     n = vf.shape[0]
@@ -887,7 +887,7 @@ def link_all(refs, vf):
     return wpar
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace):
     """Encode every vertex into four channel streams.
 

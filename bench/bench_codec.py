@@ -316,7 +316,7 @@ def decode_speed_text() -> str:
              "geometry 0.096 s; flange-10m 1.98 s and 0.95 s (run in turn on one thread each is slower, "
              "2.08 and 1.13 s: the two working sets evict each other between batches). So two threads "
              "cannot take a decode below its connectivity time: ours / VTK zlib ≤ 1.5 needs the connectivity "
-             "decoder itself about 25 % faster on flange-1m and 40 % on flange-10m. On the grids the stages "
+             "decoder itself about 20 % faster on flange-1m and 40 % on flange-10m. On the grids the stages "
              "are closer to even but the file is only 3–4 batches, so the overlap is smaller. When "
              "another process holds the second core (this machine is shared) two threads gain nothing, "
              "and lose nothing either (flange-1m 0.26–0.28 s with 1 or 2 threads then). Tried for the "

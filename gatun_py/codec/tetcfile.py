@@ -40,6 +40,9 @@ from .threads import RunAhead, check_jobs
 
 FORMAT_NAME = "tetc"
 DEFAULT_BATCH_TETS = 65536
+# decode_mesh on two threads cuts a level into batches of at least this many tets (smaller ones
+# cost more hand-overs than they gain: flange-1m was slower in batches of 16,384 than of 65,536)
+_MIN_RUN_AHEAD_BATCH_TETS = 16384
 # counts beyond these bounds are not believed from a stream of the given size (rejected before
 # allocating): a regular 40^3 grid, the most compressible mesh we know, codes 8.3 tets per byte of
 # its tet section and 5 boundary faces per byte; 512 leaves 60x headroom
@@ -738,7 +741,10 @@ class TetcReader:
         points = np.empty((n, 3), np.float32)
         density = np.empty(n, np.float32)
         tets = np.empty((lv["tets"], 4), np.int32)  # decoded into in place, batch by batch
-        for b, _ in self._batches(level, DEFAULT_BATCH_TETS, extra, tets_out=tets, jobs=jobs):
+        batch_tets = DEFAULT_BATCH_TETS
+        if jobs > 1:  # the last batch's geometry waits for nothing to overlap: a dozen batches or more
+            batch_tets = min(DEFAULT_BATCH_TETS, max(_MIN_RUN_AHEAD_BATCH_TETS, lv["tets"] // 12))
+        for b, _ in self._batches(level, batch_tets, extra, tets_out=tets, jobs=jobs):
             k = len(b.points)
             points[b.first:b.first + k] = b.points
             density[b.first:b.first + k] = b.density

@@ -113,8 +113,9 @@ def decompress(input, output, level, ratio, selective, tets, size, tf_spec, azim
                jobs, force, quiet):
     """Decompress a .tetc file into any mesh format meshio writes that holds tets.
 
-    The bricks of a bricked file decode in parallel (--jobs) and are stitched into one mesh, each
-    shared vertex once; the output is the same whatever --jobs is. With --selective, write the
+    With --jobs 2 or more (default: all cores) the connectivity decodes on a thread of its own,
+    ahead of the geometry; the bricks of a bricked file decode in parallel and are stitched into
+    one mesh, each shared vertex once. The output is the same whatever --jobs is. With --selective, write the
     mesh `tetc render --selective` draws for that view and transfer function (same options), e.g.
     to check it or use it elsewhere.
     """

@@ -270,7 +270,8 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
                log=None) -> TetMesh:
     """Decode a ``.tetc`` file (optionally simplified) and write it in any meshio format.
 
-    ``jobs``: threads decoding the bricks of a bricked file (default: all cores). With
+    ``jobs``: threads decoding (default: all cores): the connectivity ahead of the geometry, the
+    bricks of a bricked file in parallel (:meth:`TetcFile.mesh`). With
     ``selective``, the mesh a selective render of that view and transfer function (``size``,
     ``tf``, ``azimuth``, ``elevation``, ``zoom``, ``scalar_range``, see :func:`render`) would draw,
     at ``ratio`` or ``tets``: so it can be checked and used elsewhere. A file without merge
@@ -464,8 +465,10 @@ class TetcFile:
     def mesh(self, ratio: float | None = None, *, level: int | None = None, jobs: int | None = None) -> TetMesh:
         """The mesh at a simplification ratio (merged / all vertices) or a stored level; default the full mesh.
 
-        A bricked file decodes its bricks on ``jobs`` threads (default: all cores) and stitches them
-        (every brick at ``ratio`` of its own vertices); the result does not depend on ``jobs``.
+        Decodes on ``jobs`` threads (default: all cores): the connectivity in a thread of its own
+        ahead of the geometry (:meth:`TetcReader.decode_mesh`), and a bricked file's bricks in
+        parallel, stitched (every brick at ``ratio`` of its own vertices); the result does not
+        depend on ``jobs``.
         """
         if ratio is not None and level is not None:
             raise OptionError("give a ratio or a level, not both")

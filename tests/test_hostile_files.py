@@ -45,7 +45,7 @@ def _exercise(data: bytes) -> None:
     r.read_dependencies()
     for b in (r.brick(k) for k in range(r.n_bricks)):  # a one-brick file is its own brick 0
         for lv in b.levels:
-            b.decode_mesh(lv["level"])
+            b.decode_mesh(lv["level"], jobs=2)  # the connectivity on a thread of its own
             b.read_forest(lv["level"])
         for name, _, k in b.arrays:
             for _ in b.iter_decode(0, scalar=name, component=None if k == 1 else "magnitude"):

@@ -46,6 +46,7 @@ from ..mesh import TetMesh
 from .brickindex import BRICKS_KEY, brick_prefix
 from .container import build_container
 from .tetcfile import TetcReader, check_mesh, encode_level, file_meta
+from .threads import check_jobs, default_jobs
 
 __all__ = ["BrickLevels", "EncodedBrick", "encode_brick", "encode_bricked", "read_cut", "stitch_bricks",
            "decode_bricked", "map_bricks", "default_jobs"]
@@ -54,23 +55,6 @@ _CUT_HEAD = struct.Struct("<4sIIII")
 _CUT_MAGIC = b"CUT1"  # positions and file-wide ids
 _CUT_POINTS_MAGIC = b"CUTP"  # positions only: shared vertices are matched by their coordinates
 _LZMA_FILTERS = [{"id": lzma.FILTER_LZMA2, "preset": 6}]
-
-
-def default_jobs() -> int:
-    """All cores this process may use."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
-
-
-def check_jobs(jobs) -> int:
-    """``jobs`` as a positive int (None: all cores)."""
-    if jobs is None:
-        return default_jobs()
-    if isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1:
-        raise OptionError(f"jobs must be a positive integer, got {jobs!r}")
-    return int(jobs)
 
 
 # -- the cut section ------------------------------------------------------------------------------
@@ -242,6 +226,12 @@ def read_cut(reader: TetcReader, k: int, level: int = 0) -> tuple[np.ndarray, np
     b = reader.brick(k)
     n = int(b.level_meta(level)["points"])
     return decode_cut(b.read_section(f"L{level}/cut"), n, int(reader.meta.get("cut_points", 0)))
+
+
+def brick_jobs(jobs: int | None, n_bricks: int) -> int:
+    """Threads each brick's own decode may use while :func:`map_bricks` decodes ``n_bricks`` bricks
+    on ``jobs`` threads (their share of the cores: 1 once every thread has a brick)."""
+    return max(1, check_jobs(jobs) // max(1, int(n_bricks)))
 
 
 def map_bricks(fn, n_bricks: int, jobs: int | None = None, progress=None) -> list:
@@ -433,13 +423,14 @@ def decode_bricked(source, level: int = 0, *, jobs: int | None = None, progress=
     """
     reader = source if isinstance(source, TetcReader) else TetcReader(source)
     if reader.n_bricks == 1:
-        return reader.decode_mesh(level)
+        return reader.decode_mesh(level, jobs=jobs)
     bricks = [reader.brick(k) for k in range(reader.n_bricks)]
     missing = [k for k, b in enumerate(bricks) if level not in {lv["level"] for lv in b.levels}]
     if missing:
         raise OptionError(f"level {level} is not stored in every brick (missing in brick {missing[0]}); "
                           f"stored in all: {[lv['level'] for lv in reader.levels]}")
     cuts = [read_cut(reader, k, level) for k in range(len(bricks))]  # checked before the long work
-    meshes = map_bricks(lambda k: bricks[k].decode_mesh(level), len(bricks), jobs, progress)
+    per_brick = brick_jobs(jobs, len(bricks))
+    meshes = map_bricks(lambda k: bricks[k].decode_mesh(level, jobs=per_brick), len(bricks), jobs, progress)
     return stitch_bricks(meshes, cuts, int(reader.meta["cut_points"]), jobs=jobs,
                          n_points=int(reader.meta["points"]) if level == 0 else None)

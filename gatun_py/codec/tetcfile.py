@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import nullcontext
 from dataclasses import dataclass
 from typing import Iterator
 
@@ -35,9 +36,13 @@ from .forest import (FOREST_CODING, ROOT_RANK, coding_for_format as forest_codin
                      decode_forest_on_geometry, decode_forest_on_mesh, decode_forest_rounds, encode_forest_on_geometry,
                      encode_forest_on_mesh, encode_forest_rounds, forest_header)
 from .geometry import HEADER_SIZE, GeometryDecoder, check_geometry_header, encode_geometry
+from .threads import RunAhead, check_jobs
 
 FORMAT_NAME = "tetc"
 DEFAULT_BATCH_TETS = 65536
+# decode_mesh on two threads cuts a level into batches of at least this many tets (smaller ones
+# cost more hand-overs than they gain: flange-1m was slower in batches of 16,384 than of 65,536)
+_MIN_RUN_AHEAD_BATCH_TETS = 16384
 # counts beyond these bounds are not believed from a stream of the given size (rejected before
 # allocating): a regular 40^3 grid, the most compressible mesh we know, codes 8.3 tets per byte of
 # its tet section and 5 boundary faces per byte; 512 leaves 60x headroom
@@ -599,54 +604,68 @@ class TetcReader:
             return None
         return ArrayDecoder(self.read_section(section), n_points=n, dtype="float64", components=3)
 
+    def _connectivity_batches(self, conn, lv: dict, batch_tets: int, tets_out, copy_refs: bool):
+        """The connectivity stage of a decode: yields (first new vertex, tets or None, new vertices'
+        refs, boundary faces or None), the boundary surface first, then batches of tets (into
+        ``tets_out`` when given, see :meth:`_batches`). ``copy_refs``: hand over copies of the
+        refs (the decoder rewrites its window of them on the next call)."""
+        faces, nbv = conn.boundary()
+        if nbv != lv["boundary_vertices"]:
+            raise CorruptFileError("corrupt boundary section: vertex count does not match the metadata")
+        refs = conn.last_refs
+        yield 0, None, refs.copy() if copy_refs else refs, faces
+        conn.start_tets()
+        known = nbv
+        while conn.tets_done < lv["tets"]:
+            out = None if tets_out is None else tets_out[conn.tets_done:]
+            tets = conn.next_tets(batch_tets, out=out)
+            refs = conn.last_refs  # the batch's new vertices
+            yield known, tets, refs.copy() if copy_refs else refs, None
+            known = conn.vertices_known
+        if known != lv["referenced_points"]:
+            raise CorruptFileError("corrupt tet section: vertex count does not match the metadata")
+        self.last_peak_border = conn.peak_border
+
     def _batches(self, level: int, batch_tets: int, extra: dict, tets_out: np.ndarray | None = None,
-                 geometry=None):
+                 geometry=None, *, jobs: int = 1, depth: int = 4):
         """Decode ``level``: yields (TetBatch, {key: exact values of the batch's new vertices}).
 
         ``extra`` maps keys to :class:`ArrayDecoder`s fed alongside the geometry; a decoder under the
         key ``_POINTS`` is predicted from the float32 coordinates, the default scalar's from the
         float32 density. ``tets_out``, an (m, 4) int32 array for all the level's tets, receives
         them in order (the batches' tets are views of it). ``geometry``: a fresh geometry decoder
-        of the level to use (default: :meth:`_geometry`'s).
+        of the level to use (default: :meth:`_geometry`'s). ``jobs`` > 1: the connectivity decodes
+        in a thread of its own, up to ``depth`` batches ahead of the geometry and the point arrays
+        (:class:`~.threads.RunAhead`; the same batches, its errors raised here).
         """
         lv = self.level_meta(level)
-        n, m, nf = lv["points"], lv["tets"], lv["boundary_faces"]
-        self._checked_points(level)
-        geo = self._geometry(level, n) if geometry is None else geometry
+        n = self._checked_points(level)
         conn = self._connectivity(level)
+        stages = self._connectivity_batches(conn, lv, batch_tets, tets_out, copy_refs=jobs > 1)
+        with RunAhead(stages, depth=depth, name="tetc-connectivity") if jobs > 1 else nullcontext(stages) as source:
+            geo = self._geometry(level, n) if geometry is None else geometry  # set up while the boundary decodes
 
-        def exact(refs, pts, dens):
-            out = {}
-            for key, dec in extra.items():
-                ext = pts if key == _POINTS else dens if key == self.scalar_name else None
-                out[key] = dec.decode(refs, ext, positions=geo.values)
-            return out
+            def exact(refs, pts, dens):
+                out = {}
+                for key, dec in extra.items():
+                    ext = pts if key == _POINTS else dens if key == self.scalar_name else None
+                    out[key] = dec.decode(refs, ext, positions=geo.values)
+                return out
 
-        faces, nbv = conn.boundary()
-        if nbv != lv["boundary_vertices"]:
-            raise CorruptFileError("corrupt boundary section: vertex count does not match the metadata")
-        refs = conn.last_refs
-        pts, dens = geo.decode(refs)
-        yield TetBatch.of_vertices(0, pts, dens, faces), exact(refs, pts, dens)
-        conn.start_tets()
-        known = nbv
-        while conn.tets_done < m:
-            out = None if tets_out is None else tets_out[conn.tets_done:]
-            tets = conn.next_tets(batch_tets, out=out)
-            refs = conn.last_refs  # the batch's new vertices (a window the next call rewrites)
-            pts, dens = geo.decode(refs)
-            yield TetBatch.of_tets(known, tets, pts, dens), exact(refs, pts, dens)
-            known = conn.vertices_known
-        if known != lv["referenced_points"]:
-            raise CorruptFileError("corrupt tet section: vertex count does not match the metadata")
-        if known < n:
+            known = 0
+            for first, tets, refs, faces in source:
+                pts, dens = geo.decode(refs)
+                batch = TetBatch.of_vertices(0, pts, dens, faces) if faces is not None else \
+                    TetBatch.of_tets(first, tets, pts, dens)
+                yield batch, exact(refs, pts, dens)
+                known = first + len(refs)
+        if known < n:  # vertices no tet references: no refs
             none = np.full((n - known, 4), -1, np.int32)
             pts, dens = geo.decode(none)
             yield TetBatch.of_vertices(known, pts, dens), exact(none, pts, dens)
         geo.finish()
         for dec in extra.values():
             dec.finish()
-        self.last_peak_border = conn.peak_border
 
     def iter_decode(self, level: int = 0, *, scalar: str | None = None, component=None,
                     batch_tets: int = DEFAULT_BATCH_TETS) -> Iterator[TetBatch]:
@@ -684,11 +703,31 @@ class TetcReader:
                 batch.density = scalar_of(exact, scalar, component).astype(np.float32)
             yield batch
 
-    def decode_mesh(self, level: int = 0):
+    def decode_mesh(self, level: int = 0, *, jobs: int | None = None):
         """The whole mesh of ``level`` as a :class:`~gatun_py.mesh.TetMesh` (vertices in decode order).
 
         Coordinates in their stored dtype and every point array in its own, bit for bit.
+
+        Parameters
+        ----------
+        level : int
+            A stored level (0: the full mesh).
+        jobs : int, optional
+            Threads (default: all cores). With two or more, the connectivity decodes in a thread
+            of its own ahead of the geometry and the point arrays (both decoders release the GIL);
+            the mesh is the same whatever ``jobs`` is.
+
+        Examples
+        --------
+        >>> from gatun_py.warmup import SHIPPED_TETC
+        >>> r = TetcReader(SHIPPED_TETC)
+        >>> m = r.decode_mesh(jobs=2)
+        >>> m.n_tets == r.level_meta(0)["tets"]
+        True
+        >>> bool((m.tets == r.decode_mesh(jobs=1).tets).all())
+        True
         """
+        jobs = check_jobs(jobs)
         lv = self.level_meta(level)
         n = self._checked_points(level)
         extra = {}
@@ -702,7 +741,10 @@ class TetcReader:
         points = np.empty((n, 3), np.float32)
         density = np.empty(n, np.float32)
         tets = np.empty((lv["tets"], 4), np.int32)  # decoded into in place, batch by batch
-        for b, _ in self._batches(level, DEFAULT_BATCH_TETS, extra, tets_out=tets):
+        batch_tets = DEFAULT_BATCH_TETS
+        if jobs > 1:  # the last batch's geometry waits for nothing to overlap: a dozen batches or more
+            batch_tets = min(DEFAULT_BATCH_TETS, max(_MIN_RUN_AHEAD_BATCH_TETS, lv["tets"] // 12))
+        for b, _ in self._batches(level, batch_tets, extra, tets_out=tets, jobs=jobs):
             k = len(b.points)
             points[b.first:b.first + k] = b.points
             density[b.first:b.first + k] = b.density
@@ -726,6 +768,7 @@ def iter_decode(source, level: int = 0, **kw) -> Iterator[TetBatch]:
     return TetcReader(source).iter_decode(level, **kw)
 
 
-def decode_mesh(source, level: int = 0):
-    """Decode a whole level of a ``.tetc`` file into a :class:`~gatun_py.mesh.TetMesh`."""
-    return TetcReader(source).decode_mesh(level)
+def decode_mesh(source, level: int = 0, *, jobs: int | None = None):
+    """Decode a whole level of a ``.tetc`` file into a :class:`~gatun_py.mesh.TetMesh` (see
+    :meth:`TetcReader.decode_mesh`)."""
+    return TetcReader(source).decode_mesh(level, jobs=jobs)

@@ -20,8 +20,8 @@ import numba
 import numpy as np
 
 from ..codec import LevelPayload, TetcReader
-from ..codec.bricks import (BrickLevels, check_jobs, decode_bricked, distinct_points, encode_brick, encode_bricked,
-                            map_bricks, read_cut, stitch_bricks)
+from ..codec.bricks import (BrickLevels, brick_jobs, check_jobs, decode_bricked, distinct_points, encode_brick,
+                            encode_bricked, map_bricks, read_cut, stitch_bricks)
 from ..errors import CorruptFileError, OptionError, TetcError
 from ..mesh import TetMesh
 from ..mesh.partition import Brick, partition_tets, split_bricks
@@ -139,14 +139,14 @@ def read_bricked(reader: TetcReader, *, ratio: float | None = None, level: int |
     bricks still meet).
     """
     if reader.n_bricks == 1:
-        return read_simplified(reader, ratio=ratio, level=level)
+        return read_simplified(reader, ratio=ratio, level=level, jobs=jobs)
     if ratio is None:
         return decode_bricked(reader, 0 if level is None else int(level), jobs=jobs, progress=progress)
 
     def one(k):
         b = reader.brick(k)
         target = resolve_target(b, ratio=ratio, level=level)
-        mesh = b.decode_mesh(target.level)
+        mesh = b.decode_mesh(target.level, jobs=brick_jobs(jobs, reader.n_bricks))
         pos, ids = read_cut(reader, k, target.level)
         anc = target_ancestors(b, target)
         if anc is None:

@@ -269,7 +269,7 @@ def target_ancestors(reader, target: Target, *, times: dict | None = None) -> np
     return anc
 
 
-def read_simplified(source, *, ratio: float | None = None, level: int | None = None):
+def read_simplified(source, *, ratio: float | None = None, level: int | None = None, jobs: int | None = None):
     """The mesh at a simplification ratio (or a stored level) of a ``.tetc`` file.
 
     The level chosen by :func:`resolve_target` is decoded and its forest applied for the
@@ -282,6 +282,8 @@ def read_simplified(source, *, ratio: float | None = None, level: int | None = N
         0 <= ratio <= the file's maximum ratio.
     level : int, optional
         A stored level (exclusive with ``ratio``).
+    jobs : int, optional
+        Threads decoding the level (:meth:`TetcReader.decode_mesh`; default: all cores).
 
     Returns
     -------
@@ -296,5 +298,5 @@ def read_simplified(source, *, ratio: float | None = None, level: int | None = N
     reader = source if isinstance(source, TetcReader) else TetcReader(source)
     target = resolve_target(reader, ratio=ratio, level=level)
     anc = target_ancestors(reader, target)  # first: the level's decode then reuses the forest's connectivity
-    mesh = reader.decode_mesh(target.level)
+    mesh = reader.decode_mesh(target.level, jobs=jobs)
     return mesh if anc is None else mesh_from_ancestors(mesh, anc)[0]

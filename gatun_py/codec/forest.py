@@ -495,14 +495,27 @@ def decode_forest_rounds(data: bytes, tets: np.ndarray, n: int, *, boundary, poi
     body = np.frombuffer(data, np.uint8, offset=_HEADER.size)
     st = dec_state()
     probs = FK.new_model()
+    mask = _boundary_mask(boundary, n)
+    return _decode_rounds_then_parents(
+        st, body, n, k, points, density,
+        lambda symbol, rid: FK.decode_rounds_kernel(st, body, probs, start, nbrs, mask, k, symbol, rid),
+        lambda parent, rank, of_rank: FK.decode_parents_kernel(st, body, probs, start, nbrs, k, parent, rank,
+                                                               of_rank))
+
+
+def _decode_rounds_then_parents(st, body, n: int, k: int, points, density, decode_rounds, decode_parents):
+    """The part forest codings 2 and 3 share after their set-up: every vertex's bucket and round
+    (``decode_rounds(symbol, rid)``), the ranks inside the rounds by :func:`canonical_key`, then
+    the parents (``decode_parents(parent, rank, of_rank)``); both kernels return False on damage.
+    Checks the stream's end and the forest; returns (parent, rank) with roots at ROOT_RANK."""
     symbol = np.empty(n, np.int8)
     rid = np.empty(n, np.int64)
     damaged = CorruptFileError("merge forest: the coded data is damaged or truncated")
-    if not FK.decode_rounds_kernel(st, body, probs, start, nbrs, _boundary_mask(boundary, n), k, symbol, rid):
+    if not decode_rounds(symbol, rid):
         raise damaged
     rank, of_rank = _ranks_of_rounds(symbol, rid, k, points, density)
     parent = np.arange(n, dtype=np.int32)
-    if not FK.decode_parents_kernel(st, body, probs, start, nbrs, k, parent, rank, of_rank):
+    if not decode_parents(parent, rank, of_rank):
         raise damaged
     check_decoder(st, body, "merge forest")
     rank[rank == k] = ROOT_RANK
@@ -583,16 +596,8 @@ def decode_forest_on_geometry(data: bytes, tets: np.ndarray, n: int, *, boundary
     q, u, bins = _geometry_terms(tets, points, density, start, nbrs, mask)
     body = np.frombuffer(data, np.uint8, offset=_HEADER.size)
     st = dec_state()
-    symbol = np.empty(n, np.int8)
-    rid = np.empty(n, np.int64)
-    damaged = CorruptFileError("merge forest: the coded data is damaged or truncated")
-    if not FK.decode_rounds3_kernel(st, body, start, nbrs, mask, k, bins, symbol, rid):
-        raise damaged
-    rank, of_rank = _ranks_of_rounds(symbol, rid, k, points, density)
-    parent = np.arange(n, dtype=np.int32)
-    if not FK.decode_parents3_kernel(st, body, start, nbrs, mask, k, parent, rank, of_rank, q, u):
-        raise damaged
-    check_decoder(st, body, "merge forest")
-    rank[rank == k] = ROOT_RANK
-    check_forest(parent, rank)
-    return parent, rank
+    return _decode_rounds_then_parents(
+        st, body, n, k, points, density,
+        lambda symbol, rid: FK.decode_rounds3_kernel(st, body, start, nbrs, mask, k, bins, symbol, rid),
+        lambda parent, rank, of_rank: FK.decode_parents3_kernel(st, body, start, nbrs, mask, k, parent, rank,
+                                                                of_rank, q, u))

@@ -415,6 +415,16 @@ def test_rewritten_metadata(worker, files, data):
     check(worker, _build(meta, sections), f"{where}.{key}={target[key]!r}")
 
 
+@pytest.mark.parametrize("value", ["", [1.0], "12", [0.0, 1.0, 2.0], None])
+def test_scalar_range_not_a_pair(worker, files, value):
+    """A scalar range of any length but two (found by the test above: an empty one once reached
+    the bricked isosurface's brick choice as an empty tuple)."""
+    for data in files:
+        meta, sections = _split(data)
+        meta["scalar_range"] = value
+        check(worker, _build(meta, sections), f"top.scalar_range={value!r}")
+
+
 @HYPO
 @given(st.data())
 def test_rewritten_section_bytes(worker, files, data):

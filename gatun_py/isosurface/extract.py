@@ -793,7 +793,7 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs, values=(), jobs=1):
 def _file_box_and_range(reader: TetcReader):
     try:
         lo, hi = (np.asarray(x, np.float64).reshape(3) for x in reader.meta["bbox"])
-        rng = tuple(float(x) for x in reader.meta["scalar_range"])
+        rng = tuple(float(x) for x in np.asarray(reader.meta["scalar_range"], np.float64).reshape(2))
     except (KeyError, TypeError, ValueError):
         raise CorruptFileError("corrupt metadata: bad bounding box or scalar range") from None
     return lo, hi, rng

@@ -178,11 +178,10 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
         payload = mesh
     else:
         with ThreadPoolExecutor(1, thread_name_prefix="tetc-level") as pool:
-            # Level 0's mesh does not depend on the forest: with a second core it is encoded beside
-            # the decimation (whose driver kernel releases the GIL); its forest is added afterwards.
-            # So is every other level's mesh, as soon as the merges before it are done.
+            # With a second core the levels' meshes are encoded beside the decimation (whose merge
+            # loop releases the GIL), each as soon as the merges before it are done; their forests
+            # are added afterwards.
             beside = _LevelsBeside(mesh, pool, MAX_LEVEL if levels is None else min(int(levels), MAX_LEVEL))
-            level0 = pool.submit(encode_level, LevelPayload(0, 0.0, 0, mesh)) if threads > 1 else None
             forest = decimate(mesh, w_density=w_density, w_geometry=w_geometry,
                               progress=_counter(progress, mesh.n_points),
                               on_level=beside.submit if threads > 1 else None)
@@ -196,8 +195,6 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
                 deps = merge_dependencies(mesh, forest)
                 log(f"merge dependencies: {deps.idx.size} ({deps.idx.size / max(deps.n_merges, 1):.1f} per merge)")
                 deps = (deps.ptr, deps.idx, deps.removed)
-            if level0 is not None:
-                mesh_codes[0] = level0.result()
     n = (len(data) if payload is None else
          write_tetc(output, payload, source=name, force=force, dependencies=deps, mesh_codes=mesh_codes,
                     threads=threads))
@@ -210,8 +207,14 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
 
 
 class _LevelsBeside:
-    """Levels 1.. built and their meshes encoded in ``pool`` (one worker: in level order, each
-    from the one before) while the decimation goes on: :meth:`submit` is its ``on_level``."""
+    """Levels built and their meshes encoded in ``pool`` (one worker: in level order, each from
+    the one before) while the decimation goes on: :meth:`submit` is its ``on_level``.
+
+    Level 0's mesh does not depend on the forest, but it is encoded only once level 1's merges
+    are done: before them the decimation's set-up and first evaluation of every vertex use both
+    cores, and an encoder beside them made that phase twice as long (flange-10m: 49 s from the end
+    of the validation to the first merge with level 0 beside, XX s without); the merge loop leaves
+    the second core idle."""
 
     def __init__(self, mesh: TetMesh, pool: ThreadPoolExecutor, max_level: int):
         self.mesh, self.pool, self.max_level = mesh, pool, max_level
@@ -219,6 +222,8 @@ class _LevelsBeside:
         self.jobs = {}
 
     def submit(self, i: int, prefix) -> None:
+        if 0 not in self.jobs:
+            self.jobs[0] = self.pool.submit(encode_level, LevelPayload(0, 0.0, 0, self.mesh))
         if i <= self.max_level:
             self.jobs[i] = self.pool.submit(self._encode, i, prefix)
 
@@ -232,7 +237,7 @@ class _LevelsBeside:
         was built from a prefix of the forest and is checked against the level's mesh made from
         the whole forest (the same by construction: a level's mesh depends only on the set of
         merges before it); a level that differed would be coded again from ``levels``."""
-        out = {}
+        out = {0: self.jobs[0].result()} if 0 in self.jobs else {}
         for lv in levels[1:]:
             job = self.jobs.get(lv.level)
             if job is None:

@@ -7,6 +7,7 @@ from hypothesis import strategies as st
 
 from gatun_py.errors import MeshError
 from gatun_py.mesh import validate_tets
+from gatun_py.mesh.validate import coincident_points, duplicate_rows
 from meshgen import delaunay_mesh, grid_mesh, mesh_strategy
 
 
@@ -146,3 +147,35 @@ def test_face_multiplicity_beyond_the_packed_range_uses_the_triples():
     tets = np.array([[0, 1, 2, 3], [0, 1, 2, 4], [0, 1, 2, 5]]) + (1 << _KEY_BITS)
     counts, over = face_multiplicity(tets)
     assert counts.sum() == 12 and over.tolist() == [[tets[0, 0], tets[0, 1], tets[0, 2]]]
+
+
+def _plain_duplicates(s):
+    """The reference: a lexsort of the four sorted ids, every row equal to the one before it."""
+    order = np.lexsort(s.T[::-1])
+    ss = s[order]
+    same = (ss[1:] == ss[:-1]).all(axis=1)
+    rows, twins = order[1:][same], order[:-1][same]
+    first = np.argsort(rows, kind="stable")
+    return rows[first], twins[first]
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.lists(st.integers(0, 12), min_size=4, max_size=4, unique=True), min_size=0, max_size=60),
+       st.booleans())
+def test_duplicate_rows_match_the_plain_lexsort(rows, wide):
+    """Packed keys (and the lexsort fallback for ids of 21 bits or more) find the same repeats,
+    with the same twins, as a lexsort of all four columns: many rows share three ids here."""
+    s = np.sort(np.array(rows, np.int64).reshape(-1, 4), axis=1)
+    if wide:
+        s = s + (1 << 21)
+    got, ref = duplicate_rows(s), _plain_duplicates(s)
+    assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1])
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(*[st.sampled_from([0.0, -0.0, 1.0, 2.5, -1.0]) for _ in range(3)]), min_size=0, max_size=40),
+       st.sampled_from([np.float32, np.float64]))
+def test_coincident_points_match_unique(points, dtype):
+    p = np.array(points, dtype).reshape(-1, 3)
+    expect = p.shape[0] - np.unique(p, axis=0).shape[0] if p.shape[0] else 0
+    assert coincident_points(p) == expect

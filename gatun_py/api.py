@@ -212,9 +212,9 @@ class _LevelsBeside:
 
     Level 0's mesh does not depend on the forest, but it is encoded only once level 1's merges
     are done: before them the decimation's set-up and first evaluation of every vertex use both
-    cores, and an encoder beside them made that phase twice as long (flange-10m: 49 s from the end
-    of the validation to the first merge with level 0 beside, XX s without); the merge loop leaves
-    the second core idle."""
+    cores, and an encoder beside them made that phase half as long again (flange-10m, from the
+    validated mesh to the first merge: 45-47 s with level 0 encoded beside, 29-30 s without, on a
+    machine loaded by another job); the merge loop leaves the second core idle."""
 
     def __init__(self, mesh: TetMesh, pool: ThreadPoolExecutor, max_level: int):
         self.mesh, self.pool, self.max_level = mesh, pool, max_level

@@ -150,13 +150,14 @@ def test_face_multiplicity_beyond_the_packed_range_uses_the_triples():
 
 
 def _plain_duplicates(s):
-    """The reference: a lexsort of the four sorted ids, every row equal to the one before it."""
-    order = np.lexsort(s.T[::-1])
-    ss = s[order]
-    same = (ss[1:] == ss[:-1]).all(axis=1)
-    rows, twins = order[1:][same], order[:-1][same]
-    first = np.argsort(rows, kind="stable")
-    return rows[first], twins[first]
+    """The reference: every row that repeats an earlier one, with the last earlier copy as its twin."""
+    last, rows, twins = {}, [], []
+    for i, row in enumerate(map(tuple, s.tolist())):
+        if row in last:
+            rows.append(i)
+            twins.append(last[row])
+        last[row] = i
+    return np.array(rows, np.int64), np.array(twins, np.int64)
 
 
 @settings(max_examples=200, deadline=None)

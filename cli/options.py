@@ -221,23 +221,31 @@ def interruptible():
 @contextlib.contextmanager
 def progress_reporter(label: str, quiet: bool, *, min_total: int = 100_000):
     """Yield a ``progress(done, total)`` callable (the library verbs' protocol) that draws a bar on
-    stderr once it knows the total, for work of at least ``min_total`` items; a no-op when quiet."""
-    state = {"bar": None, "done": 0}
+    stderr once it knows the total, for work of at least ``min_total`` items; a no-op when quiet.
+    The bar is closed (its line ended) as soon as ``done`` reaches ``total``, so that the status
+    lines the verb prints afterwards start on a line of their own."""
+    state = {"bar": None, "done": 0, "closed": False}
+
+    def close() -> None:
+        if state["bar"] is not None and not state["closed"]:
+            state["closed"] = True
+            state["bar"].__exit__(None, None, None)
 
     def progress(done: int, total: int) -> None:
-        if quiet or total < min_total:
+        if quiet or total < min_total or state["closed"]:
             return
         if state["bar"] is None:
             state["bar"] = click.progressbar(length=total, label=label, file=sys.stderr, show_eta=True)
             state["bar"].__enter__()
         state["bar"].update(done - state["done"])
         state["done"] = done
+        if done >= total:
+            close()
 
     try:
         yield progress
     finally:
-        if state["bar"] is not None:
-            state["bar"].__exit__(None, None, None)
+        close()
 
 
 @contextlib.contextmanager

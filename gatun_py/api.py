@@ -185,6 +185,8 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
             forest = decimate(mesh, w_density=w_density, w_geometry=w_geometry,
                               progress=_counter(progress, mesh.n_points),
                               on_level=beside.submit if threads > 1 else None)
+            if progress is not None:  # done: the last vertices of every component are never merged
+                progress(mesh.n_points, mesh.n_points)
             lv = build_levels(mesh, forest, levels)
             mesh_codes = beside.codes(lv)
             log(f"merge forest: {forest.n_merges} merges (max ratio {forest.max_ratio:.5f}); "

@@ -56,9 +56,13 @@ def _assert_same(a, b):
 
 
 def _check_independent_of_numbering(mesh, seeds=(0, 1), **kw):
+    """The same forest in the input, Morton, reversed and random local numberings, and without
+    dropping the dead tets on the way (:meth:`DecimationState.compact`)."""
     ref = _decimate_in(_input_order, mesh, **kw)
     for order in [local_order, _reversed_order] + [_random_order(s) for s in seeds]:
         _assert_same(_decimate_in(order, mesh, **kw), ref)
+    with mock.patch.object(DecimationState, "compact_if_sparse", lambda self: None):
+        _assert_same(_decimate_in(local_order, mesh, **kw), ref)
     return ref[0]
 
 
@@ -142,6 +146,15 @@ def test_evaluate_apply_and_current_tets_speak_the_callers_ids(name):
         assert n_legal > 0
         pa, pb = st.prefix(), ref.prefix()
         assert np.array_equal(pa.parent, pb.parent) and np.array_equal(pa.rank, pb.rank)
+        # dropping the dead tets keeps every list (as the caller's tets, in order) and every error
+        n_live = int(st.alive.sum())
+        st.compact()
+        assert st.T.shape[0] == n_live and st.alive.all() and np.array_equal(st.current_tets(), tets)
+        for v in range(mesh.n_points):
+            slots = K._star(v, st.head, st.nxt, st.T, st.alive)
+            got = (4 * st.t_orig[slots >> 2] + (slots & 3)).tolist()
+            assert got == K._star(int(st.v_orig[v]), ref.head, ref.nxt, ref.T, ref.alive).tolist()
+        assert all(st.evaluate(a, b) == ref.evaluate(a, b) for t in tets for a in t for b in t if a != b)
 
 
 def test_local_order_is_a_permutation_with_locality():

@@ -1,7 +1,9 @@
 """Numba kernels of the Van Gelder decimation (see :mod:`gatun_py.simplify.decimate`).
 
 Everything here works on plain arrays; :func:`gatun_py.simplify.decimate.decimate` builds them,
-validates the input and drives the loop. The mesh state during decimation:
+validates the input and drives the loop. Vertex and tet ids here are the state's local
+numbering (see :class:`gatun_py.simplify.decimate.DecimationState`); ``vkey`` maps a vertex to
+the caller's id, which breaks every tie between equal errors. The mesh state during decimation:
 
 ``T`` (m, 4) int32
     current vertex ids of every tet (a merged vertex is replaced by its target in place);
@@ -1164,6 +1166,53 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp
             p_next[p] = tp_head[best]
             tp_head[best] = p
             tp_count[best] += 1
+
+
+@njit(cache=True)
+def _compact_tets(T, alive, nbr, head, nxt, tp_head, tp_count, t_orig):
+    """The live tets renumbered 0.. in their order (the dead ones dropped), as new arrays
+    (T, nbr, nxt, tp_head, tp_count, t_orig); ``head`` is rewritten in place. Every vertex's list
+    keeps its live slots in their order (the dead ones are unlinked, as :func:`_tidy` would), so
+    the merges that follow are the same; they walk fewer cache lines."""
+    m = T.shape[0]
+    new_id = np.full(m, -1, np.int32)
+    k = 0
+    for t in range(m):
+        if alive[t]:
+            new_id[t] = k
+            k += 1
+    T2 = np.empty((k, 4), np.int32)
+    nbr2 = np.empty((k, 4), np.int32)
+    tp_head2 = np.empty(k, np.int32)
+    tp_count2 = np.empty(k, np.int32)
+    t_orig2 = np.empty(k, t_orig.dtype)
+    for t in range(m):
+        u = new_id[t]
+        if u < 0:
+            continue
+        for j in range(4):
+            T2[u, j] = T[t, j]
+            x = nbr[t, j]
+            nbr2[u, j] = new_id[x] if x >= 0 else -1
+        tp_head2[u] = tp_head[t]
+        tp_count2[u] = tp_count[t]
+        t_orig2[u] = t_orig[t]
+    nxt2 = np.full(4 * k, -1, np.int32)
+    for v in range(head.shape[0]):
+        last = -1
+        s = head[v]
+        head[v] = -1
+        while s >= 0:
+            t = s >> 2
+            if alive[t] and T[t, s & 3] == v:
+                s2 = 4 * new_id[t] + (s & 3)
+                if last < 0:
+                    head[v] = s2
+                else:
+                    nxt2[last] = s2
+                last = s2
+            s = nxt[s]
+    return T2, nbr2, nxt2, tp_head2, tp_count2, t_orig2
 
 
 @njit(cache=True)

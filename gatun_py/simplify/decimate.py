@@ -106,9 +106,10 @@ The merge loop is bound by memory latency, and a mesher's numbering can have no 
 (the gmsh flange: the median tet spans 48,492 of 160,534 vertex ids, a vertex's star 612,597 of
 810,347 tet ids), so every star walk, quadric, mark and point list touched random memory. The
 state works in a local numbering (:func:`local_order`: vertices along a Morton curve, tets by
-their first vertex) and hands out only the caller's ids; the merges stay the same bit for bit
-(see :class:`DecimationState`): ``bench/forest_identity.py`` hashes are unchanged. Measured in
-bench/sections/simplify.md (flange-1m and the 7.8 M-tet flange: decimation CPU -14 % and -19 %).
+their first vertex), drops the dead tets as they pile up, and hands out only the caller's ids;
+the merges stay the same bit for bit (see :class:`DecimationState`): ``bench/forest_identity.py``
+hashes are unchanged. flange-1m's decimation: 17.1 s CPU against 20.9 s in the caller's
+numbering (bench/sections/simplify.md).
 """
 
 from __future__ import annotations
@@ -262,10 +263,11 @@ class DecimationState:
     caller's numbering and then renumbered, every vertex's incidence list keeps the caller's tet
     order, and every tie between equal errors goes to the smaller caller's id (``vkey``): so the
     merges are the same in any local numbering, bit for bit. What the state hands out
-    (:meth:`prefix`, :meth:`forest`, :meth:`evaluate`, :meth:`apply`, :meth:`current_tets`,
+    (:meth:`prefix`, :meth:`evaluate`, :meth:`apply`, :meth:`current_tets`,
     :meth:`lock_vertices`) is in the caller's numbering; the arrays themselves are local
     (``v_orig[v]``: the caller's id of local vertex v, ``v_local`` its inverse; ``t_orig`` the
-    same for tets).
+    same for tets). Once half of the tet rows are dead, :meth:`compact` drops them (the live ones
+    keep their order, every list its live slots in order: the same merges again).
 
     Parameters
     ----------

@@ -93,7 +93,7 @@ def _compare_all_edges(state, pts, dens, pw=None):
                                   "two_components", "single_tet"])
 def test_candidates_match_reference(name):
     mesh = AWKWARD[name]()
-    state = DecimationState(mesh, 1.0, 3.0)
+    state = DecimationState(mesh, 1.0, 3.0, order="input")
     tets = [tuple(int(x) for x in t) for t in mesh.tets]
     assert set(np.flatnonzero(state.pinned).tolist()) == pinned_vertices(tets, mesh.n_points)
     pts, dens = mesh.points.astype(np.float64), mesh.density.astype(np.float64)
@@ -117,7 +117,7 @@ def test_candidates_match_reference(name):
 @pytest.mark.parametrize("name", ["delaunay", "jittered_grid", "degenerate_grid"])
 def test_quadrics_match_reference_and_accumulate(name):
     mesh = AWKWARD[name]()
-    state = DecimationState(mesh, 1.0, 1.0)
+    state = DecimationState(mesh, 1.0, 1.0, order="input")
     w = np.abs(mesh.signed_volumes()) / np.abs(mesh.signed_volumes()).sum() * QUADRIC_WEIGHT / SCALAR_SCALE**2
     ref = tet_quadrics(state.u4, mesh.tets.tolist(), w)
     assert np.allclose(state.quad, ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
@@ -144,7 +144,7 @@ def test_sample_points_follow_the_merges(name):
     to (or, on a face shared by two tets, in another tet that also contains it)."""
     mesh = AWKWARD[name]()
     pts, dens = _sample_points(mesh)
-    state = DecimationState(mesh, 1.0, 1.0)
+    state = DecimationState(mesh, 1.0, 1.0, order="input")
     n, m = mesh.n_points, mesh.n_tets
     # the centroids' rows first (named n + t), the vertices' weights beside
     assert np.array_equal(state.p_orig[:m], np.arange(n, n + m))
@@ -177,7 +177,7 @@ def test_sample_points_follow_the_merges(name):
                          ids=["delaunay", "grid", "degenerate"])
 def test_replay_every_merge_is_legal_and_final_state_is_stuck(mesh):
     forest = decimate(mesh)
-    state = DecimationState(mesh, 1.0, 1.0)
+    state = DecimationState(mesh, 1.0, 1.0, order="input")
     kw = _naive_kw(state, None)
     pts, dens = mesh.points.astype(np.float64), mesh.density.astype(np.float64)
     tets = [tuple(int(x) for x in t) for t in mesh.tets]
@@ -255,7 +255,7 @@ def test_meshes_without_tets():
 def test_set_up_matches_reference(name):
     """Face neighbours, boundary and pinned vertices and incidence lists of the set-up kernels."""
     mesh = AWKWARD[name]()
-    state = DecimationState(mesh, 1.0, 1.0)
+    state = DecimationState(mesh, 1.0, 1.0, order="input")
     tets = [tuple(int(x) for x in t) for t in mesh.tets]
     assert state.nbr.tolist() == face_neighbours(tets)
     assert set(np.flatnonzero(state.pinned).tolist()) == pinned_vertices(tets, mesh.n_points)
@@ -289,7 +289,7 @@ def test_branch_and_bound_picks_the_best_merge(mesh):
     """The bounded search of _evaluate picks what computing every candidate's error would, bit for bit,
     at the start and part way through (where the sample points make the bound loose)."""
     forest = decimate(mesh)
-    state = DecimationState(mesh, 1.0, 1.0)
+    state = DecimationState(mesh, 1.0, 1.0, order="input")
     order = np.argsort(forest.rank)[: forest.n_merges]
     done = 0
     for stop in (0, len(order) // 3, 2 * len(order) // 3):
@@ -342,7 +342,7 @@ def test_compacting_the_points_keeps_every_list_and_its_order(name):
     """The point rows are rewritten tet by tet from time to time: the same points (by name and
     row content) in the same order in every tet's list, side by side from row 0."""
     mesh = AWKWARD[name]()
-    state = DecimationState(mesh, 1.0, 1.0)
+    state = DecimationState(mesh, 1.0, 1.0, order="input")
     forest = decimate(mesh)
     for a in np.argsort(forest.rank)[: forest.n_merges // 2]:
         state.apply(int(a), int(forest.parent[a]))

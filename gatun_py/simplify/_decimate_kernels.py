@@ -1,7 +1,9 @@
 """Numba kernels of the Van Gelder decimation (see :mod:`gatun_py.simplify.decimate`).
 
 Everything here works on plain arrays; :func:`gatun_py.simplify.decimate.decimate` builds them,
-validates the input and drives the loop. The mesh state during decimation:
+validates the input and drives the loop. Vertex and tet ids here are the state's local
+numbering (see :class:`gatun_py.simplify.decimate.DecimationState`); ``vkey`` maps a vertex to
+the caller's id, which breaks every tie between equal errors. The mesh state during decimation:
 
 ``T`` (m, 4) int32
     current vertex ids of every tet (a merged vertex is replaced by its target in place);
@@ -815,9 +817,10 @@ def _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pdat, m
 
 
 @njit(cache=True, _nrt=False)
-def _loses(e, b, best_e, best_b):
-    """True when (e, b) cannot be the best against the best so far (``best_b`` < 0: none yet)."""
-    return best_b >= 0 and (e > best_e or (e == best_e and b > best_b))
+def _loses(e, b, best_e, best_b, vkey):
+    """True when (e, b) cannot be the best against the best so far (``best_b`` < 0: none yet);
+    equal errors go to the smaller ``vkey`` (the caller's vertex id, see :func:`_run`)."""
+    return best_b >= 0 and (e > best_e or (e == best_e and vkey[b] > vkey[best_b]))
 
 
 # Sample points summed between two checks of the running lower bound in _candidate_exact.
@@ -825,7 +828,7 @@ _BOUND_EVERY = 32
 
 
 @njit(cache=True, _nrt=False)
-def _candidate_exact(a, b, terms, st, T, pts, dens, params, pdat, ctx, best_b, best_e, counters):
+def _candidate_exact(a, b, terms, st, T, pts, dens, params, pdat, ctx, best_b, best_e, counters, vkey):
     """(exact error, True) of candidate b of :func:`_candidate_terms` (``terms`` its row), or
     (0, False) as soon as a lower bound of it loses against (``best_e``, ``best_b``).
 
@@ -850,7 +853,7 @@ def _candidate_exact(a, b, terms, st, T, pts, dens, params, pdat, ctx, best_b, b
     if npt > 0:
         w = params[P_WS] * stride
         if _loses(_total_error(terms[0], di, terms[1], terms[2], terms[3], w * (0.0 - e_old), n_col, power),
-                  b, best_e, best_b):
+                  b, best_e, best_b, vkey):
             counters[C_PRUNED] += 1
             return 0.0, False
         _new_star_planes(b, st, T, pts, dens, s_ok, s_lam, s_val, q)
@@ -860,7 +863,7 @@ def _candidate_exact(a, b, terms, st, T, pts, dens, params, pdat, ctx, best_b, b
             acc = _sample_sum(acc, lo, hi, b, pts, dens, pdat, p_id, p_k, s_ok, s_lam, s_val)
             counters[C_POINTS] += hi - lo
             if hi < npt and _loses(_total_error(terms[0], di, terms[1], terms[2], terms[3], w * (acc - e_old), n_col,
-                                                power), b, best_e, best_b):
+                                                power), b, best_e, best_b, vkey):
                 counters[C_PRUNED] += 1
                 return 0.0, False
         se = w * (acc - e_old)
@@ -882,11 +885,11 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, m
 
 
 @njit(cache=True)
-def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mark, mark_b, mark_ab, counters,
-              pdat, tp_head, tp_count, p_next):
+def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, mark, mark_b, mark_ab,
+              counters, pdat, tp_head, tp_count, p_next):
     """Best legal merge of a: (target, error), or (-1, 0) when a has none.
 
-    The best is the smallest (error, target id) among the candidates that pass the link
+    The best is the smallest (error, ``vkey`` of the target) among the candidates that pass the link
     condition. Branch and bound: candidates are visited by their lower bound (the cheap terms),
     and the expensive ones (interpolation, sample points) are computed only while the bound can
     still beat the best found so far: the same choice as computing every error, for a fraction
@@ -904,12 +907,14 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
                           terms, False)
     if nc == 0:
         return -1, 0.0
-    # by bound, ties by target id, so the result does not depend on list order: an insertion sort
-    # on (bound, target) (a dozen candidates: np.argsort's allocation costs more than the sort)
+    # by bound, ties by target (caller's id), so the result does not depend on list order or on
+    # the internal numbering: an insertion sort on (bound, key) (a dozen candidates: np.argsort's
+    # allocation costs more than the sort)
     order = np.empty(nc, np.int64)
     for x in range(nc):
         y = x
-        while y > 0 and (low[order[y - 1]] > low[x] or (low[order[y - 1]] == low[x] and cand[order[y - 1]] > cand[x])):
+        while y > 0 and (low[order[y - 1]] > low[x]
+                         or (low[order[y - 1]] == low[x] and vkey[cand[order[y - 1]]] > vkey[cand[x]])):
             order[y] = order[y - 1]
             y -= 1
         order[y] = x
@@ -918,10 +923,11 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
     for x in range(nc):
         k = order[x]
         b = cand[k]
-        if _loses(low[k], b, best_e, best_b):
+        if _loses(low[k], b, best_e, best_b, vkey):
             return best_b, best_e
-        e, whole = _candidate_exact(a, b, terms[k], st, T, pts, dens, params, pdat, ctx, best_b, best_e, counters)
-        if not whole or _loses(e, b, best_e, best_b):
+        e, whole = _candidate_exact(a, b, terms[k], st, T, pts, dens, params, pdat, ctx, best_b, best_e, counters,
+                                    vkey)
+        if not whole or _loses(e, b, best_e, best_b, vkey):
             continue
         counters[C_LINK] += 1
         if _link_ok(a, b, st, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
@@ -932,8 +938,9 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
 
 # -- a binary min-heap over (error, vertex) with a version stamp for lazy deletion ----------------
 @njit(cache=True, _nrt=False)
-def _heap_less(h_err, h_v, i, j):
-    return h_err[i] < h_err[j] or (h_err[i] == h_err[j] and h_v[i] < h_v[j])
+def _heap_less(h_err, h_v, vkey, i, j):
+    """(error, ``vkey`` of the vertex) of entry i below entry j's (the key only read on equal errors)."""
+    return h_err[i] < h_err[j] or (h_err[i] == h_err[j] and vkey[h_v[i]] < vkey[h_v[j]])
 
 
 @njit(cache=True, _nrt=False)
@@ -945,7 +952,7 @@ def _heap_swap(h_err, h_v, h_b, h_ver, i, j):
 
 
 @njit(cache=True, _nrt=False)
-def _heap_push(h_err, h_v, h_b, h_ver, counters, e, v, b, ver, cur_ver):
+def _heap_push(h_err, h_v, h_b, h_ver, vkey, counters, e, v, b, ver, cur_ver):
     n = counters[C_HEAP]
     if n >= h_err.shape[0]:
         # full: drop stale entries and rebuild (at most one live entry per vertex)
@@ -959,7 +966,7 @@ def _heap_push(h_err, h_v, h_b, h_ver, counters, e, v, b, ver, cur_ver):
                 k += 1
         n = k
         for i in range(n // 2 - 1, -1, -1):
-            _sift_down(h_err, h_v, h_b, h_ver, i, n)
+            _sift_down(h_err, h_v, h_b, h_ver, vkey, i, n)
     h_err[n] = e
     h_v[n] = v
     h_b[n] = b
@@ -967,7 +974,7 @@ def _heap_push(h_err, h_v, h_b, h_ver, counters, e, v, b, ver, cur_ver):
     i = n
     while i > 0:
         p = (i - 1) >> 1
-        if _heap_less(h_err, h_v, i, p):
+        if _heap_less(h_err, h_v, vkey, i, p):
             _heap_swap(h_err, h_v, h_b, h_ver, i, p)
             i = p
         else:
@@ -976,15 +983,15 @@ def _heap_push(h_err, h_v, h_b, h_ver, counters, e, v, b, ver, cur_ver):
 
 
 @njit(cache=True, _nrt=False)
-def _sift_down(h_err, h_v, h_b, h_ver, i, n):
+def _sift_down(h_err, h_v, h_b, h_ver, vkey, i, n):
     while True:
         l = 2 * i + 1
         if l >= n:
             break
         m = l
-        if l + 1 < n and _heap_less(h_err, h_v, l + 1, l):
+        if l + 1 < n and _heap_less(h_err, h_v, vkey, l + 1, l):
             m = l + 1
-        if _heap_less(h_err, h_v, m, i):
+        if _heap_less(h_err, h_v, vkey, m, i):
             _heap_swap(h_err, h_v, h_b, h_ver, i, m)
             i = m
         else:
@@ -992,12 +999,12 @@ def _sift_down(h_err, h_v, h_b, h_ver, i, n):
 
 
 @njit(cache=True, _nrt=False)
-def _heap_pop(h_err, h_v, h_b, h_ver, counters):
+def _heap_pop(h_err, h_v, h_b, h_ver, vkey, counters):
     n = counters[C_HEAP] - 1
     e, v, b, ver = h_err[0], h_v[0], h_b[0], h_ver[0]
     _heap_swap(h_err, h_v, h_b, h_ver, 0, n)
     counters[C_HEAP] = n
-    _sift_down(h_err, h_v, h_b, h_ver, 0, n)
+    _sift_down(h_err, h_v, h_b, h_ver, vkey, 0, n)
     return e, v, b, ver
 
 
@@ -1162,6 +1169,53 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp
 
 
 @njit(cache=True)
+def _compact_tets(T, alive, nbr, head, nxt, tp_head, tp_count, t_orig):
+    """The live tets renumbered 0.. in their order (the dead ones dropped), as new arrays
+    (T, nbr, nxt, tp_head, tp_count, t_orig); ``head`` is rewritten in place. Every vertex's list
+    keeps its live slots in their order (the dead ones are unlinked, as :func:`_tidy` would), so
+    the merges that follow are the same; they walk fewer cache lines."""
+    m = T.shape[0]
+    new_id = np.full(m, -1, np.int32)
+    k = 0
+    for t in range(m):
+        if alive[t]:
+            new_id[t] = k
+            k += 1
+    T2 = np.empty((k, 4), np.int32)
+    nbr2 = np.empty((k, 4), np.int32)
+    tp_head2 = np.empty(k, np.int32)
+    tp_count2 = np.empty(k, np.int32)
+    t_orig2 = np.empty(k, t_orig.dtype)
+    for t in range(m):
+        u = new_id[t]
+        if u < 0:
+            continue
+        for j in range(4):
+            T2[u, j] = T[t, j]
+            x = nbr[t, j]
+            nbr2[u, j] = new_id[x] if x >= 0 else -1
+        tp_head2[u] = tp_head[t]
+        tp_count2[u] = tp_count[t]
+        t_orig2[u] = t_orig[t]
+    nxt2 = np.full(4 * k, -1, np.int32)
+    for v in range(head.shape[0]):
+        last = -1
+        s = head[v]
+        head[v] = -1
+        while s >= 0:
+            t = s >> 2
+            if alive[t] and T[t, s & 3] == v:
+                s2 = 4 * new_id[t] + (s & 3)
+                if last < 0:
+                    head[v] = s2
+                else:
+                    nxt2[last] = s2
+                last = s2
+            s = nxt[s]
+    return T2, nbr2, nxt2, tp_head2, tp_count2, t_orig2
+
+
+@njit(cache=True)
 def _compact_every(n):
     """Merges between two rewrites of the point rows (about 16 in a whole decimation)."""
     return max(4096, n // 16)
@@ -1203,12 +1257,12 @@ def _compact_points(alive, pdat, p_orig, tp_head, p_next, counters):
 
 @njit(cache=True, parallel=True)
 def _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4,
-                   marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count, p_next):
+                   vkey, marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count, p_next):
     """:func:`_evaluate` of ``todo[:n_todo]`` in parallel: every evaluation only reads the mesh
     (each thread stamps its own mark rows), so the results cannot depend on the scheduling."""
     for i in prange(n_todo):
         tid = get_thread_id()
-        b, e = _evaluate(todo[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks[tid],
+        b, e = _evaluate(todo[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks[tid],
                          marks_b[tid], marks_ab[tid], tcount[tid], pdat, tp_head, tp_count, p_next)
         out_b[i] = b
         out_e[i] = e
@@ -1247,13 +1301,16 @@ def _set_aside(d_err, d_v, d_b, d_ver, n_def, e, a, b, v_a, ver):
 
 
 @njit(cache=True, nogil=True)  # compress encodes level 0's mesh in a thread meanwhile
-def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks, marks_b, marks_ab, tcount,
+def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab, tcount,
          counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pdat, tp_head, tp_count, p_next,
          vw, p_orig, lock, lock_b, round_stamp, max_blocked):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left.
 
     ``marks*`` and ``tcount`` have one row per thread (stamps, evaluation counts); the sequential
-    steps use row 0.
+    steps use row 0. ``vkey[v]`` is vertex v's id in the caller's numbering (the kernels work in a
+    local one, see :class:`gatun_py.simplify.decimate.DecimationState`): every tie between equal
+    errors (the heap, the best candidate) goes to the smaller key, so the merges do not depend on
+    the local numbering.
 
     With ``round_stamp > 0`` the call is one round of independent merges (see
     :mod:`gatun_py.simplify.decimate`): a merge a -> b sets ``lock`` to ``round_stamp`` on every vertex
@@ -1291,17 +1348,17 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
         found = False
         if n_todo == 1:
             out_b[0], out_e[0] = _evaluate(todo[0], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
-                                           u4, mark, mark_b, mark_ab, tc, pdat, tp_head, tp_count, p_next)
+                                           u4, vkey, mark, mark_b, mark_ab, tc, pdat, tp_head, tp_count, p_next)
         elif n_todo > 1:
             _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params,
-                           quad, u4, marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count, p_next)
+                           quad, u4, vkey, marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count, p_next)
         # pushed in todo order, as evaluated one by one
         for i in range(n_todo):
             v = todo[i]
             ver[v] += 1
             if out_b[i] >= 0:
                 last_err[v] = out_e[i]
-                _heap_push(h_err, h_v, h_b, h_ver, counters, out_e[i], v, out_b[i], ver[v], ver)
+                _heap_push(h_err, h_v, h_b, h_ver, vkey, counters, out_e[i], v, out_b[i], ver[v], ver)
                 found = True
             else:
                 last_err[v] = -1.0
@@ -1313,7 +1370,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
             # the round is over: what it set aside goes back with its error unchanged
             for i in range(n_def):
                 if d_ver[i] == ver[d_v[i]]:
-                    _heap_push(h_err, h_v, h_b, h_ver, counters, d_err[i], d_v[i], d_b[i], d_ver[i], ver)
+                    _heap_push(h_err, h_v, h_b, h_ver, vkey, counters, d_err[i], d_v[i], d_b[i], d_ver[i], ver)
             return False
         if counters[C_HEAP] == 0:
             # neighbourhoods two rings away from a merge may have become legal: look again
@@ -1324,7 +1381,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
                     n_todo += 1
             sweeping = True
             continue
-        e, a, b, v_a = _heap_pop(h_err, h_v, h_b, h_ver, counters)
+        e, a, b, v_a = _heap_pop(h_err, h_v, h_b, h_ver, vkey, counters)
         tc[C_POPS] += 1
         if v_a != ver[a] or parent[a] != a:
             tc[C_STALE] += 1
@@ -1381,13 +1438,13 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, mar
             w = nb[i]
             if parent[w] == w and not pinned[w]:
                 ver[w] += 1
-                _heap_push(h_err, h_v, h_b, h_ver, counters, max(e, last_err[w]), w, -1, ver[w], ver)
+                _heap_push(h_err, h_v, h_b, h_ver, vkey, counters, max(e, last_err[w]), w, -1, ver[w], ver)
 
 
 @njit(cache=True, nogil=True)
-def _run_rounds(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks, marks_b, marks_ab, tcount,
-                counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, pdat, tp_head, tp_count, p_next, vw,
-                p_orig, lock, lock_b, ends, max_blocked, round_no, starts):
+def _run_rounds(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab,
+                tcount, counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, pdat, tp_head, tp_count, p_next,
+                vw, p_orig, lock, lock_b, ends, max_blocked, round_no, starts):
     """Rounds of :func:`_run` up to every ``ends[r]`` in turn (its ``max_blocked[r]``), in one call
     without the GIL: the round loop of :func:`gatun_py.simplify.decimate.decimate` (a return to
     Python between rounds waits for the GIL, which a numba encoder in another thread may hold for
@@ -1400,7 +1457,7 @@ def _run_rounds(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, 
             starts[k] = counters[C_MERGES]
             k += 1
             round_no[0] += 1
-            if _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, marks, marks_b, marks_ab,
+            if _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab,
                     tcount, counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, ends[r], pdat, tp_head,
                     tp_count, p_next, vw, p_orig, lock, lock_b, round_no[0], max_blocked[r]):
                 return k, True, r
@@ -1433,13 +1490,36 @@ def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, pd
 @njit(cache=True)
 def _incidence(T, n):
     """(head, nxt): every vertex's list of slots 4*t + c in increasing order."""
+    return _incidence_in_order(T, n, np.arange(T.shape[0]))
+
+
+@njit(cache=True)
+def _incidence_in_order(T, n, t_order):
+    """(head, nxt): every vertex's list of slots 4*t + c, the tets in the order ``t_order`` (a
+    permutation of the tet ids) and a tet's corners in increasing order."""
     head = np.full(n, -1, np.int32)
     nxt = np.full(4 * T.shape[0], -1, np.int32)
-    for s in range(4 * T.shape[0] - 1, -1, -1):
-        v = T[s >> 2, s & 3]
-        nxt[s] = head[v]
-        head[v] = s
+    for i in range(t_order.shape[0] - 1, -1, -1):
+        t = t_order[i]
+        for c in range(3, -1, -1):
+            s = 4 * t + c
+            v = T[t, c]
+            nxt[s] = head[v]
+            head[v] = s
     return head, nxt
+
+
+@njit(cache=True)
+def _relabel_rows(src, rows, new_id):
+    """``new_id[src[rows[i], j]]`` for every i, j (int32; -1 stays -1): a (k, 4) array of ids
+    (tets' vertices, tets' neighbours) renumbered, its rows reordered."""
+    out = np.empty((rows.shape[0], src.shape[1]), np.int32)
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        for j in range(src.shape[1]):
+            x = src[r, j]
+            out[i, j] = new_id[x] if x >= 0 else -1
+    return out
 
 
 @njit(cache=True)
@@ -1533,25 +1613,32 @@ def _vertex_topology(T, nbr, head, nxt, n):
 
 
 @njit(cache=True)
-def _sample_points(pts, dens, T, tet_w, centroid_weight):
-    """(pdat, vw, p_orig): the rows (x, y, z, value, weight) of every tet's centroid (weight its
-    volume fraction x ``centroid_weight``; row t, named n + t), room for the n vertices after
-    them, and every vertex's weight as a point (a quarter of its tets' volume fractions)."""
+def _vertex_weights(T, tet_w, n):
+    """Every vertex's weight as a sample point: a quarter of its tets' volume fractions ``tet_w``
+    (summed tet by tet, corner by corner: the order fixes the bits)."""
+    vw = np.zeros(n)
+    for t in range(T.shape[0]):
+        for c in range(4):
+            vw[T[t, c]] += tet_w[t] / 4.0
+    return vw
+
+
+@njit(cache=True)
+def _centroid_points(pts, dens, T, tet_w, centroid_weight):
+    """(pdat, p_orig): the rows (x, y, z, value, weight) of every tet's centroid (weight its
+    volume fraction x ``centroid_weight``; row t, named n + t) and room for the n vertices after
+    them (each row is computed from its own tet alone: the same bits in any tet order)."""
     n = pts.shape[0]
     m = T.shape[0]
     pdat = np.zeros((n + m, 5))
     p_orig = np.full(n + m, -1, np.int32)
-    vw = np.zeros(n)
-    for t in range(m):
-        for c in range(4):
-            vw[T[t, c]] += tet_w[t] / 4.0
     for t in range(m):
         pdat[t, 4] = tet_w[t] * centroid_weight
         for k in range(3):
             pdat[t, k] = (((pts[T[t, 0], k] + pts[T[t, 1], k]) + pts[T[t, 2], k]) + pts[T[t, 3], k]) / 4.0
         pdat[t, 3] = (((dens[T[t, 0]] + dens[T[t, 1]]) + dens[T[t, 2]]) + dens[T[t, 3]]) / 4.0
         p_orig[t] = n + t
-    return pdat, vw, p_orig
+    return pdat, p_orig
 
 
 @njit(cache=True)

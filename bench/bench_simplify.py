@@ -467,6 +467,32 @@ def forest_row(name, mesh, ug, reps):
 
 
 FOREST_HEAD = "### Whole forest: time and reach"
+# measured by hand (alternating checkouts), kept when the table is re-measured
+LOCAL_NUMBERING_NOTE = (
+    "Local numbering (issue 12, session 13): the gmsh flange's numbering has no locality (flange-1m: the "
+    'median tet spans 48,492 of 160,534 vertex ids, the median star 612,597 of 810,347 tet ids) and the '
+    'merge loop is bound by memory latency. `DecimationState` now works in a local numbering '
+    '(`local_order`: vertices along a 10-bit Morton curve of the position, tets by their smallest new '
+    "vertex id) and drops the dead tets, order kept, whenever half of the tet rows are dead; the set-up's "
+    "sums are taken in the caller's numbering and renumbered, every incidence list keeps the caller's tet "
+    "order and every tie between equal errors goes to the smaller caller's id, so the forests are "
+    'bit-identical (`bench/forest_identity.py --check` against main: post, fire, Blunt-fin, Combustion, '
+    'block-50k, flange-1m; the 7.8 M-tet compress writes the same file, sha256 a509ba7b…). Decimation '
+    'CPU, `forest_identity.py` on main and on the branch in turn, twice each (2026-11-24 21:43-21:45 UTC, '
+    'NUMBA_NUM_THREADS=2, load 1.5 to 2.3): flange-1m 20.45 / 21.44 s → 16.94 / 17.22 s (−19 %), '
+    'Blunt-fin 2.91 / 2.53 → 2.37 / 2.39 s, Combustion 3.25 / 3.12 → 2.80 / 2.74 s, block-50k 0.77 / 0.73 '
+    '→ 0.66 / 0.69 s; whole processes (read + decimate) in alternating pairs: flange-1m CPU ratio 0.864 '
+    '(median of 3), Combustion 1.02 (median of 5; in process 2.76 against 2.86 s: the grid-derived '
+    'samples are numbered with locality already). `NUMBA_NUM_THREADS=2 /usr/bin/time -v tetc compress '
+    'flange-10m.vtu --force --quiet` with all levels, warm cache, branch, main, branch one after the '
+    'other (21:45-22:03 UTC, load 0.6 to 1.2, nothing else running): branch 3 min 53.9 s and 3 min 39.9 s '
+    'wall, 246.8 + 12.8 s and 245.1 + 13.0 s CPU, 2,956,704 and 2,941,144 KB peak; main 4 min 27.8 s, '
+    '296.6 + 11.4 s, 2,971,216 KB (the 4-minute target met). Local orders tried on flange-1m (one '
+    'decimation each, two rounds, load 2 to 3, noisy): Morton 16.3 s CPU, Hilbert 16.9 / 18.8 s, reverse '
+    'Cuthill-McKee 19.4 / 20.1 s, Morton with the tets by the sum of their vertex ids 20.0 s, the '
+    "caller's numbering 17.8 / 18.6 s; dropping the dead tets alone: CPU ratio 0.92 (median of 3 pairs, "
+    '0.90 to 1.01, load ~3).'
+)
 
 
 def forest_table(rows) -> list[str]:
@@ -493,6 +519,7 @@ def forest_table(rows) -> list[str]:
           "on a shared machine, where wall time mostly measures the other jobs. Best of 3 interleaved runs on "
           f"Blunt-fin and Combustion, one elsewhere; load average {load:.1f} at the end of the table "
           "(`python bench/bench_simplify.py --only forest` re-measures it alone).", "",
+          LOCAL_NUMBERING_NOTE, "",
           "Tried and dropped (issue 12, build12 session): evaluating the next lazy heap entries speculatively "
           "on the second thread (a 2-task prange beside each lazy evaluation, results kept until the next "
           "merge; forests identical). It would serve 34 % of the lazy evaluations on Combustion (43 % with "

@@ -1487,13 +1487,13 @@ def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, pd
 
 # -- set-up: incidence, adjacency, vertex topology, sample points, quadrics (O(1) memory per tet
 # beyond the state itself) -------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _incidence(T, n):
     """(head, nxt): every vertex's list of slots 4*t + c in increasing order."""
     return _incidence_in_order(T, n, np.arange(T.shape[0]))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _incidence_in_order(T, n, t_order):
     """(head, nxt): every vertex's list of slots 4*t + c, the tets in the order ``t_order`` (a
     permutation of the tet ids) and a tet's corners in increasing order."""
@@ -1522,7 +1522,7 @@ def _relabel_rows(src, rows, new_id):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _face_neighbours(T, head, nxt):
     """nbr[t, k] = the tet across face k of t (the face opposite corner k), -1 on the boundary
     (found in the incidence list of the face's smallest vertex)."""
@@ -1549,7 +1549,7 @@ def _face_neighbours(T, head, nxt):
     return nbr
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _vertex_topology(T, nbr, head, nxt, n):
     """(is_boundary, pinned): boundary vertices, and vertices whose neighbourhood is not a manifold
     (``PIN_ALL`` in ``pinned``, a uint8 array of ``PIN_*`` flags).

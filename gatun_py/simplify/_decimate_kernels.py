@@ -1300,7 +1300,7 @@ def _set_aside(d_err, d_v, d_b, d_ver, n_def, e, a, b, v_a, ver):
     return n_def + 1
 
 
-@njit(cache=True, nogil=True)  # compress encodes level 0's mesh in a thread meanwhile
+@njit(cache=True, nogil=True)  # compress encodes the levels' meshes in a thread meanwhile
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab, tcount,
          counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pdat, tp_head, tp_count, p_next,
          vw, p_orig, lock, lock_b, round_stamp, max_blocked):

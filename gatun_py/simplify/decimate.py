@@ -88,9 +88,9 @@ forest's ranks >= N_i minus N_i. Parents always land in a later round than their
 locked by a -> b), so a parent still outranks its child.
 
 The rounds run in one kernel call (``_run_rounds``, no GIL) per eighth of a level: ``tetc compress``
-encodes the levels' meshes in a thread meanwhile (level 0 at once, level i once ``on_level`` says
-its merges are done), and the encoder's kernels hold the GIL, so a return to Python after every
-round waited for one of them (flange-1m: the decimation phase 19.1 s wall for 19.1 s CPU with
+encodes the levels' meshes in a thread meanwhile (level i once ``on_level`` says its merges are
+done, level 0 from level 1's end on), and while the encoder's kernels held the GIL, a return to
+Python after every round waited for one of them (flange-1m: the decimation phase 19.1 s wall for 19.1 s CPU with
 level 0 beside it, 18.1 s for 20.5 s with every level beside it). Speculative evaluation of the
 next lazy heap entries on the second thread was tried and measured slower (see bench/sections/
 simplify.md).
@@ -106,7 +106,7 @@ The merge loop is bound by memory latency, and a mesher's numbering can have no 
 (the gmsh flange: the median tet spans 48,492 of 160,534 vertex ids, a vertex's star 612,597 of
 810,347 tet ids), so every star walk, quadric, mark and point list touched random memory. The
 state works in a local numbering (:func:`local_order`: vertices along a Morton curve, tets by
-their first vertex), drops the dead tets as they pile up, and hands out only the caller's ids;
+their smallest new vertex id), drops the dead tets as they pile up, and hands out only the caller's ids;
 the merges stay the same bit for bit (see :class:`DecimationState`): ``bench/forest_identity.py``
 hashes are unchanged. flange-1m's decimation: 17.1 s CPU against 20.9 s in the caller's
 numbering (bench/sections/simplify.md).
@@ -125,7 +125,7 @@ from ..mesh import TetMesh
 from ..mesh.model import TET_FACES
 from . import _decimate_kernels as K
 from .forest import MergeForest
-from .levels import level_merges
+from .levels import level_ends, level_merges
 
 __all__ = ["decimate", "DEFAULT_W_DENSITY", "DEFAULT_W_GEOMETRY", "SWEPT_WEIGHT", "INTERP_WEIGHT", "MASS_WEIGHT",
            "QUADRIC_WEIGHT", "SCALAR_SCALE", "SAMPLE_WEIGHT", "COLLAPSE_POWER",
@@ -588,18 +588,6 @@ def _canonical_ranks(rank: np.ndarray, n_merges: int, round_starts: list[int], k
     return out, [int(x) for x in starts]
 
 
-def _level_ends(n_points: int) -> dict[int, int]:
-    """{N_i: i} for the levels i >= 1 with N_i > N_(i-1) > 0 or i == 1 (the first i of equal N_i)."""
-    out = {}
-    prev = 0
-    for i in range(1, 63):
-        n = level_merges(n_points, i)
-        if n > prev:
-            out[n] = i
-            prev = n
-    return out
-
-
 def _round_ends(n_points: int, limit: int, rounds: int) -> list[int]:
     """(end, quota) of every round at the latest: each level's interval [N_i, N_i+1) in ``rounds``
     equal quotas (of the whole interval, so that ``max_merges`` does not move them), cut at ``limit``."""
@@ -686,7 +674,7 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
     done = 0
     starts = []
     # N_i -> i for the levels on_level hears of (the first i of equal N_i)
-    level_ends = _level_ends(mesh.n_points) if on_level is not None else {}
+    level_at = level_ends(mesh.n_points) if on_level is not None else {}
     if rounds:
         plan = _round_ends(mesh.n_points, limit, int(rounds))
         ends = np.array([e for e, _ in plan], np.int64)
@@ -697,15 +685,15 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
         lo = 0
         while lo < ends.size:
             hi = min(lo + step, ends.size)
-            ahead = [j for j in range(lo, hi) if int(ends[j]) in level_ends]
+            ahead = [j for j in range(lo, hi) if int(ends[j]) in level_at]
             hi = ahead[0] + 1 if ahead else hi  # stop at a level's end
             new_starts, finished, r = state.run_rounds(ends[lo:hi], blocked[lo:hi])
             starts.extend(new_starts)
             if progress is not None:
                 progress(state.n_merges - done)
             done = state.n_merges
-            if done in level_ends and done == ends[lo + r]:
-                on_level(level_ends[done], state.prefix())
+            if done in level_at and done == ends[lo + r]:
+                on_level(level_at[done], state.prefix())
             if finished:
                 break
             state.compact_if_sparse()
@@ -714,14 +702,14 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
         chunk = max(1024, mesh.n_points // 50)
         while True:
             target = min(limit, state.n_merges + chunk) if progress is not None else limit
-            if level_ends:  # stop at the next level's end too
-                target = min(target, min((e for e in level_ends if e > state.n_merges), default=target))
+            if level_at:  # stop at the next level's end too
+                target = min(target, min((e for e in level_at if e > state.n_merges), default=target))
             finished = state.run(target)
             if progress is not None:
                 progress(state.n_merges - done)
             done = state.n_merges
-            if done in level_ends:
-                on_level(level_ends[done], state.prefix())
+            if done in level_at:
+                on_level(level_at[done], state.prefix())
             if finished or done >= limit:
                 break
             state.compact_if_sparse()

@@ -12,7 +12,7 @@ from ..errors import CorruptFileError, OptionError
 from ..mesh import TetMesh
 from .forest import ROOT_RANK, MergeForest, ancestors, forest_prefix, mesh_from_ancestors, simplified_mesh
 
-__all__ = ["MAX_LEVEL", "LevelMesh", "level_merges", "available_levels", "build_levels", "next_level", "level_forest",
+__all__ = ["MAX_LEVEL", "LevelMesh", "level_merges", "level_ends", "available_levels", "build_levels", "next_level", "level_forest",
            "read_simplified", "forest_merges", "storage_forests", "Target", "resolve_target", "stored_levels",
            "target_ancestors"]
 
@@ -26,16 +26,22 @@ def level_merges(n_points: int, i: int) -> int:
     return n_points - -(-n_points // (1 << i)) if i < 63 else n_points - (1 if n_points else 0)
 
 
+def level_ends(n_points: int, max_level: int = 62) -> dict[int, int]:
+    """{N_i: i} for the levels 1..max_level of a mesh of ``n_points`` whose N_i is more than the
+    level before's (of equal N_i the first i; no level i >= 1 with N_i = 0)."""
+    out = {}
+    prev = 0
+    for i in range(1, max_level + 1):
+        n = level_merges(n_points, i)
+        if n > prev:
+            out[n] = i
+            prev = n
+    return out
+
+
 def available_levels(forest: MergeForest, max_level: int = MAX_LEVEL) -> list[int]:
     """Levels 0..max_level whose N_i the forest reaches (level 0 always; duplicates of N dropped)."""
-    out = [0]
-    for i in range(1, max_level + 1):
-        n = level_merges(forest.n_points, i)
-        if n > forest.n_merges:
-            break
-        if n > level_merges(forest.n_points, out[-1]):
-            out.append(i)
-    return out
+    return [0] + [i for n, i in level_ends(forest.n_points, max_level).items() if n <= forest.n_merges]
 
 
 @dataclass(frozen=True, eq=False)

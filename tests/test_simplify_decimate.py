@@ -114,6 +114,32 @@ def test_candidates_match_reference(name):
     _compare_all_edges(state, spts, sdens, _sample_weights(mesh))
 
 
+@settings(max_examples=40, deadline=None)
+@given(mesh_strategy())
+def test_tet_hyperplanes_against_svd(mesh):
+    """Each tet's plane: unit normal orthogonal to its edges in (x, y, z, s) (the SVD's null vector,
+    up to sign), through its corners; flat tets and tets of weight 0 get a zero plane and weight."""
+    rng = np.random.default_rng(mesh.n_points)
+    u4 = np.column_stack([mesh.points.astype(np.float64), rng.random(mesh.n_points)])
+    T = np.ascontiguousarray(mesh.tets, np.int32)
+    weight = rng.random(mesh.n_tets)
+    weight[::5] = 0.0
+    planes = np.empty((mesh.n_tets, 6))
+    K._tet_hyperplanes(u4, T, weight, planes)
+    for t in range(mesh.n_tets):
+        e = u4[T[t, 1:]] - u4[T[t, 0]]
+        sv = np.linalg.svd(e, compute_uv=False)
+        n, d, w = planes[t, :4], planes[t, 4], planes[t, 5]
+        if weight[t] == 0.0 or sv[-1] <= 1e-9 * max(sv[0], 1e-300):  # weight 0 or (nearly) flat in 4-D
+            if weight[t] == 0.0:
+                assert w == 0.0 and not n.any()
+            continue
+        ref = np.linalg.svd(e)[2][-1]
+        assert w == weight[t] and abs(np.linalg.norm(n) - 1.0) < 1e-12
+        assert min(np.abs(n - ref).max(), np.abs(n + ref).max()) < 1e-6
+        assert np.abs(u4[T[t]] @ n + d).max() < 1e-9 * (1.0 + np.abs(u4[T[t]]).max())
+
+
 @pytest.mark.parametrize("name", ["delaunay", "jittered_grid", "degenerate_grid"])
 def test_quadrics_match_reference_and_accumulate(name):
     mesh = AWKWARD[name]()

@@ -1641,12 +1641,61 @@ def _centroid_points(pts, dens, T, tet_w, centroid_weight):
     return pdat, p_orig
 
 
+@njit(cache=True, _nrt=False, inline="always")
+def _det3(a0, a1, a2, b0, b1, b2, c0, c1, c2):
+    """Determinant of the 3 x 3 matrix with rows a, b, c (cofactors along a, in this order)."""
+    return a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0) + a2 * (b0 * c1 - b1 * c0)
+
+
+@njit(cache=True, nogil=True)
+def _tet_hyperplanes(u4, T, weight, planes):
+    """``planes[t]`` = (unit normal n (4), offset d, weight w) of tet t's hyperplane through its
+    corners' (x, y, z, s): n . u + d = 0 there. The normal is the generalised cross product of the
+    three edge vectors e1, e2, e3 from corner 0 (n_k = (-1)^k x the determinant of the edges without
+    coordinate k), normalised; a flat tet (n = 0) or one of weight <= 0 gets n = 0 and w = 0.
+
+    Every operation is spelled out, so the quadrics (and with them the forest) are the same bits
+    on every machine, whichever LAPACK kernel numpy would have picked for a determinant."""
+    for t in range(T.shape[0]):
+        p = T[t, 0]
+        x0 = u4[p, 0]
+        x1 = u4[p, 1]
+        x2 = u4[p, 2]
+        x3 = u4[p, 3]
+        q = T[t, 1]
+        a0, a1, a2, a3 = u4[q, 0] - x0, u4[q, 1] - x1, u4[q, 2] - x2, u4[q, 3] - x3
+        q = T[t, 2]
+        b0, b1, b2, b3 = u4[q, 0] - x0, u4[q, 1] - x1, u4[q, 2] - x2, u4[q, 3] - x3
+        q = T[t, 3]
+        c0, c1, c2, c3 = u4[q, 0] - x0, u4[q, 1] - x1, u4[q, 2] - x2, u4[q, 3] - x3
+        n0 = _det3(a1, a2, a3, b1, b2, b3, c1, c2, c3)
+        n1 = -_det3(a0, a2, a3, b0, b2, b3, c0, c2, c3)
+        n2 = _det3(a0, a1, a3, b0, b1, b3, c0, c1, c3)
+        n3 = -_det3(a0, a1, a2, b0, b1, b2, c0, c1, c2)
+        ln = np.sqrt(((n0 * n0 + n1 * n1) + n2 * n2) + n3 * n3)
+        w = weight[t]
+        if ln > 0.0 and w > 0.0:
+            n0 /= ln
+            n1 /= ln
+            n2 /= ln
+            n3 /= ln
+        else:
+            n0 = n1 = n2 = n3 = 0.0
+            w = 0.0
+        planes[t, 0] = n0
+        planes[t, 1] = n1
+        planes[t, 2] = n2
+        planes[t, 3] = n3
+        planes[t, 4] = -(((n0 * x0 + n1 * x1) + n2 * x2) + n3 * x3)
+        planes[t, 5] = w
+
+
 @njit(cache=True)
 def _accumulate_quadrics(T, planes, out):
     """out[v] += the weighted quadric of tet t for every corner v of every tet t, corner by corner
     (the order of a bincount over the corner-major index list). ``planes[t]`` = (unit normal n (4),
-    offset d, weight w); the terms are formed as ``(n_i * n_j) * w`` (i <= j, row by row),
-    ``(n_i * d) * w`` and ``(d * d) * w``, the products numpy's vectorised form computes."""
+    offset d, weight w) from :func:`_tet_hyperplanes`; the terms are formed as ``(n_i * n_j) * w``
+    (i <= j, row by row), ``(n_i * d) * w`` and ``(d * d) * w``."""
     q = np.empty(15)
     for c in range(4):
         for t in range(T.shape[0]):

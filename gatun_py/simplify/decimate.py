@@ -228,46 +228,15 @@ def tet_quadrics(u4: np.ndarray, tets: np.ndarray, weight: np.ndarray) -> np.nda
     """
     n = u4.shape[0]
     out = np.zeros((n, 15))
+    tets = np.ascontiguousarray(tets, np.int32)  # DecimationState's dtype: one compiled kernel
     m = tets.shape[0]
     if m == 0:
         return out
-    # per tet its unit normal, offset and weight (48 bytes; its 15 quadric terms would be 120, the
-    # largest temporary of a decimation's set-up): the kernel forms the terms as numpy would.
-    # Chunks of tets are independent rows of ``planes`` and numpy releases the GIL in its loops, so
-    # they run in threads (the same bits in any order; flange-10m 5.4 s on one thread).
+    # per tet its unit normal, offset and weight (48 bytes; its 15 quadric terms would be 120)
     planes = np.empty((m, 6))
-    chunks = range(0, m, _CHUNK)
-    threads = min(numba.get_num_threads(), len(chunks))
-    if threads > 1:
-        with ThreadPoolExecutor(threads, thread_name_prefix="tetc-quadrics") as pool:
-            for f in [pool.submit(_tet_planes, u4, tets, weight, lo, planes) for lo in chunks]:
-                f.result()
-    else:
-        for lo in chunks:
-            _tet_planes(u4, tets, weight, lo, planes)
+    K._tet_hyperplanes(np.ascontiguousarray(u4, np.float64), tets, np.ascontiguousarray(weight, np.float64), planes)
     K._accumulate_quadrics(tets, planes, out)
     return out
-
-
-def _tet_planes(u4: np.ndarray, tets: np.ndarray, weight: np.ndarray, lo: int, planes: np.ndarray) -> None:
-    """``planes[t]`` = (unit 4D normal, offset, weight) of the tets t in ``lo .. lo + _CHUNK``
-    (a weight of 0 for flat tets, whose hyperplane is not unique)."""
-    hi = min(tets.shape[0], lo + _CHUNK)
-    P = u4[tets[lo:hi]]  # (k, 4, 4)
-    e = P[:, 1:, :] - P[:, :1, :]  # (k, 3, 4)
-    # generalised cross product: the normal orthogonal to the three edge vectors in 4D
-    nrm = np.empty((hi - lo, 4))
-    for k in range(4):
-        cols = [j for j in range(4) if j != k]
-        nrm[:, k] = (-1) ** k * np.linalg.det(e[:, :, cols])
-    ln = np.linalg.norm(nrm, axis=1)
-    w = weight[lo:hi]
-    ok = (ln > 0) & (w > 0)
-    nrm[ok] /= ln[ok, None]
-    nrm[~ok] = 0.0
-    planes[lo:hi, :4] = nrm
-    planes[lo:hi, 4] = -np.einsum("mk,mk->m", nrm, P[:, 0, :])
-    planes[lo:hi, 5] = np.where(ok, w, 0.0)
 
 
 def _topology(T: np.ndarray, n: int):

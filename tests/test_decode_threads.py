@@ -176,6 +176,23 @@ def test_1000_byte_flips_fail_the_same_on_two_threads():
     assert _runners() == before
 
 
+def _batches(stream):
+    return [(b.first, b.points.tobytes(), b.density.tobytes(), np.asarray(b.tets).tobytes(),
+             np.asarray(b.boundary).tobytes()) for b in stream]
+
+
+@pytest.mark.parametrize("scalar", [None, "T", "id"])
+def test_iter_decode_on_two_threads_gives_the_same_batches(scalar):
+    """The stream a (not lean) render reads with a second core: every batch as on one thread, for
+    the default scalar and for other point arrays (decoded beside the geometry)."""
+    data = encode_tetc([LevelPayload(0, 0.0, 0, _mesh64())])
+    one = _batches(TetcReader(data).iter_decode(0, scalar=scalar, batch_tets=25, jobs=1))
+    two = _batches(TetcReader(data).iter_decode(0, scalar=scalar, batch_tets=25, jobs=2, depth=2))
+    assert len(one) > 3 and one == two
+    with pytest.raises(OptionError):
+        next(TetcReader(data).iter_decode(0, jobs=0))
+
+
 def test_a_stream_closed_early_stops_its_thread():
     data = encode_tetc([LevelPayload(0, 0.0, 0, load_sample("bluntfin")[0])])
     before = _runners()

@@ -668,7 +668,7 @@ class TetcReader:
             dec.finish()
 
     def iter_decode(self, level: int = 0, *, scalar: str | None = None, component=None,
-                    batch_tets: int = DEFAULT_BATCH_TETS) -> Iterator[TetBatch]:
+                    batch_tets: int = DEFAULT_BATCH_TETS, jobs: int = 1, depth: int = 4) -> Iterator[TetBatch]:
         """Stream the mesh of ``level`` as :class:`~gatun_py.mesh.TetBatch`es.
 
         The first batch holds the boundary surface and its vertices, then batches of up to
@@ -683,11 +683,16 @@ class TetcReader:
             default scalar, straight from the geometry section).
         component : None, int or "magnitude"
             For a vector array: the component, or the Euclidean norm.
+        jobs : int
+            1: one thread. 2 or more: the connectivity decodes in a thread of its own, up to
+            ``depth`` batches ahead (:class:`~gatun_py.codec.prefetch.PrefetchedDecode`); the same
+            batches, while the caller works on the previous ones.
         """
+        jobs = check_jobs(jobs)
         n = self._checked_points(level)
         names = [a[0] for a in self.arrays]
         if scalar is None or (scalar == self.scalar_name and component in (None, 0)):
-            for batch, _ in self._batches(level, batch_tets, {}):
+            for batch, _ in self._batches(level, batch_tets, {}, jobs=jobs, depth=depth):
                 yield batch
             return
         if scalar not in names:
@@ -698,7 +703,7 @@ class TetcReader:
         except ValueError as e:
             raise OptionError(str(e)) from None
         dec = self._array_decoder(level, j, n)
-        for batch, exact in self._batches(level, batch_tets, {scalar: dec}):
+        for batch, exact in self._batches(level, batch_tets, {scalar: dec}, jobs=jobs, depth=depth):
             with np.errstate(over="ignore"):  # beyond float32: inf, like any float32 rounding
                 batch.density = scalar_of(exact, scalar, component).astype(np.float32)
             yield batch

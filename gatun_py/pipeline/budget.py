@@ -585,7 +585,8 @@ def seed_costs(*, repeats: int = 3) -> Costs:
             best = min(best, time.perf_counter() - t0)
         return best
 
-    # one thread, as the streaming render decodes (and as the reference costs were measured)
+    # one thread, as the reference costs were measured: with a second core the streaming render's
+    # connectivity decodes ahead in a thread of its own, so a frame takes at most this plan
     decode_s = best_of(lambda: (reader.decode_mesh(0, jobs=1), ancestors(*reader.read_forest(0), half)))
     decode_scale = decode_s / ref.decode_s(Work(tets_decoded=big.n_tets, forest_points=big.n_points))
 

@@ -18,6 +18,7 @@ import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from .._resources import peak_rss_mb
@@ -39,6 +40,13 @@ PIPELINES = ("streaming", "generic")
 # it with a note, so no render can sample for ever (a 1e-9 step would take years).
 MAX_SAMPLES_PER_DIAGONAL = 20_000
 LEAN_BATCH_TETS = 16384  # decode batch of a lean streaming render
+PREFETCH_BATCHES = 2  # batches the connectivity decoder may run ahead of a (not lean) streaming render
+
+
+def decode_jobs() -> int:
+    """Threads for a streaming render's decode: 2 (the connectivity ahead in a thread of its own)
+    when numba may use two or more, else 1 (a Dask worker given one core keeps to it)."""
+    return 2 if numba.get_num_threads() >= 2 else 1
 
 
 @dataclass(frozen=True)
@@ -189,10 +197,12 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
 def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress, watch=None, decoded=None, *,
                    partial=None, partial_every_s=0.25, fragments=False):
     lv = reader.level_meta(target.level)
-    # A lean render holds about one batch of tets in flight: smaller batches, less memory.
+    # A lean render holds about one batch of tets in flight: smaller batches, less memory. Otherwise,
+    # with a second core, the connectivity decodes ahead in a thread of its own while this one
+    # decodes the geometry and renders (the same batches, so the same image).
     batches = iter(decoded) if decoded is not None else reader.iter_decode(
         target.level, scalar=view.scalar, component=view.component,
-        **({"batch_tets": LEAN_BATCH_TETS} if view.lean else {}))
+        **({"batch_tets": LEAN_BATCH_TETS} if view.lean else {"jobs": decode_jobs(), "depth": PREFETCH_BATCHES}))
     filt = None
     if anc is not None:
         filt = SimplifyFilter(anc)

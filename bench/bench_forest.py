@@ -176,6 +176,46 @@ def _level_forest_bytes(forest, mesh):
     return levels, payloads, mesh_bytes, new_f, c2_f, c1_f, old_f
 
 
+def shared_vertex_trade(payloads):
+    """What storing each vertex's data once across the levels 1.. would give and cost (issue 12's
+    all-levels target), from the file ``tetc compress`` writes.
+
+    A level's vertices are a subset of the finer level's, with the same values. If every level
+    from 1 on stored only the vertices it adds to the next coarser level (predicted from its own
+    tets, as today) and took the others from the coarser levels, its vertex data would shrink to
+    its new vertices' share; level 0 stays whole, so a full-resolution decode is unchanged. The
+    size is a lower bound (referencing the inherited vertices is not counted). The cost: a level's
+    vertices would need every coarser level's connectivity decoded first, so decoding level i
+    would take its own time plus the connectivity of levels i+1.. (process CPU, best of 3)."""
+    reader = TetcReader(encode_tetc(payloads))
+    enc = [encode_level(p) for p in payloads]
+    vertex_bytes, other_bytes = [], []
+    for e, p in zip(enc, payloads):
+        vb = sum(len(v) for k, v in e.sections.items() if not k.endswith(("/forest", "/tets", "/boundary")))
+        vertex_bytes.append(vb)
+        other_bytes.append(sum(len(v) for v in e.sections.values()) - vb)
+    n = [p.mesh.n_points for p in payloads] + [0]
+    shared = vertex_bytes[0] + sum(vb * (n[i] - n[i + 1]) / n[i] for i, vb in enumerate(vertex_bytes) if i > 0 and n[i])
+    level0 = vertex_bytes[0] + other_bytes[0]
+    conn = [cpu_best(lambda i=i: reader._level_tets(i)) for i in range(len(payloads))]
+    whole = [cpu_best(lambda i=i: reader.decode_mesh(i, jobs=1)) for i in range(min(3, len(payloads)))]
+    slower = [(whole[i] + sum(conn[i + 1:])) / whole[i] for i in range(1, len(whole))]
+    return dict(now=(sum(vertex_bytes) + sum(other_bytes)) / level0, shared=(shared + sum(other_bytes)) / level0,
+                vertex_now=sum(vertex_bytes) / vertex_bytes[0], slower=slower)
+
+
+def _trade_reading(rows) -> str:
+    """The reading of the shared-vertex-data table, from its figures."""
+    under = [f"{r['name']} {r['trade']['shared']:.2f}" for r in rows if r["trade"]["shared"] <= 2.0]
+    over = [f"{r['name']} {r['trade']['shared']:.2f}" for r in rows if r["trade"]["shared"] > 2.0]
+    slow = [x for r in rows for x in r["trade"]["slower"]]
+    return ("Reading: at its lower bound, sharing the vertex data would bring " + (", ".join(under) or "no mesh")
+            + " to or under 2.0 × level 0" + (f", not {', '.join(over)}" if over else "")
+            + f"; and every stored level but 0 would decode {min(slow):.2f}–{max(slow):.2f} × slower, while the levels "
+            "exist to decode fast (the time budget picks them). The targets conflict, and sharing alone does not "
+            "meet the size one everywhere: the format keeps each level whole.")
+
+
 def measure(name):
     """Coding 3 of the rounds forest (what format 7 writes) against coding 2 of the same forest
     (format 6) and coding 1 of the greedy forest (formats 3 to 5), same run."""
@@ -216,6 +256,7 @@ def measure(name):
     old_dec_s = cpu_best(lambda: decode_forest(old_bytes, n))
     k = forest.n_merges
     predictability = rank_predictability(mesh, greedy, encode_level(payloads[0]).vertex_order)
+    trade = shared_vertex_trade(payloads)
     lvl0_new = mesh_bytes[0] + new_f[0]
     lvl0_c2 = mesh_bytes[0] + c2_f[0]
     lvl0_c1 = g_mesh_bytes[0] + g_c1_f[0]
@@ -229,7 +270,7 @@ def measure(name):
                 forests_c1=sum(g_c1_f), forests_old=sum(old_f), enc=enc_forest_s, dec=dec_s, conn=conn_s, geo=geo_s,
                 c3_alone=c3_alone, c2_alone=c2_alone, c1_dec=c1_dec_s, old_dec=old_dec_s, t_forest=t_forest,
                 t_greedy=t_greedy, level_bytes=list(zip(mesh_bytes, new_f, c2_f, g_c1_f)),
-                predictability=predictability)
+                predictability=predictability, trade=trade)
 
 
 def main(argv=None):
@@ -292,6 +333,17 @@ def main(argv=None):
               table(["mesh"] + labels, [[r["name"]] + [f"{r['predictability'][x]:.2f}" for x in labels] for r in rows]),
               "",
               "Reading: every predictor saves a fraction of a bit per vertex of the greedy order's place, far from what would pay for a new coding: the greedy order inside a bucket follows errors that change with every merge around a vertex. Hence coding 2 changes the order itself (rounds of independent merges numbered by a key the decoder computes) instead of predicting it.", ""]
+    lines += ["What storing a vertex's data once across the levels would give and cost (`shared_vertex_trade`): "
+              "levels 1.. keeping only the vertices each adds to the next coarser level (level 0 stays whole), "
+              "against the files written today. *vertex data now* = all levels' geometry and point-array sections / "
+              "level 0's; *all / level 0, shared* is a lower bound (the inherited vertices' references not counted); "
+              "*decode* = decoding level i would also need every coarser level's connectivity: (level i's decode + "
+              "the connectivity of levels i+1..) / level i's decode, process CPU, one thread.", "",
+              table(["mesh", "vertex data now: all / level 0", "all / level 0 now", "all / level 0, shared (bound)",
+                     "decode level 1, shared / now", "level 2"],
+                    [[r["name"], f"{r['trade']['vertex_now']:.2f}", f"{r['trade']['now']:.3f}",
+                      f"{r['trade']['shared']:.3f}"] + [f"{x:.2f}" for x in r["trade"]["slower"]] for r in rows]), "",
+              _trade_reading(rows), ""]
     r0 = rows[0]
     lines += [f"Per level ({r0['name']}): bytes of the mesh (rounds forest), of the forest in codings 3 and 2 and "
               "of the greedy forest in coding 1.", "",

@@ -17,8 +17,10 @@ the caller's id, which breaks every tie between equal errors. The mesh state dur
 ``quad`` (n, 15) float64, ``u4`` (n, 4) float64
     every vertex's error quadric (A's upper triangle, b, c; see :func:`_quadric_at`) and its
     (x, y, z, s) point; merging a into b adds a's quadric to b's.
-``pdat`` (n + m, 5) float64, ``p_orig``, ``p_next`` (n + m,) int32, ``tp_head``, ``tp_count`` (m,) int32
-    sample points of the original field, one row (x, y, z, value, weight) each: the centroid of
+``pdat`` (n + m, 6) float64, ``p_orig``, ``p_next`` (n + m,) int32, ``tp_head``, ``tp_count`` (m,) int32
+    sample points of the original field, one row (x, y, z, value, weight, error) each (error: the
+    weighted squared error against the interpolant of the tet holding it, see
+    :func:`_star_samples`): the centroid of
     every input tet from the start, every vertex once merged away (its row added then, from
     ``pts``, ``dens`` and its weight ``vw``); ``p_orig`` names the point (a vertex id, or n + t
     for tet t's centroid). Every one is listed in the live tet that holds it (``tp_count[t]`` of
@@ -527,27 +529,53 @@ def _star_sample_count(st, tp_count):
 
 
 @njit(cache=True, _nrt=False)
-def _star_samples(st, T, pts, dens, pdat, tp_head, tp_count, p_next, stride, p_id, p_k, lam, val, q):
+def _point_error(pdat, p, val):
+    """Sample point p's weighted squared error against the interpolant ``val`` of a positive tet
+    (from :func:`_tet_planes`)."""
+    f = val[0] * pdat[p, 0] + val[1] * pdat[p, 1] + val[2] * pdat[p, 2] + val[3]
+    return pdat[p, 4] * (pdat[p, 3] - f) ** 2
+
+
+@njit(cache=True, nogil=True)
+def _set_point_errors(T, pts, dens, pdat, tp_head, p_next):
+    """``pdat[p, 5]`` of every listed point: its error in its tet (:func:`_point_error`; 0.0 in a
+    flat tet), the cache :func:`_star_samples` sums."""
+    lam = np.empty((4, 4))
+    val = np.empty(4)
+    q = np.empty(4, np.int64)
+    for t in range(tp_head.shape[0]):
+        p = tp_head[t]
+        if p < 0:
+            continue
+        for j in range(4):
+            q[j] = T[t, j]
+        ok = _tet_planes(pts, dens, q, lam, val)
+        while p >= 0:
+            pdat[p, 5] = _point_error(pdat, p, val) if ok else 0.0
+            p = p_next[p]
+
+
+@njit(cache=True, _nrt=False)
+def _star_samples(st, pdat, tp_head, p_next, stride, p_id, p_k):
     """Every stride-th sample point of the star (``p_id``) with its star tet (``p_k``); returns the
-    sum of their weighted squared errors against the current interpolant (``lam``, ``val``: scratch)."""
+    sum of their weighted squared errors against the current interpolant, in list order.
+
+    The errors are the ones cached in ``pdat[:, 5]`` where each point got its tet (set-up,
+    :func:`_reassign_points`): a point's tet only changes (its vertices relabelled) in a merge
+    that moves every point of it, so the cache is always the error in the tet as it is now,
+    computed by the same expression from the same planes. A flat tet's points hold 0.0, which
+    adds nothing to ``e_old`` (>= +0.0) bit for bit, as skipping them did."""
     e_old = 0.0
     npt = 0
     seen = 0
     for i in range(st.shape[0]):
         t = st[i] >> 2
         p = tp_head[t]
-        if p < 0:
-            continue
-        for j in range(4):
-            q[j] = T[t, j]
-        flat = not _tet_planes(pts, dens, q, lam, val)
         while p >= 0:
             if seen % stride == 0:
                 p_id[npt] = p
                 p_k[npt] = i
-                if not flat:
-                    f = val[0] * pdat[p, 0] + val[1] * pdat[p, 1] + val[2] * pdat[p, 2] + val[3]
-                    e_old += pdat[p, 4] * (pdat[p, 3] - f) ** 2
+                e_old += pdat[p, 5]
                 npt += 1
             seen += 1
             p = p_next[p]
@@ -751,7 +779,7 @@ def _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count
     q = np.empty(4, np.int64)
     e_old = 0.0
     if npt > 0:
-        e_old = _star_samples(st, T, pts, dens, pdat, tp_head, tp_count, p_next, stride, p_id, p_k, s_lam[0], s_val[0], q)
+        e_old = _star_samples(st, pdat, tp_head, p_next, stride, p_id, p_k)
     return (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
             stride, e_old, np.empty(ns), np.empty(2), q, np.empty(3), np.empty(bf.shape[0]), s_ok, s_lam, s_val)
 
@@ -1141,13 +1169,13 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp
                 continue
             t = st_a[i] >> 2
             if low > margin[i]:
-                best = t
+                best = i
                 break
             for j in range(4):
                 q[j] = T[t, j]
             _value_at(pts, dens, q, v6s[i], x, y, z, vout)
             if vout[0] >= 0.0:
-                best = t
+                best = i
                 break
         if best < 0:
             # outside every tet: the nearest, by the determinants
@@ -1161,8 +1189,11 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp
                 _value_at(pts, dens, q, v6s[i], x, y, z, vout)
                 if vout[0] > best_lo:
                     best_lo = vout[0]
-                    best = t
+                    best = i
         if best >= 0:  # else no tet of a's star is left (or all are flat): the point is dropped
+            # its error in the new tet, for _star_samples (usable[best]: alive with v6 > 0)
+            pdat[p, 5] = _point_error(pdat, p, val[best])
+            best = st_a[best] >> 2
             p_next[p] = tp_head[best]
             tp_head[best] = p
             tp_count[best] += 1
@@ -1232,7 +1263,7 @@ def _compact_points(alive, pdat, p_orig, tp_head, p_next, counters):
             while p >= 0:
                 k += 1
                 p = p_next[p]
-    new_dat = np.empty((k, 5))
+    new_dat = np.empty((k, pdat.shape[1]))
     new_orig = np.empty(k, np.int32)
     new_next = np.empty(k, np.int32)
     k = 0
@@ -1243,7 +1274,7 @@ def _compact_points(alive, pdat, p_orig, tp_head, p_next, counters):
             continue
         tp_head[t] = k
         while p >= 0:
-            for j in range(5):
+            for j in range(pdat.shape[1]):
                 new_dat[k, j] = pdat[p, j]
             new_orig[k] = p_orig[p]
             p = p_next[p]
@@ -1625,12 +1656,12 @@ def _vertex_weights(T, tet_w, n):
 
 @njit(cache=True)
 def _centroid_points(pts, dens, T, tet_w, centroid_weight):
-    """(pdat, p_orig): the rows (x, y, z, value, weight) of every tet's centroid (weight its
+    """(pdat, p_orig): the rows (x, y, z, value, weight, 0) of every tet's centroid (weight its
     volume fraction x ``centroid_weight``; row t, named n + t) and room for the n vertices after
     them (each row is computed from its own tet alone: the same bits in any tet order)."""
     n = pts.shape[0]
     m = T.shape[0]
-    pdat = np.zeros((n + m, 5))
+    pdat = np.zeros((n + m, 6))
     p_orig = np.full(n + m, -1, np.int32)
     for t in range(m):
         pdat[t, 4] = tet_w[t] * centroid_weight

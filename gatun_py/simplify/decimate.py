@@ -385,13 +385,15 @@ class DecimationState:
         # Sample points of the original field, listed in the live tet holding them: every input
         # tet's centroid from the start (ids n + t, weight its volume fraction x CENTROID_WEIGHT),
         # every vertex once merged away (weight a quarter of its tets' volume fraction); one row
-        # (x, y, z, value, weight) per point, the centroids first (p_orig: which point a row is,
-        # in the local numbering).
+        # (x, y, z, value, weight, error) per point, the centroids first (p_orig: which point a row
+        # is, in the local numbering); error: its weighted squared error in the tet holding it,
+        # kept up to date by the merges that move it (see _decimate_kernels._star_samples).
         self.pdat, self.p_orig = K._centroid_points(self.pts, self.dens, self.T, tet_w[self.t_orig], CENTROID_WEIGHT)
         del tet_w
         self.p_next = np.full(n + m, -1, np.int32)
         self.tp_head = np.arange(m, dtype=np.int32)
         self.tp_count = np.ones(m, np.int32)
+        K._set_point_errors(self.T, self.pts, self.dens, self.pdat, self.tp_head, self.p_next)
         # per thread of the parallel evaluations: stamp rows and counters (stamps, evaluations)
         threads = max(1, int(numba.config.NUMBA_NUM_THREADS))
         self.marks = np.zeros((threads, n), np.int64)

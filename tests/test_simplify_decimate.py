@@ -297,9 +297,13 @@ def test_branch_and_bound_picks_the_best_merge(mesh):
             state.apply(int(a), int(forest.parent[a]))
         done = stop
         for a in np.flatnonzero(state.parent == np.arange(mesh.n_points)):
-            got = K._evaluate(int(a), *state._mesh_args(), state.marks[0], state.marks_b[0], state.marks_ab[0],
-                              state.tcount[0], *state._sample_args())
-            assert (int(got[0]), float(got[1])) == _best_by_every_error(state, int(a)), (stop, a)
+            want = _best_by_every_error(state, int(a))
+            # with the scratch buffers of a thread, and with none (every array allocated)
+            for fbuf, ibuf in ((np.empty(K._SCRATCH_F), np.empty(K._SCRATCH_I, np.int64)),
+                               (np.empty(0), np.empty(0, np.int64))):
+                got = K._evaluate(int(a), *state._mesh_args(), state.marks[0], state.marks_b[0], state.marks_ab[0],
+                                  state.tcount[0], *state._sample_args(), fbuf, ibuf)
+                assert (int(got[0]), float(got[1])) == want, (stop, a, fbuf.size)
 
 
 def test_forest_does_not_depend_on_the_thread_count():

@@ -209,6 +209,37 @@ def _star_view(v, head, nxt, T, alive):
     return out
 
 
+# Scratch: an evaluation takes its ~30 arrays as views of one float and one int buffer per thread
+# (``_SCRATCH_F``, ``_SCRATCH_I`` elements; a star too large for them gets new arrays), instead of
+# allocating each: an evaluation runs ~4 times per merge.
+_SCRATCH_F = 1 << 15
+_SCRATCH_I = 1 << 14
+
+
+@njit(cache=True)
+def _take(buf, o, k):
+    """(``buf[o:o + k]``, o + k) when it fits in ``buf``, else (a new array of k, o + k)."""
+    if o + k <= buf.shape[0]:
+        return buf[o:o + k], o + k
+    return np.empty(k, buf.dtype), o + k
+
+
+@njit(cache=True)
+def _star_into(v, head, nxt, T, alive, buf):
+    """:func:`_star_view` in one walk of the list, as a view of ``buf`` when the star fits."""
+    cnt = 0
+    cap = buf.shape[0]
+    s = head[v]
+    while s >= 0:
+        if alive[s >> 2] and T[s >> 2, s & 3] == v:
+            if cnt >= cap:
+                return _star_view(v, head, nxt, T, alive)
+            buf[cnt] = s
+            cnt += 1
+        s = nxt[s]
+    return buf[:cnt]
+
+
 @njit(cache=True)
 def _star(v, head, nxt, T, alive):
     """Slots (4*t + corner) of the live tets around v; unlinks dead slots on the way."""
@@ -229,7 +260,14 @@ def _next_stamp(counters):
 
 @njit(cache=True)
 def _boundary_faces_of(st, T, nbr):
-    """(count, faces (k, 3)) boundary faces (outward) incident to the star's centre vertex."""
+    """Boundary faces (k, 3) (outward) incident to the star's centre vertex."""
+    out, _ = _boundary_faces_into(st, T, nbr, np.empty(0, np.int64), 0)
+    return out
+
+
+@njit(cache=True)
+def _boundary_faces_into(st, T, nbr, buf, o):
+    """(:func:`_boundary_faces_of` in ``buf`` from o on when they fit, the offset after them)."""
     k = 0
     for i in range(st.shape[0]):
         t = st[i] >> 2
@@ -237,7 +275,8 @@ def _boundary_faces_of(st, T, nbr):
         for f in range(4):
             if f != c and nbr[t, f] < 0:
                 k += 1
-    out = np.empty((k, 3), np.int64)
+    flat, o = _take(buf, o, 3 * k)
+    out = flat.reshape((k, 3))
     k = 0
     for i in range(st.shape[0]):
         t = st[i] >> 2
@@ -247,13 +286,19 @@ def _boundary_faces_of(st, T, nbr):
                 for j in range(3):
                     out[k, j] = T[t, _TET_FACES[f, j]]
                 k += 1
-    return out
+    return out, o
 
 
 @njit(cache=True)
 def _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
     """The link condition Lk(a) ∩ Lk(b) = Lk(ab) for collapsing edge ab (with a virtual vertex ω)."""
-    st_b = _star_view(b, head, nxt, T, alive)
+    return _link_ok_buf(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters, np.empty(0, np.int64))
+
+
+@njit(cache=True)
+def _link_ok_buf(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters, buf):
+    """:func:`_link_ok` with b's star and the edges of Lk(ab) in the scratch ``buf`` (when they fit)."""
+    st_b = _star_into(b, head, nxt, T, alive, buf)
     s_b = _next_stamp(counters)
     for i in range(st_b.shape[0]):
         t = st_b[i] >> 2
@@ -270,7 +315,8 @@ def _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counter
     if n_shared == 0:
         return False  # not an edge of the current mesh
     # Lk(ab) edges: the opposite edge of every tet around ab.
-    ab_edges = np.empty((n_shared, 2), np.int64)
+    ab_flat, _ = _take(buf, st_b.shape[0], 2 * n_shared)
+    ab_edges = ab_flat.reshape((n_shared, 2))
     k = 0
     for i in range(st_a.shape[0]):
         t = st_a[i] >> 2
@@ -567,17 +613,17 @@ def _star_samples(st, pdat, tp_head, p_next, stride, p_id, p_k):
     adds nothing to ``e_old`` (>= +0.0) bit for bit, as skipping them did."""
     e_old = 0.0
     npt = 0
-    seen = 0
+    skip = 0  # points to pass before the next one taken (a countdown: no division per point)
     for i in range(st.shape[0]):
-        t = st[i] >> 2
-        p = tp_head[t]
+        p = tp_head[st[i] >> 2]
         while p >= 0:
-            if seen % stride == 0:
+            if skip == 0:
                 p_id[npt] = p
                 p_k[npt] = i
                 e_old += pdat[p, 5]
                 npt += 1
-            seen += 1
+                skip = stride
+            skip -= 1
             p = p_next[p]
     return e_old
 
@@ -748,40 +794,55 @@ def _total_error(dm_w, di, ge_w, swept_w, qe_w, se, n_col, power):
 
 
 @njit(cache=True)
-def _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next):
+def _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next, fbuf, ibuf, fo, io):
     """Everything about a's star that every candidate merge of a shares, and the scratch arrays of
-    one evaluation, as one tuple (see the names unpacked in :func:`_candidate_terms`)."""
+    one evaluation, as one tuple (see the names unpacked in :func:`_candidate_terms`), all taken
+    from ``fbuf`` (from offset ``fo`` on) and ``ibuf`` (from ``io``) where they fit (see
+    :func:`_take`). Returns (the tuple, the offset in ``ibuf`` after it)."""
     ns = st.shape[0]
-    vol_old = np.empty(ns)
-    mass_old = np.empty(ns)
-    dsum = np.empty(ns)
-    nrm = np.empty((ns, 3))
-    off = np.empty(ns)
-    fn = np.empty(3)
+    vol_old, fo = _take(fbuf, fo, ns)
+    mass_old, fo = _take(fbuf, fo, ns)
+    dsum, fo = _take(fbuf, fo, ns)
+    nrm_flat, fo = _take(fbuf, fo, 3 * ns)
+    nrm = nrm_flat.reshape((ns, 3))
+    off, fo = _take(fbuf, fo, ns)
+    fn, fo = _take(fbuf, fo, 3)
     vol_star, reach2 = _star_volumes(a, st, T, pts, dens, vol_old, mass_old, dsum, nrm, off, fn)
     # every new tet's vertices lie within sqrt(reach2) of a, so its edges are <= 2 sqrt(reach2):
     # a value above twice this bound is safely positive whatever the rounding
     fast_ok = 2.0 * VOLUME_EPS * (4.0 * reach2) ** 1.5
-    bf = _boundary_faces_of(st, T, nbr) if isb[a] else np.empty((0, 3), np.int64)
-    n_old = np.empty((bf.shape[0], 3))
-    area_old = np.empty(bf.shape[0])
+    if isb[a]:
+        bf, io = _boundary_faces_into(st, T, nbr, ibuf, io)
+    else:
+        bf_flat, io = _take(ibuf, io, 0)
+        bf = bf_flat.reshape((0, 3))
+    nbf = bf.shape[0]
+    n_old_flat, fo = _take(fbuf, fo, 3 * nbf)
+    n_old = n_old_flat.reshape((nbf, 3))
+    area_old, fo = _take(fbuf, fo, nbf)
     area_sum = _star_boundary(bf, pts, n_old, area_old)
     # the sample points in a's star (only they see the interpolant change) and their squared error
     # now; late on, stars hold many points: every stride-th one stands for stride points
     npt = _star_sample_count(st, tp_count) if params[P_WS] > 0.0 else 0
     max_s = max(1, int(params[P_MAXS]))
     stride = (npt + max_s - 1) // max_s if npt > max_s else 1
-    p_id = np.empty((npt + stride - 1) // stride, np.int64)
-    p_k = np.empty(p_id.shape[0], np.int64)
-    s_ok = np.zeros(ns, np.bool_)
-    s_lam = np.empty((ns, 4, 4))
-    s_val = np.empty((ns, 4))
-    q = np.empty(4, np.int64)
+    p_id, io = _take(ibuf, io, (npt + stride - 1) // stride)
+    p_k, io = _take(ibuf, io, p_id.shape[0])
+    s_ok, io = _take(ibuf, io, ns)  # 0 / 1: new tet k survives positive (set by _new_star_planes)
+    q, io = _take(ibuf, io, 4)
+    s_lam_flat, fo = _take(fbuf, fo, 16 * ns)
+    s_lam = s_lam_flat.reshape((ns, 4, 4))
+    s_val_flat, fo = _take(fbuf, fo, 4 * ns)
+    s_val = s_val_flat.reshape((ns, 4))
+    v6n, fo = _take(fbuf, fo, ns)
+    vout, fo = _take(fbuf, fo, 2)
+    n_new, fo = _take(fbuf, fo, 3)
+    area_new, fo = _take(fbuf, fo, nbf)
     e_old = 0.0
     if npt > 0:
         e_old = _star_samples(st, pdat, tp_head, p_next, stride, p_id, p_k)
     return (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
-            stride, e_old, np.empty(ns), np.empty(2), q, np.empty(3), np.empty(bf.shape[0]), s_ok, s_lam, s_val)
+            stride, e_old, v6n, vout, q, n_new, area_new, s_ok, s_lam, s_val), io
 
 
 @njit(cache=True, _nrt=False)
@@ -906,7 +967,8 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, m
     Returns the number of candidates. Legality here covers volumes, boundary orientation and the
     boundary-into-interior rule; the link condition is checked by the caller, best first.
     """
-    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next)
+    ctx, _ = _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next, np.empty(0),
+                           np.empty(0, np.int64), 0, 0)
     terms = np.empty((cand_out.shape[0], 5))
     return _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pdat, mark, counters, ctx, cand_out,
                             err_out, terms, True)
@@ -914,23 +976,27 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, m
 
 @njit(cache=True)
 def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, mark, mark_b, mark_ab,
-              counters, pdat, tp_head, tp_count, p_next):
+              counters, pdat, tp_head, tp_count, p_next, fbuf, ibuf):
     """Best legal merge of a: (target, error), or (-1, 0) when a has none.
 
     The best is the smallest (error, ``vkey`` of the target) among the candidates that pass the link
     condition. Branch and bound: candidates are visited by their lower bound (the cheap terms),
     and the expensive ones (interpolation, sample points) are computed only while the bound can
     still beat the best found so far: the same choice as computing every error, for a fraction
-    of the cost.
+    of the cost. ``fbuf``, ``ibuf``: this thread's scratch (see :func:`_take`).
     """
-    st = _star_view(a, head, nxt, T, alive)
+    st = _star_into(a, head, nxt, T, alive, ibuf)
     if st.shape[0] == 0 or pinned[a]:
         return -1, 0.0
     cap = 3 * st.shape[0] + 1
-    cand = np.empty(cap, np.int64)
-    low = np.empty(cap)
-    terms = np.empty((cap, 5))
-    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next)
+    cand, io = _take(ibuf, st.shape[0], cap)
+    order, io = _take(ibuf, io, cap)
+    low, fo = _take(fbuf, 0, cap)
+    terms_flat, fo = _take(fbuf, fo, 5 * cap)
+    terms = terms_flat.reshape((cap, 5))
+    ctx, io = _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next, fbuf, ibuf, fo,
+                            io)
+    link_buf = ibuf[min(io, ibuf.shape[0]):]
     nc = _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pdat, mark, counters, ctx, cand, low,
                           terms, False)
     if nc == 0:
@@ -938,7 +1004,6 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
     # by bound, ties by target (caller's id), so the result does not depend on list order or on
     # the internal numbering: an insertion sort on (bound, key) (a dozen candidates: np.argsort's
     # allocation costs more than the sort)
-    order = np.empty(nc, np.int64)
     for x in range(nc):
         y = x
         while y > 0 and (low[order[y - 1]] > low[x]
@@ -958,7 +1023,7 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
         if not whole or _loses(e, b, best_e, best_b, vkey):
             continue
         counters[C_LINK] += 1
-        if _link_ok(a, b, st, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
+        if _link_ok_buf(a, b, st, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters, link_buf):
             best_b = b
             best_e = e
     return best_b, best_e
@@ -1290,11 +1355,15 @@ def _compact_points(alive, pdat, p_orig, tp_head, p_next, counters):
 def _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4,
                    vkey, marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count, p_next):
     """:func:`_evaluate` of ``todo[:n_todo]`` in parallel: every evaluation only reads the mesh
-    (each thread stamps its own mark rows), so the results cannot depend on the scheduling."""
+    (each thread stamps its own mark rows and uses its own scratch), so the results cannot depend on
+    the scheduling."""
+    fbufs = np.empty((marks.shape[0], _SCRATCH_F))
+    ibufs = np.empty((marks.shape[0], _SCRATCH_I), np.int64)
     for i in prange(n_todo):
         tid = get_thread_id()
         b, e = _evaluate(todo[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks[tid],
-                         marks_b[tid], marks_ab[tid], tcount[tid], pdat, tp_head, tp_count, p_next)
+                         marks_b[tid], marks_ab[tid], tcount[tid], pdat, tp_head, tp_count, p_next, fbufs[tid],
+                         ibufs[tid])
         out_b[i] = b
         out_e[i] = e
 
@@ -1363,6 +1432,8 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
     mark_b = marks_b[0]
     mark_ab = marks_ab[0]
     tc = tcount[0]
+    fbuf = np.empty(_SCRATCH_F)
+    ibuf = np.empty(_SCRATCH_I, np.int64)
     # vertices to (re-)evaluate now: all of them at the start and in a sweep (in parallel), one
     # when a lazy re-evaluation comes up
     todo = np.empty(n, np.int64)
@@ -1379,7 +1450,8 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
         found = False
         if n_todo == 1:
             out_b[0], out_e[0] = _evaluate(todo[0], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
-                                           u4, vkey, mark, mark_b, mark_ab, tc, pdat, tp_head, tp_count, p_next)
+                                           u4, vkey, mark, mark_b, mark_ab, tc, pdat, tp_head, tp_count, p_next, fbuf,
+                                           ibuf)
         elif n_todo > 1:
             _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params,
                            quad, u4, vkey, marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count, p_next)
@@ -1436,7 +1508,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
         tc[C_LINK] += 1
         # a's star is unchanged since the entry was made (that would have bumped its version),
         # but b's may have changed: check the link condition again
-        if not _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, tc):
+        if not _link_ok_buf(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, tc, ibuf):
             todo[0] = a
             n_todo = 1
             continue
@@ -1502,12 +1574,19 @@ def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, pd
     the vertices of a's star but a), the sample points and b's quadric."""
     _apply_merge(a, b, st_a, T, alive, nbr, head, nxt)
     # only the tets of edge ab died (the others keep their slots, relabelled a -> b), so only
-    # the lists of their vertices hold dead slots: tidy those (a's is b's now)
+    # the lists of their vertices hold dead slots: tidy those (a's is b's now). The dead tets are
+    # listed first (a few of a's star), so the test per vertex looks at them only.
+    dead = np.empty(st_a.shape[0], np.int64)
+    n_dead = 0
+    for k in range(st_a.shape[0]):
+        t = st_a[k] >> 2
+        if not alive[t]:
+            dead[n_dead] = t
+            n_dead += 1
     for i in range(nb.shape[0]):
         w = nb[i]
-        for k in range(st_a.shape[0]):
-            t = st_a[k] >> 2
-            if not alive[t] and _contains(T, t, w):
+        for k in range(n_dead):
+            if _contains(T, dead[k], w):
                 _tidy(w, head, nxt, T, alive)
                 break
     if params[P_WS] > 0.0:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import sys
 from pathlib import Path
 
@@ -17,6 +18,8 @@ from gatun_py.errors import OptionError
 from gatun_py.simplify import ROOT_RANK, check_forest, decimate, simplified_mesh
 from gatun_py.simplify import _decimate_kernels as K
 from gatun_py.simplify.decimate import CENTROID_WEIGHT, QUADRIC_WEIGHT, SCALAR_SCALE, DecimationState
+
+D = importlib.import_module("gatun_py.simplify.decimate")  # the module (the package exports the function)
 
 MANIFOLD = {k for k in AWKWARD if k not in ("edge_touching", "vertex_touching")}
 
@@ -48,15 +51,18 @@ def _sample_points(mesh):
     return np.concatenate([p, cen]), np.concatenate([d, val])
 
 
+def _rows(state, t):
+    """The point rows of tet t's list, in order."""
+    return range(state.tp_head[t], state.tp_head[t] + state.tp_count[t])
+
+
 def _kernel_samples(state):
     """point -> tet (4-tuple) from the kernel's per-tet lists."""
     out = {}
     for t in np.flatnonzero(state.alive):
-        p = state.tp_head[t]
-        while p >= 0:
+        for p in _rows(state, t):
             assert state.p_orig[p] not in out, "a sample point listed twice"
             out[int(state.p_orig[p])] = tuple(int(x) for x in state.T[t])
-            p = state.p_next[p]
     return out
 
 
@@ -64,10 +70,8 @@ def _star_samples(state, a):
     """The sample points of a's tets in the kernel's order (star order, then list order)."""
     out = {}
     for s in K._star(a, state.head, state.nxt, state.T, state.alive):
-        p = state.tp_head[s >> 2]
-        while p >= 0:
+        for p in _rows(state, s >> 2):
             out[int(state.p_orig[p])] = tuple(int(x) for x in state.T[s >> 2])
-            p = state.p_next[p]
     return out
 
 
@@ -352,24 +356,30 @@ def test_compacting_the_points_keeps_every_list_and_its_order(name):
         state.apply(int(a), int(forest.parent[a]))
 
     def lists():
-        out = {}
-        for t in np.flatnonzero(state.alive):
-            rows, p = [], state.tp_head[t]
-            while p >= 0:
-                rows.append((int(state.p_orig[p]), tuple(state.pdat[p])))
-                p = state.p_next[p]
-            out[int(t)] = rows
-        return out
+        return {int(t): [(int(state.p_orig[p]), tuple(state.pdat[p])) for p in _rows(state, t)]
+                for t in np.flatnonzero(state.alive)}
 
     before = lists()
-    assert state.counters[K.C_PTOP] == mesh.n_tets + forest.n_merges // 2
-    K._compact_points(state.alive, state.pdat, state.p_orig, state.tp_head, state.p_next, state.counters)
+    K._compact_points(state.alive, state.pdat, state.p_orig, state.tp_head, state.tp_count, state.counters)
     assert lists() == before
     k = int(state.counters[K.C_PTOP])
     assert k == sum(len(v) for v in before.values())
-    # side by side: every list is a run of consecutive rows
-    for t in np.flatnonzero(state.alive):
-        p = state.tp_head[t]
-        while p >= 0 and state.p_next[p] >= 0:
-            assert state.p_next[p] == p + 1
-            p = state.p_next[p]
+    # from row 0, tet by tet
+    live = [t for t in np.flatnonzero(state.alive) if state.tp_count[t] > 0]
+    assert [int(state.tp_head[t]) for t in live] == np.cumsum([0] + [int(state.tp_count[t]) for t in live])[:-1].tolist()
+
+
+@pytest.mark.parametrize("name", ["delaunay", "cavity", "two_components"])
+def test_running_out_of_point_rows_changes_no_merge(name, monkeypatch):
+    """Without room beyond the n + m points the rows are rewritten by many merges (every list
+    kept in order): the forest stays the same, bit for bit."""
+    mesh = AWKWARD[name]()
+    want = decimate(mesh, rounds=0)
+    monkeypatch.setattr(D, "POINT_SLACK", 0.0)
+    state = DecimationState(mesh, 1.0, 1.0)
+    assert state.pdat.shape[0] == mesh.n_points + mesh.n_tets
+    state.run(mesh.n_points)
+    assert state.counters[K.C_REWRITES] > 0
+    got = state.prefix()
+    assert got.n_merges == want.n_merges
+    assert np.array_equal(got.parent, want.parent) and np.array_equal(got.rank, want.rank)

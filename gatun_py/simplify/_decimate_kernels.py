@@ -17,18 +17,18 @@ the caller's id, which breaks every tie between equal errors. The mesh state dur
 ``quad`` (n, 15) float64, ``u4`` (n, 4) float64
     every vertex's error quadric (A's upper triangle, b, c; see :func:`_quadric_at`) and its
     (x, y, z, s) point; merging a into b adds a's quadric to b's.
-``pdat`` (n + m, 6) float64, ``p_orig``, ``p_next`` (n + m,) int32, ``tp_head``, ``tp_count`` (m,) int32
+``pdat`` (r, 6) float64, ``p_orig`` (r,) int32, ``tp_head``, ``tp_count`` (m,) int32
     sample points of the original field, one row (x, y, z, value, weight, error) each (error: the
     weighted squared error against the interpolant of the tet holding it, see
-    :func:`_star_samples`): the centroid of
-    every input tet from the start, every vertex once merged away (its row added then, from
-    ``pts``, ``dens`` and its weight ``vw``); ``p_orig`` names the point (a vertex id, or n + t
-    for tet t's centroid). Every one is listed in the live tet that holds it (``tp_count[t]`` of
-    them, ``tp_head[t]`` -> ``p_next`` chain), with its weight (its share of the original
-    volume). Rows ``counters[C_PTOP]`` on are free; every ``_compact_every(n)`` merges the rows are
-    rewritten tet by tet in list order (:func:`_compact_points`), so that a tet's points lie
-    side by side in memory (the evaluations walk these lists; the order within a list, which fixes
-    the sums, is kept). A merge a -> b hands
+    :func:`_star_samples`): the centroid of every input tet from the start, every vertex once
+    merged away (its row made then, from ``pts``, ``dens`` and its weight ``vw``); ``p_orig``
+    names the point (a vertex id, or n + t for tet t's centroid). Every one is listed in the live
+    tet that holds it, with its weight (its share of the original volume): tet t's list is the run
+    of rows ``tp_head[t]`` .. ``tp_head[t] + tp_count[t] - 1`` (the evaluations read these runs
+    in order: the order within a list fixes the sums). Rows ``counters[C_PTOP]`` on are free
+    (r = n + m + ``POINT_SLACK`` x (n + m) rows: room beyond the n + m points); a merge writes
+    the new lists of its star there, and when the rows run out they are rewritten tet by tet
+    from row 0 (:func:`_compact_points`, every list in its order). A merge a -> b hands
     a and the points of a's star to the tets of the new star.
 
 A merge a -> b is legal when every surviving tet of a's star stays positive, every boundary face
@@ -59,8 +59,9 @@ P_WD, P_WG, P_WV, P_WI, P_WQ, P_WS, P_NCP, P_MAXS = 0, 1, 2, 3, 4, 5, 6, 7
 C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS, C_STARTED, C_EXACT, C_PTOP = 0, 1, 2, 3, 4, 5, 6, 7
 # what the search does (bench/forest_identity.py --counters prints them): link tests, exact
 # evaluations stopped by their bound, sample points summed by exact evaluations, heap pops and the
-# stale ones, evaluations of one vertex on its pop, sample points moved by merges
-C_LINK, C_PRUNED, C_POINTS, C_POPS, C_STALE, C_LAZY, C_MOVED = 8, 9, 10, 11, 12, 13, 14
+# stale ones, evaluations of one vertex on its pop, sample points moved by merges, rewrites of the
+# point rows (:func:`_compact_points`)
+C_LINK, C_PRUNED, C_POINTS, C_POPS, C_STALE, C_LAZY, C_MOVED, C_REWRITES = 8, 9, 10, 11, 12, 13, 14, 15
 N_COUNTERS = 16
 # bits of a vertex's ``pinned`` flags: PIN_KEEP never merged away, PIN_NO_TARGET nothing merges into
 # it. A non-manifold vertex has both (PIN_ALL); a locked vertex (a brick's cut vertex) only
@@ -508,12 +509,11 @@ def _new_value(p, k0, pdat, ok, lam, val, fallback):
             lj = lam[k, j, 0] * x + lam[k, j, 1] * y + lam[k, j, 2] * z + lam[k, j, 3]
             if lj < lo:
                 lo = lj
-        f = val[k, 0] * x + val[k, 1] * y + val[k, 2] * z + val[k, 3]
         if lo >= 0.0:
-            return f
+            return val[k, 0] * x + val[k, 1] * y + val[k, 2] * z + val[k, 3]
         if lo > best_lo:
             best_lo = lo
-            v = f
+            v = val[k, 0] * x + val[k, 1] * y + val[k, 2] * z + val[k, 3]
     return v
 
 
@@ -577,32 +577,30 @@ def _star_sample_count(st, tp_count):
 @njit(cache=True, _nrt=False)
 def _point_error(pdat, p, val):
     """Sample point p's weighted squared error against the interpolant ``val`` of a positive tet
-    (from :func:`_tet_planes`)."""
+    (from :func:`_tet_planes`; ``pdat[p]``: the point's row)."""
     f = val[0] * pdat[p, 0] + val[1] * pdat[p, 1] + val[2] * pdat[p, 2] + val[3]
     return pdat[p, 4] * (pdat[p, 3] - f) ** 2
 
 
 @njit(cache=True, nogil=True)
-def _set_point_errors(T, pts, dens, pdat, tp_head, p_next):
+def _set_point_errors(T, pts, dens, pdat, tp_head, tp_count):
     """``pdat[p, 5]`` of every listed point: its error in its tet (:func:`_point_error`; 0.0 in a
     flat tet), the cache :func:`_star_samples` sums."""
     lam = np.empty((4, 4))
     val = np.empty(4)
     q = np.empty(4, np.int64)
     for t in range(tp_head.shape[0]):
-        p = tp_head[t]
-        if p < 0:
+        if tp_count[t] == 0:
             continue
         for j in range(4):
             q[j] = T[t, j]
         ok = _tet_planes(pts, dens, q, lam, val)
-        while p >= 0:
+        for p in range(tp_head[t], tp_head[t] + tp_count[t]):
             pdat[p, 5] = _point_error(pdat, p, val) if ok else 0.0
-            p = p_next[p]
 
 
 @njit(cache=True, _nrt=False)
-def _star_samples(st, pdat, tp_head, p_next, stride, p_id, p_k):
+def _star_samples(st, pdat, tp_head, tp_count, stride, p_id, p_k):
     """Every stride-th sample point of the star (``p_id``) with its star tet (``p_k``); returns the
     sum of their weighted squared errors against the current interpolant, in list order.
 
@@ -613,18 +611,19 @@ def _star_samples(st, pdat, tp_head, p_next, stride, p_id, p_k):
     adds nothing to ``e_old`` (>= +0.0) bit for bit, as skipping them did."""
     e_old = 0.0
     npt = 0
-    skip = 0  # points to pass before the next one taken (a countdown: no division per point)
+    skip = 0  # the points of the next tets to pass before the next one taken
     for i in range(st.shape[0]):
-        p = tp_head[st[i] >> 2]
-        while p >= 0:
-            if skip == 0:
-                p_id[npt] = p
-                p_k[npt] = i
-                e_old += pdat[p, 5]
-                npt += 1
-                skip = stride
-            skip -= 1
-            p = p_next[p]
+        t = st[i] >> 2
+        c = tp_count[t]
+        j = skip
+        while j < c:  # a tet's points are rows tp_head[t] .. + c - 1, in list order
+            p = tp_head[t] + j
+            p_id[npt] = p
+            p_k[npt] = i
+            e_old += pdat[p, 5]
+            npt += 1
+            j += stride
+        skip = j - c
     return e_old
 
 
@@ -794,7 +793,7 @@ def _total_error(dm_w, di, ge_w, swept_w, qe_w, se, n_col, power):
 
 
 @njit(cache=True)
-def _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next, fbuf, ibuf, fo, io):
+def _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, fbuf, ibuf, fo, io):
     """Everything about a's star that every candidate merge of a shares, and the scratch arrays of
     one evaluation, as one tuple (see the names unpacked in :func:`_candidate_terms`), all taken
     from ``fbuf`` (from offset ``fo`` on) and ``ibuf`` (from ``io``) where they fit (see
@@ -840,7 +839,7 @@ def _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count
     area_new, fo = _take(fbuf, fo, nbf)
     e_old = 0.0
     if npt > 0:
-        e_old = _star_samples(st, pdat, tp_head, p_next, stride, p_id, p_k)
+        e_old = _star_samples(st, pdat, tp_head, tp_count, stride, p_id, p_k)
     return (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
             stride, e_old, v6n, vout, q, n_new, area_new, s_ok, s_lam, s_val), io
 
@@ -961,13 +960,13 @@ def _candidate_exact(a, b, terms, st, T, pts, dens, params, pdat, ctx, best_b, b
 
 @njit(cache=True)
 def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, mark, counters, cand_out, err_out,
-                      pdat, tp_head, tp_count, p_next):
+                      pdat, tp_head, tp_count):
     """Error of every geometrically legal merge a -> b (b a neighbour of a): fills the outputs.
 
     Returns the number of candidates. Legality here covers volumes, boundary orientation and the
     boundary-into-interior rule; the link condition is checked by the caller, best first.
     """
-    ctx, _ = _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next, np.empty(0),
+    ctx, _ = _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, np.empty(0),
                            np.empty(0, np.int64), 0, 0)
     terms = np.empty((cand_out.shape[0], 5))
     return _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pdat, mark, counters, ctx, cand_out,
@@ -976,7 +975,7 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, m
 
 @njit(cache=True)
 def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, mark, mark_b, mark_ab,
-              counters, pdat, tp_head, tp_count, p_next, fbuf, ibuf):
+              counters, pdat, tp_head, tp_count, fbuf, ibuf):
     """Best legal merge of a: (target, error), or (-1, 0) when a has none.
 
     The best is the smallest (error, ``vkey`` of the target) among the candidates that pass the link
@@ -994,7 +993,7 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
     low, fo = _take(fbuf, 0, cap)
     terms_flat, fo = _take(fbuf, fo, 5 * cap)
     terms = terms_flat.reshape((cap, 5))
-    ctx, io = _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next, fbuf, ibuf, fo,
+    ctx, io = _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, fbuf, ibuf, fo,
                             io)
     link_buf = ibuf[min(io, ibuf.shape[0]):]
     nc = _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pdat, mark, counters, ctx, cand, low,
@@ -1144,7 +1143,7 @@ def _splice_incidence(a, b, head, nxt):
 
 
 @njit(cache=True)
-def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp_count, p_next, counters):
+def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp_count, counters):
     """After merging a: a and every point listed in a's former star go to the first live tet of
     the new star (star order) that contains them, else the one they are nearest to (largest
     smallest barycentric coordinate of :func:`_value_at`, the first of equals; as :func:`_new_value`).
@@ -1152,37 +1151,37 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp
     Containment is decided by :func:`_value_at`'s determinants; the tet planes (four dot products
     per point) settle it first wherever they are farther from 0 than any rounding of either could
     reach, so the determinants only run for points within rounding of a face (or in slivers).
+
+    Every tet of the new star gets its points as a new run of rows at the top (in the order a list
+    that each point was pushed on in turn would have: the last first), with their errors in it
+    (``pdat[:, 5]``); the old rows of the star's tets are left behind (:func:`_compact_points`
+    drops them when the rows run out).
     """
+    ns = st_a.shape[0]
     cnt = 1
-    for i in range(st_a.shape[0]):
-        p = tp_head[st_a[i] >> 2]
-        while p >= 0:
-            cnt += 1
-            p = p_next[p]
-    plist = np.empty(cnt, np.int64)
+    for i in range(ns):
+        cnt += tp_count[st_a[i] >> 2]
     counters[C_MOVED] += cnt
-    # a becomes a sample point: its row at the top of the point rows
-    r = counters[C_PTOP]
-    counters[C_PTOP] = r + 1
-    pdat[r, 0] = pts[a, 0]
-    pdat[r, 1] = pts[a, 1]
-    pdat[r, 2] = pts[a, 2]
-    pdat[r, 3] = dens[a]
-    pdat[r, 4] = vw[a]
-    p_orig[r] = a
-    p_next[r] = -1
-    plist[0] = r
+    # the points in turn: a first (it becomes a sample point), then every star tet's in list order
+    rows = np.empty((cnt, pdat.shape[1]))
+    orig = np.empty(cnt, np.int32)
+    rows[0, 0] = pts[a, 0]
+    rows[0, 1] = pts[a, 1]
+    rows[0, 2] = pts[a, 2]
+    rows[0, 3] = dens[a]
+    rows[0, 4] = vw[a]
+    rows[0, 5] = 0.0
+    orig[0] = a
     cnt = 1
-    for i in range(st_a.shape[0]):
+    for i in range(ns):
         t = st_a[i] >> 2
-        p = tp_head[t]
-        while p >= 0:
-            plist[cnt] = p
+        for p in range(tp_head[t], tp_head[t] + tp_count[t]):
+            for j in range(pdat.shape[1]):
+                rows[cnt, j] = pdat[p, j]
+            orig[cnt] = p_orig[p]
             cnt += 1
-            p = p_next[p]
         tp_head[t] = -1
         tp_count[t] = 0
-    ns = st_a.shape[0]
     # the extent of every coordinate involved (star vertices and points): bounds the rounding
     lo3 = np.full(3, 1e300)
     hi3 = np.full(3, -1e300)
@@ -1194,8 +1193,8 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp
                 hi3[d] = max(hi3[d], pts[T[t, j], d])
     for ip in range(cnt):
         for d in range(3):
-            lo3[d] = min(lo3[d], pdat[plist[ip], d])
-            hi3[d] = max(hi3[d], pdat[plist[ip], d])
+            lo3[d] = min(lo3[d], rows[ip, d])
+            hi3[d] = max(hi3[d], rows[ip, d])
     ext3 = ((hi3[0] - lo3[0]) ** 2 + (hi3[1] - lo3[1]) ** 2 + (hi3[2] - lo3[2]) ** 2) ** 1.5
     v6s = np.zeros(ns)
     usable = np.zeros(ns, np.bool_)
@@ -1216,11 +1215,13 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp
             c = ext3 / v6
             margin[i] = 1e-10 * c * (1.0 + c)
     vout = np.empty(2)
+    where = np.empty(cnt, np.int64)  # the star tet (index) each point goes to, -1: dropped
+    per = np.zeros(ns, np.int64)
+    n_keep = 0
     for ip in range(cnt):
-        p = plist[ip]
-        x = pdat[p, 0]
-        y = pdat[p, 1]
-        z = pdat[p, 2]
+        x = rows[ip, 0]
+        y = rows[ip, 1]
+        z = rows[ip, 2]
         best = -1
         for i in range(ns):
             if not usable[i]:
@@ -1255,13 +1256,31 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp
                 if vout[0] > best_lo:
                     best_lo = vout[0]
                     best = i
+        where[ip] = best
         if best >= 0:  # else no tet of a's star is left (or all are flat): the point is dropped
             # its error in the new tet, for _star_samples (usable[best]: alive with v6 > 0)
-            pdat[p, 5] = _point_error(pdat, p, val[best])
-            best = st_a[best] >> 2
-            p_next[p] = tp_head[best]
-            tp_head[best] = p
-            tp_count[best] += 1
+            rows[ip, 5] = _point_error(rows, ip, val[best])
+            per[best] += 1
+            n_keep += 1
+    if counters[C_PTOP] + n_keep > pdat.shape[0]:
+        _compact_points(alive, pdat, p_orig, tp_head, tp_count, counters)
+    top = counters[C_PTOP]
+    for i in range(ns):
+        if per[i] > 0:
+            t = st_a[i] >> 2
+            tp_head[t] = top
+            tp_count[t] = per[i]
+            top += per[i]
+            per[i] = top  # filled from its end down: the last point to arrive comes first
+    for ip in range(cnt):
+        i = where[ip]
+        if i >= 0:
+            per[i] -= 1
+            r = per[i]
+            for j in range(pdat.shape[1]):
+                pdat[r, j] = rows[ip, j]
+            p_orig[r] = orig[ip]
+    counters[C_PTOP] = top
 
 
 @njit(cache=True)
@@ -1312,48 +1331,39 @@ def _compact_tets(T, alive, nbr, head, nxt, tp_head, tp_count, t_orig):
 
 
 @njit(cache=True)
-def _compact_every(n):
-    """Merges between two rewrites of the point rows (about 16 in a whole decimation)."""
-    return max(4096, n // 16)
-
-
-@njit(cache=True)
-def _compact_points(alive, pdat, p_orig, tp_head, p_next, counters):
-    """Rewrite the point rows tet by tet, every list in its order, from row 0 (dropped points
-    go): a tet's points side by side in memory. Ids change, lists and their order do not."""
+def _compact_points(alive, pdat, p_orig, tp_head, tp_count, counters):
+    """Rewrite the point rows tet by tet, every run of rows in its order, from row 0 (the rows
+    left behind by the merges, and the points of dead tets, go). Ids change, lists and their order
+    do not."""
     k = 0
     for t in range(tp_head.shape[0]):
         if alive[t]:
-            p = tp_head[t]
-            while p >= 0:
-                k += 1
-                p = p_next[p]
+            k += tp_count[t]
     new_dat = np.empty((k, pdat.shape[1]))
     new_orig = np.empty(k, np.int32)
-    new_next = np.empty(k, np.int32)
     k = 0
     for t in range(tp_head.shape[0]):
-        p = tp_head[t]
-        if not alive[t] or p < 0:
+        c = tp_count[t]
+        if not alive[t] or c == 0:
             tp_head[t] = -1
+            tp_count[t] = 0
             continue
+        r0 = tp_head[t]
         tp_head[t] = k
-        while p >= 0:
+        for p in range(r0, r0 + c):
             for j in range(pdat.shape[1]):
                 new_dat[k, j] = pdat[p, j]
             new_orig[k] = p_orig[p]
-            p = p_next[p]
-            new_next[k] = k + 1 if p >= 0 else -1
             k += 1
     pdat[:k] = new_dat
     p_orig[:k] = new_orig
-    p_next[:k] = new_next
     counters[C_PTOP] = k
+    counters[C_REWRITES] += 1
 
 
 @njit(cache=True, parallel=True)
 def _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4,
-                   vkey, marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count, p_next):
+                   vkey, marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count):
     """:func:`_evaluate` of ``todo[:n_todo]`` in parallel: every evaluation only reads the mesh
     (each thread stamps its own mark rows and uses its own scratch), so the results cannot depend on
     the scheduling."""
@@ -1362,7 +1372,7 @@ def _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, de
     for i in prange(n_todo):
         tid = get_thread_id()
         b, e = _evaluate(todo[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks[tid],
-                         marks_b[tid], marks_ab[tid], tcount[tid], pdat, tp_head, tp_count, p_next, fbufs[tid],
+                         marks_b[tid], marks_ab[tid], tcount[tid], pdat, tp_head, tp_count, fbufs[tid],
                          ibufs[tid])
         out_b[i] = b
         out_e[i] = e
@@ -1402,7 +1412,7 @@ def _set_aside(d_err, d_v, d_b, d_ver, n_def, e, a, b, v_a, ver):
 
 @njit(cache=True, nogil=True)  # compress encodes the levels' meshes in a thread meanwhile
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab, tcount,
-         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pdat, tp_head, tp_count, p_next,
+         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pdat, tp_head, tp_count,
          vw, p_orig, lock, lock_b, round_stamp, max_blocked):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left.
 
@@ -1427,7 +1437,6 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
     d_b = np.empty(d_err.shape[0], np.int32)
     d_ver = np.empty(d_err.shape[0], np.int32)
     n_def = 0
-    compact_every = _compact_every(n)
     mark = marks[0]
     mark_b = marks_b[0]
     mark_ab = marks_ab[0]
@@ -1450,11 +1459,11 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
         found = False
         if n_todo == 1:
             out_b[0], out_e[0] = _evaluate(todo[0], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
-                                           u4, vkey, mark, mark_b, mark_ab, tc, pdat, tp_head, tp_count, p_next, fbuf,
+                                           u4, vkey, mark, mark_b, mark_ab, tc, pdat, tp_head, tp_count, fbuf,
                                            ibuf)
         elif n_todo > 1:
             _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params,
-                           quad, u4, vkey, marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count, p_next)
+                           quad, u4, vkey, marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count)
         # pushed in todo order, as evaluated one by one
         for i in range(n_todo):
             v = todo[i]
@@ -1525,12 +1534,10 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
                     nb[k] = w
                     k += 1
         _merge(a, b, st_a, nb[:k], T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, vw, p_orig, tp_head,
-               tp_count, p_next, counters)
+               tp_count, counters)
         parent[a] = b
         rank[a] = counters[C_MERGES]
         counters[C_MERGES] += 1
-        if params[P_WS] > 0.0 and counters[C_MERGES] % compact_every == 0:
-            _compact_points(alive, pdat, p_orig, tp_head, p_next, counters)
         ver[a] += 1
         if round_stamp > 0:
             lock[a] = round_stamp
@@ -1546,7 +1553,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
 
 @njit(cache=True, nogil=True)
 def _run_rounds(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab,
-                tcount, counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, pdat, tp_head, tp_count, p_next,
+                tcount, counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, pdat, tp_head, tp_count,
                 vw, p_orig, lock, lock_b, ends, max_blocked, round_no, starts):
     """Rounds of :func:`_run` up to every ``ends[r]`` in turn (its ``max_blocked[r]``), in one call
     without the GIL: the round loop of :func:`gatun_py.simplify.decimate.decimate` (a return to
@@ -1562,14 +1569,14 @@ def _run_rounds(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, 
             round_no[0] += 1
             if _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab,
                     tcount, counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, ends[r], pdat, tp_head,
-                    tp_count, p_next, vw, p_orig, lock, lock_b, round_no[0], max_blocked[r]):
+                    tp_count, vw, p_orig, lock, lock_b, round_no[0], max_blocked[r]):
                 return k, True, r
     return k, False, ends.shape[0] - 1
 
 
 @njit(cache=True)
 def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, vw, p_orig, tp_head, tp_count,
-           p_next, counters):
+           counters):
     """Everything a merge a -> b changes: the tets, the lists of the vertices around it (``nb``:
     the vertices of a's star but a), the sample points and b's quadric."""
     _apply_merge(a, b, st_a, T, alive, nbr, head, nxt)
@@ -1590,7 +1597,7 @@ def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, pd
                 _tidy(w, head, nxt, T, alive)
                 break
     if params[P_WS] > 0.0:
-        _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp_count, p_next, counters)
+        _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp_count, counters)
     for j in range(quad.shape[1]):
         quad[b, j] += quad[a, j]
 
@@ -1734,14 +1741,15 @@ def _vertex_weights(T, tet_w, n):
 
 
 @njit(cache=True)
-def _centroid_points(pts, dens, T, tet_w, centroid_weight):
+def _centroid_points(pts, dens, T, tet_w, centroid_weight, rows):
     """(pdat, p_orig): the rows (x, y, z, value, weight, 0) of every tet's centroid (weight its
-    volume fraction x ``centroid_weight``; row t, named n + t) and room for the n vertices after
-    them (each row is computed from its own tet alone: the same bits in any tet order)."""
+    volume fraction x ``centroid_weight``; row t, named n + t) and room for the rest of ``rows``
+    (at least the n vertices) after them (each row is computed from its own tet alone: the same
+    bits in any tet order)."""
     n = pts.shape[0]
     m = T.shape[0]
-    pdat = np.zeros((n + m, 6))
-    p_orig = np.full(n + m, -1, np.int32)
+    pdat = np.zeros((max(rows, n + m), 6))
+    p_orig = np.full(pdat.shape[0], -1, np.int32)
     for t in range(m):
         pdat[t, 4] = tet_w[t] * centroid_weight
         for k in range(3):

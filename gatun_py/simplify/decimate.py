@@ -205,6 +205,10 @@ CENTROID_WEIGHT = 1.0
 # every setting is within 0.002 of the greedy order.
 ROUNDS_PER_LEVEL = 64
 ROUND_BLOCKED = 0.25
+# Room for sample point rows beyond the n + m points, as a fraction of n + m: a merge writes the runs
+# of its star's points there, and when the rows run out they are rewritten (the more room, the
+# rarer the rewrites, each O(n + m)).
+POINT_SLACK = 0.5
 # Tets per chunk of the vectorised set-up (bounds its temporaries).
 _CHUNK = 1 << 16
 
@@ -388,12 +392,15 @@ class DecimationState:
         # (x, y, z, value, weight, error) per point, the centroids first (p_orig: which point a row
         # is, in the local numbering); error: its weighted squared error in the tet holding it,
         # kept up to date by the merges that move it (see _decimate_kernels._star_samples).
-        self.pdat, self.p_orig = K._centroid_points(self.pts, self.dens, self.T, tet_w[self.t_orig], CENTROID_WEIGHT)
+        # A tet's points are a run of rows (tp_head[t], tp_count[t] of them); a merge writes the
+        # new runs of its star at the top, and the rows are rewritten from 0 when they run out.
+        rows = n + m + int(POINT_SLACK * (n + m))
+        self.pdat, self.p_orig = K._centroid_points(self.pts, self.dens, self.T, tet_w[self.t_orig], CENTROID_WEIGHT,
+                                                    rows)
         del tet_w
-        self.p_next = np.full(n + m, -1, np.int32)
         self.tp_head = np.arange(m, dtype=np.int32)
         self.tp_count = np.ones(m, np.int32)
-        K._set_point_errors(self.T, self.pts, self.dens, self.pdat, self.tp_head, self.p_next)
+        K._set_point_errors(self.T, self.pts, self.dens, self.pdat, self.tp_head, self.tp_count)
         # per thread of the parallel evaluations: stamp rows and counters (stamps, evaluations)
         threads = max(1, int(numba.config.NUMBA_NUM_THREADS))
         self.marks = np.zeros((threads, n), np.int64)
@@ -424,7 +431,7 @@ class DecimationState:
                 self.params, self.quad, self.u4, self.v_orig)
 
     def _sample_args(self):
-        return (self.pdat, self.tp_head, self.tp_count, self.p_next)
+        return (self.pdat, self.tp_head, self.tp_count)
 
     def _heap_args(self):
         return (self.ver, self.h_err, self.h_v, self.h_b, self.h_ver, self.last_err)
@@ -497,7 +504,7 @@ class DecimationState:
         nb = np.unique(self.T[st >> 2])
         K._merge(a, b, st, nb[nb != a].astype(np.int64), self.T, self.alive, self.nbr, self.head, self.nxt, self.pts,
                  self.dens, self.params, self.quad, self.pdat, self.vw, self.p_orig, self.tp_head, self.tp_count,
-                 self.p_next, self.counters)
+                 self.counters)
         self.parent[a] = b
         self.rank[a] = self.counters[K.C_MERGES]
         self.counters[K.C_MERGES] += 1

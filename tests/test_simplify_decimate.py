@@ -347,8 +347,8 @@ def test_unstructured_gmsh_mesh():
 
 @pytest.mark.parametrize("name", ["delaunay", "cavity"])
 def test_compacting_the_points_keeps_every_list_and_its_order(name):
-    """The point rows are rewritten tet by tet from time to time: the same points (by name and
-    row content) in the same order in every tet's list, side by side from row 0."""
+    """The point rows are rewritten when they run out: the same points (by name and row content)
+    in the same order in every tet's list, side by side from row 0."""
     mesh = AWKWARD[name]()
     state = DecimationState(mesh, 1.0, 1.0, order="input")
     forest = decimate(mesh)
@@ -360,13 +360,16 @@ def test_compacting_the_points_keeps_every_list_and_its_order(name):
                 for t in np.flatnonzero(state.alive)}
 
     before = lists()
-    K._compact_points(state.alive, state.pdat, state.p_orig, state.tp_head, state.tp_count, state.counters)
+    K._compact_points(state.alive, state.pdat, state.prow, state.tp_head, state.tp_count, state.counters)
     assert lists() == before
     k = int(state.counters[K.C_PTOP])
     assert k == sum(len(v) for v in before.values())
-    # from row 0, tet by tet
+    # side by side from row 0, no row left between them
     live = [t for t in np.flatnonzero(state.alive) if state.tp_count[t] > 0]
-    assert [int(state.tp_head[t]) for t in live] == np.cumsum([0] + [int(state.tp_count[t]) for t in live])[:-1].tolist()
+    runs = sorted((int(state.tp_head[t]), int(state.tp_count[t])) for t in live)
+    assert runs[0][0] == 0 and runs[-1][0] + runs[-1][1] == k
+    assert all(h + c == h2 for (h, c), (h2, _) in zip(runs, runs[1:]))
+    assert all(state.prow[h, 1] == t for t in live for h in _rows(state, t))
 
 
 @pytest.mark.parametrize("name", ["delaunay", "cavity", "two_components"])

@@ -17,12 +17,13 @@ the caller's id, which breaks every tie between equal errors. The mesh state dur
 ``quad`` (n, 15) float64, ``u4`` (n, 4) float64
     every vertex's error quadric (A's upper triangle, b, c; see :func:`_quadric_at`) and its
     (x, y, z, s) point; merging a into b adds a's quadric to b's.
-``pdat`` (r, 6) float64, ``p_orig`` (r,) int32, ``tp_head``, ``tp_count`` (m,) int32
+``pdat`` (r, 6) float64, ``prow`` (r, 2) int32, ``tp_head``, ``tp_count`` (m,) int32
     sample points of the original field, one row (x, y, z, value, weight, error) each (error: the
     weighted squared error against the interpolant of the tet holding it, see
     :func:`_star_samples`): the centroid of every input tet from the start, every vertex once
-    merged away (its row made then, from ``pts``, ``dens`` and its weight ``vw``); ``p_orig``
-    names the point (a vertex id, or n + t for tet t's centroid). Every one is listed in the live
+    merged away (its row made then, from ``pts``, ``dens`` and its weight ``vw``); ``prow[r, 0]``
+    names the point (a vertex id, or n + t for tet t's centroid), ``prow[r, 1]`` the tet the run
+    holding row r was written for. Every one is listed in the live
     tet that holds it, with its weight (its share of the original volume): tet t's list is the run
     of rows ``tp_head[t]`` .. ``tp_head[t] + tp_count[t] - 1`` (the evaluations read these runs
     in order: the order within a list fixes the sums). Rows ``counters[C_PTOP]`` on are free
@@ -1143,7 +1144,7 @@ def _splice_incidence(a, b, head, nxt):
 
 
 @njit(cache=True)
-def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp_count, counters):
+def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, prow, tp_head, tp_count, counters):
     """After merging a: a and every point listed in a's former star go to the first live tet of
     the new star (star order) that contains them, else the one they are nearest to (largest
     smallest barycentric coordinate of :func:`_value_at`, the first of equals; as :func:`_new_value`).
@@ -1178,7 +1179,7 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp
         for p in range(tp_head[t], tp_head[t] + tp_count[t]):
             for j in range(pdat.shape[1]):
                 rows[cnt, j] = pdat[p, j]
-            orig[cnt] = p_orig[p]
+            orig[cnt] = prow[p, 0]
             cnt += 1
         tp_head[t] = -1
         tp_count[t] = 0
@@ -1263,7 +1264,7 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp
             per[best] += 1
             n_keep += 1
     if counters[C_PTOP] + n_keep > pdat.shape[0]:
-        _compact_points(alive, pdat, p_orig, tp_head, tp_count, counters)
+        _compact_points(alive, pdat, prow, tp_head, tp_count, counters)
     top = counters[C_PTOP]
     for i in range(ns):
         if per[i] > 0:
@@ -1279,14 +1280,16 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp
             r = per[i]
             for j in range(pdat.shape[1]):
                 pdat[r, j] = rows[ip, j]
-            p_orig[r] = orig[ip]
+            prow[r, 0] = orig[ip]
+            prow[r, 1] = st_a[i] >> 2
     counters[C_PTOP] = top
 
 
 @njit(cache=True)
-def _compact_tets(T, alive, nbr, head, nxt, tp_head, tp_count, t_orig):
+def _compact_tets(T, alive, nbr, head, nxt, tp_head, tp_count, t_orig, prow, counters):
     """The live tets renumbered 0.. in their order (the dead ones dropped), as new arrays
-    (T, nbr, nxt, tp_head, tp_count, t_orig); ``head`` is rewritten in place. Every vertex's list
+    (T, nbr, nxt, tp_head, tp_count, t_orig); ``head`` and the point rows' tets (``prow[:, 1]``,
+    -1 for a dead tet's) are rewritten in place. Every vertex's list
     keeps its live slots in their order (the dead ones are unlinked, as :func:`_tidy` would), so
     the merges that follow are the same; they walk fewer cache lines."""
     m = T.shape[0]
@@ -1312,6 +1315,9 @@ def _compact_tets(T, alive, nbr, head, nxt, tp_head, tp_count, t_orig):
         tp_head2[u] = tp_head[t]
         tp_count2[u] = tp_count[t]
         t_orig2[u] = t_orig[t]
+    for r in range(counters[C_PTOP]):
+        t = prow[r, 1]
+        prow[r, 1] = new_id[t] if t >= 0 else -1
     nxt2 = np.full(4 * k, -1, np.int32)
     for v in range(head.shape[0]):
         last = -1
@@ -1331,32 +1337,31 @@ def _compact_tets(T, alive, nbr, head, nxt, tp_head, tp_count, t_orig):
 
 
 @njit(cache=True)
-def _compact_points(alive, pdat, p_orig, tp_head, tp_count, counters):
-    """Rewrite the point rows tet by tet, every run of rows in its order, from row 0 (the rows
-    left behind by the merges, and the points of dead tets, go). Ids change, lists and their order
-    do not."""
+def _compact_points(alive, pdat, prow, tp_head, tp_count, counters):
+    """Slide the live runs of rows down from row 0, in row order (the rows left behind by the
+    merges go; every list keeps its rows in order). Ids change, lists and their order do not.
+
+    A row r is the start of a live run when its tet t = ``prow[r, 1]`` is alive and
+    ``tp_head[t] == r``: the rows below the top are written once between two rewrites, so that run
+    is the one written for t at r."""
+    top = counters[C_PTOP]
     k = 0
-    for t in range(tp_head.shape[0]):
-        if alive[t]:
-            k += tp_count[t]
-    new_dat = np.empty((k, pdat.shape[1]))
-    new_orig = np.empty(k, np.int32)
-    k = 0
-    for t in range(tp_head.shape[0]):
-        c = tp_count[t]
-        if not alive[t] or c == 0:
-            tp_head[t] = -1
-            tp_count[t] = 0
+    r = 0
+    while r < top:
+        t = prow[r, 1]
+        if t < 0 or not alive[t] or tp_head[t] != r or tp_count[t] == 0:
+            r += 1
             continue
-        r0 = tp_head[t]
+        c = tp_count[t]
+        if k != r:  # k < r: an ascending copy never overwrites a row it still has to read
+            for i in range(c):
+                for j in range(pdat.shape[1]):
+                    pdat[k + i, j] = pdat[r + i, j]
+                prow[k + i, 0] = prow[r + i, 0]
+                prow[k + i, 1] = t
         tp_head[t] = k
-        for p in range(r0, r0 + c):
-            for j in range(pdat.shape[1]):
-                new_dat[k, j] = pdat[p, j]
-            new_orig[k] = p_orig[p]
-            k += 1
-    pdat[:k] = new_dat
-    p_orig[:k] = new_orig
+        k += c
+        r += c
     counters[C_PTOP] = k
     counters[C_REWRITES] += 1
 
@@ -1413,7 +1418,7 @@ def _set_aside(d_err, d_v, d_b, d_ver, n_def, e, a, b, v_a, ver):
 @njit(cache=True, nogil=True)  # compress encodes the levels' meshes in a thread meanwhile
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab, tcount,
          counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pdat, tp_head, tp_count,
-         vw, p_orig, lock, lock_b, round_stamp, max_blocked):
+         vw, prow, lock, lock_b, round_stamp, max_blocked):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left.
 
     ``marks*`` and ``tcount`` have one row per thread (stamps, evaluation counts); the sequential
@@ -1533,7 +1538,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
                     mark[w] = stamp
                     nb[k] = w
                     k += 1
-        _merge(a, b, st_a, nb[:k], T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, vw, p_orig, tp_head,
+        _merge(a, b, st_a, nb[:k], T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, vw, prow, tp_head,
                tp_count, counters)
         parent[a] = b
         rank[a] = counters[C_MERGES]
@@ -1554,7 +1559,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
 @njit(cache=True, nogil=True)
 def _run_rounds(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab,
                 tcount, counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, pdat, tp_head, tp_count,
-                vw, p_orig, lock, lock_b, ends, max_blocked, round_no, starts):
+                vw, prow, lock, lock_b, ends, max_blocked, round_no, starts):
     """Rounds of :func:`_run` up to every ``ends[r]`` in turn (its ``max_blocked[r]``), in one call
     without the GIL: the round loop of :func:`gatun_py.simplify.decimate.decimate` (a return to
     Python between rounds waits for the GIL, which a numba encoder in another thread may hold for
@@ -1569,13 +1574,13 @@ def _run_rounds(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, 
             round_no[0] += 1
             if _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab,
                     tcount, counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, ends[r], pdat, tp_head,
-                    tp_count, vw, p_orig, lock, lock_b, round_no[0], max_blocked[r]):
+                    tp_count, vw, prow, lock, lock_b, round_no[0], max_blocked[r]):
                 return k, True, r
     return k, False, ends.shape[0] - 1
 
 
 @njit(cache=True)
-def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, vw, p_orig, tp_head, tp_count,
+def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, vw, prow, tp_head, tp_count,
            counters):
     """Everything a merge a -> b changes: the tets, the lists of the vertices around it (``nb``:
     the vertices of a's star but a), the sample points and b's quadric."""
@@ -1597,7 +1602,7 @@ def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, pd
                 _tidy(w, head, nxt, T, alive)
                 break
     if params[P_WS] > 0.0:
-        _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp_count, counters)
+        _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, prow, tp_head, tp_count, counters)
     for j in range(quad.shape[1]):
         quad[b, j] += quad[a, j]
 
@@ -1742,21 +1747,22 @@ def _vertex_weights(T, tet_w, n):
 
 @njit(cache=True)
 def _centroid_points(pts, dens, T, tet_w, centroid_weight, rows):
-    """(pdat, p_orig): the rows (x, y, z, value, weight, 0) of every tet's centroid (weight its
-    volume fraction x ``centroid_weight``; row t, named n + t) and room for the rest of ``rows``
+    """(pdat, prow): the rows (x, y, z, value, weight, 0) and (name, tet) of every tet's
+    centroid (weight its volume fraction x ``centroid_weight``; row t, named n + t) and room for the rest of ``rows``
     (at least the n vertices) after them (each row is computed from its own tet alone: the same
     bits in any tet order)."""
     n = pts.shape[0]
     m = T.shape[0]
     pdat = np.zeros((max(rows, n + m), 6))
-    p_orig = np.full(pdat.shape[0], -1, np.int32)
+    prow = np.full((pdat.shape[0], 2), -1, np.int32)
     for t in range(m):
         pdat[t, 4] = tet_w[t] * centroid_weight
         for k in range(3):
             pdat[t, k] = (((pts[T[t, 0], k] + pts[T[t, 1], k]) + pts[T[t, 2], k]) + pts[T[t, 3], k]) / 4.0
         pdat[t, 3] = (((dens[T[t, 0]] + dens[T[t, 1]]) + dens[T[t, 2]]) + dens[T[t, 3]]) / 4.0
-        p_orig[t] = n + t
-    return pdat, p_orig
+        prow[t, 0] = n + t
+        prow[t, 1] = t
+    return pdat, prow
 
 
 @njit(cache=True)

@@ -389,13 +389,13 @@ class DecimationState:
         # Sample points of the original field, listed in the live tet holding them: every input
         # tet's centroid from the start (ids n + t, weight its volume fraction x CENTROID_WEIGHT),
         # every vertex once merged away (weight a quarter of its tets' volume fraction); one row
-        # (x, y, z, value, weight, error) per point, the centroids first (p_orig: which point a row
-        # is, in the local numbering); error: its weighted squared error in the tet holding it,
+        # (x, y, z, value, weight, error) per point, the centroids first (prow: which point a row
+        # is, in the local numbering, and the tet its run was written for); error: its weighted squared error in the tet holding it,
         # kept up to date by the merges that move it (see _decimate_kernels._star_samples).
         # A tet's points are a run of rows (tp_head[t], tp_count[t] of them); a merge writes the
         # new runs of its star at the top, and the rows are rewritten from 0 when they run out.
         rows = n + m + int(POINT_SLACK * (n + m))
-        self.pdat, self.p_orig = K._centroid_points(self.pts, self.dens, self.T, tet_w[self.t_orig], CENTROID_WEIGHT,
+        self.pdat, self.prow = K._centroid_points(self.pts, self.dens, self.T, tet_w[self.t_orig], CENTROID_WEIGHT,
                                                     rows)
         del tet_w
         self.tp_head = np.arange(m, dtype=np.int32)
@@ -453,7 +453,7 @@ class DecimationState:
             stamp = self.round
         return bool(K._run(*self._mesh_args(), self.marks, self.marks_b, self.marks_ab, self.tcount, self.counters,
                            *self._heap_args(), self.parent, self.rank, np.int64(max_merges), *self._sample_args(),
-                           self.vw, self.p_orig, self.lock, self.lock_b, np.int64(stamp), np.int64(max_blocked)))
+                           self.vw, self.prow, self.lock, self.lock_b, np.int64(stamp), np.int64(max_blocked)))
 
     def run_rounds(self, ends: np.ndarray, max_blocked: np.ndarray):
         """Rounds of independent merges (as :meth:`run` with ``one_round``) up to every ``ends[r]``
@@ -464,7 +464,7 @@ class DecimationState:
         round_no = np.array([self.round], np.int64)
         k, finished, r = K._run_rounds(*self._mesh_args(), self.marks, self.marks_b, self.marks_ab, self.tcount,
                                        self.counters, *self._heap_args(), self.parent, self.rank,
-                                       *self._sample_args(), self.vw, self.p_orig, self.lock, self.lock_b, ends,
+                                       *self._sample_args(), self.vw, self.prow, self.lock, self.lock_b, ends,
                                        np.ascontiguousarray(max_blocked, np.int64), round_no, starts)
         self.round = int(round_no[0])
         return [int(x) for x in starts[:k]], bool(finished), int(r)
@@ -503,11 +503,16 @@ class DecimationState:
         st = K._star(a, self.head, self.nxt, self.T, self.alive)
         nb = np.unique(self.T[st >> 2])
         K._merge(a, b, st, nb[nb != a].astype(np.int64), self.T, self.alive, self.nbr, self.head, self.nxt, self.pts,
-                 self.dens, self.params, self.quad, self.pdat, self.vw, self.p_orig, self.tp_head, self.tp_count,
+                 self.dens, self.params, self.quad, self.pdat, self.vw, self.prow, self.tp_head, self.tp_count,
                  self.counters)
         self.parent[a] = b
         self.rank[a] = self.counters[K.C_MERGES]
         self.counters[K.C_MERGES] += 1
+
+    @property
+    def p_orig(self) -> np.ndarray:
+        """Which point every row of ``pdat`` is (a local vertex id, or n + t for tet t's centroid)."""
+        return self.prow[:, 0]
 
     @property
     def n_merges(self) -> int:
@@ -523,7 +528,7 @@ class DecimationState:
         are dead, the star walks touch fewer cache lines. The merges that follow are the same."""
         (self.T, self.nbr, self.nxt, self.tp_head, self.tp_count,
          self.t_orig) = K._compact_tets(self.T, self.alive, self.nbr, self.head, self.nxt, self.tp_head,
-                                        self.tp_count, self.t_orig)
+                                        self.tp_count, self.t_orig, self.prow, self.counters)
         self.alive = np.ones(self.T.shape[0], bool)
 
     def compact_if_sparse(self) -> None:

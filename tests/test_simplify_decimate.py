@@ -10,6 +10,7 @@ import numba
 import numpy as np
 import pytest
 from hypothesis import given, settings
+from hypothesis import strategies as hst
 from meshgen import AWKWARD, delaunay_mesh, degenerate_grid, grid_mesh, mesh_strategy, single_tet
 from naive_simplify import (check_valid, collapse, evaluate_merge, face_neighbours, interpolate, legal_merges,
                             pinned_vertices, quadric_value, reassign_samples, tet_quadrics)
@@ -386,3 +387,31 @@ def test_running_out_of_point_rows_changes_no_merge(name, monkeypatch):
     got = state.prefix()
     assert got.n_merges == want.n_merges
     assert np.array_equal(got.parent, want.parent) and np.array_equal(got.rank, want.rank)
+
+
+@settings(max_examples=60, deadline=None)
+@given(hst.lists(hst.tuples(hst.integers(0, 2), hst.integers(0, 11), hst.sampled_from([0.0, -0.0, 1.0, 2.5, 1e-300, 7.0])),
+                max_size=80), hst.randoms(use_true_random=False))
+def test_heap_pops_the_smallest_current_entry(ops, rnd):
+    """The heap keeps one entry per vertex (a push replaces it, a removal drops it) and pops the
+    smallest (error, vkey) among them: against a dict of the current entries."""
+    n = 12
+    vkey = np.array(rnd.sample(range(100), n), np.int32)
+    h_err, h_v, h_b, h_ver = np.zeros(n + 1), np.zeros(n + 1, np.int32), np.zeros(n + 1, np.int32), \
+        np.zeros(n + 1, np.int32)
+    h_pos = np.full(n, -1, np.int32)
+    counters = np.zeros(K.N_COUNTERS, np.int64)
+    ref = {}
+    for step, (op, v, e) in enumerate(ops):
+        if op == 0:
+            K._heap_push(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, e, v, v + 1, step)
+            ref[v] = (e, v + 1, step)
+        elif op == 1:
+            K._heap_remove(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, v)
+            ref.pop(v, None)
+        elif ref:
+            want = min(ref, key=lambda u: (ref[u][0], vkey[u]))
+            e_got, v_got, b_got, ver_got = K._heap_pop(h_err, h_v, h_b, h_ver, h_pos, vkey, counters)
+            assert (v_got, (e_got, b_got, ver_got)) == (want, ref.pop(want))
+        assert counters[K.C_HEAP] == len(ref)
+        assert all(h_v[h_pos[u]] == u for u in ref) and all(h_pos[u] == -1 for u in range(n) if u not in ref)

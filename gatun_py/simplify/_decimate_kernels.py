@@ -1029,7 +1029,13 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
     return best_b, best_e
 
 
-# -- a binary min-heap over (error, vertex) with a version stamp for lazy deletion ----------------
+# -- a binary min-heap over (error, vertex), at most one entry per vertex ---------------------------
+# ``h_pos[v]``: the index of v's entry, -1 if none. A vertex's new entry replaces its old one, and a
+# vertex re-evaluated without a legal merge loses it: every entry is current (``h_ver``, the
+# vertex's version when it was made, stays for the callers' checks). The keys (error, ``vkey``)
+# of distinct vertices are distinct and the errors are never NaN, so the entries come out in
+# one order whatever the heap's shape: the order of a heap that kept the superseded entries
+# and skipped them on their way out (the one before), with no such entries to pop.
 @njit(cache=True, _nrt=False)
 def _heap_less(h_err, h_v, vkey, i, j):
     """(error, ``vkey`` of the vertex) of entry i below entry j's (the key only read on equal errors)."""
@@ -1037,46 +1043,60 @@ def _heap_less(h_err, h_v, vkey, i, j):
 
 
 @njit(cache=True, _nrt=False)
-def _heap_swap(h_err, h_v, h_b, h_ver, i, j):
+def _heap_swap(h_err, h_v, h_b, h_ver, h_pos, i, j):
     h_err[i], h_err[j] = h_err[j], h_err[i]
     h_v[i], h_v[j] = h_v[j], h_v[i]
     h_b[i], h_b[j] = h_b[j], h_b[i]
     h_ver[i], h_ver[j] = h_ver[j], h_ver[i]
+    h_pos[h_v[i]] = i
+    h_pos[h_v[j]] = j
 
 
 @njit(cache=True, _nrt=False)
-def _heap_push(h_err, h_v, h_b, h_ver, vkey, counters, e, v, b, ver, cur_ver):
-    n = counters[C_HEAP]
-    if n >= h_err.shape[0]:
-        # full: drop stale entries and rebuild (at most one live entry per vertex)
-        k = 0
-        for i in range(n):
-            if h_ver[i] == cur_ver[h_v[i]]:
-                h_err[k] = h_err[i]
-                h_v[k] = h_v[i]
-                h_b[k] = h_b[i]
-                h_ver[k] = h_ver[i]
-                k += 1
-        n = k
-        for i in range(n // 2 - 1, -1, -1):
-            _sift_down(h_err, h_v, h_b, h_ver, vkey, i, n)
-    h_err[n] = e
-    h_v[n] = v
-    h_b[n] = b
-    h_ver[n] = ver
-    i = n
+def _sift_up(h_err, h_v, h_b, h_ver, h_pos, vkey, i):
     while i > 0:
         p = (i - 1) >> 1
         if _heap_less(h_err, h_v, vkey, i, p):
-            _heap_swap(h_err, h_v, h_b, h_ver, i, p)
+            _heap_swap(h_err, h_v, h_b, h_ver, h_pos, i, p)
             i = p
         else:
             break
-    counters[C_HEAP] = n + 1
+    return i
 
 
 @njit(cache=True, _nrt=False)
-def _sift_down(h_err, h_v, h_b, h_ver, vkey, i, n):
+def _heap_push(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, e, v, b, ver):
+    """v's entry (error e, target b, version ver), replacing the one v has."""
+    i = h_pos[v]
+    if i < 0:
+        i = counters[C_HEAP]
+        counters[C_HEAP] = i + 1
+        h_pos[v] = i
+    h_err[i] = e
+    h_v[i] = v
+    h_b[i] = b
+    h_ver[i] = ver
+    i = _sift_up(h_err, h_v, h_b, h_ver, h_pos, vkey, i)
+    _sift_down(h_err, h_v, h_b, h_ver, h_pos, vkey, i, counters[C_HEAP])
+
+
+@njit(cache=True, _nrt=False)
+def _heap_remove(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, v):
+    """Drop v's entry, if it has one."""
+    i = h_pos[v]
+    if i < 0:
+        return
+    n = counters[C_HEAP] - 1
+    _heap_swap(h_err, h_v, h_b, h_ver, h_pos, i, n)
+    h_pos[v] = -1
+    counters[C_HEAP] = n
+    if i < n:
+        i = _sift_up(h_err, h_v, h_b, h_ver, h_pos, vkey, i)
+        _sift_down(h_err, h_v, h_b, h_ver, h_pos, vkey, i, n)
+
+
+@njit(cache=True, _nrt=False)
+def _sift_down(h_err, h_v, h_b, h_ver, h_pos, vkey, i, n):
     while True:
         l = 2 * i + 1
         if l >= n:
@@ -1085,19 +1105,20 @@ def _sift_down(h_err, h_v, h_b, h_ver, vkey, i, n):
         if l + 1 < n and _heap_less(h_err, h_v, vkey, l + 1, l):
             m = l + 1
         if _heap_less(h_err, h_v, vkey, m, i):
-            _heap_swap(h_err, h_v, h_b, h_ver, i, m)
+            _heap_swap(h_err, h_v, h_b, h_ver, h_pos, i, m)
             i = m
         else:
             break
 
 
 @njit(cache=True, _nrt=False)
-def _heap_pop(h_err, h_v, h_b, h_ver, vkey, counters):
+def _heap_pop(h_err, h_v, h_b, h_ver, h_pos, vkey, counters):
     n = counters[C_HEAP] - 1
     e, v, b, ver = h_err[0], h_v[0], h_b[0], h_ver[0]
-    _heap_swap(h_err, h_v, h_b, h_ver, 0, n)
+    _heap_swap(h_err, h_v, h_b, h_ver, h_pos, 0, n)
+    h_pos[v] = -1
     counters[C_HEAP] = n
-    _sift_down(h_err, h_v, h_b, h_ver, vkey, 0, n)
+    _sift_down(h_err, h_v, h_b, h_ver, h_pos, vkey, 0, n)
     return e, v, b, ver
 
 
@@ -1417,7 +1438,7 @@ def _set_aside(d_err, d_v, d_b, d_ver, n_def, e, a, b, v_a, ver):
 
 @njit(cache=True, nogil=True)  # compress encodes the levels' meshes in a thread meanwhile
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab, tcount,
-         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pdat, tp_head, tp_count,
+         counters, ver, h_err, h_v, h_b, h_ver, h_pos, last_err, parent, rank, max_merges, pdat, tp_head, tp_count,
          vw, prow, lock, lock_b, round_stamp, max_blocked):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left.
 
@@ -1475,10 +1496,11 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
             ver[v] += 1
             if out_b[i] >= 0:
                 last_err[v] = out_e[i]
-                _heap_push(h_err, h_v, h_b, h_ver, vkey, counters, out_e[i], v, out_b[i], ver[v], ver)
+                _heap_push(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, out_e[i], v, out_b[i], ver[v])
                 found = True
             else:
                 last_err[v] = -1.0
+                _heap_remove(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, v)
         n_todo = 0
         if sweeping and not found:
             return True
@@ -1487,7 +1509,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
             # the round is over: what it set aside goes back with its error unchanged
             for i in range(n_def):
                 if d_ver[i] == ver[d_v[i]]:
-                    _heap_push(h_err, h_v, h_b, h_ver, vkey, counters, d_err[i], d_v[i], d_b[i], d_ver[i], ver)
+                    _heap_push(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, d_err[i], d_v[i], d_b[i], d_ver[i])
             return False
         if counters[C_HEAP] == 0:
             # neighbourhoods two rings away from a merge may have become legal: look again
@@ -1498,7 +1520,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
                     n_todo += 1
             sweeping = True
             continue
-        e, a, b, v_a = _heap_pop(h_err, h_v, h_b, h_ver, vkey, counters)
+        e, a, b, v_a = _heap_pop(h_err, h_v, h_b, h_ver, h_pos, vkey, counters)
         tc[C_POPS] += 1
         if v_a != ver[a] or parent[a] != a:
             tc[C_STALE] += 1
@@ -1553,12 +1575,12 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
             w = nb[i]
             if parent[w] == w and not pinned[w]:
                 ver[w] += 1
-                _heap_push(h_err, h_v, h_b, h_ver, vkey, counters, max(e, last_err[w]), w, -1, ver[w], ver)
+                _heap_push(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, max(e, last_err[w]), w, -1, ver[w])
 
 
 @njit(cache=True, nogil=True)
 def _run_rounds(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab,
-                tcount, counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, pdat, tp_head, tp_count,
+                tcount, counters, ver, h_err, h_v, h_b, h_ver, h_pos, last_err, parent, rank, pdat, tp_head, tp_count,
                 vw, prow, lock, lock_b, ends, max_blocked, round_no, starts):
     """Rounds of :func:`_run` up to every ``ends[r]`` in turn (its ``max_blocked[r]``), in one call
     without the GIL: the round loop of :func:`gatun_py.simplify.decimate.decimate` (a return to
@@ -1573,7 +1595,7 @@ def _run_rounds(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, 
             k += 1
             round_no[0] += 1
             if _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab,
-                    tcount, counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, ends[r], pdat, tp_head,
+                    tcount, counters, ver, h_err, h_v, h_b, h_ver, h_pos, last_err, parent, rank, ends[r], pdat, tp_head,
                     tp_count, vw, prow, lock, lock_b, round_no[0], max_blocked[r]):
                 return k, True, r
     return k, False, ends.shape[0] - 1

@@ -411,12 +411,14 @@ class DecimationState:
         self.counters[K.C_PTOP] = m
         self.ver = np.zeros(n, np.int32)
         self.last_err = np.full(n, -1.0)
-        # at most one live entry per vertex: a full heap compacts to <= n and has n free slots again
+        # at most one entry per vertex in the heap (h_pos), and at most one current entry per
+        # vertex among those a round sets aside (a full list drops the others first)
         cap = 2 * n + 1024
         self.h_err = np.zeros(cap)
         self.h_v = np.zeros(cap, np.int32)
         self.h_b = np.zeros(cap, np.int32)
         self.h_ver = np.zeros(cap, np.int32)
+        self.h_pos = np.full(n, -1, np.int32)  # every vertex's entry in the heap (at most one)
         # the forest so far, local: parent[v] (a local id), rank[v]
         self.parent = np.arange(n, dtype=np.int32)
         self.rank = np.full(n, K.ROOT_RANK, np.int32)
@@ -434,7 +436,7 @@ class DecimationState:
         return (self.pdat, self.tp_head, self.tp_count)
 
     def _heap_args(self):
-        return (self.ver, self.h_err, self.h_v, self.h_b, self.h_ver, self.last_err)
+        return (self.ver, self.h_err, self.h_v, self.h_b, self.h_ver, self.h_pos, self.last_err)
 
     def start(self) -> None:
         """Evaluate every vertex's best merge (the first :meth:`run` does it too)."""

@@ -390,8 +390,9 @@ def test_running_out_of_point_rows_changes_no_merge(name, monkeypatch):
 
 
 @settings(max_examples=60, deadline=None)
-@given(hst.lists(hst.tuples(hst.integers(0, 2), hst.integers(0, 11), hst.sampled_from([0.0, -0.0, 1.0, 2.5, 1e-300, 7.0])),
-                max_size=80), hst.randoms(use_true_random=False))
+@given(hst.lists(hst.tuples(hst.integers(0, 2), hst.integers(0, 11),
+                            hst.sampled_from([0.0, -0.0, 1.0, 2.5, 1e-300, 7.0])), max_size=80),
+       hst.randoms(use_true_random=False))
 def test_heap_pops_the_smallest_current_entry(ops, rnd):
     """The heap keeps one entry per vertex (a push replaces it, a removal drops it) and pops the
     smallest (error, vkey) among them: against a dict of the current entries."""

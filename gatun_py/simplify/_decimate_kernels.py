@@ -1595,8 +1595,8 @@ def _run_rounds(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, 
             k += 1
             round_no[0] += 1
             if _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab,
-                    tcount, counters, ver, h_err, h_v, h_b, h_ver, h_pos, last_err, parent, rank, ends[r], pdat, tp_head,
-                    tp_count, vw, prow, lock, lock_b, round_no[0], max_blocked[r]):
+                    tcount, counters, ver, h_err, h_v, h_b, h_ver, h_pos, last_err, parent, rank, ends[r], pdat,
+                    tp_head, tp_count, vw, prow, lock, lock_b, round_no[0], max_blocked[r]):
                 return k, True, r
     return k, False, ends.shape[0] - 1
 

@@ -390,8 +390,9 @@ class DecimationState:
         # tet's centroid from the start (ids n + t, weight its volume fraction x CENTROID_WEIGHT),
         # every vertex once merged away (weight a quarter of its tets' volume fraction); one row
         # (x, y, z, value, weight, error) per point, the centroids first (prow: which point a row
-        # is, in the local numbering, and the tet its run was written for); error: its weighted squared error in the tet holding it,
-        # kept up to date by the merges that move it (see _decimate_kernels._star_samples).
+        # is, in the local numbering, and the tet its run was written for); error: its weighted
+        # squared error in the tet holding it, kept up to date by the merges that move it (see
+        # _decimate_kernels._star_samples).
         # A tet's points are a run of rows (tp_head[t], tp_count[t] of them); a merge writes the
         # new runs of its star at the top, and the rows are rewritten from 0 when they run out.
         rows = n + m + int(POINT_SLACK * (n + m))

@@ -95,12 +95,16 @@ level 0 beside it, 18.1 s for 20.5 s with every level beside it). Speculative ev
 next lazy heap entries on the second thread was tried and measured slower (see bench/sections/
 simplify.md).
 
-Where the time goes (perf on the kernels' code, Blunt-fin, one thread, after the speed work of
-issue 12): the star context of an evaluation (chiefly walking the star's sample points: memory
-bound) ~20 %, the sampled errors of the exact evaluations ~15 %, moving the points after a merge
-~11 %, the merge and list upkeep ~10 %, star and link walks ~12 %, the heap ~5 %. Per merge
-(``bench/forest_identity.py --counters``): ~3.8 evaluations, ~38 candidates, ~5.3 exact
-evaluations, ~220 sample points summed, ~3.6 link tests, ~11 heap pops of which ~8.6 stale.
+Where the time goes (perf on the kernels' code, Combustion, one thread, session 14): the new values
+at the sample points of the exact evaluations (``_new_value``) ~13 %, moving the points after a
+merge ~9 %, the star context (volumes, sample sums) ~8 %, star and link walks ~10 %, the merge and
+list upkeep ~5 %, the candidates' cheap terms and legality ~8 %, rewriting the point rows ~2.5 %,
+the heap ~1 %. Per merge (``bench/forest_identity.py --counters``): ~3.6 evaluations, ~32
+candidates, ~5.9 exact evaluations, ~250 sample points summed, ~135 points moved, ~3.8 link tests,
+~2.6 heap pops. What made it so (every step bit-identical): every sample point caches its error in
+its tet (the star sums read it instead of forming every star tet's planes), a tet's points are a
+run of rows (no chain to walk; a stride jumps), an evaluation's ~30 scratch arrays are views of a
+per-thread buffer, and the heap holds one entry per vertex (no superseded entries to pop).
 
 The merge loop is bound by memory latency, and a mesher's numbering can have no locality at all
 (the gmsh flange: the median tet spans 48,492 of 160,534 vertex ids, a vertex's star 612,597 of

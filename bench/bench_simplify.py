@@ -501,7 +501,7 @@ MERGE_LOOP_NOTE = (
     "caches its weighted squared error in its tet, set where it gets the tet (the star sums read it instead of "
     "forming every star tet's planes); a tet's sample points are a run of rows instead of a linked chain (a "
     "merge writes its star's new runs at the top, the rows are rewritten in place when they run out, with room "
-    "for 1.5 × (points + tets) rows); an evaluation's ~30 scratch arrays are views of a per-thread buffer and a "
+    "for 1.25 × (points + tets) rows); an evaluation's ~30 scratch arrays are views of a per-thread buffer and a "
     "star is walked once; the heap keeps one entry per vertex (Combustion: 2.6 pops per merge instead of 10.0, "
     "7.4 of them superseded). Decimation CPU (`DecimationState` + `decimate()`, process time), main's code and "
     "the branch in alternating processes, medians: one thread (4 pairs, load 2.1 to 2.7) Blunt-fin 3.53 → "

@@ -494,6 +494,27 @@ LOCAL_NUMBERING_NOTE = (
     '0.90 to 1.01, load ~3).'
 )
 
+# measured by hand (alternating checkouts), kept when the table is re-measured
+MERGE_LOOP_NOTE = (
+    "Merge loop (issue 12, session 14; forests bit-identical, `bench/forest_identity.py --check` against "
+    "main on post, fire, Blunt-fin, Combustion, block-50k and flange-1m after every step): every sample point "
+    "caches its weighted squared error in its tet, set where it gets the tet (the star sums read it instead of "
+    "forming every star tet's planes); a tet's sample points are a run of rows instead of a linked chain (a "
+    "merge writes its star's new runs at the top, the rows are rewritten in place when they run out, with room "
+    "for 1.25 × (points + tets) rows); an evaluation's ~30 scratch arrays are views of a per-thread buffer and a "
+    "star is walked once; the heap keeps one entry per vertex (Combustion: 2.6 pops per merge instead of 10.0, "
+    "7.4 of them superseded). Decimation CPU (`DecimationState` + `decimate()`, process time), main's code and "
+    "the branch in alternating processes, medians: one thread (4 pairs, load 2.1 to 2.7) Blunt-fin 3.53 → "
+    "2.89 s (×0.78), Combustion 3.84 → 3.34 s (×0.83), flange-1m 23.95 → 19.65 s (×0.83); two threads (3 "
+    "pairs, load 1.0 to 1.3) Blunt-fin ×0.80, Combustion ×0.83, flange-1m ×0.88. Tried and dropped: the "
+    "cached errors in their own array beside the rows (×1.01 / ×1.06, no gain), an early exit from the "
+    "containment tests (slower: the branch mispredicts), rewriting the chains every n/256 merges instead of "
+    "n/16 (the rewrites cost more than the walks saved). The table above was measured on a slow, noisy "
+    "machine (VTK 0.73 s on Combustion against 0.40 s in session 13's table, 1.18 s on Blunt-fin against "
+    "0.68 s); main's code by the same script two minutes later (load ~1.1): Blunt-fin 4.60 s CPU (3.0× VTK's "
+    "1.51 s in that run), Combustion 4.67 s (5.6× 0.84 s), flange-1m 26.53 s (3.7× 7.08 s)."
+)
+
 
 def forest_table(rows) -> list[str]:
     """The "Whole forest" table and its note."""
@@ -519,7 +540,7 @@ def forest_table(rows) -> list[str]:
           "on a shared machine, where wall time mostly measures the other jobs. Best of 3 interleaved runs on "
           f"Blunt-fin and Combustion, one elsewhere; load average {load:.1f} at the end of the table "
           "(`python bench/bench_simplify.py --only forest` re-measures it alone).", "",
-          LOCAL_NUMBERING_NOTE, "",
+          LOCAL_NUMBERING_NOTE, "", MERGE_LOOP_NOTE, "",
           "Tried and dropped (issue 12, build12 session): evaluating the next lazy heap entries speculatively "
           "on the second thread (a 2-task prange beside each lazy evaluation, results kept until the next "
           "merge; forests identical). It would serve 34 % of the lazy evaluations on Combustion (43 % with "

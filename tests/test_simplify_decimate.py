@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import sys
 from pathlib import Path
 
@@ -9,6 +10,7 @@ import numba
 import numpy as np
 import pytest
 from hypothesis import given, settings
+from hypothesis import strategies as hst
 from meshgen import AWKWARD, delaunay_mesh, degenerate_grid, grid_mesh, mesh_strategy, single_tet
 from naive_simplify import (check_valid, collapse, evaluate_merge, face_neighbours, interpolate, legal_merges,
                             pinned_vertices, quadric_value, reassign_samples, tet_quadrics)
@@ -17,6 +19,8 @@ from gatun_py.errors import OptionError
 from gatun_py.simplify import ROOT_RANK, check_forest, decimate, simplified_mesh
 from gatun_py.simplify import _decimate_kernels as K
 from gatun_py.simplify.decimate import CENTROID_WEIGHT, QUADRIC_WEIGHT, SCALAR_SCALE, DecimationState
+
+D = importlib.import_module("gatun_py.simplify.decimate")  # the module (the package exports the function)
 
 MANIFOLD = {k for k in AWKWARD if k not in ("edge_touching", "vertex_touching")}
 
@@ -48,15 +52,18 @@ def _sample_points(mesh):
     return np.concatenate([p, cen]), np.concatenate([d, val])
 
 
+def _rows(state, t):
+    """The point rows of tet t's list, in order."""
+    return range(state.tp_head[t], state.tp_head[t] + state.tp_count[t])
+
+
 def _kernel_samples(state):
     """point -> tet (4-tuple) from the kernel's per-tet lists."""
     out = {}
     for t in np.flatnonzero(state.alive):
-        p = state.tp_head[t]
-        while p >= 0:
+        for p in _rows(state, t):
             assert state.p_orig[p] not in out, "a sample point listed twice"
             out[int(state.p_orig[p])] = tuple(int(x) for x in state.T[t])
-            p = state.p_next[p]
     return out
 
 
@@ -64,10 +71,8 @@ def _star_samples(state, a):
     """The sample points of a's tets in the kernel's order (star order, then list order)."""
     out = {}
     for s in K._star(a, state.head, state.nxt, state.T, state.alive):
-        p = state.tp_head[s >> 2]
-        while p >= 0:
+        for p in _rows(state, s >> 2):
             out[int(state.p_orig[p])] = tuple(int(x) for x in state.T[s >> 2])
-            p = state.p_next[p]
     return out
 
 
@@ -323,9 +328,13 @@ def test_branch_and_bound_picks_the_best_merge(mesh):
             state.apply(int(a), int(forest.parent[a]))
         done = stop
         for a in np.flatnonzero(state.parent == np.arange(mesh.n_points)):
-            got = K._evaluate(int(a), *state._mesh_args(), state.marks[0], state.marks_b[0], state.marks_ab[0],
-                              state.tcount[0], *state._sample_args())
-            assert (int(got[0]), float(got[1])) == _best_by_every_error(state, int(a)), (stop, a)
+            want = _best_by_every_error(state, int(a))
+            # with the scratch buffers of a thread, and with none (every array allocated)
+            for fbuf, ibuf in ((np.empty(K._SCRATCH_F), np.empty(K._SCRATCH_I, np.int64)),
+                               (np.empty(0), np.empty(0, np.int64))):
+                got = K._evaluate(int(a), *state._mesh_args(), state.marks[0], state.marks_b[0], state.marks_ab[0],
+                                  state.tcount[0], *state._sample_args(), fbuf, ibuf)
+                assert (int(got[0]), float(got[1])) == want, (stop, a, fbuf.size)
 
 
 def test_forest_does_not_depend_on_the_thread_count():
@@ -365,8 +374,8 @@ def test_unstructured_gmsh_mesh():
 
 @pytest.mark.parametrize("name", ["delaunay", "cavity"])
 def test_compacting_the_points_keeps_every_list_and_its_order(name):
-    """The point rows are rewritten tet by tet from time to time: the same points (by name and
-    row content) in the same order in every tet's list, side by side from row 0."""
+    """The point rows are rewritten when they run out: the same points (by name and row content)
+    in the same order in every tet's list, side by side from row 0."""
     mesh = AWKWARD[name]()
     state = DecimationState(mesh, 1.0, 1.0, order="input")
     forest = decimate(mesh)
@@ -374,24 +383,62 @@ def test_compacting_the_points_keeps_every_list_and_its_order(name):
         state.apply(int(a), int(forest.parent[a]))
 
     def lists():
-        out = {}
-        for t in np.flatnonzero(state.alive):
-            rows, p = [], state.tp_head[t]
-            while p >= 0:
-                rows.append((int(state.p_orig[p]), tuple(state.pdat[p])))
-                p = state.p_next[p]
-            out[int(t)] = rows
-        return out
+        return {int(t): [(int(state.p_orig[p]), tuple(state.pdat[p])) for p in _rows(state, t)]
+                for t in np.flatnonzero(state.alive)}
 
     before = lists()
-    assert state.counters[K.C_PTOP] == mesh.n_tets + forest.n_merges // 2
-    K._compact_points(state.alive, state.pdat, state.p_orig, state.tp_head, state.p_next, state.counters)
+    K._compact_points(state.alive, state.pdat, state.prow, state.tp_head, state.tp_count, state.counters)
     assert lists() == before
     k = int(state.counters[K.C_PTOP])
     assert k == sum(len(v) for v in before.values())
-    # side by side: every list is a run of consecutive rows
-    for t in np.flatnonzero(state.alive):
-        p = state.tp_head[t]
-        while p >= 0 and state.p_next[p] >= 0:
-            assert state.p_next[p] == p + 1
-            p = state.p_next[p]
+    # side by side from row 0, no row left between them
+    live = [t for t in np.flatnonzero(state.alive) if state.tp_count[t] > 0]
+    runs = sorted((int(state.tp_head[t]), int(state.tp_count[t])) for t in live)
+    assert runs[0][0] == 0 and runs[-1][0] + runs[-1][1] == k
+    assert all(h + c == h2 for (h, c), (h2, _) in zip(runs, runs[1:]))
+    assert all(state.prow[h, 1] == t for t in live for h in _rows(state, t))
+
+
+@pytest.mark.parametrize("name", ["delaunay", "cavity", "two_components"])
+def test_running_out_of_point_rows_changes_no_merge(name, monkeypatch):
+    """Without room beyond the n + m points the rows are rewritten by many merges (every list
+    kept in order): the forest stays the same, bit for bit."""
+    mesh = AWKWARD[name]()
+    want = decimate(mesh, rounds=0)
+    monkeypatch.setattr(D, "POINT_SLACK", 0.0)
+    state = DecimationState(mesh, 1.0, 1.0)
+    assert state.pdat.shape[0] == mesh.n_points + mesh.n_tets
+    state.run(mesh.n_points)
+    assert state.counters[K.C_REWRITES] > 0
+    got = state.prefix()
+    assert got.n_merges == want.n_merges
+    assert np.array_equal(got.parent, want.parent) and np.array_equal(got.rank, want.rank)
+
+
+@settings(max_examples=60, deadline=None)
+@given(hst.lists(hst.tuples(hst.integers(0, 2), hst.integers(0, 11),
+                            hst.sampled_from([0.0, -0.0, 1.0, 2.5, 1e-300, 7.0])), max_size=80),
+       hst.randoms(use_true_random=False))
+def test_heap_pops_the_smallest_current_entry(ops, rnd):
+    """The heap keeps one entry per vertex (a push replaces it, a removal drops it) and pops the
+    smallest (error, vkey) among them: against a dict of the current entries."""
+    n = 12
+    vkey = np.array(rnd.sample(range(100), n), np.int32)
+    h_err, h_v, h_b, h_ver = np.zeros(n + 1), np.zeros(n + 1, np.int32), np.zeros(n + 1, np.int32), \
+        np.zeros(n + 1, np.int32)
+    h_pos = np.full(n, -1, np.int32)
+    counters = np.zeros(K.N_COUNTERS, np.int64)
+    ref = {}
+    for step, (op, v, e) in enumerate(ops):
+        if op == 0:
+            K._heap_push(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, e, v, v + 1, step)
+            ref[v] = (e, v + 1, step)
+        elif op == 1:
+            K._heap_remove(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, v)
+            ref.pop(v, None)
+        elif ref:
+            want = min(ref, key=lambda u: (ref[u][0], vkey[u]))
+            e_got, v_got, b_got, ver_got = K._heap_pop(h_err, h_v, h_b, h_ver, h_pos, vkey, counters)
+            assert (v_got, (e_got, b_got, ver_got)) == (want, ref.pop(want))
+        assert counters[K.C_HEAP] == len(ref)
+        assert all(h_v[h_pos[u]] == u for u in ref) and all(h_pos[u] == -1 for u in range(n) if u not in ref)

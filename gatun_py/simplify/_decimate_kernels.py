@@ -17,16 +17,19 @@ the caller's id, which breaks every tie between equal errors. The mesh state dur
 ``quad`` (n, 15) float64, ``u4`` (n, 4) float64
     every vertex's error quadric (A's upper triangle, b, c; see :func:`_quadric_at`) and its
     (x, y, z, s) point; merging a into b adds a's quadric to b's.
-``pdat`` (n + m, 5) float64, ``p_orig``, ``p_next`` (n + m,) int32, ``tp_head``, ``tp_count`` (m,) int32
-    sample points of the original field, one row (x, y, z, value, weight) each: the centroid of
-    every input tet from the start, every vertex once merged away (its row added then, from
-    ``pts``, ``dens`` and its weight ``vw``); ``p_orig`` names the point (a vertex id, or n + t
-    for tet t's centroid). Every one is listed in the live tet that holds it (``tp_count[t]`` of
-    them, ``tp_head[t]`` -> ``p_next`` chain), with its weight (its share of the original
-    volume). Rows ``counters[C_PTOP]`` on are free; every ``_compact_every(n)`` merges the rows are
-    rewritten tet by tet in list order (:func:`_compact_points`), so that a tet's points lie
-    side by side in memory (the evaluations walk these lists; the order within a list, which fixes
-    the sums, is kept). A merge a -> b hands
+``pdat`` (r, 6) float64, ``prow`` (r, 2) int32, ``tp_head``, ``tp_count`` (m,) int32
+    sample points of the original field, one row (x, y, z, value, weight, error) each (error: the
+    weighted squared error against the interpolant of the tet holding it, see
+    :func:`_star_samples`): the centroid of every input tet from the start, every vertex once
+    merged away (its row made then, from ``pts``, ``dens`` and its weight ``vw``); ``prow[r, 0]``
+    names the point (a vertex id, or n + t for tet t's centroid), ``prow[r, 1]`` the tet the run
+    holding row r was written for. Every one is listed in the live
+    tet that holds it, with its weight (its share of the original volume): tet t's list is the run
+    of rows ``tp_head[t]`` .. ``tp_head[t] + tp_count[t] - 1`` (the evaluations read these runs
+    in order: the order within a list fixes the sums). Rows ``counters[C_PTOP]`` on are free
+    (r = n + m + ``POINT_SLACK`` x (n + m) rows: room beyond the n + m points); a merge writes
+    the new lists of its star there, and when the rows run out they are rewritten tet by tet
+    from row 0 (:func:`_compact_points`, every list in its order). A merge a -> b hands
     a and the points of a's star to the tets of the new star.
 
 A merge a -> b is legal when every surviving tet of a's star stays positive, every boundary face
@@ -57,8 +60,9 @@ P_WD, P_WG, P_WV, P_WI, P_WQ, P_WS, P_NCP, P_MAXS = 0, 1, 2, 3, 4, 5, 6, 7
 C_MERGES, C_HEAP, C_STAMP, C_SWEEPS, C_EVALS, C_STARTED, C_EXACT, C_PTOP = 0, 1, 2, 3, 4, 5, 6, 7
 # what the search does (bench/forest_identity.py --counters prints them): link tests, exact
 # evaluations stopped by their bound, sample points summed by exact evaluations, heap pops and the
-# stale ones, evaluations of one vertex on its pop, sample points moved by merges
-C_LINK, C_PRUNED, C_POINTS, C_POPS, C_STALE, C_LAZY, C_MOVED = 8, 9, 10, 11, 12, 13, 14
+# stale ones, evaluations of one vertex on its pop, sample points moved by merges, rewrites of the
+# point rows (:func:`_compact_points`)
+C_LINK, C_PRUNED, C_POINTS, C_POPS, C_STALE, C_LAZY, C_MOVED, C_REWRITES = 8, 9, 10, 11, 12, 13, 14, 15
 N_COUNTERS = 16
 # bits of a vertex's ``pinned`` flags: PIN_KEEP never merged away, PIN_NO_TARGET nothing merges into
 # it. A non-manifold vertex has both (PIN_ALL); a locked vertex (a brick's cut vertex) only
@@ -207,6 +211,37 @@ def _star_view(v, head, nxt, T, alive):
     return out
 
 
+# Scratch: an evaluation takes its ~30 arrays as views of one float and one int buffer per thread
+# (``_SCRATCH_F``, ``_SCRATCH_I`` elements; a star too large for them gets new arrays), instead of
+# allocating each: an evaluation runs ~4 times per merge.
+_SCRATCH_F = 1 << 15
+_SCRATCH_I = 1 << 14
+
+
+@njit(cache=True)
+def _take(buf, o, k):
+    """(``buf[o:o + k]``, o + k) when it fits in ``buf``, else (a new array of k, o + k)."""
+    if o + k <= buf.shape[0]:
+        return buf[o:o + k], o + k
+    return np.empty(k, buf.dtype), o + k
+
+
+@njit(cache=True)
+def _star_into(v, head, nxt, T, alive, buf):
+    """:func:`_star_view` in one walk of the list, as a view of ``buf`` when the star fits."""
+    cnt = 0
+    cap = buf.shape[0]
+    s = head[v]
+    while s >= 0:
+        if alive[s >> 2] and T[s >> 2, s & 3] == v:
+            if cnt >= cap:
+                return _star_view(v, head, nxt, T, alive)
+            buf[cnt] = s
+            cnt += 1
+        s = nxt[s]
+    return buf[:cnt]
+
+
 @njit(cache=True)
 def _star(v, head, nxt, T, alive):
     """Slots (4*t + corner) of the live tets around v; unlinks dead slots on the way."""
@@ -227,7 +262,14 @@ def _next_stamp(counters):
 
 @njit(cache=True)
 def _boundary_faces_of(st, T, nbr):
-    """(count, faces (k, 3)) boundary faces (outward) incident to the star's centre vertex."""
+    """Boundary faces (k, 3) (outward) incident to the star's centre vertex."""
+    out, _ = _boundary_faces_into(st, T, nbr, np.empty(0, np.int64), 0)
+    return out
+
+
+@njit(cache=True)
+def _boundary_faces_into(st, T, nbr, buf, o):
+    """(:func:`_boundary_faces_of` in ``buf`` from o on when they fit, the offset after them)."""
     k = 0
     for i in range(st.shape[0]):
         t = st[i] >> 2
@@ -235,7 +277,8 @@ def _boundary_faces_of(st, T, nbr):
         for f in range(4):
             if f != c and nbr[t, f] < 0:
                 k += 1
-    out = np.empty((k, 3), np.int64)
+    flat, o = _take(buf, o, 3 * k)
+    out = flat.reshape((k, 3))
     k = 0
     for i in range(st.shape[0]):
         t = st[i] >> 2
@@ -245,13 +288,19 @@ def _boundary_faces_of(st, T, nbr):
                 for j in range(3):
                     out[k, j] = T[t, _TET_FACES[f, j]]
                 k += 1
-    return out
+    return out, o
 
 
 @njit(cache=True)
 def _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
     """The link condition Lk(a) ∩ Lk(b) = Lk(ab) for collapsing edge ab (with a virtual vertex ω)."""
-    st_b = _star_view(b, head, nxt, T, alive)
+    return _link_ok_buf(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters, np.empty(0, np.int64))
+
+
+@njit(cache=True)
+def _link_ok_buf(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters, buf):
+    """:func:`_link_ok` with b's star and the edges of Lk(ab) in the scratch ``buf`` (when they fit)."""
+    st_b = _star_into(b, head, nxt, T, alive, buf)
     s_b = _next_stamp(counters)
     for i in range(st_b.shape[0]):
         t = st_b[i] >> 2
@@ -268,7 +317,8 @@ def _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counter
     if n_shared == 0:
         return False  # not an edge of the current mesh
     # Lk(ab) edges: the opposite edge of every tet around ab.
-    ab_edges = np.empty((n_shared, 2), np.int64)
+    ab_flat, _ = _take(buf, st_b.shape[0], 2 * n_shared)
+    ab_edges = ab_flat.reshape((n_shared, 2))
     k = 0
     for i in range(st_a.shape[0]):
         t = st_a[i] >> 2
@@ -460,12 +510,11 @@ def _new_value(p, k0, pdat, ok, lam, val, fallback):
             lj = lam[k, j, 0] * x + lam[k, j, 1] * y + lam[k, j, 2] * z + lam[k, j, 3]
             if lj < lo:
                 lo = lj
-        f = val[k, 0] * x + val[k, 1] * y + val[k, 2] * z + val[k, 3]
         if lo >= 0.0:
-            return f
+            return val[k, 0] * x + val[k, 1] * y + val[k, 2] * z + val[k, 3]
         if lo > best_lo:
             best_lo = lo
-            v = f
+            v = val[k, 0] * x + val[k, 1] * y + val[k, 2] * z + val[k, 3]
     return v
 
 
@@ -527,30 +576,55 @@ def _star_sample_count(st, tp_count):
 
 
 @njit(cache=True, _nrt=False)
-def _star_samples(st, T, pts, dens, pdat, tp_head, tp_count, p_next, stride, p_id, p_k, lam, val, q):
-    """Every stride-th sample point of the star (``p_id``) with its star tet (``p_k``); returns the
-    sum of their weighted squared errors against the current interpolant (``lam``, ``val``: scratch)."""
-    e_old = 0.0
-    npt = 0
-    seen = 0
-    for i in range(st.shape[0]):
-        t = st[i] >> 2
-        p = tp_head[t]
-        if p < 0:
+def _point_error(pdat, p, val):
+    """Sample point p's weighted squared error against the interpolant ``val`` of a positive tet
+    (from :func:`_tet_planes`; ``pdat[p]``: the point's row)."""
+    f = val[0] * pdat[p, 0] + val[1] * pdat[p, 1] + val[2] * pdat[p, 2] + val[3]
+    return pdat[p, 4] * (pdat[p, 3] - f) ** 2
+
+
+@njit(cache=True, nogil=True)
+def _set_point_errors(T, pts, dens, pdat, tp_head, tp_count):
+    """``pdat[p, 5]`` of every listed point: its error in its tet (:func:`_point_error`; 0.0 in a
+    flat tet), the cache :func:`_star_samples` sums."""
+    lam = np.empty((4, 4))
+    val = np.empty(4)
+    q = np.empty(4, np.int64)
+    for t in range(tp_head.shape[0]):
+        if tp_count[t] == 0:
             continue
         for j in range(4):
             q[j] = T[t, j]
-        flat = not _tet_planes(pts, dens, q, lam, val)
-        while p >= 0:
-            if seen % stride == 0:
-                p_id[npt] = p
-                p_k[npt] = i
-                if not flat:
-                    f = val[0] * pdat[p, 0] + val[1] * pdat[p, 1] + val[2] * pdat[p, 2] + val[3]
-                    e_old += pdat[p, 4] * (pdat[p, 3] - f) ** 2
-                npt += 1
-            seen += 1
-            p = p_next[p]
+        ok = _tet_planes(pts, dens, q, lam, val)
+        for p in range(tp_head[t], tp_head[t] + tp_count[t]):
+            pdat[p, 5] = _point_error(pdat, p, val) if ok else 0.0
+
+
+@njit(cache=True, _nrt=False)
+def _star_samples(st, pdat, tp_head, tp_count, stride, p_id, p_k):
+    """Every stride-th sample point of the star (``p_id``) with its star tet (``p_k``); returns the
+    sum of their weighted squared errors against the current interpolant, in list order.
+
+    The errors are the ones cached in ``pdat[:, 5]`` where each point got its tet (set-up,
+    :func:`_reassign_points`): a point's tet only changes (its vertices relabelled) in a merge
+    that moves every point of it, so the cache is always the error in the tet as it is now,
+    computed by the same expression from the same planes. A flat tet's points hold 0.0, which
+    adds nothing to ``e_old`` (>= +0.0) bit for bit, as skipping them did."""
+    e_old = 0.0
+    npt = 0
+    skip = 0  # the points of the next tets to pass before the next one taken
+    for i in range(st.shape[0]):
+        t = st[i] >> 2
+        c = tp_count[t]
+        j = skip
+        while j < c:  # a tet's points are rows tp_head[t] .. + c - 1, in list order
+            p = tp_head[t] + j
+            p_id[npt] = p
+            p_k[npt] = i
+            e_old += pdat[p, 5]
+            npt += 1
+            j += stride
+        skip = j - c
     return e_old
 
 
@@ -720,40 +794,55 @@ def _total_error(dm_w, di, ge_w, swept_w, qe_w, se, n_col, power):
 
 
 @njit(cache=True)
-def _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next):
+def _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, fbuf, ibuf, fo, io):
     """Everything about a's star that every candidate merge of a shares, and the scratch arrays of
-    one evaluation, as one tuple (see the names unpacked in :func:`_candidate_terms`)."""
+    one evaluation, as one tuple (see the names unpacked in :func:`_candidate_terms`), all taken
+    from ``fbuf`` (from offset ``fo`` on) and ``ibuf`` (from ``io``) where they fit (see
+    :func:`_take`). Returns (the tuple, the offset in ``ibuf`` after it)."""
     ns = st.shape[0]
-    vol_old = np.empty(ns)
-    mass_old = np.empty(ns)
-    dsum = np.empty(ns)
-    nrm = np.empty((ns, 3))
-    off = np.empty(ns)
-    fn = np.empty(3)
+    vol_old, fo = _take(fbuf, fo, ns)
+    mass_old, fo = _take(fbuf, fo, ns)
+    dsum, fo = _take(fbuf, fo, ns)
+    nrm_flat, fo = _take(fbuf, fo, 3 * ns)
+    nrm = nrm_flat.reshape((ns, 3))
+    off, fo = _take(fbuf, fo, ns)
+    fn, fo = _take(fbuf, fo, 3)
     vol_star, reach2 = _star_volumes(a, st, T, pts, dens, vol_old, mass_old, dsum, nrm, off, fn)
     # every new tet's vertices lie within sqrt(reach2) of a, so its edges are <= 2 sqrt(reach2):
     # a value above twice this bound is safely positive whatever the rounding
     fast_ok = 2.0 * VOLUME_EPS * (4.0 * reach2) ** 1.5
-    bf = _boundary_faces_of(st, T, nbr) if isb[a] else np.empty((0, 3), np.int64)
-    n_old = np.empty((bf.shape[0], 3))
-    area_old = np.empty(bf.shape[0])
+    if isb[a]:
+        bf, io = _boundary_faces_into(st, T, nbr, ibuf, io)
+    else:
+        bf_flat, io = _take(ibuf, io, 0)
+        bf = bf_flat.reshape((0, 3))
+    nbf = bf.shape[0]
+    n_old_flat, fo = _take(fbuf, fo, 3 * nbf)
+    n_old = n_old_flat.reshape((nbf, 3))
+    area_old, fo = _take(fbuf, fo, nbf)
     area_sum = _star_boundary(bf, pts, n_old, area_old)
     # the sample points in a's star (only they see the interpolant change) and their squared error
     # now; late on, stars hold many points: every stride-th one stands for stride points
     npt = _star_sample_count(st, tp_count) if params[P_WS] > 0.0 else 0
     max_s = max(1, int(params[P_MAXS]))
     stride = (npt + max_s - 1) // max_s if npt > max_s else 1
-    p_id = np.empty((npt + stride - 1) // stride, np.int64)
-    p_k = np.empty(p_id.shape[0], np.int64)
-    s_ok = np.zeros(ns, np.bool_)
-    s_lam = np.empty((ns, 4, 4))
-    s_val = np.empty((ns, 4))
-    q = np.empty(4, np.int64)
+    p_id, io = _take(ibuf, io, (npt + stride - 1) // stride)
+    p_k, io = _take(ibuf, io, p_id.shape[0])
+    s_ok, io = _take(ibuf, io, ns)  # 0 / 1: new tet k survives positive (set by _new_star_planes)
+    q, io = _take(ibuf, io, 4)
+    s_lam_flat, fo = _take(fbuf, fo, 16 * ns)
+    s_lam = s_lam_flat.reshape((ns, 4, 4))
+    s_val_flat, fo = _take(fbuf, fo, 4 * ns)
+    s_val = s_val_flat.reshape((ns, 4))
+    v6n, fo = _take(fbuf, fo, ns)
+    vout, fo = _take(fbuf, fo, 2)
+    n_new, fo = _take(fbuf, fo, 3)
+    area_new, fo = _take(fbuf, fo, nbf)
     e_old = 0.0
     if npt > 0:
-        e_old = _star_samples(st, T, pts, dens, pdat, tp_head, tp_count, p_next, stride, p_id, p_k, s_lam[0], s_val[0], q)
+        e_old = _star_samples(st, pdat, tp_head, tp_count, stride, p_id, p_k)
     return (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
-            stride, e_old, np.empty(ns), np.empty(2), q, np.empty(3), np.empty(bf.shape[0]), s_ok, s_lam, s_val)
+            stride, e_old, v6n, vout, q, n_new, area_new, s_ok, s_lam, s_val), io
 
 
 @njit(cache=True, _nrt=False)
@@ -872,13 +961,14 @@ def _candidate_exact(a, b, terms, st, T, pts, dens, params, pdat, ctx, best_b, b
 
 @njit(cache=True)
 def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, mark, counters, cand_out, err_out,
-                      pdat, tp_head, tp_count, p_next):
+                      pdat, tp_head, tp_count):
     """Error of every geometrically legal merge a -> b (b a neighbour of a): fills the outputs.
 
     Returns the number of candidates. Legality here covers volumes, boundary orientation and the
     boundary-into-interior rule; the link condition is checked by the caller, best first.
     """
-    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next)
+    ctx, _ = _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, np.empty(0),
+                           np.empty(0, np.int64), 0, 0)
     terms = np.empty((cand_out.shape[0], 5))
     return _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pdat, mark, counters, ctx, cand_out,
                             err_out, terms, True)
@@ -886,23 +976,27 @@ def _candidate_errors(a, st, T, nbr, pts, dens, isb, pinned, params, quad, u4, m
 
 @njit(cache=True)
 def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, mark, mark_b, mark_ab,
-              counters, pdat, tp_head, tp_count, p_next):
+              counters, pdat, tp_head, tp_count, fbuf, ibuf):
     """Best legal merge of a: (target, error), or (-1, 0) when a has none.
 
     The best is the smallest (error, ``vkey`` of the target) among the candidates that pass the link
     condition. Branch and bound: candidates are visited by their lower bound (the cheap terms),
     and the expensive ones (interpolation, sample points) are computed only while the bound can
     still beat the best found so far: the same choice as computing every error, for a fraction
-    of the cost.
+    of the cost. ``fbuf``, ``ibuf``: this thread's scratch (see :func:`_take`).
     """
-    st = _star_view(a, head, nxt, T, alive)
+    st = _star_into(a, head, nxt, T, alive, ibuf)
     if st.shape[0] == 0 or pinned[a]:
         return -1, 0.0
     cap = 3 * st.shape[0] + 1
-    cand = np.empty(cap, np.int64)
-    low = np.empty(cap)
-    terms = np.empty((cap, 5))
-    ctx = _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, p_next)
+    cand, io = _take(ibuf, st.shape[0], cap)
+    order, io = _take(ibuf, io, cap)
+    low, fo = _take(fbuf, 0, cap)
+    terms_flat, fo = _take(fbuf, fo, 5 * cap)
+    terms = terms_flat.reshape((cap, 5))
+    ctx, io = _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, fbuf, ibuf, fo,
+                            io)
+    link_buf = ibuf[min(io, ibuf.shape[0]):]
     nc = _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pdat, mark, counters, ctx, cand, low,
                           terms, False)
     if nc == 0:
@@ -910,7 +1004,6 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
     # by bound, ties by target (caller's id), so the result does not depend on list order or on
     # the internal numbering: an insertion sort on (bound, key) (a dozen candidates: np.argsort's
     # allocation costs more than the sort)
-    order = np.empty(nc, np.int64)
     for x in range(nc):
         y = x
         while y > 0 and (low[order[y - 1]] > low[x]
@@ -930,13 +1023,19 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
         if not whole or _loses(e, b, best_e, best_b, vkey):
             continue
         counters[C_LINK] += 1
-        if _link_ok(a, b, st, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters):
+        if _link_ok_buf(a, b, st, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, counters, link_buf):
             best_b = b
             best_e = e
     return best_b, best_e
 
 
-# -- a binary min-heap over (error, vertex) with a version stamp for lazy deletion ----------------
+# -- a binary min-heap over (error, vertex), at most one entry per vertex ---------------------------
+# ``h_pos[v]``: the index of v's entry, -1 if none. A vertex's new entry replaces its old one, and a
+# vertex re-evaluated without a legal merge loses it: every entry is current (``h_ver``, the
+# vertex's version when it was made, stays for the callers' checks). The keys (error, ``vkey``)
+# of distinct vertices are distinct and the errors are never NaN, so the entries come out in
+# one order whatever the heap's shape: the order of a heap that kept the superseded entries
+# and skipped them on their way out (the one before), with no such entries to pop.
 @njit(cache=True, _nrt=False)
 def _heap_less(h_err, h_v, vkey, i, j):
     """(error, ``vkey`` of the vertex) of entry i below entry j's (the key only read on equal errors)."""
@@ -944,46 +1043,60 @@ def _heap_less(h_err, h_v, vkey, i, j):
 
 
 @njit(cache=True, _nrt=False)
-def _heap_swap(h_err, h_v, h_b, h_ver, i, j):
+def _heap_swap(h_err, h_v, h_b, h_ver, h_pos, i, j):
     h_err[i], h_err[j] = h_err[j], h_err[i]
     h_v[i], h_v[j] = h_v[j], h_v[i]
     h_b[i], h_b[j] = h_b[j], h_b[i]
     h_ver[i], h_ver[j] = h_ver[j], h_ver[i]
+    h_pos[h_v[i]] = i
+    h_pos[h_v[j]] = j
 
 
 @njit(cache=True, _nrt=False)
-def _heap_push(h_err, h_v, h_b, h_ver, vkey, counters, e, v, b, ver, cur_ver):
-    n = counters[C_HEAP]
-    if n >= h_err.shape[0]:
-        # full: drop stale entries and rebuild (at most one live entry per vertex)
-        k = 0
-        for i in range(n):
-            if h_ver[i] == cur_ver[h_v[i]]:
-                h_err[k] = h_err[i]
-                h_v[k] = h_v[i]
-                h_b[k] = h_b[i]
-                h_ver[k] = h_ver[i]
-                k += 1
-        n = k
-        for i in range(n // 2 - 1, -1, -1):
-            _sift_down(h_err, h_v, h_b, h_ver, vkey, i, n)
-    h_err[n] = e
-    h_v[n] = v
-    h_b[n] = b
-    h_ver[n] = ver
-    i = n
+def _sift_up(h_err, h_v, h_b, h_ver, h_pos, vkey, i):
     while i > 0:
         p = (i - 1) >> 1
         if _heap_less(h_err, h_v, vkey, i, p):
-            _heap_swap(h_err, h_v, h_b, h_ver, i, p)
+            _heap_swap(h_err, h_v, h_b, h_ver, h_pos, i, p)
             i = p
         else:
             break
-    counters[C_HEAP] = n + 1
+    return i
 
 
 @njit(cache=True, _nrt=False)
-def _sift_down(h_err, h_v, h_b, h_ver, vkey, i, n):
+def _heap_push(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, e, v, b, ver):
+    """v's entry (error e, target b, version ver), replacing the one v has."""
+    i = h_pos[v]
+    if i < 0:
+        i = counters[C_HEAP]
+        counters[C_HEAP] = i + 1
+        h_pos[v] = i
+    h_err[i] = e
+    h_v[i] = v
+    h_b[i] = b
+    h_ver[i] = ver
+    i = _sift_up(h_err, h_v, h_b, h_ver, h_pos, vkey, i)
+    _sift_down(h_err, h_v, h_b, h_ver, h_pos, vkey, i, counters[C_HEAP])
+
+
+@njit(cache=True, _nrt=False)
+def _heap_remove(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, v):
+    """Drop v's entry, if it has one."""
+    i = h_pos[v]
+    if i < 0:
+        return
+    n = counters[C_HEAP] - 1
+    _heap_swap(h_err, h_v, h_b, h_ver, h_pos, i, n)
+    h_pos[v] = -1
+    counters[C_HEAP] = n
+    if i < n:
+        i = _sift_up(h_err, h_v, h_b, h_ver, h_pos, vkey, i)
+        _sift_down(h_err, h_v, h_b, h_ver, h_pos, vkey, i, n)
+
+
+@njit(cache=True, _nrt=False)
+def _sift_down(h_err, h_v, h_b, h_ver, h_pos, vkey, i, n):
     while True:
         l = 2 * i + 1
         if l >= n:
@@ -992,19 +1105,20 @@ def _sift_down(h_err, h_v, h_b, h_ver, vkey, i, n):
         if l + 1 < n and _heap_less(h_err, h_v, vkey, l + 1, l):
             m = l + 1
         if _heap_less(h_err, h_v, vkey, m, i):
-            _heap_swap(h_err, h_v, h_b, h_ver, i, m)
+            _heap_swap(h_err, h_v, h_b, h_ver, h_pos, i, m)
             i = m
         else:
             break
 
 
 @njit(cache=True, _nrt=False)
-def _heap_pop(h_err, h_v, h_b, h_ver, vkey, counters):
+def _heap_pop(h_err, h_v, h_b, h_ver, h_pos, vkey, counters):
     n = counters[C_HEAP] - 1
     e, v, b, ver = h_err[0], h_v[0], h_b[0], h_ver[0]
-    _heap_swap(h_err, h_v, h_b, h_ver, 0, n)
+    _heap_swap(h_err, h_v, h_b, h_ver, h_pos, 0, n)
+    h_pos[v] = -1
     counters[C_HEAP] = n
-    _sift_down(h_err, h_v, h_b, h_ver, vkey, 0, n)
+    _sift_down(h_err, h_v, h_b, h_ver, h_pos, vkey, 0, n)
     return e, v, b, ver
 
 
@@ -1051,7 +1165,7 @@ def _splice_incidence(a, b, head, nxt):
 
 
 @njit(cache=True)
-def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp_count, p_next, counters):
+def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, prow, tp_head, tp_count, counters):
     """After merging a: a and every point listed in a's former star go to the first live tet of
     the new star (star order) that contains them, else the one they are nearest to (largest
     smallest barycentric coordinate of :func:`_value_at`, the first of equals; as :func:`_new_value`).
@@ -1059,37 +1173,37 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp
     Containment is decided by :func:`_value_at`'s determinants; the tet planes (four dot products
     per point) settle it first wherever they are farther from 0 than any rounding of either could
     reach, so the determinants only run for points within rounding of a face (or in slivers).
+
+    Every tet of the new star gets its points as a new run of rows at the top (in the order a list
+    that each point was pushed on in turn would have: the last first), with their errors in it
+    (``pdat[:, 5]``); the old rows of the star's tets are left behind (:func:`_compact_points`
+    drops them when the rows run out).
     """
+    ns = st_a.shape[0]
     cnt = 1
-    for i in range(st_a.shape[0]):
-        p = tp_head[st_a[i] >> 2]
-        while p >= 0:
-            cnt += 1
-            p = p_next[p]
-    plist = np.empty(cnt, np.int64)
+    for i in range(ns):
+        cnt += tp_count[st_a[i] >> 2]
     counters[C_MOVED] += cnt
-    # a becomes a sample point: its row at the top of the point rows
-    r = counters[C_PTOP]
-    counters[C_PTOP] = r + 1
-    pdat[r, 0] = pts[a, 0]
-    pdat[r, 1] = pts[a, 1]
-    pdat[r, 2] = pts[a, 2]
-    pdat[r, 3] = dens[a]
-    pdat[r, 4] = vw[a]
-    p_orig[r] = a
-    p_next[r] = -1
-    plist[0] = r
+    # the points in turn: a first (it becomes a sample point), then every star tet's in list order
+    rows = np.empty((cnt, pdat.shape[1]))
+    orig = np.empty(cnt, np.int32)
+    rows[0, 0] = pts[a, 0]
+    rows[0, 1] = pts[a, 1]
+    rows[0, 2] = pts[a, 2]
+    rows[0, 3] = dens[a]
+    rows[0, 4] = vw[a]
+    rows[0, 5] = 0.0
+    orig[0] = a
     cnt = 1
-    for i in range(st_a.shape[0]):
+    for i in range(ns):
         t = st_a[i] >> 2
-        p = tp_head[t]
-        while p >= 0:
-            plist[cnt] = p
+        for p in range(tp_head[t], tp_head[t] + tp_count[t]):
+            for j in range(pdat.shape[1]):
+                rows[cnt, j] = pdat[p, j]
+            orig[cnt] = prow[p, 0]
             cnt += 1
-            p = p_next[p]
         tp_head[t] = -1
         tp_count[t] = 0
-    ns = st_a.shape[0]
     # the extent of every coordinate involved (star vertices and points): bounds the rounding
     lo3 = np.full(3, 1e300)
     hi3 = np.full(3, -1e300)
@@ -1101,8 +1215,8 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp
                 hi3[d] = max(hi3[d], pts[T[t, j], d])
     for ip in range(cnt):
         for d in range(3):
-            lo3[d] = min(lo3[d], pdat[plist[ip], d])
-            hi3[d] = max(hi3[d], pdat[plist[ip], d])
+            lo3[d] = min(lo3[d], rows[ip, d])
+            hi3[d] = max(hi3[d], rows[ip, d])
     ext3 = ((hi3[0] - lo3[0]) ** 2 + (hi3[1] - lo3[1]) ** 2 + (hi3[2] - lo3[2]) ** 2) ** 1.5
     v6s = np.zeros(ns)
     usable = np.zeros(ns, np.bool_)
@@ -1123,11 +1237,13 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp
             c = ext3 / v6
             margin[i] = 1e-10 * c * (1.0 + c)
     vout = np.empty(2)
+    where = np.empty(cnt, np.int64)  # the star tet (index) each point goes to, -1: dropped
+    per = np.zeros(ns, np.int64)
+    n_keep = 0
     for ip in range(cnt):
-        p = plist[ip]
-        x = pdat[p, 0]
-        y = pdat[p, 1]
-        z = pdat[p, 2]
+        x = rows[ip, 0]
+        y = rows[ip, 1]
+        z = rows[ip, 2]
         best = -1
         for i in range(ns):
             if not usable[i]:
@@ -1141,13 +1257,13 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp
                 continue
             t = st_a[i] >> 2
             if low > margin[i]:
-                best = t
+                best = i
                 break
             for j in range(4):
                 q[j] = T[t, j]
             _value_at(pts, dens, q, v6s[i], x, y, z, vout)
             if vout[0] >= 0.0:
-                best = t
+                best = i
                 break
         if best < 0:
             # outside every tet: the nearest, by the determinants
@@ -1161,17 +1277,40 @@ def _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp
                 _value_at(pts, dens, q, v6s[i], x, y, z, vout)
                 if vout[0] > best_lo:
                     best_lo = vout[0]
-                    best = t
+                    best = i
+        where[ip] = best
         if best >= 0:  # else no tet of a's star is left (or all are flat): the point is dropped
-            p_next[p] = tp_head[best]
-            tp_head[best] = p
-            tp_count[best] += 1
+            # its error in the new tet, for _star_samples (usable[best]: alive with v6 > 0)
+            rows[ip, 5] = _point_error(rows, ip, val[best])
+            per[best] += 1
+            n_keep += 1
+    if counters[C_PTOP] + n_keep > pdat.shape[0]:
+        _compact_points(alive, pdat, prow, tp_head, tp_count, counters)
+    top = counters[C_PTOP]
+    for i in range(ns):
+        if per[i] > 0:
+            t = st_a[i] >> 2
+            tp_head[t] = top
+            tp_count[t] = per[i]
+            top += per[i]
+            per[i] = top  # filled from its end down: the last point to arrive comes first
+    for ip in range(cnt):
+        i = where[ip]
+        if i >= 0:
+            per[i] -= 1
+            r = per[i]
+            for j in range(pdat.shape[1]):
+                pdat[r, j] = rows[ip, j]
+            prow[r, 0] = orig[ip]
+            prow[r, 1] = st_a[i] >> 2
+    counters[C_PTOP] = top
 
 
 @njit(cache=True)
-def _compact_tets(T, alive, nbr, head, nxt, tp_head, tp_count, t_orig):
+def _compact_tets(T, alive, nbr, head, nxt, tp_head, tp_count, t_orig, prow, counters):
     """The live tets renumbered 0.. in their order (the dead ones dropped), as new arrays
-    (T, nbr, nxt, tp_head, tp_count, t_orig); ``head`` is rewritten in place. Every vertex's list
+    (T, nbr, nxt, tp_head, tp_count, t_orig); ``head`` and the point rows' tets (``prow[:, 1]``,
+    -1 for a dead tet's) are rewritten in place. Every vertex's list
     keeps its live slots in their order (the dead ones are unlinked, as :func:`_tidy` would), so
     the merges that follow are the same; they walk fewer cache lines."""
     m = T.shape[0]
@@ -1197,6 +1336,9 @@ def _compact_tets(T, alive, nbr, head, nxt, tp_head, tp_count, t_orig):
         tp_head2[u] = tp_head[t]
         tp_count2[u] = tp_count[t]
         t_orig2[u] = t_orig[t]
+    for r in range(counters[C_PTOP]):
+        t = prow[r, 1]
+        prow[r, 1] = new_id[t] if t >= 0 else -1
     nxt2 = np.full(4 * k, -1, np.int32)
     for v in range(head.shape[0]):
         last = -1
@@ -1216,54 +1358,48 @@ def _compact_tets(T, alive, nbr, head, nxt, tp_head, tp_count, t_orig):
 
 
 @njit(cache=True)
-def _compact_every(n):
-    """Merges between two rewrites of the point rows (about 16 in a whole decimation)."""
-    return max(4096, n // 16)
+def _compact_points(alive, pdat, prow, tp_head, tp_count, counters):
+    """Slide the live runs of rows down from row 0, in row order (the rows left behind by the
+    merges go; every list keeps its rows in order). Ids change, lists and their order do not.
 
-
-@njit(cache=True)
-def _compact_points(alive, pdat, p_orig, tp_head, p_next, counters):
-    """Rewrite the point rows tet by tet, every list in its order, from row 0 (dropped points
-    go): a tet's points side by side in memory. Ids change, lists and their order do not."""
+    A row r is the start of a live run when its tet t = ``prow[r, 1]`` is alive and
+    ``tp_head[t] == r``: the rows below the top are written once between two rewrites, so that run
+    is the one written for t at r."""
+    top = counters[C_PTOP]
     k = 0
-    for t in range(tp_head.shape[0]):
-        if alive[t]:
-            p = tp_head[t]
-            while p >= 0:
-                k += 1
-                p = p_next[p]
-    new_dat = np.empty((k, 5))
-    new_orig = np.empty(k, np.int32)
-    new_next = np.empty(k, np.int32)
-    k = 0
-    for t in range(tp_head.shape[0]):
-        p = tp_head[t]
-        if not alive[t] or p < 0:
-            tp_head[t] = -1
+    r = 0
+    while r < top:
+        t = prow[r, 1]
+        if t < 0 or not alive[t] or tp_head[t] != r or tp_count[t] == 0:
+            r += 1
             continue
+        c = tp_count[t]
+        if k != r:  # k < r: an ascending copy never overwrites a row it still has to read
+            for i in range(c):
+                for j in range(pdat.shape[1]):
+                    pdat[k + i, j] = pdat[r + i, j]
+                prow[k + i, 0] = prow[r + i, 0]
+                prow[k + i, 1] = t
         tp_head[t] = k
-        while p >= 0:
-            for j in range(5):
-                new_dat[k, j] = pdat[p, j]
-            new_orig[k] = p_orig[p]
-            p = p_next[p]
-            new_next[k] = k + 1 if p >= 0 else -1
-            k += 1
-    pdat[:k] = new_dat
-    p_orig[:k] = new_orig
-    p_next[:k] = new_next
+        k += c
+        r += c
     counters[C_PTOP] = k
+    counters[C_REWRITES] += 1
 
 
 @njit(cache=True, parallel=True)
 def _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4,
-                   vkey, marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count, p_next):
+                   vkey, marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count):
     """:func:`_evaluate` of ``todo[:n_todo]`` in parallel: every evaluation only reads the mesh
-    (each thread stamps its own mark rows), so the results cannot depend on the scheduling."""
+    (each thread stamps its own mark rows and uses its own scratch), so the results cannot depend on
+    the scheduling."""
+    fbufs = np.empty((marks.shape[0], _SCRATCH_F))
+    ibufs = np.empty((marks.shape[0], _SCRATCH_I), np.int64)
     for i in prange(n_todo):
         tid = get_thread_id()
         b, e = _evaluate(todo[i], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks[tid],
-                         marks_b[tid], marks_ab[tid], tcount[tid], pdat, tp_head, tp_count, p_next)
+                         marks_b[tid], marks_ab[tid], tcount[tid], pdat, tp_head, tp_count, fbufs[tid],
+                         ibufs[tid])
         out_b[i] = b
         out_e[i] = e
 
@@ -1302,8 +1438,8 @@ def _set_aside(d_err, d_v, d_b, d_ver, n_def, e, a, b, v_a, ver):
 
 @njit(cache=True, nogil=True)  # compress encodes the levels' meshes in a thread meanwhile
 def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab, tcount,
-         counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, max_merges, pdat, tp_head, tp_count, p_next,
-         vw, p_orig, lock, lock_b, round_stamp, max_blocked):
+         counters, ver, h_err, h_v, h_b, h_ver, h_pos, last_err, parent, rank, max_merges, pdat, tp_head, tp_count,
+         vw, prow, lock, lock_b, round_stamp, max_blocked):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left.
 
     ``marks*`` and ``tcount`` have one row per thread (stamps, evaluation counts); the sequential
@@ -1327,11 +1463,12 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
     d_b = np.empty(d_err.shape[0], np.int32)
     d_ver = np.empty(d_err.shape[0], np.int32)
     n_def = 0
-    compact_every = _compact_every(n)
     mark = marks[0]
     mark_b = marks_b[0]
     mark_ab = marks_ab[0]
     tc = tcount[0]
+    fbuf = np.empty(_SCRATCH_F)
+    ibuf = np.empty(_SCRATCH_I, np.int64)
     # vertices to (re-)evaluate now: all of them at the start and in a sweep (in parallel), one
     # when a lazy re-evaluation comes up
     todo = np.empty(n, np.int64)
@@ -1348,20 +1485,22 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
         found = False
         if n_todo == 1:
             out_b[0], out_e[0] = _evaluate(todo[0], T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
-                                           u4, vkey, mark, mark_b, mark_ab, tc, pdat, tp_head, tp_count, p_next)
+                                           u4, vkey, mark, mark_b, mark_ab, tc, pdat, tp_head, tp_count, fbuf,
+                                           ibuf)
         elif n_todo > 1:
             _evaluate_many(todo, n_todo, out_b, out_e, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params,
-                           quad, u4, vkey, marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count, p_next)
+                           quad, u4, vkey, marks, marks_b, marks_ab, tcount, pdat, tp_head, tp_count)
         # pushed in todo order, as evaluated one by one
         for i in range(n_todo):
             v = todo[i]
             ver[v] += 1
             if out_b[i] >= 0:
                 last_err[v] = out_e[i]
-                _heap_push(h_err, h_v, h_b, h_ver, vkey, counters, out_e[i], v, out_b[i], ver[v], ver)
+                _heap_push(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, out_e[i], v, out_b[i], ver[v])
                 found = True
             else:
                 last_err[v] = -1.0
+                _heap_remove(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, v)
         n_todo = 0
         if sweeping and not found:
             return True
@@ -1370,7 +1509,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
             # the round is over: what it set aside goes back with its error unchanged
             for i in range(n_def):
                 if d_ver[i] == ver[d_v[i]]:
-                    _heap_push(h_err, h_v, h_b, h_ver, vkey, counters, d_err[i], d_v[i], d_b[i], d_ver[i], ver)
+                    _heap_push(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, d_err[i], d_v[i], d_b[i], d_ver[i])
             return False
         if counters[C_HEAP] == 0:
             # neighbourhoods two rings away from a merge may have become legal: look again
@@ -1381,7 +1520,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
                     n_todo += 1
             sweeping = True
             continue
-        e, a, b, v_a = _heap_pop(h_err, h_v, h_b, h_ver, vkey, counters)
+        e, a, b, v_a = _heap_pop(h_err, h_v, h_b, h_ver, h_pos, vkey, counters)
         tc[C_POPS] += 1
         if v_a != ver[a] or parent[a] != a:
             tc[C_STALE] += 1
@@ -1405,7 +1544,7 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
         tc[C_LINK] += 1
         # a's star is unchanged since the entry was made (that would have bumped its version),
         # but b's may have changed: check the link condition again
-        if not _link_ok(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, tc):
+        if not _link_ok_buf(a, b, st_a, T, alive, nbr, head, nxt, isb, mark_b, mark_ab, tc, ibuf):
             todo[0] = a
             n_todo = 1
             continue
@@ -1421,13 +1560,11 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
                     mark[w] = stamp
                     nb[k] = w
                     k += 1
-        _merge(a, b, st_a, nb[:k], T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, vw, p_orig, tp_head,
-               tp_count, p_next, counters)
+        _merge(a, b, st_a, nb[:k], T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, vw, prow, tp_head,
+               tp_count, counters)
         parent[a] = b
         rank[a] = counters[C_MERGES]
         counters[C_MERGES] += 1
-        if params[P_WS] > 0.0 and counters[C_MERGES] % compact_every == 0:
-            _compact_points(alive, pdat, p_orig, tp_head, p_next, counters)
         ver[a] += 1
         if round_stamp > 0:
             lock[a] = round_stamp
@@ -1438,13 +1575,13 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
             w = nb[i]
             if parent[w] == w and not pinned[w]:
                 ver[w] += 1
-                _heap_push(h_err, h_v, h_b, h_ver, vkey, counters, max(e, last_err[w]), w, -1, ver[w], ver)
+                _heap_push(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, max(e, last_err[w]), w, -1, ver[w])
 
 
 @njit(cache=True, nogil=True)
 def _run_rounds(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab,
-                tcount, counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, pdat, tp_head, tp_count, p_next,
-                vw, p_orig, lock, lock_b, ends, max_blocked, round_no, starts):
+                tcount, counters, ver, h_err, h_v, h_b, h_ver, h_pos, last_err, parent, rank, pdat, tp_head, tp_count,
+                vw, prow, lock, lock_b, ends, max_blocked, round_no, starts):
     """Rounds of :func:`_run` up to every ``ends[r]`` in turn (its ``max_blocked[r]``), in one call
     without the GIL: the round loop of :func:`gatun_py.simplify.decimate.decimate` (a return to
     Python between rounds waits for the GIL, which a numba encoder in another thread may hold for
@@ -1458,29 +1595,36 @@ def _run_rounds(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, 
             k += 1
             round_no[0] += 1
             if _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab,
-                    tcount, counters, ver, h_err, h_v, h_b, h_ver, last_err, parent, rank, ends[r], pdat, tp_head,
-                    tp_count, p_next, vw, p_orig, lock, lock_b, round_no[0], max_blocked[r]):
+                    tcount, counters, ver, h_err, h_v, h_b, h_ver, h_pos, last_err, parent, rank, ends[r], pdat,
+                    tp_head, tp_count, vw, prow, lock, lock_b, round_no[0], max_blocked[r]):
                 return k, True, r
     return k, False, ends.shape[0] - 1
 
 
 @njit(cache=True)
-def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, vw, p_orig, tp_head, tp_count,
-           p_next, counters):
+def _merge(a, b, st_a, nb, T, alive, nbr, head, nxt, pts, dens, params, quad, pdat, vw, prow, tp_head, tp_count,
+           counters):
     """Everything a merge a -> b changes: the tets, the lists of the vertices around it (``nb``:
     the vertices of a's star but a), the sample points and b's quadric."""
     _apply_merge(a, b, st_a, T, alive, nbr, head, nxt)
     # only the tets of edge ab died (the others keep their slots, relabelled a -> b), so only
-    # the lists of their vertices hold dead slots: tidy those (a's is b's now)
+    # the lists of their vertices hold dead slots: tidy those (a's is b's now). The dead tets are
+    # listed first (a few of a's star), so the test per vertex looks at them only.
+    dead = np.empty(st_a.shape[0], np.int64)
+    n_dead = 0
+    for k in range(st_a.shape[0]):
+        t = st_a[k] >> 2
+        if not alive[t]:
+            dead[n_dead] = t
+            n_dead += 1
     for i in range(nb.shape[0]):
         w = nb[i]
-        for k in range(st_a.shape[0]):
-            t = st_a[k] >> 2
-            if not alive[t] and _contains(T, t, w):
+        for k in range(n_dead):
+            if _contains(T, dead[k], w):
                 _tidy(w, head, nxt, T, alive)
                 break
     if params[P_WS] > 0.0:
-        _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, p_orig, tp_head, tp_count, p_next, counters)
+        _reassign_points(a, st_a, T, alive, pts, dens, pdat, vw, prow, tp_head, tp_count, counters)
     for j in range(quad.shape[1]):
         quad[b, j] += quad[a, j]
 
@@ -1624,21 +1768,23 @@ def _vertex_weights(T, tet_w, n):
 
 
 @njit(cache=True)
-def _centroid_points(pts, dens, T, tet_w, centroid_weight):
-    """(pdat, p_orig): the rows (x, y, z, value, weight) of every tet's centroid (weight its
-    volume fraction x ``centroid_weight``; row t, named n + t) and room for the n vertices after
-    them (each row is computed from its own tet alone: the same bits in any tet order)."""
+def _centroid_points(pts, dens, T, tet_w, centroid_weight, rows):
+    """(pdat, prow): the rows (x, y, z, value, weight, 0) and (name, tet) of every tet's
+    centroid (weight its volume fraction x ``centroid_weight``; row t, named n + t) and room for the rest of ``rows``
+    (at least the n vertices) after them (each row is computed from its own tet alone: the same
+    bits in any tet order)."""
     n = pts.shape[0]
     m = T.shape[0]
-    pdat = np.zeros((n + m, 5))
-    p_orig = np.full(n + m, -1, np.int32)
+    pdat = np.zeros((max(rows, n + m), 6))
+    prow = np.full((pdat.shape[0], 2), -1, np.int32)
     for t in range(m):
         pdat[t, 4] = tet_w[t] * centroid_weight
         for k in range(3):
             pdat[t, k] = (((pts[T[t, 0], k] + pts[T[t, 1], k]) + pts[T[t, 2], k]) + pts[T[t, 3], k]) / 4.0
         pdat[t, 3] = (((dens[T[t, 0]] + dens[T[t, 1]]) + dens[T[t, 2]]) + dens[T[t, 3]]) / 4.0
-        p_orig[t] = n + t
-    return pdat, p_orig
+        prow[t, 0] = n + t
+        prow[t, 1] = t
+    return pdat, prow
 
 
 @njit(cache=True, _nrt=False, inline="always")

@@ -95,12 +95,16 @@ level 0 beside it, 18.1 s for 20.5 s with every level beside it). Speculative ev
 next lazy heap entries on the second thread was tried and measured slower (see bench/sections/
 simplify.md).
 
-Where the time goes (perf on the kernels' code, Blunt-fin, one thread, after the speed work of
-issue 12): the star context of an evaluation (chiefly walking the star's sample points: memory
-bound) ~20 %, the sampled errors of the exact evaluations ~15 %, moving the points after a merge
-~11 %, the merge and list upkeep ~10 %, star and link walks ~12 %, the heap ~5 %. Per merge
-(``bench/forest_identity.py --counters``): ~3.8 evaluations, ~38 candidates, ~5.3 exact
-evaluations, ~220 sample points summed, ~3.6 link tests, ~11 heap pops of which ~8.6 stale.
+Where the time goes (perf on the kernels' code, Combustion, one thread, session 14): the new values
+at the sample points of the exact evaluations (``_new_value``) ~13 %, moving the points after a
+merge ~9 %, the star context (volumes, sample sums) ~8 %, star and link walks ~10 %, the merge and
+list upkeep ~5 %, the candidates' cheap terms and legality ~8 %, rewriting the point rows ~2.5 %,
+the heap ~1 %. Per merge (``bench/forest_identity.py --counters``): ~3.6 evaluations, ~32
+candidates, ~5.9 exact evaluations, ~250 sample points summed, ~135 points moved, ~3.8 link tests,
+~2.6 heap pops. What made it so (every step bit-identical): every sample point caches its error in
+its tet (the star sums read it instead of forming every star tet's planes), a tet's points are a
+run of rows (no chain to walk; a stride jumps), an evaluation's ~30 scratch arrays are views of a
+per-thread buffer, and the heap holds one entry per vertex (no superseded entries to pop).
 
 The merge loop is bound by memory latency, and a mesher's numbering can have no locality at all
 (the gmsh flange: the median tet spans 48,492 of 160,534 vertex ids, a vertex's star 612,597 of
@@ -205,6 +209,11 @@ CENTROID_WEIGHT = 1.0
 # every setting is within 0.002 of the greedy order.
 ROUNDS_PER_LEVEL = 64
 ROUND_BLOCKED = 0.25
+# Room for sample point rows beyond the n + m points, as a fraction of n + m: a merge writes the runs
+# of its star's points there, and when the rows run out they are rewritten (the more room, the
+# rarer the rewrites, each O(n + m)). flange-1m, greedy, one thread: 0.25 / 0.5 / 1.0 rewrite 98 / 52
+# / 27 times in 19.3-19.5 / 19.3-20.9 / 18.9-20.2 s CPU (noise); 56 bytes per row.
+POINT_SLACK = 0.25
 # Tets per chunk of the vectorised set-up (bounds its temporaries).
 _CHUNK = 1 << 16
 
@@ -354,13 +363,19 @@ class DecimationState:
         # Sample points of the original field, listed in the live tet holding them: every input
         # tet's centroid from the start (ids n + t, weight its volume fraction x CENTROID_WEIGHT),
         # every vertex once merged away (weight a quarter of its tets' volume fraction); one row
-        # (x, y, z, value, weight) per point, the centroids first (p_orig: which point a row is,
-        # in the local numbering).
-        self.pdat, self.p_orig = K._centroid_points(self.pts, self.dens, self.T, tet_w[self.t_orig], CENTROID_WEIGHT)
+        # (x, y, z, value, weight, error) per point, the centroids first (prow: which point a row
+        # is, in the local numbering, and the tet its run was written for); error: its weighted
+        # squared error in the tet holding it, kept up to date by the merges that move it (see
+        # _decimate_kernels._star_samples).
+        # A tet's points are a run of rows (tp_head[t], tp_count[t] of them); a merge writes the
+        # new runs of its star at the top, and the rows are rewritten from 0 when they run out.
+        rows = n + m + int(POINT_SLACK * (n + m))
+        self.pdat, self.prow = K._centroid_points(self.pts, self.dens, self.T, tet_w[self.t_orig], CENTROID_WEIGHT,
+                                                    rows)
         del tet_w
-        self.p_next = np.full(n + m, -1, np.int32)
         self.tp_head = np.arange(m, dtype=np.int32)
         self.tp_count = np.ones(m, np.int32)
+        K._set_point_errors(self.T, self.pts, self.dens, self.pdat, self.tp_head, self.tp_count)
         # per thread of the parallel evaluations: stamp rows and counters (stamps, evaluations)
         threads = max(1, int(numba.config.NUMBA_NUM_THREADS))
         self.marks = np.zeros((threads, n), np.int64)
@@ -371,12 +386,14 @@ class DecimationState:
         self.counters[K.C_PTOP] = m
         self.ver = np.zeros(n, np.int32)
         self.last_err = np.full(n, -1.0)
-        # at most one live entry per vertex: a full heap compacts to <= n and has n free slots again
+        # at most one entry per vertex in the heap (h_pos), and at most one current entry per
+        # vertex among those a round sets aside (a full list drops the others first)
         cap = 2 * n + 1024
         self.h_err = np.zeros(cap)
         self.h_v = np.zeros(cap, np.int32)
         self.h_b = np.zeros(cap, np.int32)
         self.h_ver = np.zeros(cap, np.int32)
+        self.h_pos = np.full(n, -1, np.int32)  # every vertex's entry in the heap (at most one)
         # the forest so far, local: parent[v] (a local id), rank[v]
         self.parent = np.arange(n, dtype=np.int32)
         self.rank = np.full(n, K.ROOT_RANK, np.int32)
@@ -391,10 +408,10 @@ class DecimationState:
                 self.params, self.quad, self.u4, self.v_orig)
 
     def _sample_args(self):
-        return (self.pdat, self.tp_head, self.tp_count, self.p_next)
+        return (self.pdat, self.tp_head, self.tp_count)
 
     def _heap_args(self):
-        return (self.ver, self.h_err, self.h_v, self.h_b, self.h_ver, self.last_err)
+        return (self.ver, self.h_err, self.h_v, self.h_b, self.h_ver, self.h_pos, self.last_err)
 
     def start(self) -> None:
         """Evaluate every vertex's best merge (the first :meth:`run` does it too)."""
@@ -413,7 +430,7 @@ class DecimationState:
             stamp = self.round
         return bool(K._run(*self._mesh_args(), self.marks, self.marks_b, self.marks_ab, self.tcount, self.counters,
                            *self._heap_args(), self.parent, self.rank, np.int64(max_merges), *self._sample_args(),
-                           self.vw, self.p_orig, self.lock, self.lock_b, np.int64(stamp), np.int64(max_blocked)))
+                           self.vw, self.prow, self.lock, self.lock_b, np.int64(stamp), np.int64(max_blocked)))
 
     def run_rounds(self, ends: np.ndarray, max_blocked: np.ndarray):
         """Rounds of independent merges (as :meth:`run` with ``one_round``) up to every ``ends[r]``
@@ -424,7 +441,7 @@ class DecimationState:
         round_no = np.array([self.round], np.int64)
         k, finished, r = K._run_rounds(*self._mesh_args(), self.marks, self.marks_b, self.marks_ab, self.tcount,
                                        self.counters, *self._heap_args(), self.parent, self.rank,
-                                       *self._sample_args(), self.vw, self.p_orig, self.lock, self.lock_b, ends,
+                                       *self._sample_args(), self.vw, self.prow, self.lock, self.lock_b, ends,
                                        np.ascontiguousarray(max_blocked, np.int64), round_no, starts)
         self.round = int(round_no[0])
         return [int(x) for x in starts[:k]], bool(finished), int(r)
@@ -463,11 +480,16 @@ class DecimationState:
         st = K._star(a, self.head, self.nxt, self.T, self.alive)
         nb = np.unique(self.T[st >> 2])
         K._merge(a, b, st, nb[nb != a].astype(np.int64), self.T, self.alive, self.nbr, self.head, self.nxt, self.pts,
-                 self.dens, self.params, self.quad, self.pdat, self.vw, self.p_orig, self.tp_head, self.tp_count,
-                 self.p_next, self.counters)
+                 self.dens, self.params, self.quad, self.pdat, self.vw, self.prow, self.tp_head, self.tp_count,
+                 self.counters)
         self.parent[a] = b
         self.rank[a] = self.counters[K.C_MERGES]
         self.counters[K.C_MERGES] += 1
+
+    @property
+    def p_orig(self) -> np.ndarray:
+        """Which point every row of ``pdat`` is (a local vertex id, or n + t for tet t's centroid)."""
+        return self.prow[:, 0]
 
     @property
     def n_merges(self) -> int:
@@ -483,7 +505,7 @@ class DecimationState:
         are dead, the star walks touch fewer cache lines. The merges that follow are the same."""
         (self.T, self.nbr, self.nxt, self.tp_head, self.tp_count,
          self.t_orig) = K._compact_tets(self.T, self.alive, self.nbr, self.head, self.nxt, self.tp_head,
-                                        self.tp_count, self.t_orig)
+                                        self.tp_count, self.t_orig, self.prow, self.counters)
         self.alive = np.ones(self.T.shape[0], bool)
 
     def compact_if_sparse(self) -> None:

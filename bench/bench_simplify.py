@@ -509,10 +509,17 @@ MERGE_LOOP_NOTE = (
     "pairs, load 1.0 to 1.3) Blunt-fin ×0.80, Combustion ×0.83, flange-1m ×0.88. Tried and dropped: the "
     "cached errors in their own array beside the rows (×1.01 / ×1.06, no gain), an early exit from the "
     "containment tests (slower: the branch mispredicts), rewriting the chains every n/256 merges instead of "
-    "n/16 (the rewrites cost more than the walks saved). The table above was measured on a slow, noisy "
-    "machine (VTK 0.73 s on Combustion against 0.40 s in session 13's table, 1.18 s on Blunt-fin against "
-    "0.68 s); main's code by the same script two minutes later (load ~1.1): Blunt-fin 4.60 s CPU (3.0× VTK's "
-    "1.51 s in that run), Combustion 4.67 s (5.6× 0.84 s), flange-1m 26.53 s (3.7× 7.08 s)."
+    "n/16 (the rewrites cost more than the walks saved). The set-up forms the tets' 4-D hyperplanes in one "
+    "kernel (`_tet_hyperplanes`) instead of stacked `np.linalg.det` calls (Combustion 0.15 → 0.011 s CPU; the "
+    "quadrics move by ≤ 4e-16 relative, so the three grid-derived samples' forests break some near-ties the "
+    "other way: the quality table in the pipeline section is unchanged within 0.003). Same window, quiet "
+    "(lead, 2026-11-25 01:00-01:04 UTC, load 1.0; this machine is not session 13's: VTK takes 1.0-1.4 s on "
+    "Blunt-fin against 0.68 s there): the session's starting code (e8c85f0, the same script with its "
+    "package on PYTHONPATH) Blunt-fin 3.80 s CPU (2.8× VTK's 1.36 s in that run), Combustion 3.97 s (6.4× "
+    "0.62 s), flange-1m 22.62 s (3.5× 6.51 s); this code before and in the table above: Blunt-fin 2.80 / "
+    "2.84 s (2.8× / 2.9×), Combustion 3.17 / 3.19 s (6.0× / 4.6×), flange-1m 18.19 / 18.86 s (2.8× / 2.9×). "
+    "Our CPU moves by 3 % between runs, VTK's best of 3 by up to 40 % (Blunt-fin 0.98-1.36 s, Combustion "
+    "0.53-0.70 s), so the ratios near 3 are within VTK's own spread."
 )
 
 

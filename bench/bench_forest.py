@@ -188,12 +188,13 @@ def shared_vertex_trade(payloads):
     vertices would need every coarser level's connectivity decoded first, so decoding level i
     would take its own time plus the connectivity of levels i+1.. (process CPU, best of 3)."""
     reader = TetcReader(encode_tetc(payloads))
-    enc = [encode_level(p) for p in payloads]
     vertex_bytes, other_bytes = [], []
-    for e, p in zip(enc, payloads):
-        vb = sum(len(v) for k, v in e.sections.items() if not k.endswith(("/forest", "/tets", "/boundary")))
+    for p in payloads:
+        sizes = {k: reader.container.section_size(k) for k in reader.container.section_names()
+                 if k.startswith(f"L{p.level}/")}
+        vb = sum(v for k, v in sizes.items() if not k.endswith(("/forest", "/tets", "/boundary")))
         vertex_bytes.append(vb)
-        other_bytes.append(sum(len(v) for v in e.sections.values()) - vb)
+        other_bytes.append(sum(sizes.values()) - vb)
     n = [p.mesh.n_points for p in payloads] + [0]
     shared = vertex_bytes[0] + sum(vb * (n[i] - n[i + 1]) / n[i] for i, vb in enumerate(vertex_bytes) if i > 0 and n[i])
     level0 = vertex_bytes[0] + other_bytes[0]

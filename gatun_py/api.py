@@ -357,8 +357,8 @@ def info(source, *, scalar: str | None = None, q_file=None, q_var: str = "densit
         "coincident_points": report.coincident_points,
         "unreferenced_points": report.unreferenced_points,
         "bbox": [lo.tolist(), hi.tolist()],
-        "scalar": mesh.scalar_name,
-        "scalar_range": list(mesh.scalar_range),
+        "scalar": mesh.scalar_name if mesh.has_scalar else None,
+        "scalar_range": list(mesh.scalar_range) if mesh.has_scalar else None,
         "notes": list(report.notes),
     }
 
@@ -414,7 +414,7 @@ class TetcFile:
 
     def __repr__(self) -> str:
         return (f"TetcFile({self.path!r}, points={self.n_points}, tets={self.n_tets}, "
-                f"scalar={self.scalar_name!r}, levels={self.levels}, max_ratio={self.max_ratio:.4f})")
+                f"scalar={self.scalar_name or None!r}, levels={self.levels}, max_ratio={self.max_ratio:.4f})")
 
     def __enter__(self):
         return self

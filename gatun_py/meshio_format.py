@@ -18,7 +18,7 @@ def read(filename) -> meshio.Mesh:
 
     mesh = open_tetc(filename).mesh()
     return meshio.Mesh(np.asarray(mesh.points), [("tetra", np.asarray(mesh.tets))],
-                       point_data={name: np.asarray(a) for name, a in mesh.point_data.items()})
+                       point_data={name: np.asarray(a) for name, a in mesh.user_point_data.items()})
 
 
 def write(filename, mesh: meshio.Mesh, **options) -> None:

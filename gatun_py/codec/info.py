@@ -54,8 +54,9 @@ def tetc_info(source) -> dict:
         "tets": r.meta.get("tets"),
         "boundary_faces": r.meta.get("boundary_faces"),
         "bbox": r.meta.get("bbox"),
-        "scalar": r.meta.get("scalar"),
-        "scalar_range": r.meta.get("scalar_range"),
+        # a mesh stored without a scalar has its zeros under the name "": no scalar, no range
+        "scalar": r.meta.get("scalar") or None,
+        "scalar_range": r.meta.get("scalar_range") if r.meta.get("scalar") else None,
         "source": r.meta.get("source"),
         "bytes_total": c.size,
         "bits_per_tet_connectivity": round(8.0 * conn / lv0["tets"], 4) if lv0["tets"] else 0.0,
@@ -64,7 +65,7 @@ def tetc_info(source) -> dict:
         "format_version": c.major,
         "points_dtype": r.points_dtype.name,
         "arrays": [{"name": name, "dtype": dt.name, "components": k, "bytes": plain.get(f"L{i0}/array/{j}", 0)}
-                   for j, (name, dt, k) in enumerate(r.arrays)],
+                   for j, (name, dt, k) in enumerate(r.arrays) if name],
         "levels": levels,
         "forest": _forest_info(r, sizes),
         "bricks": _bricks_info(r, sizes),

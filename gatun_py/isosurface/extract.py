@@ -31,6 +31,7 @@ from ..codec.container import MAGIC
 from ..codec.prefetch import PrefetchedDecode
 from ..errors import CorruptFileError, OptionError, ReadError, TetcError
 from ..mesh import TetMesh, mesh_batches, read_mesh
+from ..mesh.model import NO_SCALAR
 from ..mesh.synthetic import jittered_grid
 from ..simplify.filter import SimplifyFilter
 from ..simplify.levels import resolve_target, target_ancestors
@@ -746,6 +747,9 @@ def _rss_mb() -> float:
         return 0.0
 
 
+_NO_SCALAR_MESSAGE = "the mesh has no scalar (it came without point data): there is no field to extract an isosurface of"
+
+
 def _open_stream(source, *, level, ratio_mesh, read_kwargs, values=(), jobs=1):
     """(batches, info) for any source; info has points, bbox_lo/hi, scalar_range and, for a
     simplified start, the boundary of the simplified mesh (see below). ``values`` and ``jobs``
@@ -756,11 +760,15 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs, values=(), jobs=1):
         if level is not None or ratio_mesh is not None:
             raise OptionError("level and ratio_mesh need a .tetc file (a mesh file has no merge forest)")
         mesh = source if isinstance(source, TetMesh) else read_mesh(source, **(read_kwargs or {}))[0]
+        if not mesh.has_scalar:
+            raise OptionError(_NO_SCALAR_MESSAGE)
         lo, hi = mesh.bbox
         info = {"points": mesh.n_points, "bbox_lo": lo, "bbox_hi": hi, "scalar_range": mesh.scalar_range,
                 "tets": mesh.n_tets}
         return mesh_batches(mesh), info
     reader = source if isinstance(source, TetcReader) else TetcReader(source)
+    if reader.scalar_name == NO_SCALAR:
+        raise OptionError(_NO_SCALAR_MESSAGE)
     if reader.n_bricks > 1:
         return _open_bricked(reader, level=level, ratio_mesh=ratio_mesh, values=values, jobs=jobs)
     target = resolve_target(reader, ratio=ratio_mesh, level=level)

@@ -23,7 +23,7 @@ from meshio import _helpers
 from .._atomic import atomic_path
 from ..errors import MeshError, OptionError, OutputError, ReadError
 from . import plot3d
-from .model import TetMesh, signed_volumes
+from .model import NO_SCALAR, TetMesh, signed_volumes
 from .split import orient_positive, split_hexes_two_colour, split_min_id_star, two_colour
 from .validate import MeshReport, validate_tets
 from .exodus import EXODUS_SUFFIXES, read_exodus
@@ -261,6 +261,11 @@ def mesh_from_meshio(m, *, scalar: str | None = None, cell_to_point: bool = Fals
             if key != cname:
                 notes.append(f"cell array {cname!r} averaged to the points as {key!r}")
     density, name = _choose_scalar(m, n, scalar, cell_to_point, point_data, source)
+    if name == NO_SCALAR:
+        hint = (f"; its cell data ({', '.join(cell_names)}) can be averaged to the points (cell-to-point)"
+                if cell_names and not cell_to_point else "")
+        notes.append(f"no point scalar: the mesh is kept without one (renders show its shape as a uniform "
+                     f"medium){hint}")
     mesh, report = _validated(source, pts, density, tets, name, point_data)
     report.notes += notes
     if not cell_to_point:
@@ -333,11 +338,8 @@ def _choose_scalar(m, n, scalar, cell_to_point, point_data, source):
         return None, name
     if len(point_scalars) > 1:
         raise ReadError(f"{source}: several point scalars, choose one by name: {', '.join(sorted(point_scalars))}")
-    cell_names = sorted(m.cell_data)
-    if cell_names:
-        raise ReadError(f"{source}: no point scalar; cell data ({', '.join(cell_names)}) can be averaged to the "
-                        "points on request (cell-to-point)")
-    raise ReadError(f"{source}: the mesh has no scalar data")
+    # no scalar at all: the mesh is kept without one (zeros under NO_SCALAR, never written back)
+    return np.zeros(n, np.float32), NO_SCALAR
 
 
 def _cell_to_point(m, name, points, tet_chunks, cell_of_tet, n):
@@ -386,8 +388,12 @@ def write_mesh(mesh: TetMesh, path, *, force: bool = False) -> None:
     fmt = mesh_output_format(path)
     if fmt in ("xdmf", "h5m", "med") and importlib.util.find_spec("h5py") is None:
         raise OutputError(f"writing {fmt} files needs h5py (pip install h5py); .vtu needs nothing extra")
-    m = meshio.Mesh(np.asarray(mesh.points), [("tetra", np.asarray(mesh.tets))],
-                    point_data={name: np.asarray(a) for name, a in mesh.point_data.items()})
+    point_data = {name: np.asarray(a) for name, a in mesh.user_point_data.items()}
+    if fmt == "gmsh":
+        # gmsh's vertex entity tags only make sense with the element tags (cell data, which a
+        # .tetc file does not hold): meshio's writer refuses them alone and writes its own
+        point_data.pop("gmsh:dim_tags", None)
+    m = meshio.Mesh(np.asarray(mesh.points), [("tetra", np.asarray(mesh.tets))], point_data=point_data)
     with atomic_path(path, force=force) as tmp:
         try:
             with warnings.catch_warnings():

@@ -10,6 +10,11 @@ import numpy as np
 # Face k is the face opposite vertex k.
 TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int64)
 
+# The default scalar's name for a mesh that came without any: its density is all zeros, stored
+# under this name, and left out wherever the user's arrays are listed or written (a bare gmsh mesh
+# compresses and decompresses to itself, and renders as a uniform medium that shows its shape).
+NO_SCALAR = ""
+
 
 @dataclass(frozen=True, eq=False, repr=False)
 class TetMesh:
@@ -29,7 +34,8 @@ class TetMesh:
     tets : (m, 4) int32
         Vertex ids of every tetrahedron, positively oriented (signed volume >= 0).
     scalar_name : str
-        Name of the default scalar, kept for output.
+        Name of the default scalar, kept for output; :data:`NO_SCALAR` (``""``) for a mesh without
+        one (``density`` all zeros, see :attr:`user_point_data`).
     point_data : dict, optional
         Every point array, ``name -> (n,) or (n, k)`` array in its own dtype (floats and integers),
         bit for bit what the user gave. The default scalar is ``point_data[scalar_name]``; when it
@@ -108,20 +114,35 @@ class TetMesh:
         return int(self.tets.shape[0])
 
     def __repr__(self) -> str:
-        if self.n_points:
+        if self.n_points and self.has_scalar:
             lo, hi = self.scalar_range
             rng = f" in [{lo:.6g}, {hi:.6g}]"
         else:
             rng = ""
         pdt = "" if self.points.dtype == np.float32 else f" {self.points.dtype}"
         arrays = ""
-        if len(self.point_data) > 1 or self.point_data[self.scalar_name].dtype != np.float32:
+        listed = [a for a in self.arrays if a[0] != NO_SCALAR] if not self.has_scalar else self.arrays
+        if len(listed) > 1 or (listed and listed[0][1] != np.float32) or (listed and not self.has_scalar):
             arrays = ", arrays=[" + ", ".join(
-                f"{name!r} {dt}" + (f" x{k}" if k > 1 else "") for name, dt, k in self.arrays) + "]"
+                f"{name!r} {dt}" + (f" x{k}" if k > 1 else "") for name, dt, k in listed) + "]"
+        scalar = repr(self.scalar_name) if self.has_scalar else "none"
         return (f"TetMesh(points={self.n_points}{pdt}, tets={self.n_tets}, "
-                f"scalar={self.scalar_name!r}{rng}{arrays})")
+                f"scalar={scalar}{rng}{arrays})")
 
     # -- point arrays ------------------------------------------------------------------------
+    @property
+    def has_scalar(self) -> bool:
+        """False for a mesh that came without a scalar (``scalar_name`` is :data:`NO_SCALAR`)."""
+        return self.scalar_name != NO_SCALAR
+
+    @property
+    def user_point_data(self) -> dict:
+        """The point arrays the user gave: ``point_data`` without the zeros of a mesh that had no
+        scalar (what a writer writes)."""
+        if self.has_scalar:
+            return self.point_data
+        return {k: v for k, v in self.point_data.items() if k != NO_SCALAR}
+
     @property
     def arrays(self) -> list[tuple[str, np.dtype, int]]:
         """``(name, dtype, components)`` of every point array, the default scalar first."""

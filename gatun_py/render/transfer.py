@@ -117,13 +117,12 @@ class TransferFunction:
         points over this scalar range (idempotent for the same range).
         """
         tf = self
+        lo, hi = data_range(scalar_range)
         if not self.absolute:
-            lo, hi = (float(v) for v in scalar_range)
-            span = hi - lo if hi > lo else 1.0
-            tf = replace(self, color_x=lo + self.color_x * span, opacity_x=lo + self.opacity_x * span,
+            tf = replace(self, color_x=lo + self.color_x * (hi - lo), opacity_x=lo + self.opacity_x * (hi - lo),
                          absolute=True)
         if tf.opacity_model == "vtk":
-            x, a = vtk_opacity_points(tf.color_x, tf.opacity_x, tf.opacity_a, scalar_range)
+            x, a = vtk_opacity_points(tf.color_x, tf.opacity_x, tf.opacity_a, (lo, hi))
             tf = replace(tf, opacity_x=x, opacity_a=a)
         return tf
 
@@ -151,15 +150,32 @@ class TransferFunction:
         between entries (and clamp outside), so both see the same function.
         """
         tf = self.resolve(scalar_range)
-        lo, hi = (float(v) for v in scalar_range)
-        if not hi > lo:
-            hi = lo + 1.0
+        lo, hi = data_range(scalar_range)
         xs = np.linspace(lo, hi, size)
         rgb, a = tf.evaluate(xs)
         tab = np.empty((size, 4), dtype=np.float64)
         tab[:, :3] = rgb
         tab[:, 3] = np.clip(a, 0.0, 1.0)
         return tab, lo, (size - 1) / (hi - lo)
+
+
+def data_range(scalar_range) -> tuple[float, float]:
+    """The scalar range a normalised transfer function is stretched over: ``scalar_range`` itself,
+    except for a constant field (``hi <= lo``), which gets ``[v - 1/2, v + 1/2]``.
+
+    A constant field (or a mesh stored without a scalar, whose values are all 0) then renders at
+    the middle of the transfer function: a uniform medium that shows the shape, where the low end
+    of most transfer functions is transparent and would leave the image empty.
+
+    >>> data_range((0.0, 0.0))
+    (-0.5, 0.5)
+    >>> data_range((1.0, 3.0))
+    (1.0, 3.0)
+    """
+    lo, hi = (float(v) for v in scalar_range)
+    if not hi > lo:
+        return lo - 0.5, lo + 0.5
+    return lo, hi
 
 
 def vtk_opacity_points(color_x, opacity_x, opacity_a, scalar_range):

@@ -602,18 +602,20 @@ def _spatial_volume(u, a, b, c, d):
     return w if w < np.inf else 0.0  # NaN and inf: no weight
 
 
-@njit(cache=True, nogil=True, _nrt=False)
-def _tet_terms(u, a, b, c, d, w, terms):
-    """The 10 terms of A of one tet's quadric (corners in id order, ``w`` its
-    :func:`_spatial_volume`): its volume times the squared
-    distance to the hyperplane through its corners in (x, y, z, value), about any of its corners
-    (the plane passes through them: no b, no c). False for a flat tet."""
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
+def hyperplane_normal(u, a, b, c, d):
+    """(length, n0, n1, n2, n3): the unit normal of the hyperplane through rows a, b, c, d of
+    ``u`` (points in 4-D, e.g. (x, y, z, value)) and the length it had before normalising; n = 0
+    when that length is 0 or not finite (a flat tet: no unique hyperplane).
+
+    The normal is the generalised cross product of the three edges from a: n_j = (-1)^j det of
+    the edges without column j, from the 2 x 2 minors of the last two edges. Every operation is
+    spelled out in this order, so the result is the same bits on every machine: the forest
+    coder's quadrics (format 7 decodes from them) and the decimator's both come from here."""
     # the three edges from corner a in (x, y, z, value)
     p0, p1, p2, p3 = u[b, 0] - u[a, 0], u[b, 1] - u[a, 1], u[b, 2] - u[a, 2], u[b, 3] - u[a, 3]
     q0, q1, q2, q3 = u[c, 0] - u[a, 0], u[c, 1] - u[a, 1], u[c, 2] - u[a, 2], u[c, 3] - u[a, 3]
     r0, r1, r2, r3 = u[d, 0] - u[a, 0], u[d, 1] - u[a, 1], u[d, 2] - u[a, 2], u[d, 3] - u[a, 3]
-    # 2x2 minors of the last two edges, then the generalised cross product (the hyperplane's
-    # normal in 4D: n_j = (-1)^j det of the edges without column j)
     m01 = q0 * r1 - q1 * r0
     m02 = q0 * r2 - q2 * r0
     m03 = q0 * r3 - q3 * r0
@@ -625,12 +627,20 @@ def _tet_terms(u, a, b, c, d, w, terms):
     n2 = p0 * m13 - p1 * m03 + p3 * m01
     n3 = -(p0 * m12 - p1 * m02 + p2 * m01)
     length = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2 + n3 * n3)
+    if not (length > 0 and length < np.inf):
+        return length, 0.0, 0.0, 0.0, 0.0
+    return length, n0 / length, n1 / length, n2 / length, n3 / length
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _tet_terms(u, a, b, c, d, w, terms):
+    """The 10 terms of A of one tet's quadric (corners in id order, ``w`` its
+    :func:`_spatial_volume`): its volume times the squared
+    distance to the hyperplane through its corners in (x, y, z, value), about any of its corners
+    (the plane passes through them: no b, no c). False for a flat tet."""
+    length, n0, n1, n2, n3 = hyperplane_normal(u, a, b, c, d)
     if not (length > 0 and w > 0 and length < np.inf):
         return False
-    n0 /= length
-    n1 /= length
-    n2 /= length
-    n3 /= length
     w0, w1, w2, w3 = w * n0, w * n1, w * n2, w * n3
     terms[0] = w0 * n0
     terms[1] = w0 * n1

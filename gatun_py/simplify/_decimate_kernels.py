@@ -44,6 +44,7 @@ from __future__ import annotations
 import numpy as np
 from numba import get_thread_id, njit, prange
 
+from ..codec._forest_kernels import hyperplane_normal
 from ..codec.forest import ROOT_RANK  # noqa: F401 (decimate.py reads it as K.ROOT_RANK)
 from ..mesh.model import TET_FACES as _TET_FACES
 
@@ -1787,52 +1788,25 @@ def _centroid_points(pts, dens, T, tet_w, centroid_weight, rows):
     return pdat, prow
 
 
-@njit(cache=True, _nrt=False, inline="always")
-def _det3(a0, a1, a2, b0, b1, b2, c0, c1, c2):
-    """Determinant of the 3 x 3 matrix with rows a, b, c (cofactors along a, in this order)."""
-    return a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0) + a2 * (b0 * c1 - b1 * c0)
-
-
 @njit(cache=True, nogil=True)
 def _tet_hyperplanes(u4, T, weight, planes):
     """``planes[t]`` = (unit normal n (4), offset d, weight w) of tet t's hyperplane through its
-    corners' (x, y, z, s): n . u + d = 0 there. The normal is the generalised cross product of the
-    three edge vectors e1, e2, e3 from corner 0 (n_k = (-1)^k x the determinant of the edges without
-    coordinate k), normalised; a flat tet (n = 0) or one of weight <= 0 gets n = 0 and w = 0.
-
-    Every operation is spelled out, so the quadrics (and with them the forest) are the same bits
-    on every machine, whichever LAPACK kernel numpy would have picked for a determinant."""
+    corners' (x, y, z, s): n . u + d = 0 there, n from
+    :func:`gatun_py.codec._forest_kernels.hyperplane_normal` (edges from corner 0, every operation
+    spelled out: the quadrics, and with them the forest, are the same bits on every machine); a
+    flat tet (n = 0) or one of weight <= 0 gets n = 0 and w = 0."""
     for t in range(T.shape[0]):
         p = T[t, 0]
-        x0 = u4[p, 0]
-        x1 = u4[p, 1]
-        x2 = u4[p, 2]
-        x3 = u4[p, 3]
-        q = T[t, 1]
-        a0, a1, a2, a3 = u4[q, 0] - x0, u4[q, 1] - x1, u4[q, 2] - x2, u4[q, 3] - x3
-        q = T[t, 2]
-        b0, b1, b2, b3 = u4[q, 0] - x0, u4[q, 1] - x1, u4[q, 2] - x2, u4[q, 3] - x3
-        q = T[t, 3]
-        c0, c1, c2, c3 = u4[q, 0] - x0, u4[q, 1] - x1, u4[q, 2] - x2, u4[q, 3] - x3
-        n0 = _det3(a1, a2, a3, b1, b2, b3, c1, c2, c3)
-        n1 = -_det3(a0, a2, a3, b0, b2, b3, c0, c2, c3)
-        n2 = _det3(a0, a1, a3, b0, b1, b3, c0, c1, c3)
-        n3 = -_det3(a0, a1, a2, b0, b1, b2, c0, c1, c2)
-        ln = np.sqrt(((n0 * n0 + n1 * n1) + n2 * n2) + n3 * n3)
+        length, n0, n1, n2, n3 = hyperplane_normal(u4, p, T[t, 1], T[t, 2], T[t, 3])
         w = weight[t]
-        if ln > 0.0 and w > 0.0:
-            n0 /= ln
-            n1 /= ln
-            n2 /= ln
-            n3 /= ln
-        else:
+        if not (length > 0.0 and length < np.inf and w > 0.0):
             n0 = n1 = n2 = n3 = 0.0
             w = 0.0
         planes[t, 0] = n0
         planes[t, 1] = n1
         planes[t, 2] = n2
         planes[t, 3] = n3
-        planes[t, 4] = -(((n0 * x0 + n1 * x1) + n2 * x2) + n3 * x3)
+        planes[t, 4] = -(((n0 * u4[p, 0] + n1 * u4[p, 1]) + n2 * u4[p, 2]) + n3 * u4[p, 3])
         planes[t, 5] = w
 
 

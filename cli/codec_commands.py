@@ -22,7 +22,15 @@ def info(input, scalar, q_file, q_var, cell_to_point, time_step, as_json):
         echo_json(data)
         return
     for k, v in data.items():
-        if isinstance(v, list) and v and isinstance(v[0], dict):
+        if k == "sections":  # every section by name: --json has them; "parts" sums them up
+            click.echo(f"sections: {len(v)} (tetc info --json lists them)")
+        elif k == "parts":
+            click.echo("parts (all levels / level 0, bytes):")
+            width = max(len(row["part"]) for row in v)
+            for row in v:
+                click.echo(f"  {row['part']:<{width}}  {row['bytes']:>12,}  {100 * row['share']:5.1f} %  "
+                           f"{row['level0_bytes']:>12,}")
+        elif isinstance(v, list) and v and isinstance(v[0], dict):
             click.echo(f"{k}:")
             for row in v:
                 click.echo("  " + ", ".join(f"{a}={b}" for a, b in row.items()))

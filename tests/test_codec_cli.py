@@ -50,6 +50,24 @@ def test_compress_info_decompress_round_trip(tmp_path):
     _same_mesh(mesh, read_mesh(vtu)[0])
 
 
+def test_info_parts_add_up_to_the_sections(tmp_path):
+    """`parts` groups every section once (all levels, and level 0 alone); the text output shows
+    them instead of the raw section list."""
+    out = tmp_path / "fire.tetc"
+    assert run("compress", FIRE, "--scalar", "t", "-o", out, "-q", "--levels", "2").exit_code == 0
+    info = json.loads(run("info", out, "--json").output)
+    parts = {row["part"]: row for row in info["parts"]}
+    assert sum(row["bytes"] for row in info["parts"]) == sum(info["sections"].values())
+    assert sum(row["level0_bytes"] for row in info["parts"]) == sum(
+        v for k, v in info["sections"].items() if k.startswith("L0/"))
+    assert {"connectivity", "geometry", "merge forests", "array 'uvw'"} <= set(parts)
+    assert parts["connectivity"]["level0_bytes"] == info["sections"]["L0/boundary"] + info["sections"]["L0/tets"]
+    assert [row["bytes"] for row in info["parts"]] == sorted((row["bytes"] for row in info["parts"]), reverse=True)
+    text = run("info", out).output
+    assert "parts (all levels / level 0, bytes):" in text and "array 'uvw'" in text
+    assert "L0/geometry" not in text  # the raw list is --json's
+
+
 def test_refuses_to_overwrite_without_force(tmp_path):
     out = tmp_path / "f.tetc"
     out.write_bytes(b"keep")

@@ -25,7 +25,9 @@ def tetc_info(source) -> dict:
         points), ``sections`` (name -> bytes), ``levels`` (one dict per stored level) and
         ``forest`` (``merges``, ``max_ratio``, ``bytes`` of all stored forests), ``format_version``,
         ``points_dtype`` and ``arrays`` (``name``, ``dtype``, ``components``, ``bytes`` in level 0
-        -- for the float32 default scalar, its share is inside the geometry section).
+        -- for the float32 default scalar, its share is inside the geometry section), and ``parts``:
+        what the bytes are, summed over levels and bricks, largest first (``part``, ``bytes``,
+        ``level0_bytes``, ``share`` of the sections' total).
     """
     r = source if isinstance(source, TetcReader) else TetcReader(source)
     c = r.container
@@ -67,6 +69,7 @@ def tetc_info(source) -> dict:
         "arrays": [{"name": name, "dtype": dt.name, "components": k, "bytes": plain.get(f"L{i0}/array/{j}", 0)}
                    for j, (name, dt, k) in enumerate(r.arrays) if name],
         "levels": levels,
+        "parts": _parts(r, plain, i0),
         "forest": _forest_info(r, sizes),
         "bricks": _bricks_info(r, sizes),
     }
@@ -91,3 +94,31 @@ def _forest_info(reader, sizes) -> dict:
     n0 = reader.levels[0]["points"]
     return {"merges": merges, "max_ratio": merges / n0 if n0 else 0.0,
             "bytes": sum(v for k, v in sizes.items() if k.endswith("/forest"))}
+
+
+_PART_OF_KIND = {"boundary": "connectivity", "tets": "connectivity", "geometry": "geometry",
+                 "points64": "float64 coordinates", "forest": "merge forests", "cut": "brick cut vertices",
+                 "deps": "merge dependencies"}
+
+
+def _parts(reader, plain: dict, i0: int) -> list:
+    """Section bytes by what they hold (see :func:`tetc_info`'s ``parts``)."""
+    names = [name for name, _, _ in reader.arrays]
+    total = max(sum(plain.values()), 1)
+    parts = {}
+    for key, v in plain.items():
+        level, _, kind = key.partition("/")
+        if not level.startswith("L"):
+            level, kind = "", key
+        if kind.startswith("array/"):
+            j = kind.split("/", 1)[1]
+            name = names[int(j)] if j.isdigit() and int(j) < len(names) else j
+            part = f"array {name!r}" if name else "zeros (no scalar)"
+        else:
+            part = _PART_OF_KIND.get(kind, kind)
+        row = parts.setdefault(part, [0, 0])
+        row[0] += v
+        if level == f"L{i0}":
+            row[1] += v
+    return [{"part": part, "bytes": b, "level0_bytes": b0, "share": round(b / total, 4)}
+            for part, (b, b0) in sorted(parts.items(), key=lambda kv: -kv[1][0])]

@@ -33,9 +33,20 @@ def info(input, scalar, q_file, q_var, cell_to_point, time_step, as_json):
         elif isinstance(v, list) and v and isinstance(v[0], dict):
             click.echo(f"{k}:")
             for row in v:
-                click.echo("  " + ", ".join(f"{a}={b}" for a, b in row.items()))
+                click.echo("  " + ", ".join(f"{a}={_short(b)}" for a, b in row.items()))
         else:
-            click.echo(f"{k}: {v}")
+            click.echo(f"{k}: {_short(v)}")
+
+
+def _short(v):
+    """A value as text, floats to 7 significant digits (--json has them in full)."""
+    if isinstance(v, float):
+        return f"{v:.7g}"
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_short(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{a}: {_short(b)}" for a, b in v.items()) + "}"
+    return str(v)
 
 
 @click.command()

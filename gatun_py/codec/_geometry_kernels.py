@@ -530,7 +530,7 @@ def _beyond_edge(vf, f0, f1, apex, ch, scratch_f, at, fallback):
     scratch_f[at + 1] = m_c - p_c / plen * (EQUILATERAL_HEIGHT * np.sqrt(e2))
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, inline="always")  # its one call site, in _gather (a call passed two arrays)
 def _geometric_cands(k, face0, face1, face2, apex, nf, vf, ch, scratch_f, nc):
     """Version 2's candidates, appended at ``scratch_f[nc:]``; returns the new count.
 

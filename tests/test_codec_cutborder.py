@@ -353,3 +353,29 @@ def test_next_tets_into_callers_array(coding):
                 np.zeros((e.n_tets, 8), np.int32)[:, ::2]):
         with pytest.raises(ValueError, match="out must be"):
             d.next_tets(e.n_tets, out=bad)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 255), st.integers(0, 40)), min_size=1, max_size=64), st.data())
+def test_case_c_selection_is_the_sorted_lists_entry(entries, data):
+    """The decoder picks case (c)'s entry j from the unsorted list (_select_vertex_adjacent); the
+    encoder sorts the list stably by sequence, then by decoded tets: the same vertex for every j,
+    with ties in both keys (few distinct sequence numbers and counts)."""
+    from gatun_py.codec import _cutborder_kernels as K
+    n2 = len(entries)
+    vdec = np.zeros(n2, np.uint8)
+    c2 = np.arange(n2, dtype=np.int64)[::-1].copy()  # vertex ids, distinct
+    c2seq = np.empty(n2, np.int64)
+    for i, (v, s) in enumerate(entries):
+        vdec[c2[i]] = v
+        c2seq[i] = s if data.draw(st.booleans()) else (1 << 31) - 2 - s
+    sc2, sseq = c2.copy(), c2seq.copy()
+    # the encoder's order: stable by sequence, then stable by decoded tets (python's sort is stable)
+    order = sorted(range(n2), key=lambda i: sseq[i])
+    order = sorted(order, key=lambda i: vdec[sc2[i]])
+    for j in range(n2):
+        assert K._select_vertex_adjacent(c2, c2seq, n2, vdec, j) == sc2[order[j]]
+    # the encoder's own second sort gives that order too
+    by_seq = sc2[np.argsort(sseq, kind="stable")]
+    K._order_by_decoded(by_seq, n2, vdec)
+    assert np.array_equal(by_seq, sc2[order])

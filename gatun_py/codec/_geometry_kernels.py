@@ -530,7 +530,7 @@ def _beyond_edge(vf, f0, f1, apex, ch, scratch_f, at, fallback):
     scratch_f[at + 1] = m_c - p_c / plen * (EQUILATERAL_HEIGHT * np.sqrt(e2))
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, inline="always")  # its one call site, in _gather (a call passed two arrays)
 def _geometric_cands(k, face0, face1, face2, apex, nf, vf, ch, scratch_f, nc):
     """Version 2's candidates, appended at ``scratch_f[nc:]``; returns the new count.
 
@@ -1044,9 +1044,14 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
     repetition context left by the previous channel. Returns the context for the next channel,
     or minus an error status."""
     # the two requests as run-time values (int64 casts): as literals they compiled _gather twice,
-    # some 1.5 s of a cold start, for no measurable speed
+    # some 1.5 s of a cold start, for no measurable speed. Where this channel of the previous vertex
+    # was predicted (every channel of an unstructured mesh's vertices), the predictions come with
+    # the repetition candidates in one call: a call passes seven arrays, some fifty words, and two
+    # a channel were a tenth of the geometry decode (flange-1m); where it repeated (grids), the
+    # predictions wait for a value that repeats nothing. The values are the same either way.
+    spec = flags[ch] == 0
     pat, m_refs = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i,
-                          np.int64(WANT_REPEATS), cands[CAND_VERSION])
+                          np.int64(WANT_BOTH if spec else WANT_REPEATS), cands[CAND_VERSION])
     m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m_refs, cands)
     is_eq = 0
     o = np.int64(0)
@@ -1063,8 +1068,9 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
             return -ERR_STREAM
     if is_eq == 0:
         # the repetition candidates of the refs (eq_o[:m_refs]) are still those of the first call
-        pat, _ = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i,
-                         np.int64(WANT_PREDICTIONS), cands[CAND_VERSION])
+        if not spec:
+            pat, _ = _gather(k, r0, r1, r2, r3, w, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i,
+                             np.int64(WANT_PREDICTIONS), cands[CAND_VERSION])
         mode = modes[ch]
         best = _best_cand(scores, ch, pat, cands)
         ctx = _res_context(pat, flags[N_CHANNELS + ch], eq_o, m_refs)

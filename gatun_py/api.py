@@ -414,7 +414,7 @@ class TetcFile:
 
     def __repr__(self) -> str:
         return (f"TetcFile({self.path!r}, points={self.n_points}, tets={self.n_tets}, "
-                f"scalar={self.scalar_name or None!r}, levels={self.levels}, max_ratio={self.max_ratio:.4f})")
+                f"scalar={self.scalar_name if self.reader.has_scalar else None!r}, levels={self.levels}, max_ratio={self.max_ratio:.4f})")
 
     def __enter__(self):
         return self

@@ -56,9 +56,8 @@ def tetc_info(source) -> dict:
         "tets": r.meta.get("tets"),
         "boundary_faces": r.meta.get("boundary_faces"),
         "bbox": r.meta.get("bbox"),
-        # a mesh stored without a scalar has its zeros under the name "": no scalar, no range
-        "scalar": r.meta.get("scalar") or None,
-        "scalar_range": r.meta.get("scalar_range") if r.meta.get("scalar") else None,
+        "scalar": r.meta.get("scalar") if r.has_scalar else None,
+        "scalar_range": r.meta.get("scalar_range") if r.has_scalar else None,
         "source": r.meta.get("source"),
         "bytes_total": c.size,
         "bits_per_tet_connectivity": round(8.0 * conn / lv0["tets"], 4) if lv0["tets"] else 0.0,
@@ -113,7 +112,7 @@ def _parts(reader, plain: dict, i0: int) -> list:
         if kind.startswith("array/"):
             j = kind.split("/", 1)[1]
             name = names[int(j)] if j.isdigit() and int(j) < len(names) else j
-            part = f"array {name!r}" if name else "zeros (no scalar)"
+            part = f"array {name!r}"
         else:
             part = _PART_OF_KIND.get(kind, kind)
         row = parts.setdefault(part, [0, 0])

@@ -24,7 +24,7 @@ import numpy as np
 from .._atomic import write_bytes_atomic
 from ..errors import CorruptFileError, MeshError, OptionError
 from ..mesh import TetBatch, TetMesh, default_step
-from ..mesh.model import scalar_of
+from ..mesh.model import NO_SCALAR, scalar_of
 from ..mesh.validate import check_tet_ids
 from .brickindex import BrickView, brick_levels_summary, parse_brick_index
 from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
@@ -414,6 +414,11 @@ class TetcReader:
     def scalar_name(self) -> str:
         name = self.meta.get("scalar", "density")
         return name if isinstance(name, str) else "density"
+
+    @property
+    def has_scalar(self) -> bool:
+        """False for a mesh stored without a scalar (see :attr:`gatun_py.mesh.TetMesh.has_scalar`)."""
+        return self.scalar_name != NO_SCALAR
 
     @property
     def n_bricks(self) -> int:

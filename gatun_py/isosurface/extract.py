@@ -31,7 +31,6 @@ from ..codec.container import MAGIC
 from ..codec.prefetch import PrefetchedDecode
 from ..errors import CorruptFileError, OptionError, ReadError, TetcError
 from ..mesh import TetMesh, mesh_batches, read_mesh
-from ..mesh.model import NO_SCALAR
 from ..mesh.synthetic import jittered_grid
 from ..simplify.filter import SimplifyFilter
 from ..simplify.levels import resolve_target, target_ancestors
@@ -767,7 +766,7 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs, values=(), jobs=1):
                 "tets": mesh.n_tets}
         return mesh_batches(mesh), info
     reader = source if isinstance(source, TetcReader) else TetcReader(source)
-    if reader.scalar_name == NO_SCALAR:
+    if not reader.has_scalar:
         raise OptionError(_NO_SCALAR_MESSAGE)
     if reader.n_bricks > 1:
         return _open_bricked(reader, level=level, ratio_mesh=ratio_mesh, values=values, jobs=jobs)

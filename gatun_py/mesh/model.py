@@ -121,8 +121,8 @@ class TetMesh:
             rng = ""
         pdt = "" if self.points.dtype == np.float32 else f" {self.points.dtype}"
         arrays = ""
-        listed = [a for a in self.arrays if a[0] != NO_SCALAR] if not self.has_scalar else self.arrays
-        if len(listed) > 1 or (listed and listed[0][1] != np.float32) or (listed and not self.has_scalar):
+        listed = [a for a in self.arrays if a[0] in self.user_point_data]
+        if len(listed) > 1 or (listed and (listed[0][1] != np.float32 or not self.has_scalar)):
             arrays = ", arrays=[" + ", ".join(
                 f"{name!r} {dt}" + (f" x{k}" if k > 1 else "") for name, dt, k in listed) + "]"
         scalar = repr(self.scalar_name) if self.has_scalar else "none"

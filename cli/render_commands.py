@@ -15,13 +15,15 @@ from .options import (POSITIVE, RATIO, Colour, camera_options, echo_json, force_
                       read_kwargs, require_file, selective_options, status, transfer_function_options)
 
 
-def _kernels_cached(*, decoder: bool) -> bool:
-    """Whether numba has compiled the render kernels (and with ``decoder`` the decoder's) into its
-    cache already."""
-    from gatun_py.codec import _cutborder_kernels
+def _kernels_cached(*, decoder: bool, simplify: bool = False) -> bool:
+    """Whether numba has compiled the render kernels (with ``decoder`` the decoder's, with
+    ``simplify`` the forest decoder's and the filter's) into its cache already."""
+    from gatun_py.codec import _cutborder_kernels, _forest_kernels, _geometry_kernels
     from gatun_py.render import _walk
+    from gatun_py.simplify import _filter_kernels
 
-    return kernels_cached(_walk, *((_cutborder_kernels,) if decoder else ()))
+    return kernels_cached(_walk, *((_cutborder_kernels, _geometry_kernels) if decoder else ()),
+                          *((_forest_kernels, _filter_kernels) if decoder and simplify else ()))
 
 
 def _component(text):
@@ -136,11 +138,12 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     check_output_path(output, force=force)
     require_file(input)
     decoder = is_tetc(input)  # a mesh file is rendered without the decoder: no need to compile it
-    if not _kernels_cached(decoder=decoder):
-        what = "the decoder and the renderer on two cores" if decoder else "the renderer"
-        status(f"compiling {what} (first run only, under a minute; `make install` does it ahead)...", quiet)
-        compile_for_render(decoder=decoder)
-    startup_s = load_kernels(lean=lean, decoder=decoder) + (time.perf_counter() - t_start)
+    simplify = selective or any(x is not None for x in (ratio, level, budget, tets))
+    if not _kernels_cached(decoder=decoder, simplify=simplify):
+        what = "the decoder and the renderer side by side" if decoder else "the renderer"
+        status(f"compiling {what} (first run only, under half a minute; `make install` does it ahead)...", quiet)
+        compile_for_render(decoder=decoder, simplify=simplify, lean=lean, mode=mode)
+    startup_s = load_kernels(lean=lean, decoder=decoder, simplify=simplify) + (time.perf_counter() - t_start)
     t_start = time.perf_counter()  # total_s: from opening the input to the image written
     with progress_reporter("rendering", quiet) as progress, interruptible():
         frame = gatun_py.render(input, size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom,

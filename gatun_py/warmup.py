@@ -8,6 +8,7 @@ mesh, which gives them the same argument types as real data; the work is split o
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -15,8 +16,9 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 from .codec import LevelPayload, TetcReader, encode_tetc
+from .codec.geometry import GeometryDecoder
 from .codec.forest import FOREST_CODING, decode_forest_on_geometry, decode_forest_on_mesh, decode_forest_rounds
-from .errors import TetcError
+from .errors import CorruptFileError, TetcError
 from .isosurface.extract import TINY_TETC, isosurface
 from .mesh import mesh_batches
 from .mesh.synthetic import jittered_grid
@@ -156,64 +158,89 @@ def _isosurface() -> str:
     return "isosurfaces"
 
 
-def _render_only() -> str:
-    _render_kernels(lean=False)
-    return "rendering"
-
-
-def _decoder_only() -> str:
-    """The streaming decoder's kernels alone (the longest job of a first run: its own process)."""
+def _connectivity_decoder() -> str:
+    """The connectivity decoder as a streamed decode drives it (batches of a few tets)."""
     reader = TetcReader(_tiny_tetc())
-    reader.decode_mesh(0)
-    list(reader.iter_decode(0, batch_tets=5))
-    return "decompression"
+    for _ in reader._connectivity_batches(reader._connectivity(0), reader.level_meta(0), 5, None, copy_refs=False):
+        pass
+    return "the connectivity decoder"
 
 
-def _filter_on_mesh() -> None:
+def _geometry_decoder() -> str:
+    """The geometry decoder, without the connectivity's: numba compiles a kernel from its arguments'
+    types, so refs of the right type do (all -1: whether the stream then decodes cleanly does not
+    matter, and a corrupt-file error is expected)."""
+    reader = TetcReader(_tiny_tetc())
+    n = reader.level_meta(0)["points"]
+    geometry = GeometryDecoder(reader.read_section("L0/geometry"), n_points=n)
+    try:
+        geometry.decode(np.full((n, 4), -1, np.int32))
+    except CorruptFileError:
+        pass
+    return "the geometry decoder"
+
+
+def _filter_on_mesh() -> str:
     """The run-time filter's kernels, on the tiny mesh's batches (no decoder needed)."""
     mesh = tiny_mesh()
     p, r = np.arange(mesh.n_points, dtype=np.int32), np.full(mesh.n_points, ROOT_RANK, np.int32)
     p[1], r[1] = 0, 0
     list(SimplifyFilter(ancestors(p, r, 1)).filter(mesh_batches(mesh, batch_tets=5)))
+    return "the run-time filter"
 
 
-def _render_and_filter() -> str:
-    _render_kernels(lean=False)
-    _filter_on_mesh()
-    return "rendering and the run-time filter"
+def _render_streamed(*, mode: str = "volume", lean: bool = False) -> str:
+    """The ray caster as ``tetc render`` drives it: batches as a decoder hands them over (writable
+    tets, vertices arriving with them) and the face table's regrowth (``lean``: counting faces)."""
+    mesh = tiny_mesh()
+    batches = [dataclasses.replace(b, tets=b.tets.copy()) for b in mesh_batches(mesh, batch_tets=7)]
+    render_batches(batches, Camera(16, 16, 30, 20), "default", mode=mode, scalar_range=mesh.scalar_range, lean=lean)
+    table = make_face_table(8, 0, 0, counting=lean)
+    mark = np.zeros(1, dtype=np.uint8)
+    rehash(table, 8, 0, lean and count_live(table, True, mark) >= 0, mark)
+    return "rendering"
 
 
-def compile_for_render(*, decoder: bool = True) -> float:
+def compile_for_render(*, decoder: bool = True, simplify: bool = False, lean: bool = False,
+                       mode: str = "volume") -> float:
     """Compile what ``tetc render`` needs into numba's cache (the first run on a fresh install);
-    returns the seconds it took. With ``decoder`` (a ``.tetc`` input) the decoder and the renderer
-    compile side by side in two processes (the forest decoder after the first one done); a mesh
-    file needs the renderer alone, compiled here."""
+    returns the seconds it took.
+
+    numba compiles one function at a time per process, so the work is split: this process compiles
+    the renderer while worker processes compile the decoder's connectivity and geometry halves
+    and, with ``simplify`` (a render at a ratio, level or budget), the merge-forest decoder and the
+    run-time filter. Three compilations at once keep two cores busy whatever their lengths (on a
+    2-core EPYC about 13, 10 and 8 s of CPU). A mesh file (``decoder=False``) needs the renderer
+    alone; what a render does not use compiles when first used (or ahead, by ``make install``).
+    """
     t0 = time.perf_counter()
-    if not decoder:
-        _render_only()
+    jobs = ([_connectivity_decoder, _geometry_decoder] if decoder else []) + \
+        ([_forest_decoder, _filter_on_mesh] if decoder and simplify else [])
+    if not jobs:
+        _render_streamed(mode=mode, lean=lean)
         return time.perf_counter() - t0
     with ProcessPoolExecutor(max_workers=2) as pool:
-        # the decoder alone in one process, the longest job (17 s of CPU, the renderer 10, the
-        # forest decoder 3, the filter 1); the filter with the renderer, and the forest decoder
-        # goes to whichever process is free first (the renderer's, usually), off the decoder's path
-        jobs = [pool.submit(_decoder_only), pool.submit(_render_and_filter), pool.submit(_forest_decoder)]
-        for job in jobs:
-            job.result()
+        futures = [pool.submit(job) for job in jobs]
+        _render_streamed(mode=mode, lean=lean)
+        for future in futures:
+            future.result()
     return time.perf_counter() - t0
 
 
-def load_kernels(*, lean: bool = False, decoder: bool = True) -> float:
+def load_kernels(*, lean: bool = False, decoder: bool = True, simplify: bool = True) -> float:
     """Load the decode, filter and render kernels into this process (from numba's cache, or by
     compiling them) with a 4x4-pixel render of a tiny file; returns the seconds it took.
     ``lean``: the face-counting kernels of a lean render too (otherwise they load when first used).
     ``decoder=False``: the render kernels only (a mesh file is rendered without the decoder).
+    ``simplify=False``: without the merge-forest decoder and the filter (a full-resolution render).
 
     The CLI does this before it opens the user's file, so ``total_s`` measures the work on the
     file, not the one-off loading of compiled code (as VTK's timing excludes ``import vtk``).
     """
     t0 = time.perf_counter()
     if decoder:
-        render_tetc(_tiny_tetc(), View(Camera(4, 4), tf="default", lean=lean), target=Target(0, 1, 0.0, 0))
+        render_tetc(_tiny_tetc(), View(Camera(4, 4), tf="default", lean=lean),
+                    target=Target(0, 1 if simplify else 0, 0.0, 0))
     else:
         mesh = tiny_mesh()
         render_batches(mesh_batches(mesh), Camera(4, 4), "default", scalar_range=mesh.scalar_range, lean=lean)

@@ -489,7 +489,7 @@ def _gather_face(B, s, cand, cscore, cseq, cface, cface_full):
     a = np.int64(E[s * E_COLS + 0])
     b = np.int64(E[s * E_COLS + 1])
     c = np.int64(E[s * E_COLS + 2])
-    n1 = 0
+    n1 = np.int64(0)
     # faces on edges (a, b) and (a, c) are all in a's list; those on (b, c) in b's list
     for k in range(2):
         u = a if k == 0 else b
@@ -566,7 +566,7 @@ def _gather_edge(B, s, cand, cscore, cseq):
     E, vhead, Q, bs = B
     p = np.int64(E[s * E_COLS + 0])
     r = np.int64(E[s * E_COLS + 1])
-    n1 = 0
+    n1 = np.int64(0)
     for k in range(2):
         u = r if k == 0 else p
         other = p if k == 0 else r
@@ -596,9 +596,9 @@ def _apply_triangle(B, u0, u1, u2, p, r):
             continue
         s = _find_edge(B, h0, h1)
         if s != -1:
-            _remove(B, 2, s)
+            _remove(B, np.int64(2), s)
         else:
-            _add(B, 2, h1, h0, apex, -1)
+            _add(B, np.int64(2), h1, h0, apex, np.int64(-1))
 
 
 
@@ -637,7 +637,7 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
     nv = 0
     done = 0
     seed_ptr = 0
-    prev_new = 0
+    prev_new = np.int64(0)
     prev_flip = 0
     while done < nf:
         s = _pop(B)
@@ -665,13 +665,13 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
             out_faces[done, 1] = tri[1]
             out_faces[done, 2] = tri[2]
             done += 1
-            _apply_triangle(B, tri[0], tri[1], tri[2], -1, -1)
+            _apply_triangle(B, tri[0], tri[1], tri[2], np.int64(-1), np.int64(-1))
             continue
         E = B[0]
         p = np.int64(E[s * E_COLS + 0])
         r = np.int64(E[s * E_COLS + 1])
         n1 = _gather_edge(B, s, cand, cscore, cseq)
-        _remove(B, 2, s)
+        _remove(B, np.int64(2), s)
         po = order[p]
         ro = order[r]
         f = _lookup_halfedge(hkey, hface, fvisited, min(po, ro), max(po, ro))
@@ -685,7 +685,7 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
             if (f0 == po and f1 == ro) or (f0 == ro and f1 == po):
                 xo = faces[f, (k + 2) % 3]
                 flip = 1 if f0 == ro else 0
-        ctx = _score_context(n1, cscore, prev_new, 2)
+        ctx = _score_context(n1, cscore, prev_new, np.int64(2))
         x = dec_of[xo]
         sym = ESC
         if x != -1:
@@ -694,7 +694,7 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
                     sym = i
                     break
         rc.enc_sym(st, out, probs, SM_C1 + ctx * 16, 4, sym)
-        prev_new = 0
+        prev_new = np.int64(0)
         if sym == ESC:
             if x == -1:
                 rc.enc_bit(st, out, probs, SM_NEW + (1 if n1 > 0 else 0), BIT_NEW)
@@ -720,7 +720,7 @@ def encode_boundary(st, out, faces, hkey, hface, n_points, B, dec_of, order, pre
         out_faces[done, 2] = x
         done += 1
         _apply_triangle(B, u0, u1, x, p, r)
-        if not _room(B, 4, 4):
+        if not _room(B, np.int64(4), np.int64(4)):
             return -1, 2
     if B[3][BS_LIVE] != 0:
         return -1, 3
@@ -738,13 +738,13 @@ def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
     rc.dec_init(st, data)
     nv = 0
     done = 0
-    prev_new = 0
+    prev_new = np.int64(0)
     prev_flip = 0
     tri = np.empty(3, np.int64)
     while done < nf:
         if rc.dec_failed(st):
             return nv, ST_ERROR
-        if not _room(B, 4, 4):
+        if not _room(B, np.int64(4), np.int64(4)):
             return nv, ST_GROW
         s = _pop(B)
         if s == -1:
@@ -767,17 +767,17 @@ def decode_boundary(st, data, nf, n_points, B, pred, out_faces):
             out_faces[done, 1] = tri[1]
             out_faces[done, 2] = tri[2]
             done += 1
-            _apply_triangle(B, tri[0], tri[1], tri[2], -1, -1)
+            _apply_triangle(B, tri[0], tri[1], tri[2], np.int64(-1), np.int64(-1))
             continue
         E = B[0]
         p = np.int64(E[s * E_COLS + 0])
         r = np.int64(E[s * E_COLS + 1])
         apex = np.int64(E[s * E_COLS + 2])
         n1 = _gather_edge(B, s, cand, cscore, cseq)
-        _remove(B, 2, s)
-        ctx = _score_context(n1, cscore, prev_new, 2)
-        sym = rc.dec_sym(st, data, probs, SM_C1 + ctx * 16, 4)
-        prev_new = 0
+        _remove(B, np.int64(2), s)
+        ctx = _score_context(n1, cscore, prev_new, np.int64(2))
+        sym = rc.dec_sym(st, data, probs, SM_C1 + ctx * 16, np.int64(4))
+        prev_new = np.int64(0)
         if sym < ESC:
             if sym >= n1:
                 return nv, ST_ERROR
@@ -938,7 +938,7 @@ def add_faces(B, faces, apex):
     """Put faces on the border in order (apex -1: the original boundary); returns the slots."""
     slots = np.empty(faces.shape[0], np.int64)
     for i in range(faces.shape[0]):
-        slots[i] = _add(B, 3, faces[i, 0], faces[i, 1], faces[i, 2], apex)
+        slots[i] = _add(B, np.int64(3), faces[i, 0], faces[i, 1], faces[i, 2], apex)
     return slots
 
 
@@ -996,7 +996,7 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
         d = dec_of[do]
         n1 = _gather_face(B, s, cand, cscore, cseq, cface, cface_full)
         _sort_candidates(cand, cscore, cseq, n1)
-        _remove(B, 3, s)
+        _remove(B, np.int64(3), s)
         ctx = _score_context(n1, cscore, prev_esc, 3)
         sym = ESC
         if d != -1:
@@ -1136,9 +1136,9 @@ def _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets, scr
         for i in range(n1):
             cfirst[i] = cand[i]
         _sort_candidates(cand, cscore, cseq, n1)
-        _remove(B, 3, s)
+        _remove(B, np.int64(3), s)
         ctx = _score_context(n1, cscore, prev_esc, 3)
-        sym = rc.dec_sym(st, data, probs, TM_C1 + ctx * 16, 4)
+        sym = rc.dec_sym(st, data, probs, TM_C1 + ctx * 16, np.int64(4))
         d = -1
         if sym < ESC:
             if sym >= n1:
@@ -1148,7 +1148,7 @@ def _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets, scr
             prev_esc = 0
         else:
             kctx = TM_KIND + 4 * ((1 if n1 > 0 else 0) + 2 * prev_esc)
-            kind = rc.dec_sym(st, data, probs, kctx, 2)
+            kind = rc.dec_sym(st, data, probs, kctx, np.int64(2))
             if kind == KIND_NEW:
                 if nv >= limit:
                     status = ST_ERROR
@@ -1415,7 +1415,7 @@ def encode_tets2(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets,
                 do = w
         d = dec_of[do]
         n1 = _gather_face(B, s, cand, cscore, cseq, cface, cface_full)
-        _remove(B, 3, s)
+        _remove(B, np.int64(3), s)
         ctx, best, second = _rank_candidates2(cand, cscore, cseq, cface, n1, vdec, nv0, a, b, c, rankp, ckey, ccls,
                                               prev_esc)
         sym = ESC

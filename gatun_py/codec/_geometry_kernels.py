@@ -141,7 +141,7 @@ ERR_REF = 2
 ERR_RANK = 3
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def ordered_int(bits):
     """Map an int32 float bit pattern to an integer with the same order as the float."""
     b = np.int64(bits)
@@ -150,7 +150,7 @@ def ordered_int(bits):
     return b
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def ordered_to_bits(o):
     """Inverse of :func:`ordered_int` (``o`` must lie in the int32 range)."""
     if o < 0:
@@ -158,7 +158,7 @@ def ordered_to_bits(o):
     return np.int32(o)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _bit_length(v):
     """Number of bits of ``|v|`` (``|v| < 2**63``): one count-leading-zeros instruction."""
     if v < 0:
@@ -166,7 +166,7 @@ def _bit_length(v):
     return 64 - leading_zeros(np.int64(v))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _add_edge(adj, deg, x, y):
     for i in range(deg[x]):
         if adj[x, i] == y:
@@ -176,14 +176,14 @@ def _add_edge(adj, deg, x, y):
         deg[x] += 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _link(adj, deg, x, y):
     if x >= 0 and y >= 0:
         _add_edge(adj, deg, x, y)
         _add_edge(adj, deg, y, x)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _dist2(vf, e0, e1, e2, x0, x1, x2):
     return (x0 - e0) ** 2 + (x1 - e1) ** 2 + (x2 - e2) ** 2
 
@@ -246,9 +246,9 @@ def link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf):
     the decoder can do the same before decoding vertex k. ``mark`` (n,) int32 scratch, zero
     at the start.
     """
-    f0 = -1
-    f1 = -1
-    f2 = -1
+    f0 = np.int64(-1)
+    f1 = np.int64(-1)
+    f2 = np.int64(-1)
     nf = 0
     for q in range(3):
         r = r0 if q == 0 else (r1 if q == 1 else r2)
@@ -306,14 +306,14 @@ def link_vertex(k, r0, r1, r2, r3, adj, deg, mark, w, vf):
 
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _par(vf, ch, x, y, w, fallback):
     if w < 0:
         return fallback
     return np.float64(vf[x, ch]) + np.float64(vf[y, ch]) - np.float64(vf[w, ch])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _ext(vf, ch, x, w, fallback):
     if w < 0:
         return fallback
@@ -340,7 +340,7 @@ def xy_table_slots(n: int, version: int) -> int:
     return XY_CACHE_SLOTS if version >= 3 else hash_capacity((3 * n) // 4 + 1)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _hash_slot(slots, used, x, version):
     """Slot of key x (an ordered int) in the open-addressing table: its slot or a free one
     (coding 3: the one slot of x in the direct-mapped cache, whatever it holds)."""
@@ -354,7 +354,7 @@ def _hash_slot(slots, used, x, version):
     return h
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _add_conditional(ch, k, vi, slots, used, eq_o, m, cands):
     """Channel 1 (y) gets one more repetition candidate: the y last seen with this vertex's x
     (curvilinear grids repeat whole (x, y) columns). Returns the new candidate count."""
@@ -372,7 +372,7 @@ def _add_conditional(ch, k, vi, slots, used, eq_o, m, cands):
     return m + 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _remember_conditional(ch, k, vi, slots, used, cands):
     if ch == 1 and cands[CAND_XY] != 0:
         x = ordered_int(vi[k, 0])
@@ -575,9 +575,9 @@ def _gather(k, r0, r1, r2, r3, ws, vf, vi, ch, cand_o, eq_o, scratch_f, scratch_
     ``WANT_BOTH`` both, ``WANT_PREDICTIONS`` only the predictions (m is then 0: the caller kept the
     repetition candidates of its first call, which are the same).
     """
-    face0 = -1
-    face1 = -1
-    face2 = -1
+    face0 = np.int64(-1)
+    face1 = np.int64(-1)
+    face2 = np.int64(-1)
     nf = 0
     for j in range(3):
         r = r0 if j == 0 else (r1 if j == 1 else r2)
@@ -737,7 +737,7 @@ def _nearest(eq_o, m, pred):
     return near
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _eq_context(m, flag, near, version):
     """Model offset of the repetition symbol: (candidates, what the previous channel did) and,
     in coding 2, which candidate the prediction lands nearest (``near``)."""
@@ -746,7 +746,7 @@ def _eq_context(m, flag, near, version):
     return EQ2_BASE + (((m - 1) * EQ_FLAGS + flag) * 5 + near) * 8
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _best_cand(scores, ch, pat, cands):
     """The candidate with the lowest score (the first of equals)."""
     row = scores[ch, pat]
@@ -759,7 +759,7 @@ def _best_cand(scores, ch, pat, cands):
     return best
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always")  # once per coded value in the decoder loop, where LLVM left a call
 def _update_scores(scores, ch, pat, cand_o, o, cands):
     row = scores[ch, pat]
     for q in range(cands[pat]):
@@ -767,7 +767,7 @@ def _update_scores(scores, ch, pat, cand_o, o, cands):
         row[q] = s - (s >> SCORE_SHIFT) + (_bit_length(o - cand_o[q]) << 4)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _enc_residual(st, out, probs, base, res, version, sign_context):
     """Code a residual: coding 3 sends its unmodelled mantissa bits in wide range-coder steps and
     codes the sign in a context (:func:`_sign_context`)."""
@@ -777,21 +777,21 @@ def _enc_residual(st, out, probs, base, res, version, sign_context):
         enc_sint(st, out, probs, base, res)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _dec_residual(st, data, probs, base, version, sign_context):
     if version >= 3:
         return dec_sint_wide(st, data, probs, base, sign_context)
     return dec_sint(st, data, probs, base)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _sign_context(cand_o, best):
     """Coding 3's guess of a prediction residual's sign: whether the pattern's first candidate (a
     plain combination of the refs, always computed) lies above the chosen prediction."""
     return 1 if cand_o[0] > cand_o[best] else 0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _search(table, lo, hi, o):
     """First index i in [lo, hi) with table[i] >= o (``hi`` if none)."""
     while lo < hi:
@@ -803,7 +803,7 @@ def _search(table, lo, hi, o):
     return lo
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _res_context(pat, big, eq_o, m):
     """Residual context: ref pattern, size of the previous residual, and the local activity
     (bit length of the spread of the refs' distinct values, in 10 classes): where the refs differ
@@ -823,13 +823,13 @@ def _res_context(pat, big, eq_o, m):
     return (pat * 2 + big) * N_ACTIVITY + act
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _eq_bits(m):
     """Bits of the repetition symbol, which takes the m + 1 values 0 .. m (m = "none")."""
     return 1 if m == 1 else (2 if m <= 3 else 3)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _index_bits(m):
     """Coding 3: bits of the index of the repeated candidate among m."""
     return 0 if m == 1 else (1 if m == 2 else (2 if m <= 4 else 3))
@@ -864,7 +864,7 @@ def _dec_repeat(st, data, probs, ctx, m, version):
     return q if q < m else m + 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _is_big(mode, res):
     if mode == MODE_TABLE:
         return 1 if (res > 2 or res < -2) else 0
@@ -1016,7 +1016,7 @@ def decode_tables_kernel(st, buf, offs, probs, modes, n_points, tables, tab_offs
         dec_init(stc, data)
         tab_offs[ch] = pos
         if modes[ch] == MODE_TABLE:
-            count = dec_uint(stc, data, pc, TABLE_BASE)
+            count = dec_uint(stc, data, pc, np.int64(TABLE_BASE))
             if count > n_points or pos + count > tables.shape[0] or dec_failed(stc):
                 return ERR_STREAM
             if count > 0:
@@ -1026,7 +1026,7 @@ def decode_tables_kernel(st, buf, offs, probs, modes, n_points, tables, tab_offs
                 tables[pos] = v
                 pos += 1
                 for _ in range(1, count):
-                    v = v + dec_uint(stc, data, pc, TABLE_BASE) + 1
+                    v = v + dec_uint(stc, data, pc, np.int64(TABLE_BASE)) + 1
                     if v >= (1 << 31) or dec_failed(stc):
                         return ERR_STREAM
                     tables[pos] = v

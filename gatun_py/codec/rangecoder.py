@@ -105,7 +105,7 @@ def capacity_hint(n_symbols: int) -> int:
 # ---------------------------------------------------------------- encoder
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _put_byte(st, out, b):
     pos = st[ENC_POS]
     if pos < out.shape[0]:
@@ -206,7 +206,7 @@ def enc_sym(st, out, probs, base, nbits, sym):
         node = (node << 1) | b
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _enc_uint(st, out, probs, base, value, wide):
     nb = 0
     v = value
@@ -300,7 +300,7 @@ def enc_finish(st, out):
 # array argument, which cost about a quarter of the decoders' time (measured with perf).
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _get_byte(st, data):
     pos = st[DEC_POS]
     st[DEC_POS] = pos + 1
@@ -328,7 +328,7 @@ def dec_init(st, data):
 
 # The decoding steps on the range and code held by the caller (in registers), inlined: a caller
 # that decodes several symbols in a row loads and stores the decoder state once.
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _decide(st, data, probs, i, rng, code):
     """One adaptive binary decision with ``probs[i]``: (bit, range, code)."""
     p = np.int64(probs[i])
@@ -348,7 +348,7 @@ def _decide(st, data, probs, i, rng, code):
     return bit, rng, code
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, _nrt=False, error_model="numpy")
 def _raw_wide(st, data, nbits, rng, code):
     """``nbits`` raw bits coded by :func:`enc_raw_wide`: (value, range, code); a damaged stream
     sets the error flag."""
@@ -429,7 +429,7 @@ def dec_sym(st, data, probs, base, nbits):
 
 @njit(cache=True, _nrt=False, inline="always")
 def _dec_uint(st, data, probs, base, wide):
-    nb = dec_sym(st, data, probs, base, INT_BUCKET_BITS)
+    nb = dec_sym(st, data, probs, base, np.int64(INT_BUCKET_BITS))
     if nb == 0:
         return np.int64(0)
     if nb > _INT_MAX_BUCKET - 1:
@@ -546,7 +546,7 @@ def dec_ok(st, data):
     return st[DEC_ERROR] == 0 and st[DEC_OVERRUN] == 0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def dec_failed(st):
     """Cheap test for kernels' loops: an error or overrun has happened."""
     return st[DEC_ERROR] != 0 or st[DEC_OVERRUN] != 0

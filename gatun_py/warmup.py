@@ -191,13 +191,12 @@ def _filter_on_mesh() -> str:
 
 def _render_streamed(*, mode: str = "volume", lean: bool = False) -> str:
     """The ray caster as ``tetc render`` drives it: batches as a decoder hands them over (writable
-    tets, vertices arriving with them) and the face table's regrowth (``lean``: counting faces)."""
+    tets), and with ``lean`` the counting face table's purge."""
     mesh = tiny_mesh()
     batches = [dataclasses.replace(b, tets=b.tets.copy()) for b in mesh_batches(mesh, batch_tets=7)]
     render_batches(batches, Camera(16, 16, 30, 20), "default", mode=mode, scalar_range=mesh.scalar_range, lean=lean)
-    table = make_face_table(8, 0, 0, counting=lean)
-    mark = np.zeros(1, dtype=np.uint8)
-    rehash(table, 8, 0, lean and count_live(table, True, mark) >= 0, mark)
+    if lean:
+        _purge_kernels()
     return "rendering"
 
 

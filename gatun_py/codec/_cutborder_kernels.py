@@ -1504,7 +1504,6 @@ def _tet_flip(tets, t, ao, bo, co, do):
     return inv & 1
 
 
-@njit(cache=True, nogil=True)
 def decode_tets2(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate, out_tets):
     """Resumable inverse of :func:`encode_tets2`: as :func:`decode_tets`, with the class
     probabilities ``rankp`` (:func:`new_rank_model`) and the decoded-tet counts ``vdec`` (int32
@@ -1519,7 +1518,9 @@ def decode_tets2(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate,
     ckey = np.empty(MAX_C1, np.int64)
     ccls = np.empty(MAX_C1, np.int64)
     cface_full = np.zeros(1, np.int64)
-    return _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate, out_tets,
+    # scratch in Python, the loop in the compiled kernel (which releases the GIL): a compiled
+    # wrapper here cost most of a second of a first run's compiling, and a call is per batch
+    return _decode_tets2_run(st, data, probs, rankp, vdec, int(nbv), int(m), int(n_limit), B, pred, tstate, out_tets,
                              (cand, cscore, cseq, c2, c2seq, seen, cface, ckey, ccls, cface_full))
 
 

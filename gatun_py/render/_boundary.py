@@ -110,7 +110,7 @@ def _boundary_hits(P, dens, dirs, width, height, faces, fwd, right, up, xs, ys, 
 def _face_hits(P, dens, dirs, width, height, faces, f, fwd, right, up, xs, ys, tan_half, base, out_ray, out_t,
                out_face, out_enter, fill):
     """:func:`_boundary_hits` for face ``f``: records its hits from ``base`` on (if ``fill``); returns their number."""
-    i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+    i0, i1, i2 = np.int64(faces[f, 0]), np.int64(faces[f, 1]), np.int64(faces[f, 2])
     n = 0
     # the edges' cross products do not depend on the ray: once per face, not per pixel
     ax, ay, az, af = _edge_cross(P, i0, i1)

@@ -307,7 +307,7 @@ def count_crossings(tets, P, xs, ys, width, height, fwd, right, up, tan_half, od
     """
     aspect = width / height
     for t in prange(tets.shape[0]):
-        v0, v1, v2, v3 = tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3]
+        v0, v1, v2, v3 = np.int64(tets[t, 0]), np.int64(tets[t, 1]), np.int64(tets[t, 2]), np.int64(tets[t, 3])
         for k in range(4):
             out[t, k] = 0
         z0, c0, r0 = _project(P, v0, fwd, right, up, tan_half, aspect, width, height)

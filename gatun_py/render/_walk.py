@@ -176,7 +176,8 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
     dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
     forward = sub == FRONT
     want = 1.0 if forward else -1.0
-    a, b, c = seg_face[s, sub, 0], seg_face[s, sub, 1], seg_face[s, sub, 2]
+    # int64 like the faces the walk moves on to: one compiled version of each helper, not two
+    a, b, c = np.int64(seg_face[s, sub, 0]), np.int64(seg_face[s, sub, 1]), np.int64(seg_face[s, sub, 2])
     oa, ob, oc = seg_face[s, 1 - sub, 0], seg_face[s, 1 - sub, 1], seg_face[s, 1 - sub, 2]
     came_from = seg_from[s, sub]
     t_here, s_here = seg_ts[s, sub, TS_T], seg_ts[s, sub, TS_SCALAR]

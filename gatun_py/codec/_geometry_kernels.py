@@ -141,7 +141,7 @@ ERR_REF = 2
 ERR_RANK = 3
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, inline="always")
 def ordered_int(bits):
     """Map an int32 float bit pattern to an integer with the same order as the float."""
     b = np.int64(bits)
@@ -150,7 +150,7 @@ def ordered_int(bits):
     return b
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, inline="always")
 def ordered_to_bits(o):
     """Inverse of :func:`ordered_int` (``o`` must lie in the int32 range)."""
     if o < 0:
@@ -340,7 +340,7 @@ def xy_table_slots(n: int, version: int) -> int:
     return XY_CACHE_SLOTS if version >= 3 else hash_capacity((3 * n) // 4 + 1)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, inline="always")
 def _hash_slot(slots, used, x, version):
     """Slot of key x (an ordered int) in the open-addressing table: its slot or a free one
     (coding 3: the one slot of x in the direct-mapped cache, whatever it holds)."""
@@ -354,7 +354,7 @@ def _hash_slot(slots, used, x, version):
     return h
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, inline="always")
 def _add_conditional(ch, k, vi, slots, used, eq_o, m, cands):
     """Channel 1 (y) gets one more repetition candidate: the y last seen with this vertex's x
     (curvilinear grids repeat whole (x, y) columns). Returns the new candidate count."""
@@ -372,7 +372,7 @@ def _add_conditional(ch, k, vi, slots, used, eq_o, m, cands):
     return m + 1
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, inline="always")
 def _remember_conditional(ch, k, vi, slots, used, cands):
     if ch == 1 and cands[CAND_XY] != 0:
         x = ordered_int(vi[k, 0])
@@ -737,7 +737,7 @@ def _nearest(eq_o, m, pred):
     return near
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, inline="always")
 def _eq_context(m, flag, near, version):
     """Model offset of the repetition symbol: (candidates, what the previous channel did) and,
     in coding 2, which candidate the prediction lands nearest (``near``)."""
@@ -746,7 +746,7 @@ def _eq_context(m, flag, near, version):
     return EQ2_BASE + (((m - 1) * EQ_FLAGS + flag) * 5 + near) * 8
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, inline="always")
 def _best_cand(scores, ch, pat, cands):
     """The candidate with the lowest score (the first of equals)."""
     row = scores[ch, pat]
@@ -777,21 +777,21 @@ def _enc_residual(st, out, probs, base, res, version, sign_context):
         enc_sint(st, out, probs, base, res)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, inline="always")
 def _dec_residual(st, data, probs, base, version, sign_context):
     if version >= 3:
         return dec_sint_wide(st, data, probs, base, sign_context)
     return dec_sint(st, data, probs, base)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, inline="always")
 def _sign_context(cand_o, best):
     """Coding 3's guess of a prediction residual's sign: whether the pattern's first candidate (a
     plain combination of the refs, always computed) lies above the chosen prediction."""
     return 1 if cand_o[0] > cand_o[best] else 0
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, inline="always")
 def _search(table, lo, hi, o):
     """First index i in [lo, hi) with table[i] >= o (``hi`` if none)."""
     while lo < hi:
@@ -803,7 +803,7 @@ def _search(table, lo, hi, o):
     return lo
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, inline="always")
 def _res_context(pat, big, eq_o, m):
     """Residual context: ref pattern, size of the previous residual, and the local activity
     (bit length of the spread of the refs' distinct values, in 10 classes): where the refs differ
@@ -864,7 +864,7 @@ def _dec_repeat(st, data, probs, ctx, m, version):
     return q if q < m else m + 1
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, inline="always")
 def _is_big(mode, res):
     if mode == MODE_TABLE:
         return 1 if (res > 2 or res < -2) else 0

@@ -429,7 +429,7 @@ def dec_sym(st, data, probs, base, nbits):
 
 @njit(cache=True, _nrt=False, inline="always")
 def _dec_uint(st, data, probs, base, wide):
-    nb = dec_sym(st, data, probs, base, np.int64(INT_BUCKET_BITS))
+    nb = dec_sym(st, data, probs, base, INT_BUCKET_BITS)  # a literal: a dec_sym of its own, its bit loop unrolled
     if nb == 0:
         return np.int64(0)
     if nb > _INT_MAX_BUCKET - 1:

@@ -723,9 +723,10 @@ COLD_HEAD = "### Cold start"
 def cold_start_section(load) -> list[str]:
     """The first ``tetc render`` of a fresh install that skipped ``make install``'s warm-up: an
     empty numba cache, so the run compiles what it needs itself; then the next run. A mesh file
-    (post.vtk) needs the renderer only; a ``.tetc`` also the decoder, compiled side by side in two
-    worker processes: post_v7.tetc is what ``tetc compress`` writes today (the codings the warm-up
-    compiles), post_v1.tetc a file of the first format, whose older codings compile on top. Wall and CPU seconds (all processes), median of
+    (post.vtk) needs the renderer only; a ``.tetc`` also the decoder, compiled side by side (the
+    renderer in the command's process, the connectivity and the geometry decoders in two workers):
+    post_v7.tetc is what ``tetc compress`` writes today (the codings compiled ahead), post_v1.tetc a
+    file of the first format, whose older codings compile during the render. Wall and CPU seconds (all processes), median of
     3 fresh caches; the CPU time says what the wall time would be on a quiet machine when the load
     average is high."""
     import resource

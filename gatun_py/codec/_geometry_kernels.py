@@ -1104,9 +1104,11 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
     return sym if is_eq else FLAG_PREDICTED
 
 
+@njit(cache=True, nogil=True)
 def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, hvals, modes, tables, tab_offs, cands, refs,
                     vf, start, count):
-    """Decode vertices ``start .. start+count-1`` into ``vf`` (n, 4) float32.
+    """Decode vertices ``start .. start+count-1`` into ``vf`` (n, 4) float32 (callable from Python
+    and from other numba kernels; Python callers take :data:`decode_vertices_py`).
 
     ``refs`` (count, 4) int32 are the refs of those vertices. ``st`` (4, 8) decoder states,
     ``probs`` (4, MODEL_SIZE) models, ``scores`` (4, N_PATTERNS, MAX_CANDS) predictor scores,
@@ -1133,11 +1135,13 @@ def decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, 
     eq_o = np.zeros(5, dtype=np.int64)
     scratch_f = np.zeros(MAX_CANDS, dtype=np.float32)
     w = np.zeros((3, NW), dtype=np.int32)
-    # the checks and scratch in Python, the loop in the compiled kernel (which releases the GIL):
-    # a compiled wrapper here cost a second of a first run's compiling, and a call is per batch
     return _decode_vertices_run(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, hvals, modes, tables,
                                 tab_offs, cands, refs, vf, int(start), int(count), (cand_o, eq_o, scratch_f, w))
 
+
+# The same checks and scratch run as Python, the loop compiled (and releasing the GIL): what the
+# decoder calls once per batch. Compiled, this wrapper cost a second of a first render's compiling.
+decode_vertices_py = decode_vertices.py_func
 
 _decode_channel_inlined = njit(cache=True, _nrt=False, inline="always")(_decode_channel.py_func)
 

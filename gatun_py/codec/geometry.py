@@ -408,7 +408,7 @@ class GeometryDecoder:
         if start + count > self.n_points:
             raise CorruptFileError(
                 f"corrupt geometry block: {start + count} vertices requested, the block holds {self.n_points}")
-        status = K.decode_vertices(*self.kernel_args, refs, self.values, start, count)
+        status = K.decode_vertices_py(*self.kernel_args, refs, self.values, start, count)
         if status != K.OK:
             what = {K.ERR_REF: "a vertex reference is out of range",
                     K.ERR_RANK: "a value-table index is out of range"}.get(status, "the coded data is damaged")

@@ -731,11 +731,13 @@ def cold_start_section(load) -> list[str]:
     average is high."""
     import resource
 
-    inputs = [("post.vtk (a mesh file: the renderer)", ROOT / "sample_meshes/lox_post_tets/post.vtk"),
-              ("post_v7.tetc (the decoder and the renderer; today's format)", ROOT / "tests/data/post_v7.tetc"),
-              ("post_v1.tetc (the decoder and the renderer; format 1's codings too)", ROOT / "tests/data/post_v1.tetc")]
+    inputs = [("post.vtk (a mesh file: the renderer)", ROOT / "sample_meshes/lox_post_tets/post.vtk", []),
+              ("post_v7.tetc (the decoder and the renderer; today's format)", ROOT / "tests/data/post_v7.tetc", []),
+              ("post_v7.tetc --ratio 0.5 (the forest decoder and the filter too)", ROOT / "tests/data/post_v7.tetc",
+               ["--ratio", "0.5"]),
+              ("post_v1.tetc (the decoder and the renderer; format 1's codings too)", ROOT / "tests/data/post_v1.tetc", [])]
     rows, said = [], []
-    for label, sample in inputs:
+    for label, sample, extra in inputs:
         firsts, seconds = [], []
         for _ in range(3):
             cache = Path(tempfile.mkdtemp(prefix="bench_cold_cache_"))
@@ -744,7 +746,7 @@ def cold_start_section(load) -> list[str]:
             for k in range(2):
                 ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
                 t0 = time.perf_counter()
-                run = subprocess.run(tetc_cmd() + ["render", str(sample), "-o", str(out_png), "--force"], env=env,
+                run = subprocess.run(tetc_cmd() + ["render", str(sample), "-o", str(out_png), "--force", *extra], env=env,
                                      capture_output=True, text=True, timeout=900)
                 wall = time.perf_counter() - t0
                 ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -82,6 +82,9 @@ N_CHANNELS = 4
 MODE_PREDICT = 0
 MODE_TABLE = 1
 MODE_SKIP = -1  # encoder only: leave the channel out of this pass
+# encoder only: ranks in the channel's table like MODE_TABLE, without the table at the stream's
+# start (geometry coding 4 sends every table in a stream of its own, :func:`encode_table_sets`)
+MODE_RANKS = 2
 
 # ref patterns (which of the face refs and the apex are present) and their predictor candidates
 PAT_NONE, PAT_ONE, PAT_EDGE, PAT_EDGE_APEX, PAT_FACE, PAT_FACE_APEX = 0, 1, 2, 3, 4, 5
@@ -893,7 +896,8 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
 
     ``st`` (4, 8) encoder states, ``out`` (4, cap) uint8 buffers, ``vf`` (n, 4) float32 values,
     ``refs`` (n, 4) checked refs, ``wpar`` (n, 3, NW) from :func:`link_all`, ``modes`` (4,)
-    per-channel mode (``MODE_SKIP``: only the repeat flags), ``tables`` the sorted distinct ordered
+    per-channel mode (``MODE_SKIP``: only the repeat flags; ``MODE_RANKS``: as ``MODE_TABLE``
+    without coding the table itself), ``tables`` the sorted distinct ordered
     ints of the table-mode channels (channel ch at ``tables[tab_offs[ch]:tab_offs[ch+1]]``).
     Returns the byte count of each stream (larger than ``out.shape[1]`` on overflow). If
     ``trace`` has n rows, ``trace[k, ch]`` records the coded (repetition symbol or -1, residual,
@@ -940,7 +944,9 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
                 was_eq[k] = sym
                 _remember_conditional(ch, k, vi, hkeys, hvals, cands)
             continue
-        if mode == MODE_TABLE:
+        if mode == MODE_RANKS:
+            mode = MODE_TABLE
+        elif mode == MODE_TABLE:
             enc_uint(stc, outc, probs, TABLE_BASE, hi - lo)
             if hi > lo:
                 enc_sint(stc, outc, probs, TABLE_BASE + INT_MODEL_SIZE, tables[lo])
@@ -1034,6 +1040,89 @@ def decode_tables_kernel(st, buf, offs, probs, modes, n_points, tables, tab_offs
         if dec_failed(stc):
             return ERR_STREAM
     tab_offs[N_CHANNELS] = pos
+    return OK
+
+
+# Geometry coding 4 sends the value tables of a block's table-mode channels in a stream of their
+# own, ahead of the channel streams, so that a reader can take a level's tables without decoding
+# its vertices. A channel's table is either the whole table or, *chained*, only the values it adds
+# to the table of the same channel in the next coarser level of the file (a coarser level's
+# vertices are a subset of the finer level's, values kept bit for bit). Either way the set is coded
+# as today's table prefix was: its size, its first value, the gaps between consecutive values less
+# one, in contexts of the channel (TABLE_SETS_MODEL per channel).
+TABLE_SETS_MODEL = 2 * INT_MODEL_SIZE
+
+
+@njit(cache=True, nogil=True)
+def encode_table_sets(st, out, present, values, offs):
+    """Code the sorted sets ``values[offs[ch]:offs[ch+1]]`` of the channels with ``present[ch]``
+    into one stream (see above); returns its byte count (larger than ``out`` on overflow)."""
+    probs = np.full(N_CHANNELS * TABLE_SETS_MODEL, PROB_INIT, dtype=np.uint16)
+    for ch in range(N_CHANNELS):
+        if present[ch] == 0:
+            continue
+        base = ch * TABLE_SETS_MODEL
+        lo = offs[ch]
+        hi = offs[ch + 1]
+        enc_uint(st, out, probs, base, hi - lo)
+        if hi > lo:
+            enc_sint(st, out, probs, base + INT_MODEL_SIZE, values[lo])
+            for i in range(lo + 1, hi):
+                enc_uint(st, out, probs, base, values[i] - values[i - 1] - 1)
+    return enc_finish(st, out)
+
+
+@njit(cache=True, nogil=True)
+def decode_table_sets(st, data, present, chained, n_points, base, base_offs, tables, tab_offs):
+    """Decode the stream of :func:`encode_table_sets` into the block's tables.
+
+    Channel ch with ``present[ch]`` gets its table at ``tables[tab_offs[ch]:tab_offs[ch+1]]``:
+    the decoded set, or with ``chained[ch]`` the decoded additions merged into the coarser level's
+    table ``base[base_offs[ch]:base_offs[ch+1]]`` (sorted, distinct). ``tables`` is the room the
+    caller allowed; a table beyond it or beyond ``n_points`` entries, values out of the float32
+    range or out of order, or an addition the coarser table already holds is ``ERR_STREAM``.
+    Fills ``tab_offs`` (5,); returns ``OK`` or ``ERR_STREAM``."""
+    probs = np.full(N_CHANNELS * TABLE_SETS_MODEL, PROB_INIT, dtype=np.uint16)
+    dec_init(st, data)
+    pos = 0
+    for ch in range(N_CHANNELS):
+        tab_offs[ch] = pos
+        if present[ch] == 0:
+            continue
+        pb = ch * TABLE_SETS_MODEL
+        count = dec_uint(st, data, probs, pb)
+        j = 0
+        jh = 0
+        if chained[ch] != 0:
+            j = base_offs[ch]
+            jh = base_offs[ch + 1]
+        if dec_failed(st) or count > n_points - (jh - j) or pos + count + (jh - j) > tables.shape[0]:
+            return ERR_STREAM
+        v = np.int64(0)
+        for i in range(count):
+            if i == 0:
+                v = dec_sint(st, data, probs, pb + INT_MODEL_SIZE)
+                if v < -(1 << 31):
+                    return ERR_STREAM
+            else:
+                v = v + dec_uint(st, data, probs, pb) + 1
+            if v >= (1 << 31) or dec_failed(st):
+                return ERR_STREAM
+            while j < jh and base[j] < v:
+                tables[pos] = base[j]
+                pos += 1
+                j += 1
+            if j < jh and base[j] == v:
+                return ERR_STREAM
+            tables[pos] = v
+            pos += 1
+        while j < jh:
+            tables[pos] = base[j]
+            pos += 1
+            j += 1
+    tab_offs[N_CHANNELS] = pos
+    if dec_failed(st):
+        return ERR_STREAM
     return OK
 
 

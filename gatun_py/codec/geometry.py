@@ -25,18 +25,38 @@ or nothing where the block does without it).
 
 Byte layout of the geometry block (little endian)::
 
-    u8  coding      1 (format <= 3), 2 (format 4: adds the tet-geometry predictors) or 3
-                    (format 5: the same model, decoded with fewer range-coder steps)
+    u8  coding      1 (format <= 3), 2 (format 4: adds the tet-geometry predictors), 3
+                    (formats 5-7: the same model, decoded with fewer range-coder steps) or 4
+                    (format 8: coding 3's model, the value tables apart and chained across levels)
     u8  modes       bit ch set (ch < 4): channel ch uses the value table; bit 4 (coding 3
-                    only): y uses the x -> y table (codings 1-2 always do)
+                    and 4 only): y uses the x -> y table (codings 1-2 always do)
     u32 n_points
     u32 length[4]   byte length of each channel's range-coded stream
+    -- coding 4 only:
+    u8  chained     bit ch set (only for a table-mode channel): channel ch's table is chained
+    u32 table_length  byte length of the table stream
+    ...             the table stream (coding 4 only)
     ...             the four streams, channel 0 (x) to 3 (density)
+
+In codings 1-3 a table-mode channel's stream starts with its table (size, first value, gaps). In
+coding 4 the tables of all table-mode channels are coded in one stream ahead of the channel
+streams (:func:`gatun_py.codec._geometry_kernels.encode_table_sets`, channel order), so that a
+reader takes a block's tables without decoding its vertices. A *chained* channel's table there
+holds only the values it adds to the table of the same channel in the next coarser level of the
+file (the next entry of the file's level list, which must code that channel with a table too):
+a coarser level's vertices are a subset of the finer one's, values bit for bit, so its table is a
+subset. Decoding level k then takes the table streams of the levels k+1, k+2, ... as far as the
+chain goes, about one whole table's worth of values, as a block of its own table would. The
+channel streams of coding 4 are coding 3's (a table-mode channel's without the table). The
+encoder of a file with levels chooses per level and channel among prediction, own table and
+chained table, coarsest level first (:func:`assemble_geometry`).
 """
 
 from __future__ import annotations
 
+import itertools
 import struct
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -46,23 +66,30 @@ from .container import VERSION_MAJOR
 from .rangecoder import (ADAPT_SHIFT, DEC_ERROR, DEC_OVERRUN, DEC_POS, INT_BUCKET_BITS, PROB_ONE, dec_state,
                          enc_state, new_model)
 
-CODINGS = K.CODINGS
+CODINGS = K.CODINGS + (4,)  # coding 4 runs the kernels of coding 3 (it moves the tables, not the model)
 
 
 def coding_for_format(major: int) -> int:
     """The geometry block coding a file of container format ``major`` is written with: 1 up to
     format 3, 2 in format 4 (the tet-geometry predictors of
-    :func:`gatun_py.codec._geometry_kernels._geometric_cands`), 3 from format 5 on (coding 2's
+    :func:`gatun_py.codec._geometry_kernels._geometric_cands`), 3 in formats 5 to 7 (coding 2's
     model with wide raw bits, a sign context, a flag-first repetition symbol and a per-block x -> y
-    cache). Readers take every coding."""
-    return 1 if major <= 3 else (2 if major == 4 else 3)
+    cache), 4 from format 8 on (coding 3's model, the value tables in a stream of their own and
+    chained across levels). Readers take every coding."""
+    return 1 if major <= 3 else (2 if major == 4 else (3 if major <= 7 else 4))
+
+
+def _kernel_coding(coding: int) -> int:
+    return min(int(coding), 3)
 
 
 # what this version of tetc writes
 FORMAT_VERSION = coding_for_format(VERSION_MAJOR)
 MAX_POINTS = 1 << 29  # the decoder's scratch tags (3 per vertex) are int32
 _HEADER = struct.Struct("<BBI4I")
-HEADER_SIZE = _HEADER.size
+HEADER_SIZE = _HEADER.size  # codings 1-3
+_HEADER4 = struct.Struct("<BBI4IBI")
+MAX_HEADER_SIZE = _HEADER4.size  # enough of a block's start to check any coding's header
 XY_TABLE_BIT = 1 << K.N_CHANNELS  # coding 3's modes: y uses the x -> y table (always, before)
 # The encoder tries a channel's value table (MODE_TABLE) when it has at most this share of distinct
 # values among the vertices, and keeps it where its stream is smaller. Blunt-fin's density has
@@ -209,6 +236,13 @@ def encode_geometry(points, density, refs, *, modes=None, coding: int = FORMAT_V
     n = vf.shape[0]
     if coding not in CODINGS:
         raise ValueError(f"coding must be one of {CODINGS}, got {coding!r}")
+    if coding >= 4:
+        if modes is not None:
+            modes = np.asarray(modes, dtype=np.int64)
+            if modes.shape != (K.N_CHANNELS,) or not np.isin(modes, (0, 1)).all():
+                raise ValueError("modes must be 4 values, each 0 (prediction) or 1 (table)")
+        parts = geometry_parts(points, density, refs, chainable=False, force_ranks=modes is not None and bool(modes.any()))
+        return assemble_geometry([parts], modes=None if modes is None else [modes])[0]
     cands = K.candidate_table(coding)
     if n >= MAX_POINTS:
         raise ValueError(f"at most {MAX_POINTS - 1} vertices per geometry block, got {n}")
@@ -261,24 +295,214 @@ def encode_geometry(points, density, refs, *, modes=None, coding: int = FORMAT_V
     return header + b"".join(streams)
 
 
-def geometry_stream_sizes(data: bytes) -> dict:
-    """Byte sizes of the parts of a geometry block (header and the x, y, z, density streams)."""
-    if len(data) < HEADER_SIZE:
-        raise CorruptFileError("corrupt geometry block: truncated header")
-    version, mode_bits, n, *lengths = _HEADER.unpack_from(data)
-    sizes = {"header": HEADER_SIZE}
-    for name, ch_len, ch in zip(("x", "y", "z", "density"), lengths, range(4)):
-        sizes[name] = ch_len
-        sizes[name + "_mode"] = "table" if mode_bits >> ch & 1 else "predict"
-    return sizes
+# ------------------------------------------------------------------------------ coding 4
 
 
-def check_geometry_header(data, n_points: int | None = None, *, total: int | None = None) -> tuple[int, int, list]:
+@dataclass
+class GeometryParts:
+    """What the coding-4 encoder knows of one block before choosing its modes: the channels'
+    distinct values and their streams coded every way that may be chosen.
+
+    Attributes
+    ----------
+    n : int
+    tables : list of 4 int64 arrays
+        Per channel, its sorted distinct ordered integers (the table a table-mode channel needs).
+    streams : dict
+        ``(ranks, xy)`` -> 4 channel streams (bytes, or None where not coded): ``ranks`` False for
+        prediction residuals, True for ranks in the channel's table (without the table); ``xy``
+        whether y had the x -> y table (only y's and z's streams depend on it).
+    """
+
+    n: int
+    tables: list
+    streams: dict
+
+
+def geometry_parts(points, density, refs, *, chainable: bool = True, force_ranks: bool = False) -> GeometryParts:
+    """Code a block's channels every way :func:`assemble_geometry` may choose (arguments as
+    :func:`encode_geometry`). ``chainable``: the block is a level of a file with coarser levels,
+    whose tables it may chain to: the ranks are coded on every channel (a chained table costs a
+    fraction of a whole one, and ranks then win even where nearly every value is distinct: every
+    level of Combustion); else only where at most :data:`TABLE_TRIAL_SHARE` of the values are
+    distinct (or on all with ``force_ranks``)."""
+    vf = _channels(points, density)
+    n = vf.shape[0]
+    if n >= MAX_POINTS:
+        raise ValueError(f"at most {MAX_POINTS - 1} vertices per geometry block, got {n}")
+    refs = _as_refs(refs, n)
+    ordered = _ordered(vf)
+    tables_list = [np.unique(ordered[:, ch]) for ch in range(K.N_CHANNELS)]
+    tables = np.concatenate(tables_list) if n else np.zeros(0, dtype=np.int64)
+    tab_offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
+    tab_offs[1:] = np.cumsum([len(t) for t in tables_list])
+    wpar = K.link_all(refs, vf)
+    xy_on, xy_off = K.candidate_table(3, True), K.candidate_table(3, False)
+    skip = K.MODE_SKIP
+    streams = {}
+    streams[False, True] = _run_encode(vf, refs, np.zeros(K.N_CHANNELS, np.int64), tables, tab_offs, xy_on, wpar=wpar)
+    streams[False, False] = [None] + _run_encode(vf, refs, np.array([skip, 0, 0, skip]), tables, tab_offs, xy_off,
+                                                 wpar=wpar)[1:3] + [None]
+    tried = np.array([n > 0 and (chainable or force_ranks or len(t) <= TABLE_TRIAL_SHARE * n) for t in tables_list])
+    if tried.any():
+        trial = np.where(tried, K.MODE_RANKS, skip).astype(np.int64)
+        on = _run_encode(vf, refs, trial, tables, tab_offs, xy_on, wpar=wpar)
+        streams[True, True] = [on[ch] if tried[ch] else None for ch in range(K.N_CHANNELS)]
+        if tried[1:3].any():
+            trial[0] = trial[3] = skip
+            off = _run_encode(vf, refs, trial, tables, tab_offs, xy_off, wpar=wpar)
+            streams[True, False] = [None] + [off[ch] if tried[ch] else None for ch in (1, 2)] + [None]
+    return GeometryParts(int(n), tables_list, streams)
+
+
+_PREDICT, _OWN, _CHAINED = 0, 1, 2
+
+
+def _table_stream(present, sets) -> bytes:
+    values = np.concatenate([np.asarray(v, np.int64) for v in sets]) if sets else np.zeros(0, np.int64)
+    offs = np.zeros(K.N_CHANNELS + 1, np.int64)
+    offs[1:] = np.cumsum([len(v) for v in sets])
+    cap = 64 + 8 * len(values)
+    while True:
+        st = enc_state()
+        out = np.empty(cap, np.uint8)
+        nbytes = int(K.encode_table_sets(st, out, np.asarray(present, np.int64), values, offs))
+        if nbytes <= cap:
+            return out[:nbytes].tobytes()
+        cap = nbytes + 64
+
+
+def _set_cost(ch: int, values) -> int:
+    """Bytes a set adds to a table stream (coded alone, less an empty stream's bytes)."""
+    sets = [np.zeros(0, np.int64)] * K.N_CHANNELS
+    sets[ch] = values
+    present = [0] * K.N_CHANNELS
+    present[ch] = 1
+    return len(_table_stream(present, sets)) - len(_table_stream([0] * K.N_CHANNELS, sets))
+
+
+def _is_subset(coarse, fine) -> bool:
+    """Whether the sorted distinct values ``coarse`` all occur in the sorted ``fine``."""
+    if len(coarse) > len(fine):
+        return False
+    at = np.searchsorted(fine, coarse)
+    return bool((at < len(fine)).all() and (fine[np.minimum(at, len(fine) - 1)] == coarse).all())
+
+
+def assemble_geometry(levels: list, modes: list | None = None) -> list:
+    """Coding-4 geometry blocks of the levels of one file (or of one brick) from their
+    :class:`GeometryParts`, finest first: block i may chain its tables to block i + 1's.
+
+    Per channel and level the modes are prediction, own table or chained table (only where the
+    next coarser block codes the channel with a table and its table is a subset of this one's),
+    and per level whether y uses the x -> y table; chosen for the fewest bytes over all levels by a
+    dynamic programme from the coarsest level on (the state: which channels the coarser level codes
+    with a table; a table's bytes are estimated by coding it alone). ``modes``: per level, 4 forced
+    modes (0 prediction, 1 table: own or chained). Returns the blocks, in the same order."""
+    nl = len(levels)
+    inf = float("inf")
+    # per level: cost[ch][mode][xy] of the channel's stream plus its table, inf where impossible
+    costs = []
+    for k, p in enumerate(levels):
+        coarse = levels[k + 1] if k + 1 < nl else None
+        c = np.full((K.N_CHANNELS, 3, 2), inf)
+        for ch in range(K.N_CHANNELS):
+            own_table = None
+            for xy in (0, 1):
+                key_xy = bool(xy) if ch in (1, 2) else True  # only y's and z's streams depend on xy
+                s = p.streams.get((False, key_xy))
+                if s is not None and s[ch] is not None:
+                    c[ch, _PREDICT, xy] = len(s[ch])
+                s = p.streams.get((True, key_xy))
+                if s is not None and s[ch] is not None:
+                    if own_table is None:
+                        own_table = _set_cost(ch, p.tables[ch])
+                    c[ch, _OWN, xy] = len(s[ch]) + own_table
+            if own_table is not None:
+                if coarse is not None and _is_subset(coarse.tables[ch], p.tables[ch]):
+                    adds = np.setdiff1d(p.tables[ch], coarse.tables[ch], assume_unique=True)
+                    c[ch, _CHAINED] = c[ch, _OWN] - own_table + _set_cost(ch, adds)
+            if modes is not None:
+                forced = int(modes[k][ch])
+                c[ch, _OWN if forced == 0 else _PREDICT] = inf
+                if forced == 0:
+                    c[ch, _CHAINED] = inf
+        costs.append(c)
+    choices = [(m, xy) for xy in (1, 0) for m in itertools.product((_PREDICT, _OWN, _CHAINED), repeat=K.N_CHANNELS)]
+    # best[k][mask]: the fewest bytes of levels k.. when level k codes the channels of mask with a table
+    nm = 1 << K.N_CHANNELS
+    best = [[inf] * nm for _ in range(nl + 1)]
+    pick = [[None] * nm for _ in range(nl)]
+    best[nl][0] = 0.0
+    for k in range(nl - 1, -1, -1):
+        # the least cost of levels k+1.. whose table mask covers a given set of channels
+        sup = [min(best[k + 1][m] for m in range(nm) if m & s == s) for s in range(nm)]
+        c = costs[k]
+        for m4, xy in choices:
+            need = sum(1 << ch for ch in range(K.N_CHANNELS) if m4[ch] == _CHAINED)
+            if k + 1 == nl and need:
+                continue
+            total = sup[need] + sum(c[ch, m4[ch], xy] for ch in range(K.N_CHANNELS))
+            mask = sum(1 << ch for ch in range(K.N_CHANNELS) if m4[ch] != _PREDICT)
+            if total < best[k][mask]:
+                best[k][mask] = total
+                pick[k][mask] = (m4, xy)
+    blocks = []
+    mask = min(range(nm), key=lambda m: best[0][m])
+    for k, p in enumerate(levels):
+        m4, xy = pick[k][mask]
+        need = sum(1 << ch for ch in range(K.N_CHANNELS) if m4[ch] == _CHAINED)
+        blocks.append(_block4(p, levels[k + 1] if k + 1 < nl else None, m4, xy))
+        if k + 1 < nl:
+            mask = min((m for m in range(nm) if m & need == need), key=lambda m: best[k + 1][m])
+    return blocks
+
+
+def _block4(p: GeometryParts, coarse, m4, xy: int) -> bytes:
+    streams, sets, present = [], [], []
+    for ch in range(K.N_CHANNELS):
+        key_xy = bool(xy) if ch in (1, 2) else True
+        streams.append(p.streams[m4[ch] != _PREDICT, key_xy][ch])
+        present.append(int(m4[ch] != _PREDICT))
+        if m4[ch] == _CHAINED:
+            sets.append(np.setdiff1d(p.tables[ch], coarse.tables[ch], assume_unique=True))
+        elif m4[ch] == _OWN:
+            sets.append(p.tables[ch])
+        else:
+            sets.append(np.zeros(0, np.int64))
+    table = _table_stream(present, sets) if any(present) else b""
+    mode_bits = sum(present[ch] << ch for ch in range(K.N_CHANNELS)) | (XY_TABLE_BIT if xy else 0)
+    chained = sum(1 << ch for ch in range(K.N_CHANNELS) if m4[ch] == _CHAINED)
+    header = _HEADER4.pack(4, mode_bits, p.n, *(len(s) for s in streams), chained, len(table))
+    return header + table + b"".join(streams)
+
+
+# ------------------------------------------------------------------------------ headers
+
+
+@dataclass
+class GeometryHeader:
+    """A geometry block's header (any coding), checked by :func:`parse_geometry_header`."""
+
+    coding: int
+    mode_bits: int
+    n: int
+    lengths: list
+    chained: int = 0  # coding 4: bit ch, channel ch's table is chained to the next coarser level's
+    table_length: int = 0  # coding 4: bytes of the table stream
+    size: int = HEADER_SIZE  # bytes of the header
+
+    @property
+    def modes(self) -> np.ndarray:
+        return np.array([(self.mode_bits >> ch) & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64)
+
+
+def parse_geometry_header(data, n_points: int | None = None, *, total: int | None = None) -> GeometryHeader:
     """Check a geometry block's header against its size (and the expected vertex count).
 
-    ``data`` is the block, or only its header with the block's size in ``total``. Returns
-    ``(mode bits, vertices, stream lengths)``; raises :class:`CorruptFileError` before anything is
-    allocated when the counts cannot come from a block of this size.
+    ``data`` is the block, or only its start (:data:`MAX_HEADER_SIZE` bytes are enough) with the
+    block's size in ``total``. Raises :class:`CorruptFileError` before anything is allocated when
+    the counts cannot come from a block of this size.
     """
     total = len(data) if total is None else int(total)
     if len(data) < HEADER_SIZE:
@@ -288,13 +512,126 @@ def check_geometry_header(data, n_points: int | None = None, *, total: int | Non
         raise CorruptFileError(f"corrupt geometry block: unknown geometry format version {version}")
     if mode_bits >> K.N_CHANNELS != 0 and (version < 3 or mode_bits >= 2 * XY_TABLE_BIT):
         raise CorruptFileError("corrupt geometry block: invalid channel modes")
+    hdr = GeometryHeader(version, mode_bits, n, lengths)
+    if version >= 4:
+        if len(data) < _HEADER4.size:
+            raise CorruptFileError("corrupt geometry block: truncated header")
+        hdr.chained, hdr.table_length = _HEADER4.unpack_from(data)[-2:]
+        hdr.size = _HEADER4.size
+        if hdr.chained & ~mode_bits & ((1 << K.N_CHANNELS) - 1) or hdr.chained >> K.N_CHANNELS:
+            raise CorruptFileError("corrupt geometry block: a chained table on a channel without a table")
+        if (hdr.table_length == 0) != (mode_bits & ((1 << K.N_CHANNELS) - 1) == 0):
+            raise CorruptFileError("corrupt geometry block: table stream does not match the channel modes")
     if n_points is not None and n != n_points:
         raise CorruptFileError(f"corrupt geometry block: {n} vertices, expected {n_points}")
-    if HEADER_SIZE + sum(lengths) != total:
+    if hdr.size + hdr.table_length + sum(lengths) != total:
         raise CorruptFileError("corrupt geometry block: stream lengths do not match the block size")
     if n > max_vertices(lengths):
         raise CorruptFileError(f"corrupt geometry block: {n} vertices cannot fit in {total} bytes")
-    return version, mode_bits, n, lengths
+    return hdr
+
+
+def geometry_stream_sizes(data: bytes) -> dict:
+    """Byte sizes of the parts of a geometry block (header, the x, y, z, density streams and, in
+    coding 4, the table stream) and each channel's mode."""
+    if len(data) < HEADER_SIZE:
+        raise CorruptFileError("corrupt geometry block: truncated header")
+    version, mode_bits, n, *lengths = _HEADER.unpack_from(data)
+    chained, table_length, size = 0, 0, HEADER_SIZE
+    if version >= 4:
+        if len(data) < _HEADER4.size:
+            raise CorruptFileError("corrupt geometry block: truncated header")
+        chained, table_length = _HEADER4.unpack_from(data)[-2:]
+        size = _HEADER4.size
+    sizes = {"header": size}
+    if version >= 4:
+        sizes["tables"] = table_length
+    for name, ch_len, ch in zip(("x", "y", "z", "density"), lengths, range(4)):
+        sizes[name] = ch_len
+        sizes[name + "_mode"] = ("chained" if chained >> ch & 1 else "table") if mode_bits >> ch & 1 else "predict"
+    return sizes
+
+
+def check_geometry_header(data, n_points: int | None = None, *, total: int | None = None) -> tuple[int, int, list]:
+    """Check a geometry block's header against its size (and the expected vertex count).
+
+    ``data`` is the block, or only its start with the block's size in ``total``. Returns
+    ``(coding, mode bits, vertices, stream lengths)`` (:func:`parse_geometry_header` has the rest of
+    a coding-4 header); raises :class:`CorruptFileError` before anything is allocated when the
+    counts cannot come from a block of this size.
+    """
+    hdr = parse_geometry_header(data, n_points, total=total)
+    return hdr.coding, hdr.mode_bits, hdr.n, hdr.lengths
+
+
+@dataclass
+class ValueTables:
+    """The value tables of a decoded block's table-mode channels: channel ch's in
+    ``tables[offs[ch]:offs[ch+1]]`` where ``present[ch]``, what a finer level's chained tables
+    are merged into."""
+
+    tables: np.ndarray
+    offs: np.ndarray
+    present: np.ndarray
+
+
+_NO_BASE = ValueTables(np.zeros(0, np.int64), np.zeros(K.N_CHANNELS + 1, np.int64), np.zeros(K.N_CHANNELS, np.int64))
+
+
+def _decode_tables4(buf, hdr: GeometryHeader, base: ValueTables | None) -> ValueTables:
+    """The tables of a coding-4 block (its table stream merged into ``base`` where chained)."""
+    present = hdr.modes
+    chained = np.array([(hdr.chained >> ch) & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64)
+    if chained.any():
+        if base is None:
+            raise CorruptFileError("corrupt geometry block: chained value tables without a coarser level")
+        if (chained & (1 - base.present)).any():
+            raise CorruptFileError("corrupt geometry block: a chained table whose coarser level codes no table")
+    else:
+        base = _NO_BASE
+    start = hdr.size
+    stream = buf[start:start + hdr.table_length]
+    room = 0
+    for ch in range(K.N_CHANNELS):
+        if present[ch]:
+            inherited = int(base.offs[ch + 1] - base.offs[ch]) if chained[ch] else 0
+            room += min(hdr.n, inherited + _MAX_TABLE_PER_BYTE * (hdr.table_length + 8))
+    tables = np.zeros(room, dtype=np.int64)
+    offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
+    st = dec_state()
+    status = K.decode_table_sets(st, stream, present, chained, hdr.n, base.tables, base.offs, tables, offs)
+    if status != K.OK or st[DEC_ERROR] != 0 or st[DEC_OVERRUN] != 0 or int(st[DEC_POS]) != hdr.table_length:
+        raise CorruptFileError("corrupt geometry block: damaged value table")
+    return ValueTables(tables[:offs[K.N_CHANNELS]], offs, present)
+
+
+def decode_value_tables(data, n_points: int | None = None, base: ValueTables | None = None) -> ValueTables:
+    """The value tables of a geometry block without decoding its vertices: what a finer level's
+    chained block needs of this one (``base``: this block's own coarser level's tables, needed when
+    it chains too). Raises :class:`CorruptFileError` on a damaged block."""
+    buf = np.frombuffer(bytes(data), dtype=np.uint8)
+    hdr = parse_geometry_header(buf, n_points)
+    if hdr.coding >= 4:
+        return _decode_tables4(buf, hdr, base)
+    offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
+    offs[0] = HEADER_SIZE
+    offs[1:] = HEADER_SIZE + np.cumsum(hdr.lengths)
+    modes = hdr.modes
+    room = sum(min(hdr.n, _MAX_TABLE_PER_BYTE * (int(hdr.lengths[ch]) + 8)) for ch in range(K.N_CHANNELS) if modes[ch])
+    tables = np.zeros(room, dtype=np.int64)
+    tab_offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
+    st = np.stack([dec_state() for _ in range(K.N_CHANNELS)])
+    probs = np.stack([new_model(K.MODEL_SIZE) for _ in range(K.N_CHANNELS)])
+    if K.decode_tables_kernel(st, buf, offs, probs, modes, hdr.n, tables, tab_offs) != K.OK:
+        raise CorruptFileError("corrupt geometry block: damaged value table")
+    return ValueTables(tables[:tab_offs[K.N_CHANNELS]], tab_offs, modes)
+
+
+def chained_to_coarser(data) -> bool:
+    """Whether a geometry block (or its first :data:`MAX_HEADER_SIZE` bytes) chains a table to the
+    next coarser level's."""
+    data = bytes(data[:MAX_HEADER_SIZE])
+    return len(data) >= MAX_HEADER_SIZE and data[0] >= 4 and _HEADER4.unpack_from(data)[-2] != 0
 
 
 class GeometryDecoder:
@@ -322,17 +659,18 @@ class GeometryDecoder:
     geometry with connectivity decoding.
     """
 
-    def __init__(self, data, n_points: int | None = None):
+    def __init__(self, data, n_points: int | None = None, base: ValueTables | None = None):
         buf = np.frombuffer(bytes(data), dtype=np.uint8)
-        coding, mode_bits, n, lengths = check_geometry_header(buf, n_points)
+        hdr = parse_geometry_header(buf, n_points)
+        coding, mode_bits, n, lengths = hdr.coding, hdr.mode_bits, hdr.n, hdr.lengths
         self.coding = int(coding)
         xy_table = self.coding < 3 or bool(mode_bits & XY_TABLE_BIT)
-        self.cands = K.candidate_table(self.coding, xy_table)
+        self.cands = K.candidate_table(_kernel_coding(self.coding), xy_table)
         self.n_points = int(n)
-        self.modes = np.array([(mode_bits >> ch) & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64)
+        self.modes = hdr.modes
         self.offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
-        self.offs[0] = HEADER_SIZE
-        self.offs[1:] = HEADER_SIZE + np.cumsum(lengths)
+        self.offs[0] = hdr.size + hdr.table_length
+        self.offs[1:] = self.offs[0] + np.cumsum(lengths)
         self.buf = buf
         self.st = np.stack([dec_state() for _ in range(K.N_CHANNELS)])
         self.probs = np.stack([new_model(K.MODEL_SIZE) for _ in range(K.N_CHANNELS)])
@@ -345,6 +683,16 @@ class GeometryDecoder:
         # half, is twice this size at 1.4 M vertices); lookups do not depend on the capacity
         self.hkeys = np.zeros(K.xy_table_slots(self.n_points, self.coding) if xy_table else 1, dtype=np.int64)
         self.hvals = np.zeros(len(self.hkeys), dtype=np.uint8)
+        if self.coding >= 4:
+            # the tables come from their own stream; the channel streams start with the vertices
+            self.value_tables = _decode_tables4(buf, hdr, base)
+            self.tables, self.tab_offs = self.value_tables.tables, self.value_tables.offs
+            if K.decode_tables_kernel(self.st, buf, self.offs, self.probs, np.zeros(K.N_CHANNELS, np.int64),
+                                      self.n_points, self.tables, np.zeros(K.N_CHANNELS + 1, np.int64)) != K.OK:
+                raise CorruptFileError("corrupt geometry block: the coded data is damaged")
+            self.values = np.empty((self.n_points, 4), dtype=np.float32)
+            self.n_decoded = 0
+            return
         stream_bytes = [int(length) for length in lengths]
         table_room = sum(min(self.n_points, _MAX_TABLE_PER_BYTE * (stream_bytes[ch] + 8))
                          for ch in range(K.N_CHANNELS) if self.modes[ch])
@@ -354,6 +702,7 @@ class GeometryDecoder:
                                         self.tables, self.tab_offs)
         if status != K.OK:
             raise CorruptFileError("corrupt geometry block: damaged value table")
+        self.value_tables = ValueTables(self.tables[:self.tab_offs[K.N_CHANNELS]], self.tab_offs, self.modes)
         self.values = np.empty((self.n_points, 4), dtype=np.float32)
         self.n_decoded = 0
 

@@ -120,16 +120,25 @@ def test_every_mode_round_trips(modes):
 @pytest.mark.parametrize("name", ["post", "bluntfin"])
 def test_mode_choice_keeps_the_smaller_stream(name):
     """Per channel the smaller of the two modes, also where most values are distinct but repeat
-    enough for a table (Blunt-fin's density: 28,025 values on 40,960 vertices)."""
+    enough for a table (Blunt-fin's density: 28,025 values on 40,960 vertices). Coding 3: a
+    table-mode channel's stream holds its table; coding 4: the tables are apart, and the block is
+    no larger than with either mode forced on every channel (a table's bytes are estimated alone:
+    a few bytes of slack)."""
     mesh = load_sample(name)[0]
     points, density, refs = _in_decode_order(mesh)
-    auto = geometry_stream_sizes(encode_geometry(points, density, refs))
-    forced = [geometry_stream_sizes(encode_geometry(points, density, refs, modes=modes))
-              for modes in [(0, 0, 0, 0), (1, 1, 1, 1)]]
+    blobs = {}
+    for coding in (3, 4):
+        blobs[coding] = [encode_geometry(points, density, refs, modes=modes, coding=coding)
+                         for modes in [None, (0, 0, 0, 0), (1, 1, 1, 1)]]
+    auto, *forced = map(geometry_stream_sizes, blobs[3])
     for ch in ("x", "y", "z", "density"):
         assert auto[ch] <= min(f[ch] for f in forced), ch
     if name == "bluntfin":
         assert auto["density_mode"] == "table" and auto["density"] < forced[0]["density"]
+    auto4, *forced4 = blobs[4]
+    assert len(auto4) <= min(map(len, forced4)) + 8
+    assert [geometry_stream_sizes(auto4)[c + "_mode"] for c in ("x", "y", "z", "density")] == \
+        [auto[c + "_mode"] for c in ("x", "y", "z", "density")]
 
 
 def test_three_column_refs_and_empty_and_single():
@@ -656,7 +665,7 @@ def test_a_channel_whose_coarser_table_is_not_a_subset_does_not_chain():
 
 @pytest.fixture(scope="module")
 def chained_pair():
-    levels = _nested_levels(np.random.default_rng(9), 400, 2, "grid")
+    levels = _nested_levels(np.random.default_rng(9), 400, 2, "few")
     blocks = _assemble(levels)
     assert blocks[0][HEADER_SIZE] != 0  # the finer block chains
     from gatun_py.codec.geometry import decode_value_tables
@@ -687,7 +696,7 @@ def test_a_coarser_table_that_holds_an_addition_is_refused(chained_pair):
     ch = next(c for c in range(4) if (blocks[0][HEADER_SIZE] >> c) & 1)
     mine = fine.tables[fine.offs[ch]:fine.offs[ch + 1]]
     theirs = base.tables[base.offs[ch]:base.offs[ch + 1]]
-    extra = np.setdiff1d(mine, theirs)[0]
+    extra = np.setdiff1d(mine, theirs)[0]  # an addition (the finer level has values of its own)
     parts = [base.tables[base.offs[c]:base.offs[c + 1]] if c != ch else np.union1d(theirs, [extra]) for c in range(4)]
     offs = np.zeros(5, np.int64)
     offs[1:] = np.cumsum([len(t) for t in parts])
@@ -720,3 +729,32 @@ def test_damaged_chained_blocks_are_refused_or_decode_right(chained_pair):
             detected += 1
     # the container's CRC catches the rest; the coder itself must notice a good share
     assert detected > 150
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), count=st.integers(0, 3000), kind=st.sampled_from(["near", "wide", "bits"]))
+def test_rank_index_finds_the_binary_search_rank(seed, count, kind):
+    """The decoder's rank search through the rank index (coding 4) gives np.searchsorted's rank
+    for any value, in the table's range or outside it, with tables on either side of it."""
+    rng = np.random.default_rng(seed)
+    if kind == "near":  # coordinates of a grid around 1
+        vals = (1 + rng.integers(0, 4 * count + 1, count) * 2.0**-12).astype(np.float32)
+    elif kind == "wide":  # magnitudes over many octaves and both signs
+        vals = (rng.choice([-1, 1], count) * 10.0 ** rng.uniform(-30, 30, count)).astype(np.float32)
+    else:
+        vals = rng.integers(-(2**31), 2**31, size=count, dtype=np.int64).astype(np.int32).view(np.float32)
+    tables_list = [np.unique(_ordered(np.stack([vals] * 4, 1))[:, 0]) for _ in range(4)]
+    tables_list[1] = tables_list[1][: len(tables_list[1]) // 3]  # tables of other lengths around it
+    offs = np.zeros(4 * 4 + 1, np.int64)
+    offs[1:5] = np.cumsum([len(t) for t in tables_list])
+    tables = np.zeros(offs[4] + K.rank_index_room(offs[:5]), np.int64)
+    tables[:offs[4]] = np.concatenate(tables_list)
+    K.build_rank_index(tables, offs)
+    probes = np.concatenate([tables[:offs[4]], tables[:offs[4]] + 1, tables[:offs[4]] - 1,
+                             rng.integers(-(2**31), 2**31, 200), [-(2**31), 2**31 - 1]])
+    for ch in range(4):
+        lo, hi = int(offs[ch]), int(offs[ch + 1])
+        if hi == lo:
+            continue
+        for o in probes[:: max(1, len(probes) // 400)]:
+            assert K._search_ranked(tables, offs, ch, lo, hi, int(o)) == lo + np.searchsorted(tables[lo:hi], o)

@@ -97,6 +97,15 @@ XY_TABLE_BIT = 1 << K.N_CHANNELS  # coding 3's modes: y uses the x -> y table (a
 # prediction residuals, and its coarser levels (0.74-0.76) gain 3-9 %; at 0.97 (Combustion's,
 # LOX post's density) and 0.99 (the gmsh flange) the table loses, so the trial is skipped there.
 TABLE_TRIAL_SHARE = 0.8
+# A level of a file with levels tries ranks on every channel, whatever its share of distinct values,
+# when it has at most this many vertices (coding 4): chained, its table costs a fraction of a whole
+# one and ranks then win on nearly every level even where nearly all values are distinct
+# (Combustion's every level; all its levels chained so: 808 KB against 961 KB). But ranks of a
+# nearly all-distinct channel decode slower than prediction residuals: its table (about 60 ns per
+# value) and a table look-up per vertex (about 70 ns: Combustion's level 0 decoded in 1.48 x the
+# time), so above this size only channels with at most TABLE_TRIAL_SHARE distinct values try them
+# (Combustion 933 KB, its levels 0-3 decode as fast as before; Blunt-fin and LOX post lose nothing).
+CHAIN_ANY_SHARE_POINTS = 4096
 
 # Absurd counts are rejected before allocating: a binary decision costs at least
 # -log2(p_max) bits, p_max being the most skewed probability the range coder's adaptation reaches;
@@ -321,11 +330,10 @@ class GeometryParts:
 
 def geometry_parts(points, density, refs, *, chainable: bool = True, force_ranks: bool = False) -> GeometryParts:
     """Code a block's channels every way :func:`assemble_geometry` may choose (arguments as
-    :func:`encode_geometry`). ``chainable``: the block is a level of a file with coarser levels,
-    whose tables it may chain to: the ranks are coded on every channel (a chained table costs a
-    fraction of a whole one, and ranks then win even where nearly every value is distinct: every
-    level of Combustion); else only where at most :data:`TABLE_TRIAL_SHARE` of the values are
-    distinct (or on all with ``force_ranks``)."""
+    :func:`encode_geometry`). The ranks are coded on the channels where at most
+    :data:`TABLE_TRIAL_SHARE` of the values are distinct, on all with ``force_ranks``, and on all
+    of a block of at most :data:`CHAIN_ANY_SHARE_POINTS` vertices with ``chainable`` (a level of a
+    file with levels, whose tables may chain to the next coarser level's)."""
     vf = _channels(points, density)
     n = vf.shape[0]
     if n >= MAX_POINTS:
@@ -343,7 +351,8 @@ def geometry_parts(points, density, refs, *, chainable: bool = True, force_ranks
     streams[False, True] = _run_encode(vf, refs, np.zeros(K.N_CHANNELS, np.int64), tables, tab_offs, xy_on, wpar=wpar)
     streams[False, False] = [None] + _run_encode(vf, refs, np.array([skip, 0, 0, skip]), tables, tab_offs, xy_off,
                                                  wpar=wpar)[1:3] + [None]
-    tried = np.array([n > 0 and (chainable or force_ranks or len(t) <= TABLE_TRIAL_SHARE * n) for t in tables_list])
+    tried = np.array([n > 0 and (force_ranks or len(t) <= TABLE_TRIAL_SHARE * n
+                                 or (chainable and n <= CHAIN_ANY_SHARE_POINTS)) for t in tables_list])
     if tried.any():
         trial = np.where(tried, K.MODE_RANKS, skip).astype(np.int64)
         on = _run_encode(vf, refs, trial, tables, tab_offs, xy_on, wpar=wpar)
@@ -581,6 +590,8 @@ _NO_BASE = ValueTables(np.zeros(0, np.int64), np.zeros(K.N_CHANNELS + 1, np.int6
 def _decode_tables4(buf, hdr: GeometryHeader, base: ValueTables | None) -> ValueTables:
     """The tables of a coding-4 block (its table stream merged into ``base`` where chained)."""
     present = hdr.modes
+    if not present.any():  # no table stream (the header checked that its length is 0)
+        return ValueTables(np.zeros(0, np.int64), np.zeros(K.N_CHANNELS + 1, np.int64), present)
     chained = np.array([(hdr.chained >> ch) & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64)
     if chained.any():
         if base is None:
@@ -685,8 +696,13 @@ class GeometryDecoder:
         self.hvals = np.zeros(len(self.hkeys), dtype=np.uint8)
         if self.coding >= 4:
             # the tables come from their own stream; the channel streams start with the vertices
-            self.value_tables = _decode_tables4(buf, hdr, base)
-            self.tables, self.tab_offs = self.value_tables.tables, self.value_tables.offs
+            self.value_tables = vt = _decode_tables4(buf, hdr, base)
+            # the kernels' tables: the values, then each large table's rank index
+            self.tables = np.zeros(len(vt.tables) + K.rank_index_room(vt.offs), dtype=np.int64)
+            self.tables[:len(vt.tables)] = vt.tables
+            self.tab_offs = np.zeros(K.N_CHANNELS + 1 + K.RANK_INDEX_FIELDS * K.N_CHANNELS, dtype=np.int64)
+            self.tab_offs[:K.N_CHANNELS + 1] = vt.offs
+            K.build_rank_index(self.tables, self.tab_offs)
             if K.decode_tables_kernel(self.st, buf, self.offs, self.probs, np.zeros(K.N_CHANNELS, np.int64),
                                       self.n_points, self.tables, np.zeros(K.N_CHANNELS + 1, np.int64)) != K.OK:
                 raise CorruptFileError("corrupt geometry block: the coded data is damaged")

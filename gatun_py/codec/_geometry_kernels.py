@@ -1170,6 +1170,8 @@ def build_rank_index(tables, tab_offs):
         while (span >> shift) >= 2 * (hi - lo):
             shift += 1
         nb = (span >> shift) + 1
+        if at + nb + 1 > tables.shape[0]:  # no room (a caller's mistake): search the whole table
+            continue
         i = lo
         for b in range(nb + 1):
             while i < hi and ((tables[i] - tmin) >> shift) < b:

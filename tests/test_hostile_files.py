@@ -499,7 +499,7 @@ def test_geometry_header_and_metadata_agree_on_a_huge_count(worker, files):
 
 # -- format 8: value tables chained across levels -------------------------------------------------
 
-_CHAINED_AT, _TABLE_LENGTH_AT, _HEADER4 = 22, 23, 27  # the coding-4 geometry header's fields
+_CHAINED_AT, _TABLE_LENGTHS_AT, _HEADER4 = 22, 23, 39  # the coding-4 geometry header's fields
 
 
 def _chained_blocks(sections) -> list:
@@ -556,15 +556,18 @@ def test_damaged_coarser_tables(worker, files, data):
     valid CRC: flipped bits, or its length field rewritten."""
     meta, sections = _split(files[data.draw(st.sampled_from([0, 2]))])
     geo = [i for i, (name, p) in enumerate(sections)
-           if name.endswith("/geometry") and p[0] == 4 and struct.unpack_from("<I", p, _TABLE_LENGTH_AT)[0]]
+           if name.endswith("/geometry") and p[0] == 4 and any(struct.unpack_from("<4I", p, _TABLE_LENGTHS_AT))]
     i = data.draw(st.sampled_from(geo))
     name, p = sections[i]
     p = bytearray(p)
-    length = struct.unpack_from("<I", p, _TABLE_LENGTH_AT)[0]
+    lengths = struct.unpack_from("<4I", p, _TABLE_LENGTHS_AT)
+    ch = data.draw(st.sampled_from([c for c in range(4) if lengths[c]]))
     if data.draw(st.booleans()):
+        start = _HEADER4 + sum(lengths[:ch])
         for _ in range(data.draw(st.integers(1, 3))):
-            p[_HEADER4 + data.draw(st.integers(0, length - 1))] ^= 1 << data.draw(st.integers(0, 7))
+            p[start + data.draw(st.integers(0, lengths[ch] - 1))] ^= 1 << data.draw(st.integers(0, 7))
     else:
-        struct.pack_into("<I", p, _TABLE_LENGTH_AT, data.draw(st.sampled_from([0, 1, length - 1, length + 1, 2**32 - 1])))
+        struct.pack_into("<I", p, _TABLE_LENGTHS_AT + 4 * ch,
+                         data.draw(st.sampled_from([0, 1, lengths[ch] - 1, lengths[ch] + 1, 2**32 - 1])))
     sections[i] = (name, bytes(p))
     check(worker, _build(meta, sections), f"{name} tables")

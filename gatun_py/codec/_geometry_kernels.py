@@ -85,7 +85,7 @@ MODE_PREDICT = 0
 MODE_TABLE = 1
 MODE_SKIP = -1  # encoder only: leave the channel out of this pass
 # encoder only: ranks in the channel's table like MODE_TABLE, without the table at the stream's
-# start (geometry coding 4 sends every table in a stream of its own, :func:`encode_table_sets`)
+# start (geometry coding 4 sends each table in a stream of its own, :func:`encode_table_set`)
 MODE_RANKS = 2
 
 # ref patterns (which of the face refs and the apex are present) and their predictor candidates
@@ -1045,88 +1045,71 @@ def decode_tables_kernel(st, buf, offs, probs, modes, n_points, tables, tab_offs
     return OK
 
 
-# Geometry coding 4 sends the value tables of a block's table-mode channels in a stream of their
-# own, ahead of the channel streams, so that a reader can take a level's tables without decoding
-# its vertices. A channel's table is either the whole table or, *chained*, only the values it adds
-# to the table of the same channel in the next coarser level of the file (a coarser level's
-# vertices are a subset of the finer level's, values kept bit for bit). Either way the set is coded
-# as the table prefix of codings 1-3 was: its size, its first value, the gaps between consecutive
-# values less one, in contexts of the channel (TABLE_SETS_MODEL per channel); the size and the gaps
-# with their unmodelled bits in wide steps (enc_uint_wide: a table decodes in half the steps).
-TABLE_SETS_MODEL = 2 * INT_MODEL_SIZE
+# Geometry coding 4 sends the value table of each table-mode channel in a stream of its own, ahead
+# of the channel streams, so that a reader takes a level's tables (or only some channels' tables)
+# without decoding its vertices. A channel's table is either the whole table or, *chained*, only
+# the values it adds to the table of the same channel in the next coarser level of the file (a
+# coarser level's vertices are a subset of the finer level's, values kept bit for bit). Either way
+# the set is coded as the table prefix of codings 1-3 was: its size, its first value, the gaps
+# between consecutive values less one; the size and the gaps with their unmodelled bits in wide
+# steps (enc_uint_wide: a table decodes in half the range-coder steps).
+TABLE_SET_MODEL = 2 * INT_MODEL_SIZE
 
 
 @njit(cache=True, nogil=True)
-def encode_table_sets(st, out, present, values, offs):
-    """Code the sorted sets ``values[offs[ch]:offs[ch+1]]`` of the channels with ``present[ch]``
-    into one stream (see above); returns its byte count (larger than ``out`` on overflow)."""
-    probs = np.full(N_CHANNELS * TABLE_SETS_MODEL, PROB_INIT, dtype=np.uint16)
-    for ch in range(N_CHANNELS):
-        if present[ch] == 0:
-            continue
-        base = ch * TABLE_SETS_MODEL
-        lo = offs[ch]
-        hi = offs[ch + 1]
-        enc_uint_wide(st, out, probs, base, hi - lo)
-        if hi > lo:
-            enc_sint(st, out, probs, base + INT_MODEL_SIZE, values[lo])
-            for i in range(lo + 1, hi):
-                enc_uint_wide(st, out, probs, base, values[i] - values[i - 1] - 1)
+def encode_table_set(st, out, values):
+    """Code the sorted distinct ``values`` into one stream (see above); returns its byte count
+    (larger than ``out`` on overflow)."""
+    probs = np.full(TABLE_SET_MODEL, PROB_INIT, dtype=np.uint16)
+    n = values.shape[0]
+    enc_uint_wide(st, out, probs, 0, n)
+    if n > 0:
+        enc_sint(st, out, probs, INT_MODEL_SIZE, values[0])
+        for i in range(1, n):
+            enc_uint_wide(st, out, probs, 0, values[i] - values[i - 1] - 1)
     return enc_finish(st, out)
 
 
 @njit(cache=True, nogil=True)
-def decode_table_sets(st, data, present, chained, n_points, base, base_offs, tables, tab_offs):
-    """Decode the stream of :func:`encode_table_sets` into the block's tables.
-
-    Channel ch with ``present[ch]`` gets its table at ``tables[tab_offs[ch]:tab_offs[ch+1]]``:
-    the decoded set, or with ``chained[ch]`` the decoded additions merged into the coarser level's
-    table ``base[base_offs[ch]:base_offs[ch+1]]`` (sorted, distinct). ``tables`` is the room the
-    caller allowed; a table beyond it or beyond ``n_points`` entries, values out of the float32
-    range or out of order, or an addition the coarser table already holds is ``ERR_STREAM``.
-    Fills ``tab_offs`` (5,); returns ``OK`` or ``ERR_STREAM``."""
-    probs = np.full(N_CHANNELS * TABLE_SETS_MODEL, PROB_INIT, dtype=np.uint16)
+def decode_table_set(st, data, n_points, base, tables):
+    """Decode a stream of :func:`encode_table_set` merged into ``base`` (the coarser level's table,
+    sorted and distinct; empty for a table of its own) into ``tables`` (the room the caller
+    allowed). A table beyond that room or beyond ``n_points`` entries, values out of order or out
+    of the float32 range, or an addition ``base`` already holds is damage. Returns the table's
+    length, or -1 on damage (the caller also checks that the stream was consumed exactly)."""
+    probs = np.full(TABLE_SET_MODEL, PROB_INIT, dtype=np.uint16)
     dec_init(st, data)
+    count = dec_uint_wide(st, data, probs, 0)
+    jh = base.shape[0]
+    if dec_failed(st) or count > n_points - jh or count + jh > tables.shape[0]:
+        return -1
     pos = 0
-    for ch in range(N_CHANNELS):
-        tab_offs[ch] = pos
-        if present[ch] == 0:
-            continue
-        pb = ch * TABLE_SETS_MODEL
-        count = dec_uint_wide(st, data, probs, pb)
-        j = 0
-        jh = 0
-        if chained[ch] != 0:
-            j = base_offs[ch]
-            jh = base_offs[ch + 1]
-        if dec_failed(st) or count > n_points - (jh - j) or pos + count + (jh - j) > tables.shape[0]:
-            return ERR_STREAM
-        v = np.int64(0)
-        for i in range(count):
-            if i == 0:
-                v = dec_sint(st, data, probs, pb + INT_MODEL_SIZE)
-                if v < -(1 << 31):
-                    return ERR_STREAM
-            else:
-                v = v + dec_uint_wide(st, data, probs, pb) + 1
-            if v >= (1 << 31) or dec_failed(st):
-                return ERR_STREAM
-            while j < jh and base[j] < v:
-                tables[pos] = base[j]
-                pos += 1
-                j += 1
-            if j < jh and base[j] == v:
-                return ERR_STREAM
-            tables[pos] = v
-            pos += 1
-        while j < jh:
+    j = 0
+    v = np.int64(0)
+    for i in range(count):
+        if i == 0:
+            v = dec_sint(st, data, probs, INT_MODEL_SIZE)
+            if v < -(1 << 31):
+                return -1
+        else:
+            v = v + dec_uint_wide(st, data, probs, 0) + 1
+        if v >= (1 << 31) or dec_failed(st):
+            return -1
+        while j < jh and base[j] < v:
             tables[pos] = base[j]
             pos += 1
             j += 1
-    tab_offs[N_CHANNELS] = pos
+        if j < jh and base[j] == v:
+            return -1
+        tables[pos] = v
+        pos += 1
+    while j < jh:
+        tables[pos] = base[j]
+        pos += 1
+        j += 1
     if dec_failed(st):
-        return ERR_STREAM
-    return OK
+        return -1
+    return pos
 
 
 # A rank index per table (coding 4's decoder): the values' range cut into at most twice as many

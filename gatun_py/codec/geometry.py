@@ -34,22 +34,22 @@ Byte layout of the geometry block (little endian)::
     u32 length[4]   byte length of each channel's range-coded stream
     -- coding 4 only:
     u8  chained     bit ch set (only for a table-mode channel): channel ch's table is chained
-    u32 table_length  byte length of the table stream
-    ...             the table stream (coding 4 only)
+    u32 table_length[4]  byte length of each channel's table stream (0: the channel has no table)
+    ...             the table streams (coding 4 only), channel 0 to 3
     ...             the four streams, channel 0 (x) to 3 (density)
 
 In codings 1-3 a table-mode channel's stream starts with its table (size, first value, gaps). In
-coding 4 the tables of all table-mode channels are coded in one stream ahead of the channel
-streams (:func:`gatun_py.codec._geometry_kernels.encode_table_sets`, channel order), so that a
-reader takes a block's tables without decoding its vertices. A *chained* channel's table there
-holds only the values it adds to the table of the same channel in the next coarser level of the
-file (the next entry of the file's level list, which must code that channel with a table too):
+coding 4 each table-mode channel's table is a stream of its own ahead of the channel streams
+(:func:`gatun_py.codec._geometry_kernels.encode_table_set`), so that a reader takes a block's
+tables, or some channels' tables, without decoding its vertices. A *chained* channel's table
+stream holds only the values it adds to the table of the same channel in the next coarser level of
+the file (the next entry of the file's level list, which must code that channel with a table too):
 a coarser level's vertices are a subset of the finer one's, values bit for bit, so its table is a
-subset. Decoding level k then takes the table streams of the levels k+1, k+2, ... as far as the
-chain goes, about one whole table's worth of values, as a block of its own table would. The
-channel streams of coding 4 are coding 3's (a table-mode channel's without the table). The
-encoder of a file with levels chooses per level and channel among prediction, own table and
-chained table, coarsest level first (:func:`assemble_geometry`).
+subset. Decoding level k then takes the table streams of the chained channels in the levels k+1,
+k+2, ... as far as their chains go, about one whole table's worth of values, as a block of its own
+tables would. The channel streams of coding 4 are coding 3's (a table-mode channel's without the
+table). The encoder of a file with levels chooses per level and channel among prediction, own
+table and chained table, coarsest level first (:func:`assemble_geometry`).
 """
 
 from __future__ import annotations
@@ -88,7 +88,7 @@ FORMAT_VERSION = coding_for_format(VERSION_MAJOR)
 MAX_POINTS = 1 << 29  # the decoder's scratch tags (3 per vertex) are int32
 _HEADER = struct.Struct("<BBI4I")
 HEADER_SIZE = _HEADER.size  # codings 1-3
-_HEADER4 = struct.Struct("<BBI4IBI")
+_HEADER4 = struct.Struct("<BBI4IB4I")
 MAX_HEADER_SIZE = _HEADER4.size  # enough of a block's start to check any coding's header
 XY_TABLE_BIT = 1 << K.N_CHANNELS  # coding 3's modes: y uses the x -> y table (always, before)
 # The encoder tries a channel's value table (MODE_TABLE) when it has at most this share of distinct
@@ -367,27 +367,16 @@ def geometry_parts(points, density, refs, *, chainable: bool = True, force_ranks
 _PREDICT, _OWN, _CHAINED = 0, 1, 2
 
 
-def _table_stream(present, sets) -> bytes:
-    values = np.concatenate([np.asarray(v, np.int64) for v in sets]) if sets else np.zeros(0, np.int64)
-    offs = np.zeros(K.N_CHANNELS + 1, np.int64)
-    offs[1:] = np.cumsum([len(v) for v in sets])
+def _table_stream(values) -> bytes:
+    """A table's (or a chained table's additions') stream: :func:`K.encode_table_set`."""
+    values = np.ascontiguousarray(values, dtype=np.int64)
     cap = 64 + 8 * len(values)
     while True:
-        st = enc_state()
         out = np.empty(cap, np.uint8)
-        nbytes = int(K.encode_table_sets(st, out, np.asarray(present, np.int64), values, offs))
+        nbytes = int(K.encode_table_set(enc_state(), out, values))
         if nbytes <= cap:
             return out[:nbytes].tobytes()
         cap = nbytes + 64
-
-
-def _set_cost(ch: int, values) -> int:
-    """Bytes a set adds to a table stream (coded alone, less an empty stream's bytes)."""
-    sets = [np.zeros(0, np.int64)] * K.N_CHANNELS
-    sets[ch] = values
-    present = [0] * K.N_CHANNELS
-    present[ch] = 1
-    return len(_table_stream(present, sets)) - len(_table_stream([0] * K.N_CHANNELS, sets))
 
 
 def _is_subset(coarse, fine) -> bool:
@@ -406,7 +395,7 @@ def assemble_geometry(levels: list, modes: list | None = None) -> list:
     next coarser block codes the channel with a table and its table is a subset of this one's),
     and per level whether y uses the x -> y table; chosen for the fewest bytes over all levels by a
     dynamic programme from the coarsest level on (the state: which channels the coarser level codes
-    with a table; a table's bytes are estimated by coding it alone). ``modes``: per level, 4 forced
+    with a table). ``modes``: per level, 4 forced
     modes (0 prediction, 1 table: own or chained). Returns the blocks, in the same order."""
     nl = len(levels)
     inf = float("inf")
@@ -416,7 +405,7 @@ def assemble_geometry(levels: list, modes: list | None = None) -> list:
         coarse = levels[k + 1] if k + 1 < nl else None
         c = np.full((K.N_CHANNELS, 3, 2), inf)
         for ch in range(K.N_CHANNELS):
-            own_table = None
+            own_table = None  # bytes of the table stream (exact: every channel's is a stream of its own)
             for xy in (0, 1):
                 key_xy = bool(xy) if ch in (1, 2) else True  # only y's and z's streams depend on xy
                 s = p.streams.get((False, key_xy))
@@ -425,12 +414,12 @@ def assemble_geometry(levels: list, modes: list | None = None) -> list:
                 s = p.streams.get((True, key_xy))
                 if s is not None and s[ch] is not None:
                     if own_table is None:
-                        own_table = _set_cost(ch, p.tables[ch])
+                        own_table = len(_table_stream(p.tables[ch]))
                     c[ch, _OWN, xy] = len(s[ch]) + own_table
             if own_table is not None:
                 if coarse is not None and _is_subset(coarse.tables[ch], p.tables[ch]):
                     adds = np.setdiff1d(p.tables[ch], coarse.tables[ch], assume_unique=True)
-                    c[ch, _CHAINED] = c[ch, _OWN] - own_table + _set_cost(ch, adds)
+                    c[ch, _CHAINED] = c[ch, _OWN] - own_table + len(_table_stream(adds))
             if modes is not None:
                 forced = int(modes[k][ch])
                 c[ch, _OWN if forced == 0 else _PREDICT] = inf
@@ -468,22 +457,20 @@ def assemble_geometry(levels: list, modes: list | None = None) -> list:
 
 
 def _block4(p: GeometryParts, coarse, m4, xy: int) -> bytes:
-    streams, sets, present = [], [], []
+    streams, tables = [], []
     for ch in range(K.N_CHANNELS):
         key_xy = bool(xy) if ch in (1, 2) else True
         streams.append(p.streams[m4[ch] != _PREDICT, key_xy][ch])
-        present.append(int(m4[ch] != _PREDICT))
         if m4[ch] == _CHAINED:
-            sets.append(np.setdiff1d(p.tables[ch], coarse.tables[ch], assume_unique=True))
+            tables.append(_table_stream(np.setdiff1d(p.tables[ch], coarse.tables[ch], assume_unique=True)))
         elif m4[ch] == _OWN:
-            sets.append(p.tables[ch])
+            tables.append(_table_stream(p.tables[ch]))
         else:
-            sets.append(np.zeros(0, np.int64))
-    table = _table_stream(present, sets) if any(present) else b""
-    mode_bits = sum(present[ch] << ch for ch in range(K.N_CHANNELS)) | (XY_TABLE_BIT if xy else 0)
+            tables.append(b"")
+    mode_bits = sum(int(m4[ch] != _PREDICT) << ch for ch in range(K.N_CHANNELS)) | (XY_TABLE_BIT if xy else 0)
     chained = sum(1 << ch for ch in range(K.N_CHANNELS) if m4[ch] == _CHAINED)
-    header = _HEADER4.pack(4, mode_bits, p.n, *(len(s) for s in streams), chained, len(table))
-    return header + table + b"".join(streams)
+    header = _HEADER4.pack(4, mode_bits, p.n, *(len(s) for s in streams), chained, *(len(t) for t in tables))
+    return header + b"".join(tables) + b"".join(streams)
 
 
 # ------------------------------------------------------------------------------ headers
@@ -498,8 +485,12 @@ class GeometryHeader:
     n: int
     lengths: list
     chained: int = 0  # coding 4: bit ch, channel ch's table is chained to the next coarser level's
-    table_length: int = 0  # coding 4: bytes of the table stream
+    table_lengths: tuple = (0, 0, 0, 0)  # coding 4: bytes of each channel's table stream
     size: int = HEADER_SIZE  # bytes of the header
+
+    @property
+    def table_length(self) -> int:
+        return sum(self.table_lengths)
 
     @property
     def modes(self) -> np.ndarray:
@@ -525,12 +516,12 @@ def parse_geometry_header(data, n_points: int | None = None, *, total: int | Non
     if version >= 4:
         if len(data) < _HEADER4.size:
             raise CorruptFileError("corrupt geometry block: truncated header")
-        hdr.chained, hdr.table_length = _HEADER4.unpack_from(data)[-2:]
+        hdr.chained, *hdr.table_lengths = _HEADER4.unpack_from(data)[-1 - K.N_CHANNELS:]
         hdr.size = _HEADER4.size
         if hdr.chained & ~mode_bits & ((1 << K.N_CHANNELS) - 1) or hdr.chained >> K.N_CHANNELS:
             raise CorruptFileError("corrupt geometry block: a chained table on a channel without a table")
-        if (hdr.table_length == 0) != (mode_bits & ((1 << K.N_CHANNELS) - 1) == 0):
-            raise CorruptFileError("corrupt geometry block: table stream does not match the channel modes")
+        if any((hdr.table_lengths[ch] == 0) != (mode_bits >> ch & 1 == 0) for ch in range(K.N_CHANNELS)):
+            raise CorruptFileError("corrupt geometry block: table streams do not match the channel modes")
     if n_points is not None and n != n_points:
         raise CorruptFileError(f"corrupt geometry block: {n} vertices, expected {n_points}")
     if hdr.size + hdr.table_length + sum(lengths) != total:
@@ -542,22 +533,25 @@ def parse_geometry_header(data, n_points: int | None = None, *, total: int | Non
 
 def geometry_stream_sizes(data: bytes) -> dict:
     """Byte sizes of the parts of a geometry block (header, the x, y, z, density streams and, in
-    coding 4, the table stream) and each channel's mode."""
+    coding 4, the table streams: ``tables`` and per channel ``x_table`` ...) and each channel's
+    mode (``predict``, ``table`` or, coding 4, ``chained``)."""
     if len(data) < HEADER_SIZE:
         raise CorruptFileError("corrupt geometry block: truncated header")
     version, mode_bits, n, *lengths = _HEADER.unpack_from(data)
-    chained, table_length, size = 0, 0, HEADER_SIZE
+    chained, table_lengths, size = 0, None, HEADER_SIZE
     if version >= 4:
         if len(data) < _HEADER4.size:
             raise CorruptFileError("corrupt geometry block: truncated header")
-        chained, table_length = _HEADER4.unpack_from(data)[-2:]
+        chained, *table_lengths = _HEADER4.unpack_from(data)[-1 - K.N_CHANNELS:]
         size = _HEADER4.size
     sizes = {"header": size}
-    if version >= 4:
-        sizes["tables"] = table_length
+    if table_lengths is not None:
+        sizes["tables"] = sum(table_lengths)
     for name, ch_len, ch in zip(("x", "y", "z", "density"), lengths, range(4)):
         sizes[name] = ch_len
         sizes[name + "_mode"] = ("chained" if chained >> ch & 1 else "table") if mode_bits >> ch & 1 else "predict"
+        if table_lengths is not None:
+            sizes[name + "_table"] = table_lengths[ch]
     return sizes
 
 
@@ -573,57 +567,50 @@ def check_geometry_header(data, n_points: int | None = None, *, total: int | Non
     return hdr.coding, hdr.mode_bits, hdr.n, hdr.lengths
 
 
-@dataclass
-class ValueTables:
-    """The value tables of a decoded block's table-mode channels: channel ch's in
-    ``tables[offs[ch]:offs[ch+1]]`` where ``present[ch]``, what a finer level's chained tables
-    are merged into."""
-
-    tables: np.ndarray
-    offs: np.ndarray
-    present: np.ndarray
+def _channels_of(mask: int) -> list:
+    return [ch for ch in range(K.N_CHANNELS) if mask >> ch & 1]
 
 
-_NO_BASE = ValueTables(np.zeros(0, np.int64), np.zeros(K.N_CHANNELS + 1, np.int64), np.zeros(K.N_CHANNELS, np.int64))
-
-
-def _decode_tables4(buf, hdr: GeometryHeader, base: ValueTables | None) -> ValueTables:
-    """The tables of a coding-4 block (its table stream merged into ``base`` where chained)."""
-    present = hdr.modes
-    if not present.any():  # no table stream (the header checked that its length is 0)
-        return ValueTables(np.zeros(0, np.int64), np.zeros(K.N_CHANNELS + 1, np.int64), present)
-    chained = np.array([(hdr.chained >> ch) & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64)
-    if chained.any():
-        if base is None:
-            raise CorruptFileError("corrupt geometry block: chained value tables without a coarser level")
-        if (chained & (1 - base.present)).any():
-            raise CorruptFileError("corrupt geometry block: a chained table whose coarser level codes no table")
-    else:
-        base = _NO_BASE
+def _decode_tables4(buf, hdr: GeometryHeader, base, channels: int = (1 << K.N_CHANNELS) - 1) -> list:
+    """Tables of a coding-4 block's table-mode channels among ``channels`` (a bit mask): per channel
+    its sorted distinct ordered integers (int64), None for a channel without a table or not asked
+    for. ``base``: per channel the next coarser level's table (needed where this block chains)."""
+    out = [None] * K.N_CHANNELS
     start = hdr.size
-    stream = buf[start:start + hdr.table_length]
-    room = 0
     for ch in range(K.N_CHANNELS):
-        if present[ch]:
-            inherited = int(base.offs[ch + 1] - base.offs[ch]) if chained[ch] else 0
-            room += min(hdr.n, inherited + _MAX_TABLE_PER_BYTE * (hdr.table_length + 8))
-    tables = np.zeros(room, dtype=np.int64)
-    offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
-    st = dec_state()
-    status = K.decode_table_sets(st, stream, present, chained, hdr.n, base.tables, base.offs, tables, offs)
-    if status != K.OK or st[DEC_ERROR] != 0 or st[DEC_OVERRUN] != 0 or int(st[DEC_POS]) != hdr.table_length:
-        raise CorruptFileError("corrupt geometry block: damaged value table")
-    return ValueTables(tables[:offs[K.N_CHANNELS]], offs, present)
+        length = int(hdr.table_lengths[ch])
+        stream = buf[start:start + length]
+        start += length
+        if not (hdr.mode_bits >> ch & 1 and channels >> ch & 1):
+            continue
+        below = _NO_TABLE
+        if hdr.chained >> ch & 1:
+            if base is None or base[ch] is None:
+                raise CorruptFileError("corrupt geometry block: a chained value table without the coarser level's")
+            below = base[ch]
+        room = min(hdr.n, len(below) + _MAX_TABLE_PER_BYTE * (length + 8))
+        table = np.empty(room, dtype=np.int64)
+        st = dec_state()
+        count = K.decode_table_set(st, stream, hdr.n, below, table)
+        if count < 0 or st[DEC_ERROR] != 0 or st[DEC_OVERRUN] != 0 or int(st[DEC_POS]) != length:
+            raise CorruptFileError("corrupt geometry block: damaged value table")
+        out[ch] = table[:count]
+    return out
 
 
-def decode_value_tables(data, n_points: int | None = None, base: ValueTables | None = None) -> ValueTables:
-    """The value tables of a geometry block without decoding its vertices: what a finer level's
-    chained block needs of this one (``base``: this block's own coarser level's tables, needed when
-    it chains too). Raises :class:`CorruptFileError` on a damaged block."""
+_NO_TABLE = np.zeros(0, np.int64)
+
+
+def decode_value_tables(data, n_points: int | None = None, base=None, channels: int = (1 << K.N_CHANNELS) - 1) -> list:
+    """The value tables of a geometry block without decoding its vertices: per channel its sorted
+    distinct ordered integers (int64), None for a channel without a table or not among
+    ``channels`` (a bit mask). What a finer level's chained block needs of this one; ``base``: per
+    channel the tables of this block's own coarser level, needed where it chains too. Raises
+    :class:`CorruptFileError` on a damaged block."""
     buf = np.frombuffer(bytes(data), dtype=np.uint8)
     hdr = parse_geometry_header(buf, n_points)
     if hdr.coding >= 4:
-        return _decode_tables4(buf, hdr, base)
+        return _decode_tables4(buf, hdr, base, channels)
     offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
     offs[0] = HEADER_SIZE
     offs[1:] = HEADER_SIZE + np.cumsum(hdr.lengths)
@@ -635,14 +622,17 @@ def decode_value_tables(data, n_points: int | None = None, base: ValueTables | N
     probs = np.stack([new_model(K.MODEL_SIZE) for _ in range(K.N_CHANNELS)])
     if K.decode_tables_kernel(st, buf, offs, probs, modes, hdr.n, tables, tab_offs) != K.OK:
         raise CorruptFileError("corrupt geometry block: damaged value table")
-    return ValueTables(tables[:tab_offs[K.N_CHANNELS]], tab_offs, modes)
+    return [tables[tab_offs[ch]:tab_offs[ch + 1]] if modes[ch] and channels >> ch & 1 else None
+            for ch in range(K.N_CHANNELS)]
 
 
-def chained_to_coarser(data) -> bool:
-    """Whether a geometry block (or its first :data:`MAX_HEADER_SIZE` bytes) chains a table to the
-    next coarser level's."""
+def chained_channels(data) -> int:
+    """The channels (bit mask) whose tables a geometry block (or its first :data:`MAX_HEADER_SIZE`
+    bytes) chains to the next coarser level's; 0 before coding 4."""
     data = bytes(data[:MAX_HEADER_SIZE])
-    return len(data) >= MAX_HEADER_SIZE and data[0] >= 4 and _HEADER4.unpack_from(data)[-2] != 0
+    if len(data) < MAX_HEADER_SIZE or data[0] < 4:
+        return 0
+    return _HEADER4.unpack_from(data)[-1 - K.N_CHANNELS] & ((1 << K.N_CHANNELS) - 1)
 
 
 class GeometryDecoder:
@@ -670,7 +660,7 @@ class GeometryDecoder:
     geometry with connectivity decoding.
     """
 
-    def __init__(self, data, n_points: int | None = None, base: ValueTables | None = None):
+    def __init__(self, data, n_points: int | None = None, base=None):
         buf = np.frombuffer(bytes(data), dtype=np.uint8)
         hdr = parse_geometry_header(buf, n_points)
         coding, mode_bits, n, lengths = hdr.coding, hdr.mode_bits, hdr.n, hdr.lengths
@@ -698,10 +688,12 @@ class GeometryDecoder:
             # the tables come from their own stream; the channel streams start with the vertices
             self.value_tables = vt = _decode_tables4(buf, hdr, base)
             # the kernels' tables: the values, then each large table's rank index
-            self.tables = np.zeros(len(vt.tables) + K.rank_index_room(vt.offs), dtype=np.int64)
-            self.tables[:len(vt.tables)] = vt.tables
             self.tab_offs = np.zeros(K.N_CHANNELS + 1 + K.RANK_INDEX_FIELDS * K.N_CHANNELS, dtype=np.int64)
-            self.tab_offs[:K.N_CHANNELS + 1] = vt.offs
+            self.tab_offs[1:K.N_CHANNELS + 1] = np.cumsum([0 if t is None else len(t) for t in vt])
+            self.tables = np.zeros(self.tab_offs[K.N_CHANNELS] + K.rank_index_room(self.tab_offs), dtype=np.int64)
+            for ch, t in enumerate(vt):
+                if t is not None:
+                    self.tables[self.tab_offs[ch]:self.tab_offs[ch + 1]] = t
             K.build_rank_index(self.tables, self.tab_offs)
             if K.decode_tables_kernel(self.st, buf, self.offs, self.probs, np.zeros(K.N_CHANNELS, np.int64),
                                       self.n_points, self.tables, np.zeros(K.N_CHANNELS + 1, np.int64)) != K.OK:
@@ -718,7 +710,8 @@ class GeometryDecoder:
                                         self.tables, self.tab_offs)
         if status != K.OK:
             raise CorruptFileError("corrupt geometry block: damaged value table")
-        self.value_tables = ValueTables(self.tables[:self.tab_offs[K.N_CHANNELS]], self.tab_offs, self.modes)
+        self.value_tables = [self.tables[self.tab_offs[ch]:self.tab_offs[ch + 1]] if self.modes[ch] else None
+                             for ch in range(K.N_CHANNELS)]
         self.values = np.empty((self.n_points, 4), dtype=np.float32)
         self.n_decoded = 0
 

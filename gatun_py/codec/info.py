@@ -123,11 +123,14 @@ def _table_streams(reader, sizes) -> tuple[dict, int]:
             if name in sizes:
                 heads[i] = geometry_stream_sizes(c.read_section_head(name, MAX_HEADER_SIZE))
                 own[f"L{i}/geometry"] = own.get(f"L{i}/geometry", 0) + heads[i].get("tables", 0)
-        at = 0  # level 0 (the first level) reads the table streams of the levels its chain reaches
-        while at + 1 < len(order) and order[at] in heads and any(
-                heads[order[at]][ch + "_mode"] == "chained" for ch in ("x", "y", "z", "density")):
+        # level 0 (the first level) reads the table streams of its chained channels in the levels
+        # their chains reach
+        need = [ch for ch in ("x", "y", "z", "density") if order[0] in heads and heads[order[0]][ch + "_mode"] == "chained"]
+        at = 0
+        while need and at + 1 < len(order) and order[at + 1] in heads:
             at += 1
-            chained0 += heads.get(order[at], {}).get("tables", 0)
+            chained0 += sum(heads[order[at]][ch + "_table"] for ch in need)
+            need = [ch for ch in need if heads[order[at]][ch + "_mode"] == "chained"]
     return own, chained0
 
 

@@ -35,7 +35,7 @@ from .dependencies import decode_dependencies, dependencies_header, encode_depen
 from .forest import (FOREST_CODING, ROOT_RANK, coding_for_format as forest_coding_for_format, decode_forest,
                      decode_forest_on_geometry, decode_forest_on_mesh, decode_forest_rounds, encode_forest_on_geometry,
                      encode_forest_on_mesh, encode_forest_rounds, forest_header)
-from .geometry import (MAX_HEADER_SIZE, GeometryDecoder, assemble_geometry, chained_to_coarser, check_geometry_header,
+from .geometry import (MAX_HEADER_SIZE, GeometryDecoder, assemble_geometry, chained_channels, check_geometry_header,
                        coding_for_format as geometry_coding_for_format, decode_value_tables, encode_geometry,
                        geometry_parts)
 from .threads import RunAhead, check_jobs
@@ -416,7 +416,7 @@ class TetcReader:
         if not isinstance(self.meta.get("scalar", ""), str):
             raise CorruptFileError("corrupt metadata: bad scalar name")
         self.points_dtype, self.arrays = self._parse_arrays()
-        self._value_tables = {}  # level -> its geometry's ValueTables, for finer levels chained to them
+        self._value_tables = {}  # (level, channel) -> its geometry's value table, for finer levels chained to it
 
     def _parse_arrays(self):
         """(points dtype, [(name, dtype, components)]) from the metadata; format 1 has one float32 scalar."""
@@ -579,35 +579,44 @@ class TetcReader:
         return GeometryDecoder(data, n_points=n, base=self._coarser_tables(level, data))
 
     def _coarser_tables(self, level: int, data=None):
-        """The value tables of the level after ``level`` in the file when ``level``'s geometry
-        (``data``, or read here) chains to them, else None: decoded from the table streams of the
-        chain's levels alone, and kept for the reader's next decodes (a viewer decodes many levels)."""
+        """Per channel the value table of the level after ``level`` in the file that ``level``'s
+        geometry (``data``, or read here) chains to, None for the others; None when nothing chains.
+        Decoded from the chain's table streams alone, channel by channel as far as each chain goes,
+        and kept for the reader's next decodes (a viewer decodes many levels)."""
         if data is None:
             data = self.container.read_section_head(f"L{level}/geometry", MAX_HEADER_SIZE)
-        if not chained_to_coarser(data):
+        mask = chained_channels(data)
+        if not mask:
             return None
         order = [lv["level"] for lv in self.levels]
         first = order.index(level) + 1
-        # the levels whose tables are missing, finest first: the next one, and each next one
-        # while the level before chains (the walk only goes on in the list: at most every level once)
-        need = []
-        at = first
-        while True:
+        cache = self._value_tables  # (level, channel) -> table
+        # the tables missing, level by level from the next one: a level's chained channels among
+        # them are missing in the level after it too (the walk only goes on in the list: at most
+        # every level once)
+        plan, need, at = [], mask, first
+        while need:
             if at >= len(order):
                 raise CorruptFileError(f"corrupt geometry section of level {order[at - 1]}: its value tables are "
                                        "chained to a coarser level the file does not hold")
-            if order[at] in self._value_tables:
+            need &= sum(1 << ch for ch in range(4) if (order[at], ch) not in cache)
+            if not need:
                 break
-            chains = chained_to_coarser(self.container.read_section_head(f"L{order[at]}/geometry", MAX_HEADER_SIZE))
-            need.append((at, chains))
-            if not chains:
-                break
+            chains = chained_channels(self.container.read_section_head(f"L{order[at]}/geometry", MAX_HEADER_SIZE))
+            plan.append((at, need, chains & need))
+            need &= chains
             at += 1
-        for at, chains in reversed(need):
-            base = self._value_tables[order[at + 1]] if chains else None
-            self._value_tables[order[at]] = decode_value_tables(self.read_section(f"L{order[at]}/geometry"),
-                                                                self._checked_points(order[at]), base)
-        return self._value_tables[order[first]]
+        for at, need, chains in reversed(plan):
+            base = [cache.get((order[at + 1], ch)) if chains >> ch & 1 else None for ch in range(4)]
+            tables = decode_value_tables(self.read_section(f"L{order[at]}/geometry"), self._checked_points(order[at]),
+                                         base, channels=need)
+            for ch in range(4):
+                if need >> ch & 1:
+                    if tables[ch] is None:
+                        raise CorruptFileError(f"corrupt geometry section of level {order[at - 1]}: a value table "
+                                               f"chained to level {order[at]}, which codes that channel without one")
+                    cache[order[at], ch] = tables[ch]
+        return [cache[order[first], ch] if mask >> ch & 1 else None for ch in range(4)]
 
     def _level_tets(self, level: int) -> np.ndarray:
         """The tets of ``level`` in decode order, from its connectivity sections alone (what the

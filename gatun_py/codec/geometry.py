@@ -227,9 +227,11 @@ def encode_geometry(points, density, refs, *, modes=None, coding: int = FORMAT_V
     modes : sequence of 4 ints, optional
         Force the residual mode per channel (0 prediction, 1 value table); by default both are
         tried and the smaller stream is kept, channel by channel.
-    coding : {1, 2, 3}
-        The block's coding version: 3 (the default, format 5), 2 what format 4 wrote (the
-        tet-geometry predictors), 1 what format 3 and older wrote.
+    coding : {1, 2, 3, 4}
+        The block's coding version: 4 (the default, format 8: coding 3's model, its value tables
+        in streams of their own; alone, it chains to nothing: :func:`assemble_geometry` codes the
+        levels of a file), 3 what formats 5 to 7 wrote, 2 what format 4 wrote (the tet-geometry
+        predictors), 1 what format 3 and older wrote.
 
     Returns
     -------
@@ -315,7 +317,7 @@ class GeometryParts:
     Attributes
     ----------
     n : int
-    tables : list of 4 int64 arrays
+    tables : list of 4 int32 arrays
         Per channel, its sorted distinct ordered integers (the table a table-mode channel needs).
     streams : dict
         ``(ranks, xy)`` -> 4 channel streams (bytes, or None where not coded): ``ranks`` False for
@@ -361,7 +363,8 @@ def geometry_parts(points, density, refs, *, chainable: bool = True, force_ranks
             trial[0] = trial[3] = skip
             off = _run_encode(vf, refs, trial, tables, tab_offs, xy_off, wpar=wpar)
             streams[True, False] = [None] + [off[ch] if tried[ch] else None for ch in (1, 2)] + [None]
-    return GeometryParts(int(n), tables_list, streams)
+    # kept until the file's levels are chained: as int32 (ordered integers of float32 fit), half the memory
+    return GeometryParts(int(n), [t.astype(np.int32) for t in tables_list], streams)
 
 
 _PREDICT, _OWN, _CHAINED = 0, 1, 2
@@ -644,9 +647,16 @@ class GeometryDecoder:
         The block written by :func:`encode_geometry`.
     n_points : int, optional
         The vertex count the container expects; a different count in the block is corruption.
+    base : list of 4 int64 arrays or None, optional
+        Coding 4: per channel the value table of the next coarser level (None for a channel
+        without one), where the block chains its tables to it (:func:`decode_value_tables`);
+        a chained block without it is corruption.
 
     Attributes
     ----------
+    value_tables : list of 4
+        Per channel the block's value table (sorted distinct ordered integers), None for a
+        channel without one: what a finer level chained to this one needs.
     values : (n, 4) float32
         x, y, z, density of every vertex decoded so far (the rest is uninitialised);
         ``points`` and ``density`` are views of it.

@@ -608,8 +608,10 @@ class TetcReader:
             at += 1
         for at, need, chains in reversed(plan):
             base = [cache.get((order[at + 1], ch)) if chains >> ch & 1 else None for ch in range(4)]
-            tables = decode_value_tables(self.read_section(f"L{order[at]}/geometry"), self._checked_points(order[at]),
-                                         base, channels=need)
+            # the block's header is checked against the level's vertex count (the metadata's, checked
+            # when the reader opened) before its tables are allocated: n caps their sizes
+            tables = decode_value_tables(self.read_section(f"L{order[at]}/geometry"),
+                                         self.level_meta(order[at])["points"], base, channels=need)
             for ch in range(4):
                 if need >> ch & 1:
                     if tables[ch] is None:

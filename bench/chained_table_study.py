@@ -12,7 +12,9 @@ vertex and the stream's end cancel). Per channel a dynamic programme over the le
 first, picks prediction, own table or chained table (chained only where level k+1 codes the channel
 with a table and T_{k+1} is a subset of T_k). Prints per file the geometry bytes per level today
 and with the best choice, and the whole file's bytes and all-levels / level-0 ratio (from the
-container's section sizes). Nothing is written.
+container's section sizes). Nothing is written. (The gate of format 8: files with levels 15.5-15.9 %
+smaller on Blunt-fin, Combustion and LOX post, 1.9 % on Room fire; format 8 builds it as geometry
+coding 4, with ranks on nearly all-distinct channels only in levels of at most 4096 vertices.)
 """
 
 from __future__ import annotations

@@ -1052,7 +1052,7 @@ def decode_tables_kernel(st, buf, offs, probs, modes, n_points, tables, tab_offs
 # coarser level's vertices are a subset of the finer level's, values kept bit for bit). Either way
 # the set is coded as the table prefix of codings 1-3 was: its size, its first value, the gaps
 # between consecutive values less one; the size and the gaps with their unmodelled bits in wide
-# steps (enc_uint_wide: a table decodes in half the range-coder steps).
+# steps (enc_uint_wide: one range-coder step for up to 16 raw bits instead of one per bit).
 TABLE_SET_MODEL = 2 * INT_MODEL_SIZE
 
 
@@ -1115,8 +1115,9 @@ def decode_table_set(st, data, n_points, base, tables):
 # A rank index per table (coding 4's decoder): the values' range cut into at most twice as many
 # buckets of 2**shift ordered integers as the table has values, and per bucket the rank of its first
 # value, so that the rank of a prediction is searched within its bucket instead of the whole table
-# (Combustion's tables, 47,000 values of a nearly all-distinct channel, were a search of 16 steps
-# in 370 KB per vertex and channel). Stored after the tables in the kernels' ``tables`` array,
+# (Blunt-fin's level 0 with ranks on every channel: its vertices decoded in 20.2 ms instead of
+# 21.8; Combustion's, 47,000 values a table: 51.8 instead of 53.3). Stored after the tables in the
+# kernels' ``tables`` array,
 # described by ``tab_offs[N_CHANNELS + 1 + 3 ch ...]`` (start, buckets, shift; 0 buckets: none).
 RANK_INDEX_MIN = 32  # smaller tables are searched whole
 RANK_INDEX_FIELDS = 3

@@ -398,8 +398,9 @@ def assemble_geometry(levels: list, modes: list | None = None) -> list:
     next coarser block codes the channel with a table and its table is a subset of this one's),
     and per level whether y uses the x -> y table; chosen for the fewest bytes over all levels by a
     dynamic programme from the coarsest level on (the state: which channels the coarser level codes
-    with a table). ``modes``: per level, 4 forced
-    modes (0 prediction, 1 table: own or chained). Returns the blocks, in the same order."""
+    with a table; every table is a stream of its own, so a choice's bytes are exact). ``modes``:
+    per level, 4 forced modes (0 prediction, 1 table: own or chained). Returns the blocks, in the
+    same order."""
     nl = len(levels)
     inf = float("inf")
     # per level: cost[ch][mode][xy] of the channel's stream plus its table, inf where impossible

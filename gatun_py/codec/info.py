@@ -129,7 +129,7 @@ def _table_streams(reader, sizes) -> tuple[dict, int]:
         at = 0
         while need and at + 1 < len(order) and order[at + 1] in heads:
             at += 1
-            chained0 += sum(heads[order[at]][ch + "_table"] for ch in need)
+            chained0 += sum(heads[order[at]].get(ch + "_table", 0) for ch in need)  # none before coding 4
             need = [ch for ch in need if heads[order[at]][ch + "_mode"] == "chained"]
     return own, chained0
 

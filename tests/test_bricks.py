@@ -421,7 +421,6 @@ def test_decode_kernels_release_the_gil():
 
     for kernel in (_cutborder_kernels.decode_boundary, _cutborder_kernels.decode_tets,
                    _geometry_kernels.decode_tables_kernel, _geometry_kernels.decode_vertices,
-                   _geometry_kernels.decode_table_set, _geometry_kernels.build_rank_index,
                    _array_kernels.decode_component, _array_kernels.reconstruct):
         assert kernel.targetoptions.get("nogil") is True, kernel.__name__
 

@@ -189,7 +189,6 @@ def test_decode_kernels_release_the_gil():
 
     kernels = [_cutborder_kernels.decode_boundary, _cutborder_kernels.decode_tets, _cutborder_kernels.add_faces,
                _geometry_kernels.decode_tables_kernel, _geometry_kernels.decode_vertices,
-               _geometry_kernels.decode_table_set, _geometry_kernels.build_rank_index,
                _array_kernels.decode_component, _array_kernels.reconstruct,
                _forest_kernels.adjacency, _forest_kernels.decode_forest_kernel, _forest_kernels.decode_rounds_kernel,
                _forest_kernels.decode_parents_kernel, _forest_kernels.level_quadrics,

@@ -728,32 +728,3 @@ def test_damaged_chained_blocks_are_refused_or_decode_right(chained_pair):
             detected += 1
     # the container's CRC catches the rest; the coder itself must notice a good share
     assert detected > 150
-
-
-@settings(max_examples=40, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), count=st.integers(0, 3000), kind=st.sampled_from(["near", "wide", "bits"]))
-def test_rank_index_finds_the_binary_search_rank(seed, count, kind):
-    """The decoder's rank search through the rank index (coding 4) gives np.searchsorted's rank
-    for any value, in the table's range or outside it, with tables on either side of it."""
-    rng = np.random.default_rng(seed)
-    if kind == "near":  # coordinates of a grid around 1
-        vals = (1 + rng.integers(0, 4 * count + 1, count) * 2.0**-12).astype(np.float32)
-    elif kind == "wide":  # magnitudes over many octaves and both signs
-        vals = (rng.choice([-1, 1], count) * 10.0 ** rng.uniform(-30, 30, count)).astype(np.float32)
-    else:
-        vals = rng.integers(-(2**31), 2**31, size=count, dtype=np.int64).astype(np.int32).view(np.float32)
-    tables_list = [np.unique(_ordered(np.stack([vals] * 4, 1))[:, 0]) for _ in range(4)]
-    tables_list[1] = tables_list[1][: len(tables_list[1]) // 3]  # tables of other lengths around it
-    offs = np.zeros(4 * 4 + 1, np.int64)
-    offs[1:5] = np.cumsum([len(t) for t in tables_list])
-    tables = np.zeros(offs[4] + K.rank_index_room(offs[:5]), np.int64)
-    tables[:offs[4]] = np.concatenate(tables_list)
-    K.build_rank_index(tables, offs)
-    probes = np.concatenate([tables[:offs[4]], tables[:offs[4]] + 1, tables[:offs[4]] - 1,
-                             rng.integers(-(2**31), 2**31, 200), [-(2**31), 2**31 - 1]])
-    for ch in range(4):
-        lo, hi = int(offs[ch]), int(offs[ch + 1])
-        if hi == lo:
-            continue
-        for o in probes[:: max(1, len(probes) // 400)]:
-            assert K._search_ranked(tables, offs, ch, lo, hi, int(o)) == lo + np.searchsorted(tables[lo:hi], o)

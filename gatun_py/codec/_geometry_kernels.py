@@ -70,14 +70,12 @@ from .rangecoder import (
     dec_sint_wide,
     dec_sym,
     dec_uint,
-    dec_uint_wide,
     enc_bit,
     enc_finish,
     enc_sint,
     enc_sint_wide,
     enc_sym,
     enc_uint,
-    enc_uint_wide,
 )
 
 N_CHANNELS = 4
@@ -1050,139 +1048,26 @@ def decode_tables_kernel(st, buf, offs, probs, modes, n_points, tables, tab_offs
 # without decoding its vertices. A channel's table is either the whole table or, *chained*, only
 # the values it adds to the table of the same channel in the next coarser level of the file (a
 # coarser level's vertices are a subset of the finer level's, values kept bit for bit). Either way
-# the set is coded as the table prefix of codings 1-3 was: its size, its first value, the gaps
-# between consecutive values less one; the size and the gaps with their unmodelled bits in wide
-# steps (enc_uint_wide: one range-coder step for up to 16 raw bits instead of one per bit).
-TABLE_SET_MODEL = 2 * INT_MODEL_SIZE
+# the set is coded exactly as the table prefix of a channel stream of codings 1-3 (its size, its
+# first value, the gaps between consecutive values less one, in a fresh model at TABLE_BASE), so
+# that decode_tables_kernel reads it: a kernel of its own cost a first decode of a format-8 file
+# 2-3.5 s of compilation (its wide-bits variant more), for no speed.
+TABLE_SET_MODEL = 2 * INT_MODEL_SIZE  # the part of a channel's model from TABLE_BASE on
 
 
 @njit(cache=True, nogil=True)
 def encode_table_set(st, out, values):
-    """Code the sorted distinct ``values`` into one stream (see above); returns its byte count
-    (larger than ``out`` on overflow)."""
+    """Code the sorted distinct ``values`` into one stream (see above: what decode_tables_kernel
+    reads as a table-mode channel's table); returns its byte count (larger than ``out`` on
+    overflow)."""
     probs = np.full(TABLE_SET_MODEL, PROB_INIT, dtype=np.uint16)
     n = values.shape[0]
-    enc_uint_wide(st, out, probs, 0, n)
+    enc_uint(st, out, probs, 0, n)
     if n > 0:
         enc_sint(st, out, probs, INT_MODEL_SIZE, values[0])
         for i in range(1, n):
-            enc_uint_wide(st, out, probs, 0, values[i] - values[i - 1] - 1)
+            enc_uint(st, out, probs, 0, values[i] - values[i - 1] - 1)
     return enc_finish(st, out)
-
-
-@njit(cache=True, nogil=True)
-def decode_table_set(st, data, n_points, base, tables):
-    """Decode a stream of :func:`encode_table_set` merged into ``base`` (the coarser level's table,
-    sorted and distinct; empty for a table of its own) into ``tables`` (the room the caller
-    allowed). A table beyond that room or beyond ``n_points`` entries, values out of order or out
-    of the float32 range, or an addition ``base`` already holds is damage. Returns the table's
-    length, or -1 on damage (the caller also checks that the stream was consumed exactly)."""
-    probs = np.full(TABLE_SET_MODEL, PROB_INIT, dtype=np.uint16)
-    dec_init(st, data)
-    count = dec_uint_wide(st, data, probs, 0)
-    jh = base.shape[0]
-    if dec_failed(st) or count > n_points - jh or count + jh > tables.shape[0]:
-        return -1
-    pos = 0
-    j = 0
-    v = np.int64(0)
-    for i in range(count):
-        if i == 0:
-            v = dec_sint(st, data, probs, INT_MODEL_SIZE)
-            if v < -(1 << 31):
-                return -1
-        else:
-            v = v + dec_uint_wide(st, data, probs, 0) + 1
-        if v >= (1 << 31) or dec_failed(st):
-            return -1
-        while j < jh and base[j] < v:
-            tables[pos] = base[j]
-            pos += 1
-            j += 1
-        if j < jh and base[j] == v:
-            return -1
-        tables[pos] = v
-        pos += 1
-    while j < jh:
-        tables[pos] = base[j]
-        pos += 1
-        j += 1
-    if dec_failed(st):
-        return -1
-    return pos
-
-
-# A rank index per table (coding 4's decoder): the values' range cut into at most twice as many
-# buckets of 2**shift ordered integers as the table has values, and per bucket the rank of its first
-# value, so that the rank of a prediction is searched within its bucket instead of the whole table
-# (Blunt-fin's level 0 with ranks on every channel: its vertices decoded in 20.2 ms instead of
-# 21.8; Combustion's, 47,000 values a table: 51.8 instead of 53.3). Stored after the tables in the
-# kernels' ``tables`` array,
-# described by ``tab_offs[N_CHANNELS + 1 + 3 ch ...]`` (start, buckets, shift; 0 buckets: none).
-RANK_INDEX_MIN = 32  # smaller tables are searched whole
-RANK_INDEX_FIELDS = 3
-
-
-def rank_index_room(tab_offs) -> int:
-    """Entries :func:`build_rank_index` appends after tables with these offsets."""
-    room = 0
-    for ch in range(N_CHANNELS):
-        count = int(tab_offs[ch + 1] - tab_offs[ch])
-        if count >= RANK_INDEX_MIN:
-            room += 2 * count + 1
-    return room
-
-
-@njit(cache=True, nogil=True)
-def build_rank_index(tables, tab_offs):
-    """Fill the rank index of every table of at least RANK_INDEX_MIN values (``tables`` holds the
-    tables, sorted and distinct, then :func:`rank_index_room` free entries; ``tab_offs`` has
-    N_CHANNELS + 1 + 3 N_CHANNELS entries, the first N_CHANNELS + 1 the tables' offsets)."""
-    at = tab_offs[N_CHANNELS]
-    for ch in range(N_CHANNELS):
-        lo = tab_offs[ch]
-        hi = tab_offs[ch + 1]
-        f = N_CHANNELS + 1 + RANK_INDEX_FIELDS * ch
-        tab_offs[f] = at
-        tab_offs[f + 1] = 0
-        tab_offs[f + 2] = 0
-        if hi - lo < RANK_INDEX_MIN:
-            continue
-        tmin = tables[lo]
-        span = tables[hi - 1] - tmin
-        shift = 0
-        while (span >> shift) >= 2 * (hi - lo):
-            shift += 1
-        nb = (span >> shift) + 1
-        if at + nb + 1 > tables.shape[0]:  # no room (a caller's mistake): search the whole table
-            continue
-        i = lo
-        for b in range(nb + 1):
-            while i < hi and ((tables[i] - tmin) >> shift) < b:
-                i += 1
-            tables[at + b] = i
-        tab_offs[f + 1] = nb
-        tab_offs[f + 2] = shift
-        at += nb + 1
-
-
-@njit(cache=True, inline="always")
-def _search_ranked(tables, tab_offs, ch, lo, hi, o):
-    """:func:`_search` in channel ch's table ``[lo, hi)``, within o's bucket where the table has
-    a rank index (:func:`build_rank_index`): the same rank."""
-    if tab_offs.shape[0] > N_CHANNELS + 1:
-        f = N_CHANNELS + 1 + RANK_INDEX_FIELDS * ch
-        nb = tab_offs[f + 1]
-        if nb > 0:
-            tmin = tables[lo]
-            if o <= tmin:
-                return lo
-            b = (o - tmin) >> tab_offs[f + 2]
-            if b >= nb:
-                return hi
-            at = tab_offs[f] + b
-            return _search(tables, tables[at], tables[at + 1], o)
-    return _search(tables, lo, hi, o)
 
 
 @njit(cache=True, _nrt=False)
@@ -1227,7 +1112,7 @@ def _decode_channel(ch, k, r0, r1, r2, r3, w, stc, data, pc, scores, flags, flag
             hi = tab_offs[ch + 1]
             if hi <= lo:
                 return -ERR_RANK
-            rp = _search_ranked(tables, tab_offs, ch, lo, hi, cand_o[best])
+            rp = _search(tables, lo, hi, cand_o[best])
             if rp >= hi:
                 rp = hi - 1
             res = _dec_residual(stc, data, pc, RANK_BASE + ctx * INT_MODEL_SIZE, cands[CAND_VERSION],

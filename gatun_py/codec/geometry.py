@@ -63,8 +63,8 @@ import numpy as np
 from ..errors import CorruptFileError
 from . import _geometry_kernels as K
 from .container import VERSION_MAJOR
-from .rangecoder import (ADAPT_SHIFT, DEC_ERROR, DEC_OVERRUN, DEC_POS, INT_BUCKET_BITS, PROB_ONE, dec_state,
-                         enc_state, new_model)
+from .rangecoder import (ADAPT_SHIFT, DEC_ERROR, DEC_OVERRUN, DEC_POS, INT_BUCKET_BITS, PROB_INIT, PROB_ONE,
+                         dec_state, enc_state, new_model)
 
 CODINGS = K.CODINGS + (4,)  # coding 4 runs the kernels of coding 3 (it moves the tables, not the model)
 
@@ -575,30 +575,57 @@ def _channels_of(mask: int) -> list:
     return [ch for ch in range(K.N_CHANNELS) if mask >> ch & 1]
 
 
+# A stream that dec_init accepts and nothing reads: the place of a channel whose table is not read
+_NO_STREAM = np.zeros(5, np.uint8)
+
+
 def _decode_tables4(buf, hdr: GeometryHeader, base, channels: int = (1 << K.N_CHANNELS) - 1) -> list:
     """Tables of a coding-4 block's table-mode channels among ``channels`` (a bit mask): per channel
     its sorted distinct ordered integers (int64), None for a channel without a table or not asked
-    for. ``base``: per channel the next coarser level's table (needed where this block chains)."""
+    for. ``base``: per channel the next coarser level's table (needed where this block chains).
+
+    A table stream is coded as the table prefix of a channel stream of codings 1-3, so
+    :func:`K.decode_tables_kernel` reads the asked ones in one call (with the same argument
+    types as a block's own decode: no other compilation); a chained channel's additions are then
+    merged into the coarser table."""
+    want = np.array([hdr.mode_bits >> ch & channels >> ch & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64)
     out = [None] * K.N_CHANNELS
-    start = hdr.size
+    if not want.any():
+        return out
+    streams, start = [], hdr.size
     for ch in range(K.N_CHANNELS):
         length = int(hdr.table_lengths[ch])
-        stream = buf[start:start + length]
+        streams.append(buf[start:start + length] if want[ch] else _NO_STREAM)
         start += length
-        if not (hdr.mode_bits >> ch & 1 and channels >> ch & 1):
+        if want[ch] and hdr.chained >> ch & 1 and (base is None or base[ch] is None):
+            raise CorruptFileError("corrupt geometry block: a chained value table without the coarser level's")
+    data = np.concatenate(streams)
+    data.flags.writeable = False  # the type of a block read from a file
+    offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
+    offs[1:] = np.cumsum([len(x) for x in streams])
+    # each set's room before allocating: at most n values, and what its stream can code
+    room = sum(min(hdr.n, _MAX_TABLE_PER_BYTE * (int(hdr.table_lengths[ch]) + 8))
+               for ch in range(K.N_CHANNELS) if want[ch])
+    sets = np.zeros(room, dtype=np.int64)
+    set_offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
+    st = np.stack([dec_state() for _ in range(K.N_CHANNELS)])
+    probs = np.full((K.N_CHANNELS, K.TABLE_BASE + K.TABLE_SET_MODEL), PROB_INIT, dtype=np.uint16)
+    if K.decode_tables_kernel(st, data, offs, probs, want, hdr.n, sets, set_offs) != K.OK:
+        raise CorruptFileError("corrupt geometry block: damaged value table")
+    for ch in range(K.N_CHANNELS):
+        if not want[ch]:
             continue
-        below = _NO_TABLE
-        if hdr.chained >> ch & 1:
-            if base is None or base[ch] is None:
-                raise CorruptFileError("corrupt geometry block: a chained value table without the coarser level's")
-            below = base[ch]
-        room = min(hdr.n, len(below) + _MAX_TABLE_PER_BYTE * (length + 8))
-        table = np.empty(room, dtype=np.int64)
-        st = dec_state()
-        count = K.decode_table_set(st, stream, hdr.n, below, table)
-        if count < 0 or st[DEC_ERROR] != 0 or st[DEC_OVERRUN] != 0 or int(st[DEC_POS]) != length:
+        if st[ch, DEC_ERROR] != 0 or st[ch, DEC_OVERRUN] != 0 or int(st[ch, DEC_POS]) != len(streams[ch]):
             raise CorruptFileError("corrupt geometry block: damaged value table")
-        out[ch] = table[:count]
+        table = sets[set_offs[ch]:set_offs[ch + 1]]
+        if hdr.chained >> ch & 1:
+            # the additions and the coarser table, both sorted: a stable sort merges the two runs
+            table = np.concatenate([np.asarray(base[ch], dtype=np.int64), table])
+            table.sort(kind="stable")
+            if len(table) > hdr.n or (table[1:] == table[:-1]).any():
+                raise CorruptFileError("corrupt geometry block: damaged value table (an addition the coarser "
+                                       "table holds, or more values than vertices)")
+        out[ch] = table
     return out
 
 
@@ -698,14 +725,10 @@ class GeometryDecoder:
         if self.coding >= 4:
             # the tables come from their own stream; the channel streams start with the vertices
             self.value_tables = vt = _decode_tables4(buf, hdr, base)
-            # the kernels' tables: the values, then each large table's rank index
-            self.tab_offs = np.zeros(K.N_CHANNELS + 1 + K.RANK_INDEX_FIELDS * K.N_CHANNELS, dtype=np.int64)
-            self.tab_offs[1:K.N_CHANNELS + 1] = np.cumsum([0 if t is None else len(t) for t in vt])
-            self.tables = np.zeros(self.tab_offs[K.N_CHANNELS] + K.rank_index_room(self.tab_offs), dtype=np.int64)
-            for ch, t in enumerate(vt):
-                if t is not None:
-                    self.tables[self.tab_offs[ch]:self.tab_offs[ch + 1]] = t
-            K.build_rank_index(self.tables, self.tab_offs)
+            # the kernels' tables, one after the other
+            self.tab_offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
+            self.tab_offs[1:] = np.cumsum([0 if t is None else len(t) for t in vt])
+            self.tables = np.concatenate([t for t in vt if t is not None] or [_NO_TABLE])
             if K.decode_tables_kernel(self.st, buf, self.offs, self.probs, np.zeros(K.N_CHANNELS, np.int64),
                                       self.n_points, self.tables, np.zeros(K.N_CHANNELS + 1, np.int64)) != K.OK:
                 raise CorruptFileError("corrupt geometry block: the coded data is damaged")

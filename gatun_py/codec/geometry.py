@@ -56,6 +56,7 @@ from __future__ import annotations
 
 import itertools
 import struct
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -575,8 +576,23 @@ def _channels_of(mask: int) -> list:
     return [ch for ch in range(K.N_CHANNELS) if mask >> ch & 1]
 
 
+_MODELS = threading.local()
+
+
+def _table_models() -> np.ndarray:
+    """The models decode_tables_kernel needs for tables alone, reset: the kernel indexes a channel's
+    table model at TABLE_BASE of a whole channel model (760 KB for four, filled anew for every level
+    of a chain was a third of its time), so one per thread is kept and only the table part reset."""
+    probs = getattr(_MODELS, "probs", None)
+    if probs is None:
+        probs = _MODELS.probs = np.full((K.N_CHANNELS, K.TABLE_BASE + K.TABLE_SET_MODEL), PROB_INIT, dtype=np.uint16)
+    probs[:, K.TABLE_BASE:] = PROB_INIT
+    return probs
+
+
 # A stream that dec_init accepts and nothing reads: the place of a channel whose table is not read
 _NO_STREAM = np.zeros(5, np.uint8)
+_MASK_MODES = [np.array([m >> ch & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64) for m in range(1 << K.N_CHANNELS)]
 
 
 def _decode_tables4(buf, hdr: GeometryHeader, base, channels: int = (1 << K.N_CHANNELS) - 1) -> list:
@@ -585,42 +601,46 @@ def _decode_tables4(buf, hdr: GeometryHeader, base, channels: int = (1 << K.N_CH
     for. ``base``: per channel the next coarser level's table (needed where this block chains).
 
     A table stream is coded as the table prefix of a channel stream of codings 1-3, so
-    :func:`K.decode_tables_kernel` reads the asked ones in one call (with the same argument
-    types as a block's own decode: no other compilation); a chained channel's additions are then
-    merged into the coarser table."""
-    want = np.array([hdr.mode_bits >> ch & channels >> ch & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64)
+    :func:`K.decode_tables_kernel` reads the asked ones in one call (with the argument types of a
+    block's own decode: nothing more to compile); a chained channel's additions are then merged
+    into the coarser table."""
+    want = hdr.mode_bits & channels & ((1 << K.N_CHANNELS) - 1)
     out = [None] * K.N_CHANNELS
-    if not want.any():
+    if not want:
         return out
-    streams, start = [], hdr.size
+    lengths = [int(x) for x in hdr.table_lengths]
     for ch in range(K.N_CHANNELS):
-        length = int(hdr.table_lengths[ch])
-        streams.append(buf[start:start + length] if want[ch] else _NO_STREAM)
-        start += length
-        if want[ch] and hdr.chained >> ch & 1 and (base is None or base[ch] is None):
+        if want >> ch & 1 and hdr.chained >> ch & 1 and (base is None or base[ch] is None):
             raise CorruptFileError("corrupt geometry block: a chained value table without the coarser level's")
-    data = np.concatenate(streams)
-    data.flags.writeable = False  # the type of a block read from a file
     offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
-    offs[1:] = np.cumsum([len(x) for x in streams])
+    if want == (1 << K.N_CHANNELS) - 1:  # every channel's table, one after the other in the block
+        data = buf[hdr.size:hdr.size + sum(lengths)]
+        offs[1:] = np.cumsum(lengths)
+    else:  # the others' places hold an empty stream
+        streams, start = [], hdr.size
+        for ch in range(K.N_CHANNELS):
+            streams.append(buf[start:start + lengths[ch]] if want >> ch & 1 else _NO_STREAM)
+            start += lengths[ch]
+        data = np.concatenate(streams)
+        data.flags.writeable = False  # the type of a block read from a file
+        offs[1:] = np.cumsum([len(x) for x in streams])
     # each set's room before allocating: at most n values, and what its stream can code
-    room = sum(min(hdr.n, _MAX_TABLE_PER_BYTE * (int(hdr.table_lengths[ch]) + 8))
-               for ch in range(K.N_CHANNELS) if want[ch])
-    sets = np.zeros(room, dtype=np.int64)
+    room = sum(min(hdr.n, _MAX_TABLE_PER_BYTE * (lengths[ch] + 8)) for ch in range(K.N_CHANNELS) if want >> ch & 1)
+    sets = np.empty(room, dtype=np.int64)
     set_offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
-    st = np.stack([dec_state() for _ in range(K.N_CHANNELS)])
-    probs = np.full((K.N_CHANNELS, K.TABLE_BASE + K.TABLE_SET_MODEL), PROB_INIT, dtype=np.uint16)
-    if K.decode_tables_kernel(st, data, offs, probs, want, hdr.n, sets, set_offs) != K.OK:
+    st = np.zeros((K.N_CHANNELS, 8), dtype=np.int64)
+    probs = _table_models()
+    if K.decode_tables_kernel(st, data, offs, probs, _MASK_MODES[want], hdr.n, sets, set_offs) != K.OK:
         raise CorruptFileError("corrupt geometry block: damaged value table")
     for ch in range(K.N_CHANNELS):
-        if not want[ch]:
+        if not want >> ch & 1:
             continue
-        if st[ch, DEC_ERROR] != 0 or st[ch, DEC_OVERRUN] != 0 or int(st[ch, DEC_POS]) != len(streams[ch]):
+        if st[ch, DEC_ERROR] != 0 or st[ch, DEC_OVERRUN] != 0 or int(st[ch, DEC_POS]) != lengths[ch]:
             raise CorruptFileError("corrupt geometry block: damaged value table")
         table = sets[set_offs[ch]:set_offs[ch + 1]]
         if hdr.chained >> ch & 1:
             # the additions and the coarser table, both sorted: a stable sort merges the two runs
-            table = np.concatenate([np.asarray(base[ch], dtype=np.int64), table])
+            table = np.concatenate([base[ch], table])
             table.sort(kind="stable")
             if len(table) > hdr.n or (table[1:] == table[:-1]).any():
                 raise CorruptFileError("corrupt geometry block: damaged value table (an addition the coarser "

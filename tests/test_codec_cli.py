@@ -9,8 +9,10 @@ import numpy as np
 
 from cli_util import assert_error, run
 from conftest import SAMPLES
+from gatun_py.codec import TetcReader
 from gatun_py.codec.container import VERSION_MAJOR
 from gatun_py.codec.cutborder import encode_connectivity
+from gatun_py.codec.geometry import geometry_stream_sizes
 from gatun_py.mesh import read_mesh
 from naive_codec import canonical_tets
 
@@ -58,9 +60,24 @@ def test_info_parts_add_up_to_the_sections(tmp_path):
     info = json.loads(run("info", out, "--json").output)
     parts = {row["part"]: row for row in info["parts"]}
     assert sum(row["bytes"] for row in info["parts"]) == sum(info["sections"].values())
+    # level 0's bytes: its sections, and the value tables of the coarser levels its geometry chains to
+    reader = TetcReader(out)
+    chained, level = 0, 0
+    need = ("x", "y", "z", "density")
+    while True:  # the chained channels' table streams, level after level as far as each chain goes
+        sizes = geometry_stream_sizes(reader.read_section(f"L{level}/geometry"))
+        need = [c for c in need if sizes[c + "_mode"] == "chained"]
+        if not need:
+            break
+        level += 1
+        coarser = geometry_stream_sizes(reader.read_section(f"L{level}/geometry"))
+        chained += sum(coarser[c + "_table"] for c in need)
+    assert level > 0  # fire's levels chain
     assert sum(row["level0_bytes"] for row in info["parts"]) == sum(
-        v for k, v in info["sections"].items() if k.startswith("L0/"))
-    assert {"connectivity", "geometry", "merge forests", "array 'uvw'"} <= set(parts)
+        v for k, v in info["sections"].items() if k.startswith("L0/")) + chained
+    assert parts["geometry value tables"]["level0_bytes"] == chained + geometry_stream_sizes(
+        reader.read_section("L0/geometry"))["tables"]
+    assert {"connectivity", "geometry", "geometry value tables", "merge forests", "array 'uvw'"} <= set(parts)
     assert parts["connectivity"]["level0_bytes"] == info["sections"]["L0/boundary"] + info["sections"]["L0/tets"]
     assert [row["bytes"] for row in info["parts"]] == sorted((row["bytes"] for row in info["parts"]), reverse=True)
     text = run("info", out).output

@@ -120,16 +120,25 @@ def test_every_mode_round_trips(modes):
 @pytest.mark.parametrize("name", ["post", "bluntfin"])
 def test_mode_choice_keeps_the_smaller_stream(name):
     """Per channel the smaller of the two modes, also where most values are distinct but repeat
-    enough for a table (Blunt-fin's density: 28,025 values on 40,960 vertices)."""
+    enough for a table (Blunt-fin's density: 28,025 values on 40,960 vertices). Coding 3: a
+    table-mode channel's stream holds its table; coding 4: the tables are apart, and the block is
+    no larger than with either mode forced on every channel (a table's bytes are estimated alone:
+    a few bytes of slack)."""
     mesh = load_sample(name)[0]
     points, density, refs = _in_decode_order(mesh)
-    auto = geometry_stream_sizes(encode_geometry(points, density, refs))
-    forced = [geometry_stream_sizes(encode_geometry(points, density, refs, modes=modes))
-              for modes in [(0, 0, 0, 0), (1, 1, 1, 1)]]
+    blobs = {}
+    for coding in (3, 4):
+        blobs[coding] = [encode_geometry(points, density, refs, modes=modes, coding=coding)
+                         for modes in [None, (0, 0, 0, 0), (1, 1, 1, 1)]]
+    auto, *forced = map(geometry_stream_sizes, blobs[3])
     for ch in ("x", "y", "z", "density"):
         assert auto[ch] <= min(f[ch] for f in forced), ch
     if name == "bluntfin":
         assert auto["density_mode"] == "table" and auto["density"] < forced[0]["density"]
+    auto4, *forced4 = blobs[4]
+    assert len(auto4) <= min(map(len, forced4)) + 8
+    assert [geometry_stream_sizes(auto4)[c + "_mode"] for c in ("x", "y", "z", "density")] == \
+        [auto[c + "_mode"] for c in ("x", "y", "z", "density")]
 
 
 def test_three_column_refs_and_empty_and_single():
@@ -205,7 +214,7 @@ def test_naive_reference_uses_the_kernel_constants():
     assert naive_geometry.ADJ_CAP == K.ADJ_CAP
 
 
-@pytest.mark.parametrize("coding", CODINGS)
+@pytest.mark.parametrize("coding", K.CODINGS)  # the kernels' (coding 4 runs coding 3's model)
 @pytest.mark.parametrize("modes", [(0, 0, 0, 0), (1, 1, 1, 1)])
 def test_kernel_model_matches_naive_reference_on_post(modes, coding):
     mesh = load_sample("post")[0]
@@ -217,7 +226,7 @@ def test_kernel_model_matches_naive_reference_on_post(modes, coding):
 @pytest.mark.filterwarnings("ignore:invalid value:RuntimeWarning")  # inf - inf in the reference's numpy
 @settings(max_examples=25, deadline=None)
 @given(n=st.integers(1, 60), seed=st.integers(0, 2**32 - 1), modes=st.tuples(*[st.integers(0, 1)] * 4),
-       hub=st.booleans(), coding=st.sampled_from(CODINGS))
+       hub=st.booleans(), coding=st.sampled_from(K.CODINGS))
 def test_kernel_model_matches_naive_reference_random(n, seed, modes, hub, coding):
     rng = np.random.default_rng(seed)
     few = rng.choice(np.array([0.0, -0.0, 1.0, 2.0, -3.5, 1e-42, 7e20, np.nan, np.inf], np.float32), size=(n, 4))
@@ -281,9 +290,13 @@ def test_each_coding_is_no_larger_on_the_samples_than_the_one_before():
     v1 = encode_geometry(points, density, refs, coding=1)
     v2 = encode_geometry(points, density, refs, coding=2)
     v3 = encode_geometry(points, density, refs, coding=3)
+    v4 = encode_geometry(points, density, refs, coding=4)
     assert len(v3) <= len(v2) < len(v1)
+    # coding 4 alone (no coarser level to chain to) is coding 3 with the tables moved: its longer
+    # header (21 bytes more) and a few bytes per table stream's end more at most
+    assert len(v4) <= len(v3) + 21 + 4 * 4
     with pytest.raises(ValueError, match="coding"):
-        encode_geometry(points, density, refs, coding=4)
+        encode_geometry(points, density, refs, coding=5)
 
 
 @pytest.mark.parametrize("sample, xy_table", [("bluntfin", True), ("fire", False)])
@@ -359,7 +372,7 @@ def post_blob(request):
     return encode_geometry(points, density, refs, coding=request.param), refs
 
 
-@pytest.fixture(scope="module", params=[2, 3], ids=lambda c: f"coding{c}")
+@pytest.fixture(scope="module", params=[2, 3, 4], ids=lambda c: f"coding{c}")
 def smooth_blob(request):
     """Codings 2 and 3 on an unstructured mesh with a smooth field: the tet-geometry predictors,
     and coding 3's wide raw bits, at work."""
@@ -544,14 +557,174 @@ def test_hash_table_without_a_free_slot_is_refused(post_blob):
 # ------------------------------------------------------------------------------ format versions
 
 
-def test_files_of_format_5_carry_geometry_coding_3_format_4_coding_2_older_coding_1(post_tetc):
+def test_files_of_format_8_carry_geometry_coding_4_format_5_to_7_coding_3_format_4_coding_2_older_1(post_tetc):
     from gatun_py.codec.container import VERSION_MAJOR
     from gatun_py.codec.geometry import coding_for_format
     from gatun_py.codec.tetcfile import TetcReader
 
-    assert [coding_for_format(v) for v in (1, 2, 3, 4, 5)] == [1, 1, 1, 2, 3]
-    assert FORMAT_VERSION == coding_for_format(VERSION_MAJOR) == 3
+    assert [coding_for_format(v) for v in (1, 2, 3, 4, 5, 6, 7, 8)] == [1, 1, 1, 2, 3, 3, 3, 4]
+    assert FORMAT_VERSION == coding_for_format(VERSION_MAJOR) == 4
     r = TetcReader(post_tetc)
-    assert r.container.major == VERSION_MAJOR >= 4
+    assert r.container.major == VERSION_MAJOR >= 8
     for lv in range(len(r.levels)):
-        assert r.read_section(f"L{lv}/geometry")[0] == 3
+        assert r.read_section(f"L{lv}/geometry")[0] == 4
+
+
+# ------------------------------------------------------------------------------ coding 4: chained tables
+
+
+def _nested_levels(rng, n0, n_levels, kind):
+    """Values of levels whose vertices are nested subsets (each coarser level a random subset of the
+    one before, in an order of its own), with random refs: what a file's levels look like to the
+    geometry coder."""
+    if kind == "few":
+        pool = rng.normal(size=(max(2, n0 // 3), 4)).astype(np.float32)
+        vals = pool[rng.integers(0, len(pool), (n0, 4)), np.arange(4)]
+    elif kind == "grid":
+        vals = rng.integers(0, 12, (n0, 4)).astype(np.float32) * np.float32(0.25)
+    else:
+        vals = rng.integers(-(2**31), 2**31, size=(n0, 4), dtype=np.int64).astype(np.int32).view(np.float32)
+    levels = [np.ascontiguousarray(vals)]
+    for _ in range(n_levels - 1):
+        prev = levels[-1]
+        keep = rng.permutation(len(prev))[: max(1, len(prev) // 2)]
+        levels.append(np.ascontiguousarray(prev[keep]))
+    return [(v, _random_refs(rng, len(v))) for v in levels]
+
+
+def _assemble(levels):
+    from gatun_py.codec.geometry import assemble_geometry, geometry_parts
+
+    return assemble_geometry([geometry_parts(v[:, :3], v[:, 3], refs) for v, refs in levels])
+
+
+def _decode_chain(blocks, levels):
+    """Decode every block coarsest first, each with the next coarser one's tables; check bits."""
+    from gatun_py.codec.geometry import decode_value_tables
+
+    base = None
+    for block, (vals, refs) in zip(reversed(blocks), reversed(levels)):
+        dec = GeometryDecoder(block, n_points=len(vals), base=base)
+        dec.decode(refs)
+        dec.finish()
+        _assert_bit_identical(dec.values, vals)
+        tables = decode_value_tables(block, len(vals), base)
+        ordered = _ordered(vals)
+        for ch in range(4):  # a table is the channel's distinct values, whether chained or not
+            assert (tables[ch] is None) == (dec.value_tables[ch] is None)
+            if tables[ch] is not None:
+                np.testing.assert_array_equal(tables[ch], dec.value_tables[ch])
+                np.testing.assert_array_equal(tables[ch], np.unique(ordered[:, ch]))
+        base = tables
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(1, 150), n_levels=st.integers(1, 5), seed=st.integers(0, 2**32 - 1),
+       kind=st.sampled_from(["few", "grid", "bits"]))
+def test_hypothesis_chained_levels_round_trip(n, n_levels, seed, kind):
+    levels = _nested_levels(np.random.default_rng(seed), n, n_levels, kind)
+    blocks = _assemble(levels)
+    assert all(b[0] == 4 for b in blocks) and blocks[-1][HEADER_SIZE] == 0  # the coarsest chains to nothing
+    _decode_chain(blocks, levels)
+
+
+def test_chained_tables_shrink_the_levels_of_a_real_sample():
+    """LOX post's levels (the file's decimation, each level in its own decode order): the chained
+    blocks are smaller than the same levels coded alone, and finer levels chain."""
+    import gatun_py
+    from gatun_py.codec.cutborder import encode_connectivity
+    from gatun_py.simplify import build_levels, decimate
+
+    mesh = load_sample("post")[0]
+    levels = []
+    for lv in build_levels(mesh, decimate(mesh), 4):
+        conn = encode_connectivity(lv.mesh.n_points, lv.mesh.tets)
+        vo = conn.vertex_order
+        vals = np.ascontiguousarray(np.column_stack([lv.mesh.points32[vo], lv.mesh.density[vo]]))
+        levels.append((vals, np.ascontiguousarray(conn.predictors, np.int32)))
+    blocks = _assemble(levels)
+    _decode_chain(blocks, levels)
+    alone = [encode_geometry(v[:, :3], v[:, 3], refs, coding=4) for v, refs in levels]
+    assert sum(map(len, blocks)) < 0.85 * sum(map(len, alone))
+    assert all(geometry_stream_sizes(b)["density_mode"] == "chained" for b in blocks[:-1])
+    assert gatun_py  # the package the levels come from
+
+
+def test_a_channel_whose_coarser_table_is_not_a_subset_does_not_chain():
+    rng = np.random.default_rng(4)
+    levels = _nested_levels(rng, 120, 2, "grid")
+    coarse_vals, coarse_refs = levels[1]
+    coarse_vals = coarse_vals.copy()
+    coarse_vals[0, 3] = np.float32(1000.5)  # a density the finer level does not have
+    levels[1] = (coarse_vals, coarse_refs)
+    blocks = _assemble(levels)
+    sizes = geometry_stream_sizes(blocks[0])
+    assert sizes["density_mode"] != "chained" and "chained" in (sizes["x_mode"], sizes["y_mode"], sizes["z_mode"])
+    _decode_chain(blocks, levels)
+
+
+@pytest.fixture(scope="module")
+def chained_pair():
+    levels = _nested_levels(np.random.default_rng(9), 400, 2, "few")
+    blocks = _assemble(levels)
+    assert blocks[0][HEADER_SIZE] != 0  # the finer block chains
+    from gatun_py.codec.geometry import decode_value_tables
+
+    return blocks, levels, decode_value_tables(blocks[1], len(levels[1][0]))
+
+
+def test_a_chained_block_needs_its_coarser_tables(chained_pair):
+    from gatun_py.codec.geometry import decode_value_tables
+
+    blocks, levels, base = chained_pair
+    with pytest.raises(CorruptFileError, match="coarser"):
+        GeometryDecoder(blocks[0])
+    with pytest.raises(CorruptFileError, match="coarser"):
+        decode_value_tables(blocks[0])
+    with pytest.raises(CorruptFileError, match="coarser"):  # the coarser level codes no table
+        GeometryDecoder(blocks[0], base=[None] * 4)
+    # a finer level's decode asks only for the chained channels of the coarser one
+    chained = blocks[0][HEADER_SIZE] & 15
+    some = decode_value_tables(blocks[1], len(levels[1][0]), channels=chained)
+    assert [t is not None for t in some] == [bool(chained >> ch & 1) for ch in range(4)]
+    GeometryDecoder(blocks[0], base=some)
+
+
+def test_a_coarser_table_that_holds_an_addition_is_refused(chained_pair):
+    """The additions and the coarser table are disjoint: a coarser table that already holds an
+    addition (another level's tables, or damage) is corruption, not a table with a repeat."""
+    blocks, levels, base = chained_pair
+    fine = GeometryDecoder(blocks[0], base=base).value_tables
+    ch = next(c for c in range(4) if (blocks[0][HEADER_SIZE] >> c) & 1)
+    extra = np.setdiff1d(fine[ch], base[ch])[0]  # an addition (the finer level has values of its own)
+    bad = list(base)
+    bad[ch] = np.union1d(base[ch], [extra])
+    with pytest.raises(CorruptFileError, match="table"):
+        GeometryDecoder(blocks[0], base=bad)
+
+
+def test_damaged_chained_blocks_are_refused_or_decode_right(chained_pair):
+    """Truncations and byte flips of a chained block (mostly its header and table stream): a
+    CorruptFileError or some values, never another exception."""
+    blocks, levels, base = chained_pair
+    refs = levels[0][1]
+    block = blocks[0]
+    for cut in np.linspace(0, len(block) - 1, 80).astype(int):
+        with pytest.raises(CorruptFileError):
+            dec = GeometryDecoder(block[:cut], base=base)
+            dec.decode(refs)
+            dec.finish()
+    rng = np.random.default_rng(12)
+    detected = 0
+    for _ in range(300):
+        data = bytearray(block)
+        pos = int(rng.integers(0, min(len(data), 39 + 64)))  # mostly the header and the table streams
+        data[pos] ^= int(rng.integers(1, 256))
+        try:
+            dec = GeometryDecoder(bytes(data), base=base)
+            dec.decode(refs)
+            dec.finish()
+        except CorruptFileError:
+            detected += 1
+    # the container's CRC catches the rest; the coder itself must notice a good share
+    assert detected > 150

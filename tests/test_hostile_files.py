@@ -495,3 +495,79 @@ def test_geometry_header_and_metadata_agree_on_a_huge_count(worker, files):
         meta["levels"][0][key] = n
     meta["points"] = n
     assert check(worker, _build(meta, out), f"n={n}")[0] == "rejected"
+
+
+# -- format 8: value tables chained across levels -------------------------------------------------
+
+_CHAINED_AT, _TABLE_LENGTHS_AT, _HEADER4 = 22, 23, 39  # the coding-4 geometry header's fields
+
+
+def _chained_blocks(sections) -> list:
+    """Indices of the coding-4 geometry sections that chain a table to the next level's."""
+    return [i for i, (name, p) in enumerate(sections)
+            if name.endswith("/geometry") and p[0] == 4 and p[_CHAINED_AT] != 0]
+
+
+def test_the_files_chain_their_tables(files):
+    """The levelled and the bricked file chain tables (else the cases below test nothing)."""
+    for data in (files[0], files[2]):
+        assert _chained_blocks(_split(data)[1])
+
+
+def test_chain_to_a_level_the_file_does_not_hold(worker, files):
+    """The coarsest level dropped (metadata and sections): the level before it chains to nothing."""
+    meta, sections = _split(files[0])
+    last = meta["levels"][-1]["level"]
+    meta["levels"] = meta["levels"][:-1]
+    kept = [(name, p) for name, p in sections if not name.startswith(f"L{last}/") and name != "deps"]
+    meta.pop("dependencies", None)
+    assert any(name == f"L{last - 1}/geometry" for name, _ in kept)
+    outcome, message = check(worker, _build(meta, kept), "coarsest level dropped")
+    assert outcome == "rejected" and "coarser level" in message, message
+
+
+def test_levels_in_another_order(worker, files):
+    """The level list reversed: every chain then points at a finer level's tables, or off the file."""
+    meta, sections = _split(files[0])
+    meta["levels"] = meta["levels"][::-1]
+    check(worker, _build(meta, sections), "levels reversed")
+
+
+@pytest.mark.parametrize("chained", range(16))
+def test_rewritten_chain_bits(worker, files, chained):
+    """Every chain byte on every level's geometry (a chain on a channel without a table, to a level
+    without that table, or none where the tables need one)."""
+    for data in (files[0], files[2]):
+        meta, sections = _split(data)
+        out = []
+        for name, p in sections:
+            if name.endswith("/geometry") and p[0] == 4:
+                p = bytearray(p)
+                p[_CHAINED_AT] = chained
+                p = bytes(p)
+            out.append((name, p))
+        check(worker, _build(meta, out), f"chained={chained}")
+
+
+@HYPO
+@given(st.data())
+def test_damaged_coarser_tables(worker, files, data):
+    """A coarser level's table stream (what a finer level's decode reads of it) damaged behind a
+    valid CRC: flipped bits, or its length field rewritten."""
+    meta, sections = _split(files[data.draw(st.sampled_from([0, 2]))])
+    geo = [i for i, (name, p) in enumerate(sections)
+           if name.endswith("/geometry") and p[0] == 4 and any(struct.unpack_from("<4I", p, _TABLE_LENGTHS_AT))]
+    i = data.draw(st.sampled_from(geo))
+    name, p = sections[i]
+    p = bytearray(p)
+    lengths = struct.unpack_from("<4I", p, _TABLE_LENGTHS_AT)
+    ch = data.draw(st.sampled_from([c for c in range(4) if lengths[c]]))
+    if data.draw(st.booleans()):
+        start = _HEADER4 + sum(lengths[:ch])
+        for _ in range(data.draw(st.integers(1, 3))):
+            p[start + data.draw(st.integers(0, lengths[ch] - 1))] ^= 1 << data.draw(st.integers(0, 7))
+    else:
+        struct.pack_into("<I", p, _TABLE_LENGTHS_AT + 4 * ch,
+                         data.draw(st.sampled_from([0, 1, lengths[ch] - 1, lengths[ch] + 1, 2**32 - 1])))
+    sections[i] = (name, bytes(p))
+    check(worker, _build(meta, sections), f"{name} tables")

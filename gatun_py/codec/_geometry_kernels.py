@@ -82,6 +82,9 @@ N_CHANNELS = 4
 MODE_PREDICT = 0
 MODE_TABLE = 1
 MODE_SKIP = -1  # encoder only: leave the channel out of this pass
+# encoder only: ranks in the channel's table like MODE_TABLE, without the table at the stream's
+# start (geometry coding 4 sends each table in a stream of its own, :func:`encode_table_set`)
+MODE_RANKS = 2
 
 # ref patterns (which of the face refs and the apex are present) and their predictor candidates
 PAT_NONE, PAT_ONE, PAT_EDGE, PAT_EDGE_APEX, PAT_FACE, PAT_FACE_APEX = 0, 1, 2, 3, 4, 5
@@ -893,7 +896,8 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
 
     ``st`` (4, 8) encoder states, ``out`` (4, cap) uint8 buffers, ``vf`` (n, 4) float32 values,
     ``refs`` (n, 4) checked refs, ``wpar`` (n, 3, NW) from :func:`link_all`, ``modes`` (4,)
-    per-channel mode (``MODE_SKIP``: only the repeat flags), ``tables`` the sorted distinct ordered
+    per-channel mode (``MODE_SKIP``: only the repeat flags; ``MODE_RANKS``: as ``MODE_TABLE``
+    without coding the table itself), ``tables`` the sorted distinct ordered
     ints of the table-mode channels (channel ch at ``tables[tab_offs[ch]:tab_offs[ch+1]]``).
     Returns the byte count of each stream (larger than ``out.shape[1]`` on overflow). If
     ``trace`` has n rows, ``trace[k, ch]`` records the coded (repetition symbol or -1, residual,
@@ -940,7 +944,9 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
                 was_eq[k] = sym
                 _remember_conditional(ch, k, vi, hkeys, hvals, cands)
             continue
-        if mode == MODE_TABLE:
+        if mode == MODE_RANKS:
+            mode = MODE_TABLE
+        elif mode == MODE_TABLE:
             enc_uint(stc, outc, probs, TABLE_BASE, hi - lo)
             if hi > lo:
                 enc_sint(stc, outc, probs, TABLE_BASE + INT_MODEL_SIZE, tables[lo])
@@ -1035,6 +1041,33 @@ def decode_tables_kernel(st, buf, offs, probs, modes, n_points, tables, tab_offs
             return ERR_STREAM
     tab_offs[N_CHANNELS] = pos
     return OK
+
+
+# Geometry coding 4 sends the value table of each table-mode channel in a stream of its own, ahead
+# of the channel streams, so that a reader takes a level's tables (or only some channels' tables)
+# without decoding its vertices. A channel's table is either the whole table or, *chained*, only
+# the values it adds to the table of the same channel in the next coarser level of the file (a
+# coarser level's vertices are a subset of the finer level's, values kept bit for bit). Either way
+# the set is coded exactly as the table prefix of a channel stream of codings 1-3 (its size, its
+# first value, the gaps between consecutive values less one, in a fresh model at TABLE_BASE), so
+# that decode_tables_kernel reads it: a kernel of its own cost a first decode of a format-8 file
+# 2-3.5 s of compilation (its wide-bits variant more), for no speed.
+TABLE_SET_MODEL = 2 * INT_MODEL_SIZE  # the part of a channel's model from TABLE_BASE on
+
+
+@njit(cache=True, nogil=True)
+def encode_table_set(st, out, values):
+    """Code the sorted distinct ``values`` into one stream (see above: what decode_tables_kernel
+    reads as a table-mode channel's table); returns its byte count (larger than ``out`` on
+    overflow)."""
+    probs = np.full(TABLE_SET_MODEL, PROB_INIT, dtype=np.uint16)
+    n = values.shape[0]
+    enc_uint(st, out, probs, 0, n)
+    if n > 0:
+        enc_sint(st, out, probs, INT_MODEL_SIZE, values[0])
+        for i in range(1, n):
+            enc_uint(st, out, probs, 0, values[i] - values[i - 1] - 1)
+    return enc_finish(st, out)
 
 
 @njit(cache=True, _nrt=False)

@@ -45,7 +45,7 @@ from ..errors import CorruptFileError, OptionError
 from ..mesh import TetMesh
 from .brickindex import BRICKS_KEY, brick_prefix
 from .container import build_container
-from .tetcfile import TetcReader, check_mesh, encode_level, file_meta
+from .tetcfile import TetcReader, _chain_geometry, check_mesh, encode_level, file_meta
 from .threads import check_jobs, default_jobs
 
 __all__ = ["BrickLevels", "EncodedBrick", "encode_brick", "encode_bricked", "read_cut", "stitch_bricks",
@@ -145,15 +145,18 @@ def encode_brick(brick: BrickLevels) -> EncodedBrick:
     Runs in a worker process (only plain data in and out)."""
     if len(brick.levels) != len(brick.cut_ids) or not brick.levels:
         raise OptionError("a brick needs one cut-id array per level")
-    sections, metas, cut_decode = {}, [], []
+    sections, metas, cut_decode, encoded = {}, [], [], []
     for lv, cut in zip(brick.levels, brick.cut_ids):
         cut = np.asarray(cut, np.int64)
         if cut.shape != (lv.mesh.n_points,):
             raise OptionError(f"level {lv.level}: cut ids do not match the mesh ({lv.mesh.n_points} points)")
-        enc = encode_level(lv)
-        sections.update(enc.sections)
+        enc = encode_level(lv, chainable=len(brick.levels) > 1)
+        encoded.append(enc)
         cut_decode.append(cut[enc.vertex_order])
         metas.append(enc.meta)
+    _chain_geometry(encoded)  # within the brick: what one decode of it reads
+    for enc in encoded:
+        sections.update(enc.sections)
     m0 = brick.levels[0].mesh
     lo, hi = m0.bbox
     entry = {"bounds": [lo.tolist(), hi.tolist()], "points": int(m0.n_points), "tets": int(m0.n_tets),

@@ -25,44 +25,72 @@ or nothing where the block does without it).
 
 Byte layout of the geometry block (little endian)::
 
-    u8  coding      1 (format <= 3), 2 (format 4: adds the tet-geometry predictors) or 3
-                    (format 5: the same model, decoded with fewer range-coder steps)
+    u8  coding      1 (format <= 3), 2 (format 4: adds the tet-geometry predictors), 3
+                    (formats 5-7: the same model, decoded with fewer range-coder steps) or 4
+                    (format 8: coding 3's model, the value tables apart and chained across levels)
     u8  modes       bit ch set (ch < 4): channel ch uses the value table; bit 4 (coding 3
-                    only): y uses the x -> y table (codings 1-2 always do)
+                    and 4 only): y uses the x -> y table (codings 1-2 always do)
     u32 n_points
     u32 length[4]   byte length of each channel's range-coded stream
+    -- coding 4 only:
+    u8  chained     bit ch set (only for a table-mode channel): channel ch's table is chained
+    u32 table_length[4]  byte length of each channel's table stream (0: the channel has no table)
+    ...             the table streams (coding 4 only), channel 0 to 3
     ...             the four streams, channel 0 (x) to 3 (density)
+
+In codings 1-3 a table-mode channel's stream starts with its table (size, first value, gaps). In
+coding 4 each table-mode channel's table is a stream of its own ahead of the channel streams
+(:func:`gatun_py.codec._geometry_kernels.encode_table_set`), so that a reader takes a block's
+tables, or some channels' tables, without decoding its vertices. A *chained* channel's table
+stream holds only the values it adds to the table of the same channel in the next coarser level of
+the file (the next entry of the file's level list, which must code that channel with a table too):
+a coarser level's vertices are a subset of the finer one's, values bit for bit, so its table is a
+subset. Decoding level k then takes the table streams of the chained channels in the levels k+1,
+k+2, ... as far as their chains go, about one whole table's worth of values, as a block of its own
+tables would. The channel streams of coding 4 are coding 3's (a table-mode channel's without the
+table). The encoder of a file with levels chooses per level and channel among prediction, own
+table and chained table, coarsest level first (:func:`assemble_geometry`).
 """
 
 from __future__ import annotations
 
+import itertools
 import struct
+import threading
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import CorruptFileError
 from . import _geometry_kernels as K
 from .container import VERSION_MAJOR
-from .rangecoder import (ADAPT_SHIFT, DEC_ERROR, DEC_OVERRUN, DEC_POS, INT_BUCKET_BITS, PROB_ONE, dec_state,
-                         enc_state, new_model)
+from .rangecoder import (ADAPT_SHIFT, DEC_ERROR, DEC_OVERRUN, DEC_POS, INT_BUCKET_BITS, PROB_INIT, PROB_ONE,
+                         dec_state, enc_state, new_model)
 
-CODINGS = K.CODINGS
+CODINGS = K.CODINGS + (4,)  # coding 4 runs the kernels of coding 3 (it moves the tables, not the model)
 
 
 def coding_for_format(major: int) -> int:
     """The geometry block coding a file of container format ``major`` is written with: 1 up to
     format 3, 2 in format 4 (the tet-geometry predictors of
-    :func:`gatun_py.codec._geometry_kernels._geometric_cands`), 3 from format 5 on (coding 2's
+    :func:`gatun_py.codec._geometry_kernels._geometric_cands`), 3 in formats 5 to 7 (coding 2's
     model with wide raw bits, a sign context, a flag-first repetition symbol and a per-block x -> y
-    cache). Readers take every coding."""
-    return 1 if major <= 3 else (2 if major == 4 else 3)
+    cache), 4 from format 8 on (coding 3's model, the value tables in a stream of their own and
+    chained across levels). Readers take every coding."""
+    return 1 if major <= 3 else (2 if major == 4 else (3 if major <= 7 else 4))
+
+
+def _kernel_coding(coding: int) -> int:
+    return min(int(coding), 3)
 
 
 # what this version of tetc writes
 FORMAT_VERSION = coding_for_format(VERSION_MAJOR)
 MAX_POINTS = 1 << 29  # the decoder's scratch tags (3 per vertex) are int32
 _HEADER = struct.Struct("<BBI4I")
-HEADER_SIZE = _HEADER.size
+HEADER_SIZE = _HEADER.size  # codings 1-3
+_HEADER4 = struct.Struct("<BBI4IB4I")
+MAX_HEADER_SIZE = _HEADER4.size  # enough of a block's start to check any coding's header
 XY_TABLE_BIT = 1 << K.N_CHANNELS  # coding 3's modes: y uses the x -> y table (always, before)
 # The encoder tries a channel's value table (MODE_TABLE) when it has at most this share of distinct
 # values among the vertices, and keeps it where its stream is smaller. Blunt-fin's density has
@@ -70,6 +98,15 @@ XY_TABLE_BIT = 1 << K.N_CHANNELS  # coding 3's modes: y uses the x -> y table (a
 # prediction residuals, and its coarser levels (0.74-0.76) gain 3-9 %; at 0.97 (Combustion's,
 # LOX post's density) and 0.99 (the gmsh flange) the table loses, so the trial is skipped there.
 TABLE_TRIAL_SHARE = 0.8
+# A level of a file with levels tries ranks on every channel, whatever its share of distinct values,
+# when it has at most this many vertices (coding 4): chained, its table costs a fraction of a whole
+# one and ranks then win on nearly every level even where nearly all values are distinct
+# (Combustion's every level; all its levels chained so: 808 KB against 961 KB). But ranks of a
+# nearly all-distinct channel decode slower than prediction residuals: its table (about 60 ns per
+# value) and a table look-up per vertex (about 70 ns: Combustion's level 0 decoded in 1.48 x the
+# time), so above this size only channels with at most TABLE_TRIAL_SHARE distinct values try them
+# (Combustion 933 KB, its levels 0-3 decode as fast as before; Blunt-fin and LOX post lose nothing).
+CHAIN_ANY_SHARE_POINTS = 4096
 
 # Absurd counts are rejected before allocating: a binary decision costs at least
 # -log2(p_max) bits, p_max being the most skewed probability the range coder's adaptation reaches;
@@ -191,9 +228,11 @@ def encode_geometry(points, density, refs, *, modes=None, coding: int = FORMAT_V
     modes : sequence of 4 ints, optional
         Force the residual mode per channel (0 prediction, 1 value table); by default both are
         tried and the smaller stream is kept, channel by channel.
-    coding : {1, 2, 3}
-        The block's coding version: 3 (the default, format 5), 2 what format 4 wrote (the
-        tet-geometry predictors), 1 what format 3 and older wrote.
+    coding : {1, 2, 3, 4}
+        The block's coding version: 4 (the default, format 8: coding 3's model, its value tables
+        in streams of their own; alone, it chains to nothing: :func:`assemble_geometry` codes the
+        levels of a file), 3 what formats 5 to 7 wrote, 2 what format 4 wrote (the tet-geometry
+        predictors), 1 what format 3 and older wrote.
 
     Returns
     -------
@@ -209,6 +248,13 @@ def encode_geometry(points, density, refs, *, modes=None, coding: int = FORMAT_V
     n = vf.shape[0]
     if coding not in CODINGS:
         raise ValueError(f"coding must be one of {CODINGS}, got {coding!r}")
+    if coding >= 4:
+        if modes is not None:
+            modes = np.asarray(modes, dtype=np.int64)
+            if modes.shape != (K.N_CHANNELS,) or not np.isin(modes, (0, 1)).all():
+                raise ValueError("modes must be 4 values, each 0 (prediction) or 1 (table)")
+        parts = geometry_parts(points, density, refs, chainable=False, force_ranks=modes is not None and bool(modes.any()))
+        return assemble_geometry([parts], modes=None if modes is None else [modes])[0]
     cands = K.candidate_table(coding)
     if n >= MAX_POINTS:
         raise ValueError(f"at most {MAX_POINTS - 1} vertices per geometry block, got {n}")
@@ -261,24 +307,207 @@ def encode_geometry(points, density, refs, *, modes=None, coding: int = FORMAT_V
     return header + b"".join(streams)
 
 
-def geometry_stream_sizes(data: bytes) -> dict:
-    """Byte sizes of the parts of a geometry block (header and the x, y, z, density streams)."""
-    if len(data) < HEADER_SIZE:
-        raise CorruptFileError("corrupt geometry block: truncated header")
-    version, mode_bits, n, *lengths = _HEADER.unpack_from(data)
-    sizes = {"header": HEADER_SIZE}
-    for name, ch_len, ch in zip(("x", "y", "z", "density"), lengths, range(4)):
-        sizes[name] = ch_len
-        sizes[name + "_mode"] = "table" if mode_bits >> ch & 1 else "predict"
-    return sizes
+# ------------------------------------------------------------------------------ coding 4
 
 
-def check_geometry_header(data, n_points: int | None = None, *, total: int | None = None) -> tuple[int, int, list]:
+@dataclass
+class GeometryParts:
+    """What the coding-4 encoder knows of one block before choosing its modes: the channels'
+    distinct values and their streams coded every way that may be chosen.
+
+    Attributes
+    ----------
+    n : int
+    tables : list of 4 int32 arrays
+        Per channel, its sorted distinct ordered integers (the table a table-mode channel needs).
+    streams : dict
+        ``(ranks, xy)`` -> 4 channel streams (bytes, or None where not coded): ``ranks`` False for
+        prediction residuals, True for ranks in the channel's table (without the table); ``xy``
+        whether y had the x -> y table (only y's and z's streams depend on it).
+    """
+
+    n: int
+    tables: list
+    streams: dict
+
+
+def geometry_parts(points, density, refs, *, chainable: bool = True, force_ranks: bool = False) -> GeometryParts:
+    """Code a block's channels every way :func:`assemble_geometry` may choose (arguments as
+    :func:`encode_geometry`). The ranks are coded on the channels where at most
+    :data:`TABLE_TRIAL_SHARE` of the values are distinct, on all with ``force_ranks``, and on all
+    of a block of at most :data:`CHAIN_ANY_SHARE_POINTS` vertices with ``chainable`` (a level of a
+    file with levels, whose tables may chain to the next coarser level's)."""
+    vf = _channels(points, density)
+    n = vf.shape[0]
+    if n >= MAX_POINTS:
+        raise ValueError(f"at most {MAX_POINTS - 1} vertices per geometry block, got {n}")
+    refs = _as_refs(refs, n)
+    ordered = _ordered(vf)
+    tables_list = [np.unique(ordered[:, ch]) for ch in range(K.N_CHANNELS)]
+    tables = np.concatenate(tables_list) if n else np.zeros(0, dtype=np.int64)
+    tab_offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
+    tab_offs[1:] = np.cumsum([len(t) for t in tables_list])
+    wpar = K.link_all(refs, vf)
+    xy_on, xy_off = K.candidate_table(3, True), K.candidate_table(3, False)
+    skip = K.MODE_SKIP
+    streams = {}
+    streams[False, True] = _run_encode(vf, refs, np.zeros(K.N_CHANNELS, np.int64), tables, tab_offs, xy_on, wpar=wpar)
+    streams[False, False] = [None] + _run_encode(vf, refs, np.array([skip, 0, 0, skip]), tables, tab_offs, xy_off,
+                                                 wpar=wpar)[1:3] + [None]
+    tried = np.array([n > 0 and (force_ranks or len(t) <= TABLE_TRIAL_SHARE * n
+                                 or (chainable and n <= CHAIN_ANY_SHARE_POINTS)) for t in tables_list])
+    if tried.any():
+        trial = np.where(tried, K.MODE_RANKS, skip).astype(np.int64)
+        on = _run_encode(vf, refs, trial, tables, tab_offs, xy_on, wpar=wpar)
+        streams[True, True] = [on[ch] if tried[ch] else None for ch in range(K.N_CHANNELS)]
+        if tried[1:3].any():
+            trial[0] = trial[3] = skip
+            off = _run_encode(vf, refs, trial, tables, tab_offs, xy_off, wpar=wpar)
+            streams[True, False] = [None] + [off[ch] if tried[ch] else None for ch in (1, 2)] + [None]
+    # kept until the file's levels are chained: as int32 (ordered integers of float32 fit), half the memory
+    return GeometryParts(int(n), [t.astype(np.int32) for t in tables_list], streams)
+
+
+_PREDICT, _OWN, _CHAINED = 0, 1, 2
+
+
+def _table_stream(values) -> bytes:
+    """A table's (or a chained table's additions') stream: :func:`K.encode_table_set`."""
+    values = np.ascontiguousarray(values, dtype=np.int64)
+    cap = 64 + 8 * len(values)
+    while True:
+        out = np.empty(cap, np.uint8)
+        nbytes = int(K.encode_table_set(enc_state(), out, values))
+        if nbytes <= cap:
+            return out[:nbytes].tobytes()
+        cap = nbytes + 64
+
+
+def _is_subset(coarse, fine) -> bool:
+    """Whether the sorted distinct values ``coarse`` all occur in the sorted ``fine``."""
+    if len(coarse) > len(fine):
+        return False
+    at = np.searchsorted(fine, coarse)
+    return bool((at < len(fine)).all() and (fine[np.minimum(at, len(fine) - 1)] == coarse).all())
+
+
+def assemble_geometry(levels: list, modes: list | None = None) -> list:
+    """Coding-4 geometry blocks of the levels of one file (or of one brick) from their
+    :class:`GeometryParts`, finest first: block i may chain its tables to block i + 1's.
+
+    Per channel and level the modes are prediction, own table or chained table (only where the
+    next coarser block codes the channel with a table and its table is a subset of this one's),
+    and per level whether y uses the x -> y table; chosen for the fewest bytes over all levels by a
+    dynamic programme from the coarsest level on (the state: which channels the coarser level codes
+    with a table; every table is a stream of its own, so a choice's bytes are exact). ``modes``:
+    per level, 4 forced modes (0 prediction, 1 table: own or chained). Returns the blocks, in the
+    same order."""
+    nl = len(levels)
+    inf = float("inf")
+    # per level: cost[ch][mode][xy] of the channel's stream plus its table, inf where impossible
+    costs = []
+    for k, p in enumerate(levels):
+        coarse = levels[k + 1] if k + 1 < nl else None
+        c = np.full((K.N_CHANNELS, 3, 2), inf)
+        for ch in range(K.N_CHANNELS):
+            own_table = None  # bytes of the table stream (exact: every channel's is a stream of its own)
+            for xy in (0, 1):
+                key_xy = bool(xy) if ch in (1, 2) else True  # only y's and z's streams depend on xy
+                s = p.streams.get((False, key_xy))
+                if s is not None and s[ch] is not None:
+                    c[ch, _PREDICT, xy] = len(s[ch])
+                s = p.streams.get((True, key_xy))
+                if s is not None and s[ch] is not None:
+                    if own_table is None:
+                        own_table = len(_table_stream(p.tables[ch]))
+                    c[ch, _OWN, xy] = len(s[ch]) + own_table
+            if own_table is not None:
+                if coarse is not None and _is_subset(coarse.tables[ch], p.tables[ch]):
+                    adds = np.setdiff1d(p.tables[ch], coarse.tables[ch], assume_unique=True)
+                    c[ch, _CHAINED] = c[ch, _OWN] - own_table + len(_table_stream(adds))
+            if modes is not None:
+                forced = int(modes[k][ch])
+                c[ch, _OWN if forced == 0 else _PREDICT] = inf
+                if forced == 0:
+                    c[ch, _CHAINED] = inf
+        costs.append(c)
+    choices = [(m, xy) for xy in (1, 0) for m in itertools.product((_PREDICT, _OWN, _CHAINED), repeat=K.N_CHANNELS)]
+    # best[k][mask]: the fewest bytes of levels k.. when level k codes the channels of mask with a table
+    nm = 1 << K.N_CHANNELS
+    best = [[inf] * nm for _ in range(nl + 1)]
+    pick = [[None] * nm for _ in range(nl)]
+    best[nl][0] = 0.0
+    for k in range(nl - 1, -1, -1):
+        # the least cost of levels k+1.. whose table mask covers a given set of channels
+        sup = [min(best[k + 1][m] for m in range(nm) if m & s == s) for s in range(nm)]
+        c = costs[k]
+        for m4, xy in choices:
+            need = sum(1 << ch for ch in range(K.N_CHANNELS) if m4[ch] == _CHAINED)
+            if k + 1 == nl and need:
+                continue
+            total = sup[need] + sum(c[ch, m4[ch], xy] for ch in range(K.N_CHANNELS))
+            mask = sum(1 << ch for ch in range(K.N_CHANNELS) if m4[ch] != _PREDICT)
+            if total < best[k][mask]:
+                best[k][mask] = total
+                pick[k][mask] = (m4, xy)
+    blocks = []
+    mask = min(range(nm), key=lambda m: best[0][m])
+    for k, p in enumerate(levels):
+        m4, xy = pick[k][mask]
+        need = sum(1 << ch for ch in range(K.N_CHANNELS) if m4[ch] == _CHAINED)
+        blocks.append(_block4(p, levels[k + 1] if k + 1 < nl else None, m4, xy))
+        if k + 1 < nl:
+            mask = min((m for m in range(nm) if m & need == need), key=lambda m: best[k + 1][m])
+    return blocks
+
+
+def _block4(p: GeometryParts, coarse, m4, xy: int) -> bytes:
+    streams, tables = [], []
+    for ch in range(K.N_CHANNELS):
+        key_xy = bool(xy) if ch in (1, 2) else True
+        streams.append(p.streams[m4[ch] != _PREDICT, key_xy][ch])
+        if m4[ch] == _CHAINED:
+            tables.append(_table_stream(np.setdiff1d(p.tables[ch], coarse.tables[ch], assume_unique=True)))
+        elif m4[ch] == _OWN:
+            tables.append(_table_stream(p.tables[ch]))
+        else:
+            tables.append(b"")
+    mode_bits = sum(int(m4[ch] != _PREDICT) << ch for ch in range(K.N_CHANNELS)) | (XY_TABLE_BIT if xy else 0)
+    chained = sum(1 << ch for ch in range(K.N_CHANNELS) if m4[ch] == _CHAINED)
+    header = _HEADER4.pack(4, mode_bits, p.n, *(len(s) for s in streams), chained, *(len(t) for t in tables))
+    return header + b"".join(tables) + b"".join(streams)
+
+
+# ------------------------------------------------------------------------------ headers
+
+
+@dataclass
+class GeometryHeader:
+    """A geometry block's header (any coding), checked by :func:`parse_geometry_header`."""
+
+    coding: int
+    mode_bits: int
+    n: int
+    lengths: list
+    chained: int = 0  # coding 4: bit ch, channel ch's table is chained to the next coarser level's
+    table_lengths: tuple = (0, 0, 0, 0)  # coding 4: bytes of each channel's table stream
+    size: int = HEADER_SIZE  # bytes of the header
+
+    @property
+    def table_length(self) -> int:
+        return sum(self.table_lengths)
+
+    @property
+    def modes(self) -> np.ndarray:
+        return np.array([(self.mode_bits >> ch) & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64)
+
+
+def parse_geometry_header(data, n_points: int | None = None, *, total: int | None = None) -> GeometryHeader:
     """Check a geometry block's header against its size (and the expected vertex count).
 
-    ``data`` is the block, or only its header with the block's size in ``total``. Returns
-    ``(mode bits, vertices, stream lengths)``; raises :class:`CorruptFileError` before anything is
-    allocated when the counts cannot come from a block of this size.
+    ``data`` is the block, or only its start (:data:`MAX_HEADER_SIZE` bytes are enough) with the
+    block's size in ``total``. Raises :class:`CorruptFileError` before anything is allocated when
+    the counts cannot come from a block of this size.
     """
     total = len(data) if total is None else int(total)
     if len(data) < HEADER_SIZE:
@@ -288,13 +517,173 @@ def check_geometry_header(data, n_points: int | None = None, *, total: int | Non
         raise CorruptFileError(f"corrupt geometry block: unknown geometry format version {version}")
     if mode_bits >> K.N_CHANNELS != 0 and (version < 3 or mode_bits >= 2 * XY_TABLE_BIT):
         raise CorruptFileError("corrupt geometry block: invalid channel modes")
+    hdr = GeometryHeader(version, mode_bits, n, lengths)
+    if version >= 4:
+        if len(data) < _HEADER4.size:
+            raise CorruptFileError("corrupt geometry block: truncated header")
+        hdr.chained, *hdr.table_lengths = _HEADER4.unpack_from(data)[-1 - K.N_CHANNELS:]
+        hdr.size = _HEADER4.size
+        if hdr.chained & ~mode_bits & ((1 << K.N_CHANNELS) - 1) or hdr.chained >> K.N_CHANNELS:
+            raise CorruptFileError("corrupt geometry block: a chained table on a channel without a table")
+        if any((hdr.table_lengths[ch] == 0) != (mode_bits >> ch & 1 == 0) for ch in range(K.N_CHANNELS)):
+            raise CorruptFileError("corrupt geometry block: table streams do not match the channel modes")
     if n_points is not None and n != n_points:
         raise CorruptFileError(f"corrupt geometry block: {n} vertices, expected {n_points}")
-    if HEADER_SIZE + sum(lengths) != total:
+    if hdr.size + hdr.table_length + sum(lengths) != total:
         raise CorruptFileError("corrupt geometry block: stream lengths do not match the block size")
     if n > max_vertices(lengths):
         raise CorruptFileError(f"corrupt geometry block: {n} vertices cannot fit in {total} bytes")
-    return version, mode_bits, n, lengths
+    return hdr
+
+
+def geometry_stream_sizes(data: bytes) -> dict:
+    """Byte sizes of the parts of a geometry block (header, the x, y, z, density streams and, in
+    coding 4, the table streams: ``tables`` and per channel ``x_table`` ...) and each channel's
+    mode (``predict``, ``table`` or, coding 4, ``chained``)."""
+    if len(data) < HEADER_SIZE:
+        raise CorruptFileError("corrupt geometry block: truncated header")
+    version, mode_bits, n, *lengths = _HEADER.unpack_from(data)
+    chained, table_lengths, size = 0, None, HEADER_SIZE
+    if version >= 4:
+        if len(data) < _HEADER4.size:
+            raise CorruptFileError("corrupt geometry block: truncated header")
+        chained, *table_lengths = _HEADER4.unpack_from(data)[-1 - K.N_CHANNELS:]
+        size = _HEADER4.size
+    sizes = {"header": size}
+    if table_lengths is not None:
+        sizes["tables"] = sum(table_lengths)
+    for name, ch_len, ch in zip(("x", "y", "z", "density"), lengths, range(4)):
+        sizes[name] = ch_len
+        sizes[name + "_mode"] = ("chained" if chained >> ch & 1 else "table") if mode_bits >> ch & 1 else "predict"
+        if table_lengths is not None:
+            sizes[name + "_table"] = table_lengths[ch]
+    return sizes
+
+
+def check_geometry_header(data, n_points: int | None = None, *, total: int | None = None) -> tuple[int, int, list]:
+    """Check a geometry block's header against its size (and the expected vertex count).
+
+    ``data`` is the block, or only its start with the block's size in ``total``. Returns
+    ``(coding, mode bits, vertices, stream lengths)`` (:func:`parse_geometry_header` has the rest of
+    a coding-4 header); raises :class:`CorruptFileError` before anything is allocated when the
+    counts cannot come from a block of this size.
+    """
+    hdr = parse_geometry_header(data, n_points, total=total)
+    return hdr.coding, hdr.mode_bits, hdr.n, hdr.lengths
+
+
+def _channels_of(mask: int) -> list:
+    return [ch for ch in range(K.N_CHANNELS) if mask >> ch & 1]
+
+
+_MODELS = threading.local()
+
+
+def _table_models() -> np.ndarray:
+    """The models decode_tables_kernel needs for tables alone, reset: the kernel indexes a channel's
+    table model at TABLE_BASE of a whole channel model (760 KB for four, filled anew for every level
+    of a chain was a third of its time), so one per thread is kept and only the table part reset."""
+    probs = getattr(_MODELS, "probs", None)
+    if probs is None:
+        probs = _MODELS.probs = np.full((K.N_CHANNELS, K.TABLE_BASE + K.TABLE_SET_MODEL), PROB_INIT, dtype=np.uint16)
+    probs[:, K.TABLE_BASE:] = PROB_INIT
+    return probs
+
+
+# A stream that dec_init accepts and nothing reads: the place of a channel whose table is not read
+_NO_STREAM = np.zeros(5, np.uint8)
+_MASK_MODES = [np.array([m >> ch & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64) for m in range(1 << K.N_CHANNELS)]
+
+
+def _decode_tables4(buf, hdr: GeometryHeader, base, channels: int = (1 << K.N_CHANNELS) - 1) -> list:
+    """Tables of a coding-4 block's table-mode channels among ``channels`` (a bit mask): per channel
+    its sorted distinct ordered integers (int64), None for a channel without a table or not asked
+    for. ``base``: per channel the next coarser level's table (needed where this block chains).
+
+    A table stream is coded as the table prefix of a channel stream of codings 1-3, so
+    :func:`K.decode_tables_kernel` reads the asked ones in one call (with the argument types of a
+    block's own decode: nothing more to compile); a chained channel's additions are then merged
+    into the coarser table."""
+    want = hdr.mode_bits & channels & ((1 << K.N_CHANNELS) - 1)
+    out = [None] * K.N_CHANNELS
+    if not want:
+        return out
+    lengths = [int(x) for x in hdr.table_lengths]
+    for ch in range(K.N_CHANNELS):
+        if want >> ch & 1 and hdr.chained >> ch & 1 and (base is None or base[ch] is None):
+            raise CorruptFileError("corrupt geometry block: a chained value table without the coarser level's")
+    offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
+    if want == (1 << K.N_CHANNELS) - 1:  # every channel's table, one after the other in the block
+        data = buf[hdr.size:hdr.size + sum(lengths)]
+        offs[1:] = np.cumsum(lengths)
+    else:  # the others' places hold an empty stream
+        streams, start = [], hdr.size
+        for ch in range(K.N_CHANNELS):
+            streams.append(buf[start:start + lengths[ch]] if want >> ch & 1 else _NO_STREAM)
+            start += lengths[ch]
+        data = np.concatenate(streams)
+        data.flags.writeable = False  # the type of a block read from a file
+        offs[1:] = np.cumsum([len(x) for x in streams])
+    # each set's room before allocating: at most n values, and what its stream can code
+    room = sum(min(hdr.n, _MAX_TABLE_PER_BYTE * (lengths[ch] + 8)) for ch in range(K.N_CHANNELS) if want >> ch & 1)
+    sets = np.empty(room, dtype=np.int64)
+    set_offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
+    st = np.zeros((K.N_CHANNELS, 8), dtype=np.int64)
+    probs = _table_models()
+    if K.decode_tables_kernel(st, data, offs, probs, _MASK_MODES[want], hdr.n, sets, set_offs) != K.OK:
+        raise CorruptFileError("corrupt geometry block: damaged value table")
+    for ch in range(K.N_CHANNELS):
+        if not want >> ch & 1:
+            continue
+        if st[ch, DEC_ERROR] != 0 or st[ch, DEC_OVERRUN] != 0 or int(st[ch, DEC_POS]) != lengths[ch]:
+            raise CorruptFileError("corrupt geometry block: damaged value table")
+        table = sets[set_offs[ch]:set_offs[ch + 1]]
+        if hdr.chained >> ch & 1:
+            # the additions and the coarser table, both sorted: a stable sort merges the two runs
+            table = np.concatenate([base[ch], table])
+            table.sort(kind="stable")
+            if len(table) > hdr.n or (table[1:] == table[:-1]).any():
+                raise CorruptFileError("corrupt geometry block: damaged value table (an addition the coarser "
+                                       "table holds, or more values than vertices)")
+        out[ch] = table
+    return out
+
+
+_NO_TABLE = np.zeros(0, np.int64)
+
+
+def decode_value_tables(data, n_points: int | None = None, base=None, channels: int = (1 << K.N_CHANNELS) - 1) -> list:
+    """The value tables of a geometry block without decoding its vertices: per channel its sorted
+    distinct ordered integers (int64), None for a channel without a table or not among
+    ``channels`` (a bit mask). What a finer level's chained block needs of this one; ``base``: per
+    channel the tables of this block's own coarser level, needed where it chains too. Raises
+    :class:`CorruptFileError` on a damaged block."""
+    buf = np.frombuffer(bytes(data), dtype=np.uint8)
+    hdr = parse_geometry_header(buf, n_points)
+    if hdr.coding >= 4:
+        return _decode_tables4(buf, hdr, base, channels)
+    offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
+    offs[0] = HEADER_SIZE
+    offs[1:] = HEADER_SIZE + np.cumsum(hdr.lengths)
+    modes = hdr.modes
+    room = sum(min(hdr.n, _MAX_TABLE_PER_BYTE * (int(hdr.lengths[ch]) + 8)) for ch in range(K.N_CHANNELS) if modes[ch])
+    tables = np.zeros(room, dtype=np.int64)
+    tab_offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
+    st = np.stack([dec_state() for _ in range(K.N_CHANNELS)])
+    probs = np.stack([new_model(K.MODEL_SIZE) for _ in range(K.N_CHANNELS)])
+    if K.decode_tables_kernel(st, buf, offs, probs, modes, hdr.n, tables, tab_offs) != K.OK:
+        raise CorruptFileError("corrupt geometry block: damaged value table")
+    return [tables[tab_offs[ch]:tab_offs[ch + 1]] if modes[ch] and channels >> ch & 1 else None
+            for ch in range(K.N_CHANNELS)]
+
+
+def chained_channels(data) -> int:
+    """The channels (bit mask) whose tables a geometry block (or its first :data:`MAX_HEADER_SIZE`
+    bytes) chains to the next coarser level's; 0 before coding 4."""
+    data = bytes(data[:MAX_HEADER_SIZE])
+    if len(data) < MAX_HEADER_SIZE or data[0] < 4:
+        return 0
+    return _HEADER4.unpack_from(data)[-1 - K.N_CHANNELS] & ((1 << K.N_CHANNELS) - 1)
 
 
 class GeometryDecoder:
@@ -306,9 +695,16 @@ class GeometryDecoder:
         The block written by :func:`encode_geometry`.
     n_points : int, optional
         The vertex count the container expects; a different count in the block is corruption.
+    base : list of 4 int64 arrays or None, optional
+        Coding 4: per channel the value table of the next coarser level (None for a channel
+        without one), where the block chains its tables to it (:func:`decode_value_tables`);
+        a chained block without it is corruption.
 
     Attributes
     ----------
+    value_tables : list of 4
+        Per channel the block's value table (sorted distinct ordered integers), None for a
+        channel without one: what a finer level chained to this one needs.
     values : (n, 4) float32
         x, y, z, density of every vertex decoded so far (the rest is uninitialised);
         ``points`` and ``density`` are views of it.
@@ -322,17 +718,18 @@ class GeometryDecoder:
     geometry with connectivity decoding.
     """
 
-    def __init__(self, data, n_points: int | None = None):
+    def __init__(self, data, n_points: int | None = None, base=None):
         buf = np.frombuffer(bytes(data), dtype=np.uint8)
-        coding, mode_bits, n, lengths = check_geometry_header(buf, n_points)
+        hdr = parse_geometry_header(buf, n_points)
+        coding, mode_bits, n, lengths = hdr.coding, hdr.mode_bits, hdr.n, hdr.lengths
         self.coding = int(coding)
         xy_table = self.coding < 3 or bool(mode_bits & XY_TABLE_BIT)
-        self.cands = K.candidate_table(self.coding, xy_table)
+        self.cands = K.candidate_table(_kernel_coding(self.coding), xy_table)
         self.n_points = int(n)
-        self.modes = np.array([(mode_bits >> ch) & 1 for ch in range(K.N_CHANNELS)], dtype=np.int64)
+        self.modes = hdr.modes
         self.offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
-        self.offs[0] = HEADER_SIZE
-        self.offs[1:] = HEADER_SIZE + np.cumsum(lengths)
+        self.offs[0] = hdr.size + hdr.table_length
+        self.offs[1:] = self.offs[0] + np.cumsum(lengths)
         self.buf = buf
         self.st = np.stack([dec_state() for _ in range(K.N_CHANNELS)])
         self.probs = np.stack([new_model(K.MODEL_SIZE) for _ in range(K.N_CHANNELS)])
@@ -345,6 +742,19 @@ class GeometryDecoder:
         # half, is twice this size at 1.4 M vertices); lookups do not depend on the capacity
         self.hkeys = np.zeros(K.xy_table_slots(self.n_points, self.coding) if xy_table else 1, dtype=np.int64)
         self.hvals = np.zeros(len(self.hkeys), dtype=np.uint8)
+        if self.coding >= 4:
+            # the tables come from their own stream; the channel streams start with the vertices
+            self.value_tables = vt = _decode_tables4(buf, hdr, base)
+            # the kernels' tables, one after the other
+            self.tab_offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
+            self.tab_offs[1:] = np.cumsum([0 if t is None else len(t) for t in vt])
+            self.tables = np.concatenate([t for t in vt if t is not None] or [_NO_TABLE])
+            if K.decode_tables_kernel(self.st, buf, self.offs, self.probs, np.zeros(K.N_CHANNELS, np.int64),
+                                      self.n_points, self.tables, np.zeros(K.N_CHANNELS + 1, np.int64)) != K.OK:
+                raise CorruptFileError("corrupt geometry block: the coded data is damaged")
+            self.values = np.empty((self.n_points, 4), dtype=np.float32)
+            self.n_decoded = 0
+            return
         stream_bytes = [int(length) for length in lengths]
         table_room = sum(min(self.n_points, _MAX_TABLE_PER_BYTE * (stream_bytes[ch] + 8))
                          for ch in range(K.N_CHANNELS) if self.modes[ch])
@@ -354,6 +764,8 @@ class GeometryDecoder:
                                         self.tables, self.tab_offs)
         if status != K.OK:
             raise CorruptFileError("corrupt geometry block: damaged value table")
+        self.value_tables = [self.tables[self.tab_offs[ch]:self.tab_offs[ch + 1]] if self.modes[ch] else None
+                             for ch in range(K.N_CHANNELS)]
         self.values = np.empty((self.n_points, 4), dtype=np.float32)
         self.n_decoded = 0
 

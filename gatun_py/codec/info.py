@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 
+from .geometry import MAX_HEADER_SIZE, geometry_stream_sizes
 from .tetcfile import TetcReader
 
 _BRICK = re.compile(r"^B\d+/")
@@ -27,7 +28,10 @@ def tetc_info(source) -> dict:
         ``points_dtype`` and ``arrays`` (``name``, ``dtype``, ``components``, ``bytes`` in level 0
         -- for the float32 default scalar, its share is inside the geometry section), and ``parts``:
         what the bytes are, summed over levels and bricks, largest first (``part``, ``bytes``,
-        ``level0_bytes``, ``share`` of the sections' total).
+        ``level0_bytes``, ``share`` of the sections' total). ``level0_bytes`` are the bytes a
+        decode of level 0 reads: its sections, and in format 8 the value tables of the coarser
+        levels its geometry is chained to (part ``geometry value tables``: the table streams of
+        the geometry sections, :mod:`gatun_py.codec.geometry`, apart from the rest of them).
     """
     r = source if isinstance(source, TetcReader) else TetcReader(source)
     c = r.container
@@ -68,7 +72,7 @@ def tetc_info(source) -> dict:
         "arrays": [{"name": name, "dtype": dt.name, "components": k, "bytes": plain.get(f"L{i0}/array/{j}", 0)}
                    for j, (name, dt, k) in enumerate(r.arrays) if name],
         "levels": levels,
-        "parts": _parts(r, plain, i0),
+        "parts": _parts(r, plain, i0, _table_streams(r, sizes)),
         "forest": _forest_info(r, sizes),
         "bricks": _bricks_info(r, sizes),
     }
@@ -100,11 +104,52 @@ _PART_OF_KIND = {"boundary": "connectivity", "tets": "connectivity", "geometry":
                  "deps": "merge dependencies"}
 
 
-def _parts(reader, plain: dict, i0: int) -> list:
-    """Section bytes by what they hold (see :func:`tetc_info`'s ``parts``)."""
+_TABLES = "geometry value tables"
+
+
+def _table_streams(reader, sizes) -> tuple[dict, int]:
+    """({plain section name: bytes of its geometry table stream}, the table-stream bytes of the
+    coarser levels a decode of level 0 reads), summed over bricks; empty before format 8."""
+    if reader.container.major < 8:
+        return {}, 0
+    c = reader.container
+    order = [lv["level"] for lv in reader.levels]
+    own, chained0 = {}, 0
+    prefixes = sorted({m.group(0) for m in map(_BRICK.match, sizes) if m}) or [""]
+    for prefix in prefixes:
+        heads = {}
+        for i in order:
+            name = f"{prefix}L{i}/geometry"
+            if name in sizes:
+                heads[i] = geometry_stream_sizes(c.read_section_head(name, MAX_HEADER_SIZE))
+                own[f"L{i}/geometry"] = own.get(f"L{i}/geometry", 0) + heads[i].get("tables", 0)
+        # level 0 (the first level) reads the table streams of its chained channels in the levels
+        # their chains reach
+        need = [ch for ch in ("x", "y", "z", "density") if order[0] in heads and heads[order[0]][ch + "_mode"] == "chained"]
+        at = 0
+        while need and at + 1 < len(order) and order[at + 1] in heads:
+            at += 1
+            chained0 += sum(heads[order[at]].get(ch + "_table", 0) for ch in need)  # none before coding 4
+            need = [ch for ch in need if heads[order[at]][ch + "_mode"] == "chained"]
+    return own, chained0
+
+
+def _parts(reader, plain: dict, i0: int, tables: tuple = ({}, 0)) -> list:
+    """Section bytes by what they hold (see :func:`tetc_info`'s ``parts``); ``tables`` from
+    :func:`_table_streams`."""
     names = [name for name, _, _ in reader.arrays]
     total = max(sum(plain.values()), 1)
     parts = {}
+    own_tables, chained0 = tables
+    if own_tables:
+        plain = dict(plain)
+        for key, v in own_tables.items():
+            plain[key] -= v
+        row = parts.setdefault(_TABLES, [0, chained0])
+        for key, v in own_tables.items():
+            row[0] += v
+            if key.startswith(f"L{i0}/"):
+                row[1] += v
     for key, v in plain.items():
         level, _, kind = key.partition("/")
         if not level.startswith("L"):

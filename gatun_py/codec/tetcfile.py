@@ -28,14 +28,16 @@ from ..mesh.model import NO_SCALAR, scalar_of
 from ..mesh.validate import check_tet_ids
 from .brickindex import BrickView, brick_levels_summary, parse_brick_index
 from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
-from .container import Container, build_container
+from .container import VERSION_MAJOR, Container, build_container
 from .cutborder import ConnectivityDecoder, coding_for_format, encode_connectivity
 from .decoded_connectivity import DecodedConnectivity, DecodedGeometry
 from .dependencies import decode_dependencies, dependencies_header, encode_dependencies
 from .forest import (FOREST_CODING, ROOT_RANK, coding_for_format as forest_coding_for_format, decode_forest,
                      decode_forest_on_geometry, decode_forest_on_mesh, decode_forest_rounds, encode_forest_on_geometry,
                      encode_forest_on_mesh, encode_forest_rounds, forest_header)
-from .geometry import HEADER_SIZE, GeometryDecoder, check_geometry_header, encode_geometry
+from .geometry import (MAX_HEADER_SIZE, GeometryDecoder, assemble_geometry, chained_channels, check_geometry_header,
+                       coding_for_format as geometry_coding_for_format, decode_value_tables, encode_geometry,
+                       geometry_parts)
 from .threads import RunAhead, check_jobs
 
 FORMAT_NAME = "tetc"
@@ -48,6 +50,7 @@ _MIN_RUN_AHEAD_BATCH_TETS = 16384
 # its tet section and 5 boundary faces per byte; 512 leaves 60x headroom
 _MAX_TETS_PER_BYTE = 512
 _MAX_FACES_PER_BYTE = 512
+GEOMETRY_CODING = geometry_coding_for_format(VERSION_MAJOR)  # what this version writes
 _POINTS = ("points",)  # key of the float64 coordinates among the exact arrays (no array name is a tuple)
 
 
@@ -85,14 +88,21 @@ class EncodedLevel:
     vertex_order: np.ndarray
     peak_border: int
     render_step: float  # default_step of this level's mesh, from the boundary the encoder found
+    # geometry coding 4: the level's channels coded every way, until the file's levels are chained
+    # (:func:`_chain_geometry` rewrites the geometry section and drops them)
+    geometry_parts: object = None
 
 
-def encode_level(payload: LevelPayload) -> EncodedLevel:
-    """Compress one level: connectivity, geometry (in decode order) and the optional forest."""
-    return _with_forest(_encode_level_mesh(payload), payload)
+def encode_level(payload: LevelPayload, *, chainable: bool = True) -> EncodedLevel:
+    """Compress one level: connectivity, geometry (in decode order) and the optional forest.
+
+    The geometry section is a block of its own; ``chainable``: the level is one of several, and
+    keeps what :func:`_chain_geometry` needs to chain its value tables to the next coarser level's
+    once every level is coded."""
+    return _with_forest(_encode_level_mesh(payload, chainable=chainable), payload)
 
 
-def _encode_level_mesh(payload: LevelPayload) -> EncodedLevel:
+def _encode_level_mesh(payload: LevelPayload, *, chainable: bool = True) -> EncodedLevel:
     """One level's mesh sections (connectivity, geometry, point arrays) and metadata, without the
     forest: :func:`_with_forest` adds it (at once in :func:`encode_level`, or later for a level
     whose mesh was coded while its forest was being built)."""
@@ -105,7 +115,12 @@ def _encode_level_mesh(payload: LevelPayload) -> EncodedLevel:
     # The boundary in decode ids and order has the same edges as mesh.boundary_faces(), so the same
     # median; deriving it again from the tets would sort all 4m faces (4 GB at 7.8 M tets).
     render_step = float(default_step(p32, conn.boundary))
-    geometry = encode_geometry(p32, d32, refs)
+    parts = None
+    if GEOMETRY_CODING >= 4:
+        parts = geometry_parts(p32, d32, refs, chainable=chainable)
+        geometry = assemble_geometry([parts])[0]
+    else:
+        geometry = encode_geometry(p32, d32, refs)
     i = int(payload.level)
     sections = {f"L{i}/boundary": conn.boundary_code, f"L{i}/tets": conn.tet_code, f"L{i}/geometry": geometry}
     if mesh.points.dtype == np.float64:
@@ -131,7 +146,19 @@ def _encode_level_mesh(payload: LevelPayload) -> EncodedLevel:
         "scalar_range": [float(x) for x in mesh.scalar_range],
         "has_forest": False,
     }
-    return EncodedLevel(i, sections, meta, vo, conn.peak_border, render_step)
+    return EncodedLevel(i, sections, meta, vo, conn.peak_border, render_step, parts if chainable else None)
+
+
+def _chain_geometry(encoded: list) -> None:
+    """Recode the geometry sections of a file's (or a brick's) levels, in file order, with their
+    value tables chained each to the next level's (:func:`~.geometry.assemble_geometry`), and drop
+    the levels' geometry parts. Levels without parts keep their sections (a file of one level)."""
+    if len(encoded) > 1 and all(e.geometry_parts is not None for e in encoded):
+        blocks = assemble_geometry([e.geometry_parts for e in encoded])
+        for e, block in zip(encoded, blocks):
+            e.sections[f"L{e.level}/geometry"] = block
+    for e in encoded:
+        e.geometry_parts = None
 
 
 def _encode_level_forest(mesh, vertex_order, parent, rank, n_boundary_vertices) -> bytes:
@@ -259,9 +286,11 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
     # checked there, and _with_forest holds it to the level's counts
     mesh_codes = mesh_codes or {}
 
+    chainable = len(levels) > 1
+
     def encode(lv):
         done = mesh_codes.get(lv.level)
-        return encode_level(lv) if done is None else _with_forest(done, lv)
+        return encode_level(lv, chainable=chainable) if done is None else _with_forest(done, lv)
 
     if threads > 1 and len(levels) > 1:
         with ThreadPoolExecutor(min(int(threads), len(levels)), thread_name_prefix="tetc-level") as pool:
@@ -282,6 +311,7 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
             encoded.append(encode(lv))
             if progress is not None:
                 progress(lv.level)
+    _chain_geometry(encoded)
     meta = file_meta(mesh0, encoded[0].meta["boundary_faces"], source, render_step=encoded[0].render_step)
     meta["levels"] = [e.meta for e in encoded]
     sections = [(name, data) for e in encoded for name, data in e.sections.items()]
@@ -309,7 +339,8 @@ def _with_forest(done: EncodedLevel, payload: LevelPayload) -> EncodedLevel:
                                                         meta["boundary_vertices"])
     meta.update(ratio=float(payload.ratio), merges_before=int(payload.merges_before),
                 has_forest=payload.forest is not None)
-    return EncodedLevel(i, sections, meta, done.vertex_order, done.peak_border, done.render_step)
+    return EncodedLevel(i, sections, meta, done.vertex_order, done.peak_border, done.render_step,
+                        done.geometry_parts)
 
 
 def _dependency_section(dependencies, level0: LevelPayload) -> tuple[dict, bytes]:
@@ -385,6 +416,7 @@ class TetcReader:
         if not isinstance(self.meta.get("scalar", ""), str):
             raise CorruptFileError("corrupt metadata: bad scalar name")
         self.points_dtype, self.arrays = self._parse_arrays()
+        self._value_tables = {}  # (level, channel) -> its geometry's value table, for finer levels chained to it
 
     def _parse_arrays(self):
         """(points dtype, [(name, dtype, components)]) from the metadata; format 1 has one float32 scalar."""
@@ -482,8 +514,11 @@ class TetcReader:
         self._one_stream()
         lv = self.level_meta(level)
         name = f"L{level}/geometry"
-        head = self.container.read_section_head(name, HEADER_SIZE)
-        check_geometry_header(head, lv["points"], total=self._size(name))
+        head = self.container.read_section_head(name, MAX_HEADER_SIZE)
+        coding, _, _, _ = check_geometry_header(head, lv["points"], total=self._size(name))
+        if coding > geometry_coding_for_format(self.container.major):
+            raise CorruptFileError(f"corrupt geometry section of level {level}: coding {coding} "
+                                   f"in a file of format {self.container.major}")
         m, nf = lv["tets"], lv["boundary_faces"]
         tlen, blen = (self._size(f"L{level}/{part}") for part in ("tets", "boundary"))
         if m > _MAX_TETS_PER_BYTE * (tlen + 8) or nf > _MAX_FACES_PER_BYTE * (blen + 8):
@@ -522,7 +557,7 @@ class TetcReader:
         render at a ratio runs right after."""
         n = self._checked_points(level)
         conn = DecodedConnectivity(self._connectivity_decoder(level))
-        geo = GeometryDecoder(self.read_section(f"L{level}/geometry"), n_points=n)
+        geo = self._geometry_decoder(level, n)
         self._decoded = (level, conn)
         for _ in self._batches(level, max(1, conn.n_tets), {}, geometry=geo):  # with every decode's checks
             pass
@@ -537,7 +572,53 @@ class TetcReader:
         self._decoded_geometry = None
         if kept is not None and kept[0] == level:
             return DecodedGeometry(kept[1])
-        return GeometryDecoder(self.read_section(f"L{level}/geometry"), n_points=n)
+        return self._geometry_decoder(level, n)
+
+    def _geometry_decoder(self, level: int, n: int) -> GeometryDecoder:
+        data = self.read_section(f"L{level}/geometry")
+        return GeometryDecoder(data, n_points=n, base=self._coarser_tables(level, data))
+
+    def _coarser_tables(self, level: int, data=None):
+        """Per channel the value table of the level after ``level`` in the file that ``level``'s
+        geometry (``data``, or read here) chains to, None for the others; None when nothing chains.
+        Decoded from the chain's table streams alone, channel by channel as far as each chain goes,
+        and kept for the reader's next decodes (a viewer decodes many levels)."""
+        if data is None:
+            data = self.container.read_section_head(f"L{level}/geometry", MAX_HEADER_SIZE)
+        mask = chained_channels(data)
+        if not mask:
+            return None
+        order = [lv["level"] for lv in self.levels]
+        first = order.index(level) + 1
+        cache = self._value_tables  # (level, channel) -> table
+        # the tables missing, level by level from the next one: a level's chained channels among
+        # them are missing in the level after it too (the walk only goes on in the list: at most
+        # every level once)
+        plan, need, at = [], mask, first
+        while need:
+            if at >= len(order):
+                raise CorruptFileError(f"corrupt geometry section of level {order[at - 1]}: its value tables are "
+                                       "chained to a coarser level the file does not hold")
+            need &= sum(1 << ch for ch in range(4) if (order[at], ch) not in cache)
+            if not need:
+                break
+            chains = chained_channels(self.container.read_section_head(f"L{order[at]}/geometry", MAX_HEADER_SIZE))
+            plan.append((at, need, chains & need))
+            need &= chains
+            at += 1
+        for at, need, chains in reversed(plan):
+            base = [cache.get((order[at + 1], ch)) if chains >> ch & 1 else None for ch in range(4)]
+            # the block's header is checked against the level's vertex count (the metadata's, checked
+            # when the reader opened) before its tables are allocated: n caps their sizes
+            tables = decode_value_tables(self.read_section(f"L{order[at]}/geometry"),
+                                         self.level_meta(order[at])["points"], base, channels=need)
+            for ch in range(4):
+                if need >> ch & 1:
+                    if tables[ch] is None:
+                        raise CorruptFileError(f"corrupt geometry section of level {order[at - 1]}: a value table "
+                                               f"chained to level {order[at]}, which codes that channel without one")
+                    cache[order[at], ch] = tables[ch]
+        return [cache[order[first], ch] if mask >> ch & 1 else None for ch in range(4)]
 
     def _level_tets(self, level: int) -> np.ndarray:
         """The tets of ``level`` in decode order, from its connectivity sections alone (what the

@@ -35,7 +35,7 @@ print(json.dumps(out))
 
 def test_a_first_render_compiles_nothing_beyond_what_was_compiled_ahead(tmp_path):
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
-    run = subprocess.run([sys.executable, "-c", CHILD, str(DATA / "post_v7.tetc")], env=env, capture_output=True,
+    run = subprocess.run([sys.executable, "-c", CHILD, str(DATA / "post_v8.tetc")], env=env, capture_output=True,
                          text=True, timeout=900)
     assert run.returncode == 0, run.stderr[-3000:]
     compiled = json.loads(run.stdout.strip().splitlines()[-1])

@@ -162,6 +162,22 @@ def _ordered(vf: np.ndarray) -> np.ndarray:
 _NO_TRACE = np.zeros((0, 4, 3), dtype=np.int64)
 
 
+def _block_tables(vf: np.ndarray, refs) -> tuple:
+    """A block's checked refs and each channel's table of distinct ordered integers: ``(refs,
+    tables_list, tables, tab_offs)``, the tables also concatenated with their offsets as the
+    kernels take them."""
+    n = vf.shape[0]
+    if n >= MAX_POINTS:
+        raise ValueError(f"at most {MAX_POINTS - 1} vertices per geometry block, got {n}")
+    refs = _as_refs(refs, n)
+    ordered = _ordered(vf)
+    tables_list = [np.unique(ordered[:, ch]) for ch in range(K.N_CHANNELS)]
+    tables = np.concatenate(tables_list) if n else np.zeros(0, dtype=np.int64)
+    tab_offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
+    tab_offs[1:] = np.cumsum([len(t) for t in tables_list])
+    return refs, tables_list, tables, tab_offs
+
+
 def _run_encode(vf, refs, modes, tables, tab_offs, cands, trace=_NO_TRACE, wpar=None) -> list:
     n = vf.shape[0]
     if wpar is None:
@@ -248,26 +264,16 @@ def encode_geometry(points, density, refs, *, modes=None, coding: int = FORMAT_V
     n = vf.shape[0]
     if coding not in CODINGS:
         raise ValueError(f"coding must be one of {CODINGS}, got {coding!r}")
-    if coding >= 4:
-        if modes is not None:
-            modes = np.asarray(modes, dtype=np.int64)
-            if modes.shape != (K.N_CHANNELS,) or not np.isin(modes, (0, 1)).all():
-                raise ValueError("modes must be 4 values, each 0 (prediction) or 1 (table)")
-        parts = geometry_parts(points, density, refs, chainable=False, force_ranks=modes is not None and bool(modes.any()))
-        return assemble_geometry([parts], modes=None if modes is None else [modes])[0]
-    cands = K.candidate_table(coding)
-    if n >= MAX_POINTS:
-        raise ValueError(f"at most {MAX_POINTS - 1} vertices per geometry block, got {n}")
-    refs = _as_refs(refs, n)
-    ordered = _ordered(vf)
-    tables_list = [np.unique(ordered[:, ch]) for ch in range(K.N_CHANNELS)]
-    tables = np.concatenate(tables_list) if n else np.zeros(0, dtype=np.int64)
-    tab_offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
-    tab_offs[1:] = np.cumsum([len(t) for t in tables_list])
     if modes is not None:
         modes = np.asarray(modes, dtype=np.int64)
         if modes.shape != (K.N_CHANNELS,) or not np.isin(modes, (0, 1)).all():
             raise ValueError("modes must be 4 values, each 0 (prediction) or 1 (table)")
+    if coding >= 4:
+        parts = geometry_parts(points, density, refs, chainable=False, force_ranks=modes is not None and bool(modes.any()))
+        return assemble_geometry([parts], modes=None if modes is None else [modes])[0]
+    cands = K.candidate_table(coding)
+    refs, tables_list, tables, tab_offs = _block_tables(vf, refs)
+    if modes is not None:
         streams = _run_encode(vf, refs, modes, tables, tab_offs, cands)
     else:
         wpar = K.link_all(refs, vf)
@@ -339,14 +345,7 @@ def geometry_parts(points, density, refs, *, chainable: bool = True, force_ranks
     file with levels, whose tables may chain to the next coarser level's)."""
     vf = _channels(points, density)
     n = vf.shape[0]
-    if n >= MAX_POINTS:
-        raise ValueError(f"at most {MAX_POINTS - 1} vertices per geometry block, got {n}")
-    refs = _as_refs(refs, n)
-    ordered = _ordered(vf)
-    tables_list = [np.unique(ordered[:, ch]) for ch in range(K.N_CHANNELS)]
-    tables = np.concatenate(tables_list) if n else np.zeros(0, dtype=np.int64)
-    tab_offs = np.zeros(K.N_CHANNELS + 1, dtype=np.int64)
-    tab_offs[1:] = np.cumsum([len(t) for t in tables_list])
+    refs, tables_list, tables, tab_offs = _block_tables(vf, refs)
     wpar = K.link_all(refs, vf)
     xy_on, xy_off = K.candidate_table(3, True), K.candidate_table(3, False)
     skip = K.MODE_SKIP

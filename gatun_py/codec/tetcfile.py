@@ -6,7 +6,9 @@ pre-simplified levels). Level ``i`` has the sections ``L{i}/boundary`` and ``L{i
 decode order, :mod:`.geometry`: the stream the renderer needs), ``L{i}/points64`` (float64
 coordinates, exact, when they are not all float32 values) and ``L{i}/array/{j}`` (point array j of
 the metadata's ``arrays``, exact in its dtype, :mod:`.arrays`; absent for a float32 default scalar,
-which the geometry holds exactly), and optionally ``L{i}/forest`` (the remaining merge forest in
+which the geometry holds exactly; format 8: without the components the array's ``copies`` entry
+lists as copies of another array's, :func:`find_copies`, and absent when that is all of them),
+and optionally ``L{i}/forest`` (the remaining merge forest in
 decode order, :mod:`.forest`). The metadata lists the levels with the counts the decoder needs, so
 a reader seeks straight to one level.
 """

@@ -8,6 +8,8 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import gatun_py
 from conftest import load_sample
@@ -100,6 +102,54 @@ def test_synthetic_copies_round_trip(scalar_dtype):
     _check_round_trip(mesh, data)
 
 
+def _column(a, c):
+    return a if a.ndim == 1 else a[:, c]
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.data())
+def test_any_repeats_round_trip(data):
+    """Arrays drawn as fresh columns, copies of earlier ones, or copies one value off: find_copies
+    finds exactly the bit-equal columns (earlier ones or the scalar's), and the file round-trips."""
+    base = grid_mesh(3, 3, 3, seed=4)
+    n = base.n_points
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**16)))
+    pool = {np.dtype("f8"): [], np.dtype("i4"): [], np.dtype("f4"): [base.density]}
+    pd = {}
+    for a in range(data.draw(st.integers(1, 5))):
+        dt = data.draw(st.sampled_from(sorted(pool, key=str)))
+        cols = []
+        for _ in range(data.draw(st.sampled_from([1, 2, 3]))):
+            how = data.draw(st.sampled_from(["fresh", "copy", "near"])) if pool[dt] else "fresh"
+            if how == "fresh":
+                col = rng.normal(size=n).astype(dt) if dt.kind == "f" else rng.integers(-3, 3, n).astype(dt)
+            else:
+                col = data.draw(st.sampled_from(pool[dt])).copy()
+                if how == "near":
+                    col[int(rng.integers(n))] += 1
+            pool[dt].append(col)
+            cols.append(col)
+        pd[f"a{a}"] = cols[0] if len(cols) == 1 else np.stack(cols, axis=1)
+    mesh, _ = validate_tets(base.points, base.density, base.tets, scalar_name="d", point_data=pd)
+    copies = find_copies(mesh)
+    arrays = list(mesh.arrays)
+    s = [a[0] for a in arrays].index("d")
+    copied = {(j, c) for j, c, _, _ in copies}
+    coded = [(s, 0)]
+    for j, c, k, kc in copies:
+        assert (k < j or k == s) and (k, kc) not in copied and j != s
+        assert _bits_equal(_column(mesh.point_data[arrays[j][0]], c), _column(mesh.point_data[arrays[k][0]], kc))
+    for j, (name, dt, k) in enumerate(arrays):
+        if j == s:
+            continue
+        own = [c for c in range(k) if (j, c) not in copied]
+        for c in own:  # none repeats an earlier array's coded column (its own array's may)
+            col = _column(mesh.point_data[name], c)
+            assert not any(_bits_equal(col, _column(mesh.point_data[arrays[kk][0]], kc)) for kk, kc in coded)
+        coded += [(j, c) for c in own]
+    _check_round_trip(mesh, encode_tetc([LevelPayload(0, 0.0, 0, mesh)]))
+
+
 def test_copies_of_the_default_scalar_in_a_vector():
     """A vector one of whose components is the (float32) default scalar: filled from the geometry."""
     base = grid_mesh(4, 4, 3, seed=1)
@@ -135,6 +185,10 @@ def test_fire_with_levels_every_level_bit_exact(tmp_path):
     rows = {row["name"]: row for row in gatun_py.info(str(out))["arrays"]}
     assert rows["u"]["copies"] == "u = uvw[0]" and rows["u"]["bytes"] == 0
     assert "copies" not in rows["uvw"]
+    for selective in (False, True):  # the render paths that read one array: u is uvw[0]
+        u = gatun_py.render(str(out), size=32, scalar="u", ratio=0.5, selective=selective)
+        uvw0 = gatun_py.render(str(out), size=32, scalar="uvw", component=0, ratio=0.5, selective=selective)
+        assert np.array_equal(u.rgb, uvw0.rgb) and np.asarray(u.rgb).any()
 
 
 # -- hostile metadata --------------------------------------------------------------------------

@@ -232,8 +232,8 @@ def _finite_range(values) -> list:
 def find_copies(mesh) -> tuple:
     """The components of ``mesh``'s point arrays that repeat another's bit for bit, in the same
     dtype: ((j, c, k, kc), ...), component c of array j equals component kc of array k, where k is
-    an earlier array or the default scalar and (k, kc) is not itself a copy (so no chains, no
-    cycles). The default scalar is never a copy (a float32 one costs nothing beside the geometry).
+    an earlier array (not j itself) or the default scalar and (k, kc) is not itself a copy (so no
+    chains, no cycles). The default scalar is never a copy (a float32 one costs nothing beside the geometry).
     Decided on level 0: a coarser level's vertices are a subset, so its columns stay equal."""
     arrays = list(mesh.arrays)
     names = [a[0] for a in arrays]
@@ -257,12 +257,15 @@ def find_copies(mesh) -> tuple:
     for j in range(len(arrays)):
         if j == s:
             continue
+        own = {}  # sources from earlier arrays only: a component repeating its own array's is coded
         for c, col in enumerate(columns(j)):
             kk = key(j, col)
             if kk in seen and same(j, c, *seen[kk]):
                 out.append((j, c) + seen[kk])
             else:
-                seen.setdefault(kk, (j, c))
+                own.setdefault(kk, (j, c))
+        for kk, src in own.items():
+            seen.setdefault(kk, src)
     return tuple(out)
 
 

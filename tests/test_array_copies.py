@@ -256,3 +256,14 @@ def test_the_valid_copy_file_decodes():
 def test_bad_copies_are_corrupt(case):
     with pytest.raises(CorruptFileError, match="format 7" if case == "format 7" else None):
         TetcReader(_bad_copy_cases()[1][case]).decode_mesh(0, jobs=1)
+
+
+def test_cli_info_shows_the_copies(tmp_path):
+    from cli_util import run
+
+    out = tmp_path / "fire.tetc"
+    run("compress", FIRE, "--scalar", "t", "--mesh-only", "-o", str(out))
+    text = run("info", str(out)).output
+    line = next(x for x in text.splitlines() if x.strip().startswith("name=u,"))
+    assert "bytes=0" in line and "copies=u = uvw[0]" in line
+    assert "array 'u'" not in text  # no section: no part

@@ -30,7 +30,7 @@ from ._resources import peak_rss_mb
 from .codec import LevelPayload, TetcReader, write_tetc
 from .codec.bricks import check_jobs
 from .codec.info import tetc_info
-from .codec.tetcfile import encode_level
+from .codec.tetcfile import encode_level, find_copies
 from .errors import OptionError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.io import mesh_output_format
@@ -220,19 +220,20 @@ class _LevelsBeside:
 
     def __init__(self, mesh: TetMesh, pool: ThreadPoolExecutor, max_level: int):
         self.mesh, self.pool, self.max_level = mesh, pool, max_level
+        self.copies = find_copies(mesh)  # what encode_tetc will ask every level for
         self.prev = None  # the last level built (the worker's chain)
         self.jobs = {}
 
     def submit(self, i: int, prefix) -> None:
         if 0 not in self.jobs:
-            self.jobs[0] = self.pool.submit(encode_level, LevelPayload(0, 0.0, 0, self.mesh))
+            self.jobs[0] = self.pool.submit(encode_level, LevelPayload(0, 0.0, 0, self.mesh, copies=self.copies))
         if i <= self.max_level:
             self.jobs[i] = self.pool.submit(self._encode, i, prefix)
 
     def _encode(self, i: int, prefix):
         lv = next_level(self.mesh, prefix, i, self.prev)
         self.prev = lv
-        return lv.mesh, encode_level(LevelPayload(i, lv.ratio, lv.n_merges, lv.mesh))
+        return lv.mesh, encode_level(LevelPayload(i, lv.ratio, lv.n_merges, lv.mesh, copies=self.copies))
 
     def codes(self, levels) -> dict:
         """{level: its encoded mesh} for the levels of ``levels`` coded beside the decimation. Each

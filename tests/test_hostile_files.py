@@ -238,6 +238,17 @@ def test_valid_files_decode(worker, files):
         assert check(worker, data)[0] == "ok"
 
 
+def test_bad_array_copies(worker):
+    """Format 8's array copies pointing at a missing array or component, at themselves, at a copy (a
+    chain or a cycle), at another dtype, or in a format-7 file: rejected, whatever reads them."""
+    from test_array_copies import _bad_copy_cases
+
+    data, cases = _bad_copy_cases()
+    assert check(worker, data)[0] == "ok"
+    for what, bad in cases.items():
+        assert check(worker, bad, what)[0] == "rejected", what
+
+
 def test_dependency_bombs(worker, files):
     """The deps section lies about its counts, or is an LZMA bomb, or rebuilds bad ranks: rejected
     before anything large is allocated."""

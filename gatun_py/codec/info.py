@@ -26,7 +26,8 @@ def tetc_info(source) -> dict:
         points), ``sections`` (name -> bytes), ``levels`` (one dict per stored level) and
         ``forest`` (``merges``, ``max_ratio``, ``bytes`` of all stored forests), ``format_version``,
         ``points_dtype`` and ``arrays`` (``name``, ``dtype``, ``components``, ``bytes`` in level 0
-        -- for the float32 default scalar, its share is inside the geometry section), and ``parts``:
+        -- for the float32 default scalar, its share is inside the geometry section; ``copies``,
+        when some components are stored as references to another array's: ``"uvw[0] = u, ..."``), and ``parts``:
         what the bytes are, summed over levels and bricks, largest first (``part``, ``bytes``,
         ``level0_bytes``, ``share`` of the sections' total). ``level0_bytes`` are the bytes a
         decode of level 0 reads: its sections, and in format 8 the value tables of the coarser
@@ -69,7 +70,8 @@ def tetc_info(source) -> dict:
         "sections": sizes,
         "format_version": c.major,
         "points_dtype": r.points_dtype.name,
-        "arrays": [{"name": name, "dtype": dt.name, "components": k, "bytes": plain.get(f"L{i0}/array/{j}", 0)}
+        "arrays": [dict({"name": name, "dtype": dt.name, "components": k, "bytes": plain.get(f"L{i0}/array/{j}", 0)},
+                        **({"copies": _copies_text(r, j)} if j in r.copies else {}))
                    for j, (name, dt, k) in enumerate(r.arrays) if name],
         "levels": levels,
         "parts": _parts(r, plain, i0, _table_streams(r, sizes)),
@@ -132,6 +134,14 @@ def _table_streams(reader, sizes) -> tuple[dict, int]:
             chained0 += sum(heads[order[at]].get(ch + "_table", 0) for ch in need)  # none before coding 4
             need = [ch for ch in need if heads[order[at]][ch + "_mode"] == "chained"]
     return own, chained0
+
+
+def _copies_text(reader, j: int) -> str:
+    """Array j's components stored as references, e.g. ``uvw[0] = u, uvw[2] = density``."""
+    def label(k, c):
+        name, _, n = reader.arrays[k]
+        return name if n == 1 else f"{name}[{c}]"
+    return ", ".join(f"{label(j, c)} = {label(k, kc)}" for c, k, kc in reader.copies[j])
 
 
 def _parts(reader, plain: dict, i0: int, tables: tuple = ({}, 0)) -> list:

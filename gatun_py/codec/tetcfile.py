@@ -6,13 +6,17 @@ pre-simplified levels). Level ``i`` has the sections ``L{i}/boundary`` and ``L{i
 decode order, :mod:`.geometry`: the stream the renderer needs), ``L{i}/points64`` (float64
 coordinates, exact, when they are not all float32 values) and ``L{i}/array/{j}`` (point array j of
 the metadata's ``arrays``, exact in its dtype, :mod:`.arrays`; absent for a float32 default scalar,
-which the geometry holds exactly), and optionally ``L{i}/forest`` (the remaining merge forest in
+which the geometry holds exactly; format 8: without the components the array's ``copies`` entry
+lists as copies of another array's, :func:`find_copies`, and absent when that is all of them),
+and optionally ``L{i}/forest`` (the remaining merge forest in
 decode order, :mod:`.forest`). The metadata lists the levels with the counts the decoder needs, so
 a reader seeks straight to one level.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import os
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import nullcontext
@@ -69,6 +73,9 @@ class LevelPayload:
     mesh : TetMesh
     forest : (parent, rank) or None
         The remaining merge forest in this level mesh's own numbering.
+    copies : tuple of (j, c, k, kc)
+        Components stored as references, :func:`find_copies` of level 0 (the file's ``copies``):
+        component c of array j is component kc of array k. Empty: every component is coded.
     """
 
     level: int
@@ -76,6 +83,7 @@ class LevelPayload:
     merges_before: int
     mesh: object
     forest: tuple | None = None
+    copies: tuple = ()
 
 
 @dataclass
@@ -91,6 +99,7 @@ class EncodedLevel:
     # geometry coding 4: the level's channels coded every way, until the file's levels are chained
     # (:func:`_chain_geometry` rewrites the geometry section and drops them)
     geometry_parts: object = None
+    copies: tuple = ()  # the payload's: what the array sections leave out
 
 
 def encode_level(payload: LevelPayload, *, chainable: bool = True) -> EncodedLevel:
@@ -127,9 +136,17 @@ def _encode_level_mesh(payload: LevelPayload, *, chainable: bool = True) -> Enco
         p64 = mesh.points[vo]
         if not np.array_equal(p64.view(np.int64), p32.astype(np.float64).view(np.int64)):
             sections[f"L{i}/points64"] = encode_array(p64, refs, external=p32)
+    copied = {}
+    for j, c, _, _ in payload.copies:
+        copied.setdefault(j, set()).add(c)
     for j, (name, values) in enumerate(mesh.point_data.items()):
         if name == mesh.scalar_name and values.dtype == np.float32:
             continue  # the geometry section holds it exactly
+        if j in copied:  # only the components that copy nothing; none: no section
+            stored = [c for c in range(values.shape[1] if values.ndim == 2 else 1) if c not in copied[j]]
+            if not stored:
+                continue
+            values = values[:, stored[0]] if len(stored) == 1 else values[:, stored]
         sections[f"L{i}/array/{j}"] = encode_array(values[vo], refs, external=d32 if name == mesh.scalar_name else None,
                                                    positions=p32)
     lo, hi = mesh.bbox
@@ -146,7 +163,8 @@ def _encode_level_mesh(payload: LevelPayload, *, chainable: bool = True) -> Enco
         "scalar_range": [float(x) for x in mesh.scalar_range],
         "has_forest": False,
     }
-    return EncodedLevel(i, sections, meta, vo, conn.peak_border, render_step, parts if chainable else None)
+    return EncodedLevel(i, sections, meta, vo, conn.peak_border, render_step, parts if chainable else None,
+                        tuple(payload.copies))
 
 
 def _chain_geometry(encoded: list) -> None:
@@ -211,12 +229,56 @@ def _finite_range(values) -> list:
     return [float(v.min()), float(v.max())] if v.size else [0.0, 0.0]
 
 
-def _arrays_meta(mesh, *, ranges: bool = False) -> list:
-    """The metadata's ``arrays``; with ``ranges`` also each one's value range (the magnitude's for a
-    vector, plus ``component_ranges``) so a renderer can normalise any of them before decoding."""
+def find_copies(mesh) -> tuple:
+    """The components of ``mesh``'s point arrays that repeat another's bit for bit, in the same
+    dtype: ((j, c, k, kc), ...), component c of array j equals component kc of array k, where k is
+    an earlier array (not j itself) or the default scalar and (k, kc) is not itself a copy (so no
+    chains, no cycles). The default scalar is never a copy (a float32 one costs nothing beside the geometry).
+    Decided on level 0: a coarser level's vertices are a subset, so its columns stay equal."""
+    arrays = list(mesh.arrays)
+    names = [a[0] for a in arrays]
+    s = names.index(mesh.scalar_name) if mesh.scalar_name in names else -1
+    seen = {}  # (dtype, digest) -> (k, kc): the first, coded, column with those bits
+
+    def columns(j):
+        a = np.asarray(mesh.point_data[names[j]])
+        return [a] if a.ndim == 1 else [a[:, c] for c in range(a.shape[1])]
+
+    def key(j, col):  # a digest, not the bytes: one column of a 10 M-point float64 array is 80 MB
+        return dtype_name(arrays[j][1]), hashlib.blake2b(np.ascontiguousarray(col).view(np.uint8)).digest()
+
+    def same(j, c, k, kc):  # bit for bit (-0.0 is not 0.0, NaN payloads count)
+        a, b = np.ascontiguousarray(columns(j)[c]), np.ascontiguousarray(columns(k)[kc])
+        return a.shape == b.shape and np.array_equal(a.view(np.uint8), b.view(np.uint8))
+
+    if s >= 0:
+        seen[key(s, columns(s)[0])] = (s, 0)
     out = []
-    for name, dt, k in mesh.arrays:
+    for j in range(len(arrays)):
+        if j == s:
+            continue
+        own = {}  # sources from earlier arrays only: a component repeating its own array's is coded
+        for c, col in enumerate(columns(j)):
+            kk = key(j, col)
+            if kk in seen and same(j, c, *seen[kk]):
+                out.append((j, c) + seen[kk])
+            else:
+                own.setdefault(kk, (j, c))
+        for kk, src in own.items():
+            seen.setdefault(kk, src)
+    return tuple(out)
+
+
+def _arrays_meta(mesh, *, ranges: bool = False, copies: tuple = ()) -> list:
+    """The metadata's ``arrays``; with ``ranges`` also each one's value range (the magnitude's for a
+    vector, plus ``component_ranges``) so a renderer can normalise any of them before decoding;
+    ``copies`` (:func:`find_copies`) as each copying array's ``copies``: [[c, k, kc], ...]."""
+    out = []
+    for j, (name, dt, k) in enumerate(mesh.arrays):
         e = {"name": name, "dtype": dtype_name(dt), "components": k}
+        own = [[c, kk, kc] for jj, c, kk, kc in copies if jj == j]
+        if own:
+            e["copies"] = own
         if ranges:
             a = mesh.point_data[name]
             if k == 1:
@@ -228,10 +290,12 @@ def _arrays_meta(mesh, *, ranges: bool = False) -> list:
     return out
 
 
-def file_meta(mesh0, n_boundary_faces: int, source: str = "", *, render_step: float | None = None) -> dict:
+def file_meta(mesh0, n_boundary_faces: int, source: str = "", *, render_step: float | None = None,
+              copies: tuple = ()) -> dict:
     """The metadata that describes the whole mesh (counts, bounds, arrays and their ranges, render
     step), before the levels or the bricks that hold it. ``render_step``: the mesh's
-    :func:`~gatun_py.mesh.default_step` when the caller has it (computed here otherwise)."""
+    :func:`~gatun_py.mesh.default_step` when the caller has it (computed here otherwise);
+    ``copies``: the components every level stores as references (:func:`find_copies`)."""
     lo, hi = mesh0.bbox
     if render_step is None:
         render_step = default_step(mesh0.points32, mesh0.boundary_faces())
@@ -243,7 +307,7 @@ def file_meta(mesh0, n_boundary_faces: int, source: str = "", *, render_step: fl
         "bbox": [lo.tolist(), hi.tolist()],
         "scalar": str(mesh0.scalar_name),
         "points_dtype": dtype_name(mesh0.points.dtype),
-        "arrays": _arrays_meta(mesh0, ranges=True),
+        "arrays": _arrays_meta(mesh0, ranges=True, copies=copies),
         "scalar_range": [float(x) for x in mesh0.scalar_range],
         "source": os.path.basename(str(source)),
         # The full mesh's volume-mode sample step, so that every level and ratio samples alike.
@@ -285,12 +349,16 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
     # every level's mesh is checked (check_mesh) by encode_level; a mesh encoded beforehand was
     # checked there, and _with_forest holds it to the level's counts
     mesh_codes = mesh_codes or {}
+    copies = find_copies(mesh0)
+    levels = [dataclasses.replace(lv, copies=copies) for lv in levels]
 
     chainable = len(levels) > 1
 
     def encode(lv):
         done = mesh_codes.get(lv.level)
-        return encode_level(lv, chainable=chainable) if done is None else _with_forest(done, lv)
+        if done is None or done.copies != copies:  # coded beforehand with other copies: again
+            return encode_level(lv, chainable=chainable)
+        return _with_forest(done, lv)
 
     if threads > 1 and len(levels) > 1:
         with ThreadPoolExecutor(min(int(threads), len(levels)), thread_name_prefix="tetc-level") as pool:
@@ -312,7 +380,8 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
             if progress is not None:
                 progress(lv.level)
     _chain_geometry(encoded)
-    meta = file_meta(mesh0, encoded[0].meta["boundary_faces"], source, render_step=encoded[0].render_step)
+    meta = file_meta(mesh0, encoded[0].meta["boundary_faces"], source, render_step=encoded[0].render_step,
+                     copies=copies)
     meta["levels"] = [e.meta for e in encoded]
     sections = [(name, data) for e in encoded for name, data in e.sections.items()]
     if dependencies is not None:
@@ -340,7 +409,7 @@ def _with_forest(done: EncodedLevel, payload: LevelPayload) -> EncodedLevel:
     meta.update(ratio=float(payload.ratio), merges_before=int(payload.merges_before),
                 has_forest=payload.forest is not None)
     return EncodedLevel(i, sections, meta, done.vertex_order, done.peak_border, done.render_step,
-                        done.geometry_parts)
+                        done.geometry_parts, done.copies)
 
 
 def _dependency_section(dependencies, level0: LevelPayload) -> tuple[dict, bytes]:
@@ -416,6 +485,7 @@ class TetcReader:
         if not isinstance(self.meta.get("scalar", ""), str):
             raise CorruptFileError("corrupt metadata: bad scalar name")
         self.points_dtype, self.arrays = self._parse_arrays()
+        self.copies = self._parse_copies()  # {j: [(c, k, kc), ...]}: see find_copies
         self._value_tables = {}  # (level, channel) -> its geometry's value table, for finer levels chained to it
 
     def _parse_arrays(self):
@@ -441,6 +511,42 @@ class TetcReader:
         if arrays[names.index(self.scalar_name)][2] != 1:
             raise CorruptFileError("corrupt metadata: the default scalar has several components")
         return pdt, arrays
+
+    def _parse_copies(self) -> dict:
+        """{j: [(c, k, kc), ...]} from the ``arrays`` entries' ``copies`` (format 8): component c of
+        array j is component kc of array k, an earlier array or the default scalar, in the same
+        dtype, and not a copy itself (which leaves no room for a cycle)."""
+        entries = self.meta.get("arrays") or []
+        listed = {j: e["copies"] for j, e in enumerate(entries) if "copies" in e}
+        if not listed:
+            return {}
+        if self.container.major < 8:
+            raise CorruptFileError("corrupt metadata: array copies in a file of format 7 or older")
+        names = [a[0] for a in self.arrays]
+        s = names.index(self.scalar_name)
+        out = {}
+        for j, rows in listed.items():
+            if not isinstance(rows, list) or not rows or j == s:
+                raise CorruptFileError(f"corrupt metadata: bad copies of array {j}")
+            for row in rows:
+                if (not isinstance(row, list) or len(row) != 3
+                        or not all(isinstance(x, int) and not isinstance(x, bool) for x in row)):
+                    raise CorruptFileError(f"corrupt metadata: bad copy entry of array {j}")
+                c, k, kc = row
+                if not 0 <= c < self.arrays[j][2] or any(c == r[0] for r in out.get(j, [])):
+                    raise CorruptFileError(f"corrupt metadata: array {j} copies a bad or repeated component")
+                if k == j:
+                    raise CorruptFileError(f"corrupt metadata: array {j} copies itself")
+                if not (0 <= k < j or k == s) or not 0 <= kc < self.arrays[k][2]:
+                    raise CorruptFileError(f"corrupt metadata: array {j} copies a missing array or component")
+                if self.arrays[k][1] != self.arrays[j][1]:
+                    raise CorruptFileError(f"corrupt metadata: array {j} copies an array of another dtype")
+                out.setdefault(j, []).append((c, k, kc))
+        for j, rows in out.items():
+            for c, k, kc in rows:
+                if any(r[0] == kc for r in out.get(k, [])):
+                    raise CorruptFileError(f"corrupt metadata: array {j} copies a copy (a chain or a cycle)")
+        return out
 
     @property
     def scalar_name(self) -> str:
@@ -675,14 +781,38 @@ class TetcReader:
         return decode_dependencies(data, self.forest_merges(), int(self.meta["tets"]))
 
     def _array_decoder(self, level: int, j: int, n: int):
-        """Decoder of array j of ``level`` (None for a float32 default scalar: the geometry holds it)."""
+        """Decoder of array j of ``level`` (None for a float32 default scalar: the geometry holds it);
+        a :class:`_CopyingDecoder` for an array with copied components, whose sources
+        (:meth:`_array_decoders`) must be decoded before it."""
         name, dt, k = self.arrays[j]
         section = f"L{level}/array/{j}"
+        copies = self.copies.get(j)
+        if copies:
+            stored = [c for c in range(k) if all(c != r[0] for r in copies)]
+            if self.container.has_section(section) != bool(stored):
+                raise CorruptFileError(f"{'missing' if stored else 'unexpected'} section {section!r}")
+            dec = ArrayDecoder(self.read_section(section), n_points=n, dtype=dt.name,
+                               components=len(stored)) if stored else None
+            return _CopyingDecoder(dec, dt, k, n, stored, [(c, self.arrays[kk][0], kc) for c, kk, kc in copies])
         if not self.container.has_section(section):
             if name == self.scalar_name and dt == np.float32:
                 return None
             raise CorruptFileError(f"missing section {section!r}")
         return ArrayDecoder(self.read_section(section), n_points=n, dtype=dt.name, components=k)
+
+    def _array_decoders(self, level: int, js, n: int) -> dict:
+        """{name: decoder} of the arrays ``js`` of ``level`` and of the arrays their copies come from,
+        in the order :meth:`_batches` must decode them (the default scalar, then by index: a copy's
+        source comes first)."""
+        need = set(js)
+        need.update(k for j in js for _, k, _ in self.copies.get(j, ()))
+        s = [a[0] for a in self.arrays].index(self.scalar_name)
+        out = {}
+        for j in sorted(need, key=lambda j: (j != s, j)):
+            dec = self._array_decoder(level, j, n)
+            if dec is not None:
+                out[self.arrays[j][0]] = dec
+        return out
 
     def _points_decoder(self, level: int, n: int):
         section = f"L{level}/points64"
@@ -734,6 +864,9 @@ class TetcReader:
             def exact(refs, pts, dens):
                 out = {}
                 for key, dec in extra.items():
+                    if isinstance(dec, _CopyingDecoder):  # its sources are before it in extra
+                        out[key] = dec.decode(refs, out, dens, positions=geo.values)
+                        continue
                     ext = pts if key == _POINTS else dens if key == self.scalar_name else None
                     out[key] = dec.decode(refs, ext, positions=geo.values)
                 return out
@@ -788,8 +921,8 @@ class TetcReader:
             scalar_of({scalar: np.zeros((0,) if self.arrays[j][2] == 1 else (0, self.arrays[j][2]))}, scalar, component)
         except ValueError as e:
             raise OptionError(str(e)) from None
-        dec = self._array_decoder(level, j, n)
-        for batch, exact in self._batches(level, batch_tets, {scalar: dec}, jobs=jobs, depth=depth):
+        extra = self._array_decoders(level, [j], n)
+        for batch, exact in self._batches(level, batch_tets, extra, jobs=jobs, depth=depth):
             with np.errstate(over="ignore"):  # beyond float32: inf, like any float32 rounding
                 batch.density = scalar_of(exact, scalar, component).astype(np.float32)
             yield batch
@@ -825,10 +958,7 @@ class TetcReader:
         pdec = self._points_decoder(level, n)
         if pdec is not None:
             extra[_POINTS] = pdec
-        for j, (name, _, _) in enumerate(self.arrays):
-            dec = self._array_decoder(level, j, n)
-            if dec is not None:
-                extra[name] = dec
+        extra.update(self._array_decoders(level, range(len(self.arrays)), n))
         points = np.empty((n, 3), np.float32)
         density = np.empty(n, np.float32)
         tets = np.empty((lv["tets"], 4), np.int32)  # decoded into in place, batch by batch
@@ -852,6 +982,40 @@ class TetcReader:
             return TetMesh(points, density, tets, self.scalar_name, point_data=point_data)
         except Exception as e:  # a mesh that fails its own invariants can only come from damage
             raise CorruptFileError(f"corrupt file: decoded mesh is invalid ({e})") from None
+
+
+class _CopyingDecoder:
+    """Streaming decoder of a point array some of whose components are copies of other arrays'
+    (the file's ``copies``): the coded components from ``dec`` (None when every one is a copy),
+    the others from the batch's values of their sources. Same interface as :class:`ArrayDecoder`
+    but for :meth:`decode`, which takes the batch's decoded arrays."""
+
+    def __init__(self, dec, dtype, k: int, n: int, stored: list, copies: list):
+        self.dec, self.stored, self.copies = dec, stored, copies  # copies: [(c, source name, kc)]
+        self.values = np.empty((n,) if k == 1 else (n, k), dtype)
+        self._cols = self.values.reshape(n, k)
+        self.n_points, self.n_decoded = n, 0
+
+    def decode(self, refs, out: dict, dens, positions=None) -> np.ndarray:
+        """The next ``len(refs)`` vertices; ``out``: the batch's values of the sources by name
+        (a float32 default scalar, held by the geometry, is ``dens``)."""
+        a, m = self.n_decoded, len(refs)
+        cols = self._cols[a:a + m]
+        if self.dec is not None:
+            part = self.dec.decode(refs, None, positions=positions)
+            cols[:, self.stored] = part.reshape(m, len(self.stored))
+        for c, src, kc in self.copies:
+            v = out.get(src, dens)
+            cols[:, c] = v if v.ndim == 1 else v[:, kc]
+        self.n_decoded = a + m
+        return self.values[a:a + m]
+
+    def finish(self) -> np.ndarray:
+        if self.dec is not None:
+            self.dec.finish()
+        if self.n_decoded != self.n_points:
+            raise CorruptFileError("corrupt array section: fewer vertices decoded than announced")
+        return self.values
 
 
 def iter_decode(source, level: int = 0, **kw) -> Iterator[TetBatch]:

@@ -209,7 +209,7 @@ def compile_for_render(*, decoder: bool = True, simplify: bool = False, lean: bo
     the renderer while worker processes compile the decoder's connectivity and geometry halves
     and, with ``simplify`` (a render at a ratio, level or budget), the merge-forest decoder and the
     run-time filter. Three compilations at once keep two cores busy whatever their lengths (on a
-    2-core EPYC about 13, 10 and 8 s of CPU). A mesh file (``decoder=False``) needs the renderer
+    2-core EPYC about 11, 8.5 and 8.7 s of CPU for the renderer, the connectivity and the geometry). A mesh file (``decoder=False``) needs the renderer
     alone; what a render does not use compiles when first used (or ahead, by ``make install``).
     """
     t0 = time.perf_counter()

@@ -75,7 +75,7 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
 @output_option("Output .tetc file.")
 @click.option("--levels", "n_levels", type=click.IntRange(min=0), default=None,
               help="Store pre-simplified levels 1..K (ratio 1-1/2^i) [default: every level the merge forest "
-                   "reaches, up to 13].")
+                   "reaches, up to 13; none under 128 points].")
 @click.option("--mesh-only", is_flag=True, help="Store only the mesh: no merge forest, no levels.")
 @click.option("--w-density", type=click.FloatRange(min=0), default=1.0, show_default=True,
               help="Decimation: weight of the density (mass) error.")

@@ -47,7 +47,7 @@ from .render.transfer import load_transfer_function
 from .simplify import build_levels, decimate, storage_forests
 from .simplify.dependencies import merge_dependencies
 from .simplify.filter import SimplifyFilter
-from .simplify.levels import MAX_LEVEL, next_level, resolve_target, target_ancestors
+from .simplify.levels import MAX_LEVEL, max_stored_level, next_level, resolve_target, target_ancestors
 
 __all__ = ["compress", "decompress", "convert", "info", "open", "render", "render_frames", "TetcFile", "Frame"]
 
@@ -105,7 +105,10 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     output : path-like
         The ``.tetc`` file, written atomically.
     levels : int, optional
-        Store pre-simplified levels 1..K (ratio 1 - 1/2^i); default every level the forest reaches.
+        Store pre-simplified levels 1..K (ratio 1 - 1/2^i), those the forest reaches; default
+        every level up to 13 that keeps at least 128 points
+        (:data:`~gatun_py.simplify.MIN_LEVEL_POINTS`; coarser ratios simplify on the fly from the
+        last stored level).
     mesh_only : bool
         Store the mesh alone: no merge forest, no levels.
     force : bool
@@ -167,6 +170,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
         raise OptionError("merge dependencies need a merge forest of one plain stream: not with mesh_only or bricks")
     deps = None
     mesh_codes = {}
+    copies = None  # find_copies(mesh), once it is known
     if bricks > 1 and mesh.n_tets == 0:
         log("note: a mesh without tets is stored as one brick")
     if bricks > 1 and mesh.n_tets > 0:
@@ -181,14 +185,15 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
             # With a second core the levels' meshes are encoded beside the decimation (whose merge
             # loop releases the GIL), each as soon as the merges before it are done; their forests
             # are added afterwards.
-            beside = _LevelsBeside(mesh, pool, MAX_LEVEL if levels is None else min(int(levels), MAX_LEVEL))
+            beside = _LevelsBeside(mesh, pool, max_stored_level(mesh.n_points) if levels is None
+                                   else min(int(levels), MAX_LEVEL))
             forest = decimate(mesh, w_density=w_density, w_geometry=w_geometry,
                               progress=_counter(progress, mesh.n_points),
                               on_level=beside.submit if threads > 1 else None)
             if progress is not None:  # done: the last vertices of every component are never merged
                 progress(mesh.n_points, mesh.n_points)
             lv = build_levels(mesh, forest, levels)
-            mesh_codes = beside.codes(lv)
+            mesh_codes, copies = beside.codes(lv), beside.copies
             log(f"merge forest: {forest.n_merges} merges (max ratio {forest.max_ratio:.5f}); "
                 f"levels {', '.join(str(x.level) for x in lv)}")
             payload = [LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
@@ -199,7 +204,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
                 deps = (deps.ptr, deps.idx, deps.removed)
     n = (len(data) if payload is None else
          write_tetc(output, payload, source=name, force=force, dependencies=deps, mesh_codes=mesh_codes,
-                    threads=threads))
+                    threads=threads, copies=copies))
     out = TetcFile(output)
     info = out.info
     log(f"wrote {output}: {n} bytes ({8.0 * n / max(mesh.n_tets, 1):.2f} bits/tet overall, "
@@ -401,9 +406,9 @@ class TetcFile:
     >>> import gatun_py, tempfile, os
     >>> from gatun_py.warmup import tiny_mesh
     >>> out = os.path.join(tempfile.mkdtemp(), "tiny.tetc")
-    >>> f = gatun_py.open(gatun_py.compress(tiny_mesh(), out).path)
-    >>> f.levels[:2]
-    [0, 1]
+    >>> f = gatun_py.open(gatun_py.compress(tiny_mesh(), out, levels=3).path)
+    >>> f.levels
+    [0, 1, 2, 3]
     >>> sum(len(b.tets) for b in f)   # the decoded stream of level 0
     90
     """

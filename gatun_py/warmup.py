@@ -28,7 +28,7 @@ from .render.camera import Camera
 from .render.composite import composite
 from .render.raycast import render_mesh
 from .render.stream import render_batches
-from .simplify import ROOT_RANK, ancestors, build_levels, decimate
+from .simplify import ROOT_RANK, ancestors, available_levels, build_levels, decimate
 from .pipeline import _importance_kernels as IK
 from .simplify.dependencies import closed_cut_order, cut_ancestors, merge_dependencies
 from .simplify.filter import SimplifyFilter
@@ -43,7 +43,8 @@ def tiny_mesh():
 def _simplify_and_render() -> str:
     mesh = tiny_mesh()
     forest = decimate(mesh)
-    levels = build_levels(mesh, forest)
+    # every level the forest reaches: the tiny mesh is below the default's smallest level
+    levels = build_levels(mesh, forest, available_levels(forest, min_points=1))
     _selective_kernels(mesh, forest)
     _render_kernels(lean=True)
     return f"decimation, merge dependencies and rendering ({len(levels)} levels)"

@@ -99,6 +99,8 @@ def test_synthetic_copies_round_trip(scalar_dtype):
     assert "copies" not in meta["arrays"][j("negz")]
     plain = encode_tetc([LevelPayload(0, 0.0, 0, mesh, copies=())])  # ignored: encode_tetc decides
     assert plain == data
+    # the caller's find_copies (compress passes the one it already has) writes the same file
+    assert encode_tetc([LevelPayload(0, 0.0, 0, mesh)], copies=find_copies(mesh)) == data
     _check_round_trip(mesh, data)
 
 

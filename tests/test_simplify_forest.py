@@ -15,7 +15,7 @@ from gatun_py.codec.forest import decode_forest, encode_forest
 from gatun_py.errors import CorruptFileError, OptionError
 from gatun_py.simplify import (ROOT_RANK, MergeForest, ancestors, available_levels, build_levels, decimate,
                                level_merges, simplified_mesh)
-from gatun_py.simplify.levels import level_forest
+from gatun_py.simplify.levels import MAX_LEVEL, level_forest
 
 _FORESTS: dict = {}
 
@@ -87,7 +87,7 @@ def test_levels_built_in_a_chain_equal_levels_from_the_input(mesh):
 def test_sample_levels_built_in_a_chain_equal_levels_from_the_input():
     mesh = load_sample("bluntfin")[0]
     forest = decimate(mesh)
-    levels = build_levels(mesh, forest)
+    levels = build_levels(mesh, forest, MAX_LEVEL)  # every level, down to a few points
     assert len(levels) >= 10
     _assert_levels_equal_direct(mesh, forest, levels)
 
@@ -164,8 +164,9 @@ def test_levels_of_a_single_tet():
 def test_build_levels_selection():
     m = delaunay_mesh(80, 9)
     f = decimate(m)
-    reach = available_levels(f)
+    reach = available_levels(f, min_points=1)
     assert [lv.level for lv in build_levels(m, f, 2)] == [i for i in reach if i <= 2]
+    assert len(reach) > 2 and [lv.level for lv in build_levels(m, f)] == [0]  # 40 points at level 1: none by default
     with pytest.raises(OptionError):
         build_levels(m, f, -1)
 
@@ -189,12 +190,30 @@ def test_samples_valid_at_levels_and_random_prefixes(name):
 def test_sample_level_continuation_is_exact():
     mesh = load_sample("post")[0]
     f = _forest("post")
-    levels = build_levels(mesh, f)
+    levels = build_levels(mesh, f, available_levels(f, min_points=1))  # down to a few points
     assert len(levels) >= 8
     rng = np.random.default_rng(3)
     for lv in levels:
         for n in rng.integers(lv.n_merges, f.n_merges + 1, 2):
             _same_state(mesh, f, lv, int(n))
+
+
+def test_default_levels_stop_at_min_points():
+    from gatun_py.simplify import MIN_LEVEL_POINTS, level_merges, storage_forests
+
+    mesh = load_sample("post")[0]
+    f = _forest("post")
+    levels = build_levels(mesh, f)
+    assert all(lv.mesh.n_points >= MIN_LEVEL_POINTS for lv in levels)
+    big_enough = [i for i in available_levels(f, min_points=1)
+                  if mesh.n_points - level_merges(mesh.n_points, i) >= MIN_LEVEL_POINTS]
+    assert [lv.level for lv in levels] == big_enough
+    assert len(big_enough) < len(available_levels(f, min_points=1))  # post's forest goes further
+    # the last stored level keeps every remaining merge: any ratio stays reachable
+    assert storage_forests(levels)[-1].n_merges == f.n_merges - levels[-1].n_merges
+    # levels asked for by number are stored however small
+    assert [lv.level for lv in build_levels(mesh, f, 7)] == [i for i in available_levels(f, min_points=1) if i <= 7]
+    assert max(big_enough) < 7
 
 
 @settings(max_examples=20, deadline=None)

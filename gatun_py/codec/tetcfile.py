@@ -316,7 +316,7 @@ def file_meta(mesh0, n_boundary_faces: int, source: str = "", *, render_step: fl
 
 
 def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, dependencies=None,
-                mesh_codes: dict | None = None, threads: int = 1) -> bytes:
+                mesh_codes: dict | None = None, threads: int = 1, copies: tuple | None = None) -> bytes:
     """Build a whole ``.tetc`` file from levels (level 0 first).
 
     Parameters
@@ -337,6 +337,9 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
         Levels encoded at once in threads (the connectivity kernels release the GIL); every level
         is coded on its own and the sections are assembled in level order, so the bytes do not
         depend on it.
+    copies : tuple, optional
+        :func:`find_copies` of level 0's mesh when the caller has it already (it hashes every
+        point array: two passes over a large mesh's arrays otherwise); computed here when omitted.
     """
     if not levels:
         raise OptionError("nothing to write: no levels")
@@ -349,7 +352,7 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
     # every level's mesh is checked (check_mesh) by encode_level; a mesh encoded beforehand was
     # checked there, and _with_forest holds it to the level's counts
     mesh_codes = mesh_codes or {}
-    copies = find_copies(mesh0)
+    copies = find_copies(mesh0) if copies is None else tuple(copies)
     levels = [dataclasses.replace(lv, copies=copies) for lv in levels]
 
     chainable = len(levels) > 1
@@ -423,12 +426,13 @@ def _dependency_section(dependencies, level0: LevelPayload) -> tuple[dict, bytes
 
 
 def write_tetc(path, mesh_or_levels, *, source: str = "", force: bool = False, progress=None,
-               dependencies=None, mesh_codes: dict | None = None, threads: int = 1) -> int:
+               dependencies=None, mesh_codes: dict | None = None, threads: int = 1,
+               copies: tuple | None = None) -> int:
     """Compress a mesh (or a list of :class:`LevelPayload`) into ``path`` atomically; returns bytes
-    written. ``mesh_codes``, ``threads``: as :func:`encode_tetc`."""
+    written. ``mesh_codes``, ``threads``, ``copies``: as :func:`encode_tetc`."""
     levels = mesh_or_levels if isinstance(mesh_or_levels, list) else [LevelPayload(0, 0.0, 0, mesh_or_levels)]
     data = encode_tetc(levels, source=source, progress=progress, dependencies=dependencies,
-                       mesh_codes=mesh_codes, threads=threads)
+                       mesh_codes=mesh_codes, threads=threads, copies=copies)
     write_bytes_atomic(path, data, force=force)
     return len(data)
 

@@ -12,11 +12,16 @@ from ..errors import CorruptFileError, OptionError
 from ..mesh import TetMesh
 from .forest import ROOT_RANK, MergeForest, ancestors, forest_prefix, mesh_from_ancestors, simplified_mesh
 
-__all__ = ["MAX_LEVEL", "LevelMesh", "level_merges", "level_ends", "available_levels", "build_levels", "next_level", "level_forest",
+__all__ = ["MAX_LEVEL", "MIN_LEVEL_POINTS", "LevelMesh", "max_stored_level", "level_merges", "level_ends", "available_levels", "build_levels", "next_level", "level_forest",
            "read_simplified", "forest_merges", "storage_forests", "Target", "resolve_target", "stored_levels",
            "target_ancestors"]
 
 MAX_LEVEL = 13
+# A level of fewer points is not stored: the level before it (under 256 points, about a thousand
+# tets) decodes in a fraction of a millisecond, and its forest then keeps all the remaining merges
+# (any ratio stays reachable), while every level costs section records, headers and metadata of its
+# own besides its data: Blunt-fin's levels 9 to 13 (80 to 5 points) took 5.2 kB of its 337 kB file.
+MIN_LEVEL_POINTS = 128
 
 
 def level_merges(n_points: int, i: int) -> int:
@@ -39,9 +44,25 @@ def level_ends(n_points: int, max_level: int = 62) -> dict[int, int]:
     return out
 
 
-def available_levels(forest: MergeForest, max_level: int = MAX_LEVEL) -> list[int]:
-    """Levels 0..max_level whose N_i the forest reaches (level 0 always; duplicates of N dropped)."""
-    return [0] + [i for n, i in level_ends(forest.n_points, max_level).items() if n <= forest.n_merges]
+def max_stored_level(n_points: int, max_level: int = MAX_LEVEL, min_points: int = MIN_LEVEL_POINTS) -> int:
+    """The last level i <= ``max_level`` whose ceil(n_points / 2^i) points are at least
+    ``min_points`` (0 if none is): the last level a file stores by default.
+
+    >>> max_stored_level(40960), max_stored_level(2288), max_stored_level(100)
+    (8, 4, 0)
+    """
+    i = 0
+    while i < max_level and -(-n_points // (1 << (i + 1))) >= min_points:
+        i += 1
+    return i
+
+
+def available_levels(forest: MergeForest, max_level: int = MAX_LEVEL, *,
+                     min_points: int = MIN_LEVEL_POINTS) -> list[int]:
+    """Levels 0..max_level whose N_i the forest reaches and which keep at least ``min_points``
+    points (level 0 always; of equal N_i the first i). ``min_points=1``: every reachable level."""
+    top = max_stored_level(forest.n_points, max_level, min_points)
+    return [0] + [i for n, i in level_ends(forest.n_points, top).items() if n <= forest.n_merges]
 
 
 @dataclass(frozen=True, eq=False)
@@ -97,17 +118,17 @@ def build_levels(mesh: TetMesh, forest: MergeForest, levels=None) -> list[LevelM
     forest : MergeForest
         Its decimation.
     levels : int or sequence of int, optional
-        An int K means levels 0..K (only those the forest reaches, see :func:`available_levels`);
-        a sequence picks levels explicitly (each must be reachable). Default: every reachable
-        level up to 13.
+        An int K means levels 0..K (those the forest reaches, however small, see
+        :func:`available_levels`); a sequence picks levels explicitly (each must be reached by the
+        forest). Default: every level up to 13 of at least :data:`MIN_LEVEL_POINTS` points.
 
     Returns
     -------
     list of LevelMesh, level 0 first.
     """
-    reach = available_levels(forest, MAX_LEVEL)
+    reach = available_levels(forest, MAX_LEVEL, min_points=1)  # what an explicit request may ask
     if levels is None:
-        wanted = reach
+        wanted = available_levels(forest, MAX_LEVEL)
     elif isinstance(levels, (int, np.integer)):
         if levels < 0:
             raise OptionError(f"levels must be >= 0, got {levels}")

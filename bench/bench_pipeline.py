@@ -47,7 +47,7 @@ REPEATS = 1 if QUICK else 3
 def build_files(name):
     """<name>_levels.tetc (all levels) and <name>_one.tetc (level 0 + forest: one stored version)."""
     from gatun_py.codec import LevelPayload, write_tetc
-    from gatun_py.simplify import build_levels, decimate
+    from gatun_py.simplify import MAX_LEVEL, build_levels, decimate
 
     WORK.mkdir(parents=True, exist_ok=True)
     lv_path, one_path = WORK / f"{name}_levels.tetc", WORK / f"{name}_one.tetc"
@@ -55,7 +55,7 @@ def build_files(name):
         return lv_path, one_path
     mesh, _ = load_mesh(name)
     forest = decimate(mesh)
-    levels = build_levels(mesh, forest)
+    levels = build_levels(mesh, forest, MAX_LEVEL)  # every level to 13, as the paper's Table 3
     pay = [LevelPayload(lv.level, lv.ratio, lv.n_merges, lv.mesh, (lv.forest.parent, lv.forest.rank)) for lv in levels]
     write_tetc(lv_path, pay, source=name, force=True)
     write_tetc(one_path, pay[:1], source=name, force=True)

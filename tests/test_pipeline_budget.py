@@ -10,6 +10,7 @@
 
 import json
 import math
+import time
 
 import numpy as np
 import pytest
@@ -184,6 +185,24 @@ def test_plan_file_budget_renders_the_planned_target(post_tetc, tmp_path, monkey
     assert res.stats["merges"] == tight.merges and res.stats["level"] == tight.level
     # The planner observed the probe: the view's hit rays are known, not guessed.
     assert planner.estimator.hit_fraction is not None
+
+
+def test_the_seeding_does_not_eat_the_budget(post_tetc, tmp_path, monkeypatch):
+    """A first budget render on a machine plans as the second does: seeding the costs (once) is
+    not charged to the frame."""
+    monkeypatch.setenv("TETC_CACHE_DIR", str(tmp_path))
+
+    def slow_seed(**_):
+        time.sleep(0.6)  # a busy machine's seeding
+        return Costs()
+
+    monkeypatch.setattr(B, "seed_costs", slow_seed)
+    view = View(Camera(48, 40, 30, 20), tf="post")
+    first, plan1, _, seeded1 = B.plan_file_budget(post_tetc, view, 0.5)
+    again, plan2, _, seeded2 = B.plan_file_budget(post_tetc, view, 0.5)
+    assert seeded1 and not seeded2
+    assert plan2.feasible and plan2.scale == 1.0  # post at 48x40 fits half a second
+    assert (plan1.feasible, plan1.scale, first.level, first.merges) == (True, 1.0, again.level, again.merges)
 
 
 def test_frame_planner_learns_from_a_frame(post_tetc, tmp_path, monkeypatch):

@@ -45,14 +45,14 @@ def level_ends(n_points: int, max_level: int = 62) -> dict[int, int]:
 
 
 def max_stored_level(n_points: int, max_level: int = MAX_LEVEL, min_points: int = MIN_LEVEL_POINTS) -> int:
-    """The last level i <= ``max_level`` whose ceil(n_points / 2^i) points are at least
-    ``min_points`` (0 if none is): the last level a file stores by default.
+    """The last level i <= ``max_level`` whose n_points - N_i points (:func:`level_merges`) are at
+    least ``min_points`` (0 if none is): the last level a file stores by default.
 
     >>> max_stored_level(40960), max_stored_level(2288), max_stored_level(100)
     (8, 4, 0)
     """
     i = 0
-    while i < max_level and -(-n_points // (1 << (i + 1))) >= min_points:
+    while i < max_level and n_points - level_merges(n_points, i + 1) >= min_points:
         i += 1
     return i
 

@@ -119,6 +119,7 @@ def _bpv(nbytes, n):
 
 def main(argv: list[str]) -> None:
     from gatun_py.codec.cutborder import encode_connectivity
+    from gatun_py.codec.container import VERSION_MAJOR
     from gatun_py.codec.geometry import CODINGS, FORMAT_VERSION, encode_geometry, geometry_stream_sizes
 
     quick = "--quick" in argv
@@ -146,9 +147,9 @@ def main(argv: list[str]) -> None:
         t_dec, dec = _best(lambda: _stream_decode(blob, refs, n), repeat)
         ok = (np.array_equal(dec.points.view(np.int32), p_dec.view(np.int32))
               and np.array_equal(dec.density.view(np.int32), d_dec.view(np.int32)))
-        blob1 = encode_geometry(p_dec, d_dec, refs, coding=1)
-        blob2 = encode_geometry(p_dec, d_dec, refs, coding=2)
-        t_dec2, _ = _best(lambda: _stream_decode(blob2, refs, n), repeat)
+        blob1, blob2, blob3, blob4 = (encode_geometry(p_dec, d_dec, refs, coding=c) for c in (1, 2, 3, 4))
+        # the decode speed of the coding before this one, by this code in the same run
+        t_dec_prev, _ = _best(lambda: _stream_decode(blob4, refs, n), repeat)
         sizes = geometry_stream_sizes(blob)
         sizes1 = geometry_stream_sizes(blob1)
         bpv = _bpv(len(blob), n)
@@ -163,7 +164,7 @@ def main(argv: list[str]) -> None:
         if ratio > TARGET:
             misses.append(name)
         channels = ("x", "y", "z", "density")
-        modes = "/".join(sizes[c + "_mode"][0] for c in channels)
+        modes = "/".join("s" if sizes.get(c + "_steps") else sizes[c + "_mode"][0] for c in channels)
         size_rows.append([name, n, len(blob), round(bpv, 2), " / ".join(f"{_bpv(sizes[c], n):.2f}" for c in channels),
                           modes, *(f"{totals[p]:.2f}" if p in totals else "n/a" for p in PEERS),
                           f"{best_bpv:.2f} ({best_peer})", f"{ratio:.2f}", "met" if ratio <= TARGET else "missed",
@@ -180,8 +181,8 @@ def main(argv: list[str]) -> None:
                           f"{total / 1e3:.1f}", f"{xz_sum / 1e3:.1f}", f"{total / xz_sum:.3f}",
                           "met" if total <= 0.5 * xz_sum else "missed"])
 
-        speed_rows.append([name, n, round(n / t_enc / 1e6, 3), round(1e9 * t_dec2 / n), round(1e9 * t_dec / n),
-                           f"{t_dec2 / t_dec:.2f}", round(n / t_dec / 1e6, 3), round(m / t_dec / 1e6, 2)])
+        speed_rows.append([name, n, round(n / t_enc / 1e6, 3), round(1e9 * t_dec_prev / n), round(1e9 * t_dec / n),
+                           f"{t_dec_prev / t_dec:.2f}", round(n / t_dec / 1e6, 3), round(m / t_dec / 1e6, 2)])
 
         no_apex = _bpv(len(encode_geometry(p_dec, d_dec, refs[:, :3])), n)
         no_table = _bpv(len(encode_geometry(p_dec, d_dec, refs, modes=(0, 0, 0, 0))), n)
@@ -192,7 +193,7 @@ def main(argv: list[str]) -> None:
                                            np.full((n, 4), -1, np.int32))), n)
         coords1 = _bpv(sum(sizes1[c] for c in channels[:3]), n)
         coords2 = _bpv(sum(sizes[c] for c in channels[:3]), n)
-        ablation_rows.append([name, round(_bpv(len(blob1), n), 2), round(_bpv(len(blob2), n), 2), round(bpv, 2),
+        ablation_rows.append([name, *(round(_bpv(len(b), n), 2) for b in (blob1, blob2, blob3, blob4)), round(bpv, 2),
                               f"{coords1:.2f} → {coords2:.2f}",
                               f"{_bpv(sizes1['density'], n):.2f} → {_bpv(sizes['density'], n):.2f}",
                               round(no_apex, 2), round(no_table, 2), round(no_refs, 2)])
@@ -201,7 +202,7 @@ def main(argv: list[str]) -> None:
     text = "## Geometry and density coding (lossless)\n\n"
     text += (f"Command: `{COMMAND}{' --quick' if quick else ''}{' --big' if '--big' in argv else ''}` "
              f"({code_state()}). Vertices in the cut-border decoder's order with its refs (face + apex); "
-             f"geometry coding {FORMAT_VERSION} (format 5); every float checked bit-identical after decoding "
+             f"geometry coding {FORMAT_VERSION} (format {VERSION_MAJOR}); every float checked bit-identical after decoding "
              "(column *exact*). Peers measured in the same run on the same float32 arrays in the file's "
              "original order: xz = Python `lzma` preset 9, fpzip 1.2.5 lossless (precision 0), pcodec "
              "(`standalone.simple_compress`, default level); each peer's coordinates in the best of three layouts "
@@ -213,7 +214,8 @@ def main(argv: list[str]) -> None:
     text += table(["data set", "points", "bytes", "b/v", "x / y / z / density b/v", "mode x/y/z/d",
                    "xz b/v", "fpzip b/v", "pcodec b/v", "best peer b/v", "ours / best", "≤ 0.9",
                    "per-array best b/v", "ours / per-array best", "exact"], size_rows)
-    text += ("\n\nMode: t = value table (ranks in the sorted distinct values of that channel), p = "
+    text += ("\n\nMode: t = value table (ranks in the sorted distinct values of that channel), s = value table "
+             "with rank steps (coding 5: most ranks coded as a step of -2..2 from the first ref's rank), p = "
              "prediction residual on the order-preserving integers; chosen per channel, whichever is "
              "smaller.\n\n")
     text += (f"Missed on {', '.join(misses)}." if misses else "Met on every mesh.")
@@ -233,15 +235,14 @@ def main(argv: list[str]) -> None:
     text += "\n\n### Speed (one thread, warm JIT cache)\n\n"
     text += (f"Command: `{COMMAND}`. Best of {repeat}, process CPU time (the machine is shared; load "
              f"average {load_avg:.1f} on {os.cpu_count()} cores when this ran). Encode = `encode_geometry` "
-             "(it tries both modes on channels with repeated values); decode = `GeometryDecoder` in batches "
-             "of 4096 vertices, as the streaming container does, for coding 2 (format 4) and coding 3 "
-             "(format 5) by this code in the same run (this code's coding-2 decoder is the format-4 one: "
-             "same kernels; the A/B against the branch point is in the report). The last column converts the "
-             "coding-3 decode speed to tets of that mesh per second (the whole-file budget is 3 M tets/s for "
-             "everything).\n\n")
-    text += table(["data set", "points", "encode M vertices/s", "decode ns/vertex, coding 2",
-                   "decode ns/vertex, coding 3", "speed-up 3 vs 2", "decode M vertices/s", "decode ≙ M tets/s"],
-                  speed_rows)
+             "(it tries every mode on channels with repeated values); decode = `GeometryDecoder` in batches "
+             f"of 4096 vertices, as the streaming container does, for coding 4 (format 8) and coding {FORMAT_VERSION} "
+             f"(format {VERSION_MAJOR}) by this code in the same run (the same kernels decode both). The last "
+             f"column converts the coding-{FORMAT_VERSION} decode speed to tets of that mesh per second (the "
+             "whole-file budget is 3 M tets/s for everything).\n\n")
+    text += table(["data set", "points", "encode M vertices/s", "decode ns/vertex, coding 4",
+                   f"decode ns/vertex, coding {FORMAT_VERSION}", f"speed-up {FORMAT_VERSION} vs 4",
+                   "decode M vertices/s", "decode ≙ M tets/s"], speed_rows)
     text += "\n\n### What each part of the model buys (b/v)\n\n"
     text += (f"Command: `{COMMAND}`. *coding 1*: the format-3 coder; *coding 2*: adds the tet-geometry "
              "predictors (density: the linear field through the ref tet, the face plane or the boundary "
@@ -250,13 +251,16 @@ def main(argv: list[str]) -> None:
              "height), chosen backward-adaptively like the others, and the coordinates' repetition symbol in a "
              "context of which ref value the pattern's first prediction lands nearest; *coding 3*: the same model, "
              "residual mantissa bits in wide range-coder steps, the residual's sign in a context, the repetition "
-             "symbol as a flag then an index, the x → y table per block in a small cache. The rest are coding 3 "
+             "symbol as a flag then an index, the x → y table per block in a small cache; *coding 4*: the value "
+             "tables in streams of their own (alone, as here, a block chains to nothing); *coding 5*: rank steps "
+             f"on the table-mode channels where they pay. The rest are coding {FORMAT_VERSION} "
              "without a part: "
              "*no apex*: refs without the apex column; *no tables*: prediction residuals only; *no refs*: "
              "vertices in a random order with no refs (each predicted from the previous one), i.e. what the "
              "same entropy coder does without the mesh.\n\n")
-    text += table(["data set", "coding 1", "coding 2", "coding 3", "x+y+z, 1 → 3", "density, 1 → 3", "no apex",
-                   "no tables", "no refs, shuffled"], ablation_rows)
+    text += table(["data set", "coding 1", "coding 2", "coding 3", "coding 4", f"coding {FORMAT_VERSION}",
+                   f"x+y+z, 1 → {FORMAT_VERSION}", f"density, 1 → {FORMAT_VERSION}", "no apex", "no tables",
+                   "no refs, shuffled"], ablation_rows)
     text += "\n\n![bits per vertex](figures/geometry_bits.png)\n"
     _figure(plot)
     write_section("geometry", text)

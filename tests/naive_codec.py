@@ -49,16 +49,16 @@ class NaiveRangeEncoder:
             self.range <<= 8
             self._shift_low()
 
-    def bit(self, probs, i, b):
+    def bit(self, probs, i, b, shift=ADAPT):
         p = probs[i]
         bound = (self.range >> PROB_BITS) * p
         if b == 0:
             self.range = bound
-            probs[i] = p + ((PROB_ONE - p) >> ADAPT)
+            probs[i] = p + ((PROB_ONE - p) >> shift)
         else:
             self.low += bound
             self.range -= bound
-            probs[i] = p - (p >> ADAPT)
+            probs[i] = p - (p >> shift)
         self._normalize()
 
     def raw(self, value, nbits):
@@ -107,17 +107,17 @@ class NaiveRangeDecoder:
             self.range <<= 8
             self.code = ((self.code << 8) | self._byte()) & 0xFFFFFFFF
 
-    def bit(self, probs, i):
+    def bit(self, probs, i, shift=ADAPT):
         p = probs[i]
         bound = (self.range >> PROB_BITS) * p
         if self.code < bound:
             self.range = bound
-            probs[i] = p + ((PROB_ONE - p) >> ADAPT)
+            probs[i] = p + ((PROB_ONE - p) >> shift)
             b = 0
         else:
             self.code -= bound
             self.range -= bound
-            probs[i] = p - (p >> ADAPT)
+            probs[i] = p - (p >> shift)
             b = 1
         self._normalize()
         return b

@@ -450,3 +450,19 @@ def naive_symbols(values: np.ndarray, refs: np.ndarray, modes, coding: int = 1, 
 
 
 from bisect import bisect_left  # noqa: E402  (kept next to its only user)
+
+
+def naive_step_context(ranks, base, others, prev_flag):
+    """Coding 5's step context index, written plainly: for each of the other refs (r1, r2, apex)
+    where its rank lies from ``base`` (0 no ref; 1 two or more below, 2 one below, 3 equal, 4 one
+    above, 5 two or more above), then what the previous channel did (0 no previous channel, i.e.
+    ``prev_flag`` None; 1 it repeated the first ref's value, flag 0; 2 anything else)."""
+    classes = []
+    for r in others:
+        if r < 0:
+            classes.append(0)
+            continue
+        d = int(ranks[r]) - base
+        classes.append(1 if d <= -2 else 2 if d == -1 else 3 if d == 0 else 4 if d == 1 else 5)
+    prev = 0 if prev_flag is None else (1 if prev_flag == 0 else 2)
+    return ((classes[0] * 6 + classes[1]) * 6 + classes[2]) * 3 + prev

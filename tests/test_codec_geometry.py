@@ -172,23 +172,32 @@ def test_hypothesis_round_trip_streaming_both_codings(n, seed, kind, batch, codi
     _streaming_round_trip(n, seed, kind, batch, coding)
 
 
-def _streaming_round_trip(n, seed, kind, batch, coding=FORMAT_VERSION):
-    rng = np.random.default_rng(seed)
-    if kind == "bits":  # any bit pattern at all
+def _random_values(rng, n, kind):
+    """(n, 4) float32: any bit pattern at all (``bits``), random walks (``smooth``) or a few values."""
+    if kind == "bits":
         vals = rng.integers(-(2**31), 2**31, size=(n, 4), dtype=np.int64).astype(np.int32).view(np.float32)
     elif kind == "smooth":
         vals = np.cumsum(rng.normal(size=(n, 4)), axis=0).astype(np.float32)
     else:
         vals = rng.choice(np.array([-2.5, 0.0, 1.0, 3.25, 1e-40], np.float32), size=(n, 4))
-    vals = np.ascontiguousarray(vals)
-    refs = _random_refs(rng, n)
-    blob = encode_geometry(vals[:, :3], vals[:, 3], refs, coding=coding)
-    dec = GeometryDecoder(blob, n_points=n)
-    for start in range(0, n, batch):
+    return np.ascontiguousarray(vals)
+
+
+def _decode_in_batches(blob, vals, refs, batch):
+    """Decode ``batch`` vertices at a time, each batch checked bit for bit against ``vals``."""
+    dec = GeometryDecoder(blob, n_points=len(vals))
+    for start in range(0, len(vals), batch):
         p, d = dec.decode(refs[start:start + batch])
         _assert_bit_identical(p, vals[start:start + batch, :3])
         _assert_bit_identical(d, vals[start:start + batch, 3])
     dec.finish()
+
+
+def _streaming_round_trip(n, seed, kind, batch, coding=FORMAT_VERSION):
+    rng = np.random.default_rng(seed)
+    vals = _random_values(rng, n, kind)
+    refs = _random_refs(rng, n)
+    _decode_in_batches(encode_geometry(vals[:, :3], vals[:, 3], refs, coding=coding), vals, refs, batch)
 
 
 # ------------------------------------------------------------------------------ reference model
@@ -291,12 +300,100 @@ def test_each_coding_is_no_larger_on_the_samples_than_the_one_before():
     v2 = encode_geometry(points, density, refs, coding=2)
     v3 = encode_geometry(points, density, refs, coding=3)
     v4 = encode_geometry(points, density, refs, coding=4)
+    v5 = encode_geometry(points, density, refs, coding=5)
     assert len(v3) <= len(v2) < len(v1)
     # coding 4 alone (no coarser level to chain to) is coding 3 with the tables moved: its longer
     # header (21 bytes more) and a few bytes per table stream's end more at most
     assert len(v4) <= len(v3) + 21 + 4 * 4
+    # coding 5 takes rank steps only where smaller: at most its header's one byte more (post's z
+    # gains by them)
+    assert len(v5) < len(v4)
     with pytest.raises(ValueError, match="coding"):
-        encode_geometry(points, density, refs, coding=5)
+        encode_geometry(points, density, refs, coding=6)
+
+
+@pytest.mark.parametrize("sample, steps", [("fire", "xyz"), ("bluntfin", "z"), ("post", "z"), ("combustion", "")])
+def test_coding_5_takes_rank_steps_on_the_grid_axes_where_they_pay(sample, steps):
+    """Room fire's grid lines run along every axis of the decode order, Blunt-fin's curvilinear
+    grid and LOX post's at least along z (in the real decode order their x and y steps escape too
+    often to be tried: STEP_ESCAPE_SHARE); Combustion's channels have no tables."""
+    mesh = load_sample(sample)[0]
+    points, density, refs = _in_decode_order(mesh)
+    v4 = encode_geometry(points, density, refs, coding=4)
+    v5 = _round_trip(points, density, refs, coding=5)
+    sizes4, sizes5 = geometry_stream_sizes(v4), geometry_stream_sizes(v5)
+    got = "".join(c for c in "xyz" if sizes5[c + "_steps"])
+    assert set(steps) <= set(got) and (got == "") == (steps == "")
+    assert not sizes5["density_steps"]
+    for c in ("x", "y", "z", "density"):
+        assert sizes5[c] <= sizes4[c], c
+        assert sizes5[c + "_mode"] == sizes4[c + "_mode"]
+    if steps:
+        assert sum(sizes4[c] - sizes5[c] for c in steps) > 0.5 * sum(sizes4[c] for c in steps)
+    else:
+        assert len(v5) == len(v4) + 1
+
+
+def _steps_forced(parts):
+    """The parts with the plain rank streams dropped: every table-mode channel takes rank steps."""
+    from gatun_py.codec.geometry import STEPS
+
+    for key in list(parts.streams):
+        if key[0] is True:
+            del parts.streams[key]
+        elif key[0] == STEPS:
+            parts.streams[True, key[1]] = [None] * 4  # what assemble_geometry looks up for ranks
+    return parts
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(1, 150), seed=st.integers(0, 2**32 - 1), kind=st.sampled_from(["bits", "smooth", "few"]),
+       batch=st.integers(1, 50))
+def test_hypothesis_rank_steps_on_every_channel_round_trip(n, seed, kind, batch):
+    """Rank steps forced on every channel (with random refs most vertices escape): the escapes,
+    the repeated values' ranks and the step decisions all round-trip, batch by batch."""
+    from unittest import mock
+
+    from gatun_py.codec import geometry
+    from gatun_py.codec.geometry import assemble_geometry, geometry_parts
+
+    rng = np.random.default_rng(seed)
+    vals = _random_values(rng, n, kind)
+    refs = _random_refs(rng, n)
+    with mock.patch.object(geometry, "STEP_ESCAPE_SHARE", 1.0):  # steps tried whatever the escapes
+        parts = geometry_parts(vals[:, :3], vals[:, 3], refs, force_ranks=True, steps=True)
+    parts = _steps_forced(parts)
+    blob = assemble_geometry([parts], modes=[(1, 1, 1, 1)], coding=5)[0]
+    sizes = geometry_stream_sizes(blob)
+    assert all(sizes[c + "_steps"] for c in ("x", "y", "z", "density"))
+    _decode_in_batches(blob, vals, refs, batch)
+
+
+def test_step_context_matches_the_naive_reference():
+    from naive_geometry import naive_step_context
+
+    rng = np.random.default_rng(5)
+    rk = rng.integers(0, 6, size=(20, 4)).astype(np.int32)
+    for _ in range(500):
+        ch = int(rng.integers(0, 4))
+        r1, r2, r3 = (int(x) for x in rng.integers(-1, 20, size=3))
+        base = int(rng.integers(0, 6))
+        flag = int(rng.integers(0, 8))
+        assert K._step_context(rk, ch, base, r1, r2, r3, flag) == \
+            K.STEP_BASE + 8 * naive_step_context(rk[:, ch], base, (r1, r2, r3), flag if ch else None)
+
+
+def test_rank_steps_on_a_channel_without_a_table_are_refused():
+    mesh = load_sample("fire")[0]
+    points, density, refs = _in_decode_order(mesh)
+    blob = bytearray(encode_geometry(points, density, refs, coding=5))
+    assert blob[0] == 5 and blob[39] == 0b0111  # x, y, z take steps; the density has no table
+    blob[39] |= 0b1000
+    with pytest.raises(CorruptFileError, match="rank steps"):
+        GeometryDecoder(bytes(blob))
+    blob[39] = 0x10
+    with pytest.raises(CorruptFileError, match="rank steps"):
+        GeometryDecoder(bytes(blob))
 
 
 @pytest.mark.parametrize("sample, xy_table", [("bluntfin", True), ("fire", False)])
@@ -372,7 +469,7 @@ def post_blob(request):
     return encode_geometry(points, density, refs, coding=request.param), refs
 
 
-@pytest.fixture(scope="module", params=[2, 3, 4], ids=lambda c: f"coding{c}")
+@pytest.fixture(scope="module", params=[2, 3, 4, 5], ids=lambda c: f"coding{c}")
 def smooth_blob(request):
     """Codings 2 and 3 on an unstructured mesh with a smooth field: the tet-geometry predictors,
     and coding 3's wide raw bits, at work."""
@@ -507,13 +604,14 @@ def test_kernel_callable_from_another_numba_kernel():
 
     @njit
     def decode_in_batches(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, hvals, modes, tables,
-                          tab_offs, cands, refs, values, batch):
+                          tab_offs, ranks, cands, refs, values, batch):
         n = values.shape[0]
         start = 0
         while start < n:
             count = min(batch, n - start)
             status = K.decode_vertices(st, buf, offs, probs, scores, flags, adj, deg, mark, hkeys, hvals, modes,
-                                       tables, tab_offs, cands, refs[start:start + count], values, start, count)
+                                       tables, tab_offs, ranks, cands, refs[start:start + count], values, start,
+                                       count)
             if status != K.OK:
                 return status
             start += count
@@ -557,17 +655,17 @@ def test_hash_table_without_a_free_slot_is_refused(post_blob):
 # ------------------------------------------------------------------------------ format versions
 
 
-def test_files_of_format_8_carry_geometry_coding_4_format_5_to_7_coding_3_format_4_coding_2_older_1(post_tetc):
+def test_files_of_format_9_carry_geometry_coding_5_format_8_coding_4_older_3_2_1(post_tetc):
     from gatun_py.codec.container import VERSION_MAJOR
     from gatun_py.codec.geometry import coding_for_format
     from gatun_py.codec.tetcfile import TetcReader
 
-    assert [coding_for_format(v) for v in (1, 2, 3, 4, 5, 6, 7, 8)] == [1, 1, 1, 2, 3, 3, 3, 4]
-    assert FORMAT_VERSION == coding_for_format(VERSION_MAJOR) == 4
+    assert [coding_for_format(v) for v in (1, 2, 3, 4, 5, 6, 7, 8, 9)] == [1, 1, 1, 2, 3, 3, 3, 4, 5]
+    assert FORMAT_VERSION == coding_for_format(VERSION_MAJOR) == 5
     r = TetcReader(post_tetc)
-    assert r.container.major == VERSION_MAJOR >= 8
+    assert r.container.major == VERSION_MAJOR >= 9
     for lv in range(len(r.levels)):
-        assert r.read_section(f"L{lv}/geometry")[0] == 4
+        assert r.read_section(f"L{lv}/geometry")[0] == 5
 
 
 # ------------------------------------------------------------------------------ coding 4: chained tables
@@ -624,7 +722,7 @@ def _decode_chain(blocks, levels):
 def test_hypothesis_chained_levels_round_trip(n, n_levels, seed, kind):
     levels = _nested_levels(np.random.default_rng(seed), n, n_levels, kind)
     blocks = _assemble(levels)
-    assert all(b[0] == 4 for b in blocks) and blocks[-1][HEADER_SIZE] == 0  # the coarsest chains to nothing
+    assert all(b[0] == FORMAT_VERSION for b in blocks) and blocks[-1][HEADER_SIZE] == 0  # the coarsest chains to nothing
     _decode_chain(blocks, levels)
 
 

@@ -117,6 +117,47 @@ def test_matches_plain_python_reference_bytes():
     assert out == values.tolist() and not dec.overrun and dec.pos == len(ref)
 
 
+@njit(cache=True)
+def _encode_mixed_rates(st, bits, ctxs, fast, out):
+    probs = np.full(16, rc.PROB_INIT, dtype=np.uint16)
+    for j in range(bits.shape[0]):
+        if fast[j]:
+            rc.enc_bit_fast(st, out, probs, ctxs[j], bits[j])
+        else:
+            rc.enc_bit(st, out, probs, ctxs[j], bits[j])
+    return rc.enc_finish(st, out)
+
+
+@njit(cache=True)
+def _decode_mixed_rates(st, data, ctxs, fast):
+    rc.dec_init(st, data)
+    probs = np.full(16, rc.PROB_INIT, dtype=np.uint16)
+    got = np.zeros(ctxs.shape[0], dtype=np.int64)
+    for j in range(ctxs.shape[0]):
+        got[j] = rc.dec_bit_fast(st, data, probs, ctxs[j]) if fast[j] else rc.dec_bit(st, data, probs, ctxs[j])
+    return got, st[rc.DEC_POS]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fast_adapting_bits_match_the_plain_reference(seed):
+    """enc_bit_fast / dec_bit_fast (shift FAST_ADAPT_SHIFT) mixed with the usual rate on shared
+    models: the bytes of the plain Python coder, decoded back."""
+    rng = np.random.default_rng(seed)
+    n = 3000
+    bits = (rng.random(n) < rng.choice([0.02, 0.3, 0.9], n)).astype(np.int64)
+    ctxs = rng.integers(0, 16, n)
+    fast = rng.random(n) < 0.5
+    out = np.empty(2 * n + 64, np.uint8)
+    data = out[:_encode_mixed_rates(rc.enc_state(), bits, ctxs, fast, out)].copy()
+    enc = NaiveRangeEncoder()
+    probs = [rc.PROB_INIT] * 16
+    for b, c, f in zip(bits.tolist(), ctxs.tolist(), fast.tolist()):
+        enc.bit(probs, c, b, rc.FAST_ADAPT_SHIFT if f else rc.ADAPT_SHIFT)
+    assert data.tobytes() == enc.finish()
+    got, pos = _decode_mixed_rates(rc.dec_state(), data, ctxs, fast)
+    assert got.tolist() == bits.tolist() and pos == len(data)
+
+
 def test_skewed_bits_cost_little():
     kinds = np.zeros(20000, np.int64)
     values = np.zeros(20000, np.int64)

@@ -169,13 +169,15 @@ def test_one_reader_decodes_chained_levels_in_any_order(post_levels):
     assert {lv for lv, _ in r._value_tables} == set(range(1, n))  # level 0's tables are no one's base
 
 
-def test_a_coding_4_geometry_in_an_older_format_is_refused(post_levels):
-    """Geometry coding 4 comes with format 8: a file that says 7 and holds it is damaged."""
+@pytest.mark.parametrize("major", [7, 8])
+def test_a_newer_geometry_coding_in_an_older_format_is_refused(post_levels, major):
+    """Geometry coding 5 comes with format 9 (coding 4 with 8): a file that says 7 or 8 and holds
+    it is damaged."""
     from gatun_py.codec.container import split_container
 
     data = bytearray(build_container(*split_container(post_levels)))
-    struct.pack_into("<H", data, 8, 7)
-    with pytest.raises(CorruptFileError, match="coding 4"):
+    struct.pack_into("<H", data, 8, major)
+    with pytest.raises(CorruptFileError, match=f"coding 5 in a file of format {major}"):
         TetcReader(bytes(data)).decode_mesh(0)
 
 

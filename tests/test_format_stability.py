@@ -1,6 +1,6 @@
 """Files written by earlier versions of the format still decode bit-exactly, and reference renders hold.
 
-``tests/data/post_v{2,3,4,5,6,7,8}.tetc`` (formats 2 to 8, each written by ``tests/data/make_golden.py N``
+``tests/data/post_v{2,3,4,5,6,7,8,9}.tetc`` (formats 2 to 9, each written by ``tests/data/make_golden.py N``
 with the code of its time: format 3 at commit e8af4f5) hold float64 coordinates and point arrays of
 four dtypes/shapes; ``post_v{N}.json`` the hashes of every level's decoded points, arrays, tets and
 forest.
@@ -59,7 +59,7 @@ def test_format_1_decodes_bit_exactly(level):
     _check_forest(r, level, want)
 
 
-GOLDEN_VERSIONS = (2, 3, 4, 5, 6, 7, 8)  # one golden file per format version since 2, each written when it came
+GOLDEN_VERSIONS = (2, 3, 4, 5, 6, 7, 8, 9)  # one golden file per format version since 2, each written when it came
 GOLDEN_OF = {v: DATA / f"post_v{v}.tetc" for v in GOLDEN_VERSIONS}
 EXPECTED_OF = {v: json.loads((DATA / f"post_v{v}.json").read_text()) for v in GOLDEN_VERSIONS}
 
@@ -85,7 +85,7 @@ def test_each_format_decodes_bit_exactly(version, level):
     _check_forest(r, level, want)
 
 
-@pytest.mark.parametrize("old, new", [(3, 4), (4, 5), (5, 6), (6, 7), (7, 8)])
+@pytest.mark.parametrize("old, new", [(3, 4), (4, 5), (5, 6), (6, 7), (7, 8), (8, 9)])
 def test_consecutive_formats_hold_the_same_mesh(old, new):
     """Formats 4 to 8 changed only how the sections are coded (4: geometry; 5: connectivity and
     geometry; 6 and 7: the forest; 8: the geometry's value tables): the same mesh decodes from the
@@ -97,22 +97,27 @@ def test_consecutive_formats_hold_the_same_mesh(old, new):
         np.testing.assert_array_equal(a.point_data[name], b.point_data[name])
 
 
-def test_formats_7_and_8_hold_the_same_levels():
-    """Format 8 changed only the geometry sections' value tables (chained across the levels): every
-    level of the two golden files, points, arrays, tets and forest, decodes to the same arrays, and
-    format 8's geometry chains and is smaller."""
+@pytest.mark.parametrize("old, new, shrink, what", [(7, 8, 0.8, "chained"), (8, 9, 0.99, "steps")])
+def test_formats_7_8_and_9_hold_the_same_levels(old, new, shrink, what):
+    """Formats 8 and 9 changed only the geometry sections (8: value tables chained across the
+    levels; 9: rank steps on table-mode channels): every level of consecutive golden files, points,
+    arrays, tets and forest, decodes to the same arrays, and the newer geometry is smaller and uses
+    what its format added."""
     from gatun_py.codec.geometry import geometry_stream_sizes
 
-    assert EXPECTED_OF[7]["levels"] == EXPECTED_OF[8]["levels"]
-    a, b = (TetcReader(GOLDEN_OF[v]) for v in (7, 8))
+    assert EXPECTED_OF[old]["levels"] == EXPECTED_OF[new]["levels"]
+    a, b = (TetcReader(GOLDEN_OF[v]) for v in (old, new))
     for level in reversed(range(len(a.levels))):  # coarsest first: the chain's tables come from the reader's cache
         ma, mb = a.decode_mesh(level), b.decode_mesh(level)
         np.testing.assert_array_equal(ma.points.view(np.int64), mb.points.view(np.int64))
         np.testing.assert_array_equal(ma.tets, mb.tets)
     geometry = [sum(r.container.section_size(f"L{i}/geometry") for i in range(len(r.levels))) for r in (a, b)]
-    assert geometry[1] < 0.8 * geometry[0]
+    assert geometry[1] < shrink * geometry[0]
     modes = geometry_stream_sizes(b.read_section("L0/geometry"))
-    assert "chained" in [modes[c + "_mode"] for c in ("x", "y", "z", "density")]
+    if what == "chained":
+        assert "chained" in [modes[c + "_mode"] for c in ("x", "y", "z", "density")]
+    else:
+        assert any(modes[c + "_steps"] for c in ("x", "y", "z", "density"))
 
 
 def test_forest_codings_2_and_3_hold_the_same_forest():

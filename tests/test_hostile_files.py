@@ -510,13 +510,17 @@ def test_geometry_header_and_metadata_agree_on_a_huge_count(worker, files):
 
 # -- format 8: value tables chained across levels -------------------------------------------------
 
-_CHAINED_AT, _TABLE_LENGTHS_AT, _HEADER4 = 22, 23, 39  # the coding-4 geometry header's fields
+_CHAINED_AT, _TABLE_LENGTHS_AT, _STEPS_AT = 22, 23, 39  # the coding-4 and -5 geometry headers' fields
+
+
+def _header_size(block) -> int:
+    return 40 if block[0] == 5 else 39
 
 
 def _chained_blocks(sections) -> list:
-    """Indices of the coding-4 geometry sections that chain a table to the next level's."""
+    """Indices of the coding-4 and -5 geometry sections that chain a table to the next level's."""
     return [i for i, (name, p) in enumerate(sections)
-            if name.endswith("/geometry") and p[0] == 4 and p[_CHAINED_AT] != 0]
+            if name.endswith("/geometry") and p[0] in (4, 5) and p[_CHAINED_AT] != 0]
 
 
 def test_the_files_chain_their_tables(files):
@@ -552,7 +556,7 @@ def test_rewritten_chain_bits(worker, files, chained):
         meta, sections = _split(data)
         out = []
         for name, p in sections:
-            if name.endswith("/geometry") and p[0] == 4:
+            if name.endswith("/geometry") and p[0] in (4, 5):
                 p = bytearray(p)
                 p[_CHAINED_AT] = chained
                 p = bytes(p)
@@ -567,14 +571,14 @@ def test_damaged_coarser_tables(worker, files, data):
     valid CRC: flipped bits, or its length field rewritten."""
     meta, sections = _split(files[data.draw(st.sampled_from([0, 2]))])
     geo = [i for i, (name, p) in enumerate(sections)
-           if name.endswith("/geometry") and p[0] == 4 and any(struct.unpack_from("<4I", p, _TABLE_LENGTHS_AT))]
+           if name.endswith("/geometry") and p[0] in (4, 5) and any(struct.unpack_from("<4I", p, _TABLE_LENGTHS_AT))]
     i = data.draw(st.sampled_from(geo))
     name, p = sections[i]
     p = bytearray(p)
     lengths = struct.unpack_from("<4I", p, _TABLE_LENGTHS_AT)
     ch = data.draw(st.sampled_from([c for c in range(4) if lengths[c]]))
     if data.draw(st.booleans()):
-        start = _HEADER4 + sum(lengths[:ch])
+        start = _header_size(p) + sum(lengths[:ch])
         for _ in range(data.draw(st.integers(1, 3))):
             p[start + data.draw(st.integers(0, lengths[ch] - 1))] ^= 1 << data.draw(st.integers(0, 7))
     else:
@@ -582,3 +586,61 @@ def test_damaged_coarser_tables(worker, files, data):
                          data.draw(st.sampled_from([0, 1, lengths[ch] - 1, lengths[ch] + 1, 2**32 - 1])))
     sections[i] = (name, bytes(p))
     check(worker, _build(meta, sections), f"{name} tables")
+
+
+# -- format 9: rank steps ------------------------------------------------------------------------------
+
+
+def _step_blocks(sections) -> list:
+    """Indices of the coding-5 geometry sections with a channel coded in rank steps."""
+    return [i for i, (name, p) in enumerate(sections)
+            if name.endswith("/geometry") and p[0] == 5 and p[_STEPS_AT] != 0]
+
+
+def test_the_files_take_rank_steps(files):
+    """The levelled and the bricked file have step channels (post's z), else the cases below test
+    nothing."""
+    for data in (files[0], files[2]):
+        assert _step_blocks(_split(data)[1])
+
+
+@pytest.mark.parametrize("steps", list(range(16)) + [0x10, 0xFF])
+def test_rewritten_step_bits(worker, files, steps):
+    """Every step byte on every level's geometry: steps on a channel without a table are refused,
+    on a table channel that was coded without them (or the reverse) the decode fails or differs,
+    never crashes."""
+    for data in (files[0], files[2]):
+        meta, sections = _split(data)
+        out = []
+        for name, p in sections:
+            if name.endswith("/geometry") and p[0] == 5:
+                p = bytearray(p)
+                p[_STEPS_AT] = steps
+                p = bytes(p)
+            out.append((name, p))
+        outcome, message = check(worker, _build(meta, out), f"steps={steps}")
+        if steps >= 0x10:
+            assert outcome == "rejected" and "rank steps" in message, message
+
+
+@HYPO
+@given(st.data())
+def test_damaged_step_streams(worker, files, data):
+    """A step channel's stream damaged behind a valid CRC: flipped bits, or cut short."""
+    meta, sections = _split(files[data.draw(st.sampled_from([0, 2]))])
+    i = data.draw(st.sampled_from(_step_blocks(sections)))
+    name, p = sections[i]
+    p = bytearray(p)
+    lengths = struct.unpack_from("<4I", p, 6)
+    ch = data.draw(st.sampled_from([c for c in range(4) if p[_STEPS_AT] >> c & 1]))
+    tables = sum(struct.unpack_from("<4I", p, _TABLE_LENGTHS_AT))
+    start = _header_size(p) + tables + sum(lengths[:ch])
+    if data.draw(st.booleans()):
+        for _ in range(data.draw(st.integers(1, 3))):
+            p[start + data.draw(st.integers(0, lengths[ch] - 1))] ^= 1 << data.draw(st.integers(0, 7))
+    else:
+        cut = data.draw(st.integers(1, lengths[ch]))
+        struct.pack_into("<I", p, 6 + 4 * ch, lengths[ch] - cut)
+        del p[start + lengths[ch] - cut:start + lengths[ch]]
+    sections[i] = (name, bytes(p))
+    check(worker, _build(meta, sections), f"{name} step stream")

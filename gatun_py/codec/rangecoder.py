@@ -132,22 +132,27 @@ def _shift_low(st, out):
     st[ENC_LOW] = (low & 0x00FFFFFF) << 8
 
 
-@njit(cache=True)
-def enc_bit(st, out, probs, i, bit):
-    """Code one bit with the adaptive probability ``probs[i]``."""
+@njit(cache=True, inline="always")
+def _enc_bit_at(st, out, probs, i, bit, shift):
     p = np.int64(probs[i])
     rng = st[ENC_RANGE]
     bound = (rng >> PROB_BITS) * p
     if bit == 0:
         st[ENC_RANGE] = bound
-        probs[i] = p + ((PROB_ONE - p) >> ADAPT_SHIFT)
+        probs[i] = p + ((PROB_ONE - p) >> shift)
     else:
         st[ENC_LOW] += bound
         st[ENC_RANGE] = rng - bound
-        probs[i] = p - (p >> ADAPT_SHIFT)
+        probs[i] = p - (p >> shift)
     while st[ENC_RANGE] < TOP:
         st[ENC_RANGE] <<= 8
         _shift_low(st, out)
+
+
+@njit(cache=True)
+def enc_bit(st, out, probs, i, bit):
+    """Code one bit with the adaptive probability ``probs[i]``."""
+    _enc_bit_at(st, out, probs, i, bit, ADAPT_SHIFT)
 
 
 @njit(cache=True)
@@ -328,24 +333,29 @@ def dec_init(st, data):
 
 # The decoding steps on the range and code held by the caller (in registers), inlined: a caller
 # that decodes several symbols in a row loads and stores the decoder state once.
-@njit(cache=True, _nrt=False)
-def _decide(st, data, probs, i, rng, code):
-    """One adaptive binary decision with ``probs[i]``: (bit, range, code)."""
+@njit(cache=True, _nrt=False, inline="always")
+def _decide_at(st, data, probs, i, rng, code, shift):
     p = np.int64(probs[i])
     bound = (rng >> PROB_BITS) * p
     if code < bound:
         rng = bound
-        probs[i] = p + ((PROB_ONE - p) >> ADAPT_SHIFT)
+        probs[i] = p + ((PROB_ONE - p) >> shift)
         bit = 0
     else:
         code -= bound
         rng -= bound
-        probs[i] = p - (p >> ADAPT_SHIFT)
+        probs[i] = p - (p >> shift)
         bit = 1
     while rng < TOP:
         rng <<= 8
         code = ((code << 8) | _get_byte(st, data)) & MASK32
     return bit, rng, code
+
+
+@njit(cache=True, _nrt=False)
+def _decide(st, data, probs, i, rng, code):
+    """One adaptive binary decision with ``probs[i]``: (bit, range, code)."""
+    return _decide_at(st, data, probs, i, rng, code, ADAPT_SHIFT)
 
 
 @njit(cache=True, _nrt=False, error_model="numpy")
@@ -582,3 +592,24 @@ def run_encoder(kernel, *args, capacity: int = 1 << 16):
         if not st[ENC_OVERFLOW]:
             return out[:n].tobytes()
         capacity = max(2 * capacity, n + 64)
+
+
+# Decisions that adapt faster (each update moves the probability 1/8 of the way instead of 1/32):
+# for models with many sparse contexts, such as geometry coding 5's rank steps (648 contexts: Room
+# fire's x, y, z steps take 645 bytes at this rate; a model of the usual rate estimates 1,070).
+FAST_ADAPT_SHIFT = 3
+
+
+@njit(cache=True)
+def enc_bit_fast(st, out, probs, i, bit):
+    """:func:`enc_bit` adapting at FAST_ADAPT_SHIFT (decode with :func:`dec_bit_fast`)."""
+    _enc_bit_at(st, out, probs, i, bit, FAST_ADAPT_SHIFT)
+
+
+@njit(cache=True, _nrt=False)
+def dec_bit_fast(st, data, probs, i):
+    """Decode one bit coded by :func:`enc_bit_fast`."""
+    bit, rng, code = _decide_at(st, data, probs, i, st[DEC_RANGE], st[DEC_CODE], FAST_ADAPT_SHIFT)
+    st[DEC_RANGE] = rng
+    st[DEC_CODE] = code
+    return bit

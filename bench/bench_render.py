@@ -725,15 +725,18 @@ def cold_start_section(load) -> list[str]:
     empty numba cache, so the run compiles what it needs itself; then the next run. A mesh file
     (post.vtk) needs the renderer only; a ``.tetc`` also the decoder, compiled side by side (the
     renderer in the command's process, the connectivity and the geometry decoders in two workers):
-    post_v8.tetc is what ``tetc compress`` writes today (the codings compiled ahead), post_v1.tetc a
+    post_v{N}.tetc (N the format version) is what ``tetc compress`` writes today (the codings compiled ahead), post_v1.tetc a
     file of the first format, whose older codings compile during the render. Wall and CPU seconds (all processes), median of
     3 fresh caches; the CPU time says what the wall time would be on a quiet machine when the load
     average is high."""
     import resource
 
+    from gatun_py.codec.container import VERSION_MAJOR
+
+    today = f"post_v{VERSION_MAJOR}.tetc"
     inputs = [("post.vtk (a mesh file: the renderer)", ROOT / "sample_meshes/lox_post_tets/post.vtk", []),
-              ("post_v8.tetc (the decoder and the renderer; today's format)", ROOT / "tests/data/post_v8.tetc", []),
-              ("post_v8.tetc --ratio 0.5 (the forest decoder and the filter too)", ROOT / "tests/data/post_v8.tetc",
+              (f"{today} (the decoder and the renderer; today's format)", ROOT / "tests/data" / today, []),
+              (f"{today} --ratio 0.5 (the forest decoder and the filter too)", ROOT / "tests/data" / today,
                ["--ratio", "0.5"]),
               ("post_v1.tetc (the decoder and the renderer; format 1's codings too)", ROOT / "tests/data/post_v1.tetc", [])]
     rows, said = [], []

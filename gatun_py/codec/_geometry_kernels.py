@@ -52,8 +52,8 @@ Coding 5 (format 9) adds *rank steps* on a channel coded with a table (``MODE_ST
 whose first face ref r0 exists codes the difference of its rank and r0's rank in the table, -2 to 2
 or "escape", in fast-adapting decisions (:func:`_enc_step`) in a context of where the other refs'
 ranks lie around r0's (:func:`_step_context`) and whether the previous channel repeated r0's
-value; an escape codes the value as coding 3 codes a table-mode channel's. On a curvilinear grid the next vertex along a
-grid line is mostly one rank away on that axis (Room fire's x: 1,344 -> 187 bytes). The
+value; an escape codes the value as coding 3 codes a table-mode channel's. On a curvilinear grid
+the next vertex along a grid line is mostly one rank away on that axis (Room fire's x: 1,344 -> 187 bytes). The
 repetition flags the next channel sees are the ones coding 3 would leave (the index of the first
 candidate equal to the value), so every channel's stream still depends only on the values.
 
@@ -957,27 +957,12 @@ def _dec_step(st, data, probs, ctx):
 
 
 @njit(cache=True, _nrt=False)
-def _dec_step_rank(st, data, probs, rk, ch, r0, r1, r2, r3, flag, size):
-    """The rank of the vertex whose refs are r0 .. r3 on a step channel (of ``size`` values), -1
-    for an escape, ``-ERR_RANK`` for a rank outside the table."""
-    base = np.int64(rk[r0, ch])
-    step = _dec_step(st, data, probs, _step_context(rk, ch, base, r1, r2, r3, flag))
-    if step == STEP_ESCAPE:
-        return np.int64(-1)
-    rank = base + step
-    if rank < 0 or rank >= size:
-        return np.int64(-ERR_RANK)
-    return rank
-
-
-@njit(cache=True, _nrt=False)
-def _keep_rank(rk, k, ch, rank, tables, lo, hi, o):
-    """Store vertex k's rank on a step channel (looked up in the table where the value was
-    repeated, ``rank`` -1); False if the value is not in the table (damage)."""
-    if rank < 0:
-        rank = _search(tables, lo, hi, o) - lo
-        if rank >= hi - lo or tables[lo + rank] != o:
-            return False
+def _store_rank(rk, k, ch, tables, lo, hi, o):
+    """Store the rank of vertex k's value ``o`` (coded without a step) in the table
+    ``tables[lo:hi]``; False if the value is not in the table (damage)."""
+    rank = _search(tables, lo, hi, o) - lo
+    if rank >= hi - lo or tables[lo + rank] != o:
+        return False
     rk[k, ch] = rank
     return True
 
@@ -1057,13 +1042,7 @@ def encode_kernel(st, out, vf, refs, wpar, modes, tables, tab_offs, cands, trace
                 pat, m = _gather(k, refs[k, 0], refs[k, 1], refs[k, 2], refs[k, 3], wpar[k],
                                  vf, vi, ch, cand_o, eq_o, scratch_f, scratch_i, WANT_REPEATS, version)
                 m = _add_conditional(ch, k, vi, hkeys, hvals, eq_o, m, cands)
-                o = ordered_int(vi[k, ch])
-                sym = FLAG_PREDICTED
-                for q in range(m):
-                    if eq_o[q] == o:
-                        sym = q
-                        break
-                was_eq[k] = sym
+                was_eq[k] = _match(eq_o, m, ordered_int(vi[k, ch]))
                 _remember_conditional(ch, k, vi, hkeys, hvals, cands)
             continue
         steps = mode == MODE_STEPS
@@ -1291,11 +1270,13 @@ def _decode_step(ch, k, r0, r1, r2, r3, stc, data, pc, flags, flag, hkeys, hvals
     path cost blocks without steps 20-40 % of their geometry decode time."""
     lo = tab_offs[ch]
     hi = tab_offs[ch + 1]
-    rank = _dec_step_rank(stc, data, pc, rk, ch, r0, r1, r2, r3, flag, hi - lo)
-    if rank == -ERR_RANK:
-        return -ERR_RANK
-    if rank < 0:
+    base = np.int64(rk[r0, ch])
+    step = _dec_step(stc, data, pc, _step_context(rk, ch, base, r1, r2, r3, flag))
+    if step == STEP_ESCAPE:
         return STEP_ESCAPED
+    rank = base + step
+    if rank < 0 or rank >= hi - lo:
+        return -ERR_RANK
     if dec_failed(stc):
         return -ERR_STREAM
     o = tables[lo + rank]
@@ -1399,6 +1380,6 @@ def _decode_vertices_run(st, buf, offs, probs, scores, flags, adj, deg, mark, hk
                                            vi, cand_o, eq_o, scratch_f, scratch_i)
             if flag < 0:
                 return -flag
-            if steps and not _keep_rank(rk, k, ch, -1, tables, tab_offs[ch], tab_offs[ch + 1], ordered_int(vi[k, ch])):
+            if steps and not _store_rank(rk, k, ch, tables, tab_offs[ch], tab_offs[ch + 1], ordered_int(vi[k, ch])):
                 return ERR_RANK
     return OK

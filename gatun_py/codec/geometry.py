@@ -57,7 +57,8 @@ table and chained table, coarsest level first (:func:`assemble_geometry`).
 
 Coding 5 is coding 4 with *rank steps* (``K.MODE_STEPS``) on the table-mode channels where they
 make the stream smaller: a vertex's rank is coded as a step of -2 .. 2 from its first ref's rank,
-or an escape to coding 3's prediction (see :mod:`gatun_py.codec._geometry_kernels`).
+or an escape followed by the value as a table-mode channel of coding 4 codes it (see
+:mod:`gatun_py.codec._geometry_kernels`).
 """
 
 from __future__ import annotations
@@ -72,8 +73,8 @@ import numpy as np
 from ..errors import CorruptFileError
 from . import _geometry_kernels as K
 from .container import VERSION_MAJOR
-from .rangecoder import (ADAPT_SHIFT, DEC_ERROR, FAST_ADAPT_SHIFT, DEC_OVERRUN, DEC_POS, INT_BUCKET_BITS, PROB_INIT, PROB_ONE,
-                         dec_state, enc_state, new_model)
+from .rangecoder import (ADAPT_SHIFT, DEC_ERROR, DEC_OVERRUN, DEC_POS, FAST_ADAPT_SHIFT, INT_BUCKET_BITS, PROB_INIT,
+                         PROB_ONE, dec_state, enc_state, new_model)
 
 # codings 4 and 5 run the kernels of coding 3: 4 moves the tables, 5 adds rank steps (K.MODE_STEPS)
 CODINGS = K.CODINGS + (4, 5)

@@ -81,6 +81,10 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
               help="Decimation: weight of the density (mass) error.")
 @click.option("--w-geometry", type=click.FloatRange(min=0), default=1.0, show_default=True,
               help="Decimation: weight of the boundary geometry error.")
+@click.option("--w-sample", type=click.FloatRange(min=0), default=1.0, show_default=True,
+              help="Decimation: factor on the sampled error (the density error at the original points). "
+                   "0 builds the forest 2-2.5x faster, with worse coarse levels (12-26 % more image "
+                   "error at ratio 0.9 on the samples).")
 @click.option("--bricks", "n_bricks", type=click.IntRange(min=1, max=4096), default=1, show_default=True, metavar="K",
               help="Split the tets into K bricks (k-d tree, balanced by tets), each coded with its own forest "
                    "and levels, to decode on several cores and render apart; 1 = one stream.")
@@ -94,7 +98,7 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
                    "--cell-to-point a mesh with cell data is refused).")
 @force_option
 @quiet_option
-def compress(input, output, n_levels, mesh_only, w_density, w_geometry, n_bricks, jobs, dependencies, scalar, q_file,
+def compress(input, output, n_levels, mesh_only, w_density, w_geometry, w_sample, n_bricks, jobs, dependencies, scalar, q_file,
              q_var, cell_to_point, time_step, drop_cell_data, force, quiet):
     """Compress INPUT (any readable mesh or PLOT3D grid) losslessly into a .tetc file.
 
@@ -109,7 +113,7 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, n_bricks
     """
     with progress_reporter("decimating", quiet, min_total=1) as progress:
         gatun_py.compress(input, output, levels=n_levels, mesh_only=mesh_only, force=force, w_density=w_density,
-                          w_geometry=w_geometry, progress=progress, log=logger(quiet),
+                          w_geometry=w_geometry, w_sample=w_sample, progress=progress, log=logger(quiet),
                           drop_cell_data=drop_cell_data, bricks=n_bricks, jobs=jobs, dependencies=dependencies,
                           **read_kwargs(scalar, q_file, q_var, cell_to_point, time_step))
 

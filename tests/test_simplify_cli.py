@@ -10,6 +10,7 @@ from cli_util import assert_error, assert_usage_error, run
 from conftest import SAMPLES, load_sample
 from meshgen import single_tet
 
+from gatun_py.codec import TetcReader
 from gatun_py.mesh import read_mesh, write_mesh
 from gatun_py.simplify import build_levels, decimate, level_merges, simplified_mesh
 
@@ -108,6 +109,16 @@ def test_weights_are_options(tmp_path):
     assert run("compress", POST, "-o", out, "--w-density", 2, "--w-geometry", 0, "--levels", 1,
                "--quiet").exit_code == 0
     assert run("compress", POST, "-o", out, "--w-density", -1, "--force").exit_code == 2  # click range
+    assert run("compress", POST, "-o", out, "--w-sample", -1, "--force").exit_code == 2
+    # without the sampled error: another forest, the same lossless mesh
+    fast = tmp_path / "fast.tetc"
+    assert run("compress", POST, "-o", out, "--levels", 1, "--force", "--quiet").exit_code == 0
+    assert run("compress", POST, "-o", fast, "--levels", 1, "--w-sample", 0, "--quiet").exit_code == 0
+    a, b = TetcReader(out), TetcReader(fast)
+    assert a.read_section("L0/forest") != b.read_section("L0/forest")
+    ma, mb = a.decode_mesh(), b.decode_mesh()
+    assert np.array_equal(ma.tets, mb.tets) and np.array_equal(ma.points, mb.points)
+    assert np.array_equal(ma.density, mb.density)
 
 
 def test_single_tet_compresses_with_a_forest_of_roots(tmp_path):

@@ -257,9 +257,25 @@ def test_single_tet_is_a_forest_of_roots():
 
 
 def test_bad_weights():
-    for kw in ({"w_density": -1.0}, {"w_geometry": float("nan")}):
+    for kw in ({"w_density": -1.0}, {"w_geometry": float("nan")}, {"w_sample": -0.5}, {"w_sample": float("inf")}):
         with pytest.raises(OptionError):
             decimate(single_tet(), **kw)
+
+
+@pytest.mark.parametrize("name", ["delaunay", "jittered_grid", "cavity"])
+def test_without_the_sampled_error(name):
+    """w_sample=0 drops the sampled term only: the kernels still match the reference (with ws = 0),
+    every prefix of the forest is valid, and the forest is another one than the default's."""
+    mesh = AWKWARD[name]()
+    state = DecimationState(mesh, 1.0, 3.0, order="input", w_sample=0.0)
+    assert state.params[K.P_WS] == 0.0
+    assert state.params[K.P_WD] == DecimationState(mesh, 1.0, 3.0, order="input").params[K.P_WD]
+    assert _compare_all_edges(state, *_sample_points(mesh), _sample_weights(mesh)) > 0
+    forest = decimate(mesh, w_sample=0.0)
+    _check_forest_prefixes(mesh, forest, range(forest.n_merges + 1), f"{name} w_sample=0")
+    full = decimate(mesh)
+    assert forest.n_merges > 0.5 * mesh.n_points
+    assert not (np.array_equal(forest.parent, full.parent) and np.array_equal(forest.rank, full.rank))
 
 
 def test_max_merges_and_progress_give_the_same_prefix():

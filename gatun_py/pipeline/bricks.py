@@ -36,7 +36,8 @@ def _brick_payload(mesh: TetMesh, cut_ids: np.ndarray, options: dict) -> BrickLe
     """The levels of one brick: its mesh alone, or its forest (cut vertices locked) and levels."""
     if options["mesh_only"]:
         return BrickLevels([LevelPayload(0, 0.0, 0, mesh)], [cut_ids])
-    forest = decimate(mesh, w_density=options["w_density"], w_geometry=options["w_geometry"], locked=cut_ids >= 0)
+    forest = decimate(mesh, w_density=options["w_density"], w_geometry=options["w_geometry"],
+                      w_sample=options["w_sample"], locked=cut_ids >= 0)
     lv = build_levels(mesh, forest, options["levels"])
     payloads = [LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
                 for x, f in zip(lv, storage_forests(lv))]
@@ -65,7 +66,8 @@ def _brick_job(mesh: TetMesh, cut_ids: np.ndarray, options: dict, threads: int):
 
 
 def compress_bricks(mesh: TetMesh, n_bricks: int, *, jobs: int | None = None, mesh_only: bool = False,
-                    levels=None, w_density: float = 1.0, w_geometry: float = 1.0, source: str = "",
+                    levels=None, w_density: float = 1.0, w_geometry: float = 1.0, w_sample: float = 1.0,
+                    source: str = "",
                     cut_ids: bool | None = None, progress=None, log=None) -> bytes:
     """The bytes of a bricked ``.tetc`` file of ``mesh`` split into ``n_bricks`` (>= 2) bricks.
 
@@ -96,7 +98,8 @@ def compress_bricks(mesh: TetMesh, n_bricks: int, *, jobs: int | None = None, me
     if log is not None:
         log(f"{len(bricks)} bricks of {min(b.mesh.n_tets for b in bricks)}..{max(b.mesh.n_tets for b in bricks)} "
             f"tets; {n_cut} cut vertices ({100.0 * n_cut / max(mesh.n_points, 1):.2f} % of the points)")
-    options = dict(mesh_only=mesh_only, levels=levels, w_density=float(w_density), w_geometry=float(w_geometry))
+    options = dict(mesh_only=mesh_only, levels=levels, w_density=float(w_density), w_geometry=float(w_geometry),
+                   w_sample=float(w_sample))
     total = sum(b.mesh.n_points for b in bricks)
     done = 0
     encoded = [None] * len(bricks)

@@ -34,9 +34,9 @@ from conftest import SAMPLE_FILES, load_sample  # noqa: E402
 from gatun_py.codec.forest import (ROOT_RANK, decode_forest, decode_forest_on_geometry,  # noqa: E402
                                    decode_forest_on_mesh, decode_forest_rounds, encode_forest, encode_forest_on_geometry,
                                    encode_forest_on_mesh, encode_forest_rounds)
-from gatun_py.codec.tetcfile import LevelPayload, TetcReader, encode_level, encode_tetc  # noqa: E402
+from gatun_py.codec.tetcfile import TetcReader, encode_level, encode_tetc  # noqa: E402
 from gatun_py.mesh import read_mesh  # noqa: E402
-from gatun_py.simplify import MergeForest, build_levels, decimate, storage_forests  # noqa: E402
+from gatun_py.simplify import MergeForest, build_levels, decimate, level_payloads  # noqa: E402
 from gatun_py.simplify.decimate import ROUNDS_PER_LEVEL  # noqa: E402
 
 NAMES = {"bluntfin": "Blunt-fin", "combustion": "Combustion", "fire": "Room fire", "post": "LOX post",
@@ -151,8 +151,7 @@ def _level_forest_bytes(forest, mesh):
     forest coding 3), the same forests in coding 2 (format 6), coding 1 (format 3 to 5) and LZMA
     (format 2), and the payloads."""
     levels = build_levels(mesh, forest)
-    payloads = [LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
-                for x, f in zip(levels, storage_forests(levels))]
+    payloads = level_payloads(levels)
     mesh_bytes, new_f, c2_f, c1_f, old_f = [], [], [], [], []
     for p in payloads:
         e = encode_level(p)

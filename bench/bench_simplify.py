@@ -235,13 +235,12 @@ def probe_error_vtk(ug, pts, truth, drange):
 # -- stored size of the levels ---------------------------------------------------------------
 def stored_sizes(levels, td):
     """Section sizes of a real .tetc file holding these levels (per level: mesh bytes, forest bytes)."""
-    from gatun_py.codec import LevelPayload, write_tetc
+    from gatun_py.codec import write_tetc
     from gatun_py.codec.info import tetc_info
-    from gatun_py.simplify import storage_forests
+    from gatun_py.simplify import level_payloads
 
     path = Path(td) / "levels.tetc"
-    write_tetc(path, [LevelPayload(lv.level, lv.ratio, lv.n_merges, lv.mesh, (f.parent, f.rank))
-                      for lv, f in zip(levels, storage_forests(levels))], force=True)
+    write_tetc(path, level_payloads(levels), force=True)
     info = tetc_info(path)
     out = []
     for lv in info["levels"]:
@@ -582,16 +581,6 @@ SAMPLED_RATIOS = (0.5, 0.9)
 SAMPLED_VTK_RUNS = 3
 
 
-def _levels_file(mesh, forest, path):
-    """``path``: a .tetc file of ``mesh`` with this forest and its levels (as ``tetc compress`` stores them)."""
-    from gatun_py.codec import LevelPayload, write_tetc
-    from gatun_py.simplify import storage_forests
-
-    lv = build_levels(mesh, forest)
-    write_tetc(path, [LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
-                      for x, f in zip(lv, storage_forests(lv))], force=True)
-
-
 def sampled_section(names) -> str:
     """The forest with the default sampled error (``w_sample=1``) against ``w_sample=0``: build time
     beside VTK's quadric decimation to 99 % (same run), and the image RMSE of renders at
@@ -599,13 +588,14 @@ def sampled_section(names) -> str:
     from meshgen import delaunay_mesh
 
     from common import WORK, code_state, table
-    from gatun_py.codec import TetcReader
+    from gatun_py.codec import TetcReader, write_tetc
     from gatun_py.mesh import validate_tets
     from gatun_py.pipeline.quality import compare_images
     from gatun_py.pipeline.stream import View, file_render_defaults, render_tetc
     from gatun_py.render import Camera
     from gatun_py.render.image import to_rgb8
     from gatun_py.render.raycast import render_mesh
+    from gatun_py.simplify import level_payloads
 
     decimate(delaunay_mesh(30, 0))  # load / compile the kernels
     WORK.mkdir(parents=True, exist_ok=True)
@@ -623,7 +613,7 @@ def sampled_section(names) -> str:
                 best = min(best, time.process_time() - c0)
             cpu[w] = best
             paths[w] = WORK / f"{name}_wsample{w:g}.tetc"
-            _levels_file(mesh, forest, paths[w])
+            write_tetc(paths[w], level_payloads(build_levels(mesh, forest)), force=True)  # as tetc compress
         vtk_cpu = min(vtk_quadric(ug, 0.99)[2] for _ in range(3)) if ug is not None else float("nan")
         time_rows.append([name, f"{mesh.n_tets:,}", f"{cpu[1.0]:.2f}", f"{cpu[0.0]:.2f}", f"{cpu[1.0] / cpu[0.0]:.2f}",
                           f"{vtk_cpu:.2f}", f"{cpu[1.0] / vtk_cpu:.1f}×", f"{cpu[0.0] / vtk_cpu:.1f}×"])
@@ -631,6 +621,8 @@ def sampled_section(names) -> str:
         reader = TetcReader(paths[1.0])
         lo, hi, rng, step = file_render_defaults(reader)
         tf = {"bluntfin": "bluntfin", "combustion": "combustion"}.get(name, "default")
+        views = [View(Camera(256, 256, az, el), tf=tf, mode="volume") for az, el in SAMPLED_VIEWS]
+        refs = [to_rgb8(render_tetc(paths[1.0], v).image) for v in views]
         for r in SAMPLED_RATIOS:
             counts = {w: render_tetc(p, View(Camera(64, 64, 30.0, 20.0), tf=tf, mode="volume"),
                                      ratio=r).stats["tets_rendered"] for w, p in paths.items()}
@@ -641,10 +633,9 @@ def sampled_section(names) -> str:
                     vtk_meshes.append(validate_tets(pts.astype(np.float32), dens.astype(np.float32), tets)[0])
                 except Exception:  # VTK's output is not always a valid mesh
                     pass
-            for az, el in SAMPLED_VIEWS:
-                v = View(Camera(256, 256, az, el), tf=tf, mode="volume")
-                ref = to_rgb8(render_tetc(paths[1.0], v).image)
-                ours = {w: compare_images(ref, to_rgb8(render_tetc(p, v, ratio=r).image)).rmse for w, p in paths.items()}
+            for (az, el), v, ref in zip(SAMPLED_VIEWS, views, refs):
+                ours = {w: compare_images(ref, to_rgb8(render_tetc(p, v, ratio=r).image)).rmse
+                        for w, p in paths.items()}
                 cam = v.camera.fit(lo, hi)
                 theirs = [compare_images(ref, to_rgb8(render_mesh(vm, cam, v.tf, mode="volume", step=step,
                                                                   scalar_range=rng).image)).rmse for vm in vtk_meshes]
@@ -655,8 +646,9 @@ def sampled_section(names) -> str:
                 print(rmse_rows[-1], flush=True)
     return "\n".join([
         f"{SAMPLED_HEAD}\n",
-        f"Command: `python bench/bench_simplify.py --only sampled` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; "
-        f"{code_state()}). `decimate(mesh, w_sample=1)` (the default: the sampled error of the input tets' centroids "
+        "Command: `python bench/bench_simplify.py --only sampled` "
+        f"({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; {code_state()}). `decimate(mesh, w_sample=1)` "
+        "(the default: the sampled error of the input tets' centroids "
         "and the merged vertices, Cignoni et al.'s accurate error, in every merge's cost) against `w_sample=0` "
         "(`tetc compress --w-sample 0`: quadric, interpolation, mass and boundary terms only), and VTK's quadric "
         "decimation to 99 % in the same run; best process CPU seconds (ours on 2 threads where the first "

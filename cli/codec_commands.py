@@ -98,8 +98,8 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
                    "--cell-to-point a mesh with cell data is refused).")
 @force_option
 @quiet_option
-def compress(input, output, n_levels, mesh_only, w_density, w_geometry, w_sample, n_bricks, jobs, dependencies, scalar, q_file,
-             q_var, cell_to_point, time_step, drop_cell_data, force, quiet):
+def compress(input, output, n_levels, mesh_only, w_density, w_geometry, w_sample, n_bricks, jobs, dependencies, scalar,
+             q_file, q_var, cell_to_point, time_step, drop_cell_data, force, quiet):
     """Compress INPUT (any readable mesh or PLOT3D grid) losslessly into a .tetc file.
 
     Connectivity is cut-border coded; coordinates (float32 or float64) and every point array, in its

@@ -44,7 +44,7 @@ from .render.camera import Camera
 from .render.image import add_colorbar, image_bytes, image_format, parse_colour, to_rgb8, upscale_rgb8, write_image
 from .render.raycast import MODES
 from .render.transfer import load_transfer_function
-from .simplify import build_levels, decimate, storage_forests
+from .simplify import build_levels, decimate, level_payloads
 from .simplify.dependencies import merge_dependencies
 from .simplify.filter import SimplifyFilter
 from .simplify.levels import MAX_LEVEL, max_stored_level, next_level, resolve_target, target_ancestors
@@ -93,8 +93,7 @@ def _quiet(_msg: str) -> None:
 
 def compress(source, output, *, levels: int | None = None, mesh_only: bool = False, force: bool = False,
              w_density: float = 1.0, w_geometry: float = 1.0, w_sample: float = 1.0, scalar: str | None = None,
-             q_file=None,
-             q_var: str = "density", cell_to_point: bool = False, time_step: int | None = None,
+             q_file=None, q_var: str = "density", cell_to_point: bool = False, time_step: int | None = None,
              drop_cell_data: bool = False, bricks: int = 1, jobs: int | None = None, dependencies: bool = False,
              progress=None, log=None) -> "TetcFile":
     """Compress a mesh losslessly into a ``.tetc`` file, with its merge forest and levels.
@@ -201,8 +200,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
             mesh_codes, copies = beside.codes(lv), beside.copies
             log(f"merge forest: {forest.n_merges} merges (max ratio {forest.max_ratio:.5f}); "
                 f"levels {', '.join(str(x.level) for x in lv)}")
-            payload = [LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
-                       for x, f in zip(lv, storage_forests(lv))]
+            payload = level_payloads(lv)
             if dependencies:
                 deps = merge_dependencies(mesh, forest)
                 log(f"merge dependencies: {deps.idx.size} ({deps.idx.size / max(deps.n_merges, 1):.1f} per merge)")

@@ -25,7 +25,7 @@ from ..codec.bricks import (BrickLevels, brick_jobs, check_jobs, decode_bricked,
 from ..errors import CorruptFileError, OptionError, TetcError
 from ..mesh import TetMesh
 from ..mesh.partition import Brick, partition_tets, split_bricks
-from ..simplify import build_levels, decimate, storage_forests
+from ..simplify import build_levels, decimate, level_payloads
 from ..simplify.forest import mesh_from_ancestors
 from ..simplify.levels import read_simplified, resolve_target, target_ancestors
 
@@ -39,8 +39,7 @@ def _brick_payload(mesh: TetMesh, cut_ids: np.ndarray, options: dict) -> BrickLe
     forest = decimate(mesh, w_density=options["w_density"], w_geometry=options["w_geometry"],
                       w_sample=options["w_sample"], locked=cut_ids >= 0)
     lv = build_levels(mesh, forest, options["levels"])
-    payloads = [LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
-                for x, f in zip(lv, storage_forests(lv))]
+    payloads = level_payloads(lv)
     return BrickLevels(payloads, [cut_ids[x.vertex_ids] for x in lv])
 
 
@@ -67,8 +66,7 @@ def _brick_job(mesh: TetMesh, cut_ids: np.ndarray, options: dict, threads: int):
 
 def compress_bricks(mesh: TetMesh, n_bricks: int, *, jobs: int | None = None, mesh_only: bool = False,
                     levels=None, w_density: float = 1.0, w_geometry: float = 1.0, w_sample: float = 1.0,
-                    source: str = "",
-                    cut_ids: bool | None = None, progress=None, log=None) -> bytes:
+                    source: str = "", cut_ids: bool | None = None, progress=None, log=None) -> bytes:
     """The bytes of a bricked ``.tetc`` file of ``mesh`` split into ``n_bricks`` (>= 2) bricks.
 
     Parameters

@@ -600,8 +600,9 @@ def _round_ends(n_points: int, limit: int, rounds: int) -> list[int]:
 
 
 def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry: float = DEFAULT_W_GEOMETRY,
-             w_sample: float = 1.0, progress=None, max_merges: int | None = None, locked=None, rounds: int = ROUNDS_PER_LEVEL,
-             round_blocked: float | None = ROUND_BLOCKED, return_rounds: bool = False, on_level=None):
+             w_sample: float = 1.0, progress=None, max_merges: int | None = None, locked=None,
+             rounds: int = ROUNDS_PER_LEVEL, round_blocked: float | None = ROUND_BLOCKED, return_rounds: bool = False,
+             on_level=None):
     """Greedy Van Gelder decimation of a tetrahedral mesh into a merge forest.
 
     Parameters

@@ -7,13 +7,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..codec import TetcReader
+from ..codec import LevelPayload, TetcReader
 from ..errors import CorruptFileError, OptionError
 from ..mesh import TetMesh
 from .forest import ROOT_RANK, MergeForest, ancestors, forest_prefix, mesh_from_ancestors, simplified_mesh
 
 __all__ = ["MAX_LEVEL", "MIN_LEVEL_POINTS", "LevelMesh", "max_stored_level", "level_merges", "level_ends", "available_levels", "build_levels", "next_level", "level_forest",
-           "read_simplified", "forest_merges", "storage_forests", "Target", "resolve_target", "stored_levels",
+           "read_simplified", "forest_merges", "storage_forests", "level_payloads", "Target", "resolve_target",
+           "stored_levels",
            "target_ancestors"]
 
 MAX_LEVEL = 13
@@ -206,6 +207,13 @@ def storage_forests(levels: list[LevelMesh]) -> list[MergeForest]:
         else:
             out.append(forest_prefix(lv.forest, levels[j + 1].n_merges - lv.n_merges))
     return out
+
+
+def level_payloads(levels: list[LevelMesh]) -> list[LevelPayload]:
+    """What a file stores of these levels: each level's mesh with its :func:`storage_forests` forest,
+    as the codec's payloads (``write_tetc``, ``encode_level``)."""
+    return [LevelPayload(x.level, x.ratio, x.n_merges, x.mesh, (f.parent, f.rank))
+            for x, f in zip(levels, storage_forests(levels))]
 
 
 # -- reading levels back from a .tetc file ------------------------------------------------------

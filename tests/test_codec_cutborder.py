@@ -285,6 +285,7 @@ def test_refs_window_overflow_is_an_error_not_a_write(small_sample, coding):
     """The tet kernel writes a new vertex's refs at row ``id - pred_base``: a window too small, or a
     base past the vertex, ends the decode with an error (no write out of bounds)."""
     from gatun_py.codec import _cutborder_kernels as K
+    from gatun_py.codec.legacy import tets1
 
     e = encode_connectivity(small_sample.n_points, small_sample.tets, coding=coding)
     assert e.n_referenced > e.n_boundary_vertices  # the sample has interior vertices
@@ -296,11 +297,11 @@ def test_refs_window_overflow_is_an_error_not_a_write(small_sample, coding):
         out = np.zeros((e.n_tets, 4), np.int32)
         window = np.full((rows, 4), -1, np.int32)
         if coding == 1:
-            _, status = K.decode_tets(d._tst, d._tdata, d._probs, d.n_tets, d.n_referenced, d._B, window,
-                                      d._tstate, out)
+            _, status = tets1.decode_tets(d._tst, d._tdata, d._probs, d.n_tets, d.n_referenced, d._B, window,
+                                          d._tstate, out)
         else:
-            _, status = K.decode_tets2(d._tst, d._tdata, d._probs, d._rankp, d._vdec, d._nbv, d.n_tets,
-                                       d.n_referenced, d._B, window, d._tstate, out)
+            _, status = K.decode_tets(d._tst, d._tdata, d._probs, d._rankp, d._vdec, d._nbv, d.n_tets,
+                                      d.n_referenced, d._B, window, d._tstate, out)
         assert status == K.ST_ERROR
 
 
@@ -314,8 +315,8 @@ def test_coding2_decoded_counts_shorter_than_the_vertices_is_an_error():
     d.boundary()
     d.start_tets()
     out = np.zeros((e.n_tets, 4), np.int32)
-    _, status = K.decode_tets2(d._tst, d._tdata, d._probs, d._rankp, d._vdec[:e.n_boundary_vertices + 1], d._nbv,
-                               d.n_tets, d.n_referenced, d._B, d.predictors, d._tstate, out)
+    _, status = K.decode_tets(d._tst, d._tdata, d._probs, d._rankp, d._vdec[:e.n_boundary_vertices + 1], d._nbv,
+                              d.n_tets, d.n_referenced, d._B, d.predictors, d._tstate, out)
     assert status == K.ST_ERROR
 
 

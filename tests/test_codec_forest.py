@@ -186,8 +186,10 @@ def test_the_stream_after_the_forest_reuses_its_connectivity_and_equals_a_fresh_
 def test_decode_kernels_release_the_gil():
     """Bricks decode on threads: every kernel the decoder calls from Python runs without the GIL."""
     from gatun_py.codec import _array_kernels, _cutborder_kernels, _forest_kernels, _geometry_kernels
+    from gatun_py.codec.legacy import tets1
 
-    kernels = [_cutborder_kernels.decode_boundary, _cutborder_kernels.decode_tets, _cutborder_kernels.add_faces,
+    kernels = [_cutborder_kernels.decode_boundary, _cutborder_kernels._decode_tets_run, tets1.decode_tets,
+               _cutborder_kernels.add_faces,
                _geometry_kernels.decode_tables_kernel, _geometry_kernels.decode_vertices, _geometry_kernels._decode_vertices_run,
                _array_kernels.decode_component, _array_kernels.reconstruct,
                _forest_kernels.adjacency, _forest_kernels.decode_forest_kernel, _forest_kernels.decode_rounds_kernel,

@@ -108,14 +108,6 @@ BIT_NEW, BIT_TABLE = 1, 0
 # The encoder's per-tet symbol log (``syms``, for statistics): candidate 0..14, or the escape kind.
 SYM_NEW, SYM_VERTEX_ADJACENT, SYM_TABLE = ESC + KIND_NEW, ESC + KIND_VERTEX_ADJACENT, ESC + KIND_TABLE
 
-# model layout of the tet phase
-N_C1_CTX = 5 * 4 * 4 * 2
-TM_C1 = 0
-TM_KIND = TM_C1 + N_C1_CTX * 16
-TM_C2 = TM_KIND + 8 * 4
-TM_FLIP = TM_C2 + 2 * rc.INT_MODEL_SIZE
-TM_SIZE = TM_FLIP + 4
-
 # model layout of the boundary phase
 N_S1_CTX = 5 * 3 * 3 * 2
 SM_C1 = 0
@@ -942,285 +934,201 @@ def add_faces(B, faces, apex):
     return slots
 
 
-@njit(cache=True, nogil=True)
-def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, syms):
-    """Code the tets growing inward from the border ``B`` (the boundary, in decode ids).
+# ------------------------------------------------------------------ tet phase: the steps every coding shares
+#
+# The tet coder below and the frozen coding 1 (:mod:`gatun_py.codec.legacy.tets1`) walk the border
+# the same way and differ only in how they rank the candidates and order the case (c) list. The
+# steps they share are these helpers, inlined by numba into each coder's loop (a call would pass
+# the border's arrays and the candidate lists as some forty words on the stack).
 
-    ``tets`` and ``nbr`` (:func:`tet_neighbours`) use original ids, ``tgt[slot]`` is the
-    unvisited tet behind each border face; ``dec_of``/``order`` map between original and decode ids and are extended for
-    the new (interior) vertices, numbered from ``nv0`` on, with their predictors in ``pred``.
-    ``out_tets`` receives the tets in decode order and decode ids, ``syms`` each tet's case: the
-    candidate index (paper case a), or ESC + 0 / 1 / 2 for cases b / c / d. Returns (vertices, status)."""
-    m = tets.shape[0]
-    probs = np.full(TM_SIZE, rc.PROB_INIT, np.uint16)
-    tvisited = np.zeros(m, np.bool_)
-    cand = np.empty(MAX_C1, np.int64)
-    cscore = np.empty(MAX_C1, np.int64)
-    cseq = np.empty(MAX_C1, np.int64)
-    c2 = np.empty(MAX_C2, np.int64)
-    c2seq = np.empty(MAX_C2, np.int64)
-    seen = np.empty((2, SEEN_SLOTS), np.int64)
-    cface = np.empty((MAX_C1, 3), np.int64)  # the encoder attaches by _apply_tet's walk
-    cface_full = np.zeros(1, np.int64)
-    nv = nv0
-    prev_esc = 0
-    prev_flip = 0
-    E, vhead, Q, bs = B
-    qcap = Q.shape[0]
-    for done in range(m):
-        s = -1  # _pop written out
-        while bs[BS_QHEAD] < bs[BS_QTAIL]:
-            h = bs[BS_QHEAD] & (qcap - 1)
-            bs[BS_QHEAD] += 1
-            if E[Q[h, 0] * E_COLS + E_SEQ] == Q[h, 1]:
-                s = Q[h, 0]
-                break
-        if s == -1:
-            return nv, 1
-        a = np.int64(E[s * E_COLS + 0])
-        b = np.int64(E[s * E_COLS + 1])
-        c = np.int64(E[s * E_COLS + 2])
-        behind = np.int64(E[s * E_COLS + 3])
-        ao = order[a]
-        bo = order[b]
-        co = order[c]
-        t = tgt[s]
-        if t < 0 or tvisited[t]:
-            return nv, 2
-        tvisited[t] = True
-        do = -1
-        for k in range(4):
-            w = tets[t, k]
-            if w != ao and w != bo and w != co:
-                do = w
-        d = dec_of[do]
-        n1 = _gather_face(B, s, cand, cscore, cseq, cface, cface_full)
-        _sort_candidates(cand, cscore, cseq, n1)
-        _remove(B, np.int64(3), s)
-        ctx = _score_context(n1, cscore, prev_esc, 3)
-        sym = ESC
-        if d != -1:
-            lim = n1 if n1 < MAX_C1 else MAX_C1
-            for i in range(lim):
-                if cand[i] == d:
-                    sym = i
-                    break
-        # orientation: (a, c, b, d) unless the mesh is folded here (zero-volume tets)
-        flip = _tet_flip(tets, t, ao, bo, co, do)
-        rc.enc_sym(st, out, probs, TM_C1 + ctx * 16, 4, sym)
-        syms[done] = sym
-        if sym == ESC:
-            kctx = TM_KIND + 4 * ((1 if n1 > 0 else 0) + 2 * prev_esc)
-            if d == -1:
-                rc.enc_sym(st, out, probs, kctx, 2, KIND_NEW)
-                d = nv
-                dec_of[do] = nv
-                order[nv] = do
-                pred[nv, 0] = a
-                pred[nv, 1] = b
-                pred[nv, 2] = c
-                pred[nv, 3] = behind
-                nv += 1
-            else:
-                n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq, seen)
-                j = -1
-                for i in range(n2):
-                    if c2[i] == d:
-                        j = i
-                        break
-                if j >= 0:
-                    rc.enc_sym(st, out, probs, kctx, 2, KIND_VERTEX_ADJACENT)
-                    syms[done] = SYM_VERTEX_ADJACENT
-                    rc.enc_uint(st, out, probs, TM_C2 + (rc.INT_MODEL_SIZE if n2 > 8 else 0), j)
-                else:
-                    rc.enc_sym(st, out, probs, kctx, 2, KIND_TABLE)
-                    syms[done] = SYM_TABLE
-                    rc.enc_raw(st, out, d, _bitlen(nv - 1))
-            prev_esc = 1
-        else:
-            prev_esc = 0
-        rc.enc_bit(st, out, probs, TM_FLIP + prev_flip, flip)
-        prev_flip = flip
-        t1 = b if flip else c
-        t2 = c if flip else b
-        out_tets[done, 0] = a
-        out_tets[done, 1] = t1
-        out_tets[done, 2] = t2
-        out_tets[done, 3] = d
-        s0, s1, s2 = _apply_tet(B, a, t1, t2, d)
-        # the tets behind the new border faces: neighbours of t across them
-        for k in range(3):
-            slot = s0 if k == 0 else (s1 if k == 1 else s2)
-            if slot >= 0:
-                wo = order[a] if k == 0 else (order[t1] if k == 1 else order[t2])
-                kk = 0 if tets[t, 0] == wo else (1 if tets[t, 1] == wo else (2 if tets[t, 2] == wo else 3))
-                tgt[slot] = nbr[t, kk]
-        if bs[BS_NFREE] < 4 or qcap - (bs[BS_QTAIL] - bs[BS_QHEAD]) < 4:
-            return nv, 4
-    if B[3][BS_LIVE] != 0:
-        return nv, 5
-    rc.enc_finish(st, out)
-    return nv, 0
+_pop_inlined = njit(cache=True, _nrt=False, inline="always")(_pop.py_func)
 
 
-@njit(cache=True, nogil=True)
-def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
-    """Resumable inverse of :func:`encode_tets`.
-
-    ``tstate`` int64 array: [vertices known, tets done, prev_esc, prev_flip, pred_base];
-    ``probs`` persists between calls. Decodes until ``out_tets`` is full (status ST_BATCH), the
-    border needs more room (ST_GROW: enlarge it and call again), all ``m`` tets are done
-    (ST_DONE) or the data is inconsistent (ST_ERROR). New vertices (ids < ``n_limit``) get their
-    predictors in ``pred``, row ``decode id - pred_base`` (a window of the newest vertices, or the
-    whole table with ``pred_base`` 0); a vertex past the window is an error, never a write out of
-    bounds. Returns (number of tets written to ``out_tets``, status)."""
-    cand = np.empty(MAX_C1, np.int64)
-    cscore = np.empty(MAX_C1, np.int64)
-    cseq = np.empty(MAX_C1, np.int64)
-    c2 = np.empty(MAX_C2, np.int64)
-    c2seq = np.empty(MAX_C2, np.int64)
-    seen = np.empty((2, SEEN_SLOTS), np.int64)
-    cface = np.empty((MAX_C1, 3), np.int64)
-    cfirst = np.empty(MAX_C1, np.int64)  # the candidates in gather order (cface's rows)
-    cface_full = np.zeros(1, np.int64)
-    return _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets,
-                            (cand, cscore, cseq, c2, c2seq, seen, cface, cfirst, cface_full))
+@njit(cache=True, _nrt=False, inline="always")
+def _face(E, s):
+    """The vertices (a, b, c) of border face ``s`` and the apex behind it, as int64."""
+    return (np.int64(E[s * E_COLS + 0]), np.int64(E[s * E_COLS + 1]), np.int64(E[s * E_COLS + 2]),
+            np.int64(E[s * E_COLS + 3]))
 
 
-# compiled without the runtime's reference counting (it allocates nothing): the helpers inlined
-# into its loop would otherwise increment and decrement the border arrays' counts on every tet
-@njit(cache=True, nogil=True, _nrt=False)
-def _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets, scratch):
-    """The loop of :func:`decode_tets`, with its candidate lists in ``scratch``."""
-    cand, cscore, cseq, c2, c2seq, seen, cface, cfirst, cface_full = scratch
-    nv = tstate[0]
-    done = tstate[1]
-    prev_esc = tstate[2]
-    prev_flip = tstate[3]
-    pred_base = tstate[4]
-    # new vertices get ids below this (the header's count and the end of the refs window)
-    limit = min(n_limit, pred_base + pred.shape[0])
-    if pred_base > nv:
-        return 0, ST_ERROR
-    n_out = 0
-    status = ST_DONE
-    E, vhead, Q, bs = B
-    qcap = Q.shape[0]
-    while done < m:
-        # the checks and the pop of _room / _pop / dec_failed, written out (once per tet)
-        if st[rc.DEC_ERROR] != 0 or st[rc.DEC_OVERRUN] != 0:
-            status = ST_ERROR
+@njit(cache=True, _nrt=False, inline="always")
+def _no_room(bs, qcap):
+    """Whether the border lacks the room one more tet may need (4 slots, 4 queue entries)."""
+    return bs[BS_NFREE] < 4 or qcap - (bs[BS_QTAIL] - bs[BS_QHEAD]) < 4
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _set_refs(pred, row, a, b, c, behind):
+    """A new interior vertex's geometry refs: the face it closes and the apex behind it."""
+    pred[row, 0] = a
+    pred[row, 1] = b
+    pred[row, 2] = c
+    pred[row, 3] = behind
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _kind_context(n1, prev_esc):
+    """Context of the escape's kind symbol: any candidates, whether the previous tet escaped."""
+    return 4 * ((1 if n1 > 0 else 0) + 2 * prev_esc)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _emit_tet(out_tets, row, a, b, c, d, flip):
+    """Write the tet of face (a, b, c) and fourth vertex d, (a, c, b, d) unless ``flip``; returns
+    its second and third vertices (t1, t2)."""
+    t1 = b if flip else c
+    t2 = c if flip else b
+    out_tets[row, 0] = a
+    out_tets[row, 1] = t1
+    out_tets[row, 2] = t2
+    out_tets[row, 3] = d
+    return t1, t2
+
+
+# ---- encoders
+
+@njit(cache=True, _nrt=False, inline="always")
+def _target(tets, tgt, tvisited, order, s, a, b, c):
+    """The unvisited tet behind border face ``s`` (decode ids a, b, c), marked visited, and its
+    fourth vertex (original id): (t, do), t = -1 when there is none."""
+    ao = order[a]
+    bo = order[b]
+    co = order[c]
+    t = tgt[s]
+    if t < 0 or tvisited[t]:
+        return -1, -1
+    tvisited[t] = True
+    do = -1
+    for k in range(4):
+        w = tets[t, k]
+        if w != ao and w != bo and w != co:
+            do = w
+    return t, do
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _enc_new_vertex(st, out, probs, kctx, dec_of, order, pred, nv, do, a, b, c, behind):
+    """Code case (b), a new vertex: it gets decode id ``nv`` and its refs."""
+    rc.enc_sym(st, out, probs, kctx, 2, KIND_NEW)
+    dec_of[do] = nv
+    order[nv] = do
+    _set_refs(pred, nv, a, b, c, behind)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _enc_known_vertex(st, out, probs, kctx, c2_model, c2, n2, d, nv, syms, done):
+    """Code a known vertex d that is no candidate: case (c), its index in the vertex-adjacent list
+    ``c2[:n2]``, else case (d), its decode id."""
+    j = -1
+    for i in range(n2):
+        if c2[i] == d:
+            j = i
             break
-        if n_out >= out_tets.shape[0]:
-            status = ST_BATCH
-            break
-        if bs[BS_NFREE] < 4 or qcap - (bs[BS_QTAIL] - bs[BS_QHEAD]) < 4:
-            status = ST_GROW
-            break
-        s = -1
-        while bs[BS_QHEAD] < bs[BS_QTAIL]:
-            h = bs[BS_QHEAD] & (qcap - 1)
-            bs[BS_QHEAD] += 1
-            if E[Q[h, 0] * E_COLS + E_SEQ] == Q[h, 1]:
-                s = Q[h, 0]
-                break
-        if s == -1:
-            status = ST_ERROR
-            break
-        a = np.int64(E[s * E_COLS + 0])
-        b = np.int64(E[s * E_COLS + 1])
-        c = np.int64(E[s * E_COLS + 2])
-        behind = np.int64(E[s * E_COLS + 3])
-        cface_full[0] = 0
-        n1 = _gather_face_inlined(B, s, cand, cscore, cseq, cface, cface_full)
-        for i in range(n1):
-            cfirst[i] = cand[i]
-        _sort_candidates(cand, cscore, cseq, n1)
-        _remove(B, np.int64(3), s)
-        ctx = _score_context(n1, cscore, prev_esc, 3)
-        sym = rc.dec_sym(st, data, probs, TM_C1 + ctx * 16, np.int64(4))
-        d = -1
-        if sym < ESC:
-            if sym >= n1:
-                status = ST_ERROR
-                break
-            d = cand[sym]
-            prev_esc = 0
-        else:
-            kctx = TM_KIND + 4 * ((1 if n1 > 0 else 0) + 2 * prev_esc)
-            kind = rc.dec_sym(st, data, probs, kctx, np.int64(2))
-            if kind == KIND_NEW:
-                if nv >= limit:
-                    status = ST_ERROR
-                    break
-                d = nv
-                pred[nv - pred_base, 0] = a
-                pred[nv - pred_base, 1] = b
-                pred[nv - pred_base, 2] = c
-                pred[nv - pred_base, 3] = behind
-                nv += 1
-            elif kind == KIND_VERTEX_ADJACENT:
-                n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq, seen)
-                j = rc.dec_uint(st, data, probs, TM_C2 + (rc.INT_MODEL_SIZE if n2 > 8 else 0))
-                if j >= n2:
-                    status = ST_ERROR
-                    break
-                d = c2[j]
-            elif kind == KIND_TABLE:
-                d = rc.dec_raw(st, data, _bitlen(nv - 1))
-                if d >= nv:
-                    status = ST_ERROR
-                    break
-            else:
-                status = ST_ERROR
-                break
-            prev_esc = 1
-        if d == a or d == b or d == c:
-            status = ST_ERROR
-            break
-        flip = rc.dec_bit(st, data, probs, TM_FLIP + prev_flip)
-        prev_flip = flip
-        t1 = b if flip else c
-        t2 = c if flip else b
-        out_tets[n_out, 0] = a
-        out_tets[n_out, 1] = t1
-        out_tets[n_out, 2] = t2
-        out_tets[n_out, 3] = d
-        n_out += 1
-        done += 1
-        # the faces this tet closes were noted by the gather (d a candidate), or there are none
-        # (d no candidate, the list not full); else they are found on d's list
-        i = 0
-        while i < n1 and cfirst[i] != d:
-            i += 1
-        if i < n1:  # faces opposite a, t1, t2: on edges (t1, t2) = (b, c), (a, t2) and (a, t1)
-            _attach_tet_inlined(B, a, t1, t2, d, cface[i, EDGE_BC],
-                                cface[i, EDGE_AC if flip else EDGE_AB], cface[i, EDGE_AB if flip else EDGE_AC])
-        elif cface_full[0] == 0:
-            _attach_tet_inlined(B, a, t1, t2, d, -1, -1, -1)
-        else:
-            _apply_tet_inlined(B, a, t1, t2, d)
+    if j >= 0:
+        rc.enc_sym(st, out, probs, kctx, 2, KIND_VERTEX_ADJACENT)
+        syms[done] = SYM_VERTEX_ADJACENT
+        rc.enc_uint(st, out, probs, c2_model + (rc.INT_MODEL_SIZE if n2 > 8 else 0), j)
+    else:
+        rc.enc_sym(st, out, probs, kctx, 2, KIND_TABLE)
+        syms[done] = SYM_TABLE
+        rc.enc_raw(st, out, d, _bitlen(nv - 1))
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _set_targets(tets, nbr, tgt, order, t, a, t1, t2, s0, s1, s2):
+    """The tets behind the faces of tet t that joined the border (slots s0, s1, s2 opposite a, t1,
+    t2; -1 where a face closed one): t's neighbours across them."""
+    for k in range(3):
+        slot = s0 if k == 0 else (s1 if k == 1 else s2)
+        if slot >= 0:
+            wo = order[a] if k == 0 else (order[t1] if k == 1 else order[t2])
+            kk = 0 if tets[t, 0] == wo else (1 if tets[t, 1] == wo else (2 if tets[t, 2] == wo else 3))
+            tgt[slot] = nbr[t, kk]
+
+
+@njit(cache=True, _nrt=False)
+def _tet_flip(tets, t, ao, bo, co, do):
+    """Parity of tet t's vertex order against (a, c, b, d) (original ids): 1 where the mesh is
+    folded (zero-volume tets), else 0."""
+    w0 = tets[t, 0]
+    w1 = tets[t, 1]
+    w2 = tets[t, 2]
+    inv = 0
+    for i in range(4):
+        wi = ao if i == 0 else (co if i == 1 else (bo if i == 2 else do))
+        pi = 0 if wi == w0 else (1 if wi == w1 else (2 if wi == w2 else 3))
+        for j in range(i + 1, 4):
+            wj = ao if j == 0 else (co if j == 1 else (bo if j == 2 else do))
+            pj = 0 if wj == w0 else (1 if wj == w1 else (2 if wj == w2 else 3))
+            if pi > pj:
+                inv += 1
+    return inv & 1
+
+
+# ---- resumable decoders: ``tstate`` int64 [vertices known, tets done, prev_esc, prev_flip, pred_base]
+
+@njit(cache=True, _nrt=False, inline="always")
+def _stop(st, n_out, out_tets, bs, qcap):
+    """Why a decoder stops before its next tet: ST_ERROR (the range decoder failed), ST_BATCH
+    (``out_tets`` is full) or ST_GROW (the border needs room); -1 to go on."""
+    if st[rc.DEC_ERROR] != 0 or st[rc.DEC_OVERRUN] != 0:
+        return ST_ERROR
+    if n_out >= out_tets.shape[0]:
+        return ST_BATCH
+    if _no_room(bs, qcap):
+        return ST_GROW
+    return -1
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _dec_escape(st, data, probs, kind_model, n1, prev_esc, pred, pred_base, nv, limit, a, b, c, behind):
+    """Decode what follows an escape: (kind, d, vertices known). Case (b) gives the new vertex its
+    decode id and refs, case (d) reads a decode id; d is -1 for case (c), which the caller
+    decodes, and on an error (a vertex id past ``limit`` or not yet known, an unknown kind)."""
+    kind = rc.dec_sym(st, data, probs, kind_model + _kind_context(n1, prev_esc), 2)
+    d = -1
+    if kind == KIND_NEW:
+        if nv < limit:
+            d = nv
+            _set_refs(pred, nv - pred_base, a, b, c, behind)
+            nv += 1
+    elif kind == KIND_TABLE:
+        x = rc.dec_raw(st, data, _bitlen(nv - 1))
+        if x < nv:
+            d = x
+    return kind, d, nv
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _dec_index(st, data, probs, c2_model, n2):
+    """Case (c)'s index into a vertex-adjacent list of ``n2``, or -1 past its end."""
+    j = rc.dec_uint(st, data, probs, c2_model + (rc.INT_MODEL_SIZE if n2 > 8 else 0))
+    return j if j < n2 else -1
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _end_run(st, status, B, tstate, nv, done, prev_esc, prev_flip):
+    """Keep a decoder's state for its next call; the final status (a finished stream must leave
+    the border empty and the range decoder sound)."""
     if status == ST_DONE and (B[3][BS_LIVE] != 0 or rc.dec_failed(st)):
         status = ST_ERROR
     tstate[0] = nv
     tstate[1] = done
     tstate[2] = prev_esc
     tstate[3] = prev_flip
-    return n_out, status
+    return status
 
 
-# ------------------------------------------------------------------ tet phase, coding 2 (format 5)
+# ------------------------------------------------------------------ tet phase (tet coding 2)
 #
-# Coding 1 ranks the candidates by score (faces of T the tet would close), then by age. On an
-# unstructured mesh a score-1 candidate is the fourth vertex 0.3 % to 66 % of the time depending
-# on how full the stars already are (measured on the gmsh flange: bench/conn_study.py), which the
-# score does not see. Coding 2 gives each candidate a *class* from what the decoder knows: its
-# score, how many decoded tets already hold it, whether it is a boundary vertex, and how many
+# Each candidate gets a *class* from what the decoder knows: its score (faces of T the tet would
+# close), how many decoded tets already hold it, whether it is a boundary vertex, and how many
 # decoded tets hold the ends of the gate edges it is adjacent across (the fuller the edge's star,
-# the likelier the tet closes it). Each class has an adaptive probability of being the fourth
-# vertex (updated after every tet, the same way in encoder and decoder); candidates are ranked by
-# it, and the index is coded in a context of the two best candidates' probabilities. An escape's
-# vertex-adjacent list (case c) is ordered by decoded tets, fewest first, instead of by age.
+# the likelier the tet closes it). The score alone does not see how full the stars already are
+# (bench/sections/codec.md). Each class has an adaptive probability of being the fourth vertex
+# (updated after every tet, the same way in encoder and decoder); candidates are ranked by it, and
+# the index is coded in a context of the two best candidates' probabilities. An escape's
+# vertex-adjacent list (case c) is ordered by decoded tets, fewest first, then by age.
 
 CLS_VD_DIV, CLS_VD_LEVELS = 3, 16  # decoded tets on the candidate, /3, capped
 CLS_EV_DIV, CLS_EV_LEVELS = 6, 16  # decoded tets on the ends of its fullest gate edge, /6, capped
@@ -1232,16 +1140,16 @@ EV_LEVEL = np.minimum(np.arange(CLS_EV_DIV * CLS_EV_LEVELS) // CLS_EV_DIV, CLS_E
 RANK_SHIFT = 5  # adaptation rate of a class's probability (as the range coder's models)
 RANK_INIT = (rc.PROB_ONE // 4, (rc.PROB_ONE * 15) // 16, rc.PROB_ONE - 64)  # by score 1, 2, 3
 P_LEVELS = 8  # a candidate probability's quantisation in the index context (+1: no candidate)
-N_C1_CTX2 = 5 * (P_LEVELS + 1) * (P_LEVELS + 1) * 2
-TM2_C1 = 0
-TM2_KIND = TM2_C1 + N_C1_CTX2 * 16
-TM2_C2 = TM2_KIND + 8 * 4
-TM2_FLIP = TM2_C2 + 2 * rc.INT_MODEL_SIZE
-TM2_SIZE = TM2_FLIP + 4
+N_C1_CTX = 5 * (P_LEVELS + 1) * (P_LEVELS + 1) * 2
+TM_C1 = 0
+TM_KIND = TM_C1 + N_C1_CTX * 16
+TM_C2 = TM_KIND + 8 * 4
+TM_FLIP = TM_C2 + 2 * rc.INT_MODEL_SIZE
+TM_SIZE = TM_FLIP + 4
 
 
 def new_rank_model() -> np.ndarray:
-    """The class probabilities of coding 2 at the start of a tet stream."""
+    """The class probabilities at the start of a tet stream."""
     p = np.empty(N_CLASS, np.uint16)
     per_score = N_CLASS // 3
     for k in range(3):
@@ -1250,7 +1158,7 @@ def new_rank_model() -> np.ndarray:
 
 
 @njit(cache=True, _nrt=False)
-def _rank_candidates2(cand, cscore, cseq, cface, n1, vdec, nbv, a, b, c, rankp, ckey, ccls, prev_esc):
+def _rank_candidates(cand, cscore, cseq, cface, n1, vdec, nbv, a, b, c, rankp, ckey, ccls, prev_esc):
     """Class (``ccls``) and ranking key (``ckey``: the class probability, then the score, then the
     age; distinct, higher = better) of each gathered candidate. Returns (the index symbol's context,
     gather position of the best candidate, of the second best; -1 where there is none). The
@@ -1315,7 +1223,7 @@ def _nth_candidate(ckey, n1, r):
 
 
 @njit(cache=True, _nrt=False)
-def _learn_ranks2(rankp, ckey, ccls, n1, hit):
+def _learn_ranks(rankp, ckey, ccls, n1, hit):
     """After a tet: the class of gather position ``hit`` (-1: none) was the fourth vertex, the
     others were not. Each update starts from the probability the ranking read (in ``ckey``), and
     the hit's is written last: a class held by several candidates ends the same in any order."""
@@ -1342,7 +1250,7 @@ def _order_by_decoded(c2, n2, vdec):
 
 @njit(cache=True, _nrt=False)
 def _select_vertex_adjacent(c2, c2seq, n2, vdec, j):
-    """Entry ``j`` (< n2) of coding 2's case (c) order without sorting the list: the list as
+    """Entry ``j`` (< n2) of the case (c) order without sorting the list: the list as
     :func:`_walk_vertex_adjacent` leaves it, sorted stably by sequence (:func:`_gather_vertex_adjacent`)
     and then by decoded tets (:func:`_order_by_decoded`), is the order of the distinct keys
     (decoded tets, sequence, position met), so entry j is the (j+1)-th smallest key. The decoder
@@ -1371,12 +1279,18 @@ def _count_decoded(vdec, a, b, c, d):
 
 
 @njit(cache=True, nogil=True)
-def encode_tets2(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, syms, rankp, vdec):
-    """:func:`encode_tets` with coding 2's ranking and case (c) order (same arguments, plus the
-    class probabilities ``rankp`` from :func:`new_rank_model` and zeroed decoded-tet counts
-    ``vdec`` (uint8) by decode id; ``syms`` holds each tet's rank in coding 2's order)."""
+def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, syms, rankp, vdec):
+    """Code the tets growing inward from the border ``B`` (the boundary, in decode ids).
+
+    ``tets`` and ``nbr`` (:func:`tet_neighbours`) use original ids, ``tgt[slot]`` is the
+    unvisited tet behind each border face; ``dec_of``/``order`` map between original and decode
+    ids and are extended for the new (interior) vertices, numbered from ``nv0`` on, with their
+    predictors in ``pred``. ``rankp`` holds the class probabilities (:func:`new_rank_model`),
+    ``vdec`` (uint8, zeros) the decoded-tet counts by decode id. ``out_tets`` receives the tets
+    in decode order and decode ids, ``syms`` each tet's case: the candidate's rank (paper case
+    a), or ESC + 0 / 1 / 2 for cases b / c / d. Returns (vertices, status)."""
     m = tets.shape[0]
-    probs = np.full(TM2_SIZE, rc.PROB_INIT, np.uint16)
+    probs = np.full(TM_SIZE, rc.PROB_INIT, np.uint16)
     tvisited = np.zeros(m, np.bool_)
     cand = np.empty(MAX_C1, np.int64)
     cscore = np.empty(MAX_C1, np.int64)
@@ -1397,27 +1311,15 @@ def encode_tets2(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets,
         s = _pop(B)
         if s == -1:
             return nv, 1
-        a = np.int64(E[s * E_COLS + 0])
-        b = np.int64(E[s * E_COLS + 1])
-        c = np.int64(E[s * E_COLS + 2])
-        behind = np.int64(E[s * E_COLS + 3])
-        ao = order[a]
-        bo = order[b]
-        co = order[c]
-        t = tgt[s]
-        if t < 0 or tvisited[t]:
+        a, b, c, behind = _face(E, s)
+        t, do = _target(tets, tgt, tvisited, order, s, a, b, c)
+        if t < 0:
             return nv, 2
-        tvisited[t] = True
-        do = -1
-        for k in range(4):
-            w = tets[t, k]
-            if w != ao and w != bo and w != co:
-                do = w
         d = dec_of[do]
         n1 = _gather_face(B, s, cand, cscore, cseq, cface, cface_full)
         _remove(B, np.int64(3), s)
-        ctx, best, second = _rank_candidates2(cand, cscore, cseq, cface, n1, vdec, nv0, a, b, c, rankp, ckey, ccls,
-                                              prev_esc)
+        ctx, best, second = _rank_candidates(cand, cscore, cseq, cface, n1, vdec, nv0, a, b, c, rankp, ckey, ccls,
+                                             prev_esc)
         sym = ESC
         hit = -1
         if d != -1:
@@ -1426,58 +1328,30 @@ def encode_tets2(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets,
                     hit = i
                     sym = _rank_of(ckey, n1, i)
                     break
-        flip = _tet_flip(tets, t, ao, bo, co, do)
-        rc.enc_sym(st, out, probs, TM2_C1 + ctx * 16, 4, sym)
+        flip = _tet_flip(tets, t, order[a], order[b], order[c], do)
+        rc.enc_sym(st, out, probs, TM_C1 + ctx * 16, 4, sym)
         syms[done] = sym
         if sym == ESC:
-            kctx = TM2_KIND + 4 * ((1 if n1 > 0 else 0) + 2 * prev_esc)
+            kctx = TM_KIND + _kind_context(n1, prev_esc)
             if d == -1:
-                rc.enc_sym(st, out, probs, kctx, 2, KIND_NEW)
+                _enc_new_vertex(st, out, probs, kctx, dec_of, order, pred, nv, do, a, b, c, behind)
                 d = nv
-                dec_of[do] = nv
-                order[nv] = do
-                pred[nv, 0] = a
-                pred[nv, 1] = b
-                pred[nv, 2] = c
-                pred[nv, 3] = behind
                 nv += 1
             else:
                 n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq, seen)
                 _order_by_decoded(c2, n2, vdec)
-                j = -1
-                for i in range(n2):
-                    if c2[i] == d:
-                        j = i
-                        break
-                if j >= 0:
-                    rc.enc_sym(st, out, probs, kctx, 2, KIND_VERTEX_ADJACENT)
-                    syms[done] = SYM_VERTEX_ADJACENT
-                    rc.enc_uint(st, out, probs, TM2_C2 + (rc.INT_MODEL_SIZE if n2 > 8 else 0), j)
-                else:
-                    rc.enc_sym(st, out, probs, kctx, 2, KIND_TABLE)
-                    syms[done] = SYM_TABLE
-                    rc.enc_raw(st, out, d, _bitlen(nv - 1))
+                _enc_known_vertex(st, out, probs, kctx, TM_C2, c2, n2, d, nv, syms, done)
             prev_esc = 1
         else:
             prev_esc = 0
-        _learn_ranks2(rankp, ckey, ccls, n1, hit)
-        rc.enc_bit(st, out, probs, TM2_FLIP + prev_flip, flip)
+        _learn_ranks(rankp, ckey, ccls, n1, hit)
+        rc.enc_bit(st, out, probs, TM_FLIP + prev_flip, flip)
         prev_flip = flip
-        t1 = b if flip else c
-        t2 = c if flip else b
-        out_tets[done, 0] = a
-        out_tets[done, 1] = t1
-        out_tets[done, 2] = t2
-        out_tets[done, 3] = d
+        t1, t2 = _emit_tet(out_tets, done, a, b, c, d, flip)
         _count_decoded(vdec, a, b, c, d)
         s0, s1, s2 = _apply_tet(B, a, t1, t2, d)
-        for k in range(3):
-            slot = s0 if k == 0 else (s1 if k == 1 else s2)
-            if slot >= 0:
-                wo = order[a] if k == 0 else (order[t1] if k == 1 else order[t2])
-                kk = 0 if tets[t, 0] == wo else (1 if tets[t, 1] == wo else (2 if tets[t, 2] == wo else 3))
-                tgt[slot] = nbr[t, kk]
-        if bs[BS_NFREE] < 4 or qcap - (bs[BS_QTAIL] - bs[BS_QHEAD]) < 4:
+        _set_targets(tets, nbr, tgt, order, t, a, t1, t2, s0, s1, s2)
+        if _no_room(bs, qcap):
             return nv, 4
     if B[3][BS_LIVE] != 0:
         return nv, 5
@@ -1485,29 +1359,18 @@ def encode_tets2(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets,
     return nv, 0
 
 
-@njit(cache=True, _nrt=False)
-def _tet_flip(tets, t, ao, bo, co, do):
-    """Parity of tet t's vertex order against (a, c, b, d) (original ids): 1 where the mesh is
-    folded (zero-volume tets), else 0."""
-    w0 = tets[t, 0]
-    w1 = tets[t, 1]
-    w2 = tets[t, 2]
-    inv = 0
-    for i in range(4):
-        wi = ao if i == 0 else (co if i == 1 else (bo if i == 2 else do))
-        pi = 0 if wi == w0 else (1 if wi == w1 else (2 if wi == w2 else 3))
-        for j in range(i + 1, 4):
-            wj = ao if j == 0 else (co if j == 1 else (bo if j == 2 else do))
-            pj = 0 if wj == w0 else (1 if wj == w1 else (2 if wj == w2 else 3))
-            if pi > pj:
-                inv += 1
-    return inv & 1
+def decode_tets(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate, out_tets):
+    """Resumable inverse of :func:`encode_tets`.
 
-
-def decode_tets2(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate, out_tets):
-    """Resumable inverse of :func:`encode_tets2`: as :func:`decode_tets`, with the class
-    probabilities ``rankp`` (:func:`new_rank_model`) and the decoded-tet counts ``vdec`` (int32
-    uint8 per vertex, zeros at the start) persisting between calls, ``nbv`` the boundary vertices."""
+    ``tstate`` int64 array: [vertices known, tets done, prev_esc, prev_flip, pred_base];
+    ``probs``, the class probabilities ``rankp`` (:func:`new_rank_model`) and the decoded-tet
+    counts ``vdec`` (uint8 per vertex, zeros at the start) persist between calls, ``nbv`` is the
+    number of boundary vertices. Decodes until ``out_tets`` is full (status ST_BATCH), the border
+    needs more room (ST_GROW: enlarge it and call again), all ``m`` tets are done (ST_DONE) or
+    the data is inconsistent (ST_ERROR). New vertices (ids < ``n_limit``) get their predictors in
+    ``pred``, row ``decode id - pred_base`` (a window of the newest vertices, or the whole table
+    with ``pred_base`` 0); a vertex past the window is an error, never a write out of bounds.
+    Returns (number of tets written to ``out_tets``, status)."""
     cand = np.empty(MAX_C1, np.int64)
     cscore = np.empty(MAX_C1, np.int64)
     cseq = np.empty(MAX_C1, np.int64)
@@ -1520,22 +1383,21 @@ def decode_tets2(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate,
     cface_full = np.zeros(1, np.int64)
     # scratch in Python, the loop in the compiled kernel (which releases the GIL): a compiled
     # wrapper here cost most of a second of a first run's compiling, and a call is per batch
-    return _decode_tets2_run(st, data, probs, rankp, vdec, int(nbv), int(m), int(n_limit), B, pred, tstate, out_tets,
-                             (cand, cscore, cseq, c2, c2seq, seen, cface, ckey, ccls, cface_full))
+    return _decode_tets_run(st, data, probs, rankp, vdec, int(nbv), int(m), int(n_limit), B, pred, tstate, out_tets,
+                            (cand, cscore, cseq, c2, c2seq, seen, cface, ckey, ccls, cface_full))
 
 
-_rank_candidates2_inlined = njit(cache=True, _nrt=False, inline="always")(_rank_candidates2.py_func)
+_rank_candidates_inlined = njit(cache=True, _nrt=False, inline="always")(_rank_candidates.py_func)
 
 
+# compiled without the runtime's reference counting (it allocates nothing): the helpers inlined
+# into its loop would otherwise increment and decrement the border arrays' counts on every tet
 @njit(cache=True, nogil=True, _nrt=False)
-def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate, out_tets, scratch):
-    """The loop of :func:`decode_tets2` (as :func:`_decode_tets_run`)."""
+def _decode_tets_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate, out_tets, scratch):
+    """The loop of :func:`decode_tets`, with its candidate lists in ``scratch``."""
     cand, cscore, cseq, c2, c2seq, seen, cface, ckey, ccls, cface_full = scratch
-    nv = tstate[0]
-    done = tstate[1]
-    prev_esc = tstate[2]
-    prev_flip = tstate[3]
-    pred_base = tstate[4]
+    nv, done, prev_esc, prev_flip, pred_base = tstate[0], tstate[1], tstate[2], tstate[3], tstate[4]
+    # new vertices get ids below this (the header's count, the end of the refs window, of vdec)
     limit = min(n_limit, pred_base + pred.shape[0], vdec.shape[0])
     if pred_base > nv:
         return 0, ST_ERROR
@@ -1544,22 +1406,11 @@ def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, ts
     E, vhead, Q, bs = B
     qcap = Q.shape[0]
     while done < m:
-        if st[rc.DEC_ERROR] != 0 or st[rc.DEC_OVERRUN] != 0:
-            status = ST_ERROR
+        stop = _stop(st, n_out, out_tets, bs, qcap)
+        if stop >= 0:
+            status = stop
             break
-        if n_out >= out_tets.shape[0]:
-            status = ST_BATCH
-            break
-        if bs[BS_NFREE] < 4 or qcap - (bs[BS_QTAIL] - bs[BS_QHEAD]) < 4:
-            status = ST_GROW
-            break
-        s = -1
-        while bs[BS_QHEAD] < bs[BS_QTAIL]:
-            h = bs[BS_QHEAD] & (qcap - 1)
-            bs[BS_QHEAD] += 1
-            if E[Q[h, 0] * E_COLS + E_SEQ] == Q[h, 1]:
-                s = Q[h, 0]
-                break
+        s = _pop_inlined(B)
         if s == -1:
             status = ST_ERROR
             break
@@ -1581,16 +1432,13 @@ def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, ts
                 node = vhead[v]
                 if node != -1 and np.uint32(node) < E.shape[0]:
                     _prefetch(E, np.uint32(E[np.uint32(node)]))
-        a = np.int64(E[s * E_COLS + 0])
-        b = np.int64(E[s * E_COLS + 1])
-        c = np.int64(E[s * E_COLS + 2])
-        behind = np.int64(E[s * E_COLS + 3])
+        a, b, c, behind = _face(E, s)
         cface_full[0] = 0
         n1 = _gather_face_inlined(B, s, cand, cscore, cseq, cface, cface_full)
         _remove(B, 3, s)
-        ctx, best, second = _rank_candidates2_inlined(cand, cscore, cseq, cface, n1, vdec, nbv, a, b, c, rankp,
-                                                      ckey, ccls, prev_esc)
-        sym = rc.dec_sym(st, data, probs, TM2_C1 + ctx * 16, 4)
+        ctx, best, second = _rank_candidates_inlined(cand, cscore, cseq, cface, n1, vdec, nbv, a, b, c, rankp,
+                                                     ckey, ccls, prev_esc)
+        sym = rc.dec_sym(st, data, probs, TM_C1 + ctx * 16, 4)
         d = -1
         hit = -1
         if sym < ESC:
@@ -1604,31 +1452,14 @@ def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, ts
             d = cand[hit]
             prev_esc = 0
         else:
-            kctx = TM2_KIND + 4 * ((1 if n1 > 0 else 0) + 2 * prev_esc)
-            kind = rc.dec_sym(st, data, probs, kctx, 2)
-            if kind == KIND_NEW:
-                if nv >= limit:
-                    status = ST_ERROR
-                    break
-                d = nv
-                pred[nv - pred_base, 0] = a
-                pred[nv - pred_base, 1] = b
-                pred[nv - pred_base, 2] = c
-                pred[nv - pred_base, 3] = behind
-                nv += 1
-            elif kind == KIND_VERTEX_ADJACENT:
+            kind, d, nv = _dec_escape(st, data, probs, TM_KIND, n1, prev_esc, pred, pred_base, nv, limit,
+                                      a, b, c, behind)
+            if kind == KIND_VERTEX_ADJACENT:
                 n2 = _walk_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq, seen)
-                j = rc.dec_uint(st, data, probs, TM2_C2 + (rc.INT_MODEL_SIZE if n2 > 8 else 0))
-                if j >= n2:
-                    status = ST_ERROR
-                    break
-                d = _select_vertex_adjacent(c2, c2seq, n2, vdec, j)
-            elif kind == KIND_TABLE:
-                d = rc.dec_raw(st, data, _bitlen(nv - 1))
-                if d >= nv:
-                    status = ST_ERROR
-                    break
-            else:
+                j = _dec_index(st, data, probs, TM_C2, n2)
+                if j >= 0:
+                    d = _select_vertex_adjacent(c2, c2seq, n2, vdec, j)
+            if d < 0:
                 status = ST_ERROR
                 break
             prev_esc = 1
@@ -1640,15 +1471,10 @@ def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, ts
         if d == a or d == b or d == c:
             status = ST_ERROR
             break
-        _learn_ranks2(rankp, ckey, ccls, n1, hit if sym < ESC else -1)
-        flip = rc.dec_bit(st, data, probs, TM2_FLIP + prev_flip)
+        _learn_ranks(rankp, ckey, ccls, n1, hit if sym < ESC else -1)
+        flip = rc.dec_bit(st, data, probs, TM_FLIP + prev_flip)
         prev_flip = flip
-        t1 = b if flip else c
-        t2 = c if flip else b
-        out_tets[n_out, 0] = a
-        out_tets[n_out, 1] = t1
-        out_tets[n_out, 2] = t2
-        out_tets[n_out, 3] = d
+        t1, t2 = _emit_tet(out_tets, n_out, a, b, c, d, flip)
         n_out += 1
         done += 1
         _count_decoded(vdec, a, b, c, d)
@@ -1669,10 +1495,5 @@ def _decode_tets2_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, ts
             else:  # (t1, t3, t2, t0), (t0, t2, t3, t1), (t0, t3, t1, t2): reversed outward faces
                 _add_inlined(B, 3, t1 if j == 0 else a, d if j != 1 else t2, t2 if j == 0 else (d if j == 1 else t1),
                              a if j == 0 else (t1 if j == 1 else t2))
-    if status == ST_DONE and (B[3][BS_LIVE] != 0 or rc.dec_failed(st)):
-        status = ST_ERROR
-    tstate[0] = nv
-    tstate[1] = done
-    tstate[2] = prev_esc
-    tstate[3] = prev_flip
+    status = _end_run(st, status, B, tstate, nv, done, prev_esc, prev_flip)
     return n_out, status

@@ -35,21 +35,26 @@ import numpy as np
 from ..errors import CorruptFileError, MeshError
 from . import _cutborder_kernels as K
 from . import rangecoder as rc
-from .container import VERSION_MAJOR
+from .formats import CURRENT, codings
 
 CODINGS = (1, 2)
 
 
 def coding_for_format(major: int) -> int:
-    """The tet-stream coding a file of container format ``major`` is written with: 1 up to format
-    4, 2 from format 5 on (candidates ranked by adaptive class probabilities, see
-    :mod:`gatun_py.codec._cutborder_kernels`). The boundary stream is the same in both; readers
-    take both codings."""
-    return 1 if major <= 4 else 2
+    """The tet-stream coding of a file of format ``major`` (:mod:`gatun_py.codec.formats`)."""
+    return codings(major).tets
 
 
 # what this version of tetc writes
-FORMAT_CODING = coding_for_format(VERSION_MAJOR)
+FORMAT_CODING = CURRENT.tets
+
+
+def _tets1():
+    """The frozen tet coding 1 (formats 1 to 4), imported when a file of those versions is read:
+    today's files never compile its kernels."""
+    from .legacy import tets1
+
+    return tets1
 
 
 @dataclass
@@ -198,11 +203,11 @@ def encode_connectivity(points_count: int, tets: np.ndarray, boundary=None, *,
         B = K.new_border(n, nf + 2 * m + 8, nf + 3 * m + 8)
         tgt = np.full(nf + 3 * m + 8, -1, np.int32)
         tgt[K.add_faces(B, out_faces, -1)] = bowner
-        if coding == 1:
-            res = K.encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nbv, out_tets, symbols)
+        if coding == 1:  # the frozen coding, kept for the tests' round trips
+            res = _tets1().encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nbv, out_tets, symbols)
         else:
-            res = K.encode_tets2(st, out, tets, nbr, tgt, B, dec_of, order, pred, nbv, out_tets, symbols,
-                                 K.new_rank_model(), np.zeros(max(n, 1), np.uint8))
+            res = K.encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nbv, out_tets, symbols,
+                                K.new_rank_model(), np.zeros(max(n, 1), np.uint8))
         run_tets.result = res
         run_tets.peak = int(B[3][K.BS_PEAK])
 
@@ -319,9 +324,9 @@ class ConnectivityDecoder:
             self._window = np.empty((0, 4), np.int32)
         self.last_refs = np.empty((0, 4), np.int32)
         if self.coding == 1:
-            self._probs = np.full(K.TM_SIZE, rc.PROB_INIT, np.uint16)
+            self._probs = np.full(_tets1().TM_SIZE, rc.PROB_INIT, np.uint16)
         else:  # the class probabilities and decoded-tet counts persist between batches too
-            self._probs = np.full(K.TM2_SIZE, rc.PROB_INIT, np.uint16)
+            self._probs = np.full(K.TM_SIZE, rc.PROB_INIT, np.uint16)
             self._rankp = K.new_rank_model()
             self._vdec = np.zeros(max(self.n_points, 1), np.uint8)
         if self.n_tets:
@@ -361,11 +366,11 @@ class ConnectivityDecoder:
         filled = 0
         while filled < len(out):
             if self.coding == 1:
-                n, status = K.decode_tets(self._tst, self._tdata, self._probs, self.n_tets, self.n_referenced,
-                                          self._B, pred, self._tstate, out[filled:])
+                n, status = _tets1().decode_tets(self._tst, self._tdata, self._probs, self.n_tets, self.n_referenced,
+                                                 self._B, pred, self._tstate, out[filled:])
             else:
-                n, status = K.decode_tets2(self._tst, self._tdata, self._probs, self._rankp, self._vdec, self._nbv,
-                                           self.n_tets, self.n_referenced, self._B, pred, self._tstate, out[filled:])
+                n, status = K.decode_tets(self._tst, self._tdata, self._probs, self._rankp, self._vdec, self._nbv,
+                                          self.n_tets, self.n_referenced, self._B, pred, self._tstate, out[filled:])
             filled += n
             if status == K.ST_GROW:
                 if len(self._B[0]) // K.E_COLS + 64 >= K.MAX_SLOTS:

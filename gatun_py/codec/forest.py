@@ -44,7 +44,7 @@ import numpy as np
 
 from ..errors import CorruptFileError
 from . import _forest_kernels as FK
-from .container import VERSION_MAJOR
+from .formats import CURRENT, codings
 from .rangecoder import capacity_hint, check_decoder, dec_state, run_encoder
 
 __all__ = ["ROOT_RANK", "check_forest", "encode_forest", "decode_forest", "forest_header",
@@ -56,15 +56,12 @@ ROOT_RANK = 2**31 - 1  # the rank of a vertex that is never merged
 
 
 def coding_for_format(major: int) -> int:
-    """The forest coding a file of container format ``major`` is written with: 0 (LZMA, magic
-    ``GFR1``) in formats 1 and 2, 1 (after the level's mesh, ``GFR3``) in formats 3 to 5, 2
-    (rounds, after the level's mesh and geometry, ``GFR6``) in format 6, 3 (rounds and parents in
-    contexts of the level's quadrics, ``GFR7``) from format 7 on. Readers take every coding."""
-    return 0 if major <= 2 else (1 if major <= 5 else (2 if major == 6 else 3))
+    """The forest coding of a file of format ``major`` (:mod:`gatun_py.codec.formats`)."""
+    return codings(major).forest
 
 
 # what this version of tetc writes
-FOREST_CODING = coding_for_format(VERSION_MAJOR)
+FOREST_CODING = CURRENT.forest
 
 
 def check_forest(parent: np.ndarray, rank: np.ndarray) -> int:

@@ -72,7 +72,7 @@ import numpy as np
 
 from ..errors import CorruptFileError
 from . import _geometry_kernels as K
-from .container import VERSION_MAJOR
+from .formats import CURRENT, codings
 from .rangecoder import (ADAPT_SHIFT, DEC_ERROR, DEC_OVERRUN, DEC_POS, FAST_ADAPT_SHIFT, INT_BUCKET_BITS, PROB_INIT,
                          PROB_ONE, dec_state, enc_state, new_model)
 
@@ -81,14 +81,8 @@ CODINGS = K.CODINGS + (4, 5)
 
 
 def coding_for_format(major: int) -> int:
-    """The geometry block coding a file of container format ``major`` is written with: 1 up to
-    format 3, 2 in format 4 (the tet-geometry predictors of
-    :func:`gatun_py.codec._geometry_kernels._geometric_cands`), 3 in formats 5 to 7 (coding 2's
-    model with wide raw bits, a sign context, a flag-first repetition symbol and a per-block x -> y
-    cache), 4 in format 8 (coding 3's model, the value tables in a stream of their own and
-    chained across levels), 5 from format 9 on (coding 4 with rank steps on the table-mode
-    channels that gain by them). Readers take every coding."""
-    return 1 if major <= 3 else (2 if major == 4 else (3 if major <= 7 else (4 if major == 8 else 5)))
+    """The geometry block coding of a file of format ``major`` (:mod:`gatun_py.codec.formats`)."""
+    return codings(major).geometry
 
 
 def _kernel_coding(coding: int) -> int:
@@ -96,7 +90,7 @@ def _kernel_coding(coding: int) -> int:
 
 
 # what this version of tetc writes
-FORMAT_VERSION = coding_for_format(VERSION_MAJOR)
+FORMAT_VERSION = CURRENT.geometry
 MAX_POINTS = 1 << 29  # the decoder's scratch tags (3 per vertex) are int32
 _HEADER = struct.Struct("<BBI4I")
 HEADER_SIZE = _HEADER.size  # codings 1-3

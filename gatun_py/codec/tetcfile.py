@@ -32,16 +32,17 @@ from ..mesh.model import NO_SCALAR, scalar_of
 from ..mesh.validate import check_tet_ids
 from .brickindex import BrickView, brick_levels_summary, parse_brick_index
 from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
-from .container import VERSION_MAJOR, Container, build_container
-from .cutborder import ConnectivityDecoder, coding_for_format, encode_connectivity
+from .container import Container, build_container
+from .cutborder import ConnectivityDecoder, encode_connectivity
 from .decoded_connectivity import DecodedConnectivity, DecodedGeometry
 from .dependencies import decode_dependencies, dependencies_header, encode_dependencies
-from .forest import (FOREST_CODING, ROOT_RANK, coding_for_format as forest_coding_for_format, decode_forest,
+from .forest import (FOREST_CODING, ROOT_RANK, decode_forest,
                      decode_forest_on_geometry, decode_forest_on_mesh, decode_forest_rounds, encode_forest_on_geometry,
                      encode_forest_on_mesh, encode_forest_rounds, forest_header)
 from .geometry import (MAX_HEADER_SIZE, GeometryDecoder, assemble_geometry, chained_channels, check_geometry_header,
-                       coding_for_format as geometry_coding_for_format, decode_value_tables, encode_geometry,
+                       decode_value_tables, encode_geometry,
                        geometry_parts)
+from .formats import CURRENT, codings
 from .threads import RunAhead, check_jobs
 
 FORMAT_NAME = "tetc"
@@ -54,7 +55,7 @@ _MIN_RUN_AHEAD_BATCH_TETS = 16384
 # its tet section and 5 boundary faces per byte; 512 leaves 60x headroom
 _MAX_TETS_PER_BYTE = 512
 _MAX_FACES_PER_BYTE = 512
-GEOMETRY_CODING = geometry_coding_for_format(VERSION_MAJOR)  # what this version writes
+GEOMETRY_CODING = CURRENT.geometry  # what this version writes
 _POINTS = ("points",)  # key of the float64 coordinates among the exact arrays (no array name is a tuple)
 
 
@@ -494,7 +495,7 @@ class TetcReader:
 
     def _parse_arrays(self):
         """(points dtype, [(name, dtype, components)]) from the metadata; format 1 has one float32 scalar."""
-        if ("arrays" in self.meta) != (self.container.major >= 2):
+        if ("arrays" in self.meta) != codings(self.container.major).arrays:
             raise CorruptFileError("corrupt metadata: the array list does not match the format version")
         if "arrays" not in self.meta:  # format 1: float32 coordinates and one float32 scalar
             return np.dtype("<f4"), [(self.scalar_name, np.dtype("<f4"), 1)]
@@ -524,7 +525,7 @@ class TetcReader:
         listed = {j: e["copies"] for j, e in enumerate(entries) if "copies" in e}
         if not listed:
             return {}
-        if self.container.major < 8:
+        if not codings(self.container.major).array_copies:
             raise CorruptFileError("corrupt metadata: array copies in a file of format 7 or older")
         names = [a[0] for a in self.arrays]
         s = names.index(self.scalar_name)
@@ -626,7 +627,7 @@ class TetcReader:
         name = f"L{level}/geometry"
         head = self.container.read_section_head(name, MAX_HEADER_SIZE)
         coding, _, _, _ = check_geometry_header(head, lv["points"], total=self._size(name))
-        if coding > geometry_coding_for_format(self.container.major):
+        if coding > codings(self.container.major).geometry:
             raise CorruptFileError(f"corrupt geometry section of level {level}: coding {coding} "
                                    f"in a file of format {self.container.major}")
         m, nf = lv["tets"], lv["boundary_faces"]
@@ -650,7 +651,7 @@ class TetcReader:
         if n != lv["points"]:
             raise CorruptFileError(f"{name}: covers {n} vertices, the level has {lv['points']}")
         n = self._checked_points(level)
-        coding = forest_coding_for_format(self.container.major)
+        coding = codings(self.container.major).forest
         if coding == 0:
             return decode_forest(data, n)
         boundary = np.arange(n) < lv["boundary_vertices"]
@@ -742,7 +743,7 @@ class TetcReader:
         return ConnectivityDecoder(self.read_section(f"L{level}/boundary"), self.read_section(f"L{level}/tets"),
                                    n_points=lv["points"], n_tets=lv["tets"], n_boundary_faces=lv["boundary_faces"],
                                    n_referenced=lv["referenced_points"], keep_predictors=keep_predictors,
-                                   coding=coding_for_format(self.container.major))
+                                   coding=codings(self.container.major).tets)
 
     def _connectivity(self, level: int):
         """The level's connectivity for one decode: the one :meth:`_level_tets` kept (handed over

@@ -420,7 +420,7 @@ def test_decode_kernels_release_the_gil():
     from gatun_py.codec import _array_kernels, _cutborder_kernels, _geometry_kernels
     from gatun_py.codec.legacy import tets1
 
-    for kernel in (_cutborder_kernels.decode_boundary, _cutborder_kernels._decode_tets_run, tets1.decode_tets,
+    for kernel in (_cutborder_kernels.decode_boundary, _cutborder_kernels._decode_tets_run, tets1._decode_tets_run,
                    _geometry_kernels.decode_tables_kernel, _geometry_kernels.decode_vertices,
                    _array_kernels.decode_component, _array_kernels.reconstruct):
         assert kernel.targetoptions.get("nogil") is True, kernel.__name__

@@ -188,7 +188,7 @@ def test_decode_kernels_release_the_gil():
     from gatun_py.codec import _array_kernels, _cutborder_kernels, _forest_kernels, _geometry_kernels
     from gatun_py.codec.legacy import tets1
 
-    kernels = [_cutborder_kernels.decode_boundary, _cutborder_kernels._decode_tets_run, tets1.decode_tets,
+    kernels = [_cutborder_kernels.decode_boundary, _cutborder_kernels._decode_tets_run, tets1._decode_tets_run,
                _cutborder_kernels.add_faces,
                _geometry_kernels.decode_tables_kernel, _geometry_kernels.decode_vertices, _geometry_kernels._decode_vertices_run,
                _array_kernels.decode_component, _array_kernels.reconstruct,

@@ -944,6 +944,18 @@ def add_faces(B, faces, apex):
 _pop_inlined = njit(cache=True, _nrt=False, inline="always")(_pop.py_func)
 
 
+def candidate_lists():
+    """A tet coder's scratch for one tet's candidates, allocated once per call of its loop:
+    (cand, cscore, cseq, ckey, ccls, c2, c2seq, seen, cface, cface_full), the edge candidates with
+    their scores, ages, ranking keys and classes (coding 1 keeps the gather order in ``ckey``),
+    the vertex-adjacent list with its ages and the table of vertices met, the faces on each gate
+    edge of every candidate and whether that record overflowed."""
+    return (np.empty(MAX_C1, np.int64), np.empty(MAX_C1, np.int64), np.empty(MAX_C1, np.int64),
+            np.empty(MAX_C1, np.int64), np.empty(MAX_C1, np.int64), np.empty(MAX_C2, np.int64),
+            np.empty(MAX_C2, np.int64), np.empty((2, SEEN_SLOTS), np.int64), np.empty((MAX_C1, 3), np.int64),
+            np.zeros(1, np.int64))
+
+
 @njit(cache=True, _nrt=False, inline="always")
 def _face(E, s):
     """The vertices (a, b, c) of border face ``s`` and the apex behind it, as int64."""
@@ -1004,6 +1016,41 @@ def _target(tets, tgt, tvisited, order, s, a, b, c):
         if w != ao and w != bo and w != co:
             do = w
     return t, do
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _enc_next(B, tets, tgt, tvisited, order, dec_of):
+    """The encoder's next face: (0, its slot, the tet behind it, the tet's fourth vertex as
+    original and decode id (-1: new), the face's vertices a, b, c and the apex behind it), or an
+    error status first (1: the border emptied, 2: no unvisited tet behind the face)."""
+    s = _pop_inlined(B)
+    if s == -1:
+        return 1, s, -1, -1, -1, -1, -1, -1, -1
+    a, b, c, behind = _face(B[0], s)
+    t, do = _target(tets, tgt, tvisited, order, s, a, b, c)
+    if t < 0:
+        return 2, s, t, -1, -1, a, b, c, behind
+    return 0, s, t, do, dec_of[do], a, b, c, behind
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _enc_attach(st, out, probs, flip_model, prev_flip, flip, out_tets, done, a, b, c, d, B, tets, nbr, tgt, order, t):
+    """Code the orientation bit, write the tet, attach it to the border and note the tets behind
+    its new border faces; 4 when the border has no room left for the next tet, else 0."""
+    rc.enc_bit(st, out, probs, flip_model + prev_flip, flip)
+    t1, t2 = _emit_tet(out_tets, done, a, b, c, d, flip)
+    s0, s1, s2 = _apply_tet(B, a, t1, t2, d)
+    _set_targets(tets, nbr, tgt, order, t, a, t1, t2, s0, s1, s2)
+    return 4 if _no_room(B[3], B[2].shape[0]) else 0
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _enc_end(st, out, B):
+    """Finish the tet stream: 0, or 5 with faces left on the border after the last tet."""
+    if B[3][BS_LIVE] != 0:
+        return 5
+    rc.enc_finish(st, out)
+    return 0
 
 
 @njit(cache=True, _nrt=False, inline="always")
@@ -1078,6 +1125,16 @@ def _stop(st, n_out, out_tets, bs, qcap):
     if _no_room(bs, qcap):
         return ST_GROW
     return -1
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _next_face(st, n_out, out_tets, B):
+    """A decoder's next face: (slot, -1), or (-1, the status it stops with)."""
+    stop = _stop(st, n_out, out_tets, B[3], B[2].shape[0])
+    if stop >= 0:
+        return -1, stop
+    s = _pop_inlined(B)
+    return s, (ST_ERROR if s == -1 else -1)
 
 
 @njit(cache=True, _nrt=False, inline="always")
@@ -1278,7 +1335,6 @@ def _count_decoded(vdec, a, b, c, d):
     vdec[d] += vdec[d] < VDEC_MAX
 
 
-@njit(cache=True, nogil=True)
 def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, syms, rankp, vdec):
     """Code the tets growing inward from the border ``B`` (the boundary, in decode ids).
 
@@ -1289,33 +1345,21 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
     ``vdec`` (uint8, zeros) the decoded-tet counts by decode id. ``out_tets`` receives the tets
     in decode order and decode ids, ``syms`` each tet's case: the candidate's rank (paper case
     a), or ESC + 0 / 1 / 2 for cases b / c / d. Returns (vertices, status)."""
-    m = tets.shape[0]
+    return _encode_tets_run(st, out, tets, nbr, tgt, B, dec_of, order, pred, int(nv0), out_tets, syms, rankp, vdec,
+                            candidate_lists())
+
+
+@njit(cache=True, nogil=True)
+def _encode_tets_run(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, syms, rankp, vdec, scratch):
+    """The loop of :func:`encode_tets`, with its candidate lists in ``scratch``."""
+    cand, cscore, cseq, ckey, ccls, c2, c2seq, seen, cface, cface_full = scratch
     probs = np.full(TM_SIZE, rc.PROB_INIT, np.uint16)
-    tvisited = np.zeros(m, np.bool_)
-    cand = np.empty(MAX_C1, np.int64)
-    cscore = np.empty(MAX_C1, np.int64)
-    cseq = np.empty(MAX_C1, np.int64)
-    ckey = np.empty(MAX_C1, np.int64)
-    ccls = np.empty(MAX_C1, np.int64)
-    c2 = np.empty(MAX_C2, np.int64)
-    c2seq = np.empty(MAX_C2, np.int64)
-    seen = np.empty((2, SEEN_SLOTS), np.int64)
-    cface = np.empty((MAX_C1, 3), np.int64)
-    cface_full = np.zeros(1, np.int64)
-    nv = nv0
-    prev_esc = 0
-    prev_flip = 0
-    E, vhead, Q, bs = B
-    qcap = Q.shape[0]
-    for done in range(m):
-        s = _pop(B)
-        if s == -1:
-            return nv, 1
-        a, b, c, behind = _face(E, s)
-        t, do = _target(tets, tgt, tvisited, order, s, a, b, c)
-        if t < 0:
-            return nv, 2
-        d = dec_of[do]
+    tvisited = np.zeros(tets.shape[0], np.bool_)
+    nv, prev_esc, prev_flip = nv0, 0, 0
+    for done in range(tets.shape[0]):
+        err, s, t, do, d, a, b, c, behind = _enc_next(B, tets, tgt, tvisited, order, dec_of)
+        if err:
+            return nv, err
         n1 = _gather_face(B, s, cand, cscore, cseq, cface, cface_full)
         _remove(B, np.int64(3), s)
         ctx, best, second = _rank_candidates(cand, cscore, cseq, cface, n1, vdec, nv0, a, b, c, rankp, ckey, ccls,
@@ -1345,18 +1389,13 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
         else:
             prev_esc = 0
         _learn_ranks(rankp, ckey, ccls, n1, hit)
-        rc.enc_bit(st, out, probs, TM_FLIP + prev_flip, flip)
-        prev_flip = flip
-        t1, t2 = _emit_tet(out_tets, done, a, b, c, d, flip)
         _count_decoded(vdec, a, b, c, d)
-        s0, s1, s2 = _apply_tet(B, a, t1, t2, d)
-        _set_targets(tets, nbr, tgt, order, t, a, t1, t2, s0, s1, s2)
-        if _no_room(bs, qcap):
-            return nv, 4
-    if B[3][BS_LIVE] != 0:
-        return nv, 5
-    rc.enc_finish(st, out)
-    return nv, 0
+        err = _enc_attach(st, out, probs, TM_FLIP, prev_flip, flip, out_tets, done, a, b, c, d, B, tets, nbr, tgt,
+                          order, t)
+        if err:
+            return nv, err
+        prev_flip = flip
+    return nv, _enc_end(st, out, B)
 
 
 def decode_tets(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate, out_tets):
@@ -1371,20 +1410,10 @@ def decode_tets(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate, 
     ``pred``, row ``decode id - pred_base`` (a window of the newest vertices, or the whole table
     with ``pred_base`` 0); a vertex past the window is an error, never a write out of bounds.
     Returns (number of tets written to ``out_tets``, status)."""
-    cand = np.empty(MAX_C1, np.int64)
-    cscore = np.empty(MAX_C1, np.int64)
-    cseq = np.empty(MAX_C1, np.int64)
-    c2 = np.empty(MAX_C2, np.int64)
-    c2seq = np.empty(MAX_C2, np.int64)
-    seen = np.empty((2, SEEN_SLOTS), np.int64)
-    cface = np.empty((MAX_C1, 3), np.int64)
-    ckey = np.empty(MAX_C1, np.int64)
-    ccls = np.empty(MAX_C1, np.int64)
-    cface_full = np.zeros(1, np.int64)
     # scratch in Python, the loop in the compiled kernel (which releases the GIL): a compiled
     # wrapper here cost most of a second of a first run's compiling, and a call is per batch
     return _decode_tets_run(st, data, probs, rankp, vdec, int(nbv), int(m), int(n_limit), B, pred, tstate, out_tets,
-                            (cand, cscore, cseq, c2, c2seq, seen, cface, ckey, ccls, cface_full))
+                            candidate_lists())
 
 
 _rank_candidates_inlined = njit(cache=True, _nrt=False, inline="always")(_rank_candidates.py_func)
@@ -1395,7 +1424,7 @@ _rank_candidates_inlined = njit(cache=True, _nrt=False, inline="always")(_rank_c
 @njit(cache=True, nogil=True, _nrt=False)
 def _decode_tets_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tstate, out_tets, scratch):
     """The loop of :func:`decode_tets`, with its candidate lists in ``scratch``."""
-    cand, cscore, cseq, c2, c2seq, seen, cface, ckey, ccls, cface_full = scratch
+    cand, cscore, cseq, ckey, ccls, c2, c2seq, seen, cface, cface_full = scratch
     nv, done, prev_esc, prev_flip, pred_base = tstate[0], tstate[1], tstate[2], tstate[3], tstate[4]
     # new vertices get ids below this (the header's count, the end of the refs window, of vdec)
     limit = min(n_limit, pred_base + pred.shape[0], vdec.shape[0])
@@ -1406,13 +1435,9 @@ def _decode_tets_run(st, data, probs, rankp, vdec, nbv, m, n_limit, B, pred, tst
     E, vhead, Q, bs = B
     qcap = Q.shape[0]
     while done < m:
-        stop = _stop(st, n_out, out_tets, bs, qcap)
+        s, stop = _next_face(st, n_out, out_tets, B)
         if stop >= 0:
             status = stop
-            break
-        s = _pop_inlined(B)
-        if s == -1:
-            status = ST_ERROR
             break
         # the faces to come are known (FIFO): fetch their rows and list heads ahead of the walks
         hq = bs[BS_QHEAD]

@@ -16,12 +16,11 @@ import numpy as np
 from numba import njit
 
 from .. import rangecoder as rc
-from .._cutborder_kernels import (BS_LIVE, EDGE_AB, EDGE_AC, EDGE_BC, ESC, MAX_C1, MAX_C2, SEEN_SLOTS,
-                                  ST_DONE, ST_ERROR, KIND_VERTEX_ADJACENT, _apply_tet, _apply_tet_inlined,
-                                  _attach_tet_inlined, _dec_escape, _dec_index, _emit_tet, _enc_known_vertex,
-                                  _enc_new_vertex, _end_run, _face, _gather_face, _gather_face_inlined,
-                                  _gather_vertex_adjacent, _kind_context, _no_room, _pop_inlined, _remove,
-                                  _score_context, _set_targets, _sort_candidates, _stop, _target, _tet_flip)
+from .._cutborder_kernels import (EDGE_AB, EDGE_AC, EDGE_BC, ESC, KIND_VERTEX_ADJACENT, MAX_C1, ST_DONE,
+                                  ST_ERROR, _apply_tet_inlined, _attach_tet_inlined, _dec_escape, _dec_index,
+                                  _emit_tet, _enc_attach, _enc_end, _enc_known_vertex, _enc_new_vertex, _enc_next,
+                                  _end_run, _face, _gather_face, _gather_face_inlined, _gather_vertex_adjacent, _kind_context,
+                                  _next_face, _remove, _score_context, _sort_candidates, _tet_flip, candidate_lists)
 
 # model layout of the tet stream
 N_C1_CTX = 5 * 4 * 4 * 2
@@ -32,36 +31,25 @@ TM_FLIP = TM_C2 + 2 * rc.INT_MODEL_SIZE
 TM_SIZE = TM_FLIP + 4
 
 
-@njit(cache=True, nogil=True)
 def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, syms):
     """Coding 1 of the tets (for the tests): the arguments of
     :func:`gatun_py.codec._cutborder_kernels.encode_tets` without its ranking state; ``syms``
     holds each tet's candidate index in score order. Returns (vertices, status)."""
-    m = tets.shape[0]
+    return _encode_tets_run(st, out, tets, nbr, tgt, B, dec_of, order, pred, int(nv0), out_tets, syms,
+                            candidate_lists())
+
+
+@njit(cache=True, nogil=True)
+def _encode_tets_run(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, syms, scratch):
+    """The loop of :func:`encode_tets`, with its candidate lists in ``scratch``."""
+    cand, cscore, cseq, _, _, c2, c2seq, seen, cface, cface_full = scratch  # cface: unused, _apply_tet walks
     probs = np.full(TM_SIZE, rc.PROB_INIT, np.uint16)
-    tvisited = np.zeros(m, np.bool_)
-    cand = np.empty(MAX_C1, np.int64)
-    cscore = np.empty(MAX_C1, np.int64)
-    cseq = np.empty(MAX_C1, np.int64)
-    c2 = np.empty(MAX_C2, np.int64)
-    c2seq = np.empty(MAX_C2, np.int64)
-    seen = np.empty((2, SEEN_SLOTS), np.int64)
-    cface = np.empty((MAX_C1, 3), np.int64)  # the encoder attaches by _apply_tet's walk
-    cface_full = np.zeros(1, np.int64)
-    nv = nv0
-    prev_esc = 0
-    prev_flip = 0
-    E, vhead, Q, bs = B
-    qcap = Q.shape[0]
-    for done in range(m):
-        s = _pop_inlined(B)
-        if s == -1:
-            return nv, 1
-        a, b, c, behind = _face(E, s)
-        t, do = _target(tets, tgt, tvisited, order, s, a, b, c)
-        if t < 0:
-            return nv, 2
-        d = dec_of[do]
+    tvisited = np.zeros(tets.shape[0], np.bool_)
+    nv, prev_esc, prev_flip = nv0, 0, 0
+    for done in range(tets.shape[0]):
+        err, s, t, do, d, a, b, c, behind = _enc_next(B, tets, tgt, tvisited, order, dec_of)
+        if err:
+            return nv, err
         n1 = _gather_face(B, s, cand, cscore, cseq, cface, cface_full)
         _sort_candidates(cand, cscore, cseq, n1)
         _remove(B, np.int64(3), s)
@@ -77,70 +65,49 @@ def encode_tets(st, out, tets, nbr, tgt, B, dec_of, order, pred, nv0, out_tets, 
         flip = _tet_flip(tets, t, order[a], order[b], order[c], do)
         rc.enc_sym(st, out, probs, TM_C1 + ctx * 16, 4, sym)
         syms[done] = sym
-        if sym == ESC:
-            kctx = TM_KIND + _kind_context(n1, prev_esc)
-            if d == -1:
-                _enc_new_vertex(st, out, probs, kctx, dec_of, order, pred, nv, do, a, b, c, behind)
-                d = nv
-                nv += 1
-            else:
-                n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq, seen)
-                _enc_known_vertex(st, out, probs, kctx, TM_C2, c2, n2, d, nv, syms, done)
+        if sym != ESC:
+            prev_esc = 0
+        elif d == -1:
+            _enc_new_vertex(st, out, probs, TM_KIND + _kind_context(n1, prev_esc), dec_of, order, pred, nv, do,
+                            a, b, c, behind)
+            d = nv
+            nv += 1
             prev_esc = 1
         else:
-            prev_esc = 0
-        rc.enc_bit(st, out, probs, TM_FLIP + prev_flip, flip)
+            n2 = _gather_vertex_adjacent(B, a, b, c, cand, n1, c2, c2seq, seen)
+            _enc_known_vertex(st, out, probs, TM_KIND + _kind_context(n1, prev_esc), TM_C2, c2, n2, d, nv, syms,
+                              done)
+            prev_esc = 1
+        err = _enc_attach(st, out, probs, TM_FLIP, prev_flip, flip, out_tets, done, a, b, c, d, B, tets, nbr, tgt,
+                          order, t)
+        if err:
+            return nv, err
         prev_flip = flip
-        t1, t2 = _emit_tet(out_tets, done, a, b, c, d, flip)
-        s0, s1, s2 = _apply_tet(B, a, t1, t2, d)
-        _set_targets(tets, nbr, tgt, order, t, a, t1, t2, s0, s1, s2)
-        if _no_room(bs, qcap):
-            return nv, 4
-    if B[3][BS_LIVE] != 0:
-        return nv, 5
-    rc.enc_finish(st, out)
-    return nv, 0
+    return nv, _enc_end(st, out, B)
 
 
-@njit(cache=True, nogil=True)
 def decode_tets(st, data, probs, m, n_limit, B, pred, tstate, out_tets):
     """Resumable inverse of :func:`encode_tets`, as
     :func:`gatun_py.codec._cutborder_kernels.decode_tets` without its ranking state."""
-    cand = np.empty(MAX_C1, np.int64)
-    cscore = np.empty(MAX_C1, np.int64)
-    cseq = np.empty(MAX_C1, np.int64)
-    c2 = np.empty(MAX_C2, np.int64)
-    c2seq = np.empty(MAX_C2, np.int64)
-    seen = np.empty((2, SEEN_SLOTS), np.int64)
-    cface = np.empty((MAX_C1, 3), np.int64)
-    cfirst = np.empty(MAX_C1, np.int64)  # the candidates in gather order (cface's rows)
-    cface_full = np.zeros(1, np.int64)
-    return _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets,
-                            (cand, cscore, cseq, c2, c2seq, seen, cface, cfirst, cface_full))
+    return _decode_tets_run(st, data, probs, int(m), int(n_limit), B, pred, tstate, out_tets, candidate_lists())
 
 
 @njit(cache=True, nogil=True, _nrt=False)
 def _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets, scratch):
     """The loop of :func:`decode_tets`, with its candidate lists in ``scratch``."""
-    cand, cscore, cseq, c2, c2seq, seen, cface, cfirst, cface_full = scratch
+    cand, cscore, cseq, cfirst, _, c2, c2seq, seen, cface, cface_full = scratch  # cfirst: the gather order
     nv, done, prev_esc, prev_flip, pred_base = tstate[0], tstate[1], tstate[2], tstate[3], tstate[4]
     limit = min(n_limit, pred_base + pred.shape[0])
     if pred_base > nv:
         return 0, ST_ERROR
     n_out = 0
     status = ST_DONE
-    E, vhead, Q, bs = B
-    qcap = Q.shape[0]
     while done < m:
-        stop = _stop(st, n_out, out_tets, bs, qcap)
+        s, stop = _next_face(st, n_out, out_tets, B)
         if stop >= 0:
             status = stop
             break
-        s = _pop_inlined(B)
-        if s == -1:
-            status = ST_ERROR
-            break
-        a, b, c, behind = _face(E, s)
+        a, b, c, behind = _face(B[0], s)
         cface_full[0] = 0
         n1 = _gather_face_inlined(B, s, cand, cscore, cseq, cface, cface_full)
         for i in range(n1):
@@ -163,9 +130,8 @@ def _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets, scr
         if d < 0 or d == a or d == b or d == c:
             status = ST_ERROR
             break
-        flip = rc.dec_bit(st, data, probs, TM_FLIP + prev_flip)
-        prev_flip = flip
-        t1, t2 = _emit_tet(out_tets, n_out, a, b, c, d, flip)
+        prev_flip = rc.dec_bit(st, data, probs, TM_FLIP + prev_flip)
+        t1, t2 = _emit_tet(out_tets, n_out, a, b, c, d, prev_flip)
         n_out += 1
         done += 1
         # the faces this tet closes were noted by the gather (d a candidate), or there are none
@@ -174,8 +140,8 @@ def _decode_tets_run(st, data, probs, m, n_limit, B, pred, tstate, out_tets, scr
         while i < n1 and cfirst[i] != d:
             i += 1
         if i < n1:  # faces opposite a, t1, t2: on edges (t1, t2) = (b, c), (a, t2) and (a, t1)
-            _attach_tet_inlined(B, a, t1, t2, d, cface[i, EDGE_BC],
-                                cface[i, EDGE_AC if flip else EDGE_AB], cface[i, EDGE_AB if flip else EDGE_AC])
+            _attach_tet_inlined(B, a, t1, t2, d, cface[i, EDGE_BC], cface[i, EDGE_AC if prev_flip else EDGE_AB],
+                                cface[i, EDGE_AB if prev_flip else EDGE_AC])
         elif cface_full[0] == 0:
             _attach_tet_inlined(B, a, t1, t2, d, -1, -1, -1)
         else:

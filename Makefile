@@ -7,7 +7,7 @@ OUT    ?= out
 # Two threads, as on the benchmark machines; override with NUMBA_NUM_THREADS=... make ...
 export NUMBA_NUM_THREADS ?= 2
 
-.PHONY: install test demo bench clean distclean browser gmsh-libs
+.PHONY: install test test-fast lint clean-cache demo bench clean distclean browser gmsh-libs
 
 install: $(STAMP)
 
@@ -21,6 +21,20 @@ $(STAMP): pyproject.toml
 
 test: $(STAMP) browser
 	$(BIN)/pytest -q
+
+# The inner loop: the tests not marked slow (real data at full size, whole pipelines, installs).
+test-fast: $(STAMP)
+	$(BIN)/pytest -q -m "not slow"
+
+# ruff with the config in pyproject.toml, and no fastmath in the codec (every float bit-exact).
+lint: $(STAMP)
+	$(BIN)/ruff check gatun_py cli tests bench
+	@if grep -rnE "fastmath *=|[\"']fastmath[\"']" --include='*.py' gatun_py/codec; then \
+	  echo "fastmath in gatun_py/codec: the codec's floats must stay bit-exact"; exit 1; fi
+
+# numba's compiled kernels (next to the sources, in __pycache__): recompiled on the next run.
+clean-cache:
+	find gatun_py cli -path '*/__pycache__/*' \( -name '*.nbi' -o -name '*.nbc' \) -delete
 
 # tests/test_viewer_browser.py drives headless Chromium (Debian's chromium and chromium-driver).
 # Installed here when missing and we may (root with apt-get, as in CI); otherwise that test skips

@@ -21,7 +21,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from common import FIGURES, ROOT, SAMPLE_FILES, WORK, load, table, write_section  # noqa: E402
+from common import FIGURES, MESH_CACHE, ROOT, SAMPLE_FILES, WORK, load, table, write_section  # noqa: E402
 
 QUICK = "--quick" in sys.argv
 DECODE_ONLY = "--decode" in sys.argv
@@ -33,7 +33,7 @@ CMD = "python bench/bench_codec.py" + (" --quick" if QUICK else "")
 FLANGE_DIR = Path(os.environ.get("TETC_FLANGE_DIR", str(WORK / "flanges")))
 FLANGES = {name: FLANGE_DIR / f"{name}.tetc" for name in (("flange-1m",) if QUICK else ("flange-1m", "flange-10m"))}
 # the same flanges written by format 4 (connectivity coding 1), for the coding 1 / coding 2 columns
-FLANGE_V4_DIR = Path(os.environ.get("TETC_FLANGE_V4_DIR", "/work/cache/v4"))
+FLANGE_V4_DIR = MESH_CACHE / "v4"  # the flanges in format 4
 DECODE_MARK = ("<!-- decode speed -->", "<!-- /decode speed -->")
 
 
@@ -173,7 +173,7 @@ def _vtk_read_meshio_s(mesh, path: Path, repeat: int):
     (meshio's ``.vtu``: inline base64 binary, zlib-compressed), the ``.vtu`` a user of ``tetc convert``
     has; None without ``vtk``."""
     try:
-        import vtk
+        import vtk  # noqa: F401  (None without it)
     except ImportError:
         return None
     if not path.exists():
@@ -412,7 +412,7 @@ def flange_connectivity_text() -> str:
 CODING2_NOTE = (
     'Connectivity coding 2 (format 5) ranks the edge-adjacent candidates by a learnt probability per '
     'class (score, decoded tets on the candidate, boundary flag, decoded tets on the ends of its gate '
-    'edge; `docs/format.md`), chosen with `bench/conn_study.py` (static conditional entropy of the '
+    'edge; `docs/format.md`), chosen with `bench/studies/conn_study.py` (static conditional entropy of the '
     "candidate index on flange-1m: 1.52 bits/tet with coding 1's ranking and context, 1.29 with the exact"
     " count of decoded tets around the gate edge, 1.00 with coding 2's classes; the case (c) index 3.5 ->"
     ' 2.1 bits ordered by decoded tets instead of age). It takes the flanges to 1.73 and 1.59 bits/tet '

@@ -4,7 +4,7 @@ Run: ``python bench/bench_geometry.py [--quick] [--big]``  →  ``bench/sections
 ``bench/figures/geometry_bits.png``.
 
 Data: the four samples, then the gmsh meshes of issue 12 (block-50k and flange-1m; ``--big`` adds
-flange-10m), taken from ``$TETC_MESH_CACHE`` (default ``/work/cache``) when there, else built by
+flange-10m), taken from ``common.MESH_CACHE`` (``$TETC_MESH_CACHE``) when there, else built by
 ``bench/gmsh_meshes.py`` (slow). Vertices are coded in the real decode order of the cut-border
 connectivity coder (``encode_connectivity``), with its predictor refs. Peers run in the same process
 on the same float32 arrays in the file's original order (what a user would compress): ``lzma``
@@ -18,14 +18,12 @@ import lzma
 import os
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-from common import FIGURES, SAMPLE_FILES, code_state, load, table, write_section
+from common import FIGURES, MESH_CACHE, SAMPLE_FILES, code_state, load, table, write_section
 
 COMMAND = "python bench/bench_geometry.py"
-MESH_CACHE = Path(os.environ.get("TETC_MESH_CACHE", "/work/cache"))
 GMSH = ["block-50k", "flange-1m"]
 GMSH_BIG = ["flange-10m"]
 TARGET = 0.9  # issue 12: geometry b/v <= 0.9 x the best peer on every mesh

@@ -35,12 +35,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "bench"))
 
-from common import FIGURES, SECTIONS, WORK, code_state, table, write_section  # noqa: E402
+from common import FIGURES, MESH_CACHE, SECTIONS, WORK, code_state, table, write_section  # noqa: E402
 
 OUT = WORK / "iso"
 RATIOS = (0.2, 0.05, 0.01)
 PEERS = ("vtk", "fast", "pyfqmr", "meshopt")
-BIG_DEFAULT = Path("/work/cache/flange-10m.tetc")
+BIG_DEFAULT = MESH_CACHE / "flange-10m.tetc"
 PEER_NAMES = {"vtk": "VTK quadric", "fast": "fast-simplification", "pyfqmr": "pyfqmr", "meshopt": "meshoptimizer"}
 TETC = [str(ROOT / ".venv" / "bin" / "tetc")] if (ROOT / ".venv" / "bin" / "tetc").exists() else ["tetc"]
 
@@ -50,7 +50,6 @@ TETC = [str(ROOT / ".venv" / "bin" / "tetc")] if (ROOT / ".venv" / "bin" / "tetc
 def vtk_read_contour(vtu: str, value: float):
     """VTK's read of a .vtu and vtkContour3DLinearGrid: (points (n, 3) float64, triangles (m, 3))."""
     import vtk
-    from vtk.util.numpy_support import vtk_to_numpy
 
     r = vtk.vtkXMLUnstructuredGridReader()
     r.SetFileName(str(vtu))

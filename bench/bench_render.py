@@ -873,8 +873,8 @@ def main():
 
     from gatun_py.codec.tetcfile import write_tetc
     from gatun_py.mesh import read_mesh, write_mesh
-    from gatun_py.render import Camera, render_mesh
-    from gatun_py.render.image import read_png_rgb, to_rgb8
+    from gatun_py.render import Camera
+    from gatun_py.render.image import read_png_rgb
 
     try:
         import vtk  # noqa: F401
@@ -917,7 +917,7 @@ def main():
 
     # warm the JIT cache (first run compiles)
     t0 = time.perf_counter()
-    first = run_ours(prepared[names[0]][2], work / "warm.png", prepared[names[0]][3], (64, 64))
+    run_ours(prepared[names[0]][2], work / "warm.png", prepared[names[0]][3], (64, 64))
     first_s = time.perf_counter() - t0
 
     time_rows, quality_rows, mem_rows, pixel_rows = [], [], [], []

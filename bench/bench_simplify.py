@@ -286,7 +286,7 @@ def main(argv=None):
     decimate(delaunay_mesh(30, 0))  # load / compile the kernels
     warm = time.perf_counter() - t
 
-    rows, level_rows, fid_rows, vtk_rows = [], [], [], []
+    rows, level_rows, fid_rows = [], [], []
     for name in names:
         mesh = load_any(name)
         ug = to_vtk(mesh) if vtk is not None else None

@@ -16,6 +16,9 @@ from samples import SAMPLES as SAMPLE_FILES  # noqa: E402,F401  (the one table o
 SECTIONS = ROOT / "bench" / "sections"
 FIGURES = ROOT / "bench" / "figures"
 WORK = ROOT / "bench" / "out"  # scratch files, not committed
+# Large inputs kept between runs (gmsh meshes, big .tetc files, old-format copies): the one place a
+# bench script looks for them. Set TETC_MESH_CACHE to a shared folder to reuse another checkout's.
+MESH_CACHE = Path(os.environ.get("TETC_MESH_CACHE", WORK / "cache"))
 
 
 def load(name):

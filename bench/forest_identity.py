@@ -25,11 +25,14 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from conftest import SAMPLE_FILES, load_sample  # noqa: E402
 
+sys.path.insert(0, str(ROOT / "bench"))
+from common import MESH_CACHE  # noqa: E402
+
 from gatun_py.mesh import read_mesh  # noqa: E402
 from gatun_py.simplify import decimate  # noqa: E402
 D = importlib.import_module("gatun_py.simplify.decimate")
 
-SHARED = {"block-50k": "/work/cache/block-50k.vtu", "flange-1m": "/work/cache/flange-1m.vtu"}
+SHARED = {"block-50k": MESH_CACHE / "block-50k.vtu", "flange-1m": MESH_CACHE / "flange-1m.vtu"}
 DEFAULT = ["post", "fire", "bluntfin", "combustion", "block-50k", "flange-1m"]
 
 

@@ -106,7 +106,7 @@ def test_compress_is_the_same_bytes_with_any_job_count():
 
 def test_one_brick_is_todays_layout(tmp_path):
     m = jittered_grid((5, 5, 4), jitter=0.2)
-    a = gatun_py.compress(m, tmp_path / "a.tetc", mesh_only=True)
+    gatun_py.compress(m, tmp_path / "a.tetc", mesh_only=True)
     b = gatun_py.compress(m, tmp_path / "b.tetc", mesh_only=True, bricks=1)
     assert (tmp_path / "a.tetc").read_bytes() == (tmp_path / "b.tetc").read_bytes()
     r = b.reader

@@ -8,7 +8,6 @@ import json
 import numpy as np
 import pytest
 from cli_util import assert_usage_error, run
-from conftest import load_sample
 from naive_simplify import check_valid
 
 import gatun_py
@@ -29,6 +28,11 @@ VIEW = View(Camera(48, 40, 30, 20), tf="post")
 
 
 @pytest.fixture(scope="module")
+def _tet_key(m):
+    """The mesh's tets as sorted coordinate tuples: equal for the same tets in any order."""
+    return sorted(map(tuple, np.sort(m.points[m.tets].reshape(-1, 12), axis=1).tolist()))
+
+
 def reader(post_deps_tetc):
     return TetcReader(post_deps_tetc)
 
@@ -95,8 +99,7 @@ def test_cut_from_a_coarser_level_equals_level_zero(reader):
     parent, rank = reader.read_forest(0)
     ref = mesh_from_ancestors(base, cut_ancestors(parent, rank, cut.applied))[0]
     assert mesh.n_tets == ref.n_tets == cut.n_tets
-    key = lambda m: sorted(map(tuple, np.sort(m.points[m.tets].reshape(-1, 12), axis=1).tolist()))
-    assert key(mesh) == key(ref)
+    assert _tet_key(mesh) == _tet_key(ref)
 
 
 def test_tf_change_needs_no_reading(reader, monkeypatch):
@@ -213,8 +216,7 @@ def test_cut_within_a_stored_level(reader, level):
     assert deps.is_closed(full)
     parent, rank = reader.read_forest(0)
     ref = mesh_from_ancestors(reader.decode_mesh(0), cut_ancestors(parent, rank, full))[0]
-    key = lambda m: sorted(map(tuple, np.sort(m.points[m.tets].reshape(-1, 12), axis=1).tolist()))
-    assert key(mesh) == key(ref)
+    assert _tet_key(mesh) == _tet_key(ref)
     res = render_selective(reader, VIEW, tets=tets, level=level)
     assert res.stats["cut_tets"] == cut.n_tets and res.stats["flipped_tets"] == 0 and res.stats["level"] == level
 

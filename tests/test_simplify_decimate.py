@@ -101,7 +101,6 @@ def test_candidates_match_reference(name):
     state = DecimationState(mesh, 1.0, 3.0, order="input")
     tets = [tuple(int(x) for x in t) for t in mesh.tets]
     assert set(np.flatnonzero(state.pinned).tolist()) == pinned_vertices(tets, mesh.n_points)
-    pts, dens = mesh.points.astype(np.float64), mesh.density.astype(np.float64)
     n0 = _compare_all_edges(state, *_sample_points(mesh), _sample_weights(mesh))
     # isolated tets (single, edge-touching) cannot lose a vertex; everything else can
     assert (n0 > 0) == (name not in ("single_tet", "edge_touching"))

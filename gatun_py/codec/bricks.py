@@ -34,7 +34,7 @@ on all cores in one process, and the result does not depend on the number of thr
 from __future__ import annotations
 
 import lzma
-import os
+import os  # noqa: F401  (the doctests use it)
 import struct
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass

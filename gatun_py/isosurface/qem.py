@@ -662,7 +662,6 @@ def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, m
                 mark[tris[f, k]] = tag
         on_edge = 0
         apex0 = -1
-        apex1 = -1
         for i in range(cnt[v]):
             f = refs[start[v] + i]
             a, b, c = tris[f, 0], tris[f, 1], tris[f, 2]
@@ -673,8 +672,6 @@ def decimate(vpos, vq, vbnd, vlock, vdead, vimp, vfresh, tris, nv, nt, target, m
                 apex = a if (a != u and a != v) else (b if (b != u and b != v) else c)
                 if apex0 < 0:
                     apex0 = apex
-                else:
-                    apex1 = apex
         if on_edge == 0 or on_edge > 2:
             continue
         if vbnd[u] and vbnd[v] and on_edge != 1:

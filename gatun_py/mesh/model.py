@@ -321,7 +321,6 @@ def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
 def face_keys(tets: np.ndarray):
     """All 4m faces of the tets as sorted vertex triples, plus their owning tet and local index."""
     t = np.asarray(tets, dtype=np.int64)
-    m = t.shape[0]
     faces = t[:, TET_FACES].reshape(-1, 3)  # (4m, 3), face k of tet i at row 4i+k
     return np.sort(faces, axis=1), faces
 

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from gatun_py.codec import _cutborder_kernels as K  # noqa: E402
 from gatun_py.codec import rangecoder as rc  # noqa: E402
 from gatun_py.codec.cutborder import _sorted_halfedges, encode_connectivity  # noqa: E402

@@ -37,7 +37,7 @@ from gatun_py.codec.forest import (ROOT_RANK, decode_forest, decode_forest_on_ge
 from gatun_py.codec.tetcfile import TetcReader, encode_level, encode_tetc  # noqa: E402
 from gatun_py.mesh import read_mesh  # noqa: E402
 from gatun_py.simplify import MergeForest, build_levels, decimate, level_payloads  # noqa: E402
-from gatun_py.simplify.decimate import ROUNDS_PER_LEVEL  # noqa: E402
+from gatun_py.simplify.decimation import ROUNDS_PER_LEVEL  # noqa: E402
 
 NAMES = {"bluntfin": "Blunt-fin", "combustion": "Combustion", "fire": "Room fire", "post": "LOX post",
          "block-50k": "gmsh block 50k", "flange-1m": "gmsh flange 1M"}

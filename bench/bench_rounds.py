@@ -7,7 +7,7 @@ previous versions, bit for bit), measured in the same run.
 
 For every mesh and number of rounds: the whole decimation (wall and process CPU seconds), its
 reach (merges / points), the ranks' *ascending runs* per bucket (a run: consecutive ranks whose
-vertices ascend in :func:`gatun_py.simplify.decimate.canonical_key`; the fewest rounds a decoder
+vertices ascend in :func:`gatun_py.simplify.decimation.canonical_key`; the fewest rounds a decoder
 must be told to rebuild the ranks from the keys) and the entropy of each vertex's run id inside
 its bucket (bits per vertex of the whole mesh: what a coding of the round id without context
 pays, against log2 of the orders inside the buckets for the exact ranks); then the RMSE (0-255,
@@ -73,7 +73,7 @@ def main(argv=None):
     from gatun_py.render import Camera
     from gatun_py.render.raycast import render_mesh
     from gatun_py.simplify import decimate, simplified_mesh
-    from gatun_py.simplify.decimate import canonical_key
+    from gatun_py.simplify.decimation import canonical_key
 
     from bench_pipeline import DATASETS
 

@@ -39,7 +39,7 @@ def timed(fn, *args, repeat: int = 1, **kwargs):
 
 
 def peak_rss_mb() -> float:
-    from gatun_py._resources import peak_rss_mb as peak
+    from gatun_py._runtime import peak_rss_mb as peak
 
     return peak()
 

@@ -6,7 +6,7 @@ import math
 
 import click
 
-from gatun_py._resources import peak_rss_mb
+from gatun_py._runtime import load_isosurface_kernels, peak_rss_mb
 from .options import (camera_options, echo_json, force_option, jobs_option, mesh_input_options, progress_bar, quiet_option,
                       read_kwargs, status)
 
@@ -70,7 +70,6 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
       tetc isosurface big.tetc --value 0.3 --faces 50000 --stats -o iso.ply
     """
     from gatun_py.isosurface import isosurface as extract
-    from gatun_py.isosurface.extract import load_kernels
     from gatun_py.isosurface.io import check_surface_path
 
     if ratio is not None and faces is not None:
@@ -79,7 +78,7 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
         raise click.UsageError("give either --level or --mesh-ratio, not both")
     check_surface_path(output, force=force)  # fail before the work, not after
     if png is not None:
-        from gatun_py._atomic import check_output_path
+        from gatun_py._runtime import check_output_path
         from gatun_py.render.image import image_format
 
         from gatun_py.isosurface.extract import MAX_PREVIEW_PIXELS
@@ -92,7 +91,7 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
     total = _expected_tets(input, values, level)
     # the kernels first, on a tiny file: LLVM's pages that loading them touched are then handed
     # back before the data arrives (see load_kernels)
-    load_kernels(input, simplify=ratio not in (None, 1.0) or faces is not None)
+    load_isosurface_kernels(input, simplify=ratio not in (None, 1.0) or faces is not None)
     with progress_bar("extracting", total if total >= 200_000 else 0, quiet) as update:
         last = [0]
 

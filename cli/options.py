@@ -256,21 +256,3 @@ def progress_bar(label: str, total: int, quiet: bool):
         return
     with click.progressbar(length=total, label=label, file=sys.stderr, show_eta=True) as bar:
         yield bar.update
-
-
-def kernels_cached(*modules) -> bool:
-    """Whether numba's cache holds compiled kernels of every one of ``modules`` (a first run on a
-    fresh install compiles them ahead, on two cores, instead of one at a time in the run)."""
-    from pathlib import Path
-
-    import numba  # start-up time: options are parsed, and usage errors reported, before numba loads
-
-    def cached(module) -> bool:
-        src = Path(module.__file__)
-        if numba.config.CACHE_DIR:  # NUMBA_CACHE_DIR: one folder per source folder, "<name>_<hash>"
-            dirs = list(Path(numba.config.CACHE_DIR).glob(f"{src.parent.name}_*"))
-        else:
-            dirs = [src.parent / "__pycache__"]
-        return any(any(d.glob(f"{src.stem}.*.nbc")) for d in dirs)
-
-    return all(cached(m) for m in modules)

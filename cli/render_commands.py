@@ -7,23 +7,12 @@ import time
 import click
 
 import gatun_py
-from gatun_py._atomic import check_output_path
-from gatun_py._resources import peak_rss_mb
+from gatun_py._runtime import (check_output_path, compile_for_render, load_render_kernels, peak_rss_mb,
+                               render_kernels_cached)
 
 from .options import (POSITIVE, RATIO, Colour, camera_options, echo_json, force_option, interruptible, logger,
-                      kernels_cached, mesh_input_options, output_option, progress_reporter, quiet_option,
+                      mesh_input_options, output_option, progress_reporter, quiet_option,
                       read_kwargs, require_file, selective_options, status, transfer_function_options)
-
-
-def _kernels_cached(*, decoder: bool, simplify: bool = False) -> bool:
-    """Whether numba has compiled the render kernels (with ``decoder`` the decoder's, with
-    ``simplify`` the forest decoder's and the filter's) into its cache already."""
-    from gatun_py.codec import _cutborder_kernels, _forest_kernels, _geometry_kernels
-    from gatun_py.render import _walk
-    from gatun_py.simplify import _filter_kernels
-
-    return kernels_cached(_walk, *((_cutborder_kernels, _geometry_kernels) if decoder else ()),
-                          *((_forest_kernels, _filter_kernels) if decoder and simplify else ()))
 
 
 def _component(text):
@@ -105,9 +94,8 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     from both ends of each segment. The camera follows VTK: 30 degree perspective fitted to the
     bounding sphere, then --azimuth, --elevation, refit, --zoom.
     """
-    from gatun_py.pipeline.stream import is_tetc  # start-up time: see _kernels_cached
+    from gatun_py.pipeline.stream import is_tetc  # start-up time: numba loads after the options are checked
     from gatun_py.render.image import image_format
-    from gatun_py.warmup import compile_for_render, load_kernels
 
     t_start = time.perf_counter()
     if sum(x is not None for x in (ratio, level, budget, tets)) > 1:
@@ -139,11 +127,11 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     require_file(input)
     decoder = is_tetc(input)  # a mesh file is rendered without the decoder: no need to compile it
     simplify = selective or any(x is not None for x in (ratio, level, budget, tets))
-    if not _kernels_cached(decoder=decoder, simplify=simplify):
+    if not render_kernels_cached(decoder=decoder, simplify=simplify):
         what = "the decoder and the renderer side by side" if decoder else "the renderer"
         status(f"compiling {what} (first run only, under half a minute; `make install` does it ahead)...", quiet)
         compile_for_render(decoder=decoder, simplify=simplify, lean=lean, mode=mode)
-    startup_s = load_kernels(lean=lean, decoder=decoder, simplify=simplify) + (time.perf_counter() - t_start)
+    startup_s = load_render_kernels(lean=lean, decoder=decoder, simplify=simplify) + (time.perf_counter() - t_start)
     t_start = time.perf_counter()  # total_s: from opening the input to the image written
     with progress_reporter("rendering", quiet) as progress, interruptible():
         frame = gatun_py.render(input, size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom,
@@ -177,7 +165,7 @@ def _check_series_options(workers, scheduler, n_bricks, ratio, colorbar, lean, p
 
 
 def _render_on_cluster(input, output, *, show_stats, quiet, **options):
-    from gatun_py.api import render_frames  # start-up time: see _kernels_cached
+    from gatun_py.api import render_frames  # start-up time: numba loads after the options are checked
 
     t0 = time.perf_counter()
     done = {"n": 0}

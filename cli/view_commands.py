@@ -61,11 +61,11 @@ def view(input, port, host, no_browser, token, quiet):
         status(f"warning: listening on {host}: other machines that can reach it may connect (with the token); "
                "use the default 127.0.0.1 unless you mean it", False)
     from gatun_py.pipeline.budget import load_costs, machine_costs
-    from gatun_py.warmup import load_kernels
+    from gatun_py._runtime import load_render_kernels
 
     t0 = time.perf_counter()
     status("loading the decoder and renderer...", quiet)
-    load_kernels()
+    load_render_kernels()
     if load_costs() is None:
         status("measuring this machine's rendering costs (once, under a second)...", quiet)
     costs, _ = machine_costs()

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ._atomic import check_output_path, write_bytes_atomic
-from ._resources import peak_rss_mb
+from ._runtime import peak_rss_mb
 from .codec import LevelPayload, TetcReader, write_tetc
 from .codec.bricks import check_jobs
 from .codec.info import tetc_info

@@ -276,12 +276,12 @@ def test_result_does_not_depend_on_how_far_the_decoder_runs_ahead(post_tetc, mon
 def test_trim_heap_is_safe_to_call_between_batches():
     import platform
 
-    from gatun_py.isosurface import extract
+    from gatun_py import _runtime
 
-    extract._trim_heap()
-    extract._trim_heap()
+    _runtime.trim_heap()
+    _runtime.trim_heap()
     if platform.system() == "Linux" and platform.libc_ver()[0] == "glibc":
-        assert extract._malloc_trim() is not None  # on glibc the trim is real, not silently skipped
+        assert _runtime._malloc_trim() is not None  # on glibc the trim is real, not silently skipped
 
 
 def test_faces_target_and_error_small():

@@ -14,7 +14,7 @@ import pytest
 
 from meshgen import grid_mesh
 
-from gatun_py import _resources
+from gatun_py import _runtime
 from gatun_py.codec import LevelPayload, TetcReader, encode_tetc
 from gatun_py.isosurface import extract as iso_extract
 from gatun_py.isosurface import isosurface
@@ -95,13 +95,13 @@ def test_code_pages_handed_back_and_kernels_run_on():
     mesh = grid_mesh(6, 6, 6, jitter=0.2, seed=1)
     v = float(np.median(mesh.density))
     before = isosurface(mesh, values=v, ratio=0.3, batch_faces=30)
-    _resources.release_code_pages()
-    _resources.release_code_pages()  # twice: nothing left, nothing breaks
+    _runtime.release_code_pages()
+    _runtime.release_code_pages()  # twice: nothing left, nothing breaks
     after = isosurface(mesh, values=v, ratio=0.3, batch_faces=30)
     np.testing.assert_array_equal(before.points, after.points)
     np.testing.assert_array_equal(before.triangles, after.triangles)
     # only read-only mappings without private pages: never the relocated constants or data
-    for start, length in _resources._clean_library_ranges(_resources._CODE_LIBRARY):
+    for start, length in _runtime._clean_library_ranges(_runtime._CODE_LIBRARY):
         assert start > 0 and length > 0
 
 

@@ -105,7 +105,7 @@ def test_missing_input_fails_before_any_compiling(tmp_path, monkeypatch):
     def refuse(**_):
         raise AssertionError("compiled or loaded kernels for a missing input")
 
-    monkeypatch.setattr(rc, "_kernels_cached", lambda **_: False)
+    monkeypatch.setattr(rc, "render_kernels_cached", lambda **_: False)
     monkeypatch.setattr(warmup, "compile_for_render", refuse)
     monkeypatch.setattr(warmup, "load_kernels", refuse)
     res = run("render", tmp_path / "none.tetc", "-o", tmp_path / "o.png")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib
 import sys
 from pathlib import Path
 
@@ -18,9 +17,9 @@ from naive_simplify import (check_valid, collapse, evaluate_merge, face_neighbou
 from gatun_py.errors import OptionError
 from gatun_py.simplify import ROOT_RANK, check_forest, decimate, simplified_mesh
 from gatun_py.simplify import _decimate_kernels as K
-from gatun_py.simplify.decimate import CENTROID_WEIGHT, QUADRIC_WEIGHT, SCALAR_SCALE, DecimationState
+from gatun_py.simplify.decimation import CENTROID_WEIGHT, QUADRIC_WEIGHT, SCALAR_SCALE, DecimationState
 
-D = importlib.import_module("gatun_py.simplify.decimate")  # the module (the package exports the function)
+import gatun_py.simplify.decimation as D  # noqa: E402
 
 MANIFOLD = {k for k in AWKWARD if k not in ("edge_touching", "vertex_touching")}
 

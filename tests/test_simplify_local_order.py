@@ -4,7 +4,6 @@ on samples, a gmsh mesh, meshes full of equal errors and random meshes."""
 
 from __future__ import annotations
 
-import importlib
 from unittest import mock
 
 import numpy as np
@@ -18,9 +17,9 @@ from gatun_py.errors import OptionError
 from gatun_py.mesh import TetMesh
 from gatun_py.simplify import _decimate_kernels as K
 from gatun_py.simplify import decimate
-from gatun_py.simplify.decimate import DecimationState, local_order
+from gatun_py.simplify.decimation import DecimationState, local_order
 
-decimate_module = importlib.import_module("gatun_py.simplify.decimate")  # the package's name is the function
+from gatun_py.simplify import decimation as decimate_module
 
 
 def _random_order(seed):

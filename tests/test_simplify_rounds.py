@@ -14,7 +14,7 @@ from test_simplify_decimate import _check_forest_prefixes, _naive_kw
 
 from gatun_py.errors import OptionError
 from gatun_py.simplify import decimate
-from gatun_py.simplify.decimate import DecimationState, _canonical_ranks, canonical_key
+from gatun_py.simplify.decimation import DecimationState, _canonical_ranks, canonical_key
 from gatun_py.simplify.levels import level_merges
 
 

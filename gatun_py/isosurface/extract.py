@@ -11,11 +11,8 @@ The full-resolution surface never exists unless no reduction was asked for.
 from __future__ import annotations
 
 import collections
-import ctypes
-import functools
 import json
 import math
-import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -24,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import check_output_path
-from .._resources import peak_rss_mb, release_code_pages
+from .._runtime import peak_rss_mb, release_code_pages, rss_mb, trim_heap
 from ..codec import TetcReader
 from ..codec.bricks import check_jobs
 from ..codec.container import MAGIC
@@ -58,7 +55,7 @@ KEEP_SHARE = 0.5
 #: after the stream and so on the critical path, must still collapse (flange-10m at three
 #: isovalues: final round 0.24-0.36 s -> 0.15-0.19 s of CPU, RMS and Hausdorff equal or lower)
 KEEP_TAIL = 0.5
-#: hand the C heap's free pages back to the system after every this many batches (see _trim_heap)
+#: hand the C heap's free pages back to the system after every this many batches (see trim_heap)
 TRIM_EVERY = 4
 #: the worker unmaps LLVM's code pages (``release_code_pages``) after this many batches, by when the
 #: decoders' and the marching kernels are loaded (the boundary, then the first batch of tets), and
@@ -424,7 +421,7 @@ def load_kernels(source=None, *, simplify: bool = True) -> float:
     then extracted in memory), marching tetrahedra, and QEM unless ``simplify=False``. The CLI
     calls this before it opens the user's file, so that the peak memory of a large extraction is
     its arrays over a floor without LLVM's linker pages (see
-    :func:`gatun_py._resources.release_code_pages`; 90 MB of the 7.8 M-tet flange's peak), and
+    :func:`gatun_py._runtime.release_code_pages`; 90 MB of the 7.8 M-tet flange's peak), and
     no kernel loads in the middle of the stream. Nothing is done (0.0) when the tiny file is not
     there or not readable: the kernels then load when first used.
 
@@ -576,7 +573,7 @@ def _extract(stream, info, vals, *, ratio, faces, batch_faces, imp, check, progr
                          "locked": sum(e.locked for e in extractors),
                          "vertices": sum(e.nv for e in extractors),
                          "border_faces": sum(int(e.sizes[0]) for e in extractors),
-                         "rss_mb": round(_rss_mb(), 1), "peak_rss_mb": round(peak_rss_mb(), 1)})
+                         "rss_mb": round(rss_mb(), 1), "peak_rss_mb": round(peak_rss_mb(), 1)})
         return done
 
     # Extraction and collapses run in a worker thread (their kernels release the GIL) while the
@@ -616,7 +613,7 @@ def _extract(stream, info, vals, *, ratio, faces, batch_faces, imp, check, progr
                                          n_batches))
             tets_done += batch_len
             if n_batches % TRIM_EVERY == 0:
-                _trim_heap()
+                trim_heap()
             while len(in_flight) > MAX_IN_FLIGHT:
                 done = in_flight.popleft().result()  # re-raises the worker's exception here
                 if progress is not None:
@@ -708,42 +705,6 @@ class _SurfaceTets:
         kept = tets[keep]
         last = np.minimum(np.arange(1, -(-n // CHUNK_TETS) + 1) * CHUNK_TETS, n) - 1
         return kept, np.cumsum(keep)[last] if n else np.zeros(0, np.int64)
-
-
-@functools.cache
-def _malloc_trim():
-    """glibc's ``malloc_trim``, or None where the C library has none (macOS, Windows, musl)."""
-    try:
-        fn = ctypes.CDLL(None).malloc_trim
-    except (OSError, TypeError, AttributeError):
-        return None
-    fn.argtypes, fn.restype = [ctypes.c_size_t], ctypes.c_int
-    return fn
-
-
-def _trim_heap() -> None:
-    """Give the C heap's free pages back to the system (glibc's ``malloc_trim``; elsewhere nothing).
-
-    Why: freeing a large transient early in the stream (the connectivity decoder's 22 MB table of
-    refs, the boundary's border queue on the 7.8 M-tet flange) raises glibc's dynamic mmap
-    threshold to its size and the trim threshold to twice that. From then on the per-batch arrays
-    (1 MB of tets, refs, extraction buffers), allocated and freed by three threads, come from the
-    arenas, and ~35 MB of freed pages stayed resident at the peak (455 -> 420 MB there). A call
-    costs about a millisecond, and it changes no allocator setting of the process (``mallopt``
-    would, for the user's code too).
-    """
-    fn = _malloc_trim()
-    if fn is not None:
-        fn(0)
-
-
-def _rss_mb() -> float:
-    """Resident memory now (not the peak), for the memory-over-time record; 0 where /proc is absent."""
-    try:
-        with open("/proc/self/statm") as fh:
-            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
-    except (OSError, ValueError, IndexError):
-        return 0.0
 
 
 _NO_SCALAR_MESSAGE = "the mesh has no scalar (it came without point data): there is no field to extract an isosurface of"

@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .._resources import peak_rss_mb
+from .._runtime import peak_rss_mb
 from ..codec import TetcReader
 from ..errors import OptionError
 from ..mesh import TetMesh, default_step

@@ -21,7 +21,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from .._resources import peak_rss_mb
+from .._runtime import peak_rss_mb
 from ..codec import TetcReader
 from ..codec.container import MAGIC
 from ..errors import CorruptFileError, OptionError

@@ -1,8 +1,8 @@
-"""Numba kernels of the Van Gelder decimation (see :mod:`gatun_py.simplify.decimate`).
+"""Numba kernels of the Van Gelder decimation (see :mod:`gatun_py.simplify.decimation`).
 
-Everything here works on plain arrays; :func:`gatun_py.simplify.decimate.decimate` builds them,
+Everything here works on plain arrays; :func:`gatun_py.simplify.decimation.decimate` builds them,
 validates the input and drives the loop. Vertex and tet ids here are the state's local
-numbering (see :class:`gatun_py.simplify.decimate.DecimationState`); ``vkey`` maps a vertex to
+numbering (see :class:`gatun_py.simplify.decimation.DecimationState`); ``vkey`` maps a vertex to
 the caller's id, which breaks every tie between equal errors. The mesh state during decimation:
 
 ``T`` (m, 4) int32
@@ -1445,12 +1445,12 @@ def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vke
 
     ``marks*`` and ``tcount`` have one row per thread (stamps, evaluation counts); the sequential
     steps use row 0. ``vkey[v]`` is vertex v's id in the caller's numbering (the kernels work in a
-    local one, see :class:`gatun_py.simplify.decimate.DecimationState`): every tie between equal
+    local one, see :class:`gatun_py.simplify.decimation.DecimationState`): every tie between equal
     errors (the heap, the best candidate) goes to the smaller key, so the merges do not depend on
     the local numbering.
 
     With ``round_stamp > 0`` the call is one round of independent merges (see
-    :mod:`gatun_py.simplify.decimate`): a merge a -> b sets ``lock`` to ``round_stamp`` on every vertex
+    :mod:`gatun_py.simplify.decimation`): a merge a -> b sets ``lock`` to ``round_stamp`` on every vertex
     of a's star (a and b included) and ``lock_b[b]``; a popped candidate a' -> b' is accepted only
     when neither a' nor b' is locked and no vertex of a''s star is a target of the round (checked
     with the star walk the link test makes anyway); otherwise the entry is set aside unchanged and
@@ -1584,7 +1584,7 @@ def _run_rounds(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, 
                 tcount, counters, ver, h_err, h_v, h_b, h_ver, h_pos, last_err, parent, rank, pdat, tp_head, tp_count,
                 vw, prow, lock, lock_b, ends, max_blocked, round_no, starts):
     """Rounds of :func:`_run` up to every ``ends[r]`` in turn (its ``max_blocked[r]``), in one call
-    without the GIL: the round loop of :func:`gatun_py.simplify.decimate.decimate` (a return to
+    without the GIL: the round loop of :func:`gatun_py.simplify.decimation.decimate` (a return to
     Python between rounds waits for the GIL, which a numba encoder in another thread may hold for
     seconds). ``round_no[0]``: the last round's stamp (updated); the first merge count of every
     round goes to ``starts``. Returns (rounds started, True when no legal merge is left, the last

@@ -3,7 +3,7 @@
 Conventions (``docs/architecture.md``): ``parent[v]`` is v itself for a root, ``rank[v]`` the
 0-based execution order of v's merge (``ROOT_RANK`` for roots; inside a round of independent
 merges any order executes the same, and the ranks follow
-:func:`gatun_py.simplify.decimate.canonical_key`). The first N merges are those with rank < N; a
+:func:`gatun_py.simplify.decimation.canonical_key`). The first N merges are those with rank < N; a
 parent always has a larger rank than its children (it was still alive when they were merged into
 it).
 """

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -380,3 +382,21 @@ def test_case_c_selection_is_the_sorted_lists_entry(entries, data):
     by_seq = sc2[np.argsort(sseq, kind="stable")]
     K._order_by_decoded(by_seq, n2, vdec)
     assert np.array_equal(by_seq, sc2[order])
+
+
+def test_todays_format_decodes_without_the_frozen_codings():
+    """A file of today's format never imports (so never compiles) the frozen tet coding 1; a file
+    of format 4 does."""
+    import subprocess
+    import sys
+
+    from gatun_py.warmup import SHIPPED_TETC
+
+    code = ("import sys; from gatun_py.codec import TetcReader; r = TetcReader(sys.argv[1]); "
+            "r.decode_mesh(0); print(r.container.major, 'gatun_py.codec.legacy.tets1' in sys.modules)")
+    old = Path(__file__).resolve().parent / "data" / "post_v4.tetc"
+    for path, want in [(SHIPPED_TETC, "False"), (old, "True")]:
+        p = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=300)
+        assert p.returncode == 0, p.stderr[-2000:]
+        major, loaded = p.stdout.split()
+        assert loaded == want, (major, loaded)

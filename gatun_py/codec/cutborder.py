@@ -15,9 +15,13 @@ Two range-coded streams:
   join it.
 
 The paper orders the edge-adjacent faces by edge and then traversal order; we rank the distinct
-apexes instead by how many faces of T they would close (3, 2, 1) and then by traversal order,
-which makes index 0 far more likely, and code the index with adaptive models whose context is
-(number of candidates, scores of the first two, whether the previous tet escaped).
+apexes instead by a learnt probability of their *class* (how many faces of T they would close,
+how many decoded tets hold them and the ends of their gate edge, whether they are on the
+boundary), which makes index 0 far more likely, and code the index with adaptive models whose
+context is the two best candidates' probabilities (:mod:`gatun_py.codec._cutborder_kernels`).
+The case (c) list is ordered by decoded tets, fewest first. This is tet coding 2, what files of
+format 5 on hold; :mod:`gatun_py.codec.formats` says which coding a file has, and files of
+formats 1 to 4 decode with the frozen coding 1 (:mod:`gatun_py.codec.legacy.tets1`).
 
 Vertex numbering (decode order): boundary vertices in the order the boundary code meets them,
 then interior vertices in the order the tet code meets them, then unreferenced vertices.

@@ -4,25 +4,25 @@ Run as ``python bench/forest_identity.py [--meshes a,b] [--out FILE] [--check FI
 line per mesh (sha256 of the int32 parent and rank arrays and the merge count), with the CPU time
 of the decimation and its counters (evaluations, exact evaluations, heap pops, ...). ``--check``
 compares against a JSON file written by ``--out`` on another checkout (the decimator's speed work
-must keep the forest bit-identical) and exits 1 on any difference. Import path: whatever
+must keep the forest bit-identical) and exits 1 on any difference; ``tests/test_forest_identity.py``
+checks the samples against ``tests/data/forest_hashes.json``, written so. Import path: whatever
 ``gatun_py`` the interpreter finds first, so ``PYTHONPATH=<other checkout>`` runs that one.
 """
 
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
 
 from conftest import SAMPLE_FILES, load_sample  # noqa: E402
+from test_forest_identity import forest_hash  # noqa: E402  (one hash, the test's)
 
 sys.path.insert(0, str(ROOT / "bench"))
 from common import MESH_CACHE  # noqa: E402
@@ -39,14 +39,6 @@ def load(name):
     if name in SAMPLE_FILES:
         return load_sample(name)[0]
     return read_mesh(SHARED.get(name, name))[0]
-
-
-def forest_hash(forest) -> str:
-    h = hashlib.sha256()
-    h.update(np.ascontiguousarray(forest.parent, np.int32).tobytes())
-    h.update(np.ascontiguousarray(forest.rank, np.int32).tobytes())
-    h.update(str(int(forest.n_merges)).encode())
-    return h.hexdigest()[:16]
 
 
 def counted(mesh):

@@ -41,8 +41,9 @@ does). Beyond ``MAX_SAMPLES`` points in a's tets (late merges only), every k-th 
 The mass and area terms are the paper's; the interpolation term, the quadric, the sample points,
 the swept volume (sum over a's boundary faces of the tet between the face and b) and the division
 by the collapsed tets (the comparison that matters is at equal tet counts: it prefers merges that
-remove more tets for the same error; Combustion at ratio 0.9, quadric alone: 1.020 -> 0.996) are
-our additions; the constants below give their measured effect. The legality rules are listed in
+remove more tets for the same error) are our additions. How the weights below were chosen, and
+what each term does to the images and to the time: ``bench/studies/decimation_weights.md`` and
+``bench/sections/simplify.md``. The legality rules are listed in
 :mod:`gatun_py.simplify._decimate_kernels`.
 
 Each term is one small kernel (``_mass_error``, ``_interp_deviation``, ``_area_error``,
@@ -52,12 +53,11 @@ candidate first, with the interpolation term (>= 0) left out and the sampled err
 negative (every point's new error 0) as a lower bound, then the two expensive terms only for the
 candidates whose bound can still win, and of those the sampled sum stops as soon as the bound with
 the points not yet summed at 0 loses (it only grows point by point); the choice is the one of
-computing every error, bit for bit (Combustion: 19 % of the candidates get the expensive terms, a
-quarter of those stop early). The first evaluation of every vertex and the sweeps run in parallel
+computing every error, bit for bit. The first evaluation of every vertex and the sweeps run in parallel
 (each evaluation only reads the mesh), and their results are pushed in vertex order, so the forest
 does not depend on the thread count either.
 
-Rounds of independent merges (issue 12: what makes the ranks cheap to store). Every level's
+Rounds of independent merges (what makes the ranks cheap to store). Every level's
 interval of ranks [N_i, N_i+1) is split into rounds (``ROUNDS_PER_LEVEL`` equal quotas; a round also
 ends early once more than ``ROUND_BLOCKED`` x its quota of popped candidates were blocked, or when
 every candidate left is). A merge a -> b locks every vertex of a's star St(a) (the vertices of the
@@ -89,31 +89,17 @@ locked by a -> b), so a parent still outranks its child.
 
 The rounds run in one kernel call (``_run_rounds``, no GIL) per eighth of a level: ``tetc compress``
 encodes the levels' meshes in a thread meanwhile (level i once ``on_level`` says its merges are
-done, level 0 from level 1's end on), and while the encoder's kernels held the GIL, a return to
-Python after every round waited for one of them (flange-1m: the decimation phase 19.1 s wall for 19.1 s CPU with
-level 0 beside it, 18.1 s for 20.5 s with every level beside it). Speculative evaluation of the
-next lazy heap entries on the second thread was tried and measured slower (see bench/sections/
-simplify.md).
+done, level 0 from level 1's end on), so the encoder never waits for a return to Python.
 
-Where the time goes (perf on the kernels' code, Combustion, one thread, session 14): the new values
-at the sample points of the exact evaluations (``_new_value``) ~13 %, moving the points after a
-merge ~9 %, the star context (volumes, sample sums) ~8 %, star and link walks ~10 %, the merge and
-list upkeep ~5 %, the candidates' cheap terms and legality ~8 %, rewriting the point rows ~2.5 %,
-the heap ~1 %. Per merge (``bench/forest_identity.py --counters``): ~3.6 evaluations, ~32
-candidates, ~5.9 exact evaluations, ~250 sample points summed, ~135 points moved, ~3.8 link tests,
-~2.6 heap pops. What made it so (every step bit-identical): every sample point caches its error in
+What keeps the merge loop fast, every step bit-identical: every sample point caches its error in
 its tet (the star sums read it instead of forming every star tet's planes), a tet's points are a
-run of rows (no chain to walk; a stride jumps), an evaluation's ~30 scratch arrays are views of a
-per-thread buffer, and the heap holds one entry per vertex (no superseded entries to pop).
-
-The merge loop is bound by memory latency, and a mesher's numbering can have no locality at all
-(the gmsh flange: the median tet spans 48,492 of 160,534 vertex ids, a vertex's star 612,597 of
-810,347 tet ids), so every star walk, quadric, mark and point list touched random memory. The
-state works in a local numbering (:func:`local_order`: vertices along a Morton curve, tets by
-their smallest new vertex id), drops the dead tets as they pile up, and hands out only the caller's ids;
-the merges stay the same bit for bit (see :class:`DecimationState`): ``bench/forest_identity.py``
-hashes are unchanged. flange-1m's decimation: 17.1 s CPU against 20.9 s in the caller's
-numbering (bench/sections/simplify.md).
+run of rows (no chain to walk; a stride jumps), an evaluation's scratch arrays are views of a
+per-thread buffer, and the heap holds one entry per vertex (no superseded entries to pop). The loop
+is bound by memory latency, and a mesher's numbering can have no locality at all, so the state
+works in a local numbering (:func:`local_order`: vertices along a Morton curve, tets by their
+smallest new vertex id), drops the dead tets as they pile up, and hands out only the caller's
+ids; the merges are the same bit for bit (see :class:`DecimationState`; ``bench/forest_identity.py
+--check`` and ``tests/test_forest_identity.py``). Where the time goes: ``bench/sections/simplify.md``.
 """
 
 from __future__ import annotations
@@ -136,83 +122,43 @@ __all__ = ["decimate", "DEFAULT_W_DENSITY", "DEFAULT_W_GEOMETRY", "SWEPT_WEIGHT"
            "MAX_SAMPLES", "CENTROID_WEIGHT", "DecimationState", "tet_quadrics", "ROUNDS_PER_LEVEL", "local_order",
            "canonical_key"]
 
+# The weights of the error terms (see the module docstring). Each is a fraction of a whole-mesh
+# quantity, so they hold across data sets; they were chosen by the image error at equal tet counts
+# against the full render and against VTK's quadric decimation (bench/studies/decimation_weights.md,
+# bench/sections/simplify.md).
 DEFAULT_W_DENSITY = 1.0
 DEFAULT_W_GEOMETRY = 1.0
-# Weight of the swept boundary volume inside the geometry error, relative to the paper's area term.
-# The area term alone lets the boundary drift (equal-area faces in a different place): on Blunt-fin
-# the sampled scalar RMS error at ratio 0.9 drops from 1.1 % to 0.8 % of the range with it.
+# The swept boundary volume inside the geometry error, relative to the paper's area term: the area
+# term alone lets the boundary drift (equal-area faces in a different place).
 SWEPT_WEIGHT = 100.0
-# The density error is mostly the quadric (the 256^2 image RMSE against the full render, equal tet
-# counts, VTK's quadric decimation in the same run: Combustion 0.319 / 1.471 at ratio 0.5 / 0.9
-# with the mass + linear interpolation error of the previous version, 0.13 / 0.97 with these
-# weights (no sample points, power 1), VTK 0.20 / 0.88; Blunt-fin 0.019 / 0.330 -> 0.022 / 0.298,
-# VTK 0.034 / 0.444). What was left at 0.9 on Combustion (before the sample points below) is VTK's
-# freedom to pick the values of its vertices (it solves for the quadric's minimum); a merge forest
-# keeps the original vertices and values. Measured (view az 30 el 20 / 120 -30 / 200 60): VTK's
-# own mesh with the original field's values at its vertices renders at 1.23 / 1.13 / 1.31 (VTK
-# itself 0.88 / 0.81 / 0.92);
-# our mesh with its vertex values refitted by least squares to the original field at 347,000 points
-# would render at 0.82 / 0.76 / 0.82 (ours 0.97 / 0.89 / 0.98): the vertex choice is better than
-# VTK's, the values are what a forest cannot change. Other settings with the merged-vertex samples
-# and power 1.5 below (before the centroids; ours / VTK's median at 0.9): W_geometry 0.7 / 1.5,
-# QUADRIC_WEIGHT 2e3, INTERP_WEIGHT 0 / 3e3, SCALAR_SCALE 0.03 all x1.03 to x1.08; before them
-# (no samples, power 1): SWEPT_WEIGHT 10 / 1000 x1.6 / 1.1,
-# W_geometry 0.3 / 3 x1.16 / 1.11, the quadric weighted by tet volume ** 0 / 0.5 / 1.5 x1.10 /
-# 1.10 / 1.10, b's own accumulated quadric added (Garland-Heckbert's total cost) x1.11 to 1.18,
-# a's own subtracted (the increase only) x1.06 to 1.08.
-# SCALAR_SCALE: 0.003 / 0.01 / 0.03 measure the same (0.975 / 0.967 / 0.977 at 0.9).
+# The quadric carries most of the density error. What it leaves is the freedom of a decimator that
+# picks new vertex values (VTK solves for the quadric's minimum): a merge forest keeps the original
+# vertices and values.
 QUADRIC_WEIGHT = 1e3
 SCALAR_SCALE = 0.01
 # The squared interpolation error at the merged vertex: the one thing the quadric does not see
-# (how the new neighbourhood interpolates a's own value); 0.138 -> 0.129 / 0.996 -> 0.967 above.
+# (how the new neighbourhood interpolates a's own value).
 INTERP_WEIGHT = 1e3
 # The paper's mass term, off by default: mass gained in one tet and lost in the next cancel, so it
-# hides local errors. With the terms above it only makes things worse: Combustion 0.129 / 0.967 ->
-# 0.142 / 0.977 at weight 0.1 and 0.170 / 0.993 at 1; Blunt-fin 0.022 / 0.298 -> 0.020 / 0.359 at 0.1.
+# hides local errors, and with the terms above it only makes the images worse.
 MASS_WEIGHT = 0.0
-# The sample points (with the tet centroids) and the power of the collapsed-tet count. 256^2 image
-# RMSE against the full render at ratio 0.9, three views (az/el 30/20, 120/-30, 200/60), VTK =
-# median of 5 runs of its quadric decimation at the same tet count (VTK is not deterministic: one
-# run can land 30 % off its median), ours / VTK:
-#   before (no samples, power 1): Combustion 0.967 / 0.891 / 0.977 against 0.905 / 0.815 / 0.902
-#     (x1.07 / 1.09 / 1.08); Blunt-fin 0.298 / 0.452 / 0.384 against 0.548 / 0.581 / 0.387;
-#   power 1.5 alone: x1.06 / 1.05 / 1.06 (0.5 / 2: x1.15 / 1.15 / 1.12, x1.15 / 1.14 / 1.15);
-#   merged vertices as samples alone (weight 1e4): x1.07 / 1.06; without the quadric x1.28;
-#   merged vertices + power 1.5: x1.00 / 1.00 / 1.05 (neighbours: weight 5e3 / 2e4, power 1.3 /
-#     1.7: x1.02 to x1.07);
-#   + the tet centroids (these defaults): Combustion 0.869 / 0.792 / 0.903 against 0.884 / 0.822 /
-#     0.909 (x0.98 / 0.96 / 0.99); Blunt-fin 0.318 / 0.397 / 0.339 against 0.504 / 0.562 / 0.394.
-#     At ratio 0.5: Combustion 0.129 / 0.122 / 0.131 -> 0.141 / 0.121 / 0.139 (VTK 0.19 / 0.17 /
-#     0.19), Blunt-fin 0.022 / 0.040 / 0.029 -> 0.024 / 0.039 / 0.027 (VTK 0.037 / 0.049 / 0.090).
-#     Around it: CENTROID_WEIGHT 3 x0.98 / 1.00 / 0.99; power 1 x1.03 / 1.01 / 1.05; without the
-#     quadric x1.02 / 1.03 / 1.05.
-# Sampled scalar error against the original (bench_simplify, 50,000 points), ratio 0.9: Combustion
-# RMS 0.949 -> 0.822 % of the range, max 15.4 -> 9.7 % (VTK 0.944 / 11.6); Blunt-fin RMS 0.132 ->
-# 0.120 % (VTK 0.127). Cost: the whole forest (bench_simplify, shared 2-core machine) Blunt-fin 2.7
-# -> 10.1 s (5.7x VTK's quadric decimation to 99 %), Combustion 3.2 -> 12.6 s (11.5x); about 6 of
-# Combustion's 8.4 s CPU measured alone are the sample points.
+# The sample points (merged vertices and the input tets' centroids) and the power of the collapsed
+# tet count; the sample points are most of the decimation's time (``w_sample=0`` leaves them out).
 SAMPLE_WEIGHT = 1e4
 COLLAPSE_POWER = 1.5
 # At most this many sample points per evaluation: beyond, every k-th point of a's star stands for
-# k (a bound on the cost of the late merges, whose stars hold thousands of points). 128 saves
-# nothing measurable before ratio 0.9 and measures worse (Combustion x1.00 / 0.99 / 1.01 of VTK).
+# k (a bound on the cost of the late merges, whose stars hold thousands of points).
 MAX_SAMPLES = 256
 # Weight of the input tets' centroids among the sample points (the merged vertices have 1).
 CENTROID_WEIGHT = 1.0
 # Rounds of independent merges per level (see decimate's ``rounds``), and the fraction of a round's
-# quota of blocked candidates that ends it early. Combustion, RMSE at ratio 0.9 of the three views
-# of bench_rounds (greedy 0.867 / 0.792 / 0.902, VTK's median 0.881 / 0.821 / 0.907) and the rounds'
-# entropy in bits per vertex: 16 rounds 0.932 / 0.842 / 0.930 (4.0 bits), 32 0.907 / 0.818 / 0.914
-# (5.0), 64 0.895 / 0.819 / 0.917 (6.0), 128 0.886 / 0.810 / 0.902 (7.0); with the early end: 32 and 0.25 0.894 / 0.804 / 0.911
-# (6.4), 32 and 0.1 0.886 / 0.812 / 0.909 (7.0), 16 and 0.05 0.878 / 0.790 / 0.909 (7.0), 64 and
-# 0.25 0.872 / 0.813 / 0.894 (6.9, these defaults: every view below VTK's median). At ratio 0.5
-# every setting is within 0.002 of the greedy order.
+# quota of blocked candidates that ends it early: more rounds cost the forest's coding more bits per
+# vertex (log2 of the rounds), fewer make the order less greedy and the images worse.
 ROUNDS_PER_LEVEL = 64
 ROUND_BLOCKED = 0.25
 # Room for sample point rows beyond the n + m points, as a fraction of n + m: a merge writes the runs
 # of its star's points there, and when the rows run out they are rewritten (the more room, the
-# rarer the rewrites, each O(n + m)). flange-1m, greedy, one thread: 0.25 / 0.5 / 1.0 rewrite 98 / 52
-# / 27 times in 19.3-19.5 / 19.3-20.9 / 18.9-20.2 s CPU (noise); 56 bytes per row.
+# rarer the rewrites, each O(n + m); 56 bytes per row).
 POINT_SLACK = 0.25
 # Tets per chunk of the vectorised set-up (bounds its temporaries).
 _CHUNK = 1 << 16
@@ -291,8 +237,7 @@ class DecimationState:
         T0 = np.array(mesh.tets, np.int32)
         # set-up in the caller's numbering (every sum in its order), renumbered below. The face
         # pairing and the vertex topology (GIL-free kernels) run in a thread beside the quadrics
-        # and the local order: neither reads the other's results (flange-10m: set-up 8.6-9.2 s
-        # against 13.8-14.5 s one after the other).
+        # and the local order: neither reads the other's results.
         with ThreadPoolExecutor(1, thread_name_prefix="tetc-setup") as pool:
             topology = pool.submit(_topology, T0, n)
             # normalisation: both errors as fractions of a whole-mesh quantity
@@ -523,8 +468,8 @@ def local_order(mesh: TetMesh):
     vertex i is the caller's ``vertex_order[i]``.
 
     Why: the merge loop walks stars, candidates, quadrics and point lists, and is bound by memory
-    latency; a mesher's numbering can have no locality at all (the gmsh flange: the median tet
-    spans 48,492 of 160,534 vertex ids)."""
+    latency; a mesher's numbering can have no locality at all (a tet's vertex ids spread over
+    the whole range)."""
     n, m = mesh.n_points, mesh.n_tets
     if n == 0:
         return np.zeros(0, np.int64), np.arange(m)
@@ -615,9 +560,8 @@ def decimate(mesh: TetMesh, *, w_density: float = DEFAULT_W_DENSITY, w_geometry:
     w_sample : float
         Factor on the sampled error, the density error at the original field's points (input
         tets' centroids and merged vertices; part of the density error); >= 0, finite. 0 leaves
-        it out: the forest builds 2-2.5x faster, but its coarse levels are worse (at ratio 0.9
-        image RMSE 12-26 % higher on Blunt-fin, Combustion and a gmsh mesh, above VTK's quadric
-        decimation on the last two; ``bench/bench_simplify.py --only sampled``).
+        it out: the forest builds faster, but its coarse levels are worse (the figures:
+        ``bench/sections/simplify.md``, ``bench/bench_simplify.py --only sampled``).
     progress : callable, optional
         Called as ``progress(k)`` with the number of merges done since the previous call.
     max_merges : int, optional

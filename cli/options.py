@@ -19,11 +19,8 @@ import click
 import numpy as np
 
 from gatun_py.errors import ReadError
+from gatun_py.limits import MAX_IMAGE_SIDE, MAX_ZOOM  # light: parsing the options loads no numba
 from gatun_py.mesh.plot3d import Q_VARIABLES
-
-MAX_IMAGE_SIDE = 8192
-MAX_ZOOM = 1.0e4  # gatun_py.render.camera.MAX_ZOOM (tests/test_cli_options.py keeps them equal); not
-# imported from there so that parsing options does not load numba and the render kernels
 
 
 class FiniteFloat(click.ParamType):
@@ -70,7 +67,7 @@ class Colour(click.ParamType):
     name = "COLOUR"
 
     def convert(self, value, param, ctx):
-        from gatun_py.render.image import parse_colour  # start-up time (see MAX_ZOOM)
+        from gatun_py.render.image import parse_colour  # start-up time (numba loads after the options are checked)
 
         try:
             return parse_colour(value)

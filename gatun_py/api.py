@@ -37,6 +37,7 @@ from .mesh.io import mesh_output_format
 from .pipeline.bricks import compress_bricks, read_bricked
 from .pipeline.sortlast import BrickRef, MeshExtent, render_bricks, split_for_render
 from .pipeline.budget import load_costs, plan_file_budget, remember_frame
+from .limits import MAX_IMAGE_SIDE
 from .pipeline.distributed import BrickCluster
 from .pipeline.selective import SELECTION_ALLOWANCE_S, budget_tets, render_selective, selective_mesh
 from .pipeline.stream import PIPELINES, View, is_tetc, render_mesh_file, render_tetc
@@ -50,10 +51,6 @@ from .simplify.filter import SimplifyFilter
 from .simplify.levels import MAX_LEVEL, max_stored_level, next_level, resolve_target, target_ancestors
 
 __all__ = ["compress", "decompress", "convert", "info", "open", "render", "render_frames", "TetcFile", "Frame"]
-
-# The largest image a verb renders: 16384² is what the camera accepts, but 4096² already takes
-# 200 MB of float RGBA; larger is nearly always a typo.
-MAX_IMAGE_SIDE = 8192
 
 
 # -- reading the source --------------------------------------------------------------------------

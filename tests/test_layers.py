@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "gatun_py"
 CLI = ROOT / "cli"
 
-BASE = {"errors", "_atomic", "_runtime", "_version", "_lazy"}
+BASE = {"errors", "_atomic", "_runtime", "_version", "_lazy", "limits"}
 # gatun_py._runtime imports no stage itself; its hooks import, when called, the stages whose kernels
 # they probe in numba's cache or load ahead of a run (and numba)
 HOOKS = "_runtime"

@@ -220,3 +220,13 @@ class Container:
         if zlib.crc32(payload) != crc:
             raise CorruptFileError(f"{self.name}: section {name!r} checksum mismatch (corrupt file)")
         return payload
+
+
+def is_tetc(path) -> bool:
+    """Whether ``path`` is a ``.tetc`` file: its first bytes are the magic (a file that cannot be
+    opened, or a path of no file yet, by its suffix)."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(len(MAGIC)) == MAGIC
+    except (OSError, TypeError):
+        return str(path).lower().endswith(".tetc")

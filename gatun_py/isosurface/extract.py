@@ -24,7 +24,7 @@ from .._atomic import check_output_path
 from .._runtime import peak_rss_mb, release_code_pages, rss_mb, trim_heap
 from ..codec import TetcReader
 from ..codec.bricks import check_jobs
-from ..codec.container import MAGIC
+from ..codec.container import is_tetc
 from ..codec.prefetch import PrefetchedDecode
 from ..errors import CorruptFileError, OptionError, ReadError, TetcError
 from ..mesh import TetMesh, mesh_batches, read_mesh
@@ -431,7 +431,7 @@ def load_kernels(source=None, *, simplify: bool = True) -> float:
     True
     """
     t0 = time.perf_counter()
-    decoder = source is None or isinstance(source, TetcReader) or (not isinstance(source, TetMesh) and _is_tetc(source))
+    decoder = source is None or isinstance(source, TetcReader) or (not isinstance(source, TetMesh) and is_tetc(source))
     if decoder:
         try:
             tiny = TetcReader(TINY_TETC)
@@ -716,7 +716,7 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs, values=(), jobs=1):
     choose and decode the bricks of a bricked file."""
     if isinstance(getattr(source, "reader", None), TetcReader):  # an open gatun_py.TetcFile
         source = source.reader
-    if isinstance(source, TetMesh) or (not isinstance(source, TetcReader) and not _is_tetc(source)):
+    if isinstance(source, TetMesh) or (not isinstance(source, TetcReader) and not is_tetc(source)):
         if level is not None or ratio_mesh is not None:
             raise OptionError("level and ratio_mesh need a .tetc file (a mesh file has no merge forest)")
         mesh = source if isinstance(source, TetMesh) else read_mesh(source, **(read_kwargs or {}))[0]
@@ -780,9 +780,3 @@ def _open_bricked(reader: TetcReader, *, level, ratio_mesh, values, jobs):
     return stream, info
 
 
-def _is_tetc(path) -> bool:
-    try:
-        with open(path, "rb") as fh:
-            return fh.read(len(MAGIC)) == MAGIC
-    except (OSError, TypeError):
-        return str(path).lower().endswith(".tetc")

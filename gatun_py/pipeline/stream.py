@@ -16,14 +16,13 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 
 import numba
 import numpy as np
 
 from .._runtime import peak_rss_mb
 from ..codec import TetcReader
-from ..codec.container import MAGIC
+from ..codec.container import is_tetc  # noqa: F401  (the api and the CLI take it from here)
 from ..errors import CorruptFileError, OptionError
 from ..mesh import TetMesh, default_step, mesh_batches, read_mesh
 from ..render.camera import Camera
@@ -264,11 +263,3 @@ def render_mesh_file(source, view: View, *, read_kwargs: dict | None = None, pro
                  ratio=0.0, merges=0, tets_decoded=mesh.n_tets, notes=notes,
                  peak_rss_mb=peak_rss_mb())
     return PipelineResult(res.image, stats)
-
-
-def is_tetc(path) -> bool:
-    try:
-        with open(path, "rb") as fh:
-            return fh.read(len(MAGIC)) == MAGIC
-    except OSError:
-        return Path(path).suffix.lower() == ".tetc"

@@ -13,10 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gatun_py.errors import OptionError
-
-MAX_SIZE = 16384
-MAX_ZOOM = 1.0e4
+from ..errors import OptionError
+from ..limits import MAX_CAMERA_SIDE as MAX_SIZE, MAX_ZOOM  # noqa: F401  (MAX_ZOOM: the viewer's too)
 
 
 @dataclass(frozen=True)

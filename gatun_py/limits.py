@@ -1,0 +1,10 @@
+"""The limits of what the verbs and the CLI accept, in one light module: the CLI checks its options
+against them before numba or a kernel loads."""
+
+# The largest image a verb renders: the camera takes up to MAX_CAMERA_SIDE, but 4096² already
+# takes 200 MB of float RGBA; larger is nearly always a typo.
+MAX_IMAGE_SIDE = 8192
+# The camera's own bound on an image side (gatun_py.render.camera.Camera).
+MAX_CAMERA_SIDE = 16384
+# A zoom factor lies in [1 / MAX_ZOOM, MAX_ZOOM].
+MAX_ZOOM = 1.0e4

@@ -108,6 +108,7 @@ def _column(a, c):
     return a if a.ndim == 1 else a[:, c]
 
 
+@pytest.mark.slow  # 25 files with levels
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.data())
 def test_any_repeats_round_trip(data):
@@ -164,6 +165,7 @@ def test_copies_of_the_default_scalar_in_a_vector():
     _check_round_trip(mesh, data)
 
 
+@pytest.mark.slow  # a real sample, every level
 def test_fire_with_levels_every_level_bit_exact(tmp_path):
     """Room fire's u, v, w are uvw's components: stored once, and every level decodes them equal to
     their sources and to level 0's values (a coarser level's vertices are level 0's)."""

@@ -63,6 +63,7 @@ def test_bricked_file_decodes_to_the_input_up_to_permutation(k, cut_ids):
     assert_same_mesh(decode_bricked(r, jobs=1), m)
 
 
+@pytest.mark.slow  # the real samples at full size, decimated brick by brick
 def test_samples_round_trip_with_bricks(sample):
     name, m = sample
     data = bricked_bytes(m, 8)

@@ -229,6 +229,7 @@ def test_decimate_keeps_locked_vertices():
 
 # -- the API and the command line -----------------------------------------------------------------
 
+@pytest.mark.slow  # the whole pipeline through the CLI, a process per command
 def test_api_and_cli(tmp_path):
     from cli_util import run
 

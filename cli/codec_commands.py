@@ -94,8 +94,7 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
                    "them is flip-free); about 20-30 % more bytes, so off by default.")
 @mesh_input_options
 @click.option("--drop-cell-data", is_flag=True,
-              help="Leave out cell arrays (a .tetc file stores point arrays only; without this flag or "
-                   "--cell-to-point a mesh with cell data is refused).")
+              help="Leave out the cell arrays (by default they are stored exactly, with the cells as given).")
 @force_option
 @quiet_option
 def compress(input, output, n_levels, mesh_only, w_density, w_geometry, w_sample, n_bricks, jobs, dependencies, scalar,
@@ -129,12 +128,19 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, w_sample
 @selective_options
 @camera_options("With --selective", size_help="the image size the cut is chosen for.")
 @transfer_function_options("With --selective")
+@click.option("--as-tets", is_flag=True,
+              help="Write the tets the cells were split into, as one block of linear tets, instead of the "
+                   "cells as given (hexahedra, wedges, quadratic cells, blocks, cell arrays).")
 @jobs_option
 @force_option
 @quiet_option
 def decompress(input, output, level, ratio, selective, tets, size, tf_spec, azimuth, elevation, zoom, scalar_range,
-               jobs, force, quiet):
+               as_tets, jobs, force, quiet):
     """Decompress a .tetc file into any mesh format meshio writes that holds tets.
+
+    The full mesh comes back as the cells it was compressed from (hexahedra, wedges, pyramids,
+    quadratic cells, every block, cell array, field data and set); --as-tets writes their split
+    into tets instead.
 
     With --jobs 2 or more (default: all cores) the connectivity decodes on a thread of its own,
     ahead of the geometry; the bricks of a bricked file decode in parallel and are stitched into
@@ -150,5 +156,5 @@ def decompress(input, output, level, ratio, selective, tets, size, tf_spec, azim
         raise click.UsageError("--selective takes --ratio or --tets, not --level")
     mesh = gatun_py.decompress(input, output, ratio=ratio, level=level, force=force, jobs=jobs, selective=selective,
                                tets=tets, size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom,
-                               scalar_range=scalar_range, log=logger(quiet))
+                               scalar_range=scalar_range, as_tets=as_tets, log=logger(quiet))
     status(f"wrote {output}: {mesh.n_points} points, {mesh.n_tets} tets", quiet)

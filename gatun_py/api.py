@@ -29,6 +29,7 @@ from ._atomic import check_output_path, write_bytes_atomic
 from ._resources import peak_rss_mb
 from .codec import LevelPayload, TetcReader, write_tetc
 from .codec.bricks import check_jobs
+from .codec.cells import read_cells
 from .codec.info import tetc_info
 from .codec.tetcfile import encode_level, find_copies
 from .errors import OptionError
@@ -61,12 +62,16 @@ MAX_IMAGE_SIDE = 8192
 def _as_mesh(source, read_options: dict, log, *, storing: bool = False, drop_cell_data: bool = False) -> TetMesh:
     """A TetMesh from a path, a TetMesh or a meshio.Mesh (notes of the reader go to ``log``).
 
-    ``storing``: the mesh is about to be compressed, so cell arrays not averaged to the points are
-    refused unless ``drop_cell_data`` (a ``.tetc`` file does not hold cell data; nothing is dropped
-    without a word).
+    ``storing``: the mesh is about to be compressed with its cells (:func:`_as_mesh_and_cells`),
+    so ``drop_cell_data`` leaves its cell arrays out, with a note.
     """
+    return _as_mesh_and_cells(source, read_options, log, storing=storing, drop_cell_data=drop_cell_data)[0]
+
+
+def _as_mesh_and_cells(source, read_options: dict, log, *, storing: bool = False, drop_cell_data: bool = False):
+    """(TetMesh, the cells as given or None) from a path, a TetMesh or a meshio.Mesh."""
     if isinstance(source, TetMesh):
-        return source
+        return source, None
     if type(source).__name__ == "Mesh" and hasattr(source, "cells") and hasattr(source, "points"):
         mesh, report = mesh_from_meshio(source, scalar=read_options.get("scalar"),
                                         cell_to_point=read_options.get("cell_to_point", False), source="<meshio.Mesh>")
@@ -76,13 +81,11 @@ def _as_mesh(source, read_options: dict, log, *, storing: bool = False, drop_cel
         raise OptionError(f"cannot read a mesh from a {type(source).__name__}: give a path, a TetMesh or a meshio.Mesh")
     for note in report.notes:
         log(f"note: {note}")
-    if storing and report.cell_arrays:
-        names = ", ".join(map(repr, report.cell_arrays))
-        if not drop_cell_data:
-            raise OptionError(f"the mesh has cell data ({names}), which a .tetc file does not store: average it to "
-                              "the points (cell-to-point) or drop it explicitly (drop-cell-data)")
-        log(f"note: cell data dropped on request: {names}")
-    return mesh
+    cells = report.cells
+    if storing and drop_cell_data and cells is not None and cells.cell_data:
+        log(f"note: cell data dropped on request: {', '.join(map(repr, cells.cell_data))}")
+        cells.cell_data = {}
+    return mesh, cells
 
 
 def _quiet(_msg: str) -> None:
@@ -122,8 +125,8 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
         How to read ``source`` (see :func:`gatun_py.read_mesh`). Every point array is stored, in its
         dtype; ``scalar`` is the default one (rendered and decimated).
     drop_cell_data : bool
-        Compress a mesh whose cell arrays were not averaged to the points (``cell_to_point``),
-        leaving them out; without it such a mesh is refused.
+        Leave the cell arrays out (an explicit opt-out: by default they are stored exactly, beside
+        the cells as given).
     bricks : int
         Split the tets into this many bricks (k-d tree over the tet centroids, balanced by tet
         count), each coded on its own with its own forest and levels (its vertices shared with other
@@ -165,8 +168,13 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     threads = check_jobs(jobs)
     _check_output(source, output, force=force)  # fail before the (long) work
     t0 = time.perf_counter()
-    mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point,
-                                 time_step=time_step), log, storing=True, drop_cell_data=drop_cell_data)
+    mesh, cells = _as_mesh_and_cells(source, dict(scalar=scalar, q_file=q_file, q_var=q_var,
+                                                  cell_to_point=cell_to_point, time_step=time_step),
+                                     log, storing=True, drop_cell_data=drop_cell_data)
+    if cells is not None and cells.needed() and bricks > 1:
+        log("note: a bricked file keeps the tets only: the cells as given are not stored (compress without "
+            "bricks to keep them)")
+        cells = None
     name = Path(source).name if isinstance(source, (str, os.PathLike)) else ""
     log(f"read {name or 'mesh'}: {mesh.n_points} points, {mesh.n_tets} tets")
     if dependencies and (mesh_only or bricks > 1):
@@ -207,7 +215,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
                 deps = (deps.ptr, deps.idx, deps.removed)
     n = (len(data) if payload is None else
          write_tetc(output, payload, source=name, force=force, dependencies=deps, mesh_codes=mesh_codes,
-                    threads=threads, copies=copies))
+                    threads=threads, copies=copies, cells=cells))
     out = TetcFile(output)
     info = out.info
     log(f"wrote {output}: {n} bytes ({8.0 * n / max(mesh.n_tets, 1):.2f} bits/tet overall, "
@@ -283,8 +291,12 @@ def _counter(progress, total: int):
 def decompress(source, output, *, ratio: float | None = None, level: int | None = None, force: bool = False,
                jobs: int | None = None, selective: bool = False, tets: int | None = None, size=256,
                tf="default", azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0, scalar_range=None,
-               log=None) -> TetMesh:
+               as_tets: bool = False, log=None) -> TetMesh:
     """Decode a ``.tetc`` file (optionally simplified) and write it in any meshio format.
+
+    The full mesh of a file that stores its cells as given (hexahedra, wedges, quadratic cells,
+    several blocks, cell arrays, sets) is written as those cells; ``as_tets`` writes the tets they
+    were split into instead (as does any simplified mesh).
 
     ``jobs``: threads decoding (default: all cores): the connectivity ahead of the geometry, the
     bricks of a bricked file in parallel (:meth:`TetcFile.mesh`). With
@@ -319,7 +331,13 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
             log(f"selective cut: {cut.n_merges} merges, {cut.n_tets} tets, chosen in {cut.select_s:.3f} s")
     if mesh is None:
         mesh = f.mesh(ratio=ratio, level=level, jobs=jobs)
-    write_mesh(mesh, output, force=force)
+    cells = None
+    if "cells" in f.reader.meta and not as_tets:
+        if selective or ratio is not None or level not in (None, 0):
+            log("note: the cells as given are those of the full mesh: writing the simplified mesh's tets")
+        else:
+            cells = read_cells(f.reader, mesh.tets, mesh.n_points)
+    write_mesh(mesh, output, force=force, cells=cells)
     return mesh
 
 

@@ -36,7 +36,7 @@ import base64
 import numpy as np
 
 from ..errors import CorruptFileError, MeshError
-from ..mesh.cells import NODE_SUPPORTS, OTHER_CELLS, VOLUME_CELLS, Cells, cell_size
+from ..mesh.cells import NODE_SUPPORTS, OTHER_CELLS, VOLUME_CELLS, Cells, cell_size, is_raw_set
 from . import _cutborder_kernels as CK
 from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
 
@@ -140,6 +140,16 @@ def _neighbour_pairs(nbr: np.ndarray, cellrank: np.ndarray) -> np.ndarray:
     if not diff.any():
         return np.zeros((0, 2), np.int64)
     return np.unique(np.stack([a[diff], b[diff]], axis=1), axis=0)
+
+
+def _increasing(ids: np.ndarray) -> bool:
+    """Strictly increasing ids: a set, stored as a set (sorted in the decoded numbering), since
+    the decoded cells and points come in another order; other ids keep their order."""
+    return bool(np.all(ids[1:] > ids[:-1]))
+
+
+def _id_dtype(ids: np.ndarray) -> str:
+    return dtype_name(ids.dtype) if ids.dtype.kind in "iu" else "int64"
 
 
 def _array_entry(a: np.ndarray) -> dict:
@@ -317,10 +327,12 @@ def encode_cells(cells: Cells, mesh_tets: np.ndarray, vertex_order: np.ndarray,
     pset_meta = []
     for j, (name, ids) in enumerate(cells.point_sets.items()):
         ids = np.asarray(ids)
-        pset_meta.append({"name": str(name), "dtype": dtype_name(ids.dtype) if ids.size else "int64",
-                          "n": int(ids.size)})
+        flat = ids.reshape(-1).astype(np.int64)
+        inc = _increasing(flat)
+        pset_meta.append({"name": str(name), "dtype": _id_dtype(ids), "n": int(ids.size), "sorted": inc})
         if ids.size:
-            sections.append((f"C/pset/{j}", _code(dec_of[ids.reshape(-1).astype(np.int64)])))
+            mapped = dec_of[flat]
+            sections.append((f"C/pset/{j}", _code(np.sort(mapped) if inc else mapped)))
     cset_meta = []
     for j, (name, per_block) in enumerate(cells.cell_sets.items()):
         entries = []
@@ -329,11 +341,16 @@ def encode_cells(cells: Cells, mesh_tets: np.ndarray, vertex_order: np.ndarray,
                 entries.append(None)
                 continue
             ids = np.asarray(ids)
-            entries.append({"dtype": dtype_name(ids.dtype) if ids.size else "int64", "n": int(ids.size)})
-            if ids.size:
+            flat = ids.reshape(-1).astype(np.int64)
+            inc = _increasing(flat) and not is_raw_set(name)
+            entries.append({"dtype": _id_dtype(ids), "n": int(ids.size), "sorted": inc})
+            if ids.size and is_raw_set(name):
+                sections.append((f"C/cset/{j}/{bi}", _code(flat)))
+            elif ids.size:
                 inv = np.empty(len(out_local[bi]), np.int64)
                 inv[out_local[bi]] = np.arange(len(out_local[bi]))
-                sections.append((f"C/cset/{j}/{bi}", _code(inv[ids.reshape(-1).astype(np.int64)])))
+                mapped = inv[flat]
+                sections.append((f"C/cset/{j}/{bi}", _code(np.sort(mapped) if inc else mapped)))
         cset_meta.append({"name": str(name), "blocks": entries})
 
     meta = {
@@ -568,7 +585,7 @@ def decode_cells(meta, read_section, has_section, dec_tets: np.ndarray, n_points
                 raise CorruptFileError("corrupt metadata: bad cell set")
             count = _int(be.get("n"), 0, 2**31)
             ids = _decode(section(f"C/cset/{j}/{bi}"), count, "int64")
-            if count and (ids.min() < 0 or ids.max() >= blocks[bi][1]):
+            if count and not is_raw_set(e["name"]) and (ids.min() < 0 or ids.max() >= blocks[bi][1]):
                 raise CorruptFileError("corrupt cells section: a cell set names a missing cell")
             per.append(ids.astype(check_dtype(be.get("dtype")).newbyteorder("=")))
         cell_sets[e["name"]] = per

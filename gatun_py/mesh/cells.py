@@ -114,6 +114,12 @@ class Cells:
                 or bool(self.field_data) or bool(self.point_sets) or bool(self.cell_sets))
 
 
+def is_raw_set(name: str) -> bool:
+    """meshio's gmsh reader keeps entity tags, not cell ids, under ``gmsh:...`` cell sets (such as
+    ``gmsh:bounding_entities``): those are stored as given, not as cells."""
+    return str(name).startswith("gmsh:")
+
+
 def check_cells(cells: Cells, n_points: int, source: str = "mesh") -> None:
     """MeshError on what cannot be stored: unknown types, ids out of range, cell arrays whose length
     does not match their block, sets that name missing points or cells."""
@@ -139,6 +145,8 @@ def check_cells(cells: Cells, n_points: int, source: str = "mesh") -> None:
         if ids.size and (ids.dtype.kind not in "iu" or int(ids.min()) < 0 or int(ids.max()) >= n_points):
             raise MeshError(f"{source}: point set {name!r} names a point outside 0..{n_points - 1}")
     for name, per_block in cells.cell_sets.items():
+        if is_raw_set(name):
+            continue
         if len(per_block) != len(cells.blocks):
             raise MeshError(f"{source}: cell set {name!r} has {len(per_block)} blocks, the mesh {len(cells.blocks)}")
         for (t, d), ids in zip(cells.blocks, per_block):

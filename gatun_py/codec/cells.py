@@ -512,7 +512,7 @@ def decode_cells(meta, read_section, has_section, dec_tets: np.ndarray, n_points
         out_blocks[bi][:, :k] = corners
     quad = [bi for bi in vol_blocks if cell_size(blocks[bi][0]) > VOLUME_CELLS[blocks[bi][0]][1]]
     if quad:
-        _decode_nodes(meta, read_section, out_blocks, blocks, quad, ranks_of_block, nc, n_points)
+        _decode_nodes(meta, read_section, has_section, out_blocks, blocks, quad, ranks_of_block, nc, n_points)
     for bi, (t, count) in enumerate(blocks):
         if t not in VOLUME_CELLS:
             k = cell_size(t)
@@ -602,7 +602,7 @@ def decode_cells(meta, read_section, has_section, dec_tets: np.ndarray, n_points
                  point_sets, cell_sets)
 
 
-def _decode_nodes(meta, read_section, out_blocks, blocks, quad, ranks_of_block, nc, n_points):
+def _decode_nodes(meta, read_section, has_section, out_blocks, blocks, quad, ranks_of_block, nc, n_points):
     n_nodes = _int(meta.get("nodes"), 0, 2**40)
     expect = sum(len(ranks_of_block[bi]) * (cell_size(blocks[bi][0]) - VOLUME_CELLS[blocks[bi][0]][1])
                  for bi in quad)
@@ -613,8 +613,8 @@ def _decode_nodes(meta, read_section, out_blocks, blocks, quad, ranks_of_block, 
         for row, r in enumerate(ranks_of_block[bi].tolist()):
             where[r] = (bi, row)
     # the flags' count is known only as they are used: decode generously from the section header
-    flags_data = read_section("C/node_flags") if n_nodes else b""
-    ids_data = read_section("C/node_ids") if n_nodes else b""
+    flags_data = read_section("C/node_flags") if has_section("C/node_flags") else b""
+    ids_data = read_section("C/node_ids") if has_section("C/node_ids") else b""
     flags = _decode_any(flags_data, "uint8")
     ids = _unzigzag(_decode_any(ids_data, "int64"))
     fi = ii = 0

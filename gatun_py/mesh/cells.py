@@ -52,6 +52,20 @@ NODE_SUPPORTS = {
 }
 
 
+def _register_with_meshio() -> None:
+    """meshio's readers produce some volume types (VTK's wedge15, pyramid13, ...) that its
+    ``CellBlock`` then cannot hold (no dimension listed for them): list them."""
+    try:
+        from meshio._mesh import topological_dimension
+    except ImportError:  # another meshio layout: nothing to add
+        return
+    for t in VOLUME_CELLS:
+        topological_dimension.setdefault(t, 3)
+
+
+_register_with_meshio()
+
+
 def cell_size(cell_type: str) -> int | None:
     """Vertices per cell of a meshio cell type, None for types of no fixed size."""
     if cell_type in OTHER_CELLS:

@@ -164,6 +164,10 @@ def _meshio_read(path: Path):
     try:
         formats = _helpers._filetypes_from_path(path)
     except (KeyError, ValueError, meshio.ReadError):
+        if path.suffix.lower() in VTK_SUFFIXES:  # .vts, .vtr, .pvtu: VTK's own formats, meshio has no reader
+            if vtk_available():
+                return read_with_vtk(path)
+            raise ReadError(f"cannot read {path}: {INSTALL_HINT}") from None
         raise ReadError(f"cannot read {path}: unknown file extension {path.suffix!r} "
                         f"(mesh formats: .vtu .vtk .msh .mesh .xdmf .exo .med .inp ...; PLOT3D: .bin .xyz)") from None
     reasons = []

@@ -93,12 +93,16 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
               help="Also store the merge dependencies `render --selective` needs (every cut closed under "
                    "them is flip-free); about 20-30 % more bytes, so off by default.")
 @mesh_input_options
+@click.option("--keep-order", is_flag=True,
+              help="Also store the original point order, cell order and each cell's vertex order, so that "
+                   "decompress gives the input's numbering back exactly (node sets, boundary conditions); "
+                   "tetc info reports what it cost.")
 @click.option("--drop-cell-data", is_flag=True,
               help="Leave out the cell arrays (by default they are stored exactly, with the cells as given).")
 @force_option
 @quiet_option
 def compress(input, output, n_levels, mesh_only, w_density, w_geometry, w_sample, n_bricks, jobs, dependencies, scalar,
-             q_file, q_var, cell_to_point, time_step, drop_cell_data, force, quiet):
+             q_file, q_var, cell_to_point, time_step, keep_order, drop_cell_data, force, quiet):
     """Compress INPUT (any readable mesh or PLOT3D grid) losslessly into a .tetc file.
 
     Connectivity is cut-border coded; coordinates (float32 or float64) and every point array, in its
@@ -114,6 +118,7 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, w_sample
         gatun_py.compress(input, output, levels=n_levels, mesh_only=mesh_only, force=force, w_density=w_density,
                           w_geometry=w_geometry, w_sample=w_sample, progress=progress, log=logger(quiet),
                           drop_cell_data=drop_cell_data, bricks=n_bricks, jobs=jobs, dependencies=dependencies,
+                          keep_order=keep_order,
                           **read_kwargs(scalar, q_file, q_var, cell_to_point, time_step))
 
 

@@ -29,7 +29,7 @@ from ._atomic import check_output_path, write_bytes_atomic
 from ._resources import peak_rss_mb
 from .codec import LevelPayload, TetcReader, write_tetc
 from .codec.bricks import check_jobs
-from .codec.cells import read_cells
+from .codec.cells import read_cells, restore_order
 from .codec.info import tetc_info
 from .codec.tetcfile import encode_level, find_copies
 from .errors import OptionError
@@ -98,7 +98,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
              w_density: float = 1.0, w_geometry: float = 1.0, w_sample: float = 1.0, scalar: str | None = None,
              q_file=None, q_var: str = "density", cell_to_point: bool = False, time_step: int | None = None,
              drop_cell_data: bool = False, bricks: int = 1, jobs: int | None = None, dependencies: bool = False,
-             progress=None, log=None) -> "TetcFile":
+             keep_order: bool = False, progress=None, log=None) -> "TetcFile":
     """Compress a mesh losslessly into a ``.tetc`` file, with its merge forest and levels.
 
     Parameters
@@ -134,6 +134,10 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     jobs : int, optional
         Processes that decimate and encode bricks; without bricks, threads that encode the levels
         (and level 0 beside the decimation). Default: all cores. The bytes do not depend on it.
+    keep_order : bool
+        Also store the original point order, cell order and every cell's vertex order (tets
+        included), coded against the decoder's order: decompressing gives the input's numbering
+        back exactly (``tetc info`` reports what it cost).
     dependencies : bool
         Also store the merge dependencies that selective refinement needs (``render(...,
         selective=True)``): every cut closed under them is flip-free. They cost 20-30 % of the file
@@ -171,6 +175,14 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     mesh, cells = _as_mesh_and_cells(source, dict(scalar=scalar, q_file=q_file, q_var=q_var,
                                                   cell_to_point=cell_to_point, time_step=time_step),
                                      log, storing=True, drop_cell_data=drop_cell_data)
+    if keep_order:
+        if bricks > 1:
+            raise OptionError("keep_order needs one plain stream: not with bricks")
+        if cells is None:  # a TetMesh: its tets are its cells
+            from .mesh.cells import Cells
+
+            cells = Cells([("tetra", np.asarray(mesh.tets, np.int64))], np.arange(mesh.n_tets, dtype=np.int64))
+        cells.keep_order = True
     if cells is not None and cells.needed() and bricks > 1:
         log("note: a bricked file keeps the tets only: the cells as given are not stored (compress without "
             "bricks to keep them)")
@@ -337,6 +349,7 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
             log("note: the cells as given are those of the full mesh: writing the simplified mesh's tets")
         else:
             cells = read_cells(f.reader, mesh.tets, mesh.n_points)
+            mesh, cells = restore_order(mesh, cells)
     write_mesh(mesh, output, force=force, cells=cells)
     return mesh
 

@@ -17,12 +17,13 @@ def read(filename) -> meshio.Mesh:
     cell array, field data and set) when the file stores them, else its tets; every point array.
     Every array is the caller's own (writable), as meshio's readers return them."""
     from .api import open as open_tetc  # start-up time: the verbs load numba; registering must not
-    from .codec.cells import read_cells
+    from .codec.cells import read_cells, restore_order
     from .mesh.io import to_meshio
 
     f = open_tetc(filename)
     mesh = f.mesh()
     cells = read_cells(f.reader, mesh.tets, mesh.n_points) if f.n_bricks == 1 else None
+    mesh, cells = restore_order(mesh, cells)
     m = to_meshio(mesh, cells)
     m.points = np.array(m.points)
     m.point_data = {k: np.array(v) for k, v in m.point_data.items()}

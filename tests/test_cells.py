@@ -212,3 +212,67 @@ def test_damaged_cells_sections_raise_corrupt_file_error(tmp_path):
         res = run("decompress", p, "-o", tmp_path / "bad.vtu")
         assert_error(res, "corrupt")
         assert not (tmp_path / "bad.vtu").exists()
+
+
+# -- keep-order ----------------------------------------------------------------------------------
+
+def _exact(orig, dec):
+    from cells_check import _native, same_bits
+
+    assert same_bits(np.asarray(dec.points), _native(orig.points))
+    assert set(dec.point_data) == set(orig.point_data)
+    for k, v in orig.point_data.items():
+        assert same_bits(dec.point_data[k], _native(v)), k
+    assert [c.type for c in dec.cells] == [c.type for c in orig.cells]
+    for a, b in zip(orig.cells, dec.cells):
+        assert np.array_equal(np.asarray(a.data), np.asarray(b.data)), a.type
+    for k, v in orig.cell_data.items():
+        for a, b in zip(v, dec.cell_data[k]):
+            assert same_bits(np.asarray(b), _native(a)), k
+    for k, v in (orig.point_sets or {}).items():
+        assert np.array_equal(dec.point_sets[k], v)
+    for k, per in (orig.cell_sets or {}).items():
+        for a, b in zip(per, dec.cell_sets[k]):
+            assert (a is None and b is None) or np.array_equal(a, b), k
+
+
+@pytest.mark.parametrize("make", [lambda: mixed_mesh(3, 3, 2, 0), tetra10_mesh,
+                                  lambda: meshio.read(POST), lambda: meshio.read(ROOM_FIRE)])
+def test_keep_order_gives_the_numbering_back(tmp_path, make):
+    orig = make()
+    out = tmp_path / "k.tetc"
+    gatun_py.compress(orig, out, mesh_only=True, keep_order=True)
+    _exact(orig, meshio.read(out))
+    info = gatun_py.info(out)
+    assert info["keep_order"]["bytes"] > 0 and info["keep_order"]["bits_per_point"] > 0
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 10_000), nx=st.integers(1, 3), ny=st.integers(1, 3), nz=st.integers(1, 2))
+def test_keep_order_random_mixed_meshes(tmp_path, seed, nx, ny, nz):
+    orig = mixed_mesh(nx, ny, nz, seed)
+    out = tmp_path / "k.tetc"
+    gatun_py.compress(orig, out, mesh_only=True, keep_order=True, force=True)
+    _exact(orig, meshio.read(out))
+
+
+def test_keep_order_on_the_command_line_and_cut_short(tmp_path):
+    src = tmp_path / "in.vtu"
+    m = mixed_mesh(3, 2, 2, 1)
+    del m.cell_data["flag"]
+    m.point_sets.clear()
+    m.cell_sets.clear()
+    m.field_data.clear()
+    m.write(src)
+    orig = meshio.read(src)
+    out = tmp_path / "k.tetc"
+    assert run("compress", src, "-o", out, "-q", "--mesh-only", "--keep-order").exit_code == 0
+    back = tmp_path / "back.vtu"
+    assert run("decompress", out, "-o", back, "-q").exit_code == 0
+    _exact(orig, meshio.read(back))
+    data = out.read_bytes()
+    cut = tmp_path / "cut.tetc"
+    cut.write_bytes(data[: len(data) - 40])
+    res = run("decompress", cut, "-o", tmp_path / "cut.vtu")
+    assert_error(res, "cut.tetc")
+    assert not (tmp_path / "cut.vtu").exists()

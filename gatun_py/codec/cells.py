@@ -133,6 +133,66 @@ def _cell_refs(pairs: np.ndarray, pos: np.ndarray, n: int) -> np.ndarray:
     return refs
 
 
+def _point_refs(tets: np.ndarray, n: int) -> np.ndarray:
+    """(n, 4) refs of every decoded vertex for coding its original id: the other vertices of the
+    first tet that holds it, those decoded before it, latest first; the previous vertex for
+    vertices no tet holds."""
+    refs = np.full((n, 4), -1, np.int32)
+    t = np.asarray(tets, np.int64)
+    if len(t):
+        flat = t.reshape(-1)
+        _, first = np.unique(flat, return_index=True)
+        v = flat[first]
+        rows = t[first // 4]
+        others = np.where(rows < v[:, None], rows, -1)
+        others = -np.sort(-others, axis=1)
+        refs[v, :] = others.astype(np.int32)
+    none = np.flatnonzero(np.all(refs == -1, axis=1))
+    refs[none[none > 0], 0] = none[none > 0] - 1
+    return refs
+
+
+def restore_order(mesh, cells: Cells):
+    """(mesh, cells) in the original numbering, for cells decoded from a file written with
+    ``keep_order``: points, point arrays and tets renumbered, every block's cells, cell arrays and
+    cell sets back in their original order; (mesh, cells) unchanged otherwise."""
+    from ..mesh.model import TetMesh
+
+    if cells is None or cells.order is None:
+        return mesh, cells
+    orig, per_block = cells.order
+    n = mesh.n_points
+    inv = np.empty(n, np.int64)
+    inv[orig] = np.arange(n)
+    data = {k: np.asarray(v)[inv] for k, v in mesh.point_data.items()}
+    points = np.asarray(mesh.points)[inv]
+    out = TetMesh(points, None, orig[mesh.tets], mesh.scalar_name, point_data=data)
+    back = {bi: np.argsort(o, kind="stable") for bi, o in per_block.items()}
+    blocks = []
+    for bi, (t, d) in enumerate(cells.blocks):
+        d = orig[d]
+        blocks.append((t, d[back[bi]] if bi in back else d))
+    cell_data = {k: [a[back[bi]] if bi in back else a for bi, a in enumerate(v)] for k, v in cells.cell_data.items()}
+    point_sets = {k: _resorted(orig[v], v) for k, v in cells.point_sets.items()}
+    cell_sets = {}
+    for k, v in cells.cell_sets.items():
+        per = []
+        for bi, ids in enumerate(v):
+            if ids is None or bi not in per_block or is_raw_set(k):
+                per.append(ids)
+            else:
+                per.append(_resorted(per_block[bi][ids.astype(np.int64)].astype(ids.dtype), ids))
+        cell_sets[k] = per
+    tet_cell = cells.tet_cell
+    return out, Cells(blocks, tet_cell, cell_data, cells.field_data, point_sets, cell_sets)
+
+
+def _resorted(mapped: np.ndarray, decoded: np.ndarray) -> np.ndarray:
+    """A set decoded as increasing ids stays increasing in the original numbering."""
+    d = decoded.astype(np.int64)
+    return np.sort(mapped) if len(d) < 2 or np.all(d[1:] > d[:-1]) else mapped
+
+
 def _neighbour_pairs(nbr: np.ndarray, cellrank: np.ndarray) -> np.ndarray:
     t, k = np.nonzero(nbr >= 0)
     a, b = cellrank[t], cellrank[nbr[t, k]]
@@ -353,7 +413,17 @@ def encode_cells(cells: Cells, mesh_tets: np.ndarray, vertex_order: np.ndarray,
                 sections.append((f"C/cset/{j}/{bi}", _code(np.sort(mapped) if inc else mapped)))
         cset_meta.append({"name": str(name), "blocks": entries})
 
+    if cells.keep_order:
+        sections.append(("C/order/points", _code(np.asarray(vertex_order, np.int64), _point_refs(dec_tets, n))))
+        for p, bi in enumerate(vol_blocks):
+            ranks = rank[offsets[p]:offsets[p + 1]]
+            pos = np.full(nc, -1, np.int64)
+            pos[ranks] = out_pos[ranks]
+            if len(ranks):
+                sections.append((f"C/order/{bi}", _code(out_local[bi].astype(np.int64),
+                                                        _cell_refs(_neighbour_pairs(nbr, cellrank), pos, len(ranks)))))
     meta = {
+        "keep_order": bool(cells.keep_order),
         "blocks": block_entries,
         "palettes": pal_sizes,
         "escapes": int(len(esc)),
@@ -590,6 +660,26 @@ def decode_cells(meta, read_section, has_section, dec_tets: np.ndarray, n_points
             per.append(ids.astype(check_dtype(be.get("dtype")).newbyteorder("=")))
         cell_sets[e["name"]] = per
 
+    order = None
+    if meta.get("keep_order"):
+        orig = _decode(read_section("C/order/points"), n_points, "int64", 1, _point_refs(dec_tets, n_points))
+        if not np.array_equal(np.sort(orig), np.arange(n_points)):
+            raise CorruptFileError("corrupt cells section: the point order is not a permutation")
+        per_block = {}
+        pairs = _neighbour_pairs(nbr, cellrank) if pairs is None else pairs
+        for bi in vol_blocks:
+            ranks = ranks_of_block[bi]
+            if not len(ranks):
+                per_block[bi] = np.zeros(0, np.int64)
+                continue
+            pos = np.full(nc, -1, np.int64)
+            pos[ranks] = np.arange(len(ranks))
+            o = _decode(read_section(f"C/order/{bi}"), len(ranks), "int64", 1, _cell_refs(pairs, pos, len(ranks)))
+            if not np.array_equal(np.sort(o), np.arange(len(ranks))):
+                raise CorruptFileError("corrupt cells section: a cell order is not a permutation")
+            per_block[bi] = o
+        order = (orig, per_block)
+
     tet_cell = np.zeros(m, np.int64)  # each decoded tet's volume cell, numbered as the output blocks
     vol_pos = np.zeros(nc, np.int64)
     base = 0
@@ -599,7 +689,7 @@ def decode_cells(meta, read_section, has_section, dec_tets: np.ndarray, n_points
         base += len(ranks)
     tet_cell[:] = vol_pos[cellrank] if m else tet_cell
     return Cells([(t, out_blocks[bi]) for bi, (t, _) in enumerate(blocks)], tet_cell, cell_data, field_data,
-                 point_sets, cell_sets)
+                 point_sets, cell_sets, keep_order=order is not None, order=order)
 
 
 def _decode_nodes(meta, read_section, has_section, out_blocks, blocks, quad, ranks_of_block, nc, n_points):

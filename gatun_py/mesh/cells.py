@@ -112,6 +112,10 @@ class Cells:
     field_data: dict = field(default_factory=dict)
     point_sets: dict = field(default_factory=dict)
     cell_sets: dict = field(default_factory=dict)
+    keep_order: bool = False  # store the point order, the cell order and every tet's vertex order too
+    # decoded with keep_order: (original id of every decoded point, {block: original index of every
+    # cell in the block's decoded order})
+    order: tuple | None = None
 
     @property
     def volume(self) -> list[bool]:
@@ -124,7 +128,7 @@ class Cells:
     def needed(self) -> bool:
         """Whether anything here is more than one block of linear tets, which the tets themselves
         give back (up to each tet's vertex order and the order of the tets)."""
-        return (len(self.blocks) != 1 or self.blocks[0][0] != "tetra" or bool(self.cell_data)
+        return (self.keep_order or len(self.blocks) != 1 or self.blocks[0][0] != "tetra" or bool(self.cell_data)
                 or bool(self.field_data) or bool(self.point_sets) or bool(self.cell_sets))
 
 

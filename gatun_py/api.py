@@ -348,7 +348,7 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
         if selective or ratio is not None or level not in (None, 0):
             log("note: the cells as given are those of the full mesh: writing the simplified mesh's tets")
         else:
-            cells = read_cells(f.reader, mesh.tets, mesh.n_points)
+            cells = read_cells(f.reader, mesh.tets, mesh.n_points, mesh.points)
             mesh, cells = restore_order(mesh, cells)
     write_mesh(mesh, output, force=force, cells=cells)
     return mesh
@@ -399,8 +399,26 @@ def info(source, *, scalar: str | None = None, q_file=None, q_var: str = "densit
         "bbox": [lo.tolist(), hi.tolist()],
         "scalar": mesh.scalar_name if mesh.has_scalar else None,
         "scalar_range": list(mesh.scalar_range) if mesh.has_scalar else None,
+        "point_arrays": [_array_row(name, a) for name, a in mesh.user_point_data.items()],
+        **({"cells": [f"{t} {len(d)}" for t, d in report.cells.blocks],
+            "cell_arrays": [_array_row(name, np.concatenate([np.asarray(a).reshape(len(a), -1) for a in per]))
+                            for name, per in report.cells.cell_data.items()]}
+           if report.cells is not None else {}),
         "notes": list(report.notes),
     }
+
+
+def _array_row(name: str, a) -> dict:
+    """name, dtype, components and the finite range of an array (of its magnitude for vectors)."""
+    a = np.asarray(a)
+    k = 1 if a.ndim == 1 else int(np.prod(a.shape[1:]))
+    v = a.reshape(len(a), -1).astype(np.float64) if a.size else np.zeros((0, 1))
+    with np.errstate(over="ignore", invalid="ignore"):
+        v = v[:, 0] if k == 1 else np.sqrt(np.sum(v * v, axis=1))
+    v = v[np.isfinite(v)]
+    rng = [float(v.min()), float(v.max())] if v.size else None
+    return {"name": name, "dtype": str(a.dtype.newbyteorder("=") if a.dtype.byteorder == ">" else a.dtype),
+            "components": k, "range": rng}
 
 
 def _check_output(source, output, *, force: bool, mesh_file: bool = False) -> None:

@@ -22,7 +22,7 @@ def read(filename) -> meshio.Mesh:
 
     f = open_tetc(filename)
     mesh = f.mesh()
-    cells = read_cells(f.reader, mesh.tets, mesh.n_points) if f.n_bricks == 1 else None
+    cells = read_cells(f.reader, mesh.tets, mesh.n_points, mesh.points) if f.n_bricks == 1 else None
     mesh, cells = restore_order(mesh, cells)
     m = to_meshio(mesh, cells)
     m.points = np.array(m.points)

@@ -32,6 +32,7 @@ their file order, each cell its vertex order.
 from __future__ import annotations
 
 import base64
+import lzma
 
 import numpy as np
 
@@ -85,21 +86,66 @@ def _prev_refs(n: int) -> np.ndarray:
     return refs
 
 
-def _code(values, refs=None) -> bytes:
+def _code(values, refs=None, positions=None) -> bytes:
     values = np.ascontiguousarray(values)
     if values.shape[0] == 0:
         return b""
-    return encode_array(values, _prev_refs(len(values)) if refs is None else refs)
+    return encode_array(values, _prev_refs(len(values)) if refs is None else refs, positions=positions)
 
 
-def _decode(data: bytes, n: int, dtype: str, k: int = 1, refs=None) -> np.ndarray:
+def _decode(data: bytes, n: int, dtype: str, k: int = 1, refs=None, positions=None) -> np.ndarray:
     if n == 0:
         if data:
             raise CorruptFileError("corrupt cells section: data for no values")
         return np.zeros((0,) if k == 1 else (0, k), check_dtype(dtype))
     dec = ArrayDecoder(data, n_points=n, dtype=dtype, components=k)
-    dec.decode(_prev_refs(n) if refs is None else refs)
+    pos4 = None
+    if positions is not None:
+        pos4 = np.zeros((n, 4), np.float32)
+        pos4[:, :3] = positions
+    dec.decode(_prev_refs(n) if refs is None else refs, positions=pos4)
     return dec.finish()
+
+
+_TAG_PREDICTED, _TAG_XZ = 0, 1
+
+
+def _code_values(values, refs, positions) -> bytes:
+    """A cell array's stream: a tag byte, then the predicted coding (:func:`_code`) or, when smaller,
+    ``xz -9`` of the raw little-endian values in this order (long repeats, as in arrays that count
+    or cycle, are what xz finds and a predictor does not)."""
+    values = np.ascontiguousarray(values)
+    predicted = _code(values, refs, positions)
+    raw = lzma.compress(values.astype(values.dtype.newbyteorder("<")).tobytes(), preset=9 | lzma.PRESET_EXTREME)
+    if len(raw) < len(predicted):
+        return bytes([_TAG_XZ]) + raw
+    return bytes([_TAG_PREDICTED]) + predicted
+
+
+def _decode_values(data: bytes, n: int, dtype: str, k: int, refs, positions) -> np.ndarray:
+    if not data or data[0] not in (_TAG_PREDICTED, _TAG_XZ):
+        raise CorruptFileError("corrupt cells section: bad cell array stream")
+    if data[0] == _TAG_PREDICTED:
+        return _decode(data[1:], n, dtype, k, refs, positions)
+    dt = check_dtype(dtype)
+    size = n * k * dt.itemsize
+    try:
+        dec = lzma.LZMADecompressor(format=lzma.FORMAT_XZ)
+        body = dec.decompress(data[1:], max_length=size + 1)
+    except lzma.LZMAError as e:
+        raise CorruptFileError(f"corrupt cells section: {e}") from None
+    if len(body) != size or not dec.eof or dec.unused_data:
+        raise CorruptFileError("corrupt cells section: a cell array has the wrong length")
+    a = np.frombuffer(body, dt).copy()
+    return a if k == 1 else a.reshape(n, k)
+
+
+def _centroids(points32: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """(n, 3) float32 centre of each cell's corners: what the linear predictor of a cell array
+    evaluates its neighbours' field at (the same bits on both sides: float32 points, the cell's
+    own vertex order, float64 sums)."""
+    c = np.asarray(corners, np.int64)
+    return (points32[c].astype(np.float64).sum(axis=1) / c.shape[1]).astype(np.float32)
 
 
 def _zigzag(v: np.ndarray) -> np.ndarray:
@@ -162,11 +208,13 @@ def restore_order(mesh, cells: Cells):
         return mesh, cells
     orig, per_block = cells.order
     n = mesh.n_points
-    inv = np.empty(n, np.int64)
-    inv[orig] = np.arange(n)
-    data = {k: np.asarray(v)[inv] for k, v in mesh.point_data.items()}
-    points = np.asarray(mesh.points)[inv]
-    out = TetMesh(points, None, orig[mesh.tets], mesh.scalar_name, point_data=data)
+    if orig is None:  # the cell order alone
+        orig, out = np.arange(n), mesh
+    else:
+        inv = np.empty(n, np.int64)
+        inv[orig] = np.arange(n)
+        data = {k: np.asarray(v)[inv] for k, v in mesh.point_data.items()}
+        out = TetMesh(np.asarray(mesh.points)[inv], None, orig[mesh.tets], mesh.scalar_name, point_data=data)
     back = {bi: np.argsort(o, kind="stable") for bi, o in per_block.items()}
     blocks = []
     for bi, (t, d) in enumerate(cells.blocks):
@@ -249,7 +297,7 @@ def _field_value(e) -> np.ndarray:
 # -- encoder ---------------------------------------------------------------------------------------
 
 def encode_cells(cells: Cells, mesh_tets: np.ndarray, vertex_order: np.ndarray,
-                 dec_tets: np.ndarray) -> tuple[dict, list]:
+                 dec_tets: np.ndarray, points32: np.ndarray | None = None) -> tuple[dict, list]:
     """The ``cells`` metadata and the ``C/...`` sections of a level-0 mesh.
 
     Parameters
@@ -262,6 +310,9 @@ def encode_cells(cells: Cells, mesh_tets: np.ndarray, vertex_order: np.ndarray,
         Original id of every decoded vertex.
     dec_tets : (m, 4) int
         The tets in decode order and decode ids, as the decoder produces them.
+    points32 : (n, 3) float32, optional
+        The coordinates in decode order as the geometry section holds them: cell arrays are then
+        also predicted linearly at the cells' centres.
     """
     n = len(vertex_order)
     m = len(dec_tets)
@@ -362,26 +413,57 @@ def encode_cells(cells: Cells, mesh_tets: np.ndarray, vertex_order: np.ndarray,
             if len(data):
                 sections.append((f"C/other/{bi}", _code(dec_of[data].reshape(len(data), -1))))
 
-    # cell arrays
-    pairs = _neighbour_pairs(nbr, cellrank) if cells.cell_data else np.zeros((0, 2), np.int64)
-    data_meta = []
+    # cell arrays: each volume block's in traversal order, predicted from the earlier face-neighbouring
+    # cells; or, when the block's cell order is stored (keep_order, or because it costs less than
+    # what coding the arrays in their file order saves), in file order with the same prediction
+    pairs = (_neighbour_pairs(nbr, cellrank) if cells.cell_data or cells.keep_order
+             else np.zeros((0, 2), np.int64))
+    order_sections = {}
+    for p, bi in enumerate(vol_blocks):
+        ranks = rank[offsets[p]:offsets[p + 1]]
+        if len(ranks):
+            pos = np.full(nc, -1, np.int64)
+            pos[ranks] = out_pos[ranks]
+            order_sections[bi] = _code(out_local[bi].astype(np.int64), _cell_refs(pairs, pos, len(ranks)))
+    data_meta, coded = [], {}  # coded[(j, bi)] = {"traversal": bytes, "file": bytes}
     for j, (name, arrays) in enumerate(cells.cell_data.items()):
         entries = []
         for bi, arr in enumerate(arrays):
             arr = np.asarray(arr)
             entries.append(_array_entry(arr))
-            values = _as_columns(arr, name)[out_local[bi]]
-            if values.size == 0:
+            cols = _as_columns(arr, name)
+            if cols.size == 0:
                 continue
-            if cells.blocks[bi][0] in VOLUME_CELLS:
-                p = vol_blocks.index(bi)
-                pos = np.full(nc, -1, np.int64)
-                pos[rank[offsets[p]:offsets[p + 1]]] = out_pos[rank[offsets[p]:offsets[p + 1]]]
-                refs = _cell_refs(pairs, pos, len(values))
-            else:
+            t, data = cells.blocks[bi]
+            k = VOLUME_CELLS[t][1] if t in VOLUME_CELLS else data.shape[1]
+            ways = {}
+            for way in ("traversal", "file") if t in VOLUME_CELLS else ("file",):
+                local = out_local[bi] if way == "traversal" else np.arange(len(data))
                 refs = None
-            sections.append((f"C/data/{j}/{bi}", _code(values, refs)))
+                if t in VOLUME_CELLS:
+                    p = vol_blocks.index(bi)
+                    ranks = rank[offsets[p]:offsets[p + 1]]
+                    pos = np.full(nc, -1, np.int64)
+                    pos[ranks] = out_pos[ranks] if way == "traversal" else np.arange(len(ranks))
+                    refs = _cell_refs(pairs, pos, len(data))
+                centres = None if points32 is None else _centroids(points32, dec_of[data[local, :k]])
+                ways[way] = _code_values(cols[local], refs, centres)
+            coded[j, bi] = ways
         data_meta.append({"name": str(name), "blocks": entries})
+    trav_total = sum(len(w.get("traversal", w["file"])) for w in coded.values())
+    file_total = sum(min(len(x) for x in w.values()) for w in coded.values())
+    cell_order = cells.keep_order or (file_total + sum(map(len, order_sections.values())) < trav_total)
+    for (j, bi), ways in coded.items():
+        if cells.blocks[bi][0] not in VOLUME_CELLS:
+            way = "file"
+        elif cell_order:
+            way = min(ways, key=lambda w: len(ways[w]))
+        else:
+            way = "traversal"
+        data_meta[j]["blocks"][bi]["order"] = way
+        sections.append((f"C/data/{j}/{bi}", ways[way]))
+    if cell_order:
+        sections += [(f"C/order/{bi}", code) for bi, code in order_sections.items()]
 
     # sets
     pset_meta = []
@@ -415,15 +497,9 @@ def encode_cells(cells: Cells, mesh_tets: np.ndarray, vertex_order: np.ndarray,
 
     if cells.keep_order:
         sections.append(("C/order/points", _code(np.asarray(vertex_order, np.int64), _point_refs(dec_tets, n))))
-        for p, bi in enumerate(vol_blocks):
-            ranks = rank[offsets[p]:offsets[p + 1]]
-            pos = np.full(nc, -1, np.int64)
-            pos[ranks] = out_pos[ranks]
-            if len(ranks):
-                sections.append((f"C/order/{bi}", _code(out_local[bi].astype(np.int64),
-                                                        _cell_refs(_neighbour_pairs(nbr, cellrank), pos, len(ranks)))))
     meta = {
         "keep_order": bool(cells.keep_order),
+        "cell_order": bool(cell_order),
         "blocks": block_entries,
         "palettes": pal_sizes,
         "escapes": int(len(esc)),
@@ -487,7 +563,8 @@ def _int(v, lo=0, hi=2**62):
     return v
 
 
-def decode_cells(meta, read_section, has_section, dec_tets: np.ndarray, n_points: int) -> Cells:
+def decode_cells(meta, read_section, has_section, dec_tets: np.ndarray, n_points: int,
+                 points32: np.ndarray | None = None) -> Cells:
     """The cells of a file's ``cells`` metadata and ``C/...`` sections, in decode ids, against the
     decoded tets of level 0 (``tet_cell``: each decoded tet's cell in traversal order).
 
@@ -592,8 +669,30 @@ def decode_cells(meta, read_section, has_section, dec_tets: np.ndarray, n_points
                 raise CorruptFileError("corrupt cells section: a cell refers to a missing point")
             out_blocks[bi] = ids
 
-    # cell arrays
     pairs = None
+    order = None
+    per_block = {}
+    if meta.get("keep_order") or meta.get("cell_order"):
+        pairs = _neighbour_pairs(nbr, cellrank)
+        for bi in vol_blocks:
+            ranks = ranks_of_block[bi]
+            if not len(ranks):
+                per_block[bi] = np.zeros(0, np.int64)
+                continue
+            pos = np.full(nc, -1, np.int64)
+            pos[ranks] = np.arange(len(ranks))
+            o = _decode(read_section(f"C/order/{bi}"), len(ranks), "int64", 1, _cell_refs(pairs, pos, len(ranks)))
+            if not np.array_equal(np.sort(o), np.arange(len(ranks))):
+                raise CorruptFileError("corrupt cells section: a cell order is not a permutation")
+            per_block[bi] = o
+        orig = None
+        if meta.get("keep_order"):
+            orig = _decode(read_section("C/order/points"), n_points, "int64", 1, _point_refs(dec_tets, n_points))
+            if not np.array_equal(np.sort(orig), np.arange(n_points)):
+                raise CorruptFileError("corrupt cells section: the point order is not a permutation")
+        order = (orig, per_block)
+
+    # cell arrays
     cell_data = {}
     for j, e in enumerate(meta.get("cell_data") or []):
         if not isinstance(e, dict) or not isinstance(e.get("name"), str) or len(e.get("blocks") or []) != len(blocks):
@@ -613,16 +712,31 @@ def decode_cells(meta, read_section, has_section, dec_tets: np.ndarray, n_points
             if count == 0 or comps == 0:
                 values = np.zeros((count, *shape), dt)
             else:
-                if blocks[bi][0] in VOLUME_CELLS:
+                t = blocks[bi][0]
+                way = be.get("order", "traversal" if t in VOLUME_CELLS else "file")
+                if way not in ("traversal", "file") or (way == "traversal" and t not in VOLUME_CELLS) or (
+                        way == "file" and t in VOLUME_CELLS and bi not in per_block):
+                    raise CorruptFileError("corrupt metadata: bad cell array order")
+                local = np.arange(count)
+                refs = None
+                if t in VOLUME_CELLS:
                     if pairs is None:
                         pairs = _neighbour_pairs(nbr, cellrank)
                     pos = np.full(nc, -1, np.int64)
                     ranks = ranks_of_block[bi]
-                    pos[ranks] = np.arange(len(ranks))
+                    if way == "traversal":
+                        pos[ranks] = np.arange(len(ranks))
+                    else:
+                        pos[ranks] = per_block[bi]
+                        local = np.argsort(per_block[bi])  # file position -> decoded position
                     refs = _cell_refs(pairs, pos, count)
-                else:
-                    refs = None
-                values = _decode(read_section(f"C/data/{j}/{bi}"), count, dt.name, comps, refs)
+                centres = None
+                if points32 is not None:
+                    k = VOLUME_CELLS[t][1] if t in VOLUME_CELLS else cell_size(t)
+                    centres = _centroids(points32, out_blocks[bi][local, :k])
+                values = _decode_values(read_section(f"C/data/{j}/{bi}"), count, dt.name, comps, refs, centres)
+                if t in VOLUME_CELLS and way == "file":
+                    values = values[per_block[bi]]
                 values = values.reshape((count, *shape))
             arrays.append(values.astype(bool) if is_bool else values.astype(values.dtype.newbyteorder("=")))
         cell_data[e["name"]] = arrays
@@ -660,26 +774,6 @@ def decode_cells(meta, read_section, has_section, dec_tets: np.ndarray, n_points
             per.append(ids.astype(check_dtype(be.get("dtype")).newbyteorder("=")))
         cell_sets[e["name"]] = per
 
-    order = None
-    if meta.get("keep_order"):
-        orig = _decode(read_section("C/order/points"), n_points, "int64", 1, _point_refs(dec_tets, n_points))
-        if not np.array_equal(np.sort(orig), np.arange(n_points)):
-            raise CorruptFileError("corrupt cells section: the point order is not a permutation")
-        per_block = {}
-        pairs = _neighbour_pairs(nbr, cellrank) if pairs is None else pairs
-        for bi in vol_blocks:
-            ranks = ranks_of_block[bi]
-            if not len(ranks):
-                per_block[bi] = np.zeros(0, np.int64)
-                continue
-            pos = np.full(nc, -1, np.int64)
-            pos[ranks] = np.arange(len(ranks))
-            o = _decode(read_section(f"C/order/{bi}"), len(ranks), "int64", 1, _cell_refs(pairs, pos, len(ranks)))
-            if not np.array_equal(np.sort(o), np.arange(len(ranks))):
-                raise CorruptFileError("corrupt cells section: a cell order is not a permutation")
-            per_block[bi] = o
-        order = (orig, per_block)
-
     tet_cell = np.zeros(m, np.int64)  # each decoded tet's volume cell, numbered as the output blocks
     vol_pos = np.zeros(nc, np.int64)
     base = 0
@@ -689,7 +783,7 @@ def decode_cells(meta, read_section, has_section, dec_tets: np.ndarray, n_points
         base += len(ranks)
     tet_cell[:] = vol_pos[cellrank] if m else tet_cell
     return Cells([(t, out_blocks[bi]) for bi, (t, _) in enumerate(blocks)], tet_cell, cell_data, field_data,
-                 point_sets, cell_sets, keep_order=order is not None, order=order)
+                 point_sets, cell_sets, keep_order=bool(meta.get("keep_order")), order=order)
 
 
 def _decode_nodes(meta, read_section, has_section, out_blocks, blocks, quad, ranks_of_block, nc, n_points):
@@ -750,12 +844,13 @@ def _decode_any(data: bytes, dtype: str) -> np.ndarray:
     return _decode(data, n, dtype)
 
 
-def read_cells(reader, dec_tets: np.ndarray, n_points: int) -> Cells | None:
+def read_cells(reader, dec_tets: np.ndarray, n_points: int, points=None) -> Cells | None:
     """The cells stored in a :class:`~.tetcfile.TetcReader`'s file (None when it stores none), against
-    its level 0's decoded tets."""
+    its level 0's decoded tets and points (``points``: needed by the cell arrays)."""
     meta = reader.meta.get("cells")
     if meta is None:
         return None
     if reader.container.major < 10:
         raise CorruptFileError("corrupt metadata: cells in a file of format 9 or older")
-    return decode_cells(meta, reader.read_section, reader.container.has_section, dec_tets, n_points)
+    return decode_cells(meta, reader.read_section, reader.container.has_section, dec_tets, n_points,
+                        None if points is None else np.asarray(points).astype(np.float32))

@@ -398,7 +398,8 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
     if cells is not None and cells.needed():
         from .cells import encode_cells  # only files with cells need it
 
-        meta["cells"], cell_sections = encode_cells(cells, mesh0.tets, encoded[0].vertex_order, encoded[0].tets)
+        meta["cells"], cell_sections = encode_cells(cells, mesh0.tets, encoded[0].vertex_order, encoded[0].tets,
+                                                    mesh0.points32[encoded[0].vertex_order])
         sections += cell_sections
     return build_container(meta, sections)
 

@@ -33,11 +33,13 @@ def read(filename) -> meshio.Mesh:
 
 
 def write(filename, mesh: meshio.Mesh, **options) -> None:
-    """Compress a ``meshio.Mesh`` into ``filename`` (with its merge forest and levels; like
-    meshio's other writers it overwrites). Options go to :func:`gatun_py.compress`."""
+    """Compress a ``meshio.Mesh`` into ``filename`` (with its merge forest and levels, its cells as
+    given and its numbering, ``keep_order``; like meshio's other writers it overwrites). Options go
+    to :func:`gatun_py.compress`."""
     from .api import compress  # start-up time: as in read
 
     options.setdefault("force", True)
+    options.setdefault("keep_order", True)  # meshio's readers give the numbering back: so does this one
     compress(mesh, filename, **options)
 
 

@@ -276,3 +276,24 @@ def test_keep_order_on_the_command_line_and_cut_short(tmp_path):
     res = run("decompress", cut, "-o", tmp_path / "cut.vtu")
     assert_error(res, "cut.tetc")
     assert not (tmp_path / "cut.vtu").exists()
+
+
+def test_a_mixed_mesh_renders_as_its_tet_split(tmp_path):
+    src = tmp_path / "mixed.vtu"
+    m = mixed_mesh(4, 3, 3, 11)
+    del m.cell_data["flag"]
+    m.point_sets.clear()
+    m.cell_sets.clear()
+    m.field_data.clear()
+    m.write(src)
+    cells = tmp_path / "cells.tetc"
+    gatun_py.compress(src, cells, mesh_only=True, scalar="p")
+    split = tmp_path / "split.vtu"
+    gatun_py.decompress(cells, split, as_tets=True)
+    tets = tmp_path / "tets.tetc"
+    gatun_py.compress(split, tets, mesh_only=True, scalar="p")
+    assert "cells" in TetcReader(cells).meta and "cells" not in TetcReader(tets).meta
+    a = gatun_py.render(cells, size=64, azimuth=30, elevation=20)
+    b = gatun_py.render(tets, size=64, azimuth=30, elevation=20)
+    assert a.image.any() and np.array_equal(a.rgb, b.rgb)
+    np.testing.assert_allclose(a.image, b.image, rtol=0, atol=1e-6)

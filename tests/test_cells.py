@@ -297,3 +297,19 @@ def test_a_mixed_mesh_renders_as_its_tet_split(tmp_path):
     b = gatun_py.render(tets, size=64, azimuth=30, elevation=20)
     assert a.image.any() and np.array_equal(a.rgb, b.rgb)
     np.testing.assert_allclose(a.image, b.image, rtol=0, atol=1e-6)
+
+
+def test_exodus_round_trip(tmp_path):
+    pytest.importorskip("netCDF4")
+    from gatun_py.mesh.exodus import read_exodus
+
+    m = mixed_mesh(3, 3, 2, 2, kinds=(0,))
+    src = tmp_path / "hex.exo"
+    meshio.Mesh(m.points, [("hexahedron", m.cells[0].data)], point_data={"p": m.point_data["p"]},
+                point_sets={"left": np.array([0, 1, 2])}).write(src)
+    orig, _ = read_exodus(src)
+    assert set(orig.point_sets) == {"left"}
+    tm, _ = read_mesh(src)
+    out = tmp_path / "hex.tetc"
+    gatun_py.compress(src, out, mesh_only=True)
+    check_round_trip(orig, meshio.read(out), vertex_order_of(tm))

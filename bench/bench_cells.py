@@ -159,6 +159,29 @@ def measure(label, path, tmp: Path, quick: bool) -> dict:
     return row
 
 
+def level_costs(tmp: Path) -> list[str]:
+    """What the merge forest with its levels, and the merge dependencies, add to the samples' files
+    (the figures the --mesh-only and --dependencies help texts quote)."""
+    import gatun_py
+    from samples import SAMPLES
+
+    lines = ["", "What the forest with its levels and the merge dependencies cost on the samples "
+             "(`--mesh-only`, default, `--dependencies`):", "",
+             "| sample | mesh-only | default | default / mesh-only | --dependencies | deps / default |",
+             "|---|---:|---:|---:|---:|---:|"]
+    for name, (path, kw, _) in SAMPLES.items():
+        sizes = {}
+        for label, opts in (("mesh_only", dict(mesh_only=True)), ("default", {}), ("deps", dict(dependencies=True))):
+            out = tmp / f"{name}_{label}.tetc"
+            gatun_py.compress(path, out, force=True, **opts, **kw)
+            sizes[label] = out.stat().st_size
+        lines.append(f"| {name} | {sizes['mesh_only']:,} | {sizes['default']:,} | "
+                     f"{sizes['default'] / sizes['mesh_only']:.2f} | {sizes['deps']:,} | "
+                     f"{sizes['deps'] / sizes['default']:.2f} |")
+        print(lines[-1], flush=True)
+    return lines
+
+
 def main(argv) -> int:
     quick = "--quick" in argv
     rows = []
@@ -171,6 +194,7 @@ def main(argv) -> int:
             except Exception as e:
                 rows.append({"input": label, "error": f"{type(e).__name__}: {e}"})
             print(rows[-1], flush=True)
+        costs = level_costs(tmp)
     lines = [
         "## Cells as given: cost of the cells, the cell arrays and the file against xz -9 of the arrays",
         "",
@@ -197,6 +221,7 @@ def main(argv) -> int:
                      f"{r['mesh_only'] / r['raw_xz']:.2f} | {d} | {r['mesh_only'] / r['split']:.3f} | "
                      f"{r['cell_bytes']:,} | {data} | {keep} ({r['keep_mesh_only'] / r['mesh_only']:.3f}) | "
                      f"{r['keep_bits'][0]:.1f}, {r['keep_bits'][1]:.1f} |")
+    lines += costs
     SECTIONS.mkdir(parents=True, exist_ok=True)
     (SECTIONS / "cells.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

@@ -76,7 +76,9 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
 @click.option("--levels", "n_levels", type=click.IntRange(min=0), default=None,
               help="Store pre-simplified levels 1..K (ratio 1-1/2^i) [default: every level the merge forest "
                    "reaches, up to 13; none under 128 points].")
-@click.option("--mesh-only", is_flag=True, help="Store only the mesh: no merge forest, no levels.")
+@click.option("--mesh-only", is_flag=True,
+              help="Store only the mesh: no merge forest, no levels (the forest and levels make the file "
+                   "2.2-3.2x the mesh-only file on the samples).")
 @click.option("--w-density", type=click.FloatRange(min=0), default=1.0, show_default=True,
               help="Decimation: weight of the density (mass) error.")
 @click.option("--w-geometry", type=click.FloatRange(min=0), default=1.0, show_default=True,
@@ -91,7 +93,8 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
 @jobs_option
 @click.option("--dependencies", is_flag=True,
               help="Also store the merge dependencies `render --selective` needs (every cut closed under "
-                   "them is flip-free); about 20-30 % more bytes, so off by default.")
+                   "them is flip-free); 13-70 % more bytes than the default file on the samples (Blunt-fin "
+                   "+70 %), so off by default.")
 @mesh_input_options
 @click.option("--keep-order", is_flag=True,
               help="Also store the original point order, cell order and each cell's vertex order, so that "

@@ -140,8 +140,8 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
         back exactly (``tetc info`` reports what it cost).
     dependencies : bool
         Also store the merge dependencies that selective refinement needs (``render(...,
-        selective=True)``): every cut closed under them is flip-free. They cost 20-30 % of the file
-        on the samples, so they are stored only when asked for.
+        selective=True)``): every cut closed under them is flip-free. They add 13-70 % to the
+        default file on the samples (bench/sections/cells.md), so they are stored only when asked for.
     progress : callable, optional
         ``progress(done, total)``: vertices the decimation has processed so far, of ``total``.
     log : callable, optional

@@ -29,6 +29,7 @@ from ._atomic import check_output_path, write_bytes_atomic
 from ._runtime import peak_rss_mb
 from .codec import LevelPayload, TetcReader, write_tetc
 from .codec.bricks import check_jobs
+from .codec.cells import read_cells, restore_order
 from .codec.info import tetc_info
 from .codec.tetcfile import encode_level, find_copies
 from .errors import OptionError
@@ -58,12 +59,16 @@ __all__ = ["compress", "decompress", "convert", "info", "open", "render", "rende
 def _as_mesh(source, read_options: dict, log, *, storing: bool = False, drop_cell_data: bool = False) -> TetMesh:
     """A TetMesh from a path, a TetMesh or a meshio.Mesh (notes of the reader go to ``log``).
 
-    ``storing``: the mesh is about to be compressed, so cell arrays not averaged to the points are
-    refused unless ``drop_cell_data`` (a ``.tetc`` file does not hold cell data; nothing is dropped
-    without a word).
+    ``storing``: the mesh is about to be compressed with its cells (:func:`_as_mesh_and_cells`),
+    so ``drop_cell_data`` leaves its cell arrays out, with a note.
     """
+    return _as_mesh_and_cells(source, read_options, log, storing=storing, drop_cell_data=drop_cell_data)[0]
+
+
+def _as_mesh_and_cells(source, read_options: dict, log, *, storing: bool = False, drop_cell_data: bool = False):
+    """(TetMesh, the cells as given or None) from a path, a TetMesh or a meshio.Mesh."""
     if isinstance(source, TetMesh):
-        return source
+        return source, None
     if type(source).__name__ == "Mesh" and hasattr(source, "cells") and hasattr(source, "points"):
         mesh, report = mesh_from_meshio(source, scalar=read_options.get("scalar"),
                                         cell_to_point=read_options.get("cell_to_point", False), source="<meshio.Mesh>")
@@ -73,13 +78,11 @@ def _as_mesh(source, read_options: dict, log, *, storing: bool = False, drop_cel
         raise OptionError(f"cannot read a mesh from a {type(source).__name__}: give a path, a TetMesh or a meshio.Mesh")
     for note in report.notes:
         log(f"note: {note}")
-    if storing and report.cell_arrays:
-        names = ", ".join(map(repr, report.cell_arrays))
-        if not drop_cell_data:
-            raise OptionError(f"the mesh has cell data ({names}), which a .tetc file does not store: average it to "
-                              "the points (cell-to-point) or drop it explicitly (drop-cell-data)")
-        log(f"note: cell data dropped on request: {names}")
-    return mesh
+    cells = report.cells
+    if storing and drop_cell_data and cells is not None and cells.cell_data:
+        log(f"note: cell data dropped on request: {', '.join(map(repr, cells.cell_data))}")
+        cells.cell_data = {}
+    return mesh, cells
 
 
 def _quiet(_msg: str) -> None:
@@ -92,7 +95,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
              w_density: float = 1.0, w_geometry: float = 1.0, w_sample: float = 1.0, scalar: str | None = None,
              q_file=None, q_var: str = "density", cell_to_point: bool = False, time_step: int | None = None,
              drop_cell_data: bool = False, bricks: int = 1, jobs: int | None = None, dependencies: bool = False,
-             progress=None, log=None) -> "TetcFile":
+             keep_order: bool = False, progress=None, log=None) -> "TetcFile":
     """Compress a mesh losslessly into a ``.tetc`` file, with its merge forest and levels.
 
     Parameters
@@ -119,8 +122,8 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
         How to read ``source`` (see :func:`gatun_py.read_mesh`). Every point array is stored, in its
         dtype; ``scalar`` is the default one (rendered and decimated).
     drop_cell_data : bool
-        Compress a mesh whose cell arrays were not averaged to the points (``cell_to_point``),
-        leaving them out; without it such a mesh is refused.
+        Leave the cell arrays out (an explicit opt-out: by default they are stored exactly, beside
+        the cells as given).
     bricks : int
         Split the tets into this many bricks (k-d tree over the tet centroids, balanced by tet
         count), each coded on its own with its own forest and levels (its vertices shared with other
@@ -128,10 +131,14 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     jobs : int, optional
         Processes that decimate and encode bricks; without bricks, threads that encode the levels
         (and level 0 beside the decimation). Default: all cores. The bytes do not depend on it.
+    keep_order : bool
+        Also store the original point order, cell order and every cell's vertex order (tets
+        included), coded against the decoder's order: decompressing gives the input's numbering
+        back exactly (``tetc info`` reports what it cost).
     dependencies : bool
         Also store the merge dependencies that selective refinement needs (``render(...,
-        selective=True)``): every cut closed under them is flip-free. They cost 20-30 % of the file
-        on the samples, so they are stored only when asked for.
+        selective=True)``): every cut closed under them is flip-free. They add 13-70 % to the
+        default file on the samples (bench/sections/cells.md), so they are stored only when asked for.
     progress : callable, optional
         ``progress(done, total)``: vertices the decimation has processed so far, of ``total``.
     log : callable, optional
@@ -162,8 +169,21 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     threads = check_jobs(jobs)
     _check_output(source, output, force=force)  # fail before the (long) work
     t0 = time.perf_counter()
-    mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point,
-                                 time_step=time_step), log, storing=True, drop_cell_data=drop_cell_data)
+    mesh, cells = _as_mesh_and_cells(source, dict(scalar=scalar, q_file=q_file, q_var=q_var,
+                                                  cell_to_point=cell_to_point, time_step=time_step),
+                                     log, storing=True, drop_cell_data=drop_cell_data)
+    if keep_order:
+        if bricks > 1:
+            raise OptionError("keep_order needs one plain stream: not with bricks")
+        if cells is None:  # a TetMesh: its tets are its cells
+            from .mesh.cells import Cells
+
+            cells = Cells([("tetra", np.asarray(mesh.tets, np.int64))], np.arange(mesh.n_tets, dtype=np.int64))
+        cells.keep_order = True
+    if cells is not None and cells.needed() and bricks > 1:
+        log("note: a bricked file keeps the tets only: the cells as given are not stored (compress without "
+            "bricks to keep them)")
+        cells = None
     name = Path(source).name if isinstance(source, (str, os.PathLike)) else ""
     log(f"read {name or 'mesh'}: {mesh.n_points} points, {mesh.n_tets} tets")
     if dependencies and (mesh_only or bricks > 1):
@@ -204,7 +224,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
                 deps = (deps.ptr, deps.idx, deps.removed)
     n = (len(data) if payload is None else
          write_tetc(output, payload, source=name, force=force, dependencies=deps, mesh_codes=mesh_codes,
-                    threads=threads, copies=copies))
+                    threads=threads, copies=copies, cells=cells))
     out = TetcFile(output)
     info = out.info
     log(f"wrote {output}: {n} bytes ({8.0 * n / max(mesh.n_tets, 1):.2f} bits/tet overall, "
@@ -280,8 +300,12 @@ def _counter(progress, total: int):
 def decompress(source, output, *, ratio: float | None = None, level: int | None = None, force: bool = False,
                jobs: int | None = None, selective: bool = False, tets: int | None = None, size=256,
                tf="default", azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0, scalar_range=None,
-               log=None) -> TetMesh:
+               as_tets: bool = False, log=None) -> TetMesh:
     """Decode a ``.tetc`` file (optionally simplified) and write it in any meshio format.
+
+    The full mesh of a file that stores its cells as given (hexahedra, wedges, quadratic cells,
+    several blocks, cell arrays, sets) is written as those cells; ``as_tets`` writes the tets they
+    were split into instead (as does any simplified mesh).
 
     ``jobs``: threads decoding (default: all cores): the connectivity ahead of the geometry, the
     bricks of a bricked file in parallel (:meth:`TetcFile.mesh`). With
@@ -316,7 +340,14 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
             log(f"selective cut: {cut.n_merges} merges, {cut.n_tets} tets, chosen in {cut.select_s:.3f} s")
     if mesh is None:
         mesh = f.mesh(ratio=ratio, level=level, jobs=jobs)
-    write_mesh(mesh, output, force=force)
+    cells = None
+    if "cells" in f.reader.meta and not as_tets:
+        if selective or ratio is not None or level not in (None, 0):
+            log("note: the cells as given are those of the full mesh: writing the simplified mesh's tets")
+        else:
+            cells = read_cells(f.reader, mesh.tets, mesh.n_points, mesh.points)
+            mesh, cells = restore_order(mesh, cells)
+    write_mesh(mesh, output, force=force, cells=cells)
     return mesh
 
 
@@ -365,8 +396,26 @@ def info(source, *, scalar: str | None = None, q_file=None, q_var: str = "densit
         "bbox": [lo.tolist(), hi.tolist()],
         "scalar": mesh.scalar_name if mesh.has_scalar else None,
         "scalar_range": list(mesh.scalar_range) if mesh.has_scalar else None,
+        "point_arrays": [_array_row(name, a) for name, a in mesh.user_point_data.items()],
+        **({"cells": [f"{t} {len(d)}" for t, d in report.cells.blocks],
+            "cell_arrays": [_array_row(name, np.concatenate([np.asarray(a).reshape(len(a), -1) for a in per]))
+                            for name, per in report.cells.cell_data.items()]}
+           if report.cells is not None else {}),
         "notes": list(report.notes),
     }
+
+
+def _array_row(name: str, a) -> dict:
+    """name, dtype, components and the finite range of an array (of its magnitude for vectors)."""
+    a = np.asarray(a)
+    k = 1 if a.ndim == 1 else int(np.prod(a.shape[1:]))
+    v = a.reshape(len(a), -1).astype(np.float64) if a.size else np.zeros((0, 1))
+    with np.errstate(over="ignore", invalid="ignore"):
+        v = v[:, 0] if k == 1 else np.sqrt(np.sum(v * v, axis=1))
+    v = v[np.isfinite(v)]
+    rng = [float(v.min()), float(v.max())] if v.size else None
+    return {"name": name, "dtype": str(a.dtype.newbyteorder("=") if a.dtype.byteorder == ">" else a.dtype),
+            "components": k, "range": rng}
 
 
 def _check_output(source, output, *, force: bool, mesh_file: bool = False) -> None:

@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parent
 CACHE = ROOT / "out" / "series"
 SMALL = ROOT.parent / "tests" / "data" / "series_heat.npz"
 # name -> (finest gmsh size, steps)
-SIZES = {"small": (0.12, 40), "medium": (0.045, 60), "large": (0.022, 40)}
+SIZES = {"small": (0.12, 40), "medium": (0.045, 60), "large": (0.02, 40)}
 
 
 def gmsh_block(h: float) -> tuple[np.ndarray, np.ndarray]:

@@ -17,12 +17,12 @@ from ..mesh import TetBatch, TetMesh
 from ..mesh.model import scalar_of
 from .arrays import ArrayDecoder, encode_array
 from .decoded_connectivity import DecodedConnectivity
-from .steps import StepIndex, decode_step_array, encode_step_array, keyframe_ref
+from .steps import MAX_ORDER, StepIndex, decode_step_array, encode_step_array, history_steps, step_entry
 from .tetcfile import _POINTS, DEFAULT_BATCH_TETS, TetcReader, _finite_range
 
 __all__ = ["StepDecoder", "StepReader", "step_index", "encode_steps", "encode_level_map"]
 
-_CACHE_STEPS = 3  # a keyframe and the steps after it: a walk decodes every step once
+_CACHE_STEPS = 4  # the last steps a prediction uses: a walk decodes every step once
 
 
 def step_index(container) -> StepIndex:
@@ -102,32 +102,43 @@ class StepDecoder:
         k = self.check_step(step)
         if k in self._cache:
             return self._cache[k]
+        need, todo = [k], []
+        while need:  # the steps the prediction reaches back to, as far as the cache or a keyframe
+            s = need.pop()
+            if s in self._cache or s in todo:
+                continue
+            todo.append(s)
+            need.extend(history_steps(self.index.entries[s]))
+        have = dict(self._cache)
+        for s in sorted(todo):
+            have[s] = self._decode(s, have)
+        self._cache = {s: have[s] for s in sorted(have)[-_CACHE_STEPS:]}  # a walk needs the latest ones
+        self._cache[k] = have[k]
+        return have[k]
+
+    def _decode(self, k: int, have: dict) -> dict:
         refs, pos0, n = self._base()
         if k == 0:
             m = self.base.decode_mesh(0, jobs=1)
             out = dict(m.point_data)
             out[_POINTS] = m.points
+            return out
+        entry = self.index.entries[k]
+        hist = [have[s] for s in history_steps(entry)]
+        out = {}
+        pos = _pos4(hist[0][_POINTS]) if hist and self._moves(entry["ref"]) else pos0
+        if entry["points"]:
+            out[_POINTS] = decode_step_array(
+                self.base.read_section(f"S{k}/points"), refs, n_points=n, dtype=self.base.points_dtype.name,
+                components=3, history=[h[_POINTS] for h in hist], positions=pos)
+            pos = _pos4(out[_POINTS])
         else:
-            entry = self.index.entries[k]
-            ref = self.values(entry["ref"]) if entry["ref"] >= 0 else None
-            out = {}
-            pos = pos0 if ref is None or not self._moves(entry["ref"]) else _pos4(ref[_POINTS])
-            if entry["points"]:
-                out[_POINTS] = decode_step_array(
-                    self.base.read_section(f"S{k}/points"), refs, n_points=n, dtype=self.base.points_dtype.name,
-                    components=3, reference=None if ref is None else ref[_POINTS], positions=pos)
-                pos = _pos4(out[_POINTS])
-            else:
-                out[_POINTS] = self.base_points()
-                pos = pos0
-            for j, (name, dt, c) in enumerate(self.base.arrays):
-                out[name] = decode_step_array(self.base.read_section(f"S{k}/array/{j}"), refs, n_points=n,
-                                              dtype=dt.name, components=c,
-                                              reference=None if ref is None else ref[name], positions=pos)
-        self._cache[k] = out
-        while len(self._cache) > _CACHE_STEPS:  # keyframes stay longest: the steps after them need them
-            old = [s for s in self._cache if s != k and s % self.index.interval] or [s for s in self._cache if s != k]
-            del self._cache[old[0]]
+            out[_POINTS] = self.base_points()
+            pos = pos0
+        for j, (name, dt, c) in enumerate(self.base.arrays):
+            out[name] = decode_step_array(self.base.read_section(f"S{k}/array/{j}"), refs, n_points=n,
+                                          dtype=dt.name, components=c, history=[h[name] for h in hist],
+                                          positions=pos)
         return out
 
     def base_points(self) -> np.ndarray:
@@ -283,21 +294,23 @@ def encode_steps(meshes, vertex_order, refs, base_points, *, first: int = 1, int
         pts = np.ascontiguousarray(mesh.points[vo])
         vals = {name: np.ascontiguousarray(mesh.point_data[name][vo]) for name in mesh.point_data}
         vals[_POINTS] = pts
-        ref_k = keyframe_ref(k, interval)
-        ref = None if ref_k < 0 else held[ref_k] if ref_k in held else previous(ref_k)
+        entry = step_entry(k, interval)
+        hist = [held[s] if s in held else previous(s) for s in history_steps(entry)]
         moves = not np.array_equal(pts.view(np.uint8), base_bits)
-        ref_moves = ref is not None and not np.array_equal(ref[_POINTS].view(np.uint8), base_bits)
-        pos = _pos4(ref[_POINTS])[:, :3] if ref_moves else base_pos
+        ref_moves = bool(hist) and not np.array_equal(hist[0][_POINTS].view(np.uint8), base_bits)
+        pos = _pos4(hist[0][_POINTS])[:, :3] if ref_moves else base_pos
         sections = []
         if moves:
             sections.append((f"S{k}/points", encode_step_array(pts, refs, positions=pos,
-                                                               reference=None if ref is None else ref[_POINTS])))
+                                                               history=[h[_POINTS] for h in hist])))
             pos = _pos4(pts)[:, :3]
         else:
             pos = base_pos
         for j, name in enumerate(mesh.point_data):
             sections.append((f"S{k}/array/{j}", encode_step_array(vals[name], refs, positions=pos,
-                                                                  reference=None if ref is None else ref[name])))
-        if k % interval == 0:
-            held = {k: vals}
-        yield {"ref": ref_k, "points": bool(moves)}, sections
+                                                                  history=[h[name] for h in hist])))
+        held[k] = vals
+        for s in [s for s in held if s <= k - MAX_ORDER - 1]:
+            del held[s]
+        entry["points"] = bool(moves)
+        yield entry, sections

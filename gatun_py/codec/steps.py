@@ -49,7 +49,7 @@ from .arrays import ArrayDecoder, check_dtype, dtype_name, encode_array
 from .container import _record
 
 __all__ = ["STEP_MAGIC", "encode_step_array", "decode_step_array", "ordered", "mesh_digest", "points_digest",
-           "StepIndex", "append_block", "keyframe_ref"]
+           "StepIndex", "append_block", "step_entry", "history_steps", "extrapolate"]
 
 STEP_MAGIC = b"TETCSTEP"
 _BLOCK = struct.Struct("<8sIIQ")
@@ -59,10 +59,29 @@ MAX_STEPS = 1 << 20
 MAX_BLOCK_JSON = 1 << 20
 
 
-def keyframe_ref(k: int, interval: int) -> int:
-    """The step that step ``k`` is predicted from: its keyframe (-1 for a keyframe itself, and for
-    step 0, which the base sections hold)."""
-    return -1 if k % interval == 0 else k - k % interval
+MAX_ORDER = 2
+
+
+def step_entry(k: int, interval: int) -> dict:
+    """How step ``k`` is predicted: ``ref`` the previous step (-1: a keyframe, coded alone) and
+    ``order`` of the extrapolation (0: from ``ref`` alone, 1: the two steps up to ``ref``, 2: three),
+    never reaching before the step's keyframe ``k - k % interval``."""
+    back = k % interval
+    return {"ref": -1 if back == 0 else k - 1, "order": max(0, min(MAX_ORDER, back - 1))}
+
+
+def history_steps(entry: dict) -> list:
+    """The steps a step's prediction uses, latest first."""
+    return [] if entry["ref"] < 0 else [entry["ref"] - i for i in range(entry["order"] + 1)]
+
+
+def keyframe_interval_for(n_points: int, n_tets: int, values_per_step: int) -> int:
+    """A keyframe interval that keeps decoding any step within about 1.5x decoding step 0: a step
+    decodes its keyframe and the steps after it, each about as costly per value as step 0's arrays,
+    while step 0 also decodes the mesh (connectivity and geometry, about as costly as 9 values per tet)."""
+    mesh = 9.0 * n_tets
+    v = max(1, int(values_per_step))
+    return int(min(16, max(1, (0.5 * mesh + 1.5 * v) // v)))
 
 
 def mesh_digest(n_points: int, tets: np.ndarray) -> str:
@@ -113,51 +132,70 @@ def _unordered(o: np.ndarray, dt: np.dtype, shape: tuple) -> np.ndarray:
     return out.astype(dt, copy=False).reshape(shape)
 
 
-def encode_step_array(values, refs, *, reference=None, positions=None) -> bytes:
+def extrapolate(history) -> np.ndarray:
+    """The temporal prediction of a step from the steps before it (``history``: the previous
+    step's array first, at most three): the previous values, the line through the last two, or
+    the parabola through the last three, at equal time spacing. Floats are extrapolated in float64
+    and rounded to their dtype, integers modulo 2**64; any result (inf, NaN) is a valid prediction.
+    """
+    h = [np.asarray(a) for a in history]
+    dt = h[0].dtype
+    if len(h) == 1:
+        return h[0]
+    with np.errstate(over="ignore", invalid="ignore"):
+        if dt.kind == "f":
+            x = [a.astype(np.float64) for a in h]
+            p = 2.0 * x[0] - x[1] if len(h) == 2 else 3.0 * x[0] - 3.0 * x[1] + x[2]
+            return p.astype(dt)
+        x = [a.view(np.int64) if dt == np.uint64 else a.astype(np.int64) for a in h]
+        p = 2 * x[0] - x[1] if len(h) == 2 else 3 * x[0] - 3 * x[1] + x[2]
+        return p.view(np.uint64) if dt == np.uint64 else p.astype(dt)
+
+
+def encode_step_array(values, refs, *, history=(), positions=None) -> bytes:
     """One step's array (decode order) as a step section: the values on their own (spatial
-    predictors), or their difference to ``reference`` (the same array of the reference step),
-    whichever codes smaller.
+    predictors), or their difference to :func:`extrapolate` of ``history`` (the same array of the
+    previous steps, latest first), whichever codes smaller.
 
     Examples
     --------
     >>> import numpy as np
     >>> refs = np.array([[-1] * 4, [0, -1, -1, -1], [0, 1, -1, -1]], np.int32)
     >>> a, b = np.array([1.5, 2.5, -0.0]), np.array([1.25, 2.75, np.nan])
-    >>> data = encode_step_array(b, refs, reference=a)
-    >>> out = decode_step_array(data, refs, n_points=3, dtype="float64", components=1, reference=a)
+    >>> data = encode_step_array(b, refs, history=[a])
+    >>> out = decode_step_array(data, refs, n_points=3, dtype="float64", components=1, history=[a])
     >>> out.view(np.int64).tolist() == b.view(np.int64).tolist()
     True
     """
     values = np.asarray(values)
     best = bytes([MODE_VALUES]) + encode_array(values, refs, positions=positions)
-    if reference is not None:
-        ref = np.asarray(reference)
-        if ref.dtype != values.dtype or ref.shape != values.shape:
-            raise ValueError("the reference step's array has another dtype or shape")
+    if len(history):
+        for a in history:
+            if np.asarray(a).dtype != values.dtype or np.asarray(a).shape != values.shape:
+                raise ValueError("a previous step's array has another dtype or shape")
         with np.errstate(over="ignore"):
-            delta = ordered(values) - ordered(ref)  # modulo 2**64
-        k = 1 if values.ndim == 1 else values.shape[1]
-        delta = delta.reshape(-1) if k == 1 and values.ndim == 1 else delta
+            delta = ordered(values) - ordered(extrapolate(history))  # modulo 2**64
+        delta = delta.reshape(-1) if values.ndim == 1 else delta
         tmp = bytes([MODE_TEMPORAL]) + encode_array(delta, refs, positions=positions)
         if len(tmp) < len(best):
             best = tmp
     return best
 
 
-def decode_step_array(data, refs, *, n_points: int, dtype: str, components: int, reference=None,
+def decode_step_array(data, refs, *, n_points: int, dtype: str, components: int, history=(),
                       positions=None) -> np.ndarray:
     """Inverse of :func:`encode_step_array`: the step's array in decode order, bit for bit.
 
     ``refs``: the level-0 refs of every vertex; ``positions``: (n, 4) float32 when the coder's
-    linear predictor may need them; ``reference``: the reference step's array (mode 1)."""
+    linear predictor may need them; ``history``: the previous steps' arrays, as coded (mode 1)."""
     data = bytes(data)
     if len(data) < 1 or data[0] not in (MODE_VALUES, MODE_TEMPORAL):
         raise CorruptFileError("corrupt step section: unknown mode")
     dt = check_dtype(dtype)
     refs = np.ascontiguousarray(refs, np.int32)
     temporal = data[0] == MODE_TEMPORAL
-    if temporal and reference is None:
-        raise CorruptFileError("corrupt step section: predicted from a step that has no reference")
+    if temporal and not len(history):
+        raise CorruptFileError("corrupt step section: predicted from earlier steps, but the step has none")
     dec = ArrayDecoder(data[1:], n_points=n_points, dtype="int64" if temporal else dtype, components=components)
     if dec.needs_external():
         raise CorruptFileError("corrupt step section: external prediction in a step section")
@@ -167,11 +205,10 @@ def decode_step_array(data, refs, *, n_points: int, dtype: str, components: int,
     shape = (n_points,) if components == 1 else (n_points, components)
     if not temporal:
         return out.astype(dt, copy=False).reshape(shape)
-    ref = np.asarray(reference)
-    if ref.shape != shape or ref.dtype != dt:
-        raise CorruptFileError("corrupt step section: the reference step's array does not match")
+    if any(np.asarray(a).shape != shape or np.asarray(a).dtype != dt for a in history):
+        raise CorruptFileError("corrupt step section: the previous steps' arrays do not match")
     with np.errstate(over="ignore"):
-        o = ordered(ref) + out.reshape(n_points, components).astype(np.int64)
+        o = ordered(extrapolate(history)) + out.reshape(n_points, components).astype(np.int64)
     return _unordered(o, dt, shape)
 
 
@@ -186,10 +223,12 @@ def _number(v, what: str) -> float:
 def _entry(e, k: int) -> dict:
     if not isinstance(e, dict):
         raise CorruptFileError(f"corrupt metadata: bad entry of step {k}")
-    ref, pts = e.get("ref"), e.get("points")
-    if isinstance(ref, bool) or not isinstance(ref, int) or not -1 <= ref < k or not isinstance(pts, bool):
+    ref, order, pts = e.get("ref"), e.get("order", 0), e.get("points")
+    ints = all(isinstance(x, int) and not isinstance(x, bool) for x in (ref, order))
+    if not ints or not -1 <= ref < k or not 0 <= order <= MAX_ORDER or ref - order < -1 or ref == -1 and order \
+            or not isinstance(pts, bool):
         raise CorruptFileError(f"corrupt metadata: bad reference of step {k}")
-    return {"ref": ref, "points": pts}
+    return {"ref": ref, "order": order, "points": pts}
 
 
 class StepIndex:
@@ -210,7 +249,7 @@ class StepIndex:
         info = meta.get("steps")
         self.series = info is not None
         if info is None:
-            self.times, self.entries, self.interval = [0.0], [{"ref": -1, "points": False}], DEFAULT_KEYFRAME_INTERVAL
+            self.times, self.entries, self.interval = [0.0], [{"ref": -1, "order": 0, "points": False}], 1
             self.mesh_digest = self.points_digest = None
             self.maps = []
         else:
@@ -224,7 +263,7 @@ class StepIndex:
                 raise CorruptFileError("corrupt metadata: bad step list")
             self.times = [_number(t, "step time") for t in times]
             self.entries = [_entry(e, k) for k, e in enumerate(entries)]
-            if self.entries[0] != {"ref": -1, "points": False}:
+            if self.entries[0] != {"ref": -1, "order": 0, "points": False}:
                 raise CorruptFileError("corrupt metadata: step 0 is the base mesh")
             iv = info.get("keyframe_interval")
             if isinstance(iv, bool) or not isinstance(iv, int) or not 1 <= iv <= MAX_STEPS:
@@ -298,7 +337,8 @@ def append_block(k: int, time: float, entry: dict, sections: list, offset: int) 
             index.append({"name": name, "offset": off + len(rec) - len(payload), "length": len(payload),
                           "crc32": zlib.crc32(payload)})
             off += len(rec)
-        blob = json.dumps({"time": float(time), "ref": int(entry["ref"]), "points": bool(entry["points"]),
+        blob = json.dumps({"time": float(time), "ref": int(entry["ref"]), "order": int(entry["order"]),
+                           "points": bool(entry["points"]),
                            "sections": index}, separators=(",", ":")).encode()
         if len(blob) == jlen:
             break

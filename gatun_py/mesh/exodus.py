@@ -90,3 +90,24 @@ def read_exodus(path, *, time_step: int | None = None) -> tuple[meshio.Mesh, lis
         elif time_step not in (None, 0, -1):
             raise OptionError(f"{path}: the file has no time steps of nodal variables")
     return meshio.Mesh(points, cells, point_data=point_data), notes
+
+
+def exodus_times(path) -> list[float]:
+    """The time of every step of an Exodus file (``time_whole``; 0, 1, ... when it has none)."""
+    path = Path(path)
+    try:
+        import netCDF4  # optional dependency
+    except ImportError:
+        raise ReadError(f"{path}: {INSTALL_HINT}") from None
+    try:
+        nc = netCDF4.Dataset(str(path))
+    except OSError as e:
+        raise ReadError(f"cannot read {path} as Exodus: {e}") from None
+    with nc:
+        nc.set_auto_mask(False)
+        n = len(nc.dimensions["time_step"]) if "time_step" in nc.dimensions else 0
+        if "time_whole" in nc.variables:
+            t = np.asarray(nc.variables["time_whole"][:], np.float64).reshape(-1)
+            if len(t) == n:
+                return [float(x) for x in t]
+        return [float(k) for k in range(n)]

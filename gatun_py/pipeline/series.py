@@ -16,7 +16,7 @@ import numpy as np
 
 from .._atomic import check_output_path, write_bytes_atomic
 from ..codec import LevelPayload
-from ..codec.container import Container, build_container, split_container
+from ..codec.container import build_container, split_container
 from ..codec.cutborder import encode_connectivity
 from ..codec.stepreader import StepDecoder, encode_level_map, encode_steps, step_index
 from ..codec.steps import (append_block, keyframe_interval_for, check_step_mesh, check_times, mesh_digest,
@@ -136,8 +136,8 @@ def append_step(path, mesh, time: float | None = None) -> int:
     mesh must have step 0's points and tets. ``time``: default the last time + 1.
     """
     path = os.fspath(path)
-    c = Container(path)
-    reader = TetcReader(c)
+    reader = TetcReader(path)
+    c = reader.container
     idx = step_index(c)
     if not idx.series:
         raise OptionError(f"{path} is a snapshot, not a series: compress the steps together "

@@ -53,7 +53,7 @@ from .simplify.dependencies import merge_dependencies
 from .simplify.filter import SimplifyFilter
 from .simplify.levels import MAX_LEVEL, max_stored_level, next_level, resolve_target, target_ancestors
 
-__all__ = ["compress", "decompress", "convert", "info", "open", "render", "render_frames", "append", "TetcFile", "Frame"]
+__all__ = ["compress", "decompress", "convert", "info", "open", "render", "render_frames", "render_steps", "append", "TetcFile", "Frame"]
 
 # The largest image a verb renders: 16384² is what the camera accepts, but 4096² already takes
 # 200 MB of float RGBA; larger is nearly always a typo.
@@ -551,6 +551,8 @@ def _write_steps(f: "TetcFile", output, kind: str, *, ratio, level, jobs, force)
         raise OutputError("writing an XDMF collection needs h5py (pip install h5py); a .pvd needs nothing extra")
     h5 = output.with_suffix(".h5")
     check_output_path(h5, force=force)
+    if isinstance(f.reader.container.name, str) and os.path.isfile(f.reader.container.name):
+        f = TetcFile(os.path.abspath(f.reader.container.name))  # read from inside the temporary directory
     first = f.mesh(ratio, level=level, jobs=jobs, step=0)
     with tempfile.TemporaryDirectory(dir=output.parent) as tmp:
         tx = Path(tmp) / output.name
@@ -1040,6 +1042,71 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
         log(f"warning: {st['rays_unfinished']} rays could not be completed")
     return Frame(rgb, result.image, st)
 
+
+
+def render_steps(source, output, *, steps=(None, None, None), force: bool = False, scalar_range=None,
+                 scalar: str | None = None, component=None, progress=None, log=None, **options) -> list[dict]:
+    """Render steps of a ``.tetc`` time series, one image each: an animation.
+
+    Parameters
+    ----------
+    source : path-like or TetcFile
+    output : path-like
+        The images: ``{frame}`` (0, 1, ...) and ``{step}`` (the step's index) in the name are
+        formatted (e.g. ``run_{step:04d}.png``); without either, ``_0000``, ``_0001``, ... is added
+        before the extension.
+    steps : (start, stop, stride)
+        As a Python slice of the steps (stop excluded; None: the ends).
+    scalar_range : (float, float), optional
+        Default: the range of the rendered array over every rendered step, so that the frames
+        compare.
+    options
+        As :func:`render` (size, tf, azimuth, ratio, budget, ...).
+
+    Returns
+    -------
+    list of dict
+        Every frame's stats, with its ``output``, ``step`` and ``time``.
+    """
+    log = log or _quiet
+    f = source if isinstance(source, TetcFile) else TetcFile(source)
+    start, stop, stride = steps
+    if stride == 0:
+        raise OptionError("the step stride must not be 0")
+    for name, v in (("start", start), ("stop", stop), ("stride", stride)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer))):
+            raise OptionError(f"steps {name} must be a whole number, got {v!r}")
+    ks = list(range(f.n_steps))[slice(start, stop, stride)]
+    if not ks:
+        raise OptionError(f"no step in {start}:{stop}:{stride} (the file has {f.n_steps} steps, 0..{f.n_steps - 1})")
+    out = Path(output)
+    if "{frame" in out.name or "{step" in out.name:
+        try:
+            paths = [out.with_name(out.name.format(frame=i, step=k)) for i, k in enumerate(ks)]
+        except (KeyError, IndexError, ValueError) as e:
+            raise OptionError(f"bad frame pattern {out.name!r}: use {{frame}}, {{step}} or {{step:04d}} ({e})") from None
+    else:
+        paths = frame_paths(out, len(ks))
+    for p in paths:
+        image_format(p)
+        check_output_path(p, force=force)
+    if scalar_range is None:
+        lo, hi = math.inf, -math.inf
+        for k in ks:
+            r = f.at(k).reader.array_range(scalar, component)
+            if r is not None:
+                lo, hi = min(lo, r[0]), max(hi, r[1])
+        scalar_range = (lo, hi) if hi > lo else None
+    stats = []
+    for i, (k, p) in enumerate(zip(ks, paths)):
+        frame = render(f, time_step=k, scalar_range=scalar_range, scalar=scalar, component=component, log=log,
+                       **options)
+        frame.save(p, force=force)
+        st = dict(frame.stats, output=str(p), step=k, time=f.times[k])
+        stats.append(st)
+        if progress is not None:
+            progress(i + 1, len(ks))
+    return stats
 
 
 # -- rendering on a cluster ----------------------------------------------------------------------

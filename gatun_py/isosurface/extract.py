@@ -766,6 +766,10 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs, values=(), jobs=1):
                 "tets": mesh.n_tets}
         return mesh_batches(mesh), info
     reader = source if isinstance(source, TetcReader) else TetcReader(source)
+    if (read_kwargs or {}).get("time_step") is not None:  # a step of a time series
+        from ..codec.stepreader import StepDecoder
+
+        reader = StepDecoder(reader).reader(read_kwargs["time_step"])
     if not reader.has_scalar:
         raise OptionError(_NO_SCALAR_MESSAGE)
     if reader.n_bricks > 1:

@@ -20,12 +20,14 @@ import importlib.util
 
 import math
 import os
+import tempfile
 import time
 from time import perf_counter as _perf_counter  # render's own argument `time` hides the module
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import meshio
 import numpy as np
 
 from ._atomic import check_output_path, write_bytes_atomic
@@ -33,13 +35,16 @@ from ._resources import peak_rss_mb
 from .codec import LevelPayload, TetcReader, write_tetc
 from .codec.bricks import check_jobs
 from .codec.info import tetc_info
+from .codec.stepreader import StepDecoder
 from .codec.tetcfile import encode_level, find_copies
 from .errors import OptionError, OutputError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
+from .mesh.exodus import exodus_times
 from .mesh.io import mesh_output_format
 from .mesh.series import is_series_source, read_series
 from .pipeline.bricks import compress_bricks, read_bricked
 from .pipeline.sortlast import BrickRef, MeshExtent, render_bricks, split_for_render
+from .pipeline.series import append_step, write_series
 from .pipeline.budget import load_costs, plan_file_budget, remember_frame
 from .pipeline.distributed import BrickCluster
 from .pipeline.selective import SELECTION_ALLOWANCE_S, budget_tets, render_selective, selective_mesh
@@ -438,8 +443,6 @@ def _same_file(a, b) -> bool:
 def _exodus_steps(path) -> int:
     """Steps of an Exodus file (0 when it cannot tell: the single-mesh path reports the error)."""
     try:
-        from .mesh.exodus import exodus_times
-
         return len(exodus_times(path))
     except Exception:
         return 0
@@ -449,8 +452,6 @@ def _compress_series(source, output, *, times, levels, mesh_only, force, w_densi
                      cell_to_point, drop_cell_data, bricks, dependencies, jobs, keyframe_interval, log) -> "TetcFile":
     """:func:`compress` of a time series (one file: step 0 with its forest and levels, every step's
     arrays; :mod:`gatun_py.pipeline.series`)."""
-    from .pipeline.series import write_series
-
     if bricks != 1 or dependencies:
         raise OptionError("a time series is stored as one plain stream: not with bricks or dependencies")
     for name, w in (("w_density", w_density), ("w_geometry", w_geometry), ("w_sample", w_sample)):
@@ -505,8 +506,6 @@ def append(path, source, *, time: float | None = None, scalar: str | None = None
     last time + 1. The step is written after the last whole step: an append interrupted midway
     leaves the earlier steps readable, and the next append cuts its bytes off first.
     """
-    from .pipeline.series import append_step
-
     log = log or _quiet
     mesh = _as_mesh(source, dict(scalar=scalar, cell_to_point=cell_to_point), log, storing=True,
                     drop_cell_data=drop_cell_data)
@@ -524,11 +523,6 @@ def _series_output(output) -> str | None:
 def _write_steps(f: "TetcFile", output, kind: str, *, ratio, level, jobs, force) -> list:
     """Every step of ``f`` as a ``.pvd`` (one ``.vtu`` per step in ``<stem>_steps/``) or an XDMF
     temporal collection (one mesh, each step's point data; the coordinates must not move)."""
-    import shutil
-    import tempfile
-
-    import meshio
-
     output = Path(output)
     check_output_path(output, force=force)
     steps = range(f.n_steps)
@@ -611,8 +605,6 @@ class TetcFile:
     @property
     def _series(self):
         if self._steps is None:
-            from .codec.stepreader import StepDecoder
-
             self._steps = StepDecoder(self.reader)
         return self._steps
 

@@ -26,6 +26,7 @@ import numpy as np
 from .._atomic import check_output_path
 from .._resources import peak_rss_mb, release_code_pages
 from ..codec import TetcReader
+from ..codec.stepreader import StepDecoder
 from ..codec.bricks import check_jobs
 from ..codec.container import MAGIC
 from ..codec.prefetch import PrefetchedDecode
@@ -767,8 +768,6 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs, values=(), jobs=1):
         return mesh_batches(mesh), info
     reader = source if isinstance(source, TetcReader) else TetcReader(source)
     if (read_kwargs or {}).get("time_step") is not None:  # a step of a time series
-        from ..codec.stepreader import StepDecoder
-
         reader = StepDecoder(reader).reader(read_kwargs["time_step"])
     if not reader.has_scalar:
         raise OptionError(_NO_SCALAR_MESSAGE)

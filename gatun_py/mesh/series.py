@@ -16,7 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MeshError, OptionError, ReadError
-from .exodus import EXODUS_SUFFIXES, read_exodus
+import meshio
+
+from .exodus import EXODUS_SUFFIXES, exodus_times, read_exodus
+from .io import _meshio_read, mesh_from_meshio, read_mesh
 
 __all__ = ["Series", "read_series", "is_series_source", "SERIES_SUFFIXES"]
 
@@ -117,8 +120,6 @@ def read_series(source, *, times=None, scalar: str | None = None, cell_to_point:
     OptionError
         Times that do not increase, or as many times as files.
     """
-    from .io import read_mesh  # io imports this module's neighbours; read_mesh is only needed here
-
     opts = dict(scalar=scalar, cell_to_point=cell_to_point)
     if isinstance(source, Series):
         return source
@@ -183,8 +184,6 @@ def _time_value(path) -> float | None:
     if Path(path).suffix.lower() not in (".vtu", ".vtk"):
         return None
     try:
-        from .io import _meshio_read
-
         m = _meshio_read(Path(path))
     except ReadError:
         return None
@@ -198,8 +197,6 @@ def _time_value(path) -> float | None:
 def _read_pvd(path: Path, opts: dict) -> Series:
     """The DataSets of a ParaView collection, in file order, with their ``timestep`` exactly as
     written; a file outside the collection's folder is refused."""
-    from .io import read_mesh
-
     try:
         root = ET.parse(path).getroot()
     except (ET.ParseError, OSError) as e:
@@ -230,10 +227,6 @@ def _read_pvd(path: Path, opts: dict) -> Series:
 
 def _read_xdmf(path: Path, opts: dict) -> Series:
     """An XDMF temporal collection through meshio's TimeSeriesReader (one mesh, data per step)."""
-    import meshio
-
-    from .io import mesh_from_meshio
-
     try:
         with meshio.xdmf.TimeSeriesReader(str(path)) as reader:
             points, cells = reader.read_points_cells()
@@ -258,9 +251,6 @@ def _read_xdmf(path: Path, opts: dict) -> Series:
 
 def _read_exodus_series(path: Path, opts: dict) -> Series:
     """Every step of an Exodus file (its ``time_whole`` values)."""
-    from .exodus import exodus_times
-    from .io import mesh_from_meshio
-
     times = exodus_times(path)
     if not times:
         raise ReadError(f"{path}: the Exodus file holds no time steps")

@@ -22,7 +22,7 @@ from .tetcfile import _POINTS, DEFAULT_BATCH_TETS, TetcReader, _finite_range
 
 __all__ = ["StepDecoder", "StepReader", "step_index", "encode_steps", "encode_level_map"]
 
-_CACHE_STEPS = 4  # the last steps a prediction uses: a walk decodes every step once
+_CACHE_STEPS = MAX_ORDER + 2  # the last steps a prediction uses: a walk decodes every step once
 
 
 def step_index(container) -> StepIndex:

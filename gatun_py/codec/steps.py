@@ -8,8 +8,8 @@ scalar) plus, under the metadata key ``"steps"``:
 * ``times``: the time of every step of the base file; ``entries``: per step ``{"ref", "points"}``,
   the step it is predicted from (-1: none) and whether it stores its own coordinates;
 * ``keyframe_interval`` K: the steps ``k`` with ``k % K == 0`` are coded on their own (spatial
-  prediction only), every other step from its keyframe alone, so that any step decodes from at
-  most two coded steps (random access);
+  prediction only), every other step from the steps before it back to its keyframe (at most
+  ``MAX_ORDER + 1`` of them), so that any step decodes from at most K coded steps (random access);
 * ``mesh`` and ``points``: digests of step 0's tets and coordinates (input order), which an append
   checks a new step against without decoding anything;
 * ``maps``: the levels that hold an ``L{i}/vmap`` section, each vertex's level-0 decode id: a
@@ -18,9 +18,10 @@ scalar) plus, under the metadata key ``"steps"``:
 Sections of step ``k >= 1``: ``S{k}/array/{j}`` for every point array j of the metadata's
 ``arrays``, ``S{k}/points`` when the step's coordinates differ from step 0's; every one in level
 0's decode order, each a byte (the mode) and an array block of :mod:`.arrays`: mode 0 codes the
-values (spatial predictors), mode 1 the difference of their ordered integers (:func:`ordered`) to
-those of the reference step, modulo 2**64, as an int64 array (spatial predictors on the temporal
-difference). The encoder keeps the smaller. The arrays of a step with its own coordinates are
+values (spatial predictors), mode ``1 + p`` the difference of their ordered integers
+(:func:`ordered`) to those of :func:`extrapolate` of degree p from the previous steps, modulo
+2**64, as an int64 array (spatial predictors on the temporal difference). The encoder picks p by
+the residuals' mean bit length and keeps the smaller mode. The arrays of a step with its own coordinates are
 predicted with those coordinates (float32); its coordinates with the reference step's.
 
 Appended steps (:func:`append_block`) follow the last section of the base file, each a block::
@@ -39,6 +40,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import struct
 import zlib
 
@@ -59,13 +61,13 @@ MAX_STEPS = 1 << 20
 MAX_BLOCK_JSON = 1 << 20
 
 
-MAX_ORDER = 2
+MAX_ORDER = 6  # heat conduction gains up to order 6 (bench/sections/series.md)
 
 
 def step_entry(k: int, interval: int) -> dict:
     """How step ``k`` is predicted: ``ref`` the previous step (-1: a keyframe, coded alone) and
-    ``order`` of the extrapolation (0: from ``ref`` alone, 1: the two steps up to ``ref``, 2: three),
-    never reaching before the step's keyframe ``k - k % interval``."""
+    ``order``: the steps ``ref, ..., ref - order`` its sections may be predicted from (each
+    section's mode says the degree it uses), never reaching before its keyframe ``k - k % interval``."""
     back = k % interval
     return {"ref": -1 if back == 0 else k - 1, "order": max(0, min(MAX_ORDER, back - 1))}
 
@@ -132,30 +134,53 @@ def _unordered(o: np.ndarray, dt: np.dtype, shape: tuple) -> np.ndarray:
     return out.astype(dt, copy=False).reshape(shape)
 
 
-def extrapolate(history) -> np.ndarray:
+def extrapolate(history, order: int | None = None) -> np.ndarray:
     """The temporal prediction of a step from the steps before it (``history``: the previous
-    step's array first, at most three): the previous values, the line through the last two, or
-    the parabola through the last three, at equal time spacing. Floats are extrapolated in float64
-    and rounded to their dtype, integers modulo 2**64; any result (inf, NaN) is a valid prediction.
+    step's array first): the polynomial of degree ``order`` (default: ``len(history) - 1``)
+    through the last ``order + 1`` steps at equal time spacing, at the next step,
+    ``sum_i (-1)^i C(order + 1, i + 1) h_i`` (``h_0``; ``2 h_0 - h_1``; ``3 h_0 - 3 h_1 + h_2``; ...).
+    Floats are extrapolated in float64, term by term in that order, and rounded to their dtype;
+    integers modulo 2**64. Any result (inf, NaN) is a valid prediction.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> h = [np.array([16.0]), np.array([9.0]), np.array([4.0]), np.array([1.0])]  # t^2 at t = 4, 3, 2, 1
+    >>> [float(extrapolate(h, p)[0]) for p in range(4)]
+    [16.0, 23.0, 25.0, 25.0]
     """
     h = [np.asarray(a) for a in history]
+    p = len(h) - 1 if order is None else int(order)
+    if not 0 <= p < len(h):
+        raise ValueError(f"order {p} needs {p + 1} previous steps, {len(h)} given")
     dt = h[0].dtype
-    if len(h) == 1:
+    if p == 0:
         return h[0]
+    coef = [(-1) ** i * math.comb(p + 1, i + 1) for i in range(p + 1)]
     with np.errstate(over="ignore", invalid="ignore"):
         if dt.kind == "f":
-            x = [a.astype(np.float64) for a in h]
-            p = 2.0 * x[0] - x[1] if len(h) == 2 else 3.0 * x[0] - 3.0 * x[1] + x[2]
-            return p.astype(dt)
-        x = [a.view(np.int64) if dt == np.uint64 else a.astype(np.int64) for a in h]
-        p = 2 * x[0] - x[1] if len(h) == 2 else 3 * x[0] - 3 * x[1] + x[2]
-        return p.view(np.uint64) if dt == np.uint64 else p.astype(dt)
+            acc = coef[0] * h[0].astype(np.float64)
+            for c, a in zip(coef[1:], h[1:]):
+                acc = acc + c * a.astype(np.float64)
+            return acc.astype(dt)
+        ints = [a.view(np.int64) if dt == np.uint64 else a.astype(np.int64) for a in h[:p + 1]]
+        acc = np.int64(coef[0]) * ints[0]
+        for c, a in zip(coef[1:], ints[1:]):
+            acc = acc + np.int64(c) * a
+        return acc.view(np.uint64) if dt == np.uint64 else acc.astype(dt)
+
+
+def _zigzag_bits(d: np.ndarray) -> float:
+    """Mean bit length of zigzagged residuals: a cheap estimate of what they code to."""
+    u = (d.view(np.uint64) << np.uint64(1)) ^ (d >> 63).view(np.uint64)
+    return float(np.mean(np.log2(u.astype(np.float64) + 1.0))) if u.size else 0.0
 
 
 def encode_step_array(values, refs, *, history=(), positions=None) -> bytes:
     """One step's array (decode order) as a step section: the values on their own (spatial
     predictors), or their difference to :func:`extrapolate` of ``history`` (the same array of the
-    previous steps, latest first), whichever codes smaller.
+    previous steps, latest first) at the order whose differences are smallest, whichever codes
+    smaller.
 
     Examples
     --------
@@ -173,10 +198,15 @@ def encode_step_array(values, refs, *, history=(), positions=None) -> bytes:
         for a in history:
             if np.asarray(a).dtype != values.dtype or np.asarray(a).shape != values.shape:
                 raise ValueError("a previous step's array has another dtype or shape")
+        ov = ordered(values)
+        cands = []
         with np.errstate(over="ignore"):
-            delta = ordered(values) - ordered(extrapolate(history))  # modulo 2**64
+            for p in range(min(len(history), MAX_ORDER + 1)):
+                d = ov - ordered(extrapolate(history, p))  # modulo 2**64
+                cands.append((_zigzag_bits(d), p, d))
+        _, p, delta = min(cands, key=lambda c: c[:2])
         delta = delta.reshape(-1) if values.ndim == 1 else delta
-        tmp = bytes([MODE_TEMPORAL]) + encode_array(delta, refs, positions=positions)
+        tmp = bytes([MODE_TEMPORAL + p]) + encode_array(delta, refs, positions=positions)
         if len(tmp) < len(best):
             best = tmp
     return best
@@ -189,13 +219,15 @@ def decode_step_array(data, refs, *, n_points: int, dtype: str, components: int,
     ``refs``: the level-0 refs of every vertex; ``positions``: (n, 4) float32 when the coder's
     linear predictor may need them; ``history``: the previous steps' arrays, as coded (mode 1)."""
     data = bytes(data)
-    if len(data) < 1 or data[0] not in (MODE_VALUES, MODE_TEMPORAL):
+    if len(data) < 1 or data[0] > MODE_TEMPORAL + MAX_ORDER:
         raise CorruptFileError("corrupt step section: unknown mode")
     dt = check_dtype(dtype)
     refs = np.ascontiguousarray(refs, np.int32)
-    temporal = data[0] == MODE_TEMPORAL
-    if temporal and not len(history):
-        raise CorruptFileError("corrupt step section: predicted from earlier steps, but the step has none")
+    temporal = data[0] >= MODE_TEMPORAL
+    order = data[0] - MODE_TEMPORAL
+    if temporal and order >= len(history):
+        raise CorruptFileError(f"corrupt step section: predicted from {order + 1} earlier steps, the step has "
+                               f"{len(history)}")
     dec = ArrayDecoder(data[1:], n_points=n_points, dtype="int64" if temporal else dtype, components=components)
     if dec.needs_external():
         raise CorruptFileError("corrupt step section: external prediction in a step section")
@@ -208,7 +240,7 @@ def decode_step_array(data, refs, *, n_points: int, dtype: str, components: int,
     if any(np.asarray(a).shape != shape or np.asarray(a).dtype != dt for a in history):
         raise CorruptFileError("corrupt step section: the previous steps' arrays do not match")
     with np.errstate(over="ignore"):
-        o = ordered(extrapolate(history)) + out.reshape(n_points, components).astype(np.int64)
+        o = ordered(extrapolate(history, order)) + out.reshape(n_points, components).astype(np.int64)
     return _unordered(o, dt, shape)
 
 

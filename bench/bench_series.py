@@ -223,6 +223,9 @@ def main(argv) -> int:
                "a coarse step decodes the step's arrays at level 0 (plus the level's mesh). Survivors: each level "
                "would store its vertices' values per step (coded like a step, from the previous steps): the bytes "
                "it would add per step, against the step's own bytes.\n")
+    out.append("Chosen: gather. Survivors per level would add their bytes to every step of every file, for a "
+               "faster coarse step only when the arrays' decode, not the mesh's, dominates the coarse decode; "
+               "gathering keeps a step's bytes to level 0's and the level maps are stored once.\n")
     out.append("| series | level | level 0 of last step (s) | coarse level of last step (s) | coarse level of step 0 (s) "
                "| step bytes | survivors would add | ")
     out.append("|---|---|---|---|---|---|---|")

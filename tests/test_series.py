@@ -497,3 +497,22 @@ def test_cli_series(tmp_path, run):
     r = CliRunner().invoke(tetc, ["isosurface", out, "--value", "100", "--time-step", "4", "-o",
                                   str(tmp_path / "iso.ply"), "-q"])
     assert r.exit_code == 0, r.output
+
+
+@pytest.mark.parametrize("change", [
+    lambda st: st["entries"][1].update(ref=3),            # predicted from a later step
+    lambda st: st["entries"][2].update(order=5),          # reaching before step 0
+    lambda st: st.update(times=st["times"][::-1]),        # times going backwards
+    lambda st: st.update(keyframe_interval=0),
+    lambda st: st["entries"].pop(),                       # fewer entries than times
+    lambda st: st.update(maps=["1"]),
+])
+def test_bad_step_metadata_is_a_corrupt_file(run, change):
+    from gatun_py.codec.container import build_container, split_container
+
+    meshes = steps_of(run, 3, extra=False)
+    meta, sections = split_container(encode_series(meshes, [0.0, 1.0, 2.0], mesh_only=True))
+    change(meta["steps"])
+    f = gatun_py.open(build_container(meta, sections))
+    with pytest.raises(CorruptFileError):
+        f.mesh(step=2)

@@ -6,7 +6,7 @@ import click
 
 import gatun_py
 
-from .options import (RATIO, camera_options, echo_json, force_option, jobs_option, json_option, logger,
+from .options import (RATIO, FiniteFloat, camera_options, check_step, echo_json, force_option, jobs_option, json_option, logger,
                       mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
                       selective_options, status, transfer_function_options)
 
@@ -30,6 +30,9 @@ def info(input, scalar, q_file, q_var, cell_to_point, time_step, as_json):
             for row in v:
                 click.echo(f"  {row['part']:<{width}}  {row['bytes']:>12,}  {100 * row['share']:5.1f} %  "
                            f"{row['level0_bytes']:>12,}")
+        elif k == "times":
+            shown = v if len(v) <= 8 else v[:4] + ["..."] + v[-2:]
+            click.echo(f"times: {', '.join(x if isinstance(x, str) else f'{x:.9g}' for x in shown)}")
         elif isinstance(v, list) and v and isinstance(v[0], dict):
             click.echo(f"{k}:")
             for row in v:
@@ -71,8 +74,14 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
 
 
 @click.command()
-@click.argument("input", type=click.Path(dir_okay=False))
+@click.argument("input", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @output_option("Output .tetc file.")
+@click.option("--times", default=None, metavar="T0,T1,...",
+              help="A time series of several INPUT files: their times, comma-separated, increasing "
+                   "[default: each file's own TimeValue, else 0, 1, 2, ...].")
+@click.option("--keyframe-interval", type=click.IntRange(min=1), default=None, metavar="K",
+              help="A time series: code every K-th step alone, the others from the steps before them "
+                   "[default: chosen so that any step decodes in about 1.5x the time of step 0].")
 @click.option("--levels", "n_levels", type=click.IntRange(min=0), default=None,
               help="Store pre-simplified levels 1..K (ratio 1-1/2^i) [default: every level the merge forest "
                    "reaches, up to 13; none under 128 points].")
@@ -104,8 +113,8 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
               help="Leave out the cell arrays (by default they are stored exactly, with the cells as given).")
 @force_option
 @quiet_option
-def compress(input, output, n_levels, mesh_only, w_density, w_geometry, w_sample, n_bricks, jobs, dependencies, scalar,
-             q_file, q_var, cell_to_point, time_step, keep_order, drop_cell_data, force, quiet):
+def compress(input, output, times, keyframe_interval, n_levels, mesh_only, w_density, w_geometry, w_sample, n_bricks, jobs,
+             dependencies, scalar, q_file, q_var, cell_to_point, time_step, keep_order, drop_cell_data, force, quiet):
     """Compress INPUT (any readable mesh or PLOT3D grid) losslessly into a .tetc file.
 
     Connectivity is cut-border coded; coordinates (float32 or float64) and every point array, in its
@@ -116,9 +125,21 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, w_sample
     With --bricks K, each brick is decimated and coded on its own (on --jobs processes), its
     vertices shared with other bricks locked so simplified bricks still meet. Without bricks,
     --jobs threads code the levels (level 0 while the decimation runs); the file is the same.
+
+    A time series goes into one file: several INPUT files in time order, a ParaView .pvd, an XDMF
+    temporal collection or an Exodus file's steps. Every step must have the same points and tets;
+    the mesh, forest and levels are stored once (built on step 0), each step's point arrays (and
+    coordinates, when they move) coded from the steps before it. `tetc append` adds steps later.
     """
+    if times is not None:
+        try:
+            times = [float(t) for t in times.split(",")]
+        except ValueError:
+            raise click.BadParameter(f"{times!r} is not a comma-separated list of numbers", param_hint="'--times'")
+    series = len(input) > 1 or times is not None or keyframe_interval is not None
     with progress_reporter("decimating", quiet, min_total=1) as progress:
-        gatun_py.compress(input, output, levels=n_levels, mesh_only=mesh_only, force=force, w_density=w_density,
+        gatun_py.compress(list(input) if series else input[0], output, times=times,
+                          keyframe_interval=keyframe_interval, levels=n_levels, mesh_only=mesh_only, force=force, w_density=w_density,
                           w_geometry=w_geometry, w_sample=w_sample, progress=progress, log=logger(quiet),
                           drop_cell_data=drop_cell_data, bricks=n_bricks, jobs=jobs, dependencies=dependencies,
                           keep_order=keep_order,
@@ -133,6 +154,11 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, w_sample
 @click.option("--ratio", default=None, type=RATIO,
               help="Simplify to this ratio (merged / all vertices, 0..1) with the stored merge forest, "
                    "starting from the most simplified stored level that is still finer.")
+@click.option("--step", "--time-step", "step", type=int, default=None, metavar="K",
+              help="A time series: the step to write (0-based, negative from the end) [default: 0; with a .pvd "
+                   "or .xdmf OUTPUT, every step].")
+@click.option("--time", "at_time", type=FiniteFloat(), default=None, metavar="T",
+              help="A time series: write the step at time T.")
 @selective_options
 @camera_options("With --selective", size_help="the image size the cut is chosen for.")
 @transfer_function_options("With --selective")
@@ -142,8 +168,8 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, w_sample
 @jobs_option
 @force_option
 @quiet_option
-def decompress(input, output, level, ratio, selective, tets, size, tf_spec, azimuth, elevation, zoom, scalar_range,
-               as_tets, jobs, force, quiet):
+def decompress(input, output, level, ratio, step, at_time, selective, tets, size, tf_spec, azimuth, elevation, zoom,
+               scalar_range, as_tets, jobs, force, quiet):
     """Decompress a .tetc file into any mesh format meshio writes that holds tets.
 
     The full mesh comes back as the cells it was compressed from (hexahedra, wedges, pyramids,
@@ -158,11 +184,35 @@ def decompress(input, output, level, ratio, selective, tets, size, tf_spec, azim
     """
     if sum(x is not None for x in (level, ratio, tets)) > 1:
         raise click.UsageError("--level, --ratio and --tets are exclusive")
+    if step is not None and at_time is not None:
+        raise click.UsageError("--step and --time are exclusive")
+    check_step(input, step, at_time)
     if tets is not None and not selective:
         raise click.UsageError("--tets needs --selective")
     if selective and level is not None:
         raise click.UsageError("--selective takes --ratio or --tets, not --level")
     mesh = gatun_py.decompress(input, output, ratio=ratio, level=level, force=force, jobs=jobs, selective=selective,
                                tets=tets, size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom,
-                               scalar_range=scalar_range, as_tets=as_tets, log=logger(quiet))
+                               scalar_range=scalar_range, as_tets=as_tets, step=step, time=at_time, log=logger(quiet))
     status(f"wrote {output}: {mesh.n_points} points, {mesh.n_tets} tets", quiet)
+
+
+@click.command()
+@click.argument("series", type=click.Path(dir_okay=False))
+@click.argument("step_file", metavar="STEP", type=click.Path(dir_okay=False))
+@click.option("--time", "at_time", type=FiniteFloat(), default=None, metavar="T",
+              help="The new step's time (after the last step's) [default: the last time + 1].")
+@click.option("--scalar", default=None, metavar="NAME", help="Point-data array that is the default scalar.")
+@click.option("--cell-to-point", is_flag=True, help="Average cell arrays to the points, as when the series was compressed.")
+@click.option("--drop-cell-data", is_flag=True, help="Leave out cell arrays.")
+@quiet_option
+def append(series, step_file, at_time, scalar, cell_to_point, drop_cell_data, quiet):
+    """Append STEP (a mesh file with the series' points and tets) to the time series SERIES (.tetc).
+
+    The other steps are not re-encoded: the step is coded from the steps before it and written
+    after the last one. An append interrupted midway (a crash, kill -9) leaves every earlier step
+    readable; the next append cuts its bytes off first.
+    """
+    k = gatun_py.append(series, step_file, time=at_time, scalar=scalar, cell_to_point=cell_to_point,
+                        drop_cell_data=drop_cell_data, log=logger(quiet))
+    status(f"appended step {k} to {series}", quiet)

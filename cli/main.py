@@ -13,7 +13,7 @@ import click
 from gatun_py import __version__
 from gatun_py.errors import OutputExistsError, TetcError
 
-from .codec_commands import compress, convert, decompress, info
+from .codec_commands import append, compress, convert, decompress, info
 from .compare import compare_command
 from .isosurface_commands import isosurface
 from .render_commands import render
@@ -55,7 +55,7 @@ def tetc():
     """
 
 
-for _command in (info, convert, compress, decompress, render, isosurface, view, compare_command):
+for _command in (info, convert, compress, decompress, append, render, isosurface, view, compare_command):
     tetc.add_command(_command)
 
 

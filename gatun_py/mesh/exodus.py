@@ -107,3 +107,24 @@ def read_exodus(path, *, time_step: int | None = None) -> tuple[meshio.Mesh, lis
                 else:  # a variable some blocks do not have: no value to give their cells
                     notes.append(f"element variable {name!r} skipped: not defined on every element block")
     return meshio.Mesh(points, cells, point_data=point_data, cell_data=cell_data, point_sets=point_sets), notes
+
+
+def exodus_times(path) -> list[float]:
+    """The time of every step of an Exodus file (``time_whole``; 0, 1, ... when it has none)."""
+    path = Path(path)
+    try:
+        import netCDF4  # optional dependency
+    except ImportError:
+        raise ReadError(f"{path}: {INSTALL_HINT}") from None
+    try:
+        nc = netCDF4.Dataset(str(path))
+    except OSError as e:
+        raise ReadError(f"cannot read {path} as Exodus: {e}") from None
+    with nc:
+        nc.set_auto_mask(False)
+        n = len(nc.dimensions["time_step"]) if "time_step" in nc.dimensions else 0
+        if "time_whole" in nc.variables:
+            t = np.asarray(nc.variables["time_whole"][:], np.float64).reshape(-1)
+            if len(t) == n:
+                return [float(x) for x in t]
+        return [float(k) for k in range(n)]

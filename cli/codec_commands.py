@@ -6,6 +6,8 @@ import click
 
 import gatun_py
 
+from gatun_py.mesh.pieces import is_partitioned
+
 from .options import (RATIO, camera_options, echo_json, force_option, jobs_option, json_option, logger,
                       mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
                       selective_options, status, transfer_function_options)
@@ -71,7 +73,7 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
 
 
 @click.command()
-@click.argument("input", type=click.Path(dir_okay=False))
+@click.argument("inputs", metavar="INPUT...", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @output_option("Output .tetc file.")
 @click.option("--levels", "n_levels", type=click.IntRange(min=0), default=None,
               help="Store pre-simplified levels 1..K (ratio 1-1/2^i) [default: every level the merge forest "
@@ -96,10 +98,24 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
 @click.option("--drop-cell-data", is_flag=True,
               help="Leave out cell arrays (a .tetc file stores point arrays only; without this flag or "
                    "--cell-to-point a mesh with cell data is refused).")
+@click.option("--pieces", is_flag=True,
+              help="The INPUTs are the pieces of one mesh (a parallel solver's files, each with its own "
+                   "numbering): each piece becomes a brick, compressed one at a time, the points repeated at "
+                   "the interfaces stored once. A .pvtu file or one file of an Exodus decomposition "
+                   "(name.e.N.i) is read as its pieces without this flag.")
+@click.option("--memory", default=None, metavar="LIMIT",
+              help="With pieces: split a piece into several bricks when compressing it whole would take more "
+                   "than LIMIT (e.g. 4G) in one process (an estimate of a few hundred bytes per tet).")
+@click.option("--workers", type=click.IntRange(min=1), default=None, metavar="N",
+              help="With pieces: compress them as tasks of a local Dask cluster of N worker processes; the "
+                   "file is the same bytes as without. Needs pip install 'gatun_py[dask]'.")
+@click.option("--scheduler", default=None, metavar="tcp://HOST:PORT",
+              help="With pieces: compress them on a running Dask cluster, whose workers read their own "
+                   "pieces (the paths must be readable there, e.g. a shared folder).")
 @force_option
 @quiet_option
-def compress(input, output, n_levels, mesh_only, w_density, w_geometry, w_sample, n_bricks, jobs, dependencies, scalar,
-             q_file, q_var, cell_to_point, time_step, drop_cell_data, force, quiet):
+def compress(inputs, output, n_levels, mesh_only, w_density, w_geometry, w_sample, n_bricks, jobs, dependencies, scalar,
+             q_file, q_var, cell_to_point, time_step, drop_cell_data, pieces, memory, workers, scheduler, force, quiet):
     """Compress INPUT (any readable mesh or PLOT3D grid) losslessly into a .tetc file.
 
     Connectivity is cut-border coded; coordinates (float32 or float64) and every point array, in its
@@ -110,7 +126,29 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, w_sample
     With --bricks K, each brick is decimated and coded on its own (on --jobs processes), its
     vertices shared with other bricks locked so simplified bricks still meet. Without bricks,
     --jobs threads code the levels (level 0 while the decimation runs); the file is the same.
+
+    Pieces (--pieces, a .pvtu file, an Exodus decomposition) are never held whole: each is read,
+    decimated and coded on its own (on --jobs processes, or Dask --workers/--scheduler), so
+    memory is that of the largest piece plus the pieces' boundaries.
     """
+    if len(inputs) > 1 and not pieces:
+        raise click.UsageError("several INPUTs are the pieces of one mesh: say so with --pieces")
+    if pieces or is_partitioned(inputs[0]):
+        if n_bricks != 1 or dependencies:
+            raise click.UsageError("--bricks and --dependencies do not apply to pieces (each piece is a brick)")
+        if workers is not None and scheduler is not None:
+            raise click.UsageError("give either --workers (a local cluster) or --scheduler (a running one), not both")
+        with progress_reporter("compressing pieces", quiet, min_total=1) as progress:
+            gatun_py.compress_pieces(list(inputs), output, levels=n_levels, mesh_only=mesh_only, force=force,
+                                     w_density=w_density, w_geometry=w_geometry, w_sample=w_sample, memory=memory,
+                                     jobs=jobs, workers=workers, scheduler=scheduler, drop_cell_data=drop_cell_data,
+                                     read_options=dict(scalar=scalar, cell_to_point=cell_to_point,
+                                                       time_step=time_step),
+                                     progress=progress, log=logger(quiet))
+        return
+    if memory is not None or workers is not None or scheduler is not None:
+        raise click.UsageError("--memory, --workers and --scheduler apply to pieces (--pieces, .pvtu, name.e.N.i)")
+    input = inputs[0]
     with progress_reporter("decimating", quiet, min_total=1) as progress:
         gatun_py.compress(input, output, levels=n_levels, mesh_only=mesh_only, force=force, w_density=w_density,
                           w_geometry=w_geometry, w_sample=w_sample, progress=progress, log=logger(quiet),
@@ -126,14 +164,16 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, w_sample
 @click.option("--ratio", default=None, type=RATIO,
               help="Simplify to this ratio (merged / all vertices, 0..1) with the stored merge forest, "
                    "starting from the most simplified stored level that is still finer.")
+@click.option("--piece", type=click.IntRange(min=0), default=None, metavar="K",
+              help="A file compressed from pieces: decode piece K alone (its bricks, at --level).")
 @selective_options
 @camera_options("With --selective", size_help="the image size the cut is chosen for.")
 @transfer_function_options("With --selective")
 @jobs_option
 @force_option
 @quiet_option
-def decompress(input, output, level, ratio, selective, tets, size, tf_spec, azimuth, elevation, zoom, scalar_range,
-               jobs, force, quiet):
+def decompress(input, output, level, ratio, piece, selective, tets, size, tf_spec, azimuth, elevation, zoom,
+               scalar_range, jobs, force, quiet):
     """Decompress a .tetc file into any mesh format meshio writes that holds tets.
 
     With --jobs 2 or more (default: all cores) the connectivity decodes on a thread of its own,
@@ -148,7 +188,9 @@ def decompress(input, output, level, ratio, selective, tets, size, tf_spec, azim
         raise click.UsageError("--tets needs --selective")
     if selective and level is not None:
         raise click.UsageError("--selective takes --ratio or --tets, not --level")
+    if piece is not None and (selective or ratio is not None):
+        raise click.UsageError("--piece decodes a stored level: not with --ratio or --selective")
     mesh = gatun_py.decompress(input, output, ratio=ratio, level=level, force=force, jobs=jobs, selective=selective,
                                tets=tets, size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom,
-                               scalar_range=scalar_range, log=logger(quiet))
+                               scalar_range=scalar_range, log=logger(quiet), piece=piece)
     status(f"wrote {output}: {mesh.n_points} points, {mesh.n_tets} tets", quiet)

@@ -480,17 +480,18 @@ class _Runner:
     def _dask(self, fn, args, order):
         from .distributed import ClusterError, _distributed
         dd = _distributed()
-        futs = [self.client.submit(fn, *args[i], pure=False, retries=2, key=f"tetc-{fn.__name__}-{i}-{os.getpid()}-{id(self)}")
+        futs = [self.client.submit(fn, *args[i], pure=False, key=f"tetc-{fn.__name__}-{i}-{os.getpid()}-{id(self)}")
                 for i in order]
         index = {f.key: i for f, i in zip(futs, order)}
         try:
-            for fut in dd.as_completed(futs):
-                if fut.status == "error":
-                    exc = fut.exception()
-                    if isinstance(exc, TetcError):
-                        raise exc
-                    raise ClusterError(f"piece {index[fut.key]} failed on the cluster: {exc}")
-                yield index[fut.key], fut.result()
+            for fut in futs:  # in submission order (largest first); the spool writes them in piece order
+                try:
+                    result = fut.result()
+                except (TetcError, dd.KilledWorker, OSError, TimeoutError):
+                    raise
+                except Exception as e:  # anything else a task raised: name the piece
+                    raise ClusterError(f"piece {index[fut.key]} failed on the cluster: {type(e).__name__}: {e}") from None
+                yield index[fut.key], result
                 fut.release()
         except dd.KilledWorker as e:
             raise ClusterError(f"compressing failed: workers kept dying ({e})") from None

@@ -174,6 +174,12 @@ def test_other_arrays_and_nonconforming_interfaces_are_refused(tmp_path):
     moved = TetMesh(p.points, None, p.tets, "density", point_data={**p.point_data, "density": dens})
     write_pvtu([pieces[0], moved, pieces[2]], tmp_path / "nc.pvtu")
     assert_error(run("compress", tmp_path / "nc.pvtu", "-o", tmp_path / "n.tetc"), "do not conform")
+    # one interface point moved by one float32 step in one piece: a near miss, not two points
+    pts = p.points.copy()
+    pts[shared[0]] = np.nextafter(pts[shared[0]], np.float32(np.inf))
+    bumped = TetMesh(pts, None, p.tets, "density", point_data=p.point_data)
+    write_pvtu([pieces[0], bumped, pieces[2]], tmp_path / "ulp.pvtu")
+    assert_error(run("compress", tmp_path / "ulp.pvtu", "-o", tmp_path / "u.tetc"), "do not conform", "last bits")
     with pytest.raises(MeshError, match="overlap"):
         interface_table([boundary_part(x) for x in [pieces[0], pieces[0], pieces[1]]])
     assert not list(tmp_path.glob("*.tetc")) and not list(tmp_path.glob(".*"))

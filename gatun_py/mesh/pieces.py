@@ -31,7 +31,7 @@ from .validate import MeshReport
 
 __all__ = ["PVTU_SUFFIX", "BoundaryPart", "InterfaceTable", "boundary_part", "exodus_pieces", "interface_table",
            "is_partitioned", "piece_paths", "pvtu_pieces", "pvtu_scalar", "read_piece", "refine_midpoints",
-           "write_pvtu"]
+           "write_pvtu", "write_pvtu_index"]
 
 PVTU_SUFFIX = ".pvtu"
 MAX_PIECES = 4096  # the bricked format's limit (a piece is one brick or more)
@@ -287,8 +287,38 @@ def interface_table(parts: list[BoundaryPart], names: list[str] | None = None) -
         o = np.argsort(loc)
         shared.append((part.vertices[loc[o]], ids[o]))
     n_shared = int(multi.sum())
+    _near_misses(parts, own, local, order, occ, names)
     bf, step = _outer_faces(parts, shared, n_shared, names)
     return InterfaceTable(n_shared, shared, bf, step, int(occ.sum()))
+
+
+# Boundary points of two parts closer than this share of the boundary's extent, yet not the same
+# bits, are an interface that does not match (rounded differently by two ranks, say): no mesh has
+# two distinct surface points that close.
+NEAR_MISS = 1e-6
+
+
+def _near_misses(parts, own, local, order, occ, names) -> None:
+    """Refuse parts whose unmatched boundary points nearly coincide with another part's."""
+    from scipy.spatial import cKDTree  # scipy comes with scikit-image
+
+    rows = order[~occ]
+    if rows.size < 2:
+        return
+    p_own = own[~occ]
+    pts = np.concatenate([p.points32 for p in parts]).astype(np.float64)
+    offsets = np.cumsum([0] + [p.vertices.size for p in parts])
+    xyz = pts[offsets[p_own] + local[rows]]
+    diag = float(np.linalg.norm(xyz.max(axis=0) - xyz.min(axis=0)))
+    if diag == 0:
+        return
+    pairs = cKDTree(xyz).query_pairs(NEAR_MISS * diag, output_type="ndarray")
+    pairs = pairs[p_own[pairs[:, 0]] != p_own[pairs[:, 1]]]
+    if pairs.size:
+        i, j = pairs[0]
+        at = "(" + ", ".join(f"{float(x):.9g}" for x in xyz[i]) + ")"
+        raise MeshError(f"the pieces do not conform: {names[int(p_own[i])]} and {names[int(p_own[j])]} have "
+                        f"interface points at {at} that differ in their last bits ({len(pairs)} such pairs)")
 
 
 def _where(parts, own, local, order, pos) -> str:
@@ -375,23 +405,30 @@ def write_pvtu(pieces: list[TetMesh], path, *, force: bool = False) -> list[Path
     out = [path.with_name(f"{path.stem}_{i}.vtu") for i in range(len(pieces))]
     for p, m in zip(out, pieces):
         write_mesh(m, p, force=force)
-    m0 = pieces[0]
+    write_pvtu_index(path, out, pieces[0], force=force)
+    return out
+
+
+def write_pvtu_index(path, pieces: list, like: TetMesh, *, force: bool = False) -> None:
+    """Write the ``.pvtu`` file naming ``pieces`` (``.vtu`` files beside it, already written),
+    whose point arrays are those of ``like``."""
+    from .._atomic import atomic_path
+
+    path = Path(path)
     arrays = "".join(
         f'      <PDataArray type="{_vtk_type(a.dtype)}" Name="{n}" NumberOfComponents="{1 if a.ndim == 1 else a.shape[1]}"/>\n'
-        for n, a in m0.user_point_data.items())
-    scalars = f' Scalars="{m0.scalar_name}"' if m0.scalar_name in m0.user_point_data else ""
+        for n, a in like.user_point_data.items())
+    scalars = f' Scalars="{like.scalar_name}"' if like.scalar_name in like.user_point_data else ""
     text = ('<?xml version="1.0"?>\n'
             '<VTKFile type="PUnstructuredGrid" version="0.1" byte_order="LittleEndian">\n'
             '  <PUnstructuredGrid GhostLevel="0">\n'
             f'    <PPointData{scalars}>\n{arrays}    </PPointData>\n'
-            f'    <PPoints>\n      <PDataArray type="{_vtk_type(m0.points.dtype)}" NumberOfComponents="3"/>\n'
+            f'    <PPoints>\n      <PDataArray type="{_vtk_type(like.points.dtype)}" NumberOfComponents="3"/>\n'
             '    </PPoints>\n'
-            + "".join(f'    <Piece Source="{p.name}"/>\n' for p in out)
+            + "".join(f'    <Piece Source="{Path(p).name}"/>\n' for p in pieces)
             + '  </PUnstructuredGrid>\n</VTKFile>\n')
-    from .._atomic import atomic_path
     with atomic_path(path, force=force) as tmp:
         tmp.write_text(text)
-    return out
 
 
 def refine_midpoints(mesh: TetMesh) -> TetMesh:

@@ -216,3 +216,26 @@ def test_exodus_decomposition(tmp_path):
     os.unlink(tmp_path / "run.e.3.2")
     with pytest.raises(ReadError, match="missing"):
         exodus_pieces(tmp_path / "run.e.3.0")
+
+
+# -- everything else works from the pieced file --------------------------------------------------------
+
+def test_render_budget_and_isosurface_of_a_pieced_file(pvtu, tmp_path):
+    from gatun_py.isosurface import isosurface
+    from test_isosurface_bricks import same_surface
+
+    path, mesh = pvtu
+    pieced = gatun_py.compress(path, tmp_path / "p.tetc", mesh_only=True, jobs=1)
+    plain = gatun_py.compress(mesh, tmp_path / "w.tetc", mesh_only=True)
+    assert pieced.n_bricks == 5
+    for mode in ("volume", "face"):
+        a = gatun_py.render(plain, size=64, azimuth=30, elevation=20, mode=mode)
+        b = gatun_py.render(pieced, size=64, azimuth=30, elevation=20, mode=mode)
+        assert np.abs(a.rgb.astype(int) - b.rgb.astype(int)).max() <= 1
+    c = gatun_py.render(pieced, size=64, azimuth=30, elevation=20, budget=100.0)
+    assert c.stats["bricks"] == 5
+    assert np.abs(c.rgb.astype(int) - gatun_py.render(plain, size=64, azimuth=30, elevation=20).rgb.astype(int)).max() <= 1
+    lo, hi = mesh.scalar_range
+    for v in (lo + 0.3 * (hi - lo), lo + 0.6 * (hi - lo)):
+        s = isosurface(pieced.reader, values=v, jobs=2)
+        assert s.n_triangles > 0 and same_surface(s, isosurface(mesh, values=v))

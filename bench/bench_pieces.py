@@ -16,12 +16,14 @@ not the whole mesh; ``--workers 2`` byte-identical and faster; isosurface memory
 
     python bench/bench_pieces.py              # 0.8 M (the flange in 16 pieces) and 6.5 M (refined)
     python bench/bench_pieces.py --quick      # 0.8 M only
+    python bench/bench_pieces.py --reuse      # sizes measured before are taken from bench/out/pieces/
     python bench/bench_pieces.py --big        # adds the 62 M-tet run (flange-10m refined; ~1 h,
                                               # 8 GB; needs the whole quiet machine)
 """
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -106,16 +108,23 @@ def measure(base: str, refine: int, work: Path, *, workers: bool = True, one_pie
 
 
 def main(argv: list[str]) -> int:
-    quick, big = "--quick" in argv, "--big" in argv
+    quick, big, reuse = "--quick" in argv, "--big" in argv, "--reuse" in argv
     sizes = SIZES[:1] if quick else SIZES
     load = os.getloadavg()[0]
     results = []
+    (HERE / "out").mkdir(exist_ok=True)
     with tempfile.TemporaryDirectory(dir=HERE / "out") as tmp:
         for base, refine in sizes + ([BIG] if big else []):
+            cache = HERE / "out" / "pieces" / f"result-{base}-r{refine}.json"
+            if reuse and cache.exists():  # a size measured by an earlier run (--reuse only)
+                results.append(json.loads(cache.read_text()))
+                continue
             work = Path(tmp) / f"{base}-{refine}"
             work.mkdir()
             t0 = time.perf_counter()
             results.append(measure(base, refine, work, one_piece=(base, refine) != BIG, workers=True))
+            results[-1]["load"] = os.getloadavg()[0]
+            cache.write_text(json.dumps(results[-1]))
             print(results[-1], f"({time.perf_counter() - t0:.0f} s)", flush=True)
     rows = []
     for x in results:

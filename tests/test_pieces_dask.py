@@ -9,7 +9,8 @@ import time
 
 import pytest
 
-distributed = pytest.importorskip("distributed", reason="dask[distributed] is not installed (pip install 'gatun_py[dask]')")
+distributed = pytest.importorskip("distributed",
+                                  reason="dask[distributed] is not installed (pip install 'gatun_py[dask]')")
 
 from cli_util import run  # noqa: E402
 from gatun_py.mesh.pieces import write_pvtu  # noqa: E402

@@ -346,7 +346,8 @@ def _outer_faces(parts, shared, n_shared: int, names) -> tuple[int, float]:
         if (cnt > 2).any():
             g = int(np.flatnonzero(cnt > 2)[0])
             parts_of = np.concatenate(face_part)[inv.ravel() == g]
-            raise MeshError(f"the pieces overlap: a face is on the boundary of {', '.join(names[int(p)] for p in parts_of)}")
+            raise MeshError("the pieces overlap: a face is on the boundary of "
+                            + ", ".join(names[int(p)] for p in parts_of))
         interior = (cnt == 2)[inv.ravel()]
         b = np.cumsum([0] + [len(x) for x in face_keys])
         interior_of = [interior[b[k]:b[k + 1]] for k in range(len(parts))]
@@ -415,9 +416,9 @@ def write_pvtu_index(path, pieces: list, like: TetMesh, *, force: bool = False) 
     from .._atomic import atomic_path
 
     path = Path(path)
-    arrays = "".join(
-        f'      <PDataArray type="{_vtk_type(a.dtype)}" Name="{n}" NumberOfComponents="{1 if a.ndim == 1 else a.shape[1]}"/>\n'
-        for n, a in like.user_point_data.items())
+    arrays = "".join(f'      <PDataArray type="{_vtk_type(a.dtype)}" Name="{n}" '
+                     f'NumberOfComponents="{1 if a.ndim == 1 else a.shape[1]}"/>\n'
+                     for n, a in like.user_point_data.items())
     scalars = f' Scalars="{like.scalar_name}"' if like.scalar_name in like.user_point_data else ""
     text = ('<?xml version="1.0"?>\n'
             '<VTKFile type="PUnstructuredGrid" version="0.1" byte_order="LittleEndian">\n'

@@ -211,7 +211,8 @@ def whole_meta(summaries: list[PieceSummary], table, source: str) -> dict:
             e["component_ranges"] = [_join([s.ranges[j][1][c] for s in summaries]) for c in range(k)]
         arrays.append(e)
     n_points = sum(u[0] for s in summaries for u in s.units) - table.occurrences + table.n_shared
-    srange = [float(np.min([s.scalar_range[0] for s in summaries])), float(np.max([s.scalar_range[1] for s in summaries]))]
+    srange = [float(np.min([s.scalar_range[0] for s in summaries])),
+              float(np.max([s.scalar_range[1] for s in summaries]))]
     return {"format": FORMAT_NAME, "points": int(n_points), "tets": int(sum(s.n_tets for s in summaries)),
             "boundary_faces": int(table.boundary_faces), "bbox": [lo.tolist(), hi.tolist()], "scalar": first.scalar,
             "points_dtype": first.points_dtype, "arrays": arrays, "scalar_range": srange,
@@ -350,7 +351,8 @@ def compress_pieces(inputs, output, *, levels=None, mesh_only: bool = False, w_d
     jobs = min(check_jobs(jobs), len(paths))
     unit_tets = None
     if memory is not None:
-        unit_tets = max(MIN_BRICK_TETS, parse_memory(memory) // (BYTES_PER_TET_MESH_ONLY if mesh_only else BYTES_PER_TET))
+        per_tet = BYTES_PER_TET_MESH_ONLY if mesh_only else BYTES_PER_TET
+        unit_tets = max(MIN_BRICK_TETS, parse_memory(memory) // per_tet)
     options = dict(mesh_only=bool(mesh_only), levels=levels, w_density=float(w_density),
                    w_geometry=float(w_geometry), w_sample=float(w_sample))
     ropts = dict(read_options or {})
@@ -364,7 +366,8 @@ def compress_pieces(inputs, output, *, levels=None, mesh_only: bool = False, w_d
             for note in s.notes:
                 log(f"note: {s.name}: {note}")
         parts = [part for s in summaries for part in s.parts]
-        names = [s.name if len(s.parts) == 1 else f"{s.name} (brick {j})" for s in summaries for j in range(len(s.parts))]
+        names = [s.name if len(s.parts) == 1 else f"{s.name} (brick {j})"
+                 for s in summaries for j in range(len(s.parts))]
         if len(parts) < 2:
             raise OptionError("a partitioned mesh of one piece: compress the file itself")
         if len(parts) > MAX_BRICKS:
@@ -375,7 +378,8 @@ def compress_pieces(inputs, output, *, levels=None, mesh_only: bool = False, w_d
         meta["cut_points"] = table.n_shared
         meta[PIECES_KEY] = [{"source": s.name, "first_brick": int(firsts[i]), "bricks": len(s.parts)}
                             for i, s in enumerate(summaries)]
-        log(f"{len(paths)} pieces, {meta['tets']} tets in {len(parts)} bricks; {table.n_shared} points shared between them "
+        log(f"{len(paths)} pieces, {meta['tets']} tets in {len(parts)} bricks; {table.n_shared} points shared "
+            "between them "
             f"({100.0 * table.n_shared / max(meta['points'], 1):.2f} % of the {meta['points']} points)")
         del parts
         for s in summaries:
@@ -490,7 +494,8 @@ class _Runner:
                 except (TetcError, dd.KilledWorker, OSError, TimeoutError):
                     raise
                 except Exception as e:  # anything else a task raised: name the piece
-                    raise ClusterError(f"piece {index[fut.key]} failed on the cluster: {type(e).__name__}: {e}") from None
+                    raise ClusterError(f"piece {index[fut.key]} failed on the cluster: "
+                                       f"{type(e).__name__}: {e}") from None
                 yield index[fut.key], result
                 fut.release()
         except dd.KilledWorker as e:

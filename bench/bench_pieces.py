@@ -17,7 +17,7 @@ not the whole mesh; ``--workers 2`` byte-identical and faster; isosurface memory
     python bench/bench_pieces.py              # 0.8 M (the flange in 16 pieces) and 6.5 M (refined)
     python bench/bench_pieces.py --quick      # 0.8 M only
     python bench/bench_pieces.py --reuse      # sizes measured before are taken from bench/out/pieces/
-    python bench/bench_pieces.py --big        # adds the 62 M-tet run (flange-10m refined; ~1 h,
+    python bench/bench_pieces.py --big        # adds the ~75 M-tet run (flange-12m refined; ~1 h,
                                               # 8 GB; needs the whole quiet machine)
 """
 
@@ -38,7 +38,7 @@ from common import code_state, run_tetc, table, write_section  # noqa: E402
 from pieces_data import make  # noqa: E402
 
 SIZES = [("flange-1m", 0), ("flange-1m", 1)]  # 0.81 M and 6.5 M tets
-BIG = ("flange-10m", 1)  # 62 M tets
+BIG = ("flange-12m", 1)  # about 75 M tets (the gmsh flange is built first: minutes, several GB)
 
 
 _VTK_SCRIPT = r"""
@@ -89,6 +89,14 @@ def measure(base: str, refine: int, work: Path, *, workers: bool = True, one_pie
     tets = int(r.meta["tets"])
     out.update(tets=tets, bytes=pieced.stat().st_size, secs=secs, peak=peak, bricks=r.n_bricks,
                largest=max(int(b["tets"]) for b in r.meta["bricks"]))
+    # --memory a quarter of what the largest piece needs: every piece split into ~4 bricks
+    limit_mb = max(64, out["largest"] * 400 // 4 >> 20)
+    m = work / "memory.tetc"
+    s0, p0 = _tetc(["compress", pvtu, "-o", m, "--jobs", "1", "--memory", f"{limit_mb}M", "-q", "--force"], work,
+                   "memory", None)
+    out.update(memory_limit=limit_mb, memory_secs=s0, memory_peak=p0, memory_bricks=TetcReader(m).n_bricks,
+               memory_bytes=m.stat().st_size)
+    m.unlink()
     if one_piece:
         single = work / "whole.tetc"
         s1, p1 = _tetc(["compress", whole, "-o", single, "--jobs", "1", "-q", "--force"], work, "whole", None)
@@ -132,6 +140,9 @@ def main(argv: list[str]) -> int:
         rows.append([x["name"], x["tets"], x["bricks"], x["largest"], x["bytes"], 8.0 * x["bytes"] / x["tets"],
                      f"{100.0 * (x['bytes'] / wb - 1):+.2f} %" if wb else "-", x["secs"], x["tets"] / x["secs"],
                      x["peak"], x.get("whole_secs", "-"), x.get("whole_peak", "-")])
+    split = [[x["name"], x["bricks"], x["peak"], f"{x['memory_limit']}M", x["memory_bricks"], x["memory_peak"],
+              x["memory_secs"], f"{100.0 * (x['memory_bytes'] / x['bytes'] - 1):+.2f} %"]
+             for x in results if "memory_peak" in x]
     cluster = [[x["name"], x["secs"], x["workers_secs"], x["secs"] / x["workers_secs"], x["workers_same"]]
                for x in results if "workers_secs" in x]
     rest = [[x["name"], x["render_secs"], x["render_peak"], x["iso_secs"], x["iso_peak"], x["vtk_secs"], x["vtk_peak"],
@@ -146,6 +157,11 @@ GNU time, levels stored (`--jobs 1`); "one piece" is `tetc compress whole.vtu` o
 
 {table(["mesh", "tets", "bricks", "largest brick", "bytes", "bits/tet", "vs one piece", "s", "tets/s",
         "peak MB", "one piece s", "one piece peak MB"], rows)}
+
+`--memory LIMIT` (a quarter of the estimated need of the largest piece, 400 B/tet) splits every
+piece into bricks; peak MB of the one process against the limit:
+
+{table(["mesh", "bricks", "peak MB", "--memory", "bricks", "peak MB", "s", "bytes vs pieces"], split)}
 
 `--workers 2` (a local Dask cluster, two worker processes) against one process:
 

@@ -100,12 +100,13 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
                    "--cell-to-point a mesh with cell data is refused).")
 @click.option("--pieces", is_flag=True,
               help="The INPUTs are the pieces of one mesh (a parallel solver's files, each with its own "
-                   "numbering): each piece becomes a brick, compressed one at a time, the points repeated at "
-                   "the interfaces stored once. A .pvtu file or one file of an Exodus decomposition "
+                   "numbering): each piece becomes a brick, compressed on its own (--jobs pieces at a time), "
+                   "the points repeated at the interfaces stored once. A .pvtu file or one file of an Exodus decomposition "
                    "(name.e.N.i) is read as its pieces without this flag.")
 @click.option("--memory", default=None, metavar="LIMIT",
-              help="With pieces: split a piece into several bricks when compressing it whole would take more "
-                   "than LIMIT (e.g. 4G) in one process (an estimate of a few hundred bytes per tet).")
+              help="Split every piece (or one large INPUT) into bricks small enough that compressing one takes "
+                   "at most about LIMIT (e.g. 4G) in a process (an estimate of a few hundred bytes per tet), "
+                   "compressed one after another; the input itself is still read whole.")
 @click.option("--workers", type=click.IntRange(min=1), default=None, metavar="N",
               help="With pieces: compress them as tasks of a local Dask cluster of N worker processes; the "
                    "file is the same bytes as without. Needs pip install 'gatun_py[dask]'.")
@@ -133,7 +134,7 @@ def compress(inputs, output, n_levels, mesh_only, w_density, w_geometry, w_sampl
     """
     if len(inputs) > 1 and not pieces:
         raise click.UsageError("several INPUTs are the pieces of one mesh: say so with --pieces")
-    if pieces or is_partitioned(inputs[0]):
+    if pieces or is_partitioned(inputs[0]) or memory is not None:
         if n_bricks != 1 or dependencies:
             raise click.UsageError("--bricks and --dependencies do not apply to pieces (each piece is a brick)")
         if workers is not None and scheduler is not None:
@@ -146,8 +147,8 @@ def compress(inputs, output, n_levels, mesh_only, w_density, w_geometry, w_sampl
                                                        time_step=time_step),
                                      progress=progress, log=logger(quiet))
         return
-    if memory is not None or workers is not None or scheduler is not None:
-        raise click.UsageError("--memory, --workers and --scheduler apply to pieces (--pieces, .pvtu, name.e.N.i)")
+    if workers is not None or scheduler is not None:
+        raise click.UsageError("--workers and --scheduler apply to pieces (--pieces, .pvtu, name.e.N.i)")
     input = inputs[0]
     with progress_reporter("decimating", quiet, min_total=1) as progress:
         gatun_py.compress(input, output, levels=n_levels, mesh_only=mesh_only, force=force, w_density=w_density,

@@ -109,6 +109,12 @@ def test_memory_limit_splits_pieces_and_piece_k_decodes_alone(pvtu, tmp_path, mo
     r = TetcReader(tmp_path / "s.tetc")
     assert stats["bricks"] > 5 and r.n_bricks == stats["bricks"]
     assert_same_mesh(decode_bricked(r), mesh)
+    # one plain mesh file under a memory limit: split into bricks before any forest is built
+    write_pvtu([mesh], tmp_path / "one.pvtu")
+    stats = compress_pieces(tmp_path / "one_0.vtu", tmp_path / "one.tetc", mesh_only=True, memory="64M",
+                            read_options={"scalar": "density"})
+    assert stats["bricks"] >= 10
+    assert_same_mesh(decode_bricked(TetcReader(tmp_path / "one.tetc")), mesh)
     pieces = read_piece_meshes(path)
     for k in (0, 3):
         assert_same_mesh(piece_mesh(r, k), pieces[k])
@@ -189,7 +195,9 @@ def test_cli_usage(pvtu, tmp_path):
     files = [str(p) for p in piece_paths(path)]
     assert_usage_error(run("compress", *files[:2], "-o", tmp_path / "x.tetc"), "--pieces")
     assert_usage_error(run("compress", path, "--bricks", 3, "-o", tmp_path / "x.tetc"), "--bricks")
-    assert_usage_error(run("compress", files[0], "--memory", "1G", "-o", tmp_path / "x.tetc"), "--memory")
+    assert_usage_error(run("compress", files[0], "--workers", "2", "-o", tmp_path / "x.tetc"), "--workers")
+    assert_error(run("compress", files[0], "--memory", "1G", "--scalar", "density", "-o", tmp_path / "x.tetc"),
+                 "fits the memory limit")
     assert_error(run("compress", path, "--memory", "lots", "-o", tmp_path / "x.tetc"), "memory limit")
     res = run("compress", "--pieces", *files, "--mesh-only", "--scalar", "density", "-o", tmp_path / "x.tetc")
     assert res.exit_code == 0, res.output

@@ -102,9 +102,10 @@ def is_partitioned(path) -> bool:
     return p.suffix.lower() == PVTU_SUFFIX or _EXODUS_PIECE.match(p.name) is not None
 
 
-def piece_paths(inputs) -> list[Path]:
+def piece_paths(inputs, *, single: bool = False) -> list[Path]:
     """The pieces of ``inputs``: a ``.pvtu`` file's pieces, an Exodus decomposition's files (any
-    one of them named), or several mesh files, each one piece.
+    one of them named), or several mesh files, each one piece; with ``single``, also one plain
+    mesh file (a piece on its own).
 
     Examples
     --------
@@ -121,6 +122,8 @@ def piece_paths(inputs) -> list[Path]:
         ex = exodus_pieces(p)
         if ex is not None:
             return ex
+        if single:
+            return _existing(p, [p])
         raise OptionError(f"{p} is one mesh, not pieces of one: give a .pvtu file, an Exodus decomposition "
                           "(name.e.N.i) or several files")
     nested = [p for p in inputs if is_partitioned(p)]

@@ -324,7 +324,8 @@ def compress_pieces(inputs, output, *, levels=None, mesh_only: bool = False, w_d
     ----------
     inputs : path-like or list of path-like
         A ``.pvtu`` file, one file of an Exodus decomposition (``name.e.N.i``), or several mesh
-        files, each one piece (:func:`~gatun_py.mesh.pieces.piece_paths`).
+        files, each one piece (:func:`~gatun_py.mesh.pieces.piece_paths`); with ``memory``, also
+        one plain mesh file, split into bricks before any forest is built.
     output : path-like
         The ``.tetc`` file, written atomically.
     memory : int or str, optional
@@ -342,7 +343,7 @@ def compress_pieces(inputs, output, *, levels=None, mesh_only: bool = False, w_d
         ``pieces``, ``bricks``, ``points``, ``tets``, ``shared_points``, ``bytes``.
     """
     log = log or (lambda _m: None)
-    paths = piece_paths(inputs)
+    paths = piece_paths(inputs, single=memory is not None)
     output = Path(output)
     if any(os.path.exists(output) and os.path.samefile(p, output) for p in paths):
         raise OptionError(f"the output {output} is one of the pieces")
@@ -369,7 +370,8 @@ def compress_pieces(inputs, output, *, levels=None, mesh_only: bool = False, w_d
         names = [s.name if len(s.parts) == 1 else f"{s.name} (brick {j})"
                  for s in summaries for j in range(len(s.parts))]
         if len(parts) < 2:
-            raise OptionError("a partitioned mesh of one piece: compress the file itself")
+            raise OptionError("one piece, which fits the memory limit in one brick: compress it as a plain file"
+                              if memory is not None else "a partitioned mesh of one piece: compress the file itself")
         if len(parts) > MAX_BRICKS:
             raise OptionError(f"{len(parts)} bricks: at most {MAX_BRICKS} (a larger memory limit makes fewer)")
         table = interface_table(parts, names)

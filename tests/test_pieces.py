@@ -248,3 +248,22 @@ def test_render_budget_and_isosurface_of_a_pieced_file(pvtu, tmp_path):
     for v in (lo + 0.3 * (hi - lo), lo + 0.6 * (hi - lo)):
         s = isosurface(pieced.reader, values=v, jobs=2)
         assert s.n_triangles > 0 and same_surface(s, isosurface(mesh, values=v))
+
+
+def test_close_points_an_edge_apart_are_not_a_near_miss():
+    """Two pieces' boundary points far closer than the mesh's extent but as far apart as their own
+    edges (a fine boundary layer) are distinct points, not an interface rounded otherwise."""
+    unit = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float64)
+    tet = np.array([[0, 1, 2, 3]], np.int32)
+
+    def piece(origin, scale):
+        pts = origin + scale * unit
+        return TetMesh(pts, None, tet, point_data={"density": np.zeros(4, np.float32)})
+
+    big, a = piece(np.array([100.0, 0, 0]), 10.0), piece(np.zeros(3), 1e-7)
+    near = piece(np.array([0, 0, 2e-7]), 1e-7)  # 1e-7 above a: one edge away
+    table = interface_table([boundary_part(m) for m in (big, a, near)])
+    assert table.n_shared == 0 and table.boundary_faces == 12
+    rounded = piece(np.array([0, 0, 1e-7 + 1e-13]), 1e-7)  # a's apex, rounded otherwise
+    with pytest.raises(MeshError, match="last bits"):
+        interface_table([boundary_part(m) for m in (big, a, rounded)])

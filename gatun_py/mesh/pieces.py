@@ -295,10 +295,23 @@ def interface_table(parts: list[BoundaryPart], names: list[str] | None = None) -
     return InterfaceTable(n_shared, shared, bf, step, int(occ.sum()))
 
 
-# Boundary points of two parts closer than this share of the boundary's extent, yet not the same
-# bits, are an interface that does not match (rounded differently by two ranks, say): no mesh has
-# two distinct surface points that close.
+# Boundary points of two parts closer than this share of the boundary's extent and of their own
+# shortest boundary edges, yet not the same bits, are an interface that does not match (rounded
+# differently by two ranks, say): two distinct surface points of a mesh are an edge apart.
 NEAR_MISS = 1e-6
+NEAR_MISS_EDGE = 1e-3
+
+
+def _shortest_edges(part: BoundaryPart) -> np.ndarray:
+    """Every boundary vertex's shortest boundary edge."""
+    p = part.points32.astype(np.float64)
+    out = np.full(part.vertices.size, np.inf)
+    f = part.faces
+    for a, b in ((0, 1), (1, 2), (2, 0)):
+        ln = np.linalg.norm(p[f[:, a]] - p[f[:, b]], axis=1)
+        np.minimum.at(out, f[:, a], ln)
+        np.minimum.at(out, f[:, b], ln)
+    return out
 
 
 def _near_misses(parts, own, local, order, occ, names) -> None:
@@ -317,6 +330,10 @@ def _near_misses(parts, own, local, order, occ, names) -> None:
         return
     pairs = cKDTree(xyz).query_pairs(NEAR_MISS * diag, output_type="ndarray")
     pairs = pairs[p_own[pairs[:, 0]] != p_own[pairs[:, 1]]]
+    if pairs.size:  # only points much closer than their own edges are the same point rounded otherwise
+        edge = np.concatenate([_shortest_edges(p) for p in parts])[offsets[p_own] + local[rows]]
+        dist = np.linalg.norm(xyz[pairs[:, 0]] - xyz[pairs[:, 1]], axis=1)
+        pairs = pairs[dist < NEAR_MISS_EDGE * np.minimum(edge[pairs[:, 0]], edge[pairs[:, 1]])]
     if pairs.size:
         i, j = pairs[0]
         at = "(" + ", ".join(f"{float(x):.9g}" for x in xyz[i]) + ")"

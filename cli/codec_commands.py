@@ -6,6 +6,8 @@ import click
 
 import gatun_py
 
+from gatun_py.mesh.pieces import is_partitioned
+
 from .options import (RATIO, FiniteFloat, camera_options, check_step, echo_json, force_option, jobs_option, json_option, logger,
                       mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
                       selective_options, status, transfer_function_options)
@@ -74,7 +76,7 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
 
 
 @click.command()
-@click.argument("input", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("inputs", metavar="INPUT...", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @output_option("Output .tetc file.")
 @click.option("--times", default=None, metavar="T0,T1,...",
               help="A time series of several INPUT files: their times, comma-separated, increasing "
@@ -111,10 +113,26 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
                    "tetc info reports what it cost.")
 @click.option("--drop-cell-data", is_flag=True,
               help="Leave out the cell arrays (by default they are stored exactly, with the cells as given).")
+@click.option("--pieces", is_flag=True,
+              help="The INPUTs are the pieces of one mesh (a parallel solver's files, each with its own "
+                   "numbering), not time steps: each piece becomes a brick, compressed on its own (--jobs pieces "
+                   "at a time), the points repeated at the interfaces stored once. A .pvtu file or one file of an "
+                   "Exodus decomposition (name.e.N.i) is read as its pieces without this flag.")
+@click.option("--memory", default=None, metavar="LIMIT",
+              help="Split every piece (or one large INPUT) into bricks small enough that compressing one takes "
+                   "at most about LIMIT (e.g. 4G) in a process (an estimate of a few hundred bytes per tet), "
+                   "compressed one after another; the input itself is still read whole.")
+@click.option("--workers", type=click.IntRange(min=1), default=None, metavar="N",
+              help="With pieces: compress them as tasks of a local Dask cluster of N worker processes; the "
+                   "file is the same bytes as without. Needs dask[distributed] (pip install 'dask[distributed]').")
+@click.option("--scheduler", default=None, metavar="tcp://HOST:PORT",
+              help="With pieces: compress them on a running Dask cluster, whose workers read their own "
+                   "pieces (the paths must be readable there, e.g. a shared folder).")
 @force_option
 @quiet_option
-def compress(input, output, times, keyframe_interval, n_levels, mesh_only, w_density, w_geometry, w_sample, n_bricks, jobs,
-             dependencies, scalar, q_file, q_var, cell_to_point, time_step, keep_order, drop_cell_data, force, quiet):
+def compress(inputs, output, times, keyframe_interval, n_levels, mesh_only, w_density, w_geometry, w_sample, n_bricks,
+             jobs, dependencies, scalar, q_file, q_var, cell_to_point, time_step, keep_order, drop_cell_data, pieces,
+             memory, workers, scheduler, force, quiet):
     """Compress INPUT (any readable mesh or PLOT3D grid) losslessly into a .tetc file.
 
     Connectivity is cut-border coded; coordinates (float32 or float64) and every point array, in its
@@ -130,7 +148,29 @@ def compress(input, output, times, keyframe_interval, n_levels, mesh_only, w_den
     temporal collection or an Exodus file's steps. Every step must have the same points and tets;
     the mesh, forest and levels are stored once (built on step 0), each step's point arrays (and
     coordinates, when they move) coded from the steps before it. `tetc append` adds steps later.
+
+    Pieces (--pieces, a .pvtu file, an Exodus decomposition) are never held whole: each is read,
+    decimated and coded on its own (on --jobs processes, or Dask --workers/--scheduler), so
+    memory is that of the largest piece plus the pieces' boundaries.
     """
+    if pieces or is_partitioned(inputs[0]) or memory is not None:
+        if times is not None or keyframe_interval is not None:
+            raise click.UsageError("--times and --keyframe-interval are for a time series, not pieces")
+        if n_bricks != 1 or dependencies or keep_order:
+            raise click.UsageError("--bricks, --dependencies and --keep-order do not apply to pieces (each piece is a brick)")
+        if workers is not None and scheduler is not None:
+            raise click.UsageError("give either --workers (a local cluster) or --scheduler (a running one), not both")
+        with progress_reporter("compressing pieces", quiet, min_total=1) as progress:
+            gatun_py.compress_pieces(list(inputs), output, levels=n_levels, mesh_only=mesh_only, force=force,
+                                     w_density=w_density, w_geometry=w_geometry, w_sample=w_sample, memory=memory,
+                                     jobs=jobs, workers=workers, scheduler=scheduler, drop_cell_data=drop_cell_data,
+                                     read_options=dict(scalar=scalar, cell_to_point=cell_to_point,
+                                                       time_step=time_step),
+                                     progress=progress, log=logger(quiet))
+        return
+    if workers is not None or scheduler is not None:
+        raise click.UsageError("--workers and --scheduler apply to pieces (--pieces, .pvtu, name.e.N.i)")
+    input = inputs
     if times is not None:
         try:
             times = [float(t) for t in times.split(",")]
@@ -159,6 +199,8 @@ def compress(input, output, times, keyframe_interval, n_levels, mesh_only, w_den
                    "or .xdmf OUTPUT, every step].")
 @click.option("--time", "at_time", type=FiniteFloat(), default=None, metavar="T",
               help="A time series: write the step at time T.")
+@click.option("--piece", type=click.IntRange(min=0), default=None, metavar="K",
+              help="A file compressed from pieces: decode piece K alone (its bricks, at --level).")
 @selective_options
 @camera_options("With --selective", size_help="the image size the cut is chosen for.")
 @transfer_function_options("With --selective")
@@ -168,8 +210,8 @@ def compress(input, output, times, keyframe_interval, n_levels, mesh_only, w_den
 @jobs_option
 @force_option
 @quiet_option
-def decompress(input, output, level, ratio, step, at_time, selective, tets, size, tf_spec, azimuth, elevation, zoom,
-               scalar_range, as_tets, jobs, force, quiet):
+def decompress(input, output, level, ratio, step, at_time, piece, selective, tets, size, tf_spec, azimuth, elevation,
+               zoom, scalar_range, as_tets, jobs, force, quiet):
     """Decompress a .tetc file into any mesh format meshio writes that holds tets.
 
     The full mesh comes back as the cells it was compressed from (hexahedra, wedges, pyramids,
@@ -191,9 +233,12 @@ def decompress(input, output, level, ratio, step, at_time, selective, tets, size
         raise click.UsageError("--tets needs --selective")
     if selective and level is not None:
         raise click.UsageError("--selective takes --ratio or --tets, not --level")
+    if piece is not None and (selective or ratio is not None):
+        raise click.UsageError("--piece decodes a stored level: not with --ratio or --selective")
     mesh = gatun_py.decompress(input, output, ratio=ratio, level=level, force=force, jobs=jobs, selective=selective,
                                tets=tets, size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom,
-                               scalar_range=scalar_range, as_tets=as_tets, step=step, time=at_time, log=logger(quiet))
+                               scalar_range=scalar_range, as_tets=as_tets, step=step, time=at_time, piece=piece,
+                               log=logger(quiet))
     status(f"wrote {output}: {mesh.n_points} points, {mesh.n_tets} tets", quiet)
 
 

@@ -79,6 +79,7 @@ render = _Verb("render")
 isosurface = _Verb("isosurface", ".isosurface.extract")
 append = _Verb("append")
 render_steps = _Verb("render_steps")
+compress_pieces = _Verb("compress_pieces", ".pipeline.compress_pieces")
 
 # classes load with their module on first access
 _LAZY = {"TetcFile": "api", "Frame": "api", "Surface": "isosurface.extract", "TetMesh": "mesh", "TetBatch": "mesh", "read_mesh": "mesh",
@@ -91,7 +92,8 @@ __getattr__, __dir__, _ = attach(__name__, _LAZY)
 
 _register_meshio()
 
-__all__ = ["compress", "decompress", "convert", "info", "open", "render", "isosurface", "append", "render_steps", "TetcFile", "Frame",
+__all__ = ["compress", "decompress", "convert", "info", "open", "render", "isosurface", "append", "render_steps",
+           "compress_pieces", "TetcFile", "Frame",
            "Surface", "TetMesh",
            "TetBatch", "read_mesh", "write_mesh", "read_series", "Series", "TetcError", "ReadError", "MeshError", "CorruptFileError",
            "FormatVersionError", "OptionError", "OutputError", "OutputExistsError", "__version__"]

@@ -44,6 +44,8 @@ from .mesh.exodus import exodus_times
 from .mesh.io import mesh_output_format
 from .mesh.series import is_series_source, read_series
 from .pipeline.bricks import compress_bricks, read_bricked
+from .pipeline.compress_pieces import compress_pieces, piece_mesh
+from .mesh.pieces import is_partitioned
 from .pipeline.sortlast import BrickRef, MeshExtent, render_bricks, split_for_render
 from .pipeline.series import append_step, write_series
 from .pipeline.budget import load_costs, plan_file_budget, remember_frame
@@ -177,6 +179,16 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     (48, 90, 90)
     """
     log = log or _quiet
+    # a list of files is a time series (compress_pieces takes a list of pieces); a .pvtu or an
+    # Exodus decomposition names its pieces
+    if isinstance(source, (str, os.PathLike)) and is_partitioned(source):
+        if bricks != 1 or dependencies:  # a partitioned mesh is bricked by its pieces
+            raise OptionError("a partitioned mesh is compressed one brick per piece: no bricks or dependencies")
+        compress_pieces(source, output, levels=levels, mesh_only=mesh_only, force=force, w_density=w_density,
+                        w_geometry=w_geometry, w_sample=w_sample, jobs=jobs, drop_cell_data=drop_cell_data,
+                        read_options=dict(scalar=scalar, cell_to_point=cell_to_point, time_step=time_step),
+                        progress=progress, log=log)
+        return TetcFile(output)
     if levels is not None and (not isinstance(levels, (int, np.integer)) or levels < 0):
         raise OptionError(f"levels must be a non-negative integer, got {levels!r}")
     if times is not None or keyframe_interval is not None or is_series_source(source) \
@@ -325,7 +337,8 @@ def _counter(progress, total: int):
 def decompress(source, output, *, ratio: float | None = None, level: int | None = None, force: bool = False,
                jobs: int | None = None, selective: bool = False, tets: int | None = None, size=256,
                tf="default", azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0, scalar_range=None,
-               as_tets: bool = False, log=None, step: int | None = None, time: float | None = None) -> TetMesh:
+               as_tets: bool = False, log=None, step: int | None = None, time: float | None = None,
+               piece: int | None = None) -> TetMesh:
     """Decode a ``.tetc`` file (optionally simplified) and write it in any meshio format.
 
     The full mesh of a file that stores its cells as given (hexahedra, wedges, quadratic cells,
@@ -340,7 +353,8 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
     ``selective``, the mesh a selective render of that view and transfer function (``size``,
     ``tf``, ``azimuth``, ``elevation``, ``zoom``, ``scalar_range``, see :func:`render`) would draw,
     at ``ratio`` or ``tets``: so it can be checked and used elsewhere. A file without merge
-    dependencies gives the uniform mesh, with a note through ``log``.
+    dependencies gives the uniform mesh, with a note through ``log``. With ``piece`` (a file
+    compressed from pieces), only that piece's bricks, at ``level``.
 
     Returns the mesh written.
     """
@@ -373,6 +387,10 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
             write_mesh(mesh, output, force=force)
             return mesh
     mesh = None
+    if piece is not None:
+        if selective or ratio is not None:
+            raise OptionError("a piece is decoded at a stored level: not with a ratio or selective")
+        mesh = piece_mesh(f.reader, piece, level=0 if level is None else int(level), jobs=jobs)
     if selective:
         w, h = _size(size)
         view = View(Camera(w, h, _check_number("azimuth", azimuth, allow_none=False),

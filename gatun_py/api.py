@@ -34,6 +34,8 @@ from .codec.tetcfile import encode_level, find_copies
 from .errors import OptionError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.io import mesh_output_format
+from .mesh.pyvista_grid import to_pyvista
+from .mesh.vtkhdf import is_vtkhdf, write_vtkhdf
 from .pipeline.bricks import compress_bricks, read_bricked
 from .pipeline.sortlast import BrickRef, MeshExtent, render_bricks, split_for_render
 from .pipeline.budget import load_costs, plan_file_budget, remember_frame
@@ -319,8 +321,24 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
             log(f"selective cut: {cut.n_merges} merges, {cut.n_tets} tets, chosen in {cut.select_s:.3f} s")
     if mesh is None:
         mesh = f.mesh(ratio=ratio, level=level, jobs=jobs)
-    write_mesh(mesh, output, force=force)
+    n_steps = int(getattr(f, "n_steps", 1))
+    if is_vtkhdf(output) and n_steps > 1 and not selective:
+        _write_vtkhdf_series(f, mesh, output, ratio=ratio, level=level, jobs=jobs, force=force)
+    else:
+        write_mesh(mesh, output, force=force)
     return mesh
+
+
+def _write_vtkhdf_series(f, mesh, output, *, ratio, level, jobs, force) -> None:
+    """Every step of ``f`` into one temporal VTKHDF file: ``mesh`` (step 0's) once, each step's arrays."""
+    steps = []
+    for k, t in enumerate(f.times):
+        m = mesh if k == 0 else f.mesh(ratio=ratio, level=level, jobs=jobs, step=k)
+        if not (_same_bits(m.tets, mesh.tets) and _same_bits(m.points, mesh.points)):
+            raise OptionError(f"step {k} moves the mesh of step 0: the VTKHDF writer stores one mesh for every "
+                              "step; write the steps one by one (--step)")
+        steps.append((float(t), dict(m.user_point_data), {}))
+    write_vtkhdf(output, mesh, steps=steps, force=force)
 
 
 def convert(source, output, *, refine: int = 1, force: bool = False, scalar: str | None = None, q_file=None,
@@ -489,6 +507,20 @@ class TetcFile:
         if ratio is not None and level is not None:
             raise OptionError("give a ratio or a level, not both")
         return read_bricked(self.reader, ratio=ratio, level=level, jobs=jobs)
+
+    def to_pyvista(self, ratio: float | None = None, *, level: int | None = None, step: int | None = None):
+        """The mesh (:meth:`mesh`: at ``ratio`` or ``level``; of time step ``step`` in a series) as a
+        ``pyvista.UnstructuredGrid`` with every array (needs PyVista).
+
+        ``pyvista.read("x.tetc")`` also works once gatun_py is imported (meshio's registration): the full
+        mesh of the first step.
+        """
+        n_steps = int(getattr(self, "n_steps", 1))
+        if step is not None and not (isinstance(step, (int, np.integer)) and -n_steps <= step < n_steps):
+            raise OptionError(f"no time step {step!r}: the file has {n_steps}")
+        if step is None or n_steps == 1:
+            return to_pyvista(self.mesh(ratio, level=level))
+        return to_pyvista(self.mesh(ratio, level=level, step=int(step) % n_steps))
 
     def batches(self, *, ratio: float | None = None, level: int | None = None, batch_tets: int = 65536):
         """The decoded stream (:class:`~gatun_py.mesh.TetBatch`), simplified on the fly to ``ratio``."""

@@ -47,6 +47,7 @@ LOCAL_OK_REASONS = {
     "vtkmodules": "optional dependency",
     "netCDF4": "optional dependency (Exodus input)",
     "h5py": "optional dependency",
+    "pyvista": "optional dependency",
     "selenium": "optional dependency",
     "aiohttp": "optional dependency",
     "dask": "optional dependency",

@@ -37,7 +37,7 @@ ALLOWED = {
     "isosurface": {"isosurface", "simplify", "codec", "mesh", "render"},
     "pipeline": {"pipeline", "simplify", "codec", "mesh", "render", "isosurface"},
 }
-TOP = {"api", "meshio_format", "warmup", "viewer", "paraview", "__init__", "cli", "bricks"}
+TOP = {"api", "meshio_format", "pyvista_reader", "warmup", "viewer", "paraview", "__init__", "cli", "bricks"}
 # function-local imports that are allowed, and why (module, imported name prefix)
 LOCAL_OK_REASONS = {
     "matplotlib": "optional dependency",

@@ -7,6 +7,12 @@ ratio) and what was written. ``--info`` prints the JSON without decoding. An err
 ``tetc: error: ...``, on stderr and exits 1 (2 for a usage error): the plugin shows that line in
 ParaView's output window.
 
+``--serve`` keeps one process for many requests: it imports gatun_py and loads the decoder's kernels
+at once, then answers one JSON request per line on stdin (``{"file", "output", "step", "ratio",
+"level"}``) with one JSON line on stdout (the description, or ``{"error": ...}``), until stdin closes.
+The plugin starts it when ParaView loads the plugin, so opening a file and stepping through a series
+do not wait for another Python to start.
+
 It runs in the Python gatun_py is installed in, apart from ParaView's: that Python's numpy and
 numba never meet ParaView's.
 """
@@ -18,10 +24,15 @@ import importlib.util
 import json
 import os
 import sys
+import tempfile
+from pathlib import Path
 
 from ..errors import OptionError, TetcError
 from ..mesh import write_mesh
 from ..mesh.vtkhdf import write_vtkhdf
+
+# the tiny file shipped for warming up the kernels (gatun_py/warmup.tetc)
+WARMUP_TETC = Path(__file__).resolve().parents[1] / "warmup.tetc"
 
 
 def describe(f) -> dict:
@@ -73,6 +84,48 @@ def decode(source, output, *, step: int = 0, ratio: float | None = None, level: 
     return out
 
 
+def _answer(req: dict) -> dict:
+    try:
+        return decode(req["file"], _output(req.get("output")), step=int(req.get("step", 0)), ratio=req.get("ratio"),
+                      level=req.get("level"))
+    except TetcError as e:
+        return {"error": str(e)}
+    except MemoryError:
+        return {"error": "out of memory"}
+    except (KeyError, TypeError, ValueError) as e:  # a malformed request: the plugin's bug, said plainly
+        return {"error": f"bad request to the decoder: {e!r}"}
+
+
+def _output(output):
+    """``output``, as ``.vtu`` where h5py is missing (the plugin reads what the answer names)."""
+    if output is not None and output.endswith(".vtkhdf") and importlib.util.find_spec("h5py") is None:
+        return output[: -len(".vtkhdf")] + ".vtu"
+    return output
+
+
+def serve(stdin=None, stdout=None) -> int:
+    """Answer requests, one JSON line each, until ``stdin`` closes (see the module's help)."""
+    stdin, stdout = stdin or sys.stdin, stdout or sys.stdout
+    from ..api import open as open_tetc  # load the verbs now, not at the first request
+
+    try:  # the decoder's kernels (from numba's cache) and h5py load on first use: use them now
+        with tempfile.TemporaryDirectory() as tmp:
+            decode(WARMUP_TETC, os.path.join(tmp, "warm.vtkhdf") if importlib.util.find_spec("h5py") else None)
+        open_tetc(WARMUP_TETC)
+    except (TetcError, OSError):
+        pass
+    print(json.dumps({"ready": True}), file=stdout, flush=True)
+    for line in stdin:
+        if not line.strip():
+            continue
+        try:
+            req = json.loads(line)
+        except ValueError:
+            req = {}
+        print(json.dumps(_answer(req) if isinstance(req, dict) else {"error": "bad request"}), file=stdout, flush=True)
+    return 0
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m gatun_py.paraview.decode", description=__doc__.split("\n")[0])
     p.add_argument("file")
@@ -81,12 +134,13 @@ def main(argv=None) -> int:
     p.add_argument("--ratio", type=float, default=None)
     p.add_argument("--level", type=int, default=None)
     p.add_argument("--info", action="store_true", help="print what the file holds, decode nothing")
+    p.add_argument("--serve", action="store_true", help="answer JSON requests on stdin, one per line")
+    if argv is None and "--serve" in sys.argv[1:2] or argv == ["--serve"]:
+        return serve()
     args = p.parse_args(argv)
-    output = None if args.info else args.output
+    output = None if args.info else _output(args.output)
     if output is None and not args.info:
         p.error("give an output file, or --info")
-    if output is not None and output.endswith(".vtkhdf") and importlib.util.find_spec("h5py") is None:
-        output = output[: -len(".vtkhdf")] + ".vtu"  # the plugin reads what the JSON names
     try:
         out = decode(args.file, output, step=args.step, ratio=args.ratio, level=args.level)
     except TetcError as e:

@@ -7,8 +7,9 @@ prints its path) or ``LoadPlugin(path, ns=globals())`` in pvbatch/pvpython; then
 ParaView's own Python cannot import gatun_py: gatun_py needs numba and a numpy that ParaView's
 build may not match, and loading both into one process breaks one of them. So this file imports
 only the standard library and ParaView's VTK, and runs the decoder in the Python gatun_py is
-installed in (``python -m gatun_py.paraview.decode``): it writes the requested time step, at the
-requested ratio or stored level, to a temporary VTKHDF file that ParaView's own reader opens.
+installed in (``python -m gatun_py.paraview.decode --serve``, started when the plugin loads and kept):
+it writes the requested time step, at the requested ratio or stored level, to a temporary VTKHDF
+file that ParaView's own reader opens.
 That Python is found, in this order, in the ``TETC_PYTHON`` environment variable, in
 ``tetc_python.txt`` beside this file (written by ``tetc paraview-plugin``), as the virtual
 environment this file is installed in, or from the ``tetc`` command on ``PATH``.
@@ -19,6 +20,7 @@ level, -1 = none), the point and cell arrays to load, and the time steps of a se
 an empty output.
 """
 
+import atexit
 import json
 import os
 import shutil
@@ -40,7 +42,9 @@ except ImportError:  # VTK before 9.1: the decoder is asked for .vtu files inste
     vtkHDFReader = None
 try:
     from paraview.util.vtkAlgorithm import smdomain, smhint, smproperty, smproxy
+    IN_PARAVIEW = True
 except ImportError:  # plain VTK (pip's vtk, tests): the reader runs as an ordinary algorithm
+    IN_PARAVIEW = False
 
     class _Ignore:
         """ParaView's decorator modules as no-ops."""
@@ -113,20 +117,83 @@ def explain_failure(returncode, stderr, python):
     return f"the decoder failed ({python}): {last}"
 
 
-def run_decoder(python, args):
-    """Run ``python -m gatun_py.paraview.decode ARGS``: ``(json dict, None)`` or ``(None, message)``."""
-    try:
-        proc = subprocess.run([python, "-m", "gatun_py.paraview.decode", *args], capture_output=True, text=True,
-                              env=child_env(), stdin=subprocess.DEVNULL)
-    except OSError as e:
-        return None, (f"cannot run {python} ({e.strerror or e}): point {PYTHON_ENV} at the Python that has "
-                      "gatun_py, or run `tetc paraview-plugin` in its environment")
-    if proc.returncode != 0:
-        return None, explain_failure(proc.returncode, proc.stderr, python)
-    try:
-        return json.loads(proc.stdout.strip().splitlines()[-1]), None
-    except (ValueError, IndexError):
-        return None, f"the decoder ({python}) printed no description of the file"
+class Decoder:
+    """The decoder process (``python -m gatun_py.paraview.decode --serve``), one per ParaView process:
+    started when the plugin loads, so that gatun_py and its kernels are loaded before the first file
+    is opened, and kept for every later request (another ratio, another time step). A decoder that
+    died (killed, out of memory) is started again at the next request."""
+
+    def __init__(self):
+        self.proc = self.python = self.log = None
+        self.ready = False
+
+    def start(self):
+        """``(process, None)`` or ``(None, message)``."""
+        python, how = find_python()
+        if python is None:
+            return None, (f"cannot find the Python that has gatun_py (tried {how}): run `tetc paraview-plugin` "
+                          f"in the environment gatun_py is installed in, or set {PYTHON_ENV}")
+        if self.proc is not None and self.proc.poll() is None and self.python == python:
+            return self.proc, None
+        self.stop()
+        self.log = tempfile.TemporaryFile(mode="w+")  # its stderr: a file, so a chatty decoder never blocks
+        try:
+            self.proc = subprocess.Popen([python, "-m", "gatun_py.paraview.decode", "--serve"], stdin=subprocess.PIPE,
+                                         stdout=subprocess.PIPE, stderr=self.log, text=True, env=child_env())
+        except OSError as e:
+            self.proc = None
+            return None, (f"cannot run {python} ({e.strerror or e}): point {PYTHON_ENV} at the Python that has "
+                          "gatun_py, or run `tetc paraview-plugin` in its environment")
+        self.python, self.ready = python, False
+        return self.proc, None
+
+    def request(self, **req):
+        """One request: ``(answer dict, None)`` or ``(None, message)``."""
+        proc, err = self.start()
+        if err:
+            return None, err
+        try:
+            if not self.ready:
+                if not proc.stdout.readline():  # {"ready": true} once gatun_py is loaded
+                    raise EOFError
+                self.ready = True
+            proc.stdin.write(json.dumps(req) + "\n")
+            proc.stdin.flush()
+            line = proc.stdout.readline()
+            if not line:
+                raise EOFError
+            answer = json.loads(line)
+        except (OSError, EOFError, ValueError):
+            try:
+                code = proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                code = proc.wait()
+            self.log.seek(0)
+            message = explain_failure(code, self.log.read(), self.python)
+            self.stop()
+            return None, message
+        if "error" in answer:
+            return None, answer["error"]
+        return answer, None
+
+    def stop(self):
+        if self.proc is not None:
+            try:
+                self.proc.stdin.close()
+                self.proc.wait(timeout=5)
+            except (OSError, subprocess.TimeoutExpired):
+                self.proc.kill()
+            self.proc = None
+        if self.log is not None:
+            self.log.close()
+            self.log = None
+
+
+DECODER = Decoder()
+atexit.register(DECODER.stop)
+if IN_PARAVIEW:  # start loading gatun_py now, while ParaView and its user do something else
+    DECODER.start()
 
 
 def step_for_time(times, t):
@@ -227,20 +294,11 @@ class TetcReader(VTKPythonAlgorithmBase):
         want = (key, step, ratio, level)
         if want in self._decoded and os.path.exists(self._decoded[want][0]):
             return self._decoded[want], None
-        python, how = find_python()
-        if python is None:
-            return None, (f"cannot find the Python that has gatun_py (tried {how}): run `tetc paraview-plugin` "
-                          f"in the environment gatun_py is installed in, or set {PYTHON_ENV}")
         if self._tmp is None:
             self._tmp = tempfile.mkdtemp(prefix="tetc-paraview-")
         ext = ".vtkhdf" if vtkHDFReader is not None else ".vtu"
         out = os.path.join(self._tmp, f"decoded{len(self._decoded)}_{step}{ext}")
-        args = [self._filename, out, "--step", str(step)]
-        if ratio is not None:
-            args += ["--ratio", repr(ratio)]
-        if level is not None:
-            args += ["--level", str(level)]
-        info, err = run_decoder(python, args)
+        info, err = DECODER.request(file=self._filename, output=out, step=step, ratio=ratio, level=level)
         if err:
             return None, err
         self._remember(key, info)

@@ -33,11 +33,11 @@ pytestmark = pytest.mark.skipif(
            "(make test does)")
 
 
-def pvbatch(path, tmp_path, *, python=sys.executable, **opts):
+def pvbatch(path, tmp_path, *, python=sys.executable, transfer="", **opts):
     """Run the driver on ``path``: (result dict, arrays npz or None, stderr)."""
     out = tmp_path / f"pv{len(list(tmp_path.glob('pv*')))}"
     out.mkdir()
-    env = dict(os.environ, TETC_PYTHON=str(python))
+    env = dict(os.environ, TETC_PYTHON=str(python), TETC_PARAVIEW_TRANSFER=transfer)
     proc = subprocess.run([XVFB, "-a", PVBATCH, str(DRIVER), str(PLUGIN), str(path), str(out), json.dumps(opts)],
                           capture_output=True, text=True, env=env, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
@@ -52,8 +52,15 @@ def snapshot(tmp_path_factory):
     return pvbatch(POST, tmp_path_factory.mktemp("pv"), render="Pressure")
 
 
-def test_snapshot_cells_and_arrays_bit_exact(snapshot):
-    res, arrays, _, _ = snapshot
+@pytest.fixture(scope="module", params=["npy", "vtkhdf"])
+def opened(request, snapshot, tmp_path_factory):
+    """The snapshot through the plugin's default transfer (.npy files loaded with ParaView's numpy)
+    and through its fallback (a VTKHDF file read by ParaView's vtkHDFReader)."""
+    return snapshot if request.param == "npy" else pvbatch(POST, tmp_path_factory.mktemp("pv"), transfer="vtkhdf")
+
+
+def test_snapshot_cells_and_arrays_bit_exact(opened):
+    res, arrays, _, _ = opened
     f = gatun_py.open(POST)
     mesh = f.mesh()
     assert res["proxy"] == "TetcReader"

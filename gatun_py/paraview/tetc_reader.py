@@ -36,6 +36,14 @@ try:
     from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader
 except ImportError:  # imported without VTK (a doctest run): the helpers below still work
     VTKPythonAlgorithmBase = object
+try:  # ParaView's own numpy: the decoded arrays are loaded with it (the fastest route)
+    import numpy as np
+    from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
+    from vtkmodules.vtkCommonCore import vtkTypeInt32Array, vtkTypeInt64Array, vtkUnsignedCharArray
+    from vtkmodules.vtkCommonCore import vtkPoints
+    from vtkmodules.vtkCommonDataModel import vtkCellArray
+except ImportError:  # a ParaView without numpy: the decoder writes VTKHDF for ParaView's reader
+    np = None
 try:
     from vtkmodules.vtkIOHDF import vtkHDFReader
 except ImportError:  # VTK before 9.1: the decoder is asked for .vtu files instead
@@ -55,6 +63,9 @@ except ImportError:  # plain VTK (pip's vtk, tests): the reader runs as an ordin
     smdomain = smhint = smproperty = smproxy = _Ignore()
 
 PYTHON_ENV = "TETC_PYTHON"
+# how the decoded mesh reaches ParaView: npy (default where ParaView has numpy), vtkhdf or vtu (the
+# fallbacks, read by ParaView's own readers; set to test them)
+TRANSFER_ENV = "TETC_PARAVIEW_TRANSFER"
 HERE = os.path.dirname(os.path.abspath(__file__))
 PYTHON_FILE = os.path.join(HERE, "tetc_python.txt")
 # decoded steps kept on disk per reader (stepping back and forth does not decode again)
@@ -196,6 +207,47 @@ if IN_PARAVIEW:  # start loading gatun_py now, while ParaView and its user do so
     DECODER.start()
 
 
+def _unlink(path):
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
+
+
+def _vtk_array(cls, a):
+    """A VTK array of class ``cls`` holding a copy of the 1-D numpy array ``a``."""
+    out = cls()
+    out.SetNumberOfValues(len(a))
+    vtk_to_numpy(out)[:] = a
+    return out
+
+
+def grid_from_arrays(folder, manifest):
+    """A vtkUnstructuredGrid from the decoder's ``.npy`` files (ParaView's numpy reads them; the
+    connectivity goes into VTK's cell array in the width it was written, 32 or 64 bits)."""
+    def load(name):
+        return np.load(os.path.join(folder, name), allow_pickle=False)
+
+    grid = vtkUnstructuredGrid()
+    pts = vtkPoints()
+    pts.SetData(numpy_to_vtk(load(manifest["points"]), deep=1))
+    grid.SetPoints(pts)
+    conn, offsets = load(manifest["connectivity"]), load(manifest["offsets"])
+    cls = vtkTypeInt32Array if conn.dtype == np.int32 else vtkTypeInt64Array
+    cells = vtkCellArray()
+    cells.SetData(_vtk_array(cls, offsets.astype(conn.dtype, copy=False)), _vtk_array(cls, conn))
+    if manifest.get("cell_type") is not None:
+        grid.SetCells(int(manifest["cell_type"]), cells)
+    else:
+        grid.SetCells(_vtk_array(vtkUnsignedCharArray, load(manifest["types"])), cells)
+    for attrs, entries in ((grid.GetPointData(), manifest["point_data"]), (grid.GetCellData(), manifest["cell_data"])):
+        for name, file in entries:
+            a = numpy_to_vtk(np.ascontiguousarray(load(file)), deep=1)
+            a.SetName(name)
+            attrs.AddArray(a)
+    return grid
+
+
 def step_for_time(times, t):
     """The step shown at time ``t``: the last whose time is <= t (the first before them all)."""
     best = 0
@@ -219,6 +271,7 @@ class TetcReader(VTKPythonAlgorithmBase):
         self._info = None  # the decoder's description of the file, for its (name, mtime, size)
         self._info_key = None
         self._decoded = {}  # (file key, step, ratio, level) -> (path, points), in decoding order
+        self._manifests = {}  # path -> the decoder's list of its .npy files
         self._tmp = None
         self._shown = set()  # messages already shown (ParaView asks several times per update)
         self._point_sel = vtkDataArraySelection()
@@ -296,20 +349,20 @@ class TetcReader(VTKPythonAlgorithmBase):
             return self._decoded[want], None
         if self._tmp is None:
             self._tmp = tempfile.mkdtemp(prefix="tetc-paraview-")
-        ext = ".vtkhdf" if vtkHDFReader is not None else ".vtu"
+        ext = ".npydir" if np is not None else ".vtkhdf" if vtkHDFReader is not None else ".vtu"
+        ext = {"npy": ".npydir", "vtkhdf": ".vtkhdf", "vtu": ".vtu"}.get(os.environ.get(TRANSFER_ENV, ""), ext)
         out = os.path.join(self._tmp, f"decoded{len(self._decoded)}_{step}{ext}")
         info, err = DECODER.request(file=self._filename, output=out, step=step, ratio=ratio, level=level)
         if err:
             return None, err
         self._remember(key, info)
         self._decoded[want] = (info["output"], int(info["written_points"]))
+        self._manifests[info["output"]] = info.get("arrays")
         while len(self._decoded) > KEEP_DECODED:
             path, _ = self._decoded.pop(next(iter(self._decoded)))
+            self._manifests.pop(path, None)
             if path != info["output"]:
-                try:
-                    os.unlink(path)
-                except OSError:
-                    pass
+                shutil.rmtree(path, ignore_errors=True) if os.path.isdir(path) else _unlink(path)
         return self._decoded[want], None
 
     def _remember(self, key, info):
@@ -365,10 +418,17 @@ class TetcReader(VTKPythonAlgorithmBase):
             self._show(f"{os.path.basename(self._filename)}: {err}")
             return 1
         path, n_points = decoded
-        reader = vtkHDFReader() if path.endswith(".vtkhdf") else vtkXMLUnstructuredGridReader()
-        reader.SetFileName(path)
-        reader.Update()
-        data = reader.GetOutputDataObject(0)
+        if self._manifests.get(path):
+            try:
+                data = grid_from_arrays(path, self._manifests[path])
+            except (OSError, ValueError, KeyError) as e:
+                self._show(f"{os.path.basename(self._filename)}: cannot load the decoded arrays in {path}: {e}")
+                return 1
+        else:
+            reader = vtkHDFReader() if path.endswith(".vtkhdf") else vtkXMLUnstructuredGridReader()
+            reader.SetFileName(path)
+            reader.Update()
+            data = reader.GetOutputDataObject(0)
         if not isinstance(data, vtkUnstructuredGrid) or data.GetNumberOfPoints() != n_points:
             self._show(f"{os.path.basename(self._filename)}: ParaView could not read the decoded mesh {path}")
             return 1

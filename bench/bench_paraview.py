@@ -94,8 +94,9 @@ def main(argv: list[str]) -> int:
     quick = "--quick" in argv
     repeat = int(argv[argv.index("--repeat") + 1]) if "--repeat" in argv else (2 if quick else 5)
     if PVBATCH is None or XVFB is None:
-        print("bench_paraview: no pvbatch/xvfb-run (install Debian's paraview and xvfb: make paraview)", file=sys.stderr)
-        return 1
+        print("bench_paraview: skipped, no pvbatch/xvfb-run (install Debian's paraview and xvfb: make paraview)",
+              file=sys.stderr)
+        return 0
     if "--tetc" in argv:
         tetc = Path(argv[argv.index("--tetc") + 1])
         label = tetc.name

@@ -55,6 +55,7 @@ LOCAL_OK_REASONS = {
     "gmsh": "optional dependency",
     "PIL": "image I/O only where images are read",
     "paraview": "the ParaView plugin's decorators, present only in ParaView's own Python",
+    "numpy": "the ParaView plugin, guarded: a ParaView built without numpy gets VTKHDF files instead",
 }
 
 

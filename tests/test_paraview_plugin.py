@@ -27,7 +27,7 @@ DRIVER = ROOT / "tests" / "paraview_driver.py"
 POST = ROOT / "tests" / "data" / "post_v9.tetc"
 PVBATCH, XVFB = shutil.which("pvbatch"), shutil.which("xvfb-run")
 
-pytestmark = pytest.mark.skipif(
+needs_paraview = pytest.mark.skipif(
     PVBATCH is None or XVFB is None,
     reason=f"no {'pvbatch' if PVBATCH is None else 'xvfb-run'} here: install Debian's paraview and xvfb "
            "(make test does)")
@@ -59,6 +59,7 @@ def opened(request, snapshot, tmp_path_factory):
     return snapshot if request.param == "npy" else pvbatch(POST, tmp_path_factory.mktemp("pv"), transfer="vtkhdf")
 
 
+@needs_paraview
 def test_snapshot_cells_and_arrays_bit_exact(opened):
     res, arrays, _, _ = opened
     f = gatun_py.open(POST)
@@ -80,12 +81,14 @@ def _lit_fraction(png: Path) -> float:
     return float((rgb.max(axis=2) > 24).mean())
 
 
+@needs_paraview
 def test_volume_render_shows_the_object(snapshot):
     *_, out = snapshot
     lit = _lit_fraction(out / "volume.png")
     assert 0.1 < lit < 0.95, lit  # the object covers part of the black background, not none or all
 
 
+@needs_paraview
 def test_ratio_and_array_selection(tmp_path):
     f = gatun_py.open(POST)
     res, arrays, _, _ = pvbatch(POST, tmp_path, props={"Ratio": 0.5, "PointArrays": ["Pressure"]})
@@ -95,6 +98,7 @@ def test_ratio_and_array_selection(tmp_path):
     assert arrays["point:Pressure"].tobytes() == want.user_point_data["Pressure"].tobytes()
 
 
+@needs_paraview
 def test_stored_level(tmp_path):
     f = gatun_py.open(POST)
     res, _, _, _ = pvbatch(POST, tmp_path, props={"Level": 3})
@@ -115,6 +119,7 @@ def _corrupt(tmp_path):
     return path
 
 
+@needs_paraview
 @pytest.mark.parametrize("make, python, words", [
     (_newer, sys.executable, "written by a newer tetc"),
     (_corrupt, sys.executable, "not a .tetc file"),
@@ -149,6 +154,7 @@ def make_series(tmp_path, n_steps: int = 40) -> Path:
     return out
 
 
+@needs_paraview
 def test_series_time_steps(tmp_path):
     if not hasattr(gatun_py.TetcFile, "n_steps"):
         pytest.skip("TetcFile has no time steps yet (n_steps): the series part runs once .tetc series exist")
@@ -169,6 +175,7 @@ def _readme_block(after: str, lang: str) -> str:
     return m.group(1)
 
 
+@needs_paraview
 @pytest.mark.slow
 def test_readme_pvbatch_steps_as_written(tmp_path):
     """The README's ParaView steps, in a fresh directory, with only the venv's bin on PATH before the
@@ -183,3 +190,54 @@ def test_readme_pvbatch_steps_as_written(tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "Traceback" not in proc.stderr
     assert _lit_fraction(tmp_path / "post_paraview.png") > 0.05
+
+
+def test_cli_prints_the_plugin_path_and_records_python():
+    from cli_util import run
+    res = run("paraview-plugin")
+    assert res.exit_code == 0 and res.output.splitlines() == [str(PLUGIN)]
+    assert PLUGIN.is_file() and "smproxy.reader" in PLUGIN.read_text()
+    from gatun_py.paraview import PYTHON_FILE
+    if os.access(PYTHON_FILE.parent, os.W_OK):  # recorded where the install is writable
+        assert PYTHON_FILE.read_text().strip() == sys.executable
+
+
+def test_decoder_serves_requests_one_line_each(tmp_path):
+    """The resident decoder's protocol, without ParaView: an answer per request line, errors as
+    {"error": ...} (the process goes on), the decoded .npy files equal to gatun_py's decode."""
+    import io
+    from gatun_py.paraview.decode import serve
+    reqs = [{"file": str(POST), "output": str(tmp_path / "a.npydir"), "ratio": 0.5},
+            {"file": str(tmp_path / "missing.tetc"), "output": str(tmp_path / "b.npydir")}, "not json"]
+    stdin = io.StringIO("".join((json.dumps(r) if isinstance(r, dict) else r) + "\n" for r in reqs))
+    stdout = io.StringIO()
+    assert serve(stdin, stdout) == 0
+    lines = [json.loads(ln) for ln in stdout.getvalue().splitlines()]
+    assert lines[0] == {"ready": True} and len(lines) == 4
+    want = gatun_py.open(POST).mesh(0.5)
+    ans = lines[1]
+    assert ans["cells"] == want.n_tets and ans["written_points"] == want.n_points
+    folder = Path(ans["output"])
+    assert np.array_equal(np.load(folder / ans["arrays"]["connectivity"]).reshape(-1, 4), want.tets)
+    assert np.load(folder / ans["arrays"]["points"]).tobytes() == want.points.tobytes()
+    for name, file in ans["arrays"]["point_data"]:
+        assert np.load(folder / file).tobytes() == want.user_point_data[name].tobytes(), name
+    assert "no such file" in lines[2]["error"] and "bad request" in lines[3]["error"]
+
+
+def test_plugin_finds_python_and_explains_failures(monkeypatch, tmp_path):
+    """The plugin's helpers, imported as plain Python (outside ParaView its decorators are no-ops)."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("tetc_reader_under_test", PLUGIN)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    monkeypatch.setenv("TETC_PYTHON", "/some/python")
+    assert mod.find_python() == ("/some/python", "$TETC_PYTHON")
+    monkeypatch.delenv("TETC_PYTHON")
+    monkeypatch.setenv("PYTHONPATH", "/usr/lib/python3/dist-packages")
+    assert "PYTHONPATH" not in mod.child_env()
+    assert "not installed" in mod.explain_failure(1, "/x/python: Error while finding module specification for "
+                                                     "'gatun_py.paraview.decode' (ModuleNotFoundError: No module "
+                                                     "named 'gatun_py')", "/x/python")
+    assert mod.explain_failure(-9, "", "p").startswith("the decoder was killed by signal 9")
+    assert mod.step_for_time([0.0, 0.5, 1.0], 0.7) == 1 and mod.step_for_time([0.0, 0.5], -1.0) == 0

@@ -8,8 +8,10 @@ ParaView's own Python cannot import gatun_py: gatun_py needs numba and a numpy t
 build may not match, and loading both into one process breaks one of them. So this file imports
 only the standard library and ParaView's VTK, and runs the decoder in the Python gatun_py is
 installed in (``python -m gatun_py.paraview.decode --serve``, started when the plugin loads and kept):
-it writes the requested time step, at the requested ratio or stored level, to a temporary VTKHDF
-file that ParaView's own reader opens.
+it writes the requested time step, at the requested ratio or stored level, as ``.npy`` files in a
+temporary folder, which ParaView's own numpy loads straight into VTK arrays (ParaView 5.11's
+VTKHDF and XML readers take longer than the decode; where ParaView has no numpy the decoder writes
+a VTKHDF file for ParaView's reader).
 That Python is found, in this order, in the ``TETC_PYTHON`` environment variable, in
 ``tetc_python.txt`` beside this file (written by ``tetc paraview-plugin``), as the virtual
 environment this file is installed in, or from the ``tetc`` command on ``PATH``.

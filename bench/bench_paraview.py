@@ -6,8 +6,9 @@ Default mesh: Blunt-fin refined 2x per axis (1.5 M tets; ``bench/common.refined_
 Writes the peer, the same mesh as ``.vtu`` with VTK's XML writer and zlib (what ParaView's *Save
 Data* writes), then times in Debian's pvbatch (under xvfb-run), each run a fresh process and the
 two interleaved: from ``OpenDataFile`` to the end of the first ``UpdatePipeline``. The plugin's time
-includes starting gatun_py's Python (numba imported, kernels from the cache), decoding, writing the
-VTKHDF file and ParaView's reader on it; the decoder's own share is timed apart. Medians of the
+includes the decoder process (started by LoadPlugin: gatun_py and numba imported, kernels from the
+cache), decoding, the .npy files and loading them into VTK; a second column opens a small file first
+(the decoder already up, as in a GUI session); a fresh decoder process is timed apart. Medians of the
 runs; the machine's load is recorded. Writes bench/sections/paraview.md.
 """
 
@@ -141,10 +142,11 @@ def main(argv: list[str]) -> int:
 `python bench/bench_paraview.py{' --quick' if quick else ''}` ({code_state()}). Debian's ParaView
 (pvbatch under xvfb-run), each open a fresh pvbatch process, the two interleaved, median of {repeat}:
 from `OpenDataFile` to the end of the first `UpdatePipeline`. The plugin (gatun_py/paraview/tetc_reader.py)
-starts gatun_py's Python, which decodes the full mesh and writes it as VTKHDF, then ParaView's
-vtkHDFReader reads that; the peer is ParaView's XML reader on the same mesh saved as a zlib `.vtu`
-(VTK's XML writer, appended binary, as ParaView's *Save Data* writes it). "decoder alone": the
-decoder's process (`python -m gatun_py.paraview.decode`) timed by itself. Target: plugin <= 1.5x
+asks its decoder process (gatun_py's Python, started when the plugin loads) for the full mesh, which
+it writes as `.npy` files that the plugin loads with ParaView's numpy into VTK arrays; the peer is
+ParaView's XML reader on the same mesh saved as a zlib `.vtu` (VTK's XML writer, appended binary, as
+ParaView's *Save Data* writes it). "decoder alone": a fresh `python -m gatun_py.paraview.decode FILE
+OUT.vtkhdf` process (start-up, numba, decode, VTKHDF write) timed by itself, for scale. Target: plugin <= 1.5x
 the `.vtu`. Load average {load_before[0]:.1f} before, {load_after[0]:.1f} after, on {os.cpu_count()} cores.
 
 {table(["mesh", "tets", ".tetc MB", ".vtu MB", "plugin s", "plugin, decoder up s", ".vtu s", "plugin / .vtu",

@@ -91,7 +91,7 @@ def mesh_input_options(f):
     f = click.option("--q", "q_file", type=click.Path(dir_okay=False), default=None,
                      help="PLOT3D: the Q (solution) file; default: the ...q... file beside an ...xyz... grid.")(f)
     f = click.option("--time-step", type=int, default=None, metavar="T",
-                     help="Exodus: the time step whose nodal variables to read (0-based, -1 the last) "
+                     help="Exodus and VTKHDF: the time step whose arrays to read (0-based, -1 the last) "
                           "[default: the last; compress stores every step]. A .tetc time series: the "
                           "step to use [default: 0].")(f)
     f = click.option("--scalar", default=None, metavar="NAME",

@@ -43,6 +43,8 @@ from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.exodus import exodus_times
 from .mesh.io import mesh_output_format
 from .mesh.series import is_series_source, read_series
+from .mesh.pyvista_grid import to_pyvista
+from .mesh.vtkhdf import is_vtkhdf, write_vtkhdf
 from .pipeline.bricks import compress_bricks, read_bricked
 from .pipeline.compress_pieces import compress_pieces, piece_mesh
 from .mesh.pieces import is_partitioned
@@ -407,6 +409,10 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
             log(f"selective cut: {cut.n_merges} merges, {cut.n_tets} tets, chosen in {cut.select_s:.3f} s")
     if mesh is None:
         mesh = f.mesh(ratio=ratio, level=level, jobs=jobs)
+    n_steps = int(getattr(f, "n_steps", 1))
+    if is_vtkhdf(output) and n_steps > 1 and not selective:
+        _write_vtkhdf_series(f, mesh, output, ratio=ratio, level=level, jobs=jobs, force=force)
+        return mesh
     cells = None
     if "cells" in f.reader.meta and not as_tets:
         if selective or ratio is not None or level not in (None, 0):
@@ -416,6 +422,18 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
             mesh, cells = restore_order(mesh, cells)
     write_mesh(mesh, output, force=force, cells=cells)
     return mesh
+
+
+def _write_vtkhdf_series(f, mesh, output, *, ratio, level, jobs, force) -> None:
+    """Every step of ``f`` into one temporal VTKHDF file: ``mesh`` (step 0's) once, each step's arrays."""
+    steps = []
+    for k, t in enumerate(f.times):
+        m = mesh if k == 0 else f.mesh(ratio=ratio, level=level, jobs=jobs, step=k)
+        if not (_same_bits(m.tets, mesh.tets) and _same_bits(m.points, mesh.points)):
+            raise OptionError(f"step {k} moves the mesh of step 0: the VTKHDF writer stores one mesh for every "
+                              "step; write the steps one by one (--step)")
+        steps.append((float(t), dict(m.user_point_data), {}))
+    write_vtkhdf(output, mesh, steps=steps, force=force)
 
 
 def convert(source, output, *, refine: int = 1, force: bool = False, scalar: str | None = None, q_file=None,
@@ -778,6 +796,20 @@ class TetcFile:
         k = self.step_index(step=step)
         reader = self.reader if k == 0 else self._series.reader(k)
         return read_bricked(reader, ratio=ratio, level=level, jobs=jobs)
+
+    def to_pyvista(self, ratio: float | None = None, *, level: int | None = None, step: int | None = None):
+        """The mesh (:meth:`mesh`: at ``ratio`` or ``level``; of time step ``step`` in a series) as a
+        ``pyvista.UnstructuredGrid`` with every array (needs PyVista).
+
+        ``pyvista.read("x.tetc")`` also works once gatun_py is imported (meshio's registration): the full
+        mesh of the first step.
+        """
+        n_steps = int(getattr(self, "n_steps", 1))
+        if step is not None and not (isinstance(step, (int, np.integer)) and -n_steps <= step < n_steps):
+            raise OptionError(f"no time step {step!r}: the file has {n_steps}")
+        if step is None or n_steps == 1:
+            return to_pyvista(self.mesh(ratio, level=level))
+        return to_pyvista(self.mesh(ratio, level=level, step=int(step) % n_steps))
 
     def batches(self, *, ratio: float | None = None, level: int | None = None, batch_tets: int = 65536):
         """The decoded stream (:class:`~gatun_py.mesh.TetBatch`), simplified on the fly to ``ratio``."""

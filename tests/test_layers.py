@@ -40,7 +40,7 @@ ALLOWED = {
     "isosurface": {"isosurface", "simplify", "codec", "mesh", "render"},
     "pipeline": {"pipeline", "simplify", "codec", "mesh", "render", "isosurface"},
 }
-TOP = {"api", "meshio_format", "warmup", "viewer", "__init__", "cli", "bricks"}
+TOP = {"api", "meshio_format", "pyvista_reader", "warmup", "viewer", "paraview", "__init__", "cli", "bricks"}
 # function-local imports that are allowed, and why (module, imported name prefix)
 LOCAL_OK_REASONS = {
     "matplotlib": "optional dependency",
@@ -50,12 +50,15 @@ LOCAL_OK_REASONS = {
     "vtkmodules": "optional dependency",
     "netCDF4": "optional dependency (Exodus input)",
     "h5py": "optional dependency",
+    "pyvista": "optional dependency",
     "selenium": "optional dependency",
     "aiohttp": "optional dependency",
     "dask": "optional dependency",
     "distributed": "optional dependency",
     "gmsh": "optional dependency",
     "PIL": "image I/O only where images are read",
+    "paraview": "the ParaView plugin's decorators, present only in ParaView's own Python",
+    "numpy": "the ParaView plugin, guarded: a ParaView built without numpy gets VTKHDF files instead",
 }
 
 

@@ -29,6 +29,7 @@ from .split import orient_positive, split_hexes_two_colour, split_min_id_star, t
 from .validate import MeshReport, validate_tets
 from .exodus import EXODUS_SUFFIXES, read_exodus
 from .vtk_reader import INSTALL_HINT, VTK_SUFFIXES, read_with_vtk, vtk_available
+from .vtkhdf import is_vtkhdf, read_vtkhdf, write_vtkhdf
 
 # meshio cell type -> (linear type, number of corner vertices)
 VOLUME_CELLS = {
@@ -44,7 +45,7 @@ VOLUME_CELLS = {
 TET_FORMATS = {"vtu", "vtk", "gmsh", "xdmf", "medit", "exodus", "abaqus", "avsucd", "flac3d", "h5m", "med",
                "nastran", "permas", "su2", "tetgen", "ugrid", "dolfin-xml", "cgns", "netgen", "mdpa", "hmf"}
 TET_EXTENSIONS = (".vtu", ".vtk", ".msh", ".xdmf", ".mesh", ".exo", ".inp", ".avs", ".f3grid", ".med", ".bdf",
-                  ".su2", ".ugrid", ".xml", ".vol", ".mdpa")
+                  ".su2", ".ugrid", ".xml", ".vol", ".mdpa", ".vtkhdf")
 
 
 @dataclass
@@ -90,8 +91,17 @@ def read_mesh(path, *, scalar: str | None = None, q_file=None, q_var: str = "den
         raise ReadError(f"no such file: {path}")
     if path.is_dir():
         raise ReadError(f"{path} is a directory, not a mesh file")
-    if time_step is not None and path.suffix.lower() not in EXODUS_SUFFIXES:
-        raise OptionError(f"{path}: a time step applies to Exodus files ({', '.join(EXODUS_SUFFIXES)}) only")
+    if time_step is not None and path.suffix.lower() not in EXODUS_SUFFIXES and not is_vtkhdf(path):
+        raise OptionError(f"{path}: a time step applies to Exodus ({', '.join(EXODUS_SUFFIXES)}) and VTKHDF "
+                          "(.vtkhdf) files only")
+    if is_vtkhdf(path):  # temporal: the last step unless told, as for Exodus
+        series = read_vtkhdf(path, step=-1 if time_step is None else time_step)
+        mesh, report = mesh_from_meshio(series.mesh, scalar=scalar, cell_to_point=cell_to_point, source=str(path))
+        if series.n_steps > 1:
+            k = (-1 if time_step is None else time_step) % series.n_steps
+            series.notes.append(f"time step {k} of 0..{series.n_steps - 1} read (t = {series.times[k]:g})")
+        report.notes[:0] = series.notes
+        return mesh, report
     if path.suffix.lower() in EXODUS_SUFFIXES:
         m, notes = read_exodus(path, time_step=time_step)
         mesh, report = mesh_from_meshio(m, scalar=scalar, cell_to_point=cell_to_point, source=str(path))
@@ -400,6 +410,8 @@ def mesh_output_format(path) -> str:
     """The meshio format a tet mesh is written in for this file name; :class:`OutputError` listing the
     choices when the extension is unknown or names a format that holds no tetrahedra (STL, PLY, OBJ)."""
     path = Path(path)
+    if is_vtkhdf(path):
+        return "vtkhdf"
     try:
         fmt = _prefer_gmsh(_helpers._filetypes_from_path(path))[0]
     except Exception:
@@ -428,6 +440,9 @@ def write_mesh(mesh: TetMesh, path, *, force: bool = False, cells: Cells | None 
     block of linear tets, or ``cells`` (the cells as given, in ``mesh``'s point ids)."""
     path = Path(path)
     fmt = mesh_output_format(path)
+    if fmt == "vtkhdf":
+        write_vtkhdf(path, mesh, force=force)
+        return
     if fmt in ("xdmf", "h5m", "med") and importlib.util.find_spec("h5py") is None:
         raise OutputError(f"writing {fmt} files needs h5py (pip install h5py); .vtu needs nothing extra")
     m = to_meshio(mesh, cells)

@@ -238,6 +238,10 @@ class WorkEstimator:
     figures (steps scaled as tets^(1/3) for merges on the fly); one not observed from the observed
     levels on either side, interpolated in log(tets) - the cube-root rule alone is far off between
     a 6-tet and a 4,000-tet level, and a planner fed such guesses swings between them.
+
+    The ray caster leaves out the tets the transfer function makes invisible: a level's tets are
+    those rendered plus those culled, and the share that reaches the face table (the view's
+    transfer function's, per level, latest frame) scales the tets rendered of the estimate.
     """
 
     STEPS_PER_CUBE_ROOT = 1.5
@@ -250,6 +254,9 @@ class WorkEstimator:
         self.step = float(step) if step and step > 0 else self.diagonal / 100
         self.mode = mode
         self.seen: dict[int, tuple] = {}  # level -> (tets, hit fraction, steps per hit, samples per hit)
+        self.visible: dict[int, float] = {}  # level -> share of its tets the transfer function leaves visible
+
+    _latest_visible = 1.0
 
     @property
     def hit_fraction(self) -> float | None:
@@ -303,7 +310,8 @@ class WorkEstimator:
             steps = hit * steps_per_hit
             samples = steps if self.mode == "face" else hit * samples_per_hit / step_factor
         filtering = merges > start.merges
-        return Work(0.0 if decoded else float(start.tets), float(start.points) if filtering else 0.0, tets, steps,
+        shown = self.visible.get(start.level, self._latest_visible)
+        return Work(0.0 if decoded else float(start.tets), float(start.points) if filtering else 0.0, tets * shown, steps,
                     samples, estimated_tets(self.levels, merges, "boundary_faces"), float(pixels))
 
     def observe(self, stats: dict, *, step_factor: float = 1.0) -> None:
@@ -311,8 +319,10 @@ class WorkEstimator:
         rays, hit = int(stats.get("rays", 0)), int(stats.get("rays_hit", 0))
         if rays <= 0:
             return
-        tets = max(int(stats.get("tets_rendered", 0)), 1)
+        rendered = int(stats.get("tets_rendered", 0))
+        tets = max(rendered + int(stats.get("tets_culled", 0)), 1)
         level = int(stats.get("level", 0))
+        self.visible[level] = self._latest_visible = min(max(rendered / tets, 0.0), 1.0)
         if hit > 0:
             entry = (float(tets), hit / rays, max(float(stats.get("steps", 0)), 1.0) / hit,
                      max(float(stats.get("samples", 0)), 1.0) * step_factor / hit)

@@ -592,6 +592,7 @@ class StreamingRaycaster:
             "segments_behind_opaque": int(hidden),
             "subsegments_folded": int(np.count_nonzero(seg[SEG_FROM] == FOLD_END)),
             "boundary_anomalies": int(self._anomalies),
+            "boundary_hits": int(self._boundary_hits),
             "face_conflicts": int(self._conflicts),
             "samples": int(seg[SEG_SAMPLES].sum()),
             "steps": int(seg[SEG_STEPS].sum()),

@@ -212,8 +212,8 @@ def profile_section(work: Path, args, log=print) -> list[str]:
              "*full*: every tet, every ray to its end (`cull=False, terminate=False`); *default*: "
              "invisible tets culled, early termination at 0.99.", ""]
     cols = ["data", "TF", "way", "decode s (ns/tet)", "segments s (ns/boundary hit)", "insert s (ns/tet)",
-            "walk s (ns/step)", "compose s", "steps", "samples", "tets culled", "walk wall 1 thr / 2 thr s",
-            "max pixel diff vs full"]
+            "walk s (ns/step)", "compose s", "steps", "samples", "tets culled", "render wall 1 thr / 2 thr s",
+            "max pixel diff vs full / vs terminate"]
     lines += ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for d in data:
         reader = TetcReader(d["tetc"])
@@ -222,7 +222,7 @@ def profile_section(work: Path, args, log=print) -> list[str]:
         decode_cpu = time.process_time() - c0
         for tfkey, tf in (("dense", d["tf"]), ("t75", tf_transparent_below(d["tf"], work))):
             view, cam, rng, step, _ = file_view(reader, View(Camera(size, size, 30.0, 20.0), tf))
-            ref = None
+            ref = prev = None
             for way, kw in (("full", dict(cull=False, terminate=False)), ("terminate", dict(cull=False)),
                             ("default", {})):
                 per_thread = {}
@@ -237,6 +237,10 @@ def profile_section(work: Path, args, log=print) -> list[str]:
                 img = to_rgb8(rs[-1].image).astype(int)
                 if ref is None:
                     ref = img
+                if way != "terminate":
+                    prev = prev if prev is not None else img
+                else:
+                    prev = img
                 hits = max(st.get("boundary_hits", 0), 1)
                 walls = [statistics.median(r.stats["render_s"] for r in per_thread[t]) for t in (1, 2)]
                 lines.append("| " + " | ".join([
@@ -245,7 +249,8 @@ def profile_section(work: Path, args, log=print) -> list[str]:
                     f"{cpu['insert']:.3f} ({cpu['insert'] / max(st['tets_rendered'], 1) * 1e9:.0f})",
                     f"{cpu['walk']:.3f} ({cpu['walk'] / max(st['steps'], 1) * 1e9:.0f})", f"{cpu['compose']:.3f}",
                     f"{st['steps']:,}", f"{st['samples']:,}", f"{st['tets_culled']:,}",
-                    f"{walls[0]:.2f} / {walls[1]:.2f}", str(int(np.abs(img - ref).max()))]) + " |")
+                    f"{walls[0]:.2f} / {walls[1]:.2f}",
+                    f"{int(np.abs(img - ref).max())} / {int(np.abs(img - prev).max())}"]) + " |")
                 log(lines[-1])
     lines += ["", f"Load after: {machine_load()}. " + code_note(), ""]
     return lines

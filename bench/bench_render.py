@@ -269,6 +269,12 @@ def worker_frame(args) -> dict:
     return out
 
 
+def _worker_asm(args) -> dict:
+    from bench_render_speed import worker_asm
+
+    return worker_asm(args)
+
+
 def worker_baseline(args) -> dict:
     """Peak RSS of the interpreter with our modules imported and the kernels loaded, no data."""
     import gatun_py.codec.tetcfile  # noqa: F401
@@ -906,7 +912,7 @@ def main():
     args = ap.parse_args()
     if args.worker:
         fn = {"vtk": worker_vtk, "vtkslab": worker_vtkslab, "inmemory": worker_inmemory,
-              "baseline": worker_baseline, "frame": worker_frame}[args.worker]
+              "baseline": worker_baseline, "frame": worker_frame, "asm": _worker_asm}[args.worker]
         print(json.dumps(fn(args)))
         return
     if args.only:

@@ -52,7 +52,8 @@ class RenderResult:
         threshold); ``segments_behind_opaque`` the incomplete segments behind it, which change
         their pixel by at most 0.01; ``subsegments_folded`` the subsegments that ended where a
         grid folds over itself (the tet behind a face lies on the ray's side of it);
-        ``tets_culled`` the tets the transfer function makes invisible, left out before the walk.
+        ``tets_culled`` those of the ``tets_rendered`` the transfer function makes invisible, left
+        out before the walk.
     fragments : Fragments or None
         Every segment's composited colour and depth interval (asked for with ``fragments=True``),
         what :func:`~gatun_py.render.composite.composite` sorts and blends with other bricks'.
@@ -606,7 +607,7 @@ class StreamingRaycaster:
             "face_conflicts": int(self._conflicts),
             "samples": int(seg[SEG_SAMPLES].sum()),
             "steps": int(seg[SEG_STEPS].sum()),
-            "tets_rendered": int(self._n_tets - self._n_culled),
+            "tets_rendered": int(self._n_tets),
             "tets_culled": int(self._n_culled),
             "early_termination": OPAQUE if self._terminate else None,
             "rays_rewalked": int(self._redone),

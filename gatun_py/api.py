@@ -937,7 +937,7 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
            background="black", colorbar: bool = False, lean: bool = False, pipeline: str = "streaming",
            scalar: str | None = None, q_file=None, q_var: str = "density", cell_to_point: bool = False,
            time_step: int | None = None, component=None, selective: bool = False, tets: int | None = None,
-           progress=None, log=None, time: float | None = None) -> Frame:
+           progress=None, log=None, time: float | None = None, terminate: bool = True) -> Frame:
     """Volume-render a mesh: decode, simplify and ray-cast in one streaming pass.
 
     Parameters
@@ -972,6 +972,10 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
         Add a colour bar with the scalar's name and range on the right.
     lean : bool
         Hold only the tets in flight (less memory, slower).
+    terminate : bool
+        Stop each ray where its opacity reaches 0.99 (early ray termination, as VTK; what lies behind
+        would change the pixel by less than 1 %). Off: every ray is walked to its end, as a bricked
+        file's bricks are (sort-last compositing needs whole segments).
     pipeline : {"streaming", "generic"}
         One pass, or decode-all-then-render (the paper's baseline).
     scalar, q_file, q_var, cell_to_point, time_step
@@ -1036,7 +1040,8 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
     tf = load_transfer_function(tf)
     if opacity_model is not None:
         tf = tf.with_opacity_model(opacity_model)
-    view = View(Camera(width, height, azimuth, elevation, zoom), tf, mode, step, bool(lean), scalar_range)
+    view = View(Camera(width, height, azimuth, elevation, zoom), tf, mode, step, bool(lean), scalar_range,
+                terminate=bool(terminate))
 
     t0 = _perf_counter()
     planned = {}

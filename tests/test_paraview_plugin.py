@@ -241,3 +241,30 @@ def test_plugin_finds_python_and_explains_failures(monkeypatch, tmp_path):
                                                      "named 'gatun_py')", "/x/python")
     assert mod.explain_failure(-9, "", "p").startswith("the decoder was killed by signal 9")
     assert mod.step_for_time([0.0, 0.5, 1.0], 0.7) == 1 and mod.step_for_time([0.0, 0.5], -1.0) == 0
+
+
+def test_plugin_as_a_vtk_algorithm_keeps_few_decodes(monkeypatch):
+    """The reader class in pip's VTK (no ParaView): every ratio asked for gives gatun_py's mesh at that
+    ratio, a ratio asked for again is not decoded again, and at most KEEP_DECODED decodes stay on disk."""
+    pytest.importorskip("vtkmodules.util.vtkAlgorithm", reason="pip install vtk")
+    import importlib.util
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    monkeypatch.setenv("TETC_PYTHON", sys.executable)
+    spec = importlib.util.spec_from_file_location("tetc_reader_as_vtk", PLUGIN)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    f = gatun_py.open(POST)
+    reader = mod.TetcReader()
+    reader.SetFileName(str(POST))
+    try:
+        for ratio in (0.0, 0.2, 0.4, 0.6, 0.8, 0.2):
+            reader.SetRatio(ratio)
+            reader.Update()
+            want = f.mesh(ratio or None)
+            out = reader.GetOutputDataObject(0)
+            assert out.GetNumberOfCells() == want.n_tets, ratio
+            got = vtk_to_numpy(out.GetPointData().GetArray("Pressure"))
+            assert got.tobytes() == want.user_point_data["Pressure"].tobytes()
+            assert len(os.listdir(reader._tmp)) <= mod.KEEP_DECODED
+    finally:
+        mod.DECODER.stop()

@@ -268,3 +268,47 @@ def test_plugin_as_a_vtk_algorithm_keeps_few_decodes(monkeypatch):
             assert len(os.listdir(reader._tmp)) <= mod.KEEP_DECODED
     finally:
         mod.DECODER.stop()
+
+
+FAKE_SERIES = '''
+import sys
+import numpy as np
+import gatun_py.api as api
+from gatun_py.mesh import TetMesh
+from gatun_py.paraview.decode import serve
+
+_mesh = api.TetcFile.mesh
+
+
+def mesh(self, ratio=None, *, level=None, jobs=None, step=0):
+    m = _mesh(self, ratio, level=level, jobs=jobs)
+    data = dict(m.user_point_data)
+    if "Pressure" not in data:  # the decoder's warm-up file
+        return m
+    data["Pressure"] = (data["Pressure"] * np.float32(1 + 0.05 * step)).astype(np.float32)
+    return TetMesh(m.points, None, m.tets, "Pressure", point_data=data)
+
+
+api.TetcFile.n_steps = 40
+api.TetcFile.times = tuple(0.5 * k for k in range(40))
+api.TetcFile.mesh = mesh
+sys.exit(serve())
+'''
+
+
+@needs_paraview
+def test_plugin_time_steps_with_a_stand_in_series(tmp_path):
+    """The plugin's side of a series, before .tetc files hold one: its decoder is given a TetcFile with
+    40 steps (each step's Pressure scaled), as the time-series API has them (n_steps, times,
+    mesh(step=)). ParaView shows 40 TimestepValues and stepping changes the data."""
+    script = tmp_path / "fake_series.py"
+    script.write_text(FAKE_SERIES)
+    python = tmp_path / "python"
+    python.write_text(f"#!/bin/sh\nexec {sys.executable} {script}\n")  # ignores the plugin's -m arguments
+    python.chmod(0o755)
+    times = [0.5 * k for k in range(40)]
+    res, _, _, _ = pvbatch(POST, tmp_path, python=python, step_times=[times[0], times[1], times[39], 7.3])
+    assert res["times"] == times
+    base = float(np.asarray(gatun_py.open(POST).mesh().user_point_data["Pressure"], np.float64).sum())
+    want = [base * (1 + 0.05 * k) for k in (0, 1, 39, 14)]  # t = 7.3 shows step 14 (t = 7.0)
+    assert res["step_sums"] == pytest.approx(want, rel=1e-5) and len(set(res["step_sums"])) == 4

@@ -241,3 +241,74 @@ def test_plugin_finds_python_and_explains_failures(monkeypatch, tmp_path):
                                                      "named 'gatun_py')", "/x/python")
     assert mod.explain_failure(-9, "", "p").startswith("the decoder was killed by signal 9")
     assert mod.step_for_time([0.0, 0.5, 1.0], 0.7) == 1 and mod.step_for_time([0.0, 0.5], -1.0) == 0
+
+
+def test_plugin_as_a_vtk_algorithm_keeps_few_decodes(monkeypatch):
+    """The reader class in pip's VTK (no ParaView): every ratio asked for gives gatun_py's mesh at that
+    ratio, a ratio asked for again is not decoded again, and at most KEEP_DECODED decodes stay on disk."""
+    pytest.importorskip("vtkmodules.util.vtkAlgorithm", reason="pip install vtk")
+    import importlib.util
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    monkeypatch.setenv("TETC_PYTHON", sys.executable)
+    spec = importlib.util.spec_from_file_location("tetc_reader_as_vtk", PLUGIN)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    f = gatun_py.open(POST)
+    reader = mod.TetcReader()
+    reader.SetFileName(str(POST))
+    try:
+        for ratio in (0.0, 0.2, 0.4, 0.6, 0.8, 0.2):
+            reader.SetRatio(ratio)
+            reader.Update()
+            want = f.mesh(ratio or None)
+            out = reader.GetOutputDataObject(0)
+            assert out.GetNumberOfCells() == want.n_tets, ratio
+            got = vtk_to_numpy(out.GetPointData().GetArray("Pressure"))
+            assert got.tobytes() == want.user_point_data["Pressure"].tobytes()
+            assert len(os.listdir(reader._tmp)) <= mod.KEEP_DECODED
+    finally:
+        mod.DECODER.stop()
+
+
+FAKE_SERIES = '''
+import sys
+import numpy as np
+import gatun_py.api as api
+from gatun_py.mesh import TetMesh
+from gatun_py.paraview.decode import serve
+
+_mesh = api.TetcFile.mesh
+
+
+def mesh(self, ratio=None, *, level=None, jobs=None, step=0):
+    m = _mesh(self, ratio, level=level, jobs=jobs)
+    data = dict(m.user_point_data)
+    if "Pressure" not in data:  # the decoder's warm-up file
+        return m
+    data["Pressure"] = (data["Pressure"] * np.float32(1 + 0.05 * step)).astype(np.float32)
+    return TetMesh(m.points, None, m.tets, "Pressure", point_data=data)
+
+
+api.TetcFile.n_steps = 40
+api.TetcFile.times = tuple(0.5 * k for k in range(40))
+api.TetcFile.mesh = mesh
+sys.exit(serve())
+'''
+
+
+@needs_paraview
+def test_plugin_time_steps_with_a_stand_in_series(tmp_path):
+    """The plugin's side of a series, before .tetc files hold one: its decoder is given a TetcFile with
+    40 steps (each step's Pressure scaled), as the time-series API has them (n_steps, times,
+    mesh(step=)). ParaView shows 40 TimestepValues and stepping changes the data."""
+    script = tmp_path / "fake_series.py"
+    script.write_text(FAKE_SERIES)
+    python = tmp_path / "python"
+    python.write_text(f"#!/bin/sh\nexec {sys.executable} {script}\n")  # ignores the plugin's -m arguments
+    python.chmod(0o755)
+    times = [0.5 * k for k in range(40)]
+    res, _, _, _ = pvbatch(POST, tmp_path, python=python, step_times=[times[0], times[1], times[39], 7.3])
+    assert res["times"] == times
+    base = float(np.asarray(gatun_py.open(POST).mesh().user_point_data["Pressure"], np.float64).sum())
+    want = [base * (1 + 0.05 * k) for k in (0, 1, 39, 14)]  # t = 7.3 shows step 14 (t = 7.0)
+    assert res["step_sums"] == pytest.approx(want, rel=1e-5) and len(set(res["step_sums"])) == 4

@@ -274,6 +274,7 @@ class TetcReader(VTKPythonAlgorithmBase):
         self._info_key = None
         self._decoded = {}  # (file key, step, ratio, level) -> (path, points), in decoding order
         self._manifests = {}  # path -> the decoder's list of its .npy files
+        self._count = 0
         self._tmp = None
         self._shown = set()  # messages already shown (ParaView asks several times per update)
         self._point_sel = vtkDataArraySelection()
@@ -353,7 +354,8 @@ class TetcReader(VTKPythonAlgorithmBase):
             self._tmp = tempfile.mkdtemp(prefix="tetc-paraview-")
         ext = ".npydir" if np is not None else ".vtkhdf" if vtkHDFReader is not None else ".vtu"
         ext = {"npy": ".npydir", "vtkhdf": ".vtkhdf", "vtu": ".vtu"}.get(os.environ.get(TRANSFER_ENV, ""), ext)
-        out = os.path.join(self._tmp, f"decoded{len(self._decoded)}_{step}{ext}")
+        self._count += 1  # a new name every time: a kept decode is never overwritten
+        out = os.path.join(self._tmp, f"decoded{self._count}_step{step}{ext}")
         info, err = DECODER.request(file=self._filename, output=out, step=step, ratio=ratio, level=level)
         if err:
             return None, err
@@ -363,8 +365,10 @@ class TetcReader(VTKPythonAlgorithmBase):
         while len(self._decoded) > KEEP_DECODED:
             path, _ = self._decoded.pop(next(iter(self._decoded)))
             self._manifests.pop(path, None)
-            if path != info["output"]:
-                shutil.rmtree(path, ignore_errors=True) if os.path.isdir(path) else _unlink(path)
+            if os.path.isdir(path):
+                shutil.rmtree(path, ignore_errors=True)
+            else:
+                _unlink(path)
         return self._decoded[want], None
 
     def _remember(self, key, info):

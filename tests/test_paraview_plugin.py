@@ -156,8 +156,6 @@ def make_series(tmp_path, n_steps: int = 40) -> Path:
 
 @needs_paraview
 def test_series_time_steps(tmp_path):
-    if not hasattr(gatun_py.TetcFile, "n_steps"):
-        pytest.skip("TetcFile has no time steps yet (n_steps): the series part runs once .tetc series exist")
     path = make_series(tmp_path)
     f = gatun_py.open(path)
     times = list(f.times)

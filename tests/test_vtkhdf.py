@@ -270,8 +270,6 @@ def test_not_hdf5_and_truncated(tmp_path, post):
 
 
 def test_series_decompress_to_temporal_vtkhdf(tmp_path):
-    if not hasattr(gatun_py.TetcFile, "n_steps"):
-        pytest.skip("TetcFile has no time steps yet (n_steps): the series part runs once .tetc series exist")
     from test_paraview_plugin import make_series  # the same 40-step series the ParaView test opens
     src = make_series(tmp_path)
     f = gatun_py.open(src)

@@ -73,6 +73,18 @@ def vtk_contour(pvtu: Path, value: float, cwd: Path) -> tuple[int, float, float]
     return int(tris), time.perf_counter() - t0, int(peak_file.read_text().split()[-1]) / 1024.0
 
 
+def level_bytes(path: Path) -> tuple[int, int]:
+    """(bytes of level 0's sections, levels stored by every brick) of a .tetc file."""
+    import re
+
+    from gatun_py.codec import TetcReader
+    r = TetcReader(path)
+    c = r.container
+    l0 = sum(c.section_size(n) for n in c.section_names() if re.match(r"(B\d+/)?L0/", n))
+    levels = min(len(r.brick(k).levels) for k in range(r.n_bricks)) if r.n_bricks > 1 else len(r.levels)
+    return l0, levels
+
+
 def _tetc(args, cwd, what, rows, timeout=7200):
     code, lines, secs, peak = run_tetc(args, cwd, timeout=timeout)
     if code != 0:
@@ -91,6 +103,7 @@ def measure(base: str, refine: int, work: Path, *, workers: bool = True, one_pie
     tets = int(r.meta["tets"])
     out.update(tets=tets, bytes=pieced.stat().st_size, secs=secs, peak=peak, bricks=r.n_bricks,
                largest=max(int(b["tets"]) for b in r.meta["bricks"]))
+    out["l0_bytes"], out["levels"] = level_bytes(pieced)
     # --memory a quarter of what the largest piece needs: every piece split into ~4 bricks
     limit_mb = max(64, out["largest"] * 400 // 4 >> 20)
     m = work / "memory.tetc"
@@ -103,6 +116,7 @@ def measure(base: str, refine: int, work: Path, *, workers: bool = True, one_pie
         single = work / "whole.tetc"
         s1, p1 = _tetc(["compress", whole, "-o", single, "--jobs", "1", "-q", "--force"], work, "whole", None)
         out.update(whole_bytes=single.stat().st_size, whole_secs=s1, whole_peak=p1)
+        out["whole_l0_bytes"], out["whole_levels"] = level_bytes(single)
     if workers:
         w = work / "workers.tetc"
         s2, p2 = _tetc(["compress", pvtu, "-o", w, "--workers", "2", "-q", "--force"], work, "workers", None)
@@ -138,9 +152,11 @@ def main(argv: list[str]) -> int:
             print(results[-1], f"({time.perf_counter() - t0:.0f} s)", flush=True)
     rows = []
     for x in results:
-        wb = x.get("whole_bytes")
+        wb, w0 = x.get("whole_bytes"), x.get("whole_l0_bytes")
         rows.append([x["name"], x["tets"], x["bricks"], x["largest"], x["bytes"], 8.0 * x["bytes"] / x["tets"],
-                     f"{100.0 * (x['bytes'] / wb - 1):+.2f} %" if wb else "-", x["secs"], x["tets"] / x["secs"],
+                     f"{100.0 * (x['bytes'] / wb - 1):+.2f} %" if wb else "-",
+                     f"{100.0 * (x['l0_bytes'] / w0 - 1):+.2f} %" if w0 and "l0_bytes" in x else "-",
+                     f"{x.get('levels', '-')} / {x.get('whole_levels', '-')}", x["secs"], x["tets"] / x["secs"],
                      x["peak"], x.get("whole_secs", "-"), x.get("whole_peak", "-")])
     split = [[x["name"], x["bricks"], x["peak"], f"{x['memory_limit']}M", x["memory_bricks"], x["memory_peak"],
               x["memory_secs"], f"{100.0 * (x['memory_bytes'] / x['bytes'] - 1):+.2f} %"]
@@ -159,8 +175,12 @@ counts and peaks are not). Data:
 `.vtu`; `r1`: every piece refined once, 8x the tets). Each figure is a fresh `tetc` process under
 GNU time, levels stored (`--jobs 1`); "one piece" is `tetc compress whole.vtu` of the same mesh.
 
-{table(["mesh", "tets", "bricks", "largest brick", "bytes", "bits/tet", "vs one piece", "s", "tets/s",
-        "peak MB", "one piece s", "one piece peak MB"], rows)}
+{table(["mesh", "tets", "bricks", "largest brick", "bytes", "bits/tet", "vs one piece", "level 0 vs one piece",
+        "levels (pieces / one)", "s", "tets/s", "peak MB", "one piece s", "one piece peak MB"], rows)}
+
+"vs one piece" compares whole files: a pieced file's bricks keep their shared points at every
+level, so they stop at a coarser level count than one piece (as `--bricks K` files do), which
+makes the whole file smaller; "level 0 vs one piece" is the lossless mesh alone.
 
 `--memory LIMIT` (a quarter of the estimated need of the largest piece, 400 B/tet) splits every
 piece into bricks; peak MB of the one process against the limit:

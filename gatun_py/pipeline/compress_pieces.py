@@ -380,7 +380,7 @@ def compress_pieces(inputs, output, *, levels=None, mesh_only: bool = False, w_d
         meta["cut_points"] = table.n_shared
         meta[PIECES_KEY] = [{"source": s.name, "first_brick": int(firsts[i]), "bricks": len(s.parts)}
                             for i, s in enumerate(summaries)]
-        log(f"{len(paths)} pieces, {meta['tets']} tets in {len(parts)} bricks; {table.n_shared} points shared "
+        log(f"{len(paths)} piece{'s' if len(paths) > 1 else ''}, {meta['tets']} tets in {len(parts)} bricks; {table.n_shared} points shared "
             "between them "
             f"({100.0 * table.n_shared / max(meta['points'], 1):.2f} % of the {meta['points']} points)")
         del parts

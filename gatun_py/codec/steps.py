@@ -388,7 +388,8 @@ def check_step_mesh(mesh0, mesh, k: int, source: str = "") -> None:
     if mesh.n_points != mesh0.n_points or mesh.n_tets != mesh0.n_tets \
             or not np.array_equal(mesh.tets, mesh0.tets):
         raise MeshError(f"{where}: the mesh differs from step 0's ({mesh.n_points} points, {mesh.n_tets} tets "
-                        f"against {mesh0.n_points} and {mesh0.n_tets}, or other tets): a series keeps one topology")
+                        f"against {mesh0.n_points} and {mesh0.n_tets}, or other tets): a series keeps one topology (the pieces of one mesh are compressed "
+                        "with --pieces, gatun_py.compress_pieces)")
     if mesh.points.dtype != mesh0.points.dtype:
         raise MeshError(f"{where}: coordinates are {mesh.points.dtype}, step 0's {mesh0.points.dtype}")
     a0 = [(n, dtype_name(d), c) for n, d, c in mesh0.arrays]

@@ -54,6 +54,7 @@ class StepDecoder:
         self._level0 = None
         self._cache = {}
         self._maps = {}
+        self._points0 = None
 
     @property
     def n_steps(self) -> int:
@@ -94,8 +95,14 @@ class StepDecoder:
             p = np.asarray(conn.predictors)[:n]
             refs[:len(p)] = p
             self._level0 = (refs, geo.values, n)
+            self._conn = conn  # replayed by every step's level-0 decode: the mesh is decoded once
             r._decoded, r._decoded_geometry = (0, conn), (0, geo.values)  # for step 0's full decode
         return self._level0
+
+    def kept_level0(self):
+        """(decoded connectivity, geometry values) of level 0, decoded once for every step."""
+        self._base()
+        return self._conn, self._level0[1]
 
     def values(self, step: int) -> dict:
         """{array name: values, ``_POINTS``: coordinates} of ``step`` in level 0's decode order."""
@@ -145,13 +152,16 @@ class StepDecoder:
         """Step 0's coordinates in level 0's decode order, without decoding its point arrays."""
         if 0 in self._cache:
             return self._cache[0][_POINTS]
-        refs, pos0, n = self._base()
-        r = self.base
-        dec = r._points_decoder(0, n)
-        if dec is None:
-            return pos0[:, :3].astype(r.points_dtype)
-        dec.decode(refs, np.ascontiguousarray(pos0[:, :3]), positions=pos0)
-        return dec.finish()
+        if getattr(self, "_points0", None) is None:
+            refs, pos0, n = self._base()
+            r = self.base
+            dec = r._points_decoder(0, n)
+            if dec is None:
+                self._points0 = pos0[:, :3].astype(r.points_dtype)
+            else:
+                dec.decode(refs, np.ascontiguousarray(pos0[:, :3]), positions=pos0)
+                self._points0 = dec.finish()
+        return self._points0
 
     def _moves(self, k: int) -> bool:
         return bool(self.index.entries[k]["points"])
@@ -216,6 +226,12 @@ class StepReader(TetcReader):
         meta["arrays"] = arrays
         self.meta = meta
 
+    def _keep(self, level: int) -> None:
+        """Level 0's batches replay the connectivity and geometry the steps were decoded with."""
+        if level == 0:
+            conn, geo = self.steps.kept_level0()
+            self._decoded, self._decoded_geometry = (0, conn), (0, geo)
+
     def _gather(self, level: int, first: int, count: int) -> dict:
         vals = self.steps.values(self.step)
         m = self.steps.level_map(level)
@@ -228,6 +244,7 @@ class StepReader(TetcReader):
         name = self.scalar_name if scalar is None else scalar
         if name not in names:
             raise OptionError(f"no point array named {scalar!r}; arrays: {', '.join(map(repr, names))}")
+        self._keep(level)
         for batch, _ in TetcReader._batches(self, level, batch_tets, {}, jobs=1):
             k = len(batch.points)
             got = self._gather(level, batch.first, k)
@@ -238,9 +255,13 @@ class StepReader(TetcReader):
 
     def decode_mesh(self, level: int = 0, *, jobs: int | None = None):
         lv = self.level_meta(level)
-        tets = np.empty((lv["tets"], 4), np.int32)
-        for _ in TetcReader._batches(self, level, DEFAULT_BATCH_TETS, {}, tets_out=tets):
-            pass
+        if level == 0:  # the connectivity the steps were decoded with
+            self._one_stream()
+            tets = self.steps.kept_level0()[0].tets
+        else:
+            tets = np.empty((lv["tets"], 4), np.int32)
+            for _ in TetcReader._batches(self, level, DEFAULT_BATCH_TETS, {}, tets_out=tets):
+                pass
         got = self._gather(level, 0, int(lv["points"]))
         points = got.pop(_POINTS)
         data = {name: got[name] for name, _, _ in self.arrays}

@@ -80,8 +80,9 @@ def history_steps(entry: dict) -> list:
 def keyframe_interval_for(n_points: int, n_tets: int, values_per_step: int) -> int:
     """A keyframe interval that keeps decoding any step within about 1.5x decoding step 0: a step
     decodes its keyframe and the steps after it, each about as costly per value as step 0's arrays,
-    while step 0 also decodes the mesh (connectivity and geometry, about as costly as 9 values per tet)."""
-    mesh = 9.0 * n_tets
+    while step 0 also decodes the mesh (connectivity and geometry, about as costly as 2.5 values per
+    tet: bench/sections/series.md)."""
+    mesh = 2.5 * n_tets
     v = max(1, int(values_per_step))
     return int(min(16, max(1, (0.5 * mesh + 1.5 * v) // v)))
 

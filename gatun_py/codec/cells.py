@@ -388,7 +388,8 @@ def encode_cells(cells: Cells, mesh_tets: np.ndarray, vertex_order: np.ndarray,
             node_cells.append((ranks, dec_of[data[:, k:]], t))
     sections.append(("C/palettes", _code(np.concatenate([p.reshape(-1) for p in palettes]) if palettes
                                          else np.zeros(0, np.uint8))))
-    sections.append(("C/perms", _code(perms)))
+    all_pairs = _neighbour_pairs(nbr, cellrank)
+    sections.append(("C/perms", _code(perms, _cell_refs(all_pairs, np.arange(nc), nc))))
     pal_sizes = [int(len(p)) for p in palettes]
 
     # higher-order nodes, in traversal order
@@ -637,7 +638,8 @@ def decode_cells(meta, read_section, has_section, dec_tets: np.ndarray, n_points
     ks = [VOLUME_CELLS[blocks[i][0]][1] for i in vol_blocks]
     total = sum(_int(s, 0, 40320) * k for s, k in zip(pal_sizes, ks))
     flat = _decode(section("C/palettes"), total, "uint8").astype(np.int64)
-    perms = _decode(read_section("C/perms"), nc, "int64") if nc else np.zeros(0, np.int64)
+    perms = (_decode(read_section("C/perms"), nc, "int64", 1, _cell_refs(_neighbour_pairs(nbr, cellrank), np.arange(nc), nc))
+             if nc else np.zeros(0, np.int64))
     out_blocks = [None] * len(blocks)
     ranks_of_block = {}
     at = 0

@@ -40,6 +40,7 @@ from .codec.stepreader import StepDecoder
 from .codec.tetcfile import encode_level, find_copies
 from .errors import OptionError, OutputError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
+from .mesh.cells import Cells
 from .mesh.exodus import exodus_times
 from .mesh.io import mesh_output_format
 from .mesh.series import is_series_source, read_series
@@ -215,7 +216,6 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
         if bricks > 1:
             raise OptionError("keep_order needs one plain stream: not with bricks")
         if cells is None:  # a TetMesh: its tets are its cells
-            from .mesh.cells import Cells
 
             cells = Cells([("tetra", np.asarray(mesh.tets, np.int64))], np.arange(mesh.n_tets, dtype=np.int64))
         cells.keep_order = True

@@ -37,6 +37,7 @@ import lzma
 import numpy as np
 
 from ..errors import CorruptFileError, MeshError
+from ..mesh.model import TetMesh
 from ..mesh.cells import NODE_SUPPORTS, OTHER_CELLS, VOLUME_CELLS, Cells, cell_size, is_raw_set
 from . import _cutborder_kernels as CK
 from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
@@ -202,7 +203,6 @@ def restore_order(mesh, cells: Cells):
     """(mesh, cells) in the original numbering, for cells decoded from a file written with
     ``keep_order``: points, point arrays and tets renumbered, every block's cells, cell arrays and
     cell sets back in their original order; (mesh, cells) unchanged otherwise."""
-    from ..mesh.model import TetMesh
 
     if cells is None or cells.order is None:
         return mesh, cells

@@ -30,6 +30,7 @@ from ..errors import CorruptFileError, MeshError, OptionError
 from ..mesh import TetBatch, TetMesh, default_step
 from ..mesh.model import NO_SCALAR, scalar_of
 from ..mesh.validate import check_tet_ids
+from .cells import encode_cells
 from .brickindex import BrickView, brick_levels_summary, parse_brick_index
 from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
 from .container import Container, build_container
@@ -397,7 +398,6 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
         meta["dependencies"], deps = _dependency_section(dependencies, levels[0])
         sections.append(("deps", deps))
     if cells is not None and cells.needed():
-        from .cells import encode_cells  # only files with cells need it
 
         meta["cells"], cell_sections = encode_cells(cells, mesh0.tets, encoded[0].vertex_order, encoded[0].tets,
                                                     mesh0.points32[encoded[0].vertex_order])

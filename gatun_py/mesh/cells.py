@@ -17,6 +17,11 @@ import numpy as np
 
 from ..errors import MeshError
 
+try:  # meshio's table of cell dimensions, which CellBlock consults (see _register_with_meshio)
+    from meshio._mesh import topological_dimension as _MESHIO_DIMENSION
+except ImportError:
+    _MESHIO_DIMENSION = None
+
 # meshio volume cell type -> (linear type, corners)
 VOLUME_CELLS = {
     "tetra": ("tetra", 4), "tetra10": ("tetra", 4), "tetra20": ("tetra", 4),
@@ -55,12 +60,10 @@ NODE_SUPPORTS = {
 def _register_with_meshio() -> None:
     """meshio's readers produce some volume types (VTK's wedge15, pyramid13, ...) that its
     ``CellBlock`` then cannot hold (no dimension listed for them): list them."""
-    try:
-        from meshio._mesh import topological_dimension
-    except ImportError:  # another meshio layout: nothing to add
+    if _MESHIO_DIMENSION is None:  # another meshio layout: nothing to add
         return
     for t in VOLUME_CELLS:
-        topological_dimension.setdefault(t, 3)
+        _MESHIO_DIMENSION.setdefault(t, 3)
 
 
 _register_with_meshio()

@@ -24,8 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .._atomic import atomic_path
 from ..errors import MeshError, OptionError, ReadError
 from .exodus import read_exodus
+from .io import mesh_from_meshio, read_mesh, write_mesh
 from .model import TetMesh
 from .validate import MeshReport
 
@@ -136,7 +138,6 @@ def piece_paths(inputs, *, single: bool = False) -> list[Path]:
 
 def read_piece(path, read_options: dict | None = None) -> tuple[TetMesh, MeshReport]:
     """One piece as a validated mesh (``read_options`` as for :func:`~gatun_py.mesh.read_mesh`)."""
-    from .io import mesh_from_meshio, read_mesh  # io imports this module's neighbours, not this one
 
     opts = dict(read_options or {})
     path = Path(path)
@@ -416,7 +417,6 @@ def write_pvtu(pieces: list[TetMesh], path, *, force: bool = False) -> list[Path
     >>> len(pvtu_pieces(out))
     2
     """
-    from .io import write_mesh
 
     path = Path(path)
     if path.suffix.lower() != PVTU_SUFFIX:
@@ -433,7 +433,6 @@ def write_pvtu(pieces: list[TetMesh], path, *, force: bool = False) -> list[Path
 def write_pvtu_index(path, pieces: list, like: TetMesh, *, force: bool = False) -> None:
     """Write the ``.pvtu`` file naming ``pieces`` (``.vtu`` files beside it, already written),
     whose point arrays are those of ``like``."""
-    from .._atomic import atomic_path
 
     path = Path(path)
     arrays = "".join(f'      <PDataArray type="{_vtk_type(a.dtype)}" Name="{n}" '

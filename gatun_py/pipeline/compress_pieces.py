@@ -35,6 +35,7 @@ import struct
 import tempfile
 import zlib
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,16 +44,17 @@ import numba
 import numpy as np
 
 from .._atomic import atomic_path
-from ..codec.bricks import encode_brick, encode_cut
+from ..codec.bricks import _keys, brick_jobs, encode_brick, encode_cut, map_bricks, read_cut, stitch_bricks
 from ..codec.brickindex import BRICKS_KEY, brick_prefix
 from ..codec.container import MAGIC, PREAMBLE_SIZE, VERSION_MAJOR, VERSION_MINOR
 from ..codec.tetcfile import FORMAT_NAME, dtype_name
 from ..codec.threads import check_jobs
-from ..errors import MeshError, OptionError, OutputError, TetcError
+from ..errors import CorruptFileError, MeshError, OptionError, OutputError, TetcError
 from ..mesh import TetMesh
 from ..mesh.partition import MAX_BRICKS, partition_tets, split_bricks
 from ..mesh.pieces import boundary_part, interface_table, piece_paths, pvtu_scalar, read_piece
 from .bricks import _brick_payload, _with_loose_points
+from .distributed import ClusterError, _distributed, _numba_cache_dir
 
 __all__ = ["PIECES_KEY", "compress_pieces", "parse_memory", "piece_bricks", "piece_mesh"]
 
@@ -308,7 +310,6 @@ def piece_bricks(meta: dict, piece: int) -> range:
     e = pieces[piece]
     first, n = e.get("first_brick"), e.get("bricks")
     if not all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in (first, n)) or n < 1:
-        from ..errors import CorruptFileError
         raise CorruptFileError(f"corrupt piece list: piece {piece}")
     return range(first, first + n)
 
@@ -418,7 +419,6 @@ class _Runner:
         self.jobs, self.client, self.cluster, self.pool = jobs, None, None, None
         self.threads = 0
         if workers is not None or scheduler is not None:
-            from .distributed import ClusterError, _distributed, _numba_cache_dir
             dd = _distributed()
             try:
                 if scheduler is not None:
@@ -472,7 +472,6 @@ class _Runner:
         elif self.pool is not None:
             extra = (self.threads,) if fn is encode_piece else ()
             futs = {self.pool.submit(fn, *args[i], *extra): i for i in order}
-            from concurrent.futures import as_completed
             for fut in as_completed(futs):
                 try:
                     yield futs[fut], fut.result()
@@ -484,7 +483,6 @@ class _Runner:
                 yield i, fn(*args[i])
 
     def _dask(self, fn, args, order):
-        from .distributed import ClusterError, _distributed
         dd = _distributed()
         futs = [self.client.submit(fn, *args[i], pure=False, key=f"tetc-{fn.__name__}-{i}-{os.getpid()}-{id(self)}")
                 for i in order]
@@ -511,7 +509,6 @@ class _Runner:
 def piece_mesh(reader, piece: int, *, level: int = 0, jobs: int | None = None) -> TetMesh:
     """Piece ``piece`` of a file compressed from pieces, at a stored level: its bricks decoded and
     stitched (their shared points once; vertices and tets in decode order, not the piece's own)."""
-    from ..codec.bricks import brick_jobs, map_bricks, read_cut, stitch_bricks, _keys
 
     ks = list(piece_bricks(reader.meta, int(piece)))
     if reader.n_bricks <= 1:

@@ -173,6 +173,7 @@ def test_api_render_says_the_image_is_black(tmp_path):
     frame = gatun_py.render(delaunay_mesh(40, 1), size=16, tf=NOTHING, log=lines.append)
     assert not frame.rgb.any()
     assert sum("transparent over the whole scalar range" in line for line in lines) == 1
+    assert sum("black" in line for line in lines) == 1  # one line, not a second "no ray hits"
 
 
 # -- early ray termination --------------------------------------------------------------------------

@@ -72,11 +72,22 @@ def datasets(names, work: Path, log=print) -> list[dict]:
     return out
 
 
-def _ours(tetc_exe, d, tf, size, threads, png):
-    env = dict(os.environ, NUMBA_NUM_THREADS=str(threads))
+def _peer_cmd(peer: Path) -> tuple[list, dict]:
+    """How to run another checkout's ``tetc``: its own ``.venv/bin/tetc``, else this interpreter with
+    the checkout first on the path (a plain copy, e.g. ``git archive COMMIT | tar -x -C DIR``)."""
+    exe = peer / ".venv" / "bin" / "tetc"
+    if exe.exists():
+        return [str(exe)], {}
+    return [sys.executable, "-m", "gatun_py.cli.main"], {"PYTHONPATH": str(peer), "cwd": str(peer)}
+
+
+def _ours(tetc_exe, d, tf, size, threads, png, extra_env=None):
+    extra_env = dict(extra_env or {})
+    cwd = extra_env.pop("cwd", None)
+    env = dict(os.environ, NUMBA_NUM_THREADS=str(threads), **extra_env)
     cmd = [*tetc_exe, "render", str(d["tetc"]), "-o", str(png), "--tf", str(tf), "--size", f"{size}x{size}",
            "--azimuth", "30", "--elevation", "20", "--stats", "--quiet", "--force"]
-    out = subprocess.run(cmd, capture_output=True, text=True, timeout=1800, env=env)
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=1800, env=env, cwd=cwd)
     if out.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed: {out.stderr[-2000:]}")
     return json.loads(out.stdout)
@@ -100,14 +111,14 @@ def speed_section(work: Path, args, have_vtk: bool, log=print) -> list[str]:
     load_before = machine_load()
     data = datasets(names, work, log)
     ours_exe = tetc_cmd()
-    peer_exe = [str(peer / ".venv" / "bin" / "tetc")] if peer else None
+    peer_exe, peer_env = _peer_cmd(peer) if peer else (None, {})
     cases = [(d, tfkey, size) for d in data for tfkey in ("dense", "t75") for size in sizes]
     tfs = {d["label"]: {"dense": d["tf"], "t75": tf_transparent_below(d["tf"], work)} for d in data}
     runs: dict = {}
     for d in data:  # warm every JIT cache and the files' pages
         _ours(ours_exe, d, d["tf"], 64, 2, work / "warm.png")
         if peer_exe:
-            _ours(peer_exe, d, d["tf"], 64, 2, work / "warm.png")
+            _ours(peer_exe, d, d["tf"], 64, 2, work / "warm.png", peer_env)
     for rnd in range(repeats):  # interleaved: every way once per round
         for d, tfkey, size in cases:
             tf = tfs[d["label"]][tfkey]
@@ -116,7 +127,7 @@ def speed_section(work: Path, args, have_vtk: bool, log=print) -> list[str]:
             r.setdefault("ours2", []).append(_ours(ours_exe, d, tf, size, 2, work / "o2.png"))
             r.setdefault("ours1", []).append(_ours(ours_exe, d, tf, size, 1, work / "o1.png"))
             if peer_exe:
-                r.setdefault("peer", []).append(_ours(peer_exe, d, tf, size, 2, work / "p.png"))
+                r.setdefault("peer", []).append(_ours(peer_exe, d, tf, size, 2, work / "p.png", peer_env))
             if have_vtk:
                 for m in ("pt", "rc"):
                     r.setdefault(m, []).append(_vtk(d, tf, size, m, work))
@@ -125,6 +136,7 @@ def speed_section(work: Path, args, have_vtk: bool, log=print) -> list[str]:
             r.setdefault("frame", []).append(run_worker("frame", input=d["tetc"], tf=tf, width=size, height=size,
                                                         azimuth=30.0, elevation=20.0))
             log(f"  round {rnd + 1}: {key} ours {r['ours2'][-1]['total_s']:.2f} s"
+                + (f", peer {r['peer'][-1]['total_s']:.2f} s" if peer_exe else "")
                 + (f", VTK PT {r['pt'][-1]['read_render_s']:.2f} s, RC {r['rc'][-1]['read_render_s']:.2f} s"
                    if have_vtk else ""))
     med = statistics.median

@@ -1130,8 +1130,10 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
     st["size"] = [width, height]
     st["scalar"] = name
     st["scalar_range"] = list(rng)
-    if st.get("rays_hit", 1) == 0:
-        log("note: no ray hits the mesh; the image is black")
+    culled = st.get("tets_culled", 0)
+    if st.get("rays_hit", 1) == 0 and not (culled and culled >= st.get("tets_rendered", 0)):
+        # (all tets invisible: the ray caster's own note said so)
+        log("note: no ray hits the " + ("visible part of the mesh" if culled else "mesh") + "; the image is black")
     if st.get("rays_unfinished"):
         log(f"warning: {st['rays_unfinished']} rays could not be completed")
     return Frame(rgb, result.image, st)

@@ -173,6 +173,7 @@ def test_api_render_says_the_image_is_black(tmp_path):
     frame = gatun_py.render(delaunay_mesh(40, 1), size=16, tf=NOTHING, log=lines.append)
     assert not frame.rgb.any()
     assert sum("transparent over the whole scalar range" in line for line in lines) == 1
+    assert sum("black" in line for line in lines) == 1  # one line, not a second "no ray hits"
 
 
 # -- early ray termination --------------------------------------------------------------------------
@@ -237,3 +238,16 @@ def test_culling_real_grids_equals_the_full_walk(name):
             assert culled.stats["nan_pixels"] == 0
             assert diff8(culled.image, full.image) <= 1, (tf, az, el)
             assert np.abs(culled.image - full.image).max() < 1e-4
+
+
+def test_culled_stream_snapshots_claim_nothing_before_the_end():
+    """Culling walks once every tet has come: a snapshot before that is blank and calls no pixel final."""
+    mesh = delaunay_mesh(60, 3)
+    rc = StreamingRaycaster(Camera(12, 10), tf_above(0.5), scalar_range=mesh.scalar_range)
+    rc.add_vertices(mesh.points, mesh.density)
+    rc.set_boundary(mesh.boundary_faces())
+    rc.add_tets(mesh.tets[: mesh.n_tets // 2])
+    image, finished = rc.snapshot()
+    assert not image.any() and not finished.any()
+    rc.add_tets(mesh.tets[mesh.n_tets // 2:])
+    assert rc.finish().image.any()

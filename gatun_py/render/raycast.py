@@ -353,7 +353,7 @@ class StreamingRaycaster:
         image = np.zeros((cam.width * cam.height, 4), dtype=np.float64)
         finished = np.zeros(cam.width * cam.height, dtype=np.bool_)
         if self._started:
-            finished[:] = True
+            finished[:] = not self._deferred  # culling: nothing is walked before finish()
             if self._nseg:
                 compose(self._seg, image, self._terminate)
                 finished[self._seg[SEG_RAY][self._seg[SEG_STATE] != STATE_DONE]] = False

@@ -7,7 +7,7 @@ OUT    ?= out
 # Two threads, as on the benchmark machines; override with NUMBA_NUM_THREADS=... make ...
 export NUMBA_NUM_THREADS ?= 2
 
-.PHONY: install test test-fast lint clean-cache demo bench clean distclean browser gmsh-libs
+.PHONY: install test test-fast lint clean-cache demo bench clean distclean browser paraview gmsh-libs
 
 install: $(STAMP)
 
@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m gatun_py.warmup
 	touch $(STAMP)
 
-test: $(STAMP) browser
+test: $(STAMP) browser paraview
 	$(BIN)/pytest -q
 
 # The inner loop: the tests not marked slow (real data at full size, whole pipelines, installs).
@@ -47,6 +47,20 @@ browser:
 	      >/dev/null 2>&1) || echo "note: could not install chromium; the browser test will skip"; \
 	  else \
 	    echo "note: chromium/chromedriver not found (install Debian's chromium chromium-driver); the browser test will skip"; \
+	  fi; \
+	fi
+
+# tests/test_paraview_plugin.py loads the reader plugin in Debian's ParaView (pvbatch under xvfb-run).
+# Installed here when missing and we may (root with apt-get, as in CI); otherwise that test skips and
+# says why. Quiet, and a failed install does not fail the build.
+paraview:
+	@if ! command -v pvbatch >/dev/null 2>&1 || ! command -v xvfb-run >/dev/null 2>&1; then \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing paraview and xvfb for the ParaView plugin test..."; \
+	    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq paraview xvfb \
+	      >/dev/null 2>&1) || echo "note: could not install paraview; the ParaView plugin test will skip"; \
+	  else \
+	    echo "note: pvbatch/xvfb-run not found (install Debian's paraview xvfb); the ParaView plugin test will skip"; \
 	  fi; \
 	fi
 

@@ -52,19 +52,25 @@ def _shuffled_stream(mesh, camera, tf, **kw):
     return render_batches(batches, camera, tf, expected_tets=mesh.n_tets, **kw)
 
 
-def _vtk_scene(vtk, ug, ctf, otf, unit, width, height):
+def _vtk_scene(vtk, ug, ctf, otf, unit, width, height, mapper_kind="rc"):
     """(volume, renderer, offscreen window) of VTK's unstructured-grid ray caster as the peer runs it:
-    linear interpolation, no shading, AutoAdjustSampleDistances off, ImageSampleDistance 1, black."""
+    linear interpolation, no shading, AutoAdjustSampleDistances off, ImageSampleDistance 1, black.
+    ``mapper_kind`` "pt": projected tetrahedra (``vtkProjectedTetrahedraMapper``, OpenGL: Mesa
+    llvmpipe here), the fastest CPU path a ParaView user has."""
     prop = vtk.vtkVolumeProperty()
     prop.SetColor(ctf)
     prop.SetScalarOpacity(otf)
     prop.SetScalarOpacityUnitDistance(unit)
     prop.SetInterpolationTypeToLinear()
     prop.ShadeOff()
-    mapper = vtk.vtkUnstructuredGridVolumeRayCastMapper()
-    mapper.SetInputData(ug)
-    mapper.SetAutoAdjustSampleDistances(0)
-    mapper.SetImageSampleDistance(1.0)
+    if mapper_kind == "pt":
+        mapper = vtk.vtkProjectedTetrahedraMapper()
+        mapper.SetInputData(ug)
+    else:
+        mapper = vtk.vtkUnstructuredGridVolumeRayCastMapper()
+        mapper.SetInputData(ug)
+        mapper.SetAutoAdjustSampleDistances(0)
+        mapper.SetImageSampleDistance(1.0)
     volume = vtk.vtkVolume()
     volume.SetMapper(mapper)
     volume.SetProperty(prop)
@@ -100,7 +106,8 @@ def worker_vtk(args) -> dict:
     otf = vtk.vtkPiecewiseFunction()
     for x, a in zip(tf.opacity_x, tf.opacity_a):
         otf.AddPoint(float(x), float(a))
-    volume, ren, win = _vtk_scene(vtk, ug, ctf, otf, float(tf.unit_distance), args.width, args.height)
+    volume, ren, win = _vtk_scene(vtk, ug, ctf, otf, float(tf.unit_distance), args.width, args.height,
+                                  args.mapper or "rc")
     ren.ResetCamera()
     cam = ren.GetActiveCamera()
     cam.Azimuth(args.azimuth)
@@ -238,6 +245,34 @@ def worker_inmemory(args) -> dict:
             "peak_rss_mb": _rss_mb(), "import_rss_mb": rss_import,
             "face_table_peak_mb": res.stats.get("face_table_peak_mb", float("nan")),
             "rays_unfinished": res.stats["rays_unfinished"]}
+
+
+def worker_frame(args) -> dict:
+    """Steady state: decode the .tetc once, render the mesh twice in this process (the second is
+    the frame a viewer redraws); with ``--range`` none, the scalar range is the file's."""
+    from gatun_py.codec.tetcfile import TetcReader
+    from gatun_py.pipeline.stream import View, file_view
+    from gatun_py.render import Camera, render_mesh
+
+    reader = TetcReader(args.input)
+    mesh = reader.decode_mesh(0)
+    view, cam, rng, step, _ = file_view(reader, View(Camera(args.width, args.height, args.azimuth, args.elevation,
+                                                           args.zoom), args.tf))
+    out = {}
+    for key in ("first", "second"):
+        c0, t0 = time.process_time(), time.perf_counter()
+        res = render_mesh(mesh, cam, view.tf, step=step, scalar_range=rng)
+        out[key + "_s"] = time.perf_counter() - t0
+        out[key + "_cpu_s"] = time.process_time() - c0
+    out.update({k: res.stats[k] for k in ("steps", "samples", "segments", "tets_culled", "rays_hit", "cpu_s",
+                                          "rays_unfinished")})
+    return out
+
+
+def _worker_asm(args) -> dict:
+    from bench_render_speed import worker_asm
+
+    return worker_asm(args)
 
 
 def worker_baseline(args) -> dict:
@@ -808,7 +843,7 @@ def view_datasets(quick=False) -> list[dict]:
     return [refined_record(n, k) for n, k in ([("bluntfin", 2)] if quick else [("bluntfin", 2), ("combustion", 3)])]
 
 
-def only(parts, quick=False):
+def only(parts, quick=False, args=None):
     """Re-measure only ``parts`` (memory, lean, views, robust, cold, prefetch) and replace their blocks in the existing section."""
     try:
         import vtk  # noqa: F401
@@ -841,6 +876,16 @@ def only(parts, quick=False):
     if "prefetch" in parts:
         text = replace_block(text, PREFETCH_HEAD, prefetch_section(work, machine_load(), quick))
         sec.write_text(text)
+    if "speed" in parts:
+        from bench_render_speed import SPEED_HEAD, speed_section
+
+        text = replace_block(text, SPEED_HEAD, speed_section(work, args, have_vtk))
+        sec.write_text(text)
+    if "profile" in parts:
+        from bench_render_speed import PROFILE_HEAD, profile_section
+
+        text = replace_block(text, PROFILE_HEAD, profile_section(work, args))
+        sec.write_text(text)
     print(text)
     shutil.rmtree(work, ignore_errors=True)
 
@@ -858,17 +903,24 @@ def main():
     for k in ("azimuth", "elevation"):
         ap.add_argument(f"--{k}", type=float, default=0.0)
     ap.add_argument("--zoom", type=float, default=1.0)
+    ap.add_argument("--mapper", default=None, help="VTK worker: rc (ray caster, default) or pt (projected tetrahedra)")
+    ap.add_argument("--sizes", default=None, help="--only speed: image sizes (default 256,512,1024)")
+    ap.add_argument("--data", default=None, help="--only speed: data sets (default bluntfin,combustion,flange-1m)")
+    ap.add_argument("--peer", default=None, help="--only speed: another checkout whose .venv/bin/tetc is timed "
+                                                 "in the same runs (e.g. /work/main: the speed-up over it)")
+    ap.add_argument("--repeats", type=int, default=None, help="--only speed: interleaved rounds (default 3)")
     args = ap.parse_args()
     if args.worker:
         fn = {"vtk": worker_vtk, "vtkslab": worker_vtkslab, "inmemory": worker_inmemory,
-              "baseline": worker_baseline}[args.worker]
+              "baseline": worker_baseline, "frame": worker_frame, "asm": _worker_asm}[args.worker]
         print(json.dumps(fn(args)))
         return
     if args.only:
         parts = {p.strip() for p in args.only.split(",") if p.strip()}
-        if not parts or parts - {"memory", "lean", "views", "robust", "cold", "prefetch"}:
-            ap.error("--only takes a comma-separated list of memory, lean, views, robust, cold, prefetch")
-        only(parts, args.quick)
+        if not parts or parts - {"memory", "lean", "views", "robust", "cold", "prefetch", "speed", "profile"}:
+            ap.error("--only takes a comma-separated list of memory, lean, views, robust, cold, prefetch, speed, "
+                     "profile")
+        only(parts, args.quick, args)
         return
 
     from gatun_py.codec.tetcfile import write_tetc

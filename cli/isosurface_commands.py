@@ -7,7 +7,8 @@ import math
 import click
 
 from gatun_py._runtime import load_isosurface_kernels, peak_rss_mb
-from .options import (camera_options, echo_json, force_option, jobs_option, mesh_input_options, progress_bar, quiet_option,
+from .options import (camera_options, check_step, echo_json, force_option, jobs_option, mesh_input_options, progress_bar,
+                      quiet_option,
                       read_kwargs, status)
 
 
@@ -69,6 +70,7 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
       tetc isosurface bf.tetc --value 1.5 --value 3 --ratio 0.1 -o iso.ply --png iso.png
       tetc isosurface big.tetc --value 0.3 --faces 50000 --stats -o iso.ply
     """
+    check_step(input, time_step)
     from gatun_py.isosurface import isosurface as extract
     from gatun_py.isosurface.io import check_surface_path
 

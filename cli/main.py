@@ -13,9 +13,10 @@ import click
 from gatun_py import __version__
 from gatun_py.errors import OutputExistsError, TetcError
 
-from .codec_commands import compress, convert, decompress, info
+from .codec_commands import append, compress, convert, decompress, info
 from .compare import compare_command
 from .isosurface_commands import isosurface
+from .paraview_commands import paraview_plugin
 from .render_commands import render
 from .view_commands import view
 
@@ -55,7 +56,8 @@ def tetc():
     """
 
 
-for _command in (info, convert, compress, decompress, render, isosurface, view, compare_command):
+for _command in (info, convert, compress, decompress, append, render, isosurface, view, compare_command,
+                 paraview_plugin):
     tetc.add_command(_command)
 
 

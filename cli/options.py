@@ -91,8 +91,9 @@ def mesh_input_options(f):
     f = click.option("--q", "q_file", type=click.Path(dir_okay=False), default=None,
                      help="PLOT3D: the Q (solution) file; default: the ...q... file beside an ...xyz... grid.")(f)
     f = click.option("--time-step", type=int, default=None, metavar="T",
-                     help="Exodus: the time step whose nodal variables to read (0-based, -1 the last) "
-                          "[default: the last].")(f)
+                     help="Exodus and VTKHDF: the time step whose arrays to read (0-based, -1 the last) "
+                          "[default: the last; compress stores every step]. A .tetc time series: the "
+                          "step to use [default: 0].")(f)
     f = click.option("--scalar", default=None, metavar="NAME",
                      help="Point-data array to use as the scalar (needed when the file has several).")(f)
     return f
@@ -253,3 +254,21 @@ def progress_bar(label: str, total: int, quiet: bool):
         return
     with click.progressbar(length=total, label=label, file=sys.stderr, show_eta=True) as bar:
         yield bar.update
+
+
+def check_step(input, step=None, at_time=None) -> None:
+    """A usage error (exit 2, one line) when a .tetc INPUT has no step ``step`` or none at ``at_time``;
+    anything else about the file is the library's to report."""
+    if step is None and at_time is None:
+        return
+    from gatun_py.pipeline.stream import is_tetc
+
+    if not os.path.isfile(input) or not is_tetc(input):
+        return
+    import gatun_py
+    from gatun_py.errors import OptionError
+
+    try:
+        gatun_py.open(input).step_index(step=step, time=at_time)
+    except OptionError as e:
+        raise click.BadParameter(str(e), param_hint="'--time'" if at_time is not None else "'--step'") from None

@@ -10,8 +10,8 @@ import gatun_py
 from gatun_py._runtime import (check_output_path, compile_for_render, load_render_kernels, peak_rss_mb,
                                render_kernels_cached)
 
-from .options import (POSITIVE, RATIO, Colour, camera_options, echo_json, force_option, interruptible, logger,
-                      mesh_input_options, output_option, progress_reporter, quiet_option,
+from .options import (POSITIVE, RATIO, Colour, FiniteFloat, camera_options, check_step, echo_json, force_option,
+                      interruptible, logger, mesh_input_options, output_option, progress_reporter, quiet_option,
                       read_kwargs, require_file, selective_options, status, transfer_function_options)
 
 
@@ -81,13 +81,20 @@ def _component(text):
 @click.option("--timeout", type=POSITIVE, default=10.0, show_default=True, metavar="SECONDS",
               help="With --scheduler: how long to wait for it.")
 @click.option("--stats", "show_stats", is_flag=True, help="Print one JSON object with timings and counts on stdout.")
+@click.option("--time", "at_time", type=FiniteFloat(), default=None, metavar="T",
+              help="A .tetc time series: render the step at time T (or give --time-step K).")
+@click.option("--steps", "step_range", default=None, metavar="A:B[:S]",
+              help="A .tetc time series: render steps A, A+S, ... below B (a Python slice; B empty: to the last), "
+                   "one image each, named by {frame} and {step} in OUTPUT (e.g. run_{step:04d}.png), the scalar "
+                   "range common to all of them unless --range.")
 @selective_options
 @mesh_input_options
 @force_option
 @quiet_option
 def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, elevation, zoom, scalar_range, component,
            background, colorbar, ratio, level, budget, pipeline, lean, workers, scheduler, n_bricks, orbit, timeout,
-           show_stats, selective, tets, scalar, q_file, q_var, cell_to_point, time_step, force, quiet):
+           show_stats, at_time, step_range, selective, tets, scalar, q_file, q_var, cell_to_point, time_step, force,
+           quiet):
     """Volume-render INPUT (a .tetc file or any mesh file) into an image.
 
     Tets are rendered as they are decoded: rays start on the boundary surface and walk inward
@@ -107,6 +114,18 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     if scalar_range is not None and not scalar_range[0] < scalar_range[1]:
         raise click.BadParameter(f"MIN must be below MAX, got {scalar_range[0]:g} {scalar_range[1]:g}",
                                  param_hint="'--range'")
+    if sum(x is not None for x in (at_time, step_range, time_step)) > 1:
+        raise click.UsageError("give at most one of --time, --steps and --time-step")
+    check_step(input, time_step, at_time)
+    if step_range is not None:
+        if workers is not None or scheduler is not None or orbit > 1:
+            raise click.UsageError("--steps renders on this machine: not with --workers, --scheduler or --orbit")
+        _render_steps(input, output, _slice(step_range), dict(
+            size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom, ratio=ratio, level=level,
+            budget=budget, mode=mode, step=step, scalar_range=scalar_range, opacity_model=opacity_model,
+            background=background, colorbar=colorbar, lean=lean, pipeline=pipeline, component=_component(component),
+            selective=selective, tets=tets, scalar=scalar), force=force, quiet=quiet, show_stats=show_stats)
+        return
     if n_bricks is not None and workers is None and scheduler is None:
         raise click.UsageError("--bricks is for rendering on a cluster (--workers or --scheduler)")
     if workers is not None or scheduler is not None or orbit > 1:
@@ -139,7 +158,8 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
                                 scalar_range=scalar_range, opacity_model=opacity_model, background=background,
                                 colorbar=colorbar, lean=lean, pipeline=pipeline, progress=progress,
                                 component=_component(component), selective=selective, tets=tets,
-                                log=logger(quiet), **read_kwargs(scalar, q_file, q_var, cell_to_point, time_step))
+                                log=logger(quiet), time=at_time,
+                                **read_kwargs(scalar, q_file, q_var, cell_to_point, time_step))
     frame.save(output, force=force)
     st = frame.stats
     st["total_s"] = time.perf_counter() - t_start
@@ -181,3 +201,28 @@ def _render_on_cluster(input, output, *, show_stats, quiet, **options):
         st = frames[0]
         status(f"wrote {st['output']} ({st['tets_rendered']} tets, {st['bricks']} bricks on {st['workers']} workers, "
                f"{time.perf_counter() - t0:.2f} s)", quiet)
+
+
+def _slice(text: str) -> tuple:
+    """--steps A:B[:S] as (start, stop, stride), empty parts None."""
+    parts = text.split(":")
+    if len(parts) not in (2, 3):
+        raise click.BadParameter(f"{text!r} is not A:B or A:B:S", param_hint="'--steps'")
+    try:
+        out = tuple(int(x) if x.strip() else None for x in parts) + (None,) * (3 - len(parts))
+    except ValueError:
+        raise click.BadParameter(f"{text!r}: A, B and S are whole numbers", param_hint="'--steps'") from None
+    if out[2] == 0:
+        raise click.BadParameter(f"{text!r}: the stride S must not be 0", param_hint="'--steps'")
+    return out
+
+
+def _render_steps(input, output, steps, options, *, force, quiet, show_stats):
+    require_file(input)
+    with progress_reporter("rendering steps", quiet) as progress, interruptible():
+        stats = gatun_py.render_steps(input, output, steps=steps, force=force, progress=progress,
+                                      log=logger(quiet), **options)
+    for st in stats:
+        status(f"wrote {st['output']} (step {st['step']}, time {st['time']:g})", quiet)
+    if show_stats:
+        echo_json(stats)

@@ -77,9 +77,13 @@ info = _Verb("info")
 open = _Verb("open")  # noqa: A001 (the verb users look for, as gzip.open)
 render = _Verb("render")
 isosurface = _Verb("isosurface", ".isosurface.extract")
+append = _Verb("append")
+render_steps = _Verb("render_steps")
+compress_pieces = _Verb("compress_pieces", ".pipeline.compress_pieces")
 
 # classes load with their module on first access
 _LAZY = {"TetcFile": "api", "Frame": "api", "Surface": "isosurface.extract", "TetMesh": "mesh", "TetBatch": "mesh", "read_mesh": "mesh",
+         "read_series": "mesh.series", "Series": "mesh.series",
          "write_mesh": "mesh"}
 
 
@@ -88,7 +92,8 @@ __getattr__, __dir__, _ = attach(__name__, _LAZY)
 
 _register_meshio()
 
-__all__ = ["compress", "decompress", "convert", "info", "open", "render", "isosurface", "TetcFile", "Frame",
+__all__ = ["compress", "decompress", "convert", "info", "open", "render", "isosurface", "append", "render_steps",
+           "compress_pieces", "TetcFile", "Frame",
            "Surface", "TetMesh",
-           "TetBatch", "read_mesh", "write_mesh", "TetcError", "ReadError", "MeshError", "CorruptFileError",
+           "TetBatch", "read_mesh", "write_mesh", "read_series", "Series", "TetcError", "ReadError", "MeshError", "CorruptFileError",
            "FormatVersionError", "OptionError", "OutputError", "OutputExistsError", "__version__"]

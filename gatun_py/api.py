@@ -13,29 +13,44 @@ the command does::
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import glob
+import importlib.util
 
 import math
 import os
+import tempfile
 import time
+from time import perf_counter as _perf_counter  # render's own argument `time` hides the module
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import meshio
 import numpy as np
 
 from ._atomic import check_output_path, write_bytes_atomic
 from ._runtime import peak_rss_mb
 from .codec import LevelPayload, TetcReader, write_tetc
 from .codec.bricks import check_jobs
+from .codec.cells import read_cells, restore_order
 from .codec.info import tetc_info
+from .codec.stepreader import StepDecoder
 from .codec.tetcfile import encode_level, find_copies
-from .errors import OptionError
+from .errors import OptionError, OutputError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
+from .mesh.cells import Cells
+from .mesh.exodus import exodus_times
 from .mesh.io import mesh_output_format
+from .mesh.series import is_series_source, read_series
+from .mesh.pyvista_grid import to_pyvista
+from .mesh.vtkhdf import is_vtkhdf, write_vtkhdf
 from .pipeline.bricks import compress_bricks, read_bricked
+from .pipeline.compress_pieces import compress_pieces, piece_mesh
+from .mesh.pieces import is_partitioned
 from .pipeline.sortlast import BrickRef, MeshExtent, render_bricks, split_for_render
+from .pipeline.series import append_step, write_series
 from .pipeline.budget import load_costs, plan_file_budget, remember_frame
 from .limits import MAX_IMAGE_SIDE
 from .pipeline.distributed import BrickCluster
@@ -50,7 +65,7 @@ from .simplify.dependencies import merge_dependencies
 from .simplify.filter import SimplifyFilter
 from .simplify.levels import MAX_LEVEL, max_stored_level, next_level, resolve_target, target_ancestors
 
-__all__ = ["compress", "decompress", "convert", "info", "open", "render", "render_frames", "TetcFile", "Frame"]
+__all__ = ["compress", "decompress", "convert", "info", "open", "render", "render_frames", "render_steps", "append", "TetcFile", "Frame"]
 
 
 # -- reading the source --------------------------------------------------------------------------
@@ -58,12 +73,16 @@ __all__ = ["compress", "decompress", "convert", "info", "open", "render", "rende
 def _as_mesh(source, read_options: dict, log, *, storing: bool = False, drop_cell_data: bool = False) -> TetMesh:
     """A TetMesh from a path, a TetMesh or a meshio.Mesh (notes of the reader go to ``log``).
 
-    ``storing``: the mesh is about to be compressed, so cell arrays not averaged to the points are
-    refused unless ``drop_cell_data`` (a ``.tetc`` file does not hold cell data; nothing is dropped
-    without a word).
+    ``storing``: the mesh is about to be compressed with its cells (:func:`_as_mesh_and_cells`),
+    so ``drop_cell_data`` leaves its cell arrays out, with a note.
     """
+    return _as_mesh_and_cells(source, read_options, log, storing=storing, drop_cell_data=drop_cell_data)[0]
+
+
+def _as_mesh_and_cells(source, read_options: dict, log, *, storing: bool = False, drop_cell_data: bool = False):
+    """(TetMesh, the cells as given or None) from a path, a TetMesh or a meshio.Mesh."""
     if isinstance(source, TetMesh):
-        return source
+        return source, None
     if type(source).__name__ == "Mesh" and hasattr(source, "cells") and hasattr(source, "points"):
         mesh, report = mesh_from_meshio(source, scalar=read_options.get("scalar"),
                                         cell_to_point=read_options.get("cell_to_point", False), source="<meshio.Mesh>")
@@ -73,13 +92,11 @@ def _as_mesh(source, read_options: dict, log, *, storing: bool = False, drop_cel
         raise OptionError(f"cannot read a mesh from a {type(source).__name__}: give a path, a TetMesh or a meshio.Mesh")
     for note in report.notes:
         log(f"note: {note}")
-    if storing and report.cell_arrays:
-        names = ", ".join(map(repr, report.cell_arrays))
-        if not drop_cell_data:
-            raise OptionError(f"the mesh has cell data ({names}), which a .tetc file does not store: average it to "
-                              "the points (cell-to-point) or drop it explicitly (drop-cell-data)")
-        log(f"note: cell data dropped on request: {names}")
-    return mesh
+    cells = report.cells
+    if storing and drop_cell_data and cells is not None and cells.cell_data:
+        log(f"note: cell data dropped on request: {', '.join(map(repr, cells.cell_data))}")
+        cells.cell_data = {}
+    return mesh, cells
 
 
 def _quiet(_msg: str) -> None:
@@ -92,7 +109,8 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
              w_density: float = 1.0, w_geometry: float = 1.0, w_sample: float = 1.0, scalar: str | None = None,
              q_file=None, q_var: str = "density", cell_to_point: bool = False, time_step: int | None = None,
              drop_cell_data: bool = False, bricks: int = 1, jobs: int | None = None, dependencies: bool = False,
-             progress=None, log=None) -> "TetcFile":
+             keep_order: bool = False, progress=None, log=None, times=None,
+             keyframe_interval: int | None = None) -> "TetcFile":
     """Compress a mesh losslessly into a ``.tetc`` file, with its merge forest and levels.
 
     Parameters
@@ -119,8 +137,8 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
         How to read ``source`` (see :func:`gatun_py.read_mesh`). Every point array is stored, in its
         dtype; ``scalar`` is the default one (rendered and decimated).
     drop_cell_data : bool
-        Compress a mesh whose cell arrays were not averaged to the points (``cell_to_point``),
-        leaving them out; without it such a mesh is refused.
+        Leave the cell arrays out (an explicit opt-out: by default they are stored exactly, beside
+        the cells as given).
     bricks : int
         Split the tets into this many bricks (k-d tree over the tet centroids, balanced by tet
         count), each coded on its own with its own forest and levels (its vertices shared with other
@@ -128,14 +146,26 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     jobs : int, optional
         Processes that decimate and encode bricks; without bricks, threads that encode the levels
         (and level 0 beside the decimation). Default: all cores. The bytes do not depend on it.
+    keep_order : bool
+        Also store the original point order, cell order and every cell's vertex order (tets
+        included), coded against the decoder's order: decompressing gives the input's numbering
+        back exactly (``tetc info`` reports what it cost).
     dependencies : bool
         Also store the merge dependencies that selective refinement needs (``render(...,
-        selective=True)``): every cut closed under them is flip-free. They cost 20-30 % of the file
-        on the samples, so they are stored only when asked for.
+        selective=True)``): every cut closed under them is flip-free. They add 13-70 % to the
+        default file on the samples (bench/sections/cells.md), so they are stored only when asked for.
     progress : callable, optional
         ``progress(done, total)``: vertices the decimation has processed so far, of ``total``.
     log : callable, optional
         Called with one-line status messages (notes about the input, the forest, the sizes).
+    times : sequence of float, optional
+        A time series (``source`` a list of files, a ``.pvd``, an XDMF temporal collection, an
+        Exodus file with several steps, or a :class:`~gatun_py.mesh.series.Series`): the steps'
+        times (default: the source's own, else 0, 1, ...). Every step must have step 0's points and
+        tets; the forest and levels are built on step 0 (see :mod:`gatun_py.codec.steps`).
+    keyframe_interval : int, optional
+        A series: steps coded alone every this many (default: chosen so that any step decodes in
+        about 1.5x the time of step 0).
 
     Returns
     -------
@@ -152,8 +182,25 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     (48, 90, 90)
     """
     log = log or _quiet
+    # a list of files is a time series (compress_pieces takes a list of pieces); a .pvtu or an
+    # Exodus decomposition names its pieces
+    if isinstance(source, (str, os.PathLike)) and is_partitioned(source):
+        if bricks != 1 or dependencies:  # a partitioned mesh is bricked by its pieces
+            raise OptionError("a partitioned mesh is compressed one brick per piece: no bricks or dependencies")
+        compress_pieces(source, output, levels=levels, mesh_only=mesh_only, force=force, w_density=w_density,
+                        w_geometry=w_geometry, w_sample=w_sample, jobs=jobs, drop_cell_data=drop_cell_data,
+                        read_options=dict(scalar=scalar, cell_to_point=cell_to_point, time_step=time_step),
+                        progress=progress, log=log)
+        return TetcFile(output)
     if levels is not None and (not isinstance(levels, (int, np.integer)) or levels < 0):
         raise OptionError(f"levels must be a non-negative integer, got {levels!r}")
+    if times is not None or keyframe_interval is not None or is_series_source(source) \
+            or (isinstance(source, (str, os.PathLike)) and Path(source).suffix.lower() in (".e", ".exo", ".ex2")
+                and time_step is None and _exodus_steps(source) > 1):
+        return _compress_series(source, output, times=times, levels=levels, mesh_only=mesh_only, force=force,
+                                w_density=w_density, w_geometry=w_geometry, w_sample=w_sample, scalar=scalar,
+                                cell_to_point=cell_to_point, drop_cell_data=drop_cell_data, bricks=bricks,
+                                dependencies=dependencies, jobs=jobs, keyframe_interval=keyframe_interval, log=log)
     for name, w in (("w_density", w_density), ("w_geometry", w_geometry), ("w_sample", w_sample)):
         if not (isinstance(w, (int, float)) and math.isfinite(w) and w >= 0):
             raise OptionError(f"{name} must be a finite number >= 0, got {w!r}")
@@ -162,8 +209,20 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     threads = check_jobs(jobs)
     _check_output(source, output, force=force)  # fail before the (long) work
     t0 = time.perf_counter()
-    mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point,
-                                 time_step=time_step), log, storing=True, drop_cell_data=drop_cell_data)
+    mesh, cells = _as_mesh_and_cells(source, dict(scalar=scalar, q_file=q_file, q_var=q_var,
+                                                  cell_to_point=cell_to_point, time_step=time_step),
+                                     log, storing=True, drop_cell_data=drop_cell_data)
+    if keep_order:
+        if bricks > 1:
+            raise OptionError("keep_order needs one plain stream: not with bricks")
+        if cells is None:  # a TetMesh: its tets are its cells
+
+            cells = Cells([("tetra", np.asarray(mesh.tets, np.int64))], np.arange(mesh.n_tets, dtype=np.int64))
+        cells.keep_order = True
+    if cells is not None and cells.needed() and bricks > 1:
+        log("note: a bricked file keeps the tets only: the cells as given are not stored (compress without "
+            "bricks to keep them)")
+        cells = None
     name = Path(source).name if isinstance(source, (str, os.PathLike)) else ""
     log(f"read {name or 'mesh'}: {mesh.n_points} points, {mesh.n_tets} tets")
     if dependencies and (mesh_only or bricks > 1):
@@ -204,7 +263,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
                 deps = (deps.ptr, deps.idx, deps.removed)
     n = (len(data) if payload is None else
          write_tetc(output, payload, source=name, force=force, dependencies=deps, mesh_codes=mesh_codes,
-                    threads=threads, copies=copies))
+                    threads=threads, copies=copies, cells=cells))
     out = TetcFile(output)
     info = out.info
     log(f"wrote {output}: {n} bytes ({8.0 * n / max(mesh.n_tets, 1):.2f} bits/tet overall, "
@@ -280,15 +339,24 @@ def _counter(progress, total: int):
 def decompress(source, output, *, ratio: float | None = None, level: int | None = None, force: bool = False,
                jobs: int | None = None, selective: bool = False, tets: int | None = None, size=256,
                tf="default", azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0, scalar_range=None,
-               log=None) -> TetMesh:
+               as_tets: bool = False, log=None, step: int | None = None, time: float | None = None,
+               piece: int | None = None) -> TetMesh:
     """Decode a ``.tetc`` file (optionally simplified) and write it in any meshio format.
+
+    The full mesh of a file that stores its cells as given (hexahedra, wedges, quadratic cells,
+    several blocks, cell arrays, sets) is written as those cells; ``as_tets`` writes the tets they
+    were split into instead (as does any simplified mesh).
+
+    A time series: ``step`` (index, negative from the end) or ``time`` picks the step written
+    (default step 0); an output ending in ``.pvd`` or ``.xdmf`` without either gets every step.
 
     ``jobs``: threads decoding (default: all cores): the connectivity ahead of the geometry, the
     bricks of a bricked file in parallel (:meth:`TetcFile.mesh`). With
     ``selective``, the mesh a selective render of that view and transfer function (``size``,
     ``tf``, ``azimuth``, ``elevation``, ``zoom``, ``scalar_range``, see :func:`render`) would draw,
     at ``ratio`` or ``tets``: so it can be checked and used elsewhere. A file without merge
-    dependencies gives the uniform mesh, with a note through ``log``.
+    dependencies gives the uniform mesh, with a note through ``log``. With ``piece`` (a file
+    compressed from pieces), only that piece's bricks, at ``level``.
 
     Returns the mesh written.
     """
@@ -297,9 +365,34 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
         raise OptionError("tets needs selective=True")
     if selective and level is not None:
         raise OptionError("selective refinement takes a ratio or tets, not a stored level")
+    if step is not None and time is not None:
+        raise OptionError("give a step or a time, not both")
+    kind = _series_output(output)
+    if kind is not None and step is None and time is None:
+        if selective:
+            raise OptionError("selective refinement writes one step: give a step or a time")
+        if isinstance(source, (str, os.PathLike)) and _same_file(source, output):
+            raise OptionError(f"the output {output} is the input file")
+        f = source if isinstance(source, TetcFile) else TetcFile(source)
+        if kind == "xdmf" or f.n_steps > 1:
+            _write_steps(f, output, kind, ratio=ratio, level=level, jobs=jobs, force=force)
+            log(f"wrote {f.n_steps} step{'s' if f.n_steps > 1 else ''} to {output}")
+            return f.mesh(ratio, level=level, jobs=jobs, step=f.n_steps - 1)
     _check_output(source, output, force=force, mesh_file=True)  # before decoding
     f = source if isinstance(source, TetcFile) else TetcFile(source)
+    if step is not None or time is not None:
+        k = f.step_index(step=step, time=time)
+        if selective and k != 0:
+            raise OptionError("selective refinement is for step 0 of a series (its merge dependencies)")
+        if k != 0 or f.n_steps > 1:
+            mesh = f.mesh(ratio, level=level, jobs=jobs, step=k)
+            write_mesh(mesh, output, force=force)
+            return mesh
     mesh = None
+    if piece is not None:
+        if selective or ratio is not None:
+            raise OptionError("a piece is decoded at a stored level: not with a ratio or selective")
+        mesh = piece_mesh(f.reader, piece, level=0 if level is None else int(level), jobs=jobs)
     if selective:
         w, h = _size(size)
         view = View(Camera(w, h, _check_number("azimuth", azimuth, allow_none=False),
@@ -316,8 +409,31 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
             log(f"selective cut: {cut.n_merges} merges, {cut.n_tets} tets, chosen in {cut.select_s:.3f} s")
     if mesh is None:
         mesh = f.mesh(ratio=ratio, level=level, jobs=jobs)
-    write_mesh(mesh, output, force=force)
+    n_steps = int(getattr(f, "n_steps", 1))
+    if is_vtkhdf(output) and n_steps > 1 and not selective:
+        _write_vtkhdf_series(f, mesh, output, ratio=ratio, level=level, jobs=jobs, force=force)
+        return mesh
+    cells = None
+    if "cells" in f.reader.meta and not as_tets:
+        if selective or ratio is not None or level not in (None, 0):
+            log("note: the cells as given are those of the full mesh: writing the simplified mesh's tets")
+        else:
+            cells = read_cells(f.reader, mesh.tets, mesh.n_points, mesh.points)
+            mesh, cells = restore_order(mesh, cells)
+    write_mesh(mesh, output, force=force, cells=cells)
     return mesh
+
+
+def _write_vtkhdf_series(f, mesh, output, *, ratio, level, jobs, force) -> None:
+    """Every step of ``f`` into one temporal VTKHDF file: ``mesh`` (step 0's) once, each step's arrays."""
+    steps = []
+    for k, t in enumerate(f.times):
+        m = mesh if k == 0 else f.mesh(ratio=ratio, level=level, jobs=jobs, step=k)
+        if not (_same_bits(m.tets, mesh.tets) and _same_bits(m.points, mesh.points)):
+            raise OptionError(f"step {k} moves the mesh of step 0: the VTKHDF writer stores one mesh for every "
+                              "step; write the steps one by one (--step)")
+        steps.append((float(t), dict(m.user_point_data), {}))
+    write_vtkhdf(output, mesh, steps=steps, force=force)
 
 
 def convert(source, output, *, refine: int = 1, force: bool = False, scalar: str | None = None, q_file=None,
@@ -365,8 +481,26 @@ def info(source, *, scalar: str | None = None, q_file=None, q_var: str = "densit
         "bbox": [lo.tolist(), hi.tolist()],
         "scalar": mesh.scalar_name if mesh.has_scalar else None,
         "scalar_range": list(mesh.scalar_range) if mesh.has_scalar else None,
+        "point_arrays": [_array_row(name, a) for name, a in mesh.user_point_data.items()],
+        **({"cells": [f"{t} {len(d)}" for t, d in report.cells.blocks],
+            "cell_arrays": [_array_row(name, np.concatenate([np.asarray(a).reshape(len(a), -1) for a in per]))
+                            for name, per in report.cells.cell_data.items()]}
+           if report.cells is not None else {}),
         "notes": list(report.notes),
     }
+
+
+def _array_row(name: str, a) -> dict:
+    """name, dtype, components and the finite range of an array (of its magnitude for vectors)."""
+    a = np.asarray(a)
+    k = 1 if a.ndim == 1 else int(np.prod(a.shape[1:]))
+    v = a.reshape(len(a), -1).astype(np.float64) if a.size else np.zeros((0, 1))
+    with np.errstate(over="ignore", invalid="ignore"):
+        v = v[:, 0] if k == 1 else np.sqrt(np.sum(v * v, axis=1))
+    v = v[np.isfinite(v)]
+    rng = [float(v.min()), float(v.max())] if v.size else None
+    return {"name": name, "dtype": str(a.dtype.newbyteorder("=") if a.dtype.byteorder == ">" else a.dtype),
+            "components": k, "range": rng}
 
 
 def _check_output(source, output, *, force: bool, mesh_file: bool = False) -> None:
@@ -385,6 +519,132 @@ def _same_file(a, b) -> bool:
         return os.path.samefile(a, b)
     except OSError:
         return False
+
+
+# -- time series ---------------------------------------------------------------------------------
+
+def _exodus_steps(path) -> int:
+    """Steps of an Exodus file (0 when it cannot tell: the single-mesh path reports the error)."""
+    try:
+        return len(exodus_times(path))
+    except Exception:
+        return 0
+
+
+def _compress_series(source, output, *, times, levels, mesh_only, force, w_density, w_geometry, w_sample, scalar,
+                     cell_to_point, drop_cell_data, bricks, dependencies, jobs, keyframe_interval, log) -> "TetcFile":
+    """:func:`compress` of a time series (one file: step 0 with its forest and levels, every step's
+    arrays; :mod:`gatun_py.pipeline.series`)."""
+    if bricks != 1 or dependencies:
+        raise OptionError("a time series is stored as one plain stream: not with bricks or dependencies")
+    for name, w in (("w_density", w_density), ("w_geometry", w_geometry), ("w_sample", w_sample)):
+        if not (isinstance(w, (int, float)) and math.isfinite(w) and w >= 0):
+            raise OptionError(f"{name} must be a finite number >= 0, got {w!r}")
+    srcs = [source] if isinstance(source, (str, os.PathLike)) else source
+    for src in (srcs if isinstance(srcs, (list, tuple)) else []):
+        _check_output(src, output, force=force)
+    check_output_path(output, force=force)
+    t0 = time.perf_counter()
+    series = read_series(source, times=times, scalar=scalar, cell_to_point=cell_to_point)
+    noted = set()
+
+    class _Steps:  # the series' meshes, each step's reader notes logged once, cell data refused
+        def __len__(self):
+            return len(series)
+
+        def __getitem__(self, k):
+            mesh = series[k]
+            report = series.reports[k]
+            if report is not None and k not in noted:
+                noted.add(k)
+                for note in report.notes:
+                    if k == 0 or not note.startswith("ignored non-volume"):
+                        log(f"note: step {k}: {note}")
+                if report.cell_arrays:
+                    names = ", ".join(map(repr, report.cell_arrays))
+                    if not drop_cell_data:
+                        raise OptionError(f"step {k} ({series.names[k]}) has cell data ({names}), which a .tetc "
+                                          "series does not store yet: average it to the points (cell-to-point) "
+                                          "or drop it explicitly (drop-cell-data)")
+                    if k == 0:
+                        log(f"note: cell data dropped on request: {names}")
+            return mesh
+
+    meshes = _Steps()
+    m0 = meshes[0]
+    log(f"read {len(series)} steps ({series.times[0]:g} .. {series.times[-1]:g}): {m0.n_points} points, "
+        f"{m0.n_tets} tets")
+    n = write_series(output, meshes, series.times, force=force, levels=levels, mesh_only=mesh_only,
+                     w_density=w_density, w_geometry=w_geometry, w_sample=w_sample, threads=check_jobs(jobs),
+                     keyframe_interval=keyframe_interval, source=Path(series.names[0]).name, log=log)
+    log(f"wrote {output}: {n} bytes, {len(series)} steps, in {time.perf_counter() - t0:.1f} s")
+    return TetcFile(output)
+
+
+def append(path, source, *, time: float | None = None, scalar: str | None = None, cell_to_point: bool = False,
+           drop_cell_data: bool = False, log=None) -> int:
+    """Append a step to a series file without re-encoding the others; returns its step number.
+
+    ``source``: a mesh file (or TetMesh) with the file's points and tets; ``time``: default the
+    last time + 1. The step is written after the last whole step: an append interrupted midway
+    leaves the earlier steps readable, and the next append cuts its bytes off first.
+    """
+    log = log or _quiet
+    mesh = _as_mesh(source, dict(scalar=scalar, cell_to_point=cell_to_point), log, storing=True,
+                    drop_cell_data=drop_cell_data)
+    if time is not None:
+        time = _check_number("time", time, allow_none=False)
+    return append_step(path, mesh, time)
+
+
+def _series_output(output) -> str | None:
+    """"pvd" or "xdmf" when ``output`` is a collection every step is written to."""
+    suffix = Path(output).suffix.lower()
+    return {".pvd": "pvd", ".xdmf": "xdmf", ".xmf": "xdmf"}.get(suffix)
+
+
+def _write_steps(f: "TetcFile", output, kind: str, *, ratio, level, jobs, force) -> list:
+    """Every step of ``f`` as a ``.pvd`` (one ``.vtu`` per step in ``<stem>_steps/``) or an XDMF
+    temporal collection (one mesh, each step's point data; the coordinates must not move)."""
+    output = Path(output)
+    check_output_path(output, force=force)
+    steps = range(f.n_steps)
+    if kind == "pvd":
+        folder = output.with_name(output.stem + "_steps")
+        names = [f"step_{k:05d}.vtu" for k in steps]
+        if folder.exists() and not force:
+            for name in names:
+                check_output_path(folder / name, force=force)
+        folder.mkdir(exist_ok=True)
+        rows = []
+        for k, name in zip(steps, names):
+            write_mesh(f.mesh(ratio, level=level, jobs=jobs, step=k), folder / name, force=force)
+            rows.append(f'    <DataSet timestep="{f.times[k]!r}" part="0" file="{folder.name}/{name}"/>')
+        text = ('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
+                + "\n".join(rows) + "\n  </Collection>\n</VTKFile>\n")
+        write_bytes_atomic(output, text.encode(), force=force)
+        return [folder / n for n in names]
+    if importlib.util.find_spec("h5py") is None:
+        raise OutputError("writing an XDMF collection needs h5py (pip install h5py); a .pvd needs nothing extra")
+    h5 = output.with_suffix(".h5")
+    check_output_path(h5, force=force)
+    if isinstance(f.reader.container.name, str) and os.path.isfile(f.reader.container.name):
+        f = TetcFile(os.path.abspath(f.reader.container.name))  # read from inside the temporary directory
+    first = f.mesh(ratio, level=level, jobs=jobs, step=0)
+    with tempfile.TemporaryDirectory(dir=output.parent) as tmp:
+        tx = Path(tmp) / output.name
+        # meshio's writer puts the .h5 in the working directory: the temporary one for its duration
+        with contextlib.chdir(tmp), meshio.xdmf.TimeSeriesWriter(tx.name) as w:
+            w.write_points_cells(np.asarray(first.points), [("tetra", np.asarray(first.tets))])
+            for k in steps:
+                m = first if k == 0 else f.mesh(ratio, level=level, jobs=jobs, step=k)
+                if k and not np.array_equal(m.points, first.points):
+                    raise OptionError(f"step {k} moves the points, which an XDMF temporal collection of one "
+                                      "mesh cannot hold: write a .pvd")
+                w.write_data(f.times[k], point_data={n: np.asarray(a) for n, a in m.user_point_data.items()})
+        os.replace(Path(tmp) / h5.name, h5)
+        os.replace(tx, output)
+    return [output, h5]
 
 
 # -- open ----------------------------------------------------------------------------------------
@@ -417,10 +677,49 @@ class TetcFile:
         self.reader = (path.reader if isinstance(path, TetcFile) else path if isinstance(path, TetcReader)
                        else TetcReader(path))
         self.path = self.reader.container.name
+        self._steps = None
 
     def __repr__(self) -> str:
+        steps = f", steps={self.n_steps}" if self.n_steps > 1 else ""
         return (f"TetcFile({self.path!r}, points={self.n_points}, tets={self.n_tets}, "
-                f"scalar={self.scalar_name if self.reader.has_scalar else None!r}, levels={self.levels}, max_ratio={self.max_ratio:.4f})")
+                f"scalar={self.scalar_name if self.reader.has_scalar else None!r}, levels={self.levels}, "
+                f"max_ratio={self.max_ratio:.4f}{steps})")
+
+    @property
+    def _series(self):
+        if self._steps is None:
+            self._steps = StepDecoder(self.reader)
+        return self._steps
+
+    @property
+    def n_steps(self) -> int:
+        """Time steps the file holds (1 for a snapshot)."""
+        return self._series.n_steps
+
+    @property
+    def times(self) -> tuple:
+        """The time of every step (a snapshot: ``(0.0,)``)."""
+        return self._series.times
+
+    def step_index(self, *, step: int | None = None, time: float | None = None) -> int:
+        """The step at index ``step`` (negative from the end) or at ``time``; :class:`OptionError`
+        when there is none."""
+        if step is not None and time is not None:
+            raise OptionError("give a step or a time, not both")
+        if time is not None:
+            return self._series.step_at(_check_number("time", time, allow_none=False))
+        return self._series.check_step(0 if step is None else step)
+
+    def at(self, step: int | None = None, *, time: float | None = None) -> "TetcFile":
+        """Step ``step`` (or the one at ``time``) as a file of its own: its meshes, batches and
+        renders carry that step's coordinates and arrays (step 0: this file)."""
+        k = self.step_index(step=step, time=time)
+        return self if k == 0 else TetcFile(self._series.reader(k))
+
+    def steps(self, ratio: float | None = None, *, level: int | None = None, jobs: int | None = None):
+        """Iterate over the steps: yields ``(time, mesh)`` (see :meth:`mesh`), each step decoded once."""
+        for k in range(self.n_steps):
+            yield self.times[k], self.mesh(ratio, level=level, jobs=jobs, step=k)
 
     def __enter__(self):
         return self
@@ -433,8 +732,13 @@ class TetcFile:
 
     @property
     def info(self) -> dict:
-        """What ``tetc info --json`` prints: sizes, bits per tet, sections, levels, forest."""
-        return tetc_info(self.reader)
+        """What ``tetc info --json`` prints: sizes, bits per tet, sections, levels, forest; a series
+        also its ``steps`` and ``times``."""
+        n, times = self.n_steps, list(self.times)  # first: an appended step's sections join the index
+        out = tetc_info(self.reader)
+        if self._series.index.series:
+            out["steps"], out["times"] = n, times
+        return out
 
     @property
     def levels(self) -> list[int]:
@@ -475,8 +779,12 @@ class TetcFile:
         """Brick ``k`` as a file of its own (its levels, forest, stream); bounds in ``.info["bbox"]``."""
         return TetcFile(self.reader.brick(k))
 
-    def mesh(self, ratio: float | None = None, *, level: int | None = None, jobs: int | None = None) -> TetMesh:
+    def mesh(self, ratio: float | None = None, *, level: int | None = None, jobs: int | None = None,
+             step: int = 0) -> TetMesh:
         """The mesh at a simplification ratio (merged / all vertices) or a stored level; default the full mesh.
+
+        ``step``: of a time series, the step (negative from the end); its coordinates and point
+        arrays on the connectivity, forest and levels of step 0.
 
         Decodes on ``jobs`` threads (default: all cores): the connectivity in a thread of its own
         ahead of the geometry (:meth:`TetcReader.decode_mesh`), and a bricked file's bricks in
@@ -485,7 +793,23 @@ class TetcFile:
         """
         if ratio is not None and level is not None:
             raise OptionError("give a ratio or a level, not both")
-        return read_bricked(self.reader, ratio=ratio, level=level, jobs=jobs)
+        k = self.step_index(step=step)
+        reader = self.reader if k == 0 else self._series.reader(k)
+        return read_bricked(reader, ratio=ratio, level=level, jobs=jobs)
+
+    def to_pyvista(self, ratio: float | None = None, *, level: int | None = None, step: int | None = None):
+        """The mesh (:meth:`mesh`: at ``ratio`` or ``level``; of time step ``step`` in a series) as a
+        ``pyvista.UnstructuredGrid`` with every array (needs PyVista).
+
+        ``pyvista.read("x.tetc")`` also works once gatun_py is imported (meshio's registration): the full
+        mesh of the first step.
+        """
+        n_steps = int(getattr(self, "n_steps", 1))
+        if step is not None and not (isinstance(step, (int, np.integer)) and -n_steps <= step < n_steps):
+            raise OptionError(f"no time step {step!r}: the file has {n_steps}")
+        if step is None or n_steps == 1:
+            return to_pyvista(self.mesh(ratio, level=level))
+        return to_pyvista(self.mesh(ratio, level=level, step=int(step) % n_steps))
 
     def batches(self, *, ratio: float | None = None, level: int | None = None, batch_tets: int = 65536):
         """The decoded stream (:class:`~gatun_py.mesh.TetBatch`), simplified on the fly to ``ratio``."""
@@ -613,7 +937,7 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
            background="black", colorbar: bool = False, lean: bool = False, pipeline: str = "streaming",
            scalar: str | None = None, q_file=None, q_var: str = "density", cell_to_point: bool = False,
            time_step: int | None = None, component=None, selective: bool = False, tets: int | None = None,
-           progress=None, log=None) -> Frame:
+           progress=None, log=None, time: float | None = None, terminate: bool = True) -> Frame:
     """Volume-render a mesh: decode, simplify and ray-cast in one streaming pass.
 
     Parameters
@@ -648,11 +972,18 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
         Add a colour bar with the scalar's name and range on the right.
     lean : bool
         Hold only the tets in flight (less memory, slower).
+    terminate : bool
+        Stop each ray where its opacity reaches 0.99 (early ray termination, as VTK; what lies behind
+        would change the pixel by less than 1 %). Off: every ray is walked to its end, as a bricked
+        file's bricks are (sort-last compositing needs whole segments).
     pipeline : {"streaming", "generic"}
         One pass, or decode-all-then-render (the paper's baseline).
     scalar, q_file, q_var, cell_to_point, time_step
         How to read a mesh file (see :func:`gatun_py.read_mesh`). For a ``.tetc`` file, ``scalar``
-        names the stored point array to render (default: the file's default scalar).
+        names the stored point array to render (default: the file's default scalar), and
+        ``time_step`` the step of a time series (default 0; ``step`` is the sample spacing).
+    time : float, optional
+        ``.tetc`` time series: render the step at this time (instead of ``time_step``).
     component : None, int or "magnitude"
         ``.tetc``: for a vector array, the component to render or its magnitude.
     selective : bool
@@ -709,13 +1040,16 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
     tf = load_transfer_function(tf)
     if opacity_model is not None:
         tf = tf.with_opacity_model(opacity_model)
-    view = View(Camera(width, height, azimuth, elevation, zoom), tf, mode, step, bool(lean), scalar_range)
+    view = View(Camera(width, height, azimuth, elevation, zoom), tf, mode, step, bool(lean), scalar_range,
+                terminate=bool(terminate))
 
-    t0 = time.perf_counter()
+    t0 = _perf_counter()
     planned = {}
     bricked = None
     if isinstance(source, TetcFile) or (isinstance(source, (str, os.PathLike)) and is_tetc(source)):
         f = source if isinstance(source, TetcFile) else TetcFile(source)
+        if time_step is not None or time is not None:  # a step of a series
+            f = f.at(time_step, time=time)
         if budget is not None:
             _note_if_unsimplifiable(f.reader, os.path.basename(os.fspath(f.reader.container.name)), log)
         if f.n_bricks > 1:
@@ -763,13 +1097,15 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
                     log(f"note: the budget of {budget:g} s cannot be met: rendering the coarsest level "
                         f"(predicted {plan.predicted_s:.3f} s)")
             total = int(f.reader.level_meta(target.level)["tets"])
-            t_frame = time.perf_counter()
+            t_frame = _perf_counter()
             result = render_tetc(f.reader, view, pipeline=pipeline, target=target, progress=_counter(progress, total))
             if budget is not None:  # the machine's costs learn from every budget render
-                remember_frame(planner, result.stats, total_s=time.perf_counter() - t_frame)
+                remember_frame(planner, result.stats, total_s=_perf_counter() - t_frame)
         name = f.scalar_name if view.scalar is None else view.scalar + ("" if component is None else f"[{component}]")
         rng = f.reader.array_range(view.scalar, view.component) or (0.0, 1.0)
     else:
+        if time is not None:
+            raise OptionError("time picks a step of a .tetc time series")
         if ratio is not None or level is not None or budget is not None or selective:
             raise OptionError("ratio, level, budget and selective need a .tetc file with a merge forest "
                               "(make one with gatun_py.compress or `tetc compress`)")
@@ -789,17 +1125,84 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
     if colorbar:
         table = tf.table(rng)[0]
         rgb = add_colorbar(rgb, table, rng, name, bg)
-    st["render_total_s"] = time.perf_counter() - t0
+    st["render_total_s"] = _perf_counter() - t0
     st["peak_rss_mb"] = peak_rss_mb()
     st["size"] = [width, height]
     st["scalar"] = name
     st["scalar_range"] = list(rng)
-    if st.get("rays_hit", 1) == 0:
-        log("note: no ray hits the mesh; the image is black")
+    culled = st.get("tets_culled", 0)
+    if st.get("rays_hit", 1) == 0 and not (culled and culled >= st.get("tets_rendered", 0)):
+        # (all tets invisible: the ray caster's own note said so)
+        log("note: no ray hits the " + ("visible part of the mesh" if culled else "mesh") + "; the image is black")
     if st.get("rays_unfinished"):
         log(f"warning: {st['rays_unfinished']} rays could not be completed")
     return Frame(rgb, result.image, st)
 
+
+
+def render_steps(source, output, *, steps=(None, None, None), force: bool = False, scalar_range=None,
+                 scalar: str | None = None, component=None, progress=None, log=None, **options) -> list[dict]:
+    """Render steps of a ``.tetc`` time series, one image each: an animation.
+
+    Parameters
+    ----------
+    source : path-like or TetcFile
+    output : path-like
+        The images: ``{frame}`` (0, 1, ...) and ``{step}`` (the step's index) in the name are
+        formatted (e.g. ``run_{step:04d}.png``); without either, ``_0000``, ``_0001``, ... is added
+        before the extension.
+    steps : (start, stop, stride)
+        As a Python slice of the steps (stop excluded; None: the ends).
+    scalar_range : (float, float), optional
+        Default: the range of the rendered array over every rendered step, so that the frames
+        compare.
+    options
+        As :func:`render` (size, tf, azimuth, ratio, budget, ...).
+
+    Returns
+    -------
+    list of dict
+        Every frame's stats, with its ``output``, ``step`` and ``time``.
+    """
+    log = log or _quiet
+    f = source if isinstance(source, TetcFile) else TetcFile(source)
+    start, stop, stride = steps
+    if stride == 0:
+        raise OptionError("the step stride must not be 0")
+    for name, v in (("start", start), ("stop", stop), ("stride", stride)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer))):
+            raise OptionError(f"steps {name} must be a whole number, got {v!r}")
+    ks = list(range(f.n_steps))[slice(start, stop, stride)]
+    if not ks:
+        raise OptionError(f"no step in {start}:{stop}:{stride} (the file has {f.n_steps} steps, 0..{f.n_steps - 1})")
+    out = Path(output)
+    if "{frame" in out.name or "{step" in out.name:
+        try:
+            paths = [out.with_name(out.name.format(frame=i, step=k)) for i, k in enumerate(ks)]
+        except (KeyError, IndexError, ValueError) as e:
+            raise OptionError(f"bad frame pattern {out.name!r}: use {{frame}}, {{step}} or {{step:04d}} ({e})") from None
+    else:
+        paths = frame_paths(out, len(ks))
+    for p in paths:
+        image_format(p)
+        check_output_path(p, force=force)
+    if scalar_range is None:
+        lo, hi = math.inf, -math.inf
+        for k in ks:
+            r = f.at(k).reader.array_range(scalar, component)
+            if r is not None:
+                lo, hi = min(lo, r[0]), max(hi, r[1])
+        scalar_range = (lo, hi) if hi > lo else None
+    stats = []
+    for i, (k, p) in enumerate(zip(ks, paths)):
+        frame = render(f, time_step=k, scalar_range=scalar_range, scalar=scalar, component=component, log=log,
+                       **options)
+        frame.save(p, force=force)
+        st = dict(frame.stats, output=str(p), step=k, time=f.times[k])
+        stats.append(st)
+        if progress is not None:
+            progress(i + 1, len(ks))
+    return stats
 
 
 # -- rendering on a cluster ----------------------------------------------------------------------

@@ -20,8 +20,17 @@ def _table_eval(tab, lo, inv, s):
     return np.array([np.interp(s, xs, tab[:, c]) for c in range(4)])
 
 
-def naive_render(mesh, fitted, tf, *, mode="volume", step=None, scalar_range=None):
-    """Premultiplied RGBA (H, W, 4) float64 of ``mesh`` seen by the fitted camera ``fitted``."""
+OPAQUE = 0.99  # early ray termination, as the ray caster's (gatun_py.render._walk.OPAQUE)
+
+
+def naive_render(mesh, fitted, tf, *, mode="volume", step=None, scalar_range=None, terminate=True, cull=False):
+    """Premultiplied RGBA (H, W, 4) float64 of ``mesh`` seen by the fitted camera ``fitted``.
+
+    ``terminate``: a ray stops at the first sample (face mode: piece) that brings its opacity to
+    ``OPAQUE``. ``cull``: leave out, before casting, the tets whose scalar interval the transfer
+    function's table shows nowhere, tested the plain way (every table entry from the one below
+    the tet's smallest scalar to the one above its largest); the image must not change.
+    """
     from gatun_py.mesh import default_step
     from gatun_py.render.transfer import load_transfer_function
 
@@ -40,6 +49,12 @@ def naive_render(mesh, fitted, tf, *, mode="volume", step=None, scalar_range=Non
     tets = mesh.tets.astype(np.int64)
     vol = mesh.signed_volumes()
     keep = vol > 0  # zero-volume tets hold no part of any ray
+    if cull:
+        smin, smax = dens[tets].min(axis=1), dens[tets].max(axis=1)
+        n = len(tab)
+        i0 = np.clip(np.floor((smin - lo) * inv).astype(np.int64) - 1, 0, n - 1)
+        i1 = np.clip(np.floor((smax - lo) * inv).astype(np.int64) + 2, 0, n - 1)
+        keep &= np.array([np.any(tab[a: b + 1, 3] > 0) for a, b in zip(i0, i1)], dtype=bool)
     tets = tets[keep]
     corners = pts[tets]  # (m, 4, 3)
     # outward face normals and a point on each face
@@ -73,6 +88,7 @@ def naive_render(mesh, fitted, tf, *, mode="volume", step=None, scalar_range=Non
                 merged.append(t)
         C = np.zeros(3)
         O = 0.0
+        done = False
 
         def scalar_at(m, t):
             x = eye + t * d
@@ -81,6 +97,8 @@ def naive_render(mesh, fitted, tf, *, mode="volume", step=None, scalar_range=Non
             return float(w @ dens[tets[m]])
 
         for a, b in zip(merged[:-1], merged[1:]):
+            if done:
+                break
             mid = 0.5 * (a + b)
             inside = idx[(t_in[idx] <= mid) & (mid <= t_out[idx])]
             if len(inside) == 0:
@@ -94,11 +112,15 @@ def naive_render(mesh, fitted, tf, *, mode="volume", step=None, scalar_range=Non
                     al = rgba[3]
                     C += (1 - O) * al * rgba[:3]
                     O += (1 - O) * al
+                    if terminate and O >= OPAQUE:
+                        done = True
+                        break
             else:
                 avg = 0.5 * (_table_eval(tab, lo, inv, scalar_at(m, a)) + _table_eval(tab, lo, inv, scalar_at(m, b)))
                 al = 1.0 - (1.0 - min(avg[3], 1.0)) ** ((b - a) / unit)
                 C += (1 - O) * al * avg[:3]
                 O += (1 - O) * al
+                done = terminate and O >= OPAQUE
         image[r, :3] = C
         image[r, 3] = O
     return image.reshape(fitted.height, fitted.width, 4)

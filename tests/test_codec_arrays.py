@@ -201,12 +201,13 @@ def test_encoder_validates_before_any_kernel():
         TetMesh(base.points, base.density, base.tets.astype(np.int64) + 2**32, "d")
 
 
-def test_cell_data_is_refused_or_dropped_on_request(tmp_path):
+def test_cell_data_is_kept_or_dropped_on_request(tmp_path):
     base = AWKWARD["jittered_grid"]()
     m = meshio.Mesh(base.points, [("tetra", base.tets)], point_data={"d": base.density},
                     cell_data={"material": [np.arange(base.n_tets)]})
-    with pytest.raises(OptionError, match="'material'.*cell-to-point.*drop-cell-data"):
-        gatun_py.compress(m, tmp_path / "a.tetc", mesh_only=True)
+    gatun_py.compress(m, tmp_path / "a.tetc", mesh_only=True)
+    back = meshio.read(tmp_path / "a.tetc")
+    assert sorted(back.cell_data["material"][0].tolist()) == list(range(base.n_tets))
     notes = []
     gatun_py.compress(m, tmp_path / "b.tetc", mesh_only=True, drop_cell_data=True, log=notes.append)
     assert any("cell data dropped" in n and "material" in n for n in notes)

@@ -140,9 +140,9 @@ def test_every_array_through_the_cli_and_cell_data_never_dropped_silently(tmp_pa
     src = tmp_path / "in.vtu"
     meshio.write(src, meshio.Mesh(pts, [("tetra", tets)], point_data=pd, cell_data={"mat": [np.ones(len(tets))]}))
     out = tmp_path / "a.tetc"
-    assert_error(run("compress", src, "--scalar", "p", "-o", out, "--mesh-only"), "'mat'", "drop-cell-data")
-    assert not out.exists()
-    res = run("compress", src, "--scalar", "p", "-o", out, "--mesh-only", "--drop-cell-data")
+    res = run("compress", src, "--scalar", "p", "-o", out, "--mesh-only")  # the cell array is kept
+    assert res.exit_code == 0 and meshio.read(out).cell_data["mat"][0].tolist() == [1.0] * len(tets), res.output
+    res = run("compress", src, "--scalar", "p", "-o", out, "--mesh-only", "--drop-cell-data", "--force")
     assert res.exit_code == 0 and "cell data dropped" in res.output, res.output
     info = json.loads(run("info", out, "--json").output)
     assert info["points_dtype"] == "float64" and info["format_version"] == VERSION_MAJOR

@@ -1,6 +1,6 @@
 """Files written by earlier versions of the format still decode bit-exactly, and reference renders hold.
 
-``tests/data/post_v{2,3,4,5,6,7,8,9}.tetc`` (formats 2 to 9, each written by ``tests/data/make_golden.py N``
+``tests/data/post_v{2,...,10}.tetc`` (formats 2 to 10, each written by ``tests/data/make_golden.py N``
 with the code of its time: format 3 at commit e8af4f5) hold float64 coordinates and point arrays of
 four dtypes/shapes; ``post_v{N}.json`` the hashes of every level's decoded points, arrays, tets and
 forest.
@@ -59,7 +59,7 @@ def test_format_1_decodes_bit_exactly(level):
     _check_forest(r, level, want)
 
 
-GOLDEN_VERSIONS = (2, 3, 4, 5, 6, 7, 8, 9)  # one golden file per format version since 2, each written when it came
+GOLDEN_VERSIONS = (2, 3, 4, 5, 6, 7, 8, 9, 10)  # one golden file per format version since 2, each written when it came
 GOLDEN_OF = {v: DATA / f"post_v{v}.tetc" for v in GOLDEN_VERSIONS}
 EXPECTED_OF = {v: json.loads((DATA / f"post_v{v}.json").read_text()) for v in GOLDEN_VERSIONS}
 
@@ -85,7 +85,7 @@ def test_each_format_decodes_bit_exactly(version, level):
     _check_forest(r, level, want)
 
 
-@pytest.mark.parametrize("old, new", [(3, 4), (4, 5), (5, 6), (6, 7), (7, 8), (8, 9)])
+@pytest.mark.parametrize("old, new", [(3, 4), (4, 5), (5, 6), (6, 7), (7, 8), (8, 9), (9, 10)])
 def test_consecutive_formats_hold_the_same_mesh(old, new):
     """Formats 4 to 8 changed only how the sections are coded (4: geometry; 5: connectivity and
     geometry; 6 and 7: the forest; 8: the geometry's value tables): the same mesh decodes from the
@@ -187,3 +187,24 @@ def test_reference_renders(name):
     assert diff.max() <= 1, diff.max()
     assert (diff > 0).sum() <= 8
     assert frame.stats["rays_unfinished"] == 0
+
+
+SERIES_GOLDEN = {10: DATA / "series_v10.tetc"}  # a time series per format version since 10
+
+
+@pytest.mark.parametrize("version", sorted(SERIES_GOLDEN))
+def test_series_golden_file_decodes_bit_exactly(version):
+    """Every step of the golden series (8 steps compressed together, 2 appended; deforming, three
+    dtypes), at level 0 and level 1, decodes to the hashes written with it."""
+    import gatun_py
+
+    path = SERIES_GOLDEN[version]
+    want = json.loads(path.with_suffix(".json").read_text())
+    assert _sha(np.frombuffer(path.read_bytes(), np.uint8)) == want["file_sha256"]
+    f = gatun_py.open(path)
+    assert f.reader.container.major == version and list(f.times) == want["times"] and f.n_steps == 10
+    for k in reversed(range(f.n_steps)):  # backwards: each step from its keyframe, not from the walk
+        m, w = f.mesh(step=k), want["steps"][k]
+        assert _sha(m.points) == w["points"] and _sha(m.tets.astype(np.int32)) == w["tets"]
+        assert {name: [str(a.dtype), list(a.shape), _sha(a)] for name, a in m.point_data.items()} == w["arrays"]
+        assert _sha(f.mesh(level=1, step=k).points) == w["level1_points"]

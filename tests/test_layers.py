@@ -40,7 +40,7 @@ ALLOWED = {
     "isosurface": {"isosurface", "simplify", "codec", "mesh", "render"},
     "pipeline": {"pipeline", "simplify", "codec", "mesh", "render", "isosurface"},
 }
-TOP = {"api", "meshio_format", "warmup", "viewer", "__init__", "cli", "bricks"}
+TOP = {"api", "meshio_format", "pyvista_reader", "warmup", "viewer", "paraview", "__init__", "cli", "bricks"}
 # function-local imports that are allowed, and why (module, imported name prefix)
 LOCAL_OK_REASONS = {
     "matplotlib": "optional dependency",
@@ -50,12 +50,16 @@ LOCAL_OK_REASONS = {
     "vtkmodules": "optional dependency",
     "netCDF4": "optional dependency (Exodus input)",
     "h5py": "optional dependency",
+    "pyvista": "optional dependency",
     "selenium": "optional dependency",
     "aiohttp": "optional dependency",
     "dask": "optional dependency",
     "distributed": "optional dependency",
     "gmsh": "optional dependency",
+    "meshio": "meshio's private table of cell dimensions, guarded: another meshio layout has none",
     "PIL": "image I/O only where images are read",
+    "paraview": "the ParaView plugin's decorators, present only in ParaView's own Python",
+    "numpy": "the ParaView plugin, guarded: a ParaView built without numpy gets VTKHDF files instead",
 }
 
 
@@ -64,6 +68,8 @@ LOCAL_OK_MODULES = {
     "viewer.server": "needs the optional aiohttp: imported only when the viewer starts",
     "codec.legacy": "the frozen codings of old formats: a file of today's format never compiles them",
     "api": "start-up time: meshio's .tetc reader and writer load the verbs (and numba) when first called",
+    "codec.cells": "start-up time: meshio's .tetc reader loads the codec when first called",
+    "mesh.io": "start-up time: meshio's .tetc writer loads the mesh writers when first called",
     # an isosurface extraction loads the renderer (and PIL) only when a preview is asked for
     "render.camera": "memory and start-up of an isosurface without a preview",
     "render.image": "memory and start-up of an isosurface without a preview",

@@ -80,9 +80,9 @@ def test_cli_gmsh_mesh_with_cell_tags(tmp_path):
                 point_data={"gmsh:dim_tags": np.tile([3, 1], (n, 1))},
                 cell_data={"gmsh:geometrical": [np.ones(m, np.int32)], "gmsh:physical": [np.ones(m, np.int32)]},
                 ).write(path, file_format="gmsh")
-    refused = run("compress", path, "-o", tmp_path / "p.tetc", "-q")
-    assert refused.exit_code == 1 and "drop-cell-data" in refused.output
-    assert not (tmp_path / "p.tetc").exists()
+    kept = run("compress", path, "-o", tmp_path / "k.tetc", "-q")  # the tags are kept as cell data
+    assert kept.exit_code == 0, kept.output
+    assert meshio.read(tmp_path / "k.tetc").cell_data["gmsh:physical"][0].tolist() == [1] * m
     ok = run("compress", path, "-o", tmp_path / "p.tetc", "-q", "--drop-cell-data")
     assert ok.exit_code == 0, ok.output
     info = json.loads(run("info", tmp_path / "p.tetc", "--json").output)

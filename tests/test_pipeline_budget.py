@@ -136,6 +136,27 @@ def test_work_estimate_reproduces_an_observed_frame():
     assert est.estimate(levels[2], levels[2].merges, 10000, decoded=True).tets_decoded == 0
 
 
+def test_work_estimate_learns_the_tets_the_transfer_function_culls():
+    """A frame whose transfer function hid 3/4 of the tets: the estimate of the same view renders
+    a quarter of each level's tets (what the face table receives), and the level's own size (for
+    the steps' cube-root rule) stays the whole level's."""
+    levels = _levels()
+    est = WorkEstimator(levels, bbox=([0, 0, 0], [2, 1, 1]), step=0.05)
+    shown = levels[1].tets // 4
+    stats = {"rays": 10000, "rays_hit": 4000, "steps": 30000, "samples": 50000, "tets_rendered": levels[1].tets,
+             "tets_culled": levels[1].tets - shown, "level": 1}
+    est.observe(stats)
+    w = est.estimate(levels[1], levels[1].merges, 10000, coverage=0.9)
+    assert w.tets_rendered == pytest.approx(shown, rel=1e-3) and w.steps == pytest.approx(30000)
+    assert est.seen[1][0] == levels[1].tets
+    # another level of the same view: the same visible share, the steps by its own size
+    w2 = est.estimate(levels[2], levels[2].merges, 10000, coverage=0.9)
+    assert w2.tets_rendered == pytest.approx(levels[2].tets * shown / levels[1].tets, rel=1e-3)
+    # a frame that culls nothing resets the share
+    est.observe(dict(stats, tets_culled=0))
+    assert est.estimate(levels[1], levels[1].merges, 10000).tets_rendered == levels[1].tets
+
+
 def test_first_guess_overestimates_rays_from_the_bounding_box():
     """Before any frame, the hits are the projected box's rectangle: at least the real hits."""
     mesh, _ = load_sample("post")

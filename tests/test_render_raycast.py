@@ -266,12 +266,18 @@ def test_compose_counts_incomplete_segments_only_in_front_of_opacity():
                                np.zeros((9, 2, 2)), 5)[0])
     seg[K.SEG_ACC], seg[K.SEG_STATE] = seg_acc, state
     image = np.zeros((5, 4))
-    unfinished, hidden = compose(tuple(seg), image)
+    unfinished, hidden = compose(tuple(seg), image, False)
     assert (unfinished, hidden) == (3, 2)
     np.testing.assert_allclose(image[3], [0.0, 0.995, 0.005, 1.0])
     np.testing.assert_allclose(image[0], [0.995, 0.005 * 0.6, 0.0, 0.995 + 0.005 * 0.6])
     np.testing.assert_allclose(image[1], [0.5 * 0.3, 0.0, 0.5, 0.5 + 0.5 * 0.3])
     np.testing.assert_allclose(image[2], [0.1, 0.9 * 0.999, 0.0, 0.1 + 0.9 * 0.999])
+    # with early termination a segment behind an opaque ray adds nothing (ray 0's second);
+    # the counts are the same
+    terminated = np.zeros((5, 4))
+    assert compose(tuple(seg), terminated, True) == (3, 2)
+    np.testing.assert_allclose(terminated[0], [0.995, 0.0, 0.0, 0.995])
+    np.testing.assert_array_equal(terminated[1:], image[1:])
 
 
 @pytest.mark.parametrize("az, el", [(30, 20), (0, 0), (90, 20), (200, -45), (45, 70)])

@@ -26,7 +26,7 @@ import zlib
 from ..errors import CorruptFileError, FormatVersionError, ReadError
 
 MAGIC = b"TETC\x89\r\n\x1a"
-VERSION_MAJOR = 9  # 2: float64 coordinates and every point array (points64, array/j); 3: forest coded after
+VERSION_MAJOR = 10  # 2: float64 coordinates and every point array (points64, array/j); 3: forest coded after
 #                    the mesh, bricks (B{k}/...), merge dependencies (deps); 4: geometry coding 2
 #                    (geometry.coding_for_format maps the version to the geometry block's coding);
 #                    5: new codings of the connectivity, geometry and forest sections (each module's
@@ -35,6 +35,7 @@ VERSION_MAJOR = 9  # 2: float64 coordinates and every point array (points64, arr
 #                    coding 3 (the level's quadrics rank the parents and give the rounds a context);
 #                    8: geometry coding 4 (value tables apart, chained to the next coarser level's)
 #                    9: geometry coding 5 (rank steps on the table-mode channels)
+#                    10: time series (steps) and cells as given
 VERSION_MINOR = 0
 _PREAMBLE = struct.Struct("<8sHHII")
 PREAMBLE_SIZE = _PREAMBLE.size

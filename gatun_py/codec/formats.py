@@ -10,8 +10,8 @@ version changed.
 Examples
 --------
 >>> from gatun_py.codec.formats import codings
->>> codings(4).geometry, codings(9).geometry
-(2, 5)
+>>> codings(4).geometry, codings(9).geometry, codings(10).steps
+(2, 5, True)
 >>> codings(2).arrays, codings(1).arrays
 (True, False)
 """
@@ -44,6 +44,10 @@ class Codings:
         sections (array blocks, :mod:`gatun_py.codec.arrays`); else one float32 scalar.
     array_copies : bool
         Whether an array may list components that are ``copies`` of another array's.
+    steps : bool
+        Whether the file may be a time series (metadata ``steps``, :mod:`gatun_py.codec.steps`).
+    cells : bool
+        Whether the file may store its cells as given (metadata ``cells``, :mod:`gatun_py.codec.cells`).
     """
 
     tets: int
@@ -51,6 +55,8 @@ class Codings:
     forest: int
     arrays: bool = True
     array_copies: bool = False
+    steps: bool = False
+    cells: bool = False
 
 
 FORMATS = {
@@ -63,6 +69,7 @@ FORMATS = {
     7: Codings(tets=2, geometry=3, forest=3),
     8: Codings(tets=2, geometry=4, forest=3, array_copies=True),
     9: Codings(tets=2, geometry=5, forest=3, array_copies=True),
+    10: Codings(tets=2, geometry=5, forest=3, array_copies=True, steps=True, cells=True),
 }
 
 

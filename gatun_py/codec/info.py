@@ -76,6 +76,7 @@ def tetc_info(source) -> dict:
         "levels": levels,
         "parts": _parts(r, plain, i0, _table_streams(r, sizes)),
         "forest": _forest_info(r, sizes),
+        **_cells_info(r, sizes),
         "bricks": _bricks_info(r, sizes),
     }
 
@@ -176,3 +177,27 @@ def _parts(reader, plain: dict, i0: int, tables: tuple = ({}, 0)) -> list:
             row[1] += v
     return [{"part": part, "bytes": b, "level0_bytes": b0, "share": round(b / total, 4)}
             for part, (b, b0) in sorted(parts.items(), key=lambda kv: -kv[1][0])]
+
+
+def _cells_info(r, sizes: dict) -> dict:
+    """``cells`` (blocks, cell arrays, bytes of the cell sections) and ``keep_order`` (bytes of the
+    stored numbering, in bits per point and per cell) of a file that stores its cells as given."""
+    meta = r.meta.get("cells")
+    if not isinstance(meta, dict):
+        return {}
+    blocks = [b for b in meta.get("blocks", []) if isinstance(b, dict)]
+    n_cells = sum(int(b.get("cells", 0)) for b in blocks)
+    out = {"cells": {
+        "blocks": [f"{b.get('type')} {b.get('cells')}" for b in blocks],
+        "cell_arrays": [{"name": e.get("name"), "dtype": (e.get("blocks") or [{}])[0].get("dtype"),
+                         "shape": (e.get("blocks") or [{}])[0].get("shape"),
+                         "bytes": sum(v for k, v in sizes.items() if k.startswith(f"C/data/{j}/"))}
+                        for j, e in enumerate(meta.get("cell_data", [])) if isinstance(e, dict)],
+        "bytes": sum(v for k, v in sizes.items() if k.startswith("C/") and not k.startswith("C/order")),
+    }}
+    if meta.get("keep_order"):
+        b = sum(v for k, v in sizes.items() if k.startswith("C/order"))
+        pts = max(int(r.meta.get("points", 0)), 1)
+        out["keep_order"] = {"bytes": b, "bits_per_point": round(8.0 * sizes.get("C/order/points", 0) / pts, 3),
+                             "bits_per_cell": round(8.0 * (b - sizes.get("C/order/points", 0)) / max(n_cells, 1), 3)}
+    return out

@@ -30,6 +30,7 @@ from ..errors import CorruptFileError, MeshError, OptionError
 from ..mesh import TetBatch, TetMesh, default_step
 from ..mesh.model import NO_SCALAR, scalar_of
 from ..mesh.validate import check_tet_ids
+from .cells import encode_cells
 from .brickindex import BrickView, brick_levels_summary, parse_brick_index
 from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
 from .container import Container, build_container
@@ -101,6 +102,7 @@ class EncodedLevel:
     # (:func:`_chain_geometry` rewrites the geometry section and drops them)
     geometry_parts: object = None
     copies: tuple = ()  # the payload's: what the array sections leave out
+    tets: np.ndarray = None  # the tets in decode order and ids, as the decoder gives them (for the cells)
 
 
 def encode_level(payload: LevelPayload, *, chainable: bool = True) -> EncodedLevel:
@@ -165,7 +167,7 @@ def _encode_level_mesh(payload: LevelPayload, *, chainable: bool = True) -> Enco
         "has_forest": False,
     }
     return EncodedLevel(i, sections, meta, vo, conn.peak_border, render_step, parts if chainable else None,
-                        tuple(payload.copies))
+                        tuple(payload.copies), conn.tets)
 
 
 def _chain_geometry(encoded: list) -> None:
@@ -317,7 +319,8 @@ def file_meta(mesh0, n_boundary_faces: int, source: str = "", *, render_step: fl
 
 
 def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, dependencies=None,
-                mesh_codes: dict | None = None, threads: int = 1, copies: tuple | None = None) -> bytes:
+                mesh_codes: dict | None = None, threads: int = 1, copies: tuple | None = None,
+                cells=None) -> bytes:
     """Build a whole ``.tetc`` file from levels (level 0 first).
 
     Parameters
@@ -341,6 +344,9 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
     copies : tuple, optional
         :func:`find_copies` of level 0's mesh when the caller has it already (it hashes every
         point array: two passes over a large mesh's arrays otherwise); computed here when omitted.
+    cells : Cells, optional
+        The cell blocks level 0's tets were split from (:class:`gatun_py.mesh.cells.Cells`), stored
+        against the decoded tets (:mod:`.cells`) when they hold more than one block of tets.
     """
     if not levels:
         raise OptionError("nothing to write: no levels")
@@ -391,6 +397,11 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
     if dependencies is not None:
         meta["dependencies"], deps = _dependency_section(dependencies, levels[0])
         sections.append(("deps", deps))
+    if cells is not None and cells.needed():
+
+        meta["cells"], cell_sections = encode_cells(cells, mesh0.tets, encoded[0].vertex_order, encoded[0].tets,
+                                                    mesh0.points32[encoded[0].vertex_order])
+        sections += cell_sections
     return build_container(meta, sections)
 
 
@@ -413,7 +424,7 @@ def _with_forest(done: EncodedLevel, payload: LevelPayload) -> EncodedLevel:
     meta.update(ratio=float(payload.ratio), merges_before=int(payload.merges_before),
                 has_forest=payload.forest is not None)
     return EncodedLevel(i, sections, meta, done.vertex_order, done.peak_border, done.render_step,
-                        done.geometry_parts, done.copies)
+                        done.geometry_parts, done.copies, done.tets)
 
 
 def _dependency_section(dependencies, level0: LevelPayload) -> tuple[dict, bytes]:
@@ -428,12 +439,12 @@ def _dependency_section(dependencies, level0: LevelPayload) -> tuple[dict, bytes
 
 def write_tetc(path, mesh_or_levels, *, source: str = "", force: bool = False, progress=None,
                dependencies=None, mesh_codes: dict | None = None, threads: int = 1,
-               copies: tuple | None = None) -> int:
+               copies: tuple | None = None, cells=None) -> int:
     """Compress a mesh (or a list of :class:`LevelPayload`) into ``path`` atomically; returns bytes
-    written. ``mesh_codes``, ``threads``, ``copies``: as :func:`encode_tetc`."""
+    written. ``mesh_codes``, ``threads``, ``copies``, ``cells``: as :func:`encode_tetc`."""
     levels = mesh_or_levels if isinstance(mesh_or_levels, list) else [LevelPayload(0, 0.0, 0, mesh_or_levels)]
     data = encode_tetc(levels, source=source, progress=progress, dependencies=dependencies,
-                       mesh_codes=mesh_codes, threads=threads, copies=copies)
+                       mesh_codes=mesh_codes, threads=threads, copies=copies, cells=cells)
     write_bytes_atomic(path, data, force=force)
     return len(data)
 

@@ -23,6 +23,7 @@ import numpy as np
 from .._atomic import check_output_path
 from .._runtime import peak_rss_mb, release_code_pages, rss_mb, trim_heap
 from ..codec import TetcReader
+from ..codec.stepreader import StepDecoder
 from ..codec.bricks import check_jobs
 from ..codec.container import is_tetc
 from ..codec.prefetch import PrefetchedDecode
@@ -727,6 +728,8 @@ def _open_stream(source, *, level, ratio_mesh, read_kwargs, values=(), jobs=1):
                 "tets": mesh.n_tets}
         return mesh_batches(mesh), info
     reader = source if isinstance(source, TetcReader) else TetcReader(source)
+    if (read_kwargs or {}).get("time_step") is not None:  # a step of a time series
+        reader = StepDecoder(reader).reader(read_kwargs["time_step"])
     if not reader.has_scalar:
         raise OptionError(_NO_SCALAR_MESSAGE)
     if reader.n_bricks > 1:

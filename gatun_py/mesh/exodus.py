@@ -62,13 +62,20 @@ def read_exodus(path, *, time_step: int | None = None) -> tuple[meshio.Mesh, lis
         else:
             axes = [np.asarray(v[f"coord{a}"][:]) if f"coord{a}" in v else np.zeros(n) for a in "xyz"]
             points = np.stack(axes, axis=1)
-        cells = []
+        cells, block_ids = [], []
         for key in sorted((k for k in v if k.startswith("connect")), key=lambda k: int(k[7:] or 0)):
             etype = str(getattr(v[key], "elem_type", "")).upper()
             if etype not in ELEMENT_TYPES:
                 notes.append(f"element block {key} of type {etype or '?'} ignored")
                 continue
             cells.append((ELEMENT_TYPES[etype], np.asarray(v[key][:], np.int64) - 1))
+            block_ids.append(key[7:])
+        point_sets = {}
+        set_names = _text(v["ns_names"][:]) if "ns_names" in v else []
+        for k in range(1, 1 + sum(1 for x in v if x.startswith("node_ns"))):
+            if f"node_ns{k}" in v:
+                name = set_names[k - 1] if k - 1 < len(set_names) and set_names[k - 1] else f"node_set_{k}"
+                point_sets[name] = np.asarray(v[f"node_ns{k}"][:], np.int64) - 1
         names = _text(v["name_nod_var"][:]) if "name_nod_var" in v else []
         n_steps = len(nc.dimensions["time_step"]) if "time_step" in nc.dimensions else 0
         point_data = {}
@@ -89,4 +96,35 @@ def read_exodus(path, *, time_step: int | None = None) -> tuple[meshio.Mesh, lis
                     point_data[name] = np.asarray(v["vals_nod_var"][t, k])
         elif time_step not in (None, 0, -1):
             raise OptionError(f"{path}: the file has no time steps of nodal variables")
-    return meshio.Mesh(points, cells, point_data=point_data), notes
+        cell_data = {}
+        enames = _text(v["name_elem_var"][:]) if "name_elem_var" in v else []
+        if enames and n_steps:
+            t = (n_steps - 1 if time_step is None else int(time_step)) % n_steps
+            for k, name in enumerate(enames):
+                per = [v.get(f"vals_elem_var{k + 1}eb{b}") for b in block_ids]
+                if all(x is not None for x in per):
+                    cell_data[name] = [np.asarray(x[t]) for x in per]
+                else:  # a variable some blocks do not have: no value to give their cells
+                    notes.append(f"element variable {name!r} skipped: not defined on every element block")
+    return meshio.Mesh(points, cells, point_data=point_data, cell_data=cell_data, point_sets=point_sets), notes
+
+
+def exodus_times(path) -> list[float]:
+    """The time of every step of an Exodus file (``time_whole``; 0, 1, ... when it has none)."""
+    path = Path(path)
+    try:
+        import netCDF4  # optional dependency
+    except ImportError:
+        raise ReadError(f"{path}: {INSTALL_HINT}") from None
+    try:
+        nc = netCDF4.Dataset(str(path))
+    except OSError as e:
+        raise ReadError(f"cannot read {path} as Exodus: {e}") from None
+    with nc:
+        nc.set_auto_mask(False)
+        n = len(nc.dimensions["time_step"]) if "time_step" in nc.dimensions else 0
+        if "time_whole" in nc.variables:
+            t = np.asarray(nc.variables["time_whole"][:], np.float64).reshape(-1)
+            if len(t) == n:
+                return [float(x) for x in t]
+        return [float(k) for k in range(n)]

@@ -23,11 +23,13 @@ from meshio import _helpers
 from .._atomic import atomic_path
 from ..errors import MeshError, OptionError, OutputError, ReadError
 from . import plot3d
+from .cells import Cells, check_cell_type, check_cells
 from .model import NO_SCALAR, TetMesh, signed_volumes
 from .split import orient_positive, split_hexes_two_colour, split_min_id_star, two_colour
 from .validate import MeshReport, validate_tets
 from .exodus import EXODUS_SUFFIXES, read_exodus
 from .vtk_reader import INSTALL_HINT, VTK_SUFFIXES, read_with_vtk, vtk_available
+from .vtkhdf import is_vtkhdf, read_vtkhdf, write_vtkhdf
 
 # meshio cell type -> (linear type, number of corner vertices)
 VOLUME_CELLS = {
@@ -43,7 +45,7 @@ VOLUME_CELLS = {
 TET_FORMATS = {"vtu", "vtk", "gmsh", "xdmf", "medit", "exodus", "abaqus", "avsucd", "flac3d", "h5m", "med",
                "nastran", "permas", "su2", "tetgen", "ugrid", "dolfin-xml", "cgns", "netgen", "mdpa", "hmf"}
 TET_EXTENSIONS = (".vtu", ".vtk", ".msh", ".xdmf", ".mesh", ".exo", ".inp", ".avs", ".f3grid", ".med", ".bdf",
-                  ".su2", ".ugrid", ".xml", ".vol", ".mdpa")
+                  ".su2", ".ugrid", ".xml", ".vol", ".mdpa", ".vtkhdf")
 
 
 @dataclass
@@ -89,8 +91,17 @@ def read_mesh(path, *, scalar: str | None = None, q_file=None, q_var: str = "den
         raise ReadError(f"no such file: {path}")
     if path.is_dir():
         raise ReadError(f"{path} is a directory, not a mesh file")
-    if time_step is not None and path.suffix.lower() not in EXODUS_SUFFIXES:
-        raise OptionError(f"{path}: a time step applies to Exodus files ({', '.join(EXODUS_SUFFIXES)}) only")
+    if time_step is not None and path.suffix.lower() not in EXODUS_SUFFIXES and not is_vtkhdf(path):
+        raise OptionError(f"{path}: a time step applies to Exodus ({', '.join(EXODUS_SUFFIXES)}) and VTKHDF "
+                          "(.vtkhdf) files only")
+    if is_vtkhdf(path):  # temporal: the last step unless told, as for Exodus
+        series = read_vtkhdf(path, step=-1 if time_step is None else time_step)
+        mesh, report = mesh_from_meshio(series.mesh, scalar=scalar, cell_to_point=cell_to_point, source=str(path))
+        if series.n_steps > 1:
+            k = (-1 if time_step is None else time_step) % series.n_steps
+            series.notes.append(f"time step {k} of 0..{series.n_steps - 1} read (t = {series.times[k]:g})")
+        report.notes[:0] = series.notes
+        return mesh, report
     if path.suffix.lower() in EXODUS_SUFFIXES:
         m, notes = read_exodus(path, time_step=time_step)
         mesh, report = mesh_from_meshio(m, scalar=scalar, cell_to_point=cell_to_point, source=str(path))
@@ -163,6 +174,10 @@ def _meshio_read(path: Path):
     try:
         formats = _helpers._filetypes_from_path(path)
     except (KeyError, ValueError, meshio.ReadError):
+        if path.suffix.lower() in VTK_SUFFIXES:  # .vts, .vtr, .pvtu: VTK's own formats, meshio has no reader
+            if vtk_available():
+                return read_with_vtk(path)
+            raise ReadError(f"cannot read {path}: {INSTALL_HINT}") from None
         raise ReadError(f"cannot read {path}: unknown file extension {path.suffix!r} "
                         f"(mesh formats: .vtu .vtk .msh .mesh .xdmf .exo .med .inp ...; PLOT3D: .bin .xyz)") from None
     reasons = []
@@ -205,6 +220,8 @@ def mesh_from_meshio(m, *, scalar: str | None = None, cell_to_point: bool = Fals
 
     blocks = []  # (linear type, corner ids, block index)
     other = set()
+    for cb in m.cells:
+        check_cell_type(cb.type, source)  # polyhedra, polygons, unknown types: by name
     for bi, cb in enumerate(m.cells):
         if cb.type in VOLUME_CELLS:
             lin, k = VOLUME_CELLS[cb.type]
@@ -216,7 +233,7 @@ def mesh_from_meshio(m, *, scalar: str | None = None, cell_to_point: bool = Fals
         kinds = ", ".join(sorted(other)) or "none"
         raise MeshError(f"{source}: no volume cells (cell types present: {kinds})")
     if other:
-        notes.append(f"ignored non-volume cells: {', '.join(sorted(other))}")
+        notes.append(f"non-volume cells kept as given (not rendered): {', '.join(sorted(other))}")
 
     n = len(points)
     for lin, data, _ in blocks:
@@ -261,6 +278,10 @@ def mesh_from_meshio(m, *, scalar: str | None = None, cell_to_point: bool = Fals
             if key != cname:
                 notes.append(f"cell array {cname!r} averaged to the points as {key!r}")
     density, name = _choose_scalar(m, n, scalar, cell_to_point, point_data, source)
+    others = [k for k, v in point_data.items() if v.ndim == 1 and k != name]
+    if scalar is None and name != NO_SCALAR and others and not cell_to_point:
+        notes.append(f"default scalar {name!r}, the first of {len(others) + 1} point scalars "
+                     f"(scalar= chooses another: {', '.join(map(repr, others))})")
     if name == NO_SCALAR:
         hint = (f"; its cell data ({', '.join(cell_names)}) can be averaged to the points (cell-to-point)"
                 if cell_names and not cell_to_point else "")
@@ -270,7 +291,25 @@ def mesh_from_meshio(m, *, scalar: str | None = None, cell_to_point: bool = Fals
     report.notes += notes
     if not cell_to_point:
         report.cell_arrays = cell_names
+    report.cells = _cells_as_given(m, cell_of_tet, len(tets), n, source)
     return mesh, report
+
+
+def _cells_as_given(m, cell_of_tet, n_tets: int, n_points: int, source: str) -> Cells:
+    """The mesh's blocks, cell data, field data and sets as given, with each tet's cell."""
+    tet_cell = np.empty(n_tets, np.int64)
+    at = 0
+    for _, first, per, ncell in cell_of_tet:
+        tet_cell[at:at + per * ncell] = np.repeat(np.arange(first, first + ncell, dtype=np.int64), per)
+        at += per * ncell
+    blocks = [(cb.type, np.asarray(cb.data).astype(np.int64, copy=False)) for cb in m.cells]
+    cell_data = {str(k): [np.asarray(a) for a in v] for k, v in m.cell_data.items()}
+    cell_sets = {str(k): [None if a is None else np.asarray(a) for a in v]
+                 for k, v in (getattr(m, "cell_sets", None) or {}).items()}
+    point_sets = {str(k): np.asarray(v) for k, v in (getattr(m, "point_sets", None) or {}).items()}
+    cells = Cells(blocks, tet_cell, cell_data, dict(getattr(m, "field_data", None) or {}), point_sets, cell_sets)
+    check_cells(cells, n_points, source)
+    return cells
 
 
 def _coordinates(points: np.ndarray, notes: list) -> np.ndarray:
@@ -336,8 +375,8 @@ def _choose_scalar(m, n, scalar, cell_to_point, point_data, source):
     if len(point_scalars) == 1:
         (name, _), = point_scalars.items()
         return None, name
-    if len(point_scalars) > 1:
-        raise ReadError(f"{source}: several point scalars, choose one by name: {', '.join(sorted(point_scalars))}")
+    if len(point_scalars) > 1:  # the first, as written; the reader's notes say so
+        return None, next(iter(point_scalars))
     # no scalar at all: the mesh is kept without one (zeros under NO_SCALAR, never written back)
     return np.zeros(n, np.float32), NO_SCALAR
 
@@ -371,6 +410,8 @@ def mesh_output_format(path) -> str:
     """The meshio format a tet mesh is written in for this file name; :class:`OutputError` listing the
     choices when the extension is unknown or names a format that holds no tetrahedra (STL, PLY, OBJ)."""
     path = Path(path)
+    if is_vtkhdf(path):
+        return "vtkhdf"
     try:
         fmt = _prefer_gmsh(_helpers._filetypes_from_path(path))[0]
     except Exception:
@@ -382,18 +423,33 @@ def mesh_output_format(path) -> str:
     return fmt
 
 
-def write_mesh(mesh: TetMesh, path, *, force: bool = False) -> None:
-    """Write a linear tet mesh with every point array, format from the extension, atomically."""
+def to_meshio(mesh: TetMesh, cells: Cells | None = None) -> meshio.Mesh:
+    """A ``meshio.Mesh`` of ``mesh``'s points and point arrays, with the cells as given (blocks,
+    cell arrays, field data, sets, in ``mesh``'s point ids) or else its tets as one block."""
+    point_data = {name: np.asarray(a) for name, a in mesh.user_point_data.items()}
+    if cells is None:
+        return meshio.Mesh(np.asarray(mesh.points), [("tetra", np.asarray(mesh.tets))], point_data=point_data)
+    return meshio.Mesh(np.asarray(mesh.points), [(t, d) for t, d in cells.blocks], point_data=point_data,
+                       cell_data={k: list(v) for k, v in cells.cell_data.items()},
+                       field_data=dict(cells.field_data), point_sets=dict(cells.point_sets),
+                       cell_sets={k: list(v) for k, v in cells.cell_sets.items()})
+
+
+def write_mesh(mesh: TetMesh, path, *, force: bool = False, cells: Cells | None = None) -> None:
+    """Write a mesh with every point array, format from the extension, atomically: its tets as one
+    block of linear tets, or ``cells`` (the cells as given, in ``mesh``'s point ids)."""
     path = Path(path)
     fmt = mesh_output_format(path)
+    if fmt == "vtkhdf":
+        write_vtkhdf(path, mesh, force=force)
+        return
     if fmt in ("xdmf", "h5m", "med") and importlib.util.find_spec("h5py") is None:
         raise OutputError(f"writing {fmt} files needs h5py (pip install h5py); .vtu needs nothing extra")
-    point_data = {name: np.asarray(a) for name, a in mesh.user_point_data.items()}
-    if fmt == "gmsh":
-        # gmsh's vertex entity tags only make sense with the element tags (cell data, which a
-        # .tetc file does not hold): meshio's writer refuses them alone and writes its own
-        point_data.pop("gmsh:dim_tags", None)
-    m = meshio.Mesh(np.asarray(mesh.points), [("tetra", np.asarray(mesh.tets))], point_data=point_data)
+    m = to_meshio(mesh, cells)
+    if fmt == "gmsh" and "gmsh:geometrical" not in m.cell_data:
+        # gmsh's vertex entity tags only make sense with the element tags: meshio's writer refuses
+        # them alone and writes its own
+        m.point_data.pop("gmsh:dim_tags", None)
     with atomic_path(path, force=force) as tmp:
         try:
             with warnings.catch_warnings():

@@ -30,9 +30,14 @@ class MeshReport:
     unreferenced_points: int = 0
     cell_arrays: list[str] = field(default_factory=list)  # cell data read but not carried to the points
     notes: list[str] = field(default_factory=list)
+    cells: object = None  # the blocks as given (gatun_py.mesh.cells.Cells), from readers that have them
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        cells, self.cells = self.cells, None
+        try:
+            return {k: v for k, v in asdict(self).items() if k != "cells"}
+        finally:
+            self.cells = cells
 
 
 def _plural(n: int, word: str) -> str:

@@ -72,7 +72,7 @@ class Work:
 
     tets_decoded: float = 0.0  # tets the decoder produces (0 when the level is already in memory)
     forest_points: float = 0.0  # vertices whose ancestor the run-time filter computes (0: no filter)
-    tets_rendered: float = 0.0  # tets inserted into the ray caster's face table
+    tets_rendered: float = 0.0  # tets inserted into the ray caster's face table (the visible ones)
     steps: float = 0.0  # ray-tet steps
     samples: float = 0.0
     boundary_faces: float = 0.0
@@ -238,6 +238,10 @@ class WorkEstimator:
     figures (steps scaled as tets^(1/3) for merges on the fly); one not observed from the observed
     levels on either side, interpolated in log(tets) - the cube-root rule alone is far off between
     a 6-tet and a 4,000-tet level, and a planner fed such guesses swings between them.
+
+    The ray caster leaves out the tets the transfer function makes invisible (``tets_culled`` of
+    the ``tets_rendered`` it received): the share that reaches the face table (the view's transfer
+    function's, per level, latest frame) scales the tets of the estimate.
     """
 
     STEPS_PER_CUBE_ROOT = 1.5
@@ -250,6 +254,9 @@ class WorkEstimator:
         self.step = float(step) if step and step > 0 else self.diagonal / 100
         self.mode = mode
         self.seen: dict[int, tuple] = {}  # level -> (tets, hit fraction, steps per hit, samples per hit)
+        self.visible: dict[int, float] = {}  # level -> share of its tets the transfer function leaves visible
+
+    _latest_visible = 1.0
 
     @property
     def hit_fraction(self) -> float | None:
@@ -303,7 +310,8 @@ class WorkEstimator:
             steps = hit * steps_per_hit
             samples = steps if self.mode == "face" else hit * samples_per_hit / step_factor
         filtering = merges > start.merges
-        return Work(0.0 if decoded else float(start.tets), float(start.points) if filtering else 0.0, tets, steps,
+        shown = self.visible.get(start.level, self._latest_visible)
+        return Work(0.0 if decoded else float(start.tets), float(start.points) if filtering else 0.0, tets * shown, steps,
                     samples, estimated_tets(self.levels, merges, "boundary_faces"), float(pixels))
 
     def observe(self, stats: dict, *, step_factor: float = 1.0) -> None:
@@ -313,6 +321,8 @@ class WorkEstimator:
             return
         tets = max(int(stats.get("tets_rendered", 0)), 1)
         level = int(stats.get("level", 0))
+        shown = tets - int(stats.get("tets_culled", 0))
+        self.visible[level] = self._latest_visible = min(max(shown / tets, 0.0), 1.0)
         if hit > 0:
             entry = (float(tets), hit / rays, max(float(stats.get("steps", 0)), 1.0) / hit,
                      max(float(stats.get("samples", 0)), 1.0) * step_factor / hit)
@@ -476,7 +486,8 @@ class FramePlanner:
         start = self.level_size(int(stats["level"]))
         filtering = int(stats["merges"]) > start.merges
         return Work(0.0 if decoded else float(stats["tets_decoded"]), float(start.points) if filtering else 0.0,
-                    float(stats["tets_rendered"]), float(stats["steps"]), float(stats["samples"]),
+                    float(stats["tets_rendered"]) - float(stats.get("tets_culled", 0)), float(stats["steps"]),
+                    float(stats["samples"]),
                     estimated_tets(self.levels, int(stats["merges"]), "boundary_faces"), float(stats["rays"]))
 
     def observe(self, stats: dict, *, total_s: float, extra_s: float = 0.0, step_factor: float = 1.0,
@@ -596,7 +607,8 @@ def seed_costs(*, repeats: int = 3) -> Costs:
         runs = [render_batches(mesh_batches(mesh), Camera(size, size, 30, 20), "default", step=step,
                                scalar_range=mesh.scalar_range).stats for _ in range(repeats)]
         st = min(runs, key=lambda r: r["render_s"])
-        w = Work(0.0, 0.0, st["tets_rendered"], st["steps"], st["samples"], len(mesh.boundary_faces()), st["rays"])
+        w = Work(0.0, 0.0, st["tets_rendered"] - st.get("tets_culled", 0), st["steps"], st["samples"],
+                 len(mesh.boundary_faces()), st["rays"])
         ratios.append(st["render_s"] / ref.render_s(w))
     return ref.scaled(decode_scale, float(np.median(ratios)))
 

@@ -60,6 +60,7 @@ class View:
     scalar_range: tuple | None = None  # what the transfer function is normalised to (default: the mesh's)
     scalar: str | None = None  # .tetc: the point array to render (default: the file's default scalar)
     component: object = None  # for a vector array: its component (int) or "magnitude"
+    terminate: bool = True  # early ray termination at opacity 0.99 (off: every ray walked to its end)
 
     def __post_init__(self):
         if self.camera is None:
@@ -187,7 +188,7 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
     stats.update(forest_times)
     stats.update(
         pipeline=pipeline, level=target.level, ratio=target.ratio, merges=target.merges,
-        tets_decoded=int(lv["tets"]), filter=fstats, notes=notes,
+        tets_decoded=int(lv["tets"]), filter=fstats, notes=notes + res.stats.get("notes", []),
         peak_rss_mb=peak_rss_mb(),
     )
     return PipelineResult(res.image, stats)
@@ -210,6 +211,7 @@ def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress
         batches = watch(batches)
     res = render_batches(batches, camera, view.tf, mode=view.mode, step=step, scalar_range=rng,
                          expected_tets=int(lv["tets"]), lean=view.lean, fragments=fragments, progress=progress,
+                         terminate=view.terminate,
                          partial=partial, partial_every_s=partial_every_s)
     # render_batches times the wait for each batch: the decoder, plus the filter when there is one.
     times["decode_s"] = res.stats["decode_s"]
@@ -237,7 +239,7 @@ def _run_generic(reader, target, anc, camera, view, rng, step, times, watch=None
     if watch is not None:
         for _ in watch(mesh_batches(mesh)):
             pass
-    res = render_mesh(mesh, camera, view.tf, mode=view.mode, step=step, scalar_range=rng)
+    res = render_mesh(mesh, camera, view.tf, mode=view.mode, step=step, scalar_range=rng, terminate=view.terminate)
     return res, fstats
 
 
@@ -257,9 +259,10 @@ def render_mesh_file(source, view: View, *, read_kwargs: dict | None = None, pro
         step, step_notes = bounded_step(step, lo, hi)
         notes += step_notes
     res = render_batches(mesh_batches(mesh), view.camera.fit(lo, hi), view.tf, mode=view.mode, step=step,
-                         scalar_range=rng, expected_tets=mesh.n_tets, lean=False, progress=progress)
+                         scalar_range=rng, expected_tets=mesh.n_tets, lean=False, progress=progress,
+                         terminate=view.terminate)
     stats = dict(res.stats)
     stats.update(decode_s=read_s + stats.get("decode_s", 0.0), filter_s=0.0, pipeline="streaming", level=0,
-                 ratio=0.0, merges=0, tets_decoded=mesh.n_tets, notes=notes,
+                 ratio=0.0, merges=0, tets_decoded=mesh.n_tets, notes=notes + stats.get("notes", []),
                  peak_rss_mb=peak_rss_mb())
     return PipelineResult(res.image, stats)

@@ -68,13 +68,15 @@ def _first_sample(t0, step):
 
 # Inlined by numba: LLVM leaves a function with a loop as a call, which cost 4 % at 512² here.
 @njit(cache=True, _nrt=False, inline="always")
-def _composite(a0, a1, a2, a3, t0, s0, t1, s1, k0, k1, forward, mode, step, tab, lo, inv, unit):
+def _composite(a0, a1, a2, a3, t0, s0, t1, s1, k0, k1, forward, mode, step, tab, lo, inv, unit, thr):
     """Composite the tet interval [t0, t1) (scalar s0 -> s1) into the running colour (a0, a1, a2, a3);
     return (samples taken, new colour). The colour stays in registers for the whole walk.
 
     forward: the colour is a front subsegment's (new samples go behind it); otherwise a back
     subsegment's, walking toward the eye (new samples go in front of it). Volume mode: ``k0``,
     ``k1`` are ``_first_sample(t0)``, ``_first_sample(t1)`` (the walk computes each face's once).
+    A front subsegment stops at the first sample that brings its opacity to ``thr`` (early ray
+    termination; ``thr`` > 1: never).
     """
     if not t1 > t0:
         return 0, a0, a1, a2, a3
@@ -86,6 +88,8 @@ def _composite(a0, a1, a2, a3, t0, s0, t1, s1, k0, k1, forward, mode, step, tab,
             k = k0 + q if forward else k1 - 1 - q
             c0, c1, c2, al = _lookup(tab, lo, inv, s0 + (k * step - t0) * scale)
             a0, a1, a2, a3 = _blend(a0, a1, a2, a3, c0, c1, c2, al, forward)
+            if forward and a3 >= thr:
+                return q + 1, a0, a1, a2, a3
         return k1 - k0, a0, a1, a2, a3
     # face mode: the interval takes the average of the samples at its two faces
     p0, p1, p2, p3 = _lookup(tab, lo, inv, s0)
@@ -155,13 +159,15 @@ def _by_edge(na, nb, e, vab, sab, vbc, sbc, vac, sac):
 
 @njit(cache=True, _nrt=False)
 def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state, seg_steps,
-          seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps):
+          seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps, thr):
     """Advance subsegment ``sub`` (``FRONT`` or ``BACK``) of segment ``s`` through every present tet.
 
     Stops when the next tet is missing (the subsegment stays parked on that face), when it
     reaches the other subsegment's face (segment done), or after ``max_steps`` steps in total
-    for the segment (stuck: it can only be looping on inconsistent geometry). Returns the
-    segment's state.
+    for the segment (stuck: it can only be looping on inconsistent geometry), or, for a front
+    subsegment, at the sample where its opacity reaches ``thr`` (early ray termination: the segment
+    is done and the back subsegment's partial colour is dropped, so the result does not depend on
+    how far the back walked; ``thr`` > 1: never). Returns the segment's state.
 
     A counting table (``FT_COUNT`` column) loses one from the entry and the exit face of every
     tet stepped through, where the crossing was a clean one (``SEG_CLEAN`` 1: all three edge sides agreed;
@@ -316,10 +322,15 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
         else:
             i_t0, i_s0, i_k0, i_t1, i_s1, i_k1 = t_next, s_next, k_next, t_here, s_here, k_here
         n_new, a0, a1, a2, a3 = _composite(a0, a1, a2, a3, i_t0, i_s0, i_t1, i_s1, i_k0, i_k1, forward, mode,
-                                           step, tab, lo, inv, unit)
+                                           step, tab, lo, inv, unit, thr)
         samples += n_new
         a, b, c = na, nb, nc
         t_here, s_here, k_here = t_next, s_next, k_next
+        if forward and a3 >= thr:
+            state = STATE_DONE
+            for ch in range(4):
+                seg_acc[s, BACK, ch] = 0.0
+            break
         if a == oa and b == ob and c == oc:
             state = STATE_DONE
             break
@@ -348,7 +359,7 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
 
 
 @njit(cache=True, parallel=True)
-def advance(active, n_active, P, dens, dirs, S, F, V, max_steps):
+def advance(active, n_active, P, dens, dirs, S, F, V, max_steps, thr):
     """Advance the segments ``active[:n_active]`` of ``S`` as far as the tets in the face table ``F``
     allow (one bulk-synchronous phase). ``V``: the sampling (:func:`make_sampling`).
 
@@ -377,8 +388,46 @@ def advance(active, n_active, P, dens, dirs, S, F, V, max_steps):
                 # arrays are compiled as not aliasing the walk's, and a re-read of seg_state[s]
                 # after the walk may be folded into the read above
                 if _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state,
-                         seg_steps, seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps) != STATE_ACTIVE:
+                         seg_steps, seg_samples, htab, mul, mode, step, tab, lo, inv, unit, max_steps,
+                         thr if sub == FRONT else 2.0) != STATE_ACTIVE:
                     break
+
+
+@njit(cache=True, parallel=True)
+def advance_rays(run_lo, run_hi, P, dens, dirs, S, F, V, max_steps, terminate):
+    """Walk whole rays, front to back: the segments ``run_lo[i]:run_hi[i]`` (one ray's, nearest
+    first) for every i, each from its entry face as far as the tets in ``F`` allow (every tet
+    present: to its exit face), the back subsegment only where the front could not finish.
+
+    With ``terminate`` a ray stops where its opacity (of its segments so far, combined as
+    :func:`compose` does) reaches ``OPAQUE``: the front subsegment's threshold is the opacity that
+    takes the ray there, and segments behind an opaque ray are not walked (``compose`` leaves
+    them out). One task per block of rays, each writing only its rays' segments: the result cannot
+    depend on the thread count.
+    """
+    seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc, seg_state, seg_steps, seg_samples, _ = S
+    htab = F[FT_TABLE]
+    mul = F[FT_INFO][INFO_MUL]
+    mode, step, tab, lo, inv, unit = V
+    n_runs = run_lo.shape[0]
+    block = 16  # neighbouring rays meet the same tets (the caller hands blocks out dynamically)
+    n_blocks = (n_runs + block - 1) // block
+    for blk in prange(n_blocks):
+        for i in range(blk * block, min(n_runs, (blk + 1) * block)):
+            alpha = 0.0
+            for s in range(run_lo[i], run_hi[i]):
+                if terminate and alpha >= OPAQUE:
+                    seg_state[s] = STATE_DONE
+                    continue
+                thr = (OPAQUE - alpha) / (1.0 - alpha) if terminate else 2.0
+                if seg_state[s] == STATE_ACTIVE:
+                    for sub in range(2):
+                        if _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts, seg_acc,
+                                 seg_state, seg_steps, seg_samples, htab, mul, mode, step, tab, lo, inv, unit,
+                                 max_steps, thr if sub == FRONT else 2.0) != STATE_ACTIVE:
+                            break
+                of = seg_acc[s, FRONT, ACC_A]
+                alpha += (1.0 - alpha) * (of + (1.0 - of) * seg_acc[s, BACK, ACC_A])
 
 
 @njit(cache=True, _nrt=False)
@@ -419,7 +468,7 @@ def settle(S, boundary_keys):
 
 
 @njit(cache=True)
-def compose(S, image):
+def compose(S, image, terminate):
     """Combine subsegments (eq. 3/4) and segments (in ray order) into premultiplied RGBA.
 
     Segments are stored ray by ray, nearest first. Returns ``(unfinished, hidden)``: the number
@@ -429,7 +478,8 @@ def compose(S, image):
     termination: what lies behind weighs at most 1 - ``OPAQUE`` and may be skipped, so such a
     segment does not leave its ray unfinished (its partial colour is still added). The ray's
     opacity in front of the gap is that of the segments before it plus this segment's front
-    subsegment.
+    subsegment. With ``terminate`` a segment behind a ray already as opaque as ``OPAQUE`` adds
+    nothing (early ray termination, as :func:`advance_rays` walks it).
     """
     seg_ray, seg_acc, seg_state = S[SEG_RAY], S[SEG_ACC], S[SEG_STATE]
     unfinished = 0
@@ -446,6 +496,8 @@ def compose(S, image):
         seg_o = of + wb * back[ACC_A]
         w = 1.0 - image[r, ACC_A]
         alpha_at_gap = image[r, ACC_A] + w * of
+        if terminate and image[r, ACC_A] >= OPAQUE:
+            w = 0.0  # behind the termination point: skipped (a walk may have been cut short there)
         image[r, ACC_R] += w * seg_c0
         image[r, ACC_G] += w * seg_c1
         image[r, ACC_B] += w * seg_c2

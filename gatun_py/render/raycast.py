@@ -13,6 +13,7 @@ front, and the two are joined with the paper's equations (3)/(4).
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numba
@@ -22,16 +23,18 @@ from ..errors import MeshError, OptionError
 from ..mesh.model import default_step
 
 from ._boundary import find_segments
+from ._cull import table_boundary, visible_prefix, visible_tets
 from ._facetable import (FT_INFO, FT_NODES, FT_PARKED, FT_TABLE, INFO_FACES, INFO_MUL, INFO_NODES, count_crossings,
                          count_live, insert_tets, make_face_table, park, rehash, with_nodes, with_table)
-from ._segments import (FOLD_END, SEG_FACE, SEG_FROM, SEG_RAY, SEG_SAMPLES, SEG_STATE, SEG_STEPS, SEG_TS,
-                        STATE_ACTIVE, STATE_DONE, STATE_STUCK, TS_T)
-from ._walk import MODE_FACE, MODE_VOLUME, advance, compose, make_sampling, settle
+from ._segments import (ACC_A, FOLD_END, FRONT, SEG_ACC, SEG_FACE, SEG_FROM, SEG_RAY, SEG_SAMPLES,
+                        SEG_STATE, SEG_STEPS, SEG_TS, STATE_ACTIVE, STATE_DONE, STATE_STUCK, TS_T, make_segments)
+from ._walk import MODE_FACE, MODE_VOLUME, OPAQUE, advance, advance_rays, compose, make_sampling, settle
 from .camera import Camera, FittedCamera
 from .composite import Fragments, segment_fragments
 from .transfer import TransferFunction, load_transfer_function
 
 MODES = ("volume", "face")
+TILE = 4  # rays walk in square tiles of pixels (see StreamingRaycaster._runs)
 
 
 @dataclass
@@ -48,7 +51,9 @@ class RenderResult:
         whose walk could not be completed in front of opacity 0.99 (the early-termination
         threshold); ``segments_behind_opaque`` the incomplete segments behind it, which change
         their pixel by at most 0.01; ``subsegments_folded`` the subsegments that ended where a
-        grid folds over itself (the tet behind a face lies on the ray's side of it).
+        grid folds over itself (the tet behind a face lies on the ray's side of it);
+        ``tets_culled`` those of the ``tets_rendered`` the transfer function makes invisible, left
+        out before the walk.
     fragments : Fragments or None
         Every segment's composited colour and depth interval (asked for with ``fragments=True``),
         what :func:`~gatun_py.render.composite.composite` sorts and blends with other bricks'.
@@ -87,16 +92,33 @@ class StreamingRaycaster:
     fragments : bool
         Also return every segment as a fragment (``RenderResult.fragments``): a brick of a
         partition rendered this way composites exactly with the other bricks' fragments.
+    cull : bool
+        Leave out the tets the transfer function makes fully transparent (every table entry their
+        scalar interval reaches has opacity 0): rays enter and leave the visible part through its
+        own boundary, and the image is the full walk's. The tets are then entered as they arrive
+        and walked once all have come (front to back, as :func:`render_mesh`), so snapshots stay
+        blank until :meth:`finish`. Only where the transfer function has a transparent range;
+        not with ``lean``.
+    terminate : bool
+        Early ray termination (below); off: every ray is walked to its end.
 
     Notes
     -----
     Call :meth:`add_vertices` and :meth:`set_boundary` (any number of times, the boundary must be
     complete before the first :meth:`add_tets`), then :meth:`add_tets` for every batch, then
     :meth:`finish`. Tets may come in any order; the image does not depend on it.
+
+    Early ray termination (as VTK's): a ray stops where its opacity reaches ``OPAQUE`` (0.99); what
+    lies behind would change it by less than 0.01. A front subsegment stops there; at
+    :meth:`finish` the rays that became that opaque without their first front subsegment stopping
+    are walked again from the front, so the image equals the in-memory render's whatever the order
+    of the tets. Lean renders (whose face counters need every crossing walked) and ``fragments``
+    (bricks composited afterwards) walk every ray to its end.
     """
 
     def __init__(self, camera, tf, *, mode: str = "volume", step: float | None = None, scalar_range=None,
-                 expected_tets: int | None = None, lean: bool = False, fragments: bool = False):
+                 expected_tets: int | None = None, lean: bool = False, fragments: bool = False, cull: bool = True,
+                 terminate: bool = True):
         if mode not in MODES:
             raise OptionError(f"unknown render mode {mode!r} (choose from {', '.join(MODES)})")
         if step is not None and not (np.isfinite(step) and step > 0):
@@ -119,12 +141,21 @@ class StreamingRaycaster:
         self._conflicts = 0
         self._mark = 0
         self._t_render = 0.0
+        # CPU seconds (all threads) of each phase: what the profile and the budget model read
+        self._cpu = {"segments": 0.0, "insert": 0.0, "walk": 0.0, "compose": 0.0}
         self.fitted: FittedCamera | None = None
         # lean: count the rays still to cross each face and drop the faces no ray needs any more
         self._counting = bool(lean)
         self._table_peak = 0
         self._want_fragments = bool(fragments)
         self._entry_t = None  # fragments: each segment's boundary depths, before the walks move them
+        self._terminate = bool(terminate) and not lean and not fragments
+        self._cull = bool(cull) and not lean
+        self._deferred = False  # culling: tets entered as they come, walked at the end
+        self._n_culled = 0
+        self._seg0 = None  # the segments as they start (termination re-walks some rays from there)
+        self._redone = 0
+        self._notes: list[str] = []
 
     # -- input ----------------------------------------------------------------------------------
     def add_vertices(self, points, density) -> None:
@@ -178,7 +209,14 @@ class StreamingRaycaster:
             return
         self._check_ids(tets, "tet")
         self._n_tets += len(tets)
-        if self._nseg:
+        if self._deferred:
+            keep = np.empty(len(tets), dtype=np.uint8)
+            visible_tets(tets, self._dens[: self._nv], self._vis_prefix, self._tab_lo, self._tab_inv, keep)
+            vis = tets[keep.view(np.bool_)]
+            self._n_culled += len(tets) - len(vis)
+            if len(vis):
+                self._insert(vis, np.zeros((0, 4), dtype=np.int32), 1)
+        elif self._nseg:
             self._mark += 1
             n_active, conflicts = self._insert(tets, self._crossings(tets), self._mark)
             self._conflicts += conflicts
@@ -191,11 +229,102 @@ class StreamingRaycaster:
         t0 = time.perf_counter()
         if not self._started:
             self._start()
+        if self._deferred:
+            self._walk_visible()
         image = np.zeros((self._n_rays, 4), dtype=np.float64)
         settle(self._seg, self._boundary_keys)
-        unfinished, hidden = compose(self._seg, image)
+        with self._phase("compose"):
+            unfinished, hidden = compose(self._seg, image, self._terminate)
+        if self._terminate and not self._deferred and self._nseg:
+            redo = self._runs_to_redo(image)
+            if len(redo[0]):
+                self._rewalk(*redo)
+                image[:] = 0.0
+                settle(self._seg, self._boundary_keys)
+                unfinished, hidden = compose(self._seg, image, self._terminate)
         self._t_render += time.perf_counter() - t0
         return self._take_fragments(self._result(image, unfinished, hidden))
+
+    # -- early termination and culling ----------------------------------------------------------
+    def _runs(self):
+        """(first, end) segment of each ray's run (segments are stored ray by ray), the rays in
+        tiles of ``TILE`` x ``TILE`` pixels: :func:`advance_rays` hands out blocks of 16 runs, and
+        the rays of a square tile meet more of the same tets than a row's (fewer cache misses).
+        Runs are independent: their order changes no pixel."""
+        ray = self._seg[SEG_RAY]
+        if len(ray) == 0:
+            z = np.zeros(0, dtype=np.int64)
+            return z, z
+        lo = np.flatnonzero(np.r_[True, ray[1:] != ray[:-1]]).astype(np.int64)
+        hi = np.r_[lo[1:], len(ray)].astype(np.int64)
+        w = self.fitted.width
+        r = ray[lo].astype(np.int64)
+        row, col = r // w, r % w
+        key = ((row // TILE) * (w // TILE + 1) + col // TILE) * (TILE * TILE) + (row % TILE) * TILE + col % TILE
+        order = np.argsort(key, kind="stable")
+        return lo[order], hi[order]
+
+    @contextmanager
+    def _phase(self, name):
+        c0 = time.process_time()
+        try:
+            yield
+        finally:
+            self._cpu[name] += time.process_time() - c0
+
+    def _walk_runs(self, lo, hi, max_steps):
+        with self._phase("walk"):
+            self._walk_runs_kernel(lo, hi, max_steps)
+
+    def _walk_runs_kernel(self, lo, hi, max_steps):
+        old = numba.set_parallel_chunksize(2)
+        try:
+            advance_rays(lo, hi, self._points[: self._nv], self._dens[: self._nv], self._dirs, self._seg, self._ft,
+                         self._sampling, max_steps, self._terminate)
+        finally:
+            numba.set_parallel_chunksize(old)
+
+    def _runs_to_redo(self, image):
+        """The rays whose streamed colour is not the front-to-back walk's: opaque enough to terminate
+        (``OPAQUE``) without their first front subsegment having stopped there (a back subsegment
+        met it first, or a later segment stopped on its own threshold)."""
+        lo, hi = self._runs()
+        ray = self._seg[SEG_RAY][lo]
+        first_front = self._seg[SEG_ACC][lo, FRONT, ACC_A]
+        redo = (image[ray, ACC_A] >= OPAQUE) & ~(first_front >= OPAQUE)
+        return lo[redo], hi[redo]
+
+    def _rewalk(self, lo, hi):
+        """Walk the runs ``lo[i]:hi[i]`` again from their boundary faces, front to back (every tet
+        has arrived: the table is not lean)."""
+        seg = self._seg
+        lens = hi - lo
+        idx = np.repeat(lo - np.cumsum(lens) + lens, lens) + np.arange(int(lens.sum()), dtype=np.int64)
+        face0, from0, ts0 = self._seg0
+        seg[SEG_FACE][idx] = face0[idx]
+        seg[SEG_FROM][idx] = from0[idx]
+        seg[SEG_TS][idx] = ts0[idx]
+        seg[SEG_ACC][idx] = 0.0
+        seg[SEG_STATE][idx] = STATE_ACTIVE
+        seg[SEG_STEPS][idx] = 0
+        seg[SEG_SAMPLES][idx] = 0
+        self._redone += len(lo)
+        self._walk_runs(lo, hi, self._n_tets + 8)
+
+    def _walk_visible(self):
+        """Culling: every tet has come; cast the rays into the boundary of the visible ones and walk them."""
+        cam = self.fitted
+        P = self._points[: self._nv]
+        faces = table_boundary(self._ft[FT_TABLE]) if len(self._bfaces) else np.zeros((0, 3), dtype=np.int64)
+        self._bfaces, self._bkeys = faces, None
+        with self._phase("segments"):
+            self._seg, self._odd_pixels, self._anomalies, self._boundary_hits = find_segments(
+                P, self._dens, self._dirs, cam.width, cam.height, faces, *_ray_grid(cam))
+        self._nseg = len(self._seg[SEG_RAY])
+        if self._want_fragments:
+            self._entry_t = self._seg[SEG_TS][:, :, TS_T].copy()
+        if self._nseg:
+            self._walk_runs(*self._runs(), self._n_tets + 8)
 
     def _take_fragments(self, res: RenderResult) -> RenderResult:
         if self._want_fragments:
@@ -224,9 +353,9 @@ class StreamingRaycaster:
         image = np.zeros((cam.width * cam.height, 4), dtype=np.float64)
         finished = np.zeros(cam.width * cam.height, dtype=np.bool_)
         if self._started:
-            finished[:] = True
+            finished[:] = not self._deferred  # culling: nothing is walked before finish()
             if self._nseg:
-                compose(self._seg, image)
+                compose(self._seg, image, self._terminate)
                 finished[self._seg[SEG_RAY][self._seg[SEG_STATE] != STATE_DONE]] = False
         self._t_render += time.perf_counter() - t0
         return image.reshape(cam.height, cam.width, 4).astype(np.float32), finished.reshape(cam.height, cam.width)
@@ -267,19 +396,40 @@ class StreamingRaycaster:
             tab[:, 3] = 1.0 - np.power(1.0 - tab[:, 3], self.step / tf.unit_distance)
         self._sampling = make_sampling(MODE_VOLUME if self.mode == "volume" else MODE_FACE, self.step, tab, lo, inv,
                                        tf.unit_distance)
+        visible = tab[:, 3] > 0.0
+        if not visible.any():
+            self._notes.append("the transfer function is transparent over the whole scalar range "
+                               f"[{self.scalar_range[0]:g}, {self.scalar_range[1]:g}]: the image is black")
+        if self._cull and not visible.all():
+            self._deferred = True
+            self._vis_prefix, self._tab_lo, self._tab_inv = visible_prefix(tab[:, 3]), float(lo), float(inv)
         self._points[: self._nv] -= self._eye
         self._n_rays = cam.width * cam.height
         self._dirs = cam.ray_directions()
         P = self._points[: self._nv]
         faces = self._faces_in_front(P, faces, cam)
         self._bfaces, self._bkeys = faces, None
+        if self._deferred:
+            # segments wait for the visible part's boundary (_walk_visible); the table takes its tets
+            self._seg, _ = make_segments(np.zeros(0, np.int32), np.zeros((0, 2, 3), np.int32),
+                                         np.zeros((0, 2), np.int32), np.zeros((0, 2, 2)), self._n_rays)
+            self._nseg, self._odd_pixels, self._anomalies, self._boundary_hits = 0, np.zeros(0, np.uint8), 0, 0
+            self._active = np.zeros(0, dtype=np.int64)
+            expected = self.expected_tets or max(len(faces), 1024)
+            cap = 1 << int(np.ceil(np.log2(max(16, 2.5 * (2 * expected + len(faces) // 2)))))
+            self._ft = make_face_table(cap, self._slots_per_vertex(cap), 0, counting=False)
+            self._table_peak = self._ft[FT_TABLE].nbytes
+            return
         # the segments; the rays whose boundary crossings did not pair up (count_crossings keeps
         # the tets around them)
-        self._seg, self._odd_pixels, self._anomalies, self._boundary_hits = find_segments(
-            P, self._dens, self._dirs, cam.width, cam.height, faces, *_ray_grid(cam))
+        with self._phase("segments"):
+            self._seg, self._odd_pixels, self._anomalies, self._boundary_hits = find_segments(
+                P, self._dens, self._dirs, cam.width, cam.height, faces, *_ray_grid(cam))
         nseg = self._nseg = len(self._seg[SEG_RAY])
         if self._want_fragments:
             self._entry_t = self._seg[SEG_TS][:, :, TS_T].copy()
+        if self._terminate:
+            self._seg0 = (self._seg[SEG_FACE].copy(), self._seg[SEG_FROM].copy(), self._seg[SEG_TS].copy())
         self._active = np.arange(nseg, dtype=np.int64)
         if self._counting:  # grows with the tets in flight
             cap = 1 << int(np.ceil(np.log2(max(1024, 4 * len(faces)))))
@@ -291,6 +441,10 @@ class StreamingRaycaster:
         self._park(nseg, new_faces=min(2 * nseg, len(faces)))
 
     def _insert(self, tets, crossings, mark):
+        with self._phase("insert"):
+            return self._insert_kernel(tets, crossings, mark)
+
+    def _insert_kernel(self, tets, crossings, mark):
         """Enter tets into the face table (:func:`_facetable.insert_tets`); returns (segments to advance, conflicts).
 
         A tet adds at most four faces, but a batch of a whole mesh adds about two per tet: rather
@@ -421,6 +575,10 @@ class StreamingRaycaster:
         return (int(cap) << 16) // max(self._nv, (self.expected_tets or 0) // 4, 1)
 
     def _advance(self, n_active):
+        with self._phase("walk"):
+            self._advance_timed(n_active)
+
+    def _advance_timed(self, n_active):
         old = numba.set_parallel_chunksize(4)
         try:
             self._advance_kernel(n_active)
@@ -429,7 +587,7 @@ class StreamingRaycaster:
 
     def _advance_kernel(self, n_active):
         advance(self._active, n_active, self._points[: self._nv], self._dens[: self._nv], self._dirs, self._seg,
-                self._ft, self._sampling, self._n_tets + 8)
+                self._ft, self._sampling, self._n_tets + 8, OPAQUE if self._terminate else 2.0)
 
     def _result(self, image, unfinished, hidden):
         cam = self.fitted
@@ -445,17 +603,24 @@ class StreamingRaycaster:
             "segments_behind_opaque": int(hidden),
             "subsegments_folded": int(np.count_nonzero(seg[SEG_FROM] == FOLD_END)),
             "boundary_anomalies": int(self._anomalies),
+            "boundary_hits": int(self._boundary_hits),
             "face_conflicts": int(self._conflicts),
             "samples": int(seg[SEG_SAMPLES].sum()),
             "steps": int(seg[SEG_STEPS].sum()),
             "tets_rendered": int(self._n_tets),
+            "tets_culled": int(self._n_culled),
+            "early_termination": OPAQUE if self._terminate else None,
+            "rays_rewalked": int(self._redone),
             "face_table_peak_mb": round(self._table_peak / 2**20, 2),
             "lean": self._counting,
             "step": float(self.step),
             "mode": self.mode,
             "render_s": self._t_render,
+            "cpu_s": {k: round(v, 4) for k, v in self._cpu.items()},
             "nan_pixels": int(np.count_nonzero(~np.isfinite(img).all(axis=2))),
         }
+        if self._notes:
+            stats["notes"] = list(self._notes)
         return RenderResult(img, stats)
 
 
@@ -468,11 +633,11 @@ def _ray_grid(cam):
 
 
 def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = None,
-                scalar_range=None, fragments: bool = False) -> RenderResult:
+                scalar_range=None, fragments: bool = False, cull: bool = True, terminate: bool = True) -> RenderResult:
     """Render a whole in-memory mesh (the generic decompress-then-render baseline).
 
-    All tets enter the face table first, then every segment walks front to back from its entry
-    face in one parallel pass. Same kernels and sampling as :class:`StreamingRaycaster`, so the
+    All tets enter the face table first, then every ray walks front to back from its entry
+    face in one parallel pass, stopping where it is opaque (``OPAQUE``). Same kernels and sampling as :class:`StreamingRaycaster`, so the
     two give the same image.
 
     Parameters
@@ -487,6 +652,9 @@ def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = 
         Default the mesh's scalar range.
     fragments : bool
         Also return the segments as fragments (see :class:`StreamingRaycaster`).
+    cull, terminate : bool
+        Leave out the tets the transfer function makes invisible; stop rays where they are opaque
+        (see :class:`StreamingRaycaster`).
 
     Returns
     -------
@@ -496,19 +664,24 @@ def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = 
     rc = StreamingRaycaster(camera, tf, mode=mode, step=step,
                             scalar_range=mesh.scalar_range if scalar_range is None else scalar_range,
                             expected_tets=mesh.n_tets, lean=False,  # the whole mesh is in the table anyway
-                            fragments=fragments)
+                            fragments=fragments, cull=cull, terminate=terminate)
     rc.add_vertices(mesh.points, mesh.density)
     rc.set_boundary(mesh.boundary_faces())
     rc._start()
     tets = np.ascontiguousarray(mesh.tets, dtype=np.int32)
+    if rc._deferred:
+        rc.add_tets(tets)
+        res = rc.finish()
+        res.stats["render_s"] = rc._t_render = time.perf_counter() - t0
+        return res
     rc._n_tets = len(tets)
     if rc._nseg and len(tets):
         _, rc._conflicts = rc._insert(tets, rc._crossings(tets), 1)
-        rc._active = np.arange(rc._nseg, dtype=np.int64)
-        rc._advance(rc._nseg)
+        rc._walk_runs(*rc._runs(), rc._n_tets + 8)
     image = np.zeros((rc._n_rays, 4), dtype=np.float64)
     settle(rc._seg, rc._boundary_keys)
-    unfinished, hidden = compose(rc._seg, image)
+    with rc._phase("compose"):
+        unfinished, hidden = compose(rc._seg, image, rc._terminate)
     rc._t_render = time.perf_counter() - t0
     return rc._take_fragments(rc._result(image, unfinished, hidden))
 

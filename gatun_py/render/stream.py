@@ -9,14 +9,15 @@ from .raycast import RenderResult, StreamingRaycaster
 
 def render_batches(batches, camera, tf, *, mode: str = "volume", step: float | None = None, scalar_range=None,
                    expected_tets: int | None = None, lean: bool = False, fragments: bool = False,
-                   progress=None, partial=None, partial_every_s: float = 0.25) -> RenderResult:
+                   progress=None, partial=None, partial_every_s: float = 0.25, cull: bool = True,
+                   terminate: bool = True) -> RenderResult:
     """Stream-render ``batches`` (objects with ``points``, ``density``, ``boundary``, ``tets``).
 
     Parameters
     ----------
     batches : iterable of TetBatch
         Vertices in id order; the whole boundary before the first tet.
-    camera, tf, mode, step, scalar_range, expected_tets, lean, fragments
+    camera, tf, mode, step, scalar_range, expected_tets, lean, fragments, cull, terminate
         As for :class:`StreamingRaycaster`.
     progress : callable, optional
         Called with the number of tets of every batch once it is rendered.
@@ -32,7 +33,8 @@ def render_batches(batches, camera, tf, *, mode: str = "volume", step: float | N
         ``stats`` also holds ``decode_s`` (time spent waiting for batches) and ``batches``.
     """
     rc = StreamingRaycaster(camera, tf, mode=mode, step=step, scalar_range=scalar_range,
-                            expected_tets=expected_tets, lean=lean, fragments=fragments)
+                            expected_tets=expected_tets, lean=lean, fragments=fragments, cull=cull,
+                            terminate=terminate)
     decode_s = 0.0
     n_batches = 0
     last_partial = time.perf_counter()

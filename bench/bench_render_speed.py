@@ -147,7 +147,7 @@ def speed_section(work: Path, args, have_vtk: bool, log=print) -> list[str]:
     head = (f"{SPEED_HEAD} (512² targets: ours ≤ 0.25× the faster VTK path from file to image, steady frame "
             "≤ 0.25× VTK's repeat render, 1 → 2 threads ≥ 1.8×, 75 %-transparent frame ≤ 0.5× dense)")
     lines = [head, "",
-             f"Made by `python bench/bench_render.py --only speed"
+             "Made by `python bench/bench_render.py --only speed"
              + (f" --data {args.data}" if args and args.data else "")
              + (f" --sizes {args.sizes}" if args and args.sizes else "")
              + (f" --repeats {repeats}" if args and args.repeats else "")

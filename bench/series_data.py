@@ -80,7 +80,7 @@ def solve(points: np.ndarray, tets: np.ndarray, n_steps: int, *, dt: float = 0.0
     oriented), ``times`` (s,), ``temperature`` (s, n), ``heat_flux`` (s, m), ``moved`` (s, n, 3).
     """
     import scipy.sparse.linalg as sla
-    from skfem import Basis, BilinearForm, ElementTetP1, ElementVector, LinearForm, MeshTet, asm, condense
+    from skfem import Basis, BilinearForm, ElementTetP1, ElementVector, LinearForm, MeshTet, asm
     from skfem.helpers import div, dot, grad
     from skfem.models.elasticity import lame_parameters, linear_elasticity
 

@@ -53,7 +53,7 @@ def mixed_mesh(nx=3, ny=3, nz=2, seed=0, *, kinds=(0, 1, 2), quadratic=False) ->
         a = a[rng.permutation(len(a))]
         cells.append((typ, a))
     if quadratic:
-        cells = [(t, _add_mid_nodes(t, a, pts_list := [])) for t, a in cells]
+        cells = [(t, _add_mid_nodes(t, a, [])) for t, a in cells]
     m = meshio.Mesh(pts, cells)
     n = len(pts)
     m.point_data["p"] = rng.normal(size=n)

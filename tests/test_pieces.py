@@ -209,7 +209,7 @@ def test_cli_usage(pvtu, tmp_path):
 # -- Exodus decompositions ---------------------------------------------------------------------------------
 
 def test_exodus_decomposition(tmp_path):
-    netCDF4 = pytest.importorskip("netCDF4", reason="netCDF4 (the exodus extra) writes and reads Exodus files")
+    pytest.importorskip("netCDF4", reason="netCDF4 (the exodus extra) writes and reads Exodus files")
     from test_mesh_exodus import _write_exodus
     mesh = rich_mesh()
     pieces = solver_pieces(mesh, 3)

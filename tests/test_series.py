@@ -19,7 +19,6 @@ from hypothesis import strategies as st
 
 import gatun_py
 from gatun_py.cli.main import tetc
-from gatun_py.codec import TetcReader
 from gatun_py.codec.steps import decode_step_array, encode_step_array, extrapolate
 from gatun_py.errors import CorruptFileError, MeshError, OptionError, ReadError
 from gatun_py.mesh.validate import validate_tets

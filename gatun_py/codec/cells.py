@@ -359,7 +359,6 @@ def encode_cells(cells: Cells, mesh_tets: np.ndarray, vertex_order: np.ndarray,
     block_of = np.repeat(np.arange(len(vol_blocks)), counts)  # global cell -> volume block position
     if len(vol_blocks) > 1:
         sections.append(("C/blocks", _code(block_of[trav].astype(np.uint16))))
-    local_of = np.arange(nc) - offsets[block_of] if nc else np.zeros(0, np.int64)
 
     # vertex order
     u, starts, ucount = _first_appearance(cellrank, dec_tets, nc, n)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import CorruptFileError, OptionError
-from ..mesh import TetBatch, TetMesh
+from ..mesh import TetMesh
 from ..mesh.model import scalar_of
 from .arrays import ArrayDecoder, encode_array
 from .decoded_connectivity import DecodedConnectivity

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import MeshError, OptionError, ReadError
+from ..errors import OptionError, ReadError
 import meshio
 
 from .exodus import EXODUS_SUFFIXES, exodus_times, read_exodus

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import time as _time
 
 import numpy as np
 
@@ -23,7 +22,7 @@ from ..codec.steps import (append_block, keyframe_interval_for, check_step_mesh,
                            points_digest)
 from ..codec.arrays import dtype_name
 from ..codec.tetcfile import _POINTS, TetcReader, encode_level, encode_tetc, find_copies
-from ..errors import MeshError, OptionError, ReadError
+from ..errors import MeshError, OptionError
 from ..simplify import build_levels, decimate, level_payloads
 
 __all__ = ["encode_series", "write_series", "append_step"]

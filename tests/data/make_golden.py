@@ -68,7 +68,7 @@ def series_meshes(n_steps: int = 10):
     """Steps of the committed solver series (``series_heat.npz``, deforming), each with a float64
     temperature, its float32 copy and an integer array: every kind of step section."""
     with np.load(HERE / "series_heat.npz") as z:
-        pts, tets, moved, temp, times = z["points"], z["tets"], z["moved"], z["temperature"], z["times"]
+        tets, moved, temp, times = z["tets"], z["moved"], z["temperature"], z["times"]
     out = []
     for k in range(n_steps):
         data = {"temperature": temp[k], "t32": temp[k].astype(np.float32),

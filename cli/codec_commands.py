@@ -5,10 +5,12 @@ from __future__ import annotations
 import click
 
 import gatun_py
+from gatun_py._atomic import check_output_path
+from gatun_py._compile_notice import announce
 
 from .options import (RATIO, camera_options, echo_json, force_option, jobs_option, json_option, logger,
-                      mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
-                      selective_options, status, transfer_function_options)
+                      mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs, require_file,
+                      selective_options, status, tetc_name, transfer_function_options)
 
 
 @click.command()
@@ -72,7 +74,7 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
 
 @click.command()
 @click.argument("input", type=click.Path(dir_okay=False))
-@output_option("Output .tetc file.")
+@output_option("Output .tetc file (the name must end in .tetc).", tetc_name)
 @click.option("--levels", "n_levels", type=click.IntRange(min=0), default=None,
               help="Store pre-simplified levels 1..K (ratio 1-1/2^i) [default: every level the merge forest "
                    "reaches, up to 13; none under 128 points].")
@@ -90,7 +92,7 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
                    "and levels, to decode on several cores and render apart; 1 = one stream.")
 @jobs_option
 @click.option("--dependencies", is_flag=True,
-              help="Also store the merge dependencies `render --selective` needs (every cut closed under "
+              help="Also store the merge dependencies `tetc render --selective` needs (every cut closed under "
                    "them is flip-free); about 20-30 % more bytes, so off by default.")
 @mesh_input_options
 @click.option("--drop-cell-data", is_flag=True,
@@ -111,6 +113,10 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, w_sample
     vertices shared with other bricks locked so simplified bricks still meet. Without bricks,
     --jobs threads code the levels (level 0 while the decimation runs); the file is the same.
     """
+    require_file(input)  # before saying that it compiles
+    check_output_path(output, force=force)
+    announce(["encoder"] + ([] if mesh_only else ["decimation"]) + (["dependencies"] if dependencies else []),
+             quiet=quiet)
     with progress_reporter("decimating", quiet, min_total=1) as progress:
         gatun_py.compress(input, output, levels=n_levels, mesh_only=mesh_only, force=force, w_density=w_density,
                           w_geometry=w_geometry, w_sample=w_sample, progress=progress, log=logger(quiet),
@@ -120,13 +126,13 @@ def compress(input, output, n_levels, mesh_only, w_density, w_geometry, w_sample
 
 @click.command()
 @click.argument("input", type=click.Path(dir_okay=False))
-@output_option("Output mesh; format from the extension (.vtu, .vtk, .msh, .xdmf, ...).")
+@output_option("Output mesh (not .tetc); format from the extension (.vtu, .vtk, .msh, .xdmf, ...).")
 @click.option("--level", default=None, type=click.IntRange(min=0),
               help="Which stored level to decode (0 = the full mesh, the default).")
 @click.option("--ratio", default=None, type=RATIO,
               help="Simplify to this ratio (merged / all vertices, 0..1) with the stored merge forest, "
                    "starting from the most simplified stored level that is still finer.")
-@selective_options
+@selective_options(budget=False)
 @camera_options("With --selective", size_help="the image size the cut is chosen for.")
 @transfer_function_options("With --selective")
 @jobs_option
@@ -148,6 +154,9 @@ def decompress(input, output, level, ratio, selective, tets, size, tf_spec, azim
         raise click.UsageError("--tets needs --selective")
     if selective and level is not None:
         raise click.UsageError("--selective takes --ratio or --tets, not --level")
+    require_file(input)  # before saying that it compiles
+    check_output_path(output, force=force)
+    announce(["decoder"] + (["forest decoder"] if ratio is not None or selective else []), quiet=quiet)
     mesh = gatun_py.decompress(input, output, ratio=ratio, level=level, force=force, jobs=jobs, selective=selective,
                                tets=tets, size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom,
                                scalar_range=scalar_range, log=logger(quiet))

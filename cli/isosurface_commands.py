@@ -8,7 +8,7 @@ import click
 
 from gatun_py._resources import peak_rss_mb
 from .options import (camera_options, echo_json, force_option, jobs_option, mesh_input_options, progress_bar, quiet_option,
-                      read_kwargs, status)
+                      read_kwargs, require_file, status)
 
 
 def _finite(ctx, param, values):
@@ -69,14 +69,18 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
       tetc isosurface bf.tetc --value 1.5 --value 3 --ratio 0.1 -o iso.ply --png iso.png
       tetc isosurface big.tetc --value 0.3 --faces 50000 --stats -o iso.ply
     """
-    from gatun_py.isosurface import isosurface as extract
-    from gatun_py.isosurface.extract import load_kernels
-    from gatun_py.isosurface.io import check_surface_path
+    from gatun_py._compile_notice import announce, is_tetc
 
     if ratio is not None and faces is not None:
         raise click.UsageError("give either --ratio or --faces, not both")
     if level is not None and mesh_ratio is not None:
         raise click.UsageError("give either --level or --mesh-ratio, not both")
+    require_file(input)  # before saying that it compiles
+    announce((["decoder"] if is_tetc(input) else []) + ["isosurface"], quiet=quiet)
+    from gatun_py.isosurface import isosurface as extract  # after the notice: numba loads with it
+    from gatun_py.isosurface.extract import load_kernels
+    from gatun_py.isosurface.io import check_surface_path
+
     check_surface_path(output, force=force)  # fail before the work, not after
     if png is not None:
         from gatun_py._atomic import check_output_path

@@ -11,19 +11,8 @@ from gatun_py._atomic import check_output_path
 from gatun_py._resources import peak_rss_mb
 
 from .options import (POSITIVE, RATIO, Colour, camera_options, echo_json, force_option, interruptible, logger,
-                      kernels_cached, mesh_input_options, output_option, progress_reporter, quiet_option,
+                      mesh_input_options, output_option, progress_reporter, quiet_option,
                       read_kwargs, require_file, selective_options, status, transfer_function_options)
-
-
-def _kernels_cached(*, decoder: bool, simplify: bool = False) -> bool:
-    """Whether numba has compiled the render kernels (with ``decoder`` the decoder's, with
-    ``simplify`` the forest decoder's and the filter's) into its cache already."""
-    from gatun_py.codec import _cutborder_kernels, _forest_kernels, _geometry_kernels
-    from gatun_py.render import _walk
-    from gatun_py.simplify import _filter_kernels
-
-    return kernels_cached(_walk, *((_cutborder_kernels, _geometry_kernels) if decoder else ()),
-                          *((_forest_kernels, _filter_kernels) if decoder and simplify else ()))
 
 
 def _component(text):
@@ -80,7 +69,7 @@ def _component(text):
               help="Render on a local Dask cluster of N worker processes: the mesh is cut into bricks that stay on "
                    "the workers, and their ray fragments are composited exactly (same image as without). INPUT "
                    "may then be a glob ('steps/*.tetc', quoted): time steps, rendered file after file. "
-                   "Needs pip install 'gatun_py[dask]'.")
+                   "Needs Dask: pip install 'dask[distributed]' (or the extra: pip install 'gatun_py[dask]').")
 @click.option("--scheduler", default=None, metavar="tcp://HOST:PORT",
               help="Render on a running Dask cluster (workers started with `dask worker`, NUMBA_CACHE_DIR on a "
                    "shared folder so they compile nothing). The input must be readable by the client.")
@@ -92,7 +81,7 @@ def _component(text):
 @click.option("--timeout", type=POSITIVE, default=10.0, show_default=True, metavar="SECONDS",
               help="With --scheduler: how long to wait for it.")
 @click.option("--stats", "show_stats", is_flag=True, help="Print one JSON object with timings and counts on stdout.")
-@selective_options
+@selective_options(budget=True)
 @mesh_input_options
 @force_option
 @quiet_option
@@ -105,9 +94,8 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     from both ends of each segment. The camera follows VTK: 30 degree perspective fitted to the
     bounding sphere, then --azimuth, --elevation, refit, --zoom.
     """
-    from gatun_py.pipeline.stream import is_tetc  # start-up time: see _kernels_cached
+    from gatun_py._compile_notice import announce, is_tetc
     from gatun_py.render.image import image_format
-    from gatun_py.warmup import compile_for_render, load_kernels
 
     t_start = time.perf_counter()
     if sum(x is not None for x in (ratio, level, budget, tets)) > 1:
@@ -139,9 +127,12 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     require_file(input)
     decoder = is_tetc(input)  # a mesh file is rendered without the decoder: no need to compile it
     simplify = selective or any(x is not None for x in (ratio, level, budget, tets))
-    if not _kernels_cached(decoder=decoder, simplify=simplify):
-        what = "the decoder and the renderer side by side" if decoder else "the renderer"
-        status(f"compiling {what} (first run only, under half a minute; `make install` does it ahead)...", quiet)
+    parts = (["decoder"] if decoder else []) + ["renderer"] + (["forest decoder", "filter"] if decoder and simplify
+                                                               else [])
+    missing = announce(parts, side_by_side=decoder, quiet=quiet)
+    from gatun_py.warmup import compile_for_render, load_kernels  # after the notice: it loads numba
+
+    if missing:
         compile_for_render(decoder=decoder, simplify=simplify, lean=lean, mode=mode)
     startup_s = load_kernels(lean=lean, decoder=decoder, simplify=simplify) + (time.perf_counter() - t_start)
     t_start = time.perf_counter()  # total_s: from opening the input to the image written
@@ -177,7 +168,7 @@ def _check_series_options(workers, scheduler, n_bricks, ratio, colorbar, lean, p
 
 
 def _render_on_cluster(input, output, *, show_stats, quiet, **options):
-    from gatun_py.api import render_frames  # start-up time: see _kernels_cached
+    from gatun_py.api import render_frames  # start-up time: numba loads with it
 
     t0 = time.perf_counter()
     done = {"n": 0}

@@ -18,6 +18,7 @@ from .compare import compare_command
 from .isosurface_commands import isosurface
 from .render_commands import render
 from .view_commands import view
+from .warmup_command import warmup
 
 
 class TetcGroup(click.Group):
@@ -52,10 +53,11 @@ def tetc():
       tetc render mesh.tetc -o image.png         streaming decode + render
       tetc render mesh.tetc -o f.png --budget 0.1   fit a frame-time budget
       tetc info mesh.tetc --json                 sizes, levels, bits per tet
+      tetc warmup                                compile the kernels once, after installing
     """
 
 
-for _command in (info, convert, compress, decompress, render, isosurface, view, compare_command):
+for _command in (info, convert, compress, decompress, render, isosurface, view, compare_command, warmup):
     tetc.add_command(_command)
 
 

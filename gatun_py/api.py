@@ -31,6 +31,8 @@ from .codec import LevelPayload, TetcReader, write_tetc
 from .codec.bricks import check_jobs
 from .codec.info import tetc_info
 from .codec.tetcfile import encode_level, find_copies
+from ._compile_notice import announce as _announce_compiling
+from ._compile_notice import watch as _watch_compiles
 from .errors import OptionError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.io import mesh_output_format
@@ -50,6 +52,8 @@ from .simplify.filter import SimplifyFilter
 from .simplify.levels import MAX_LEVEL, max_stored_level, next_level, resolve_target, target_ancestors
 
 __all__ = ["compress", "decompress", "convert", "info", "open", "render", "render_frames", "TetcFile", "Frame"]
+
+_watch_compiles()  # a verb (or method) whose first run compiles says so on stderr, once per process
 
 # The largest image a verb renders: 16384² is what the camera accepts, but 4096² already takes
 # 200 MB of float RGBA; larger is nearly always a typo.
@@ -164,6 +168,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
         raise OptionError(f"bricks must be a positive integer, got {bricks!r}")
     threads = check_jobs(jobs)
     _check_output(source, output, force=force)  # fail before the (long) work
+    _announce_compiling(["encoder"] + ([] if mesh_only else ["decimation"]) + (["dependencies"] if dependencies else []))
     t0 = time.perf_counter()
     mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point,
                                  time_step=time_step), log, storing=True, drop_cell_data=drop_cell_data)
@@ -302,6 +307,7 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
         raise OptionError("selective refinement takes a ratio or tets, not a stored level")
     _check_output(source, output, force=force, mesh_file=True)  # before decoding
     f = source if isinstance(source, TetcFile) else TetcFile(source)
+    _announce_compiling(["decoder"] + (["forest decoder"] if ratio is not None or selective else []))
     mesh = None
     if selective:
         w, h = _size(size)
@@ -713,6 +719,10 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
     if opacity_model is not None:
         tf = tf.with_opacity_model(opacity_model)
     view = View(Camera(width, height, azimuth, elevation, zoom), tf, mode, step, bool(lean), scalar_range)
+    tetc_input = isinstance(source, TetcFile) or (isinstance(source, (str, os.PathLike)) and is_tetc(source))
+    simplifies = tetc_input and (selective or any(x is not None for x in (ratio, level, budget, tets)))
+    _announce_compiling((["decoder"] if tetc_input else []) + ["renderer"]
+                        + (["forest decoder", "filter"] if simplifies else []))
 
     t0 = time.perf_counter()
     planned = {}

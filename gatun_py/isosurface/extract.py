@@ -24,6 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import check_output_path
+from .._compile_notice import announce as _announce_compiling
+from .._compile_notice import watch as _watch_compiles
 from .._resources import peak_rss_mb, release_code_pages
 from ..codec import TetcReader
 from ..codec.bricks import check_jobs
@@ -414,6 +416,8 @@ class _Extractor:
 #: a tiny ``.tetc`` file shipped with the package (:mod:`gatun_py.warmup` writes and tests it)
 TINY_TETC = Path(__file__).resolve().parent.parent / "warmup.tetc"
 
+_watch_compiles()  # a first extraction that compiles says so on stderr, once per process
+
 
 def load_kernels(source=None, *, simplify: bool = True) -> float:
     """Load the kernels an extraction of ``source`` runs into this process, then hand back the
@@ -528,6 +532,8 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
     vals, ratio = _check_options(values, ratio, faces, batch_faces)
     jobs = check_jobs(jobs)
     imp = load_importance(importance_tf) if importance_tf is not None else None
+    decoder = isinstance(source, TetcReader) or (isinstance(source, (str, os.PathLike)) and _is_tetc(source))
+    _announce_compiling((["decoder"] if decoder else []) + ["isosurface"])
     t_start = time.perf_counter()
     stream, info = _open_stream(source, level=level, ratio_mesh=ratio_mesh, read_kwargs=read_kwargs, values=vals,
                                 jobs=jobs)

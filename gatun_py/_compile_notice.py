@@ -44,10 +44,11 @@ PARTS = {
 }
 
 # Seconds of compiling per part on two cores in one process (the first run of a command compiles
-# its parts one after the other, unless the command compiles them side by side, as render does).
-# The figures come from bench/sections/first_run.md; a loaded machine takes longer.
-SECONDS = {"encoder": 25, "decimation": 45, "dependencies": 5, "decoder": 15, "forest decoder": 10, "filter": 5,
-           "renderer": 15, "isosurface": 20}
+# its parts one after the other, unless the command compiles them side by side, as render does),
+# from first runs with an empty cache on a quiet machine (bench/sections/first_run.md); a loaded
+# machine takes longer.
+SECONDS = {"encoder": 35, "decimation": 70, "dependencies": 5, "decoder": 22, "forest decoder": 10, "filter": 5,
+           "renderer": 15, "isosurface": 15}
 
 TETC_MAGIC = b"TETC\x89\r\n\x1a"  # gatun_py.codec.container.MAGIC (a test keeps them equal): not imported
 # from there, since the codec's package loads numba and its kernels

@@ -102,3 +102,74 @@ def test_python_api_from_the_wheel(installed, tmp_path):
     assert res.returncode == 0, res.stderr
     assert res.stdout.split()[0] == "8750" and "(24, 24, 3)" in res.stdout
 
+
+
+def _usage_lines():
+    """The README's Usage block, line by line, as argv lists (comments and `source` left out)."""
+    import re
+    import shlex
+
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    start = readme.index("## Usage")
+    block = re.search(r"```sh\n(.*?)```", readme[start:], re.S).group(1)
+    for line in block.splitlines():
+        argv = shlex.split(line, comments=True)
+        if argv and argv[0] != "source":
+            yield line.split("#")[0].strip(), argv
+
+
+def _cache_files(d: Path) -> set:
+    return {p.relative_to(d) for p in d.rglob("*") if p.suffix in (".nbi", ".nbc")} if d.exists() else set()
+
+
+def test_readme_walkthrough_from_the_wheel(installed, tmp_path):
+    """A newcomer's first hour: the wheel in a fresh venv, an empty numba cache, every line of the
+    README's Usage section in order from a folder holding the samples. Every line exits 0 and writes
+    what it names; every line that compiled (numba's cache grew) said so on stderr, and none said so
+    without compiling; after `tetc warmup` (the README's first line) nothing compiles any more.
+    Then the README's Python block, in the same folder."""
+    import re
+
+    env_dir, env, _, _ = installed
+    env = dict(env, NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"), TETC_COMPILE_NOTICE="1")
+    # the Dask line: the README says to install Dask for it (make install does)
+    res = _run([env_dir / "bin" / "python", "-m", "pip", "install", "-q", "dask[distributed]"], tmp_path, env)
+    if res.returncode != 0:
+        pytest.skip(f"cannot install dask without the package index: {res.stderr.strip()[-300:]}")
+    cwd = tmp_path / "walk"
+    cwd.mkdir()
+    (cwd / "sample_meshes").symlink_to(ROOT / "sample_meshes")
+    cache = Path(env["NUMBA_CACHE_DIR"])
+    compiled_after_warmup = []
+    warmed = False
+    for line, argv in _usage_lines():
+        assert argv[0] == "tetc", line
+        before = _cache_files(cache)
+        res = _run([env_dir / "bin" / "tetc", *argv[1:]], cwd, env, timeout=1200)
+        assert res.returncode == 0, f"{line}\n{res.stderr[-3000:]}"
+        grew = _cache_files(cache) - before
+        said = "tetc: compiling" in res.stderr
+        if argv[1] != "warmup":
+            assert said == bool(grew), f"{line}: compiled {len(grew)} kernels, said so: {said}\n{res.stderr[-2000:]}"
+            if grew and warmed:
+                compiled_after_warmup.append((line, sorted(str(p) for p in grew)[:5]))
+        else:
+            warmed = True
+            assert "ready" in res.stderr and grew, res.stderr
+        for opt in ("-o", "--png"):
+            if opt in argv:
+                out = argv[argv.index(opt) + 1]
+                if "{frame}" in out:
+                    assert len(list(cwd.glob(out.replace("{frame}", "*")))) >= 1, line
+                else:
+                    assert (cwd / out).stat().st_size > 0, line
+        if "--json" in argv or "--stats" in argv:
+            json.loads(res.stdout)
+        if argv[1] == "compare":
+            assert re.search(r'"ssim"', res.stdout), res.stdout
+    assert not compiled_after_warmup, f"tetc warmup left these to compile: {compiled_after_warmup}"
+    code = (ROOT / "README.md").read_text(encoding="utf-8")
+    code = re.search(r"The same from Python.*?```python\n(.*?)```", code, re.S).group(1)
+    res = _run([env_dir / "bin" / "python", "-c", code], cwd, env, timeout=1200)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert (cwd / "bf90_api.png").stat().st_size > 0 and (cwd / "bf99.tetc").stat().st_size > 0

@@ -42,7 +42,10 @@ def _finite(ctx, param, values):
                    "(x in scalar range per bounding-box diagonal unless \"absolute\": true): faces with weight W "
                    "keep their detail until their error is W times larger.")
 @click.option("--png", type=click.Path(dir_okay=False), default=None,
-              help="Also write a shaded preview (Lambert, headlight) with the camera options below.")
+              help="Also write a shaded preview (Lambert, headlight) with the camera options below, framing "
+                   "the surface.")
+@click.option("--frame-volume", is_flag=True,
+              help="Preview: frame the whole mesh instead of the surface (to line up with tetc render's view).")
 @camera_options("Preview", size_default="512", size_help="size in pixels.")
 @click.option("--stats", "show_stats", is_flag=True,
               help="Print one JSON object on stdout: timings, counts, peak memory and the locked band per batch.")
@@ -50,7 +53,7 @@ def _finite(ctx, param, values):
 @jobs_option
 @force_option
 @quiet_option
-def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_ratio, importance_tf, png, size,
+def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_ratio, importance_tf, png, frame_volume, size,
                azimuth, elevation, zoom, show_stats, scalar, q_file, q_var, cell_to_point, time_step, jobs, force,
                quiet):
     """Extract the isosurface(s) of INPUT (a .tetc file or any mesh file) at --value V.
@@ -114,7 +117,8 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
         status(f"note: isovalue {v:g} is outside the scalar range [{lo_s:g}, {hi_s:g}]: its surface is empty", quiet)
     surf.save(output, force=force)
     if png is not None:
-        surf.save_preview(png, size=(w, h), azimuth=azimuth, elevation=elevation, zoom=zoom, force=force)
+        surf.save_preview(png, size=(w, h), azimuth=azimuth, elevation=elevation, zoom=zoom,
+                          frame="volume" if frame_volume else "surface", force=force)
     st["peak_rss_mb"] = peak_rss_mb()
     st["output"] = str(output)
     if show_stats:

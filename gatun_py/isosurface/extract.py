@@ -127,12 +127,14 @@ class Surface:
         """Write the surface; the format follows the extension (``.vtp``, ``.ply``, ``.obj``, ``.stl``, ...)."""
         write_surface(self, path, force=force)
 
-    def preview(self, *, size=512, azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0) -> np.ndarray:
+    def preview(self, *, size=512, azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0,
+                frame: str = "surface") -> np.ndarray:
         """A shaded picture of the surface: (H, W, 3) uint8, Lambert with a headlight.
 
-        The camera follows ``tetc render``'s conventions and is fitted to the box of the mesh the
-        surface was extracted from (``stats["bbox"]``), so the preview lines up with a volume
-        render of the same view. Several isovalues are coloured by value.
+        The camera follows ``tetc render``'s conventions, fitted to the surface's own bounding box
+        (``frame="surface"``: a small surface fills the picture) or to the box of the mesh it was
+        extracted from (``frame="volume"``, ``stats["bbox"]``: the preview lines up with a volume
+        render of the same view). Several isovalues are coloured by value.
 
         Examples
         --------
@@ -155,20 +157,26 @@ class Surface:
                 raise OptionError(f"{name} must be a finite number, got {v}")
         if zoom <= 0:
             raise OptionError(f"zoom must be > 0, got {zoom}")
+        if frame not in ("surface", "volume"):
+            raise OptionError(f"frame must be 'surface' or 'volume', got {frame!r}")
         box = self.stats.get("bbox")
-        bbox = (np.asarray(box[0], float), np.asarray(box[1], float)) if box is not None else None
+        if frame == "surface" and self.n_triangles:
+            bbox = self.bbox  # an empty surface keeps the volume's frame: a black picture of the right view
+        else:
+            bbox = (np.asarray(box[0], float), np.asarray(box[1], float)) if box is not None else None
         scal = self.point_data.get("scalar") if len(self.stats.get("values", ())) > 1 else None
         rgba = render_surface(self.points, self.triangles, Camera(w, h, azimuth, elevation, zoom), scalar=scal,
                               bbox=bbox)
         return to_rgb8(rgba)
 
     def save_preview(self, path, *, size=512, azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0,
-                     force: bool = False) -> None:
+                     frame: str = "surface", force: bool = False) -> None:
         """Write :meth:`preview` as an image (PNG, JPEG, WebP, TIFF or BMP from the extension), atomically."""
         from ..render.image import write_image  # PIL only for a preview (see preview)
 
         check_output_path(path, force=force)
-        write_image(path, self.preview(size=size, azimuth=azimuth, elevation=elevation, zoom=zoom), force=force)
+        write_image(path, self.preview(size=size, azimuth=azimuth, elevation=elevation, zoom=zoom, frame=frame),
+                    force=force)
 
     def _repr_png_(self) -> bytes:
         from ..render.image import png_bytes  # PIL only for a preview (see preview)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ORDER = ["mesh", "codec", "geometry", "lossless", "simplify", "forest", "levels", "rounds", "render", "banding", "composite", "pipeline", "selective", "selective_bound", "selective_bricks",
-         "isosurface", "view", "hostile", "bricks"]
+         "isosurface", "view", "hostile", "bricks", "first_run"]
 SCRIPTS = {"composite": "bench_bricks_render.py"}  # areas whose script is not bench_<area>.py
 
 

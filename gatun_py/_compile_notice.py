@@ -78,6 +78,28 @@ def silence() -> None:
         _said = True
 
 
+def shadowed_install() -> str | None:
+    """Where the installed gatun_py is, when this process imported another copy: a source checkout
+    in the working folder (``python`` puts it first on the path) shadowing a plain ``pip install``.
+    Its kernels then compile into a second cache, beside the checkout's files; None otherwise (an
+    editable install is the checkout itself)."""
+    if not (PACKAGE_DIR.parent / "pyproject.toml").is_file():
+        return None
+    try:
+        from importlib import metadata
+
+        for dist in metadata.distributions(name="gatun_py"):  # the checkout's egg-info is one of them
+            init = next((f for f in dist.files or () if str(f).replace("\\", "/") == "gatun_py/__init__.py"), None)
+            if init is None:  # an editable install maps the checkout instead of copying it
+                continue
+            installed = Path(dist.locate_file(init)).resolve().parent
+            if installed != PACKAGE_DIR and installed.is_dir():
+                return str(installed)
+    except Exception:  # unreadable metadata: nothing to say
+        return None
+    return None
+
+
 def say(text: str) -> bool:
     """Print ``text`` on stderr unless a notice was printed already (or notices are off); whether it was."""
     global _said
@@ -85,6 +107,11 @@ def say(text: str) -> bool:
         if _said or not enabled():
             return False
         _said = True
+    installed = shadowed_install()
+    if installed:
+        text += (f"\ntetc: note: this Python imported gatun_py from the checkout {PACKAGE_DIR.parent}, not the "
+                 f"installed package ({installed}), so its kernels compile a second time; run Python from "
+                 "another folder, or install the checkout editable (pip install -e ., as make install does)")
     try:
         print(text, file=sys.stderr, flush=True)
     except (OSError, ValueError):

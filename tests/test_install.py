@@ -173,3 +173,20 @@ def test_readme_walkthrough_from_the_wheel(installed, tmp_path):
     res = _run([env_dir / "bin" / "python", "-c", code], cwd, env, timeout=1200)
     assert res.returncode == 0, res.stderr[-3000:]
     assert (cwd / "bf90_api.png").stat().st_size > 0 and (cwd / "bf99.tetc").stat().st_size > 0
+
+
+def test_a_checkout_shadowing_the_wheel_is_named_when_it_compiles(installed, tmp_path):
+    """`python` started in the repository root imports the checkout's gatun_py, not the installed
+    one, and would compile a second cache: the compile notice says so and how to avoid it."""
+    env_dir, env, _, _ = installed
+    env = dict(env, NUMBA_CACHE_DIR=str(tmp_path / "cache"), TETC_COMPILE_NOTICE="1")
+    code = ("import gatun_py, gatun_py._compile_notice as n\n"
+            "assert 'site-packages' not in gatun_py.__file__\n"
+            "print(n.shadowed_install())\n"
+            "n.announce(['filter'])\n")
+    res = _run([env_dir / "bin" / "python", "-c", code], ROOT, env)
+    assert res.returncode == 0, res.stderr
+    assert "site-packages" in res.stdout and "compile a second time" in res.stderr, res.stderr
+    res = _run([env_dir / "bin" / "python", "-c", "import gatun_py._compile_notice as n; print(n.shadowed_install())"],
+               tmp_path, env)
+    assert res.returncode == 0 and res.stdout.strip() == "None", res.stdout + res.stderr

@@ -376,7 +376,8 @@ def mesh_output_format(path) -> str:
     except Exception:
         fmt = None
     if path.suffix.lower() == ".tetc":
-        raise OutputError(f"{path.name}: this writes a mesh file, not a .tetc file (tetc compress makes those); "
+        raise OutputError(f"{path.name}: decompress and convert write a mesh file, not a .tetc file (tetc compress "
+                          "makes those); "
                           f"name it with a mesh format's extension: {', '.join(TET_EXTENSIONS)}")
     if fmt not in TET_FORMATS:
         raise OutputError(f"cannot write a tet mesh as {path.name!r}: "

@@ -134,3 +134,28 @@ def test_a_run_on_the_warm_cache_says_nothing_of_compiling(name, files, tmp_path
     res = subprocess.run([str(_tetc()), *argv], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr
     assert NOTICE not in res.stderr, res.stderr
+
+
+VERBS = {
+    "compress": "gatun_py.compress({post_vtk!r}, 'x.tetc')",
+    "decompress": "gatun_py.decompress({post!r}, 'x.vtu')",
+    "render": "gatun_py.render({post!r}, size=16)",
+    "isosurface": "gatun_py.isosurface({post!r}, values=[0.5])",
+    "open().mesh()": "gatun_py.open({post!r}).mesh(0.5)",
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("verb", sorted(VERBS))
+def test_a_public_verb_s_first_run_says_it_compiles(verb, files, tmp_path):
+    """The Python API too: the first call that compiles prints the notice once on stderr."""
+    code = "import gatun_py\n" + VERBS[verb].format(post=str(files / "post.tetc"), post_vtk=str(POST))
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "empty-cache"), TETC_COMPILE_NOTICE="1")
+    proc = subprocess.Popen([sys.executable, "-c", code], cwd=tmp_path, env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stderr.readline().strip()
+    finally:
+        proc.kill()
+        proc.wait(timeout=60)
+    assert line.startswith(NOTICE), (verb, line)

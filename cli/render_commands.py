@@ -40,7 +40,8 @@ def _component(text):
 @click.option("--mode", type=click.Choice(["volume", "face"]), default="volume", show_default=True,
               help="volume: uniform samples every --step; face: one sample per tet (at its faces).")
 @click.option("--step", type=POSITIVE, default=None,
-              help="Sample spacing for --mode volume [default: half the median boundary edge].")
+              help="Sample spacing for --mode volume [default: half the median boundary edge, at most 1/512 of "
+                   "the bounding-box diagonal; a .tetc file uses the step recorded when it was compressed].")
 @camera_options()
 @click.option("--component", default=None, metavar="K|magnitude",
               help="For a vector point array (--scalar NAME): render component K (0-based) or its magnitude "

@@ -645,7 +645,8 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
     mode : {"volume", "face"}
         Uniform samples every ``step``, or one sample per tet at its faces.
     step : float, optional
-        Sample spacing (default: half the median boundary edge of the full mesh).
+        Sample spacing (default: half the median boundary edge of the full mesh, at most 1/512 of
+        its bounding-box diagonal; a file compressed by an earlier version keeps the step it recorded).
     scalar_range : (float, float), optional
         The range the transfer function is normalised to (default: the mesh's). Fix it to compare
         files or time steps.

@@ -78,13 +78,14 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
         raise click.UsageError("give either --ratio or --faces, not both")
     if level is not None and mesh_ratio is not None:
         raise click.UsageError("give either --level or --mesh-ratio, not both")
+    from gatun_py.isosurface.io import check_surface_path
+
     require_file(input)  # before saying that it compiles
+    check_surface_path(output, force=force)  # fail before the work, not after
     announce((["decoder"] if is_tetc(input) else []) + ["isosurface"], quiet=quiet)
     from gatun_py.isosurface import isosurface as extract  # after the notice: numba loads with it
     from gatun_py.isosurface.extract import load_kernels
-    from gatun_py.isosurface.io import check_surface_path
 
-    check_surface_path(output, force=force)  # fail before the work, not after
     if png is not None:
         from gatun_py._atomic import check_output_path
         from gatun_py.render.image import image_format

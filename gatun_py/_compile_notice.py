@@ -20,6 +20,7 @@ import hashlib
 import os
 import sys
 import threading
+from importlib import metadata
 from pathlib import Path
 
 PACKAGE_DIR = Path(__file__).resolve().parent
@@ -86,8 +87,6 @@ def shadowed_install() -> str | None:
     if not (PACKAGE_DIR.parent / "pyproject.toml").is_file():
         return None
     try:
-        from importlib import metadata
-
         for dist in metadata.distributions(name="gatun_py"):  # the checkout's egg-info is one of them
             init = next((f for f in dist.files or () if str(f).replace("\\", "/") == "gatun_py/__init__.py"), None)
             if init is None:  # an editable install maps the checkout instead of copying it

@@ -9,6 +9,7 @@ mesh, which gives them the same argument types as real data; the work is split o
 from __future__ import annotations
 
 import dataclasses
+import os
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -271,8 +272,6 @@ def warm_up(log=None) -> float:
     """Compile every kernel the commands run into numba's cache, in two processes, with a line on
     ``log`` as each part is ready; returns the seconds it took. Nothing compiles twice: a second
     call loads the kernels from the cache in seconds."""
-    import os
-
     log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
     os.environ["TETC_COMPILE_NOTICE"] = "0"  # the workers compile on purpose: no first-run notices
     t0 = time.perf_counter()

@@ -2,7 +2,8 @@
 
 The stages and what each may import (besides the standard library and third-party packages):
 
-* base: ``gatun_py.errors``, ``gatun_py._atomic``, ``gatun_py._resources`` (anyone may import them)
+* base: ``gatun_py.errors``, ``gatun_py._atomic``, ``gatun_py._resources``, ``gatun_py._compile_notice``
+  (anyone may import them)
 * mesh: base
 * codec: mesh
 * simplify: codec, mesh
@@ -27,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "gatun_py"
 CLI = ROOT / "cli"
 
-BASE = {"errors", "_atomic", "_resources", "_version", "_lazy"}
+BASE = {"errors", "_atomic", "_resources", "_version", "_lazy", "_compile_notice"}
 # stage -> the stages it may import (base always allowed)
 ALLOWED = {
     "mesh": {"mesh"},
@@ -53,6 +54,7 @@ LOCAL_OK_REASONS = {
     "distributed": "optional dependency",
     "gmsh": "optional dependency",
     "PIL": "image I/O only where images are read",
+    "numba": "start-up time: the first-run compile notice is said before numba loads (gatun_py._compile_notice)",
 }
 
 

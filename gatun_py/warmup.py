@@ -23,6 +23,7 @@ from .errors import CorruptFileError, TetcError
 from .isosurface.extract import TINY_TETC, isosurface
 from .mesh import TetMesh, mesh_batches
 from .mesh.synthetic import jittered_grid
+from .pipeline.bricks import compress_bricks, read_bricked
 from .pipeline.stream import View, render_tetc
 from .render._facetable import count_live, make_face_table, rehash
 from .render.camera import Camera
@@ -263,9 +264,18 @@ def load_kernels(*, lean: bool = False, decoder: bool = True, simplify: bool = T
     return time.perf_counter() - t0
 
 
+def _bricks() -> str:
+    """A bricked file (`tetc compress --bricks`): each brick decimated with its shared vertices
+    locked and coded, then decoded and stitched, whole and simplified."""
+    reader = TetcReader(compress_bricks(tiny_mesh(), 2, jobs=1))
+    read_bricked(reader, jobs=1)
+    read_bricked(reader, ratio=0.2, jobs=1)
+    return "bricks"
+
+
 # What `tetc warmup` (and `make install`) compiles, in two processes (numba compiles one function
 # at a time per process): each job with the seconds it takes on two cores, for the progress line.
-JOBS = ((_simplify_and_render, 60), (_codec_and_filter, 50), (_isosurface, 30))
+JOBS = ((_simplify_and_render, 60), (_codec_and_filter, 50), (_isosurface, 30), (_bricks, 20))
 
 
 def warm_up(log=None) -> float:

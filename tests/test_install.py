@@ -14,6 +14,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import time
 import venv
 from pathlib import Path
 
@@ -145,11 +146,13 @@ def test_readme_walkthrough_from_the_wheel(installed, tmp_path):
     for line, argv in _usage_lines():
         assert argv[0] == "tetc", line
         before = _cache_files(cache)
+        t0 = time.perf_counter()
         # generous: a loaded CI machine compiles the warm-up many times slower than two free cores
         res = _run([env_dir / "bin" / "tetc", *argv[1:]], cwd, env, timeout=3600)
         assert res.returncode == 0, f"{line}\n{res.stderr[-3000:]}"
         grew = _cache_files(cache) - before
         said = "tetc: compiling" in res.stderr
+        print(f"{time.perf_counter() - t0:7.1f} s  compiled {len(grew):3d}  said {said!s:5}  {line}")  # -rA shows it
         if argv[1] != "warmup":
             assert said == bool(grew), f"{line}: compiled {len(grew)} kernels, said so: {said}\n{res.stderr[-2000:]}"
             if grew and warmed:

@@ -184,6 +184,22 @@ def announce(parts, *, side_by_side: bool = False, quiet: bool = False) -> list[
     return missing
 
 
+def worker_initargs() -> tuple:
+    """``initargs`` of a process pool whose ``initializer`` is :func:`worker_init`: whether this
+    process said its notice already (or was told not to)."""
+    return (_said,)
+
+
+def worker_init(parent_said: bool) -> None:
+    """In a worker process (spawned: it shares no state with its parent): say the notice if the
+    worker compiles and the parent has not said it (its probe found the parts cached, but the
+    workers' arguments need another compilation)."""
+    if parent_said:
+        silence()
+    else:
+        watch()
+
+
 # -- the fallback: numba's compile event ----------------------------------------------------------
 
 _watching = False

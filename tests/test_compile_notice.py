@@ -159,3 +159,21 @@ def test_a_public_verb_s_first_run_says_it_compiles(verb, files, tmp_path):
         proc.kill()
         proc.wait(timeout=60)
     assert line.startswith(NOTICE), (verb, line)
+
+
+@pytest.mark.slow
+def test_bricks_compiled_in_worker_processes_say_so(tmp_path):
+    """Bricks are compressed in spawned worker processes: when the parent said nothing (here it never
+    announces), a worker that compiles says so."""
+    code = ("from gatun_py.pipeline.bricks import compress_bricks\n"
+            "from gatun_py.mesh import read_mesh\n"
+            f"compress_bricks(read_mesh({str(POST)!r})[0], 2, jobs=2, mesh_only=True)\n")
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "empty-cache"), TETC_COMPILE_NOTICE="1")
+    proc = subprocess.Popen([sys.executable, "-c", code], cwd=tmp_path, env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stderr.readline().strip()
+    finally:
+        proc.kill()
+        proc.wait(timeout=60)
+    assert line.startswith(NOTICE), line

@@ -81,13 +81,23 @@ def _first_stderr_line(argv, env, cwd, *, timeout=120.0):
     (a first run would go on compiling for a minute)."""
     t0 = time.perf_counter()
     proc = subprocess.Popen([str(_tetc()), *map(str, argv)], cwd=cwd, env=env, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         line = proc.stderr.readline()
         return line.strip(), time.perf_counter() - t0
     finally:
-        proc.kill()
-        proc.wait(timeout=timeout)
+        _end(proc, timeout)
+
+
+def _end(proc, timeout=60.0) -> None:
+    """End ``proc`` and the worker processes it started (its own process group)."""
+    import signal
+
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    proc.wait(timeout=timeout)
 
 
 @pytest.fixture(scope="module")
@@ -152,12 +162,11 @@ def test_a_public_verb_s_first_run_says_it_compiles(verb, files, tmp_path):
     code = "import gatun_py\n" + VERBS[verb].format(post=str(files / "post.tetc"), post_vtk=str(POST))
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "empty-cache"), TETC_COMPILE_NOTICE="1")
     proc = subprocess.Popen([sys.executable, "-c", code], cwd=tmp_path, env=env, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         line = proc.stderr.readline().strip()
     finally:
-        proc.kill()
-        proc.wait(timeout=60)
+        _end(proc)
     assert line.startswith(NOTICE), (verb, line)
 
 
@@ -170,10 +179,9 @@ def test_bricks_compiled_in_worker_processes_say_so(tmp_path):
             f"compress_bricks(read_mesh({str(POST)!r})[0], 2, jobs=2, mesh_only=True)\n")
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "empty-cache"), TETC_COMPILE_NOTICE="1")
     proc = subprocess.Popen([sys.executable, "-c", code], cwd=tmp_path, env=env, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         line = proc.stderr.readline().strip()
     finally:
-        proc.kill()
-        proc.wait(timeout=60)
+        _end(proc)
     assert line.startswith(NOTICE), line

@@ -33,7 +33,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 from common import SAMPLE_FILES, code_state, load, table, write_section  # noqa: E402
 from gmsh_meshes import mesh_path  # noqa: E402
 
-from gatun_py._resources import peak_rss_mb  # noqa: E402
+from gatun_py._runtime import peak_rss_mb  # noqa: E402
 from gatun_py.mesh import read_mesh  # noqa: E402
 from gatun_py.pipeline.sortlast import split_for_render, render_bricks  # noqa: E402
 from gatun_py.pipeline.stream import View, render_mesh_file  # noqa: E402

@@ -444,7 +444,7 @@ VARIANTS = (("streaming --no-lean", "streaming", False), ("streaming --lean", "s
 def mem_worker(spec: str) -> None:
     """One render in this fresh process (``--mem-worker JSON``); prints peak RSS and times as JSON."""
     t0 = time.perf_counter()
-    from gatun_py._resources import peak_rss_mb
+    from gatun_py._runtime import peak_rss_mb
     from gatun_py.pipeline.stream import View, render_tetc
     from gatun_py.render.camera import Camera
     from gatun_py.render.image import write_png

@@ -35,7 +35,7 @@ os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
 def _rss_mb() -> float:
     """Peak RSS of this process image (VmHWM: unlike ru_maxrss it is not inherited across exec)."""
-    from gatun_py._resources import peak_rss_mb
+    from gatun_py._runtime import peak_rss_mb
 
     return peak_rss_mb()
 

@@ -14,8 +14,8 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-ORDER = ["mesh", "codec", "cells", "geometry", "lossless", "simplify", "forest", "levels", "rounds", "render", "composite", "pipeline", "selective", "selective_bound", "selective_bricks",
-         "isosurface", "view", "hostile", "bricks", "series", "pieces", "paraview"]
+ORDER = ["mesh", "codec", "cells", "geometry", "lossless", "simplify", "forest", "levels", "rounds", "render", "banding", "composite", "pipeline", "selective", "selective_bound", "selective_bricks",
+         "isosurface", "view", "hostile", "bricks", "series", "pieces", "paraview", "first_run"]
 SCRIPTS = {"composite": "bench_bricks_render.py"}  # areas whose script is not bench_<area>.py
 
 

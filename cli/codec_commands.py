@@ -5,12 +5,14 @@ from __future__ import annotations
 import click
 
 import gatun_py
+from gatun_py._runtime import check_output_path
+from gatun_py._runtime import announce
 
 from gatun_py.mesh.pieces import is_partitioned
 
-from .options import (RATIO, FiniteFloat, camera_options, check_step, echo_json, force_option, jobs_option, json_option, logger,
-                      mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
-                      selective_options, status, transfer_function_options)
+from .options import (RATIO, FiniteFloat, camera_options, check_step, echo_json, force_option, jobs_option, json_option,
+                      logger, mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
+                      require_file, selective_options, status, tetc_name, transfer_function_options)
 
 
 @click.command()
@@ -77,7 +79,7 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
 
 @click.command()
 @click.argument("inputs", metavar="INPUT...", nargs=-1, required=True, type=click.Path(dir_okay=False))
-@output_option("Output .tetc file.")
+@output_option("Output .tetc file (the name must end in .tetc).", tetc_name)
 @click.option("--times", default=None, metavar="T0,T1,...",
               help="A time series of several INPUT files: their times, comma-separated, increasing "
                    "[default: each file's own TimeValue, else 0, 1, 2, ...].")
@@ -103,7 +105,7 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
                    "and levels, to decode on several cores and render apart; 1 = one stream.")
 @jobs_option
 @click.option("--dependencies", is_flag=True,
-              help="Also store the merge dependencies `render --selective` needs (every cut closed under "
+              help="Also store the merge dependencies `tetc render --selective` needs (every cut closed under "
                    "them is flip-free); 13-70 % more bytes than the default file on the samples (Blunt-fin "
                    "+70 %), so off by default.")
 @mesh_input_options
@@ -153,6 +155,11 @@ def compress(inputs, output, times, keyframe_interval, n_levels, mesh_only, w_de
     decimated and coded on its own (on --jobs processes, or Dask --workers/--scheduler), so
     memory is that of the largest piece plus the pieces' boundaries.
     """
+    for path in inputs:
+        require_file(path)  # before saying that it compiles
+    check_output_path(output, force=force)
+    announce(["encoder"] + ([] if mesh_only else ["decimation"]) + (["dependencies"] if dependencies else []),
+             quiet=quiet)
     if pieces or is_partitioned(inputs[0]) or memory is not None:
         if times is not None or keyframe_interval is not None:
             raise click.UsageError("--times and --keyframe-interval are for a time series, not pieces")
@@ -188,7 +195,7 @@ def compress(inputs, output, times, keyframe_interval, n_levels, mesh_only, w_de
 
 @click.command()
 @click.argument("input", type=click.Path(dir_okay=False))
-@output_option("Output mesh; format from the extension (.vtu, .vtk, .msh, .xdmf, ...).")
+@output_option("Output mesh (not .tetc); format from the extension (.vtu, .vtk, .msh, .xdmf, ...).")
 @click.option("--level", default=None, type=click.IntRange(min=0),
               help="Which stored level to decode (0 = the full mesh, the default).")
 @click.option("--ratio", default=None, type=RATIO,
@@ -201,7 +208,7 @@ def compress(inputs, output, times, keyframe_interval, n_levels, mesh_only, w_de
               help="A time series: write the step at time T.")
 @click.option("--piece", type=click.IntRange(min=0), default=None, metavar="K",
               help="A file compressed from pieces: decode piece K alone (its bricks, at --level).")
-@selective_options
+@selective_options(budget=False)
 @camera_options("With --selective", size_help="the image size the cut is chosen for.")
 @transfer_function_options("With --selective")
 @click.option("--as-tets", is_flag=True,
@@ -235,6 +242,9 @@ def decompress(input, output, level, ratio, step, at_time, piece, selective, tet
         raise click.UsageError("--selective takes --ratio or --tets, not --level")
     if piece is not None and (selective or ratio is not None):
         raise click.UsageError("--piece decodes a stored level: not with --ratio or --selective")
+    require_file(input)  # before saying that it compiles
+    check_output_path(output, force=force)
+    announce(["decoder"] + (["forest decoder"] if ratio is not None or selective else []), quiet=quiet)
     mesh = gatun_py.decompress(input, output, ratio=ratio, level=level, force=force, jobs=jobs, selective=selective,
                                tets=tets, size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom,
                                scalar_range=scalar_range, as_tets=as_tets, step=step, time=at_time, piece=piece,

@@ -8,8 +8,7 @@ import click
 
 from gatun_py._runtime import load_isosurface_kernels, peak_rss_mb
 from .options import (camera_options, check_step, echo_json, force_option, jobs_option, mesh_input_options, progress_bar,
-                      quiet_option,
-                      read_kwargs, status)
+                      quiet_option, read_kwargs, require_file, status)
 
 
 def _finite(ctx, param, values):
@@ -43,7 +42,10 @@ def _finite(ctx, param, values):
                    "(x in scalar range per bounding-box diagonal unless \"absolute\": true): faces with weight W "
                    "keep their detail until their error is W times larger.")
 @click.option("--png", type=click.Path(dir_okay=False), default=None,
-              help="Also write a shaded preview (Lambert, headlight) with the camera options below.")
+              help="Also write a shaded preview (Lambert, headlight) with the camera options below, framing "
+                   "the surface.")
+@click.option("--frame-volume", is_flag=True,
+              help="Preview: frame the whole mesh instead of the surface (to line up with tetc render's view).")
 @camera_options("Preview", size_default="512", size_help="size in pixels.")
 @click.option("--stats", "show_stats", is_flag=True,
               help="Print one JSON object on stdout: timings, counts, peak memory and the locked band per batch.")
@@ -51,7 +53,7 @@ def _finite(ctx, param, values):
 @jobs_option
 @force_option
 @quiet_option
-def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_ratio, importance_tf, png, size,
+def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_ratio, importance_tf, png, frame_volume, size,
                azimuth, elevation, zoom, show_stats, scalar, q_file, q_var, cell_to_point, time_step, jobs, force,
                quiet):
     """Extract the isosurface(s) of INPUT (a .tetc file or any mesh file) at --value V.
@@ -71,14 +73,19 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
       tetc isosurface big.tetc --value 0.3 --faces 50000 --stats -o iso.ply
     """
     check_step(input, time_step)
-    from gatun_py.isosurface import isosurface as extract
-    from gatun_py.isosurface.io import check_surface_path
+    from gatun_py._runtime import announce, is_tetc
 
     if ratio is not None and faces is not None:
         raise click.UsageError("give either --ratio or --faces, not both")
     if level is not None and mesh_ratio is not None:
         raise click.UsageError("give either --level or --mesh-ratio, not both")
+    from gatun_py.isosurface.io import check_surface_path
+
+    require_file(input)  # before saying that it compiles
     check_surface_path(output, force=force)  # fail before the work, not after
+    announce((["decoder"] if is_tetc(input) else []) + ["isosurface"], quiet=quiet)
+    from gatun_py.isosurface import isosurface as extract  # after the notice: numba loads with it
+
     if png is not None:
         from gatun_py._runtime import check_output_path
         from gatun_py.render.image import image_format
@@ -111,7 +118,8 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
         status(f"note: isovalue {v:g} is outside the scalar range [{lo_s:g}, {hi_s:g}]: its surface is empty", quiet)
     surf.save(output, force=force)
     if png is not None:
-        surf.save_preview(png, size=(w, h), azimuth=azimuth, elevation=elevation, zoom=zoom, force=force)
+        surf.save_preview(png, size=(w, h), azimuth=azimuth, elevation=elevation, zoom=zoom,
+                          frame="volume" if frame_volume else "surface", force=force)
     st["peak_rss_mb"] = peak_rss_mb()
     st["output"] = str(output)
     if show_stats:

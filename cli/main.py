@@ -19,6 +19,7 @@ from .isosurface_commands import isosurface
 from .paraview_commands import paraview_plugin
 from .render_commands import render
 from .view_commands import view
+from .warmup_command import warmup
 
 
 class TetcGroup(click.Group):
@@ -53,11 +54,12 @@ def tetc():
       tetc render mesh.tetc -o image.png         streaming decode + render
       tetc render mesh.tetc -o f.png --budget 0.1   fit a frame-time budget
       tetc info mesh.tetc --json                 sizes, levels, bits per tet
+      tetc warmup                                compile the kernels once, after installing
     """
 
 
 for _command in (info, convert, compress, decompress, append, render, isosurface, view, compare_command,
-                 paraview_plugin):
+                 paraview_plugin, warmup):
     tetc.add_command(_command)
 
 

@@ -99,15 +99,22 @@ def mesh_input_options(f):
     return f
 
 
-def selective_options(f):
-    """--selective and --tets N: a view- and transfer-function-dependent cut of the merge forest."""
-    f = click.option("--tets", type=click.IntRange(min=1), default=None, metavar="N",
-                     help="With --selective: at most N tets (above the mesh's count: the full mesh).")(f)
-    f = click.option("--selective", is_flag=True,
-                     help="Simplify where the view and transfer function say it matters least (hidden, "
-                          "transparent, small on screen), never flipping a tet; with --ratio, --tets or "
-                          "--budget. A file compressed without --dependencies is simplified uniformly, with a note.")(f)
-    return f
+def selective_options(*, budget: bool):
+    """--selective and --tets N: a view- and transfer-function-dependent cut of the merge forest
+    (``budget``: the command has --budget, which --selective takes too)."""
+    amounts = "--ratio, --tets or --budget" if budget else "--ratio or --tets"
+
+    def decorate(f):
+        f = click.option("--tets", type=click.IntRange(min=1), default=None, metavar="N",
+                         help="With --selective: at most N tets (above the mesh's count: the full mesh).")(f)
+        f = click.option("--selective", is_flag=True,
+                         help="Simplify where the view and transfer function say it matters least (hidden, "
+                              f"transparent, small on screen), never flipping a tet; with {amounts}. A file "
+                              "compressed without `tetc compress --dependencies` is simplified uniformly, with "
+                              "a note.")(f)
+        return f
+
+    return decorate
 
 
 def _helper(prefix: str, text: str) -> str:
@@ -162,14 +169,33 @@ def read_kwargs(scalar, q_file, q_var, cell_to_point, time_step=None) -> dict:
     return dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point, time_step=time_step)
 
 
-def output_option(help_text: str):
-    return click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help=help_text)
+def output_option(help_text: str, callback=None):
+    return click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help=help_text,
+                        callback=callback)
+
+
+def tetc_name(ctx, param, value):
+    """An output ``.tetc`` file: a name with another extension (``-o x.png``, ``-o x.vtu``) is most
+    likely a mix-up with render or decompress, and would hide a .tetc file behind a wrong name."""
+    if value is not None and not str(value).lower().endswith(".tetc"):
+        raise click.BadParameter(f"{value!r}: tetc compress writes a .tetc file, so name it NAME.tetc "
+                                 "(images come from tetc render, mesh files from tetc decompress)")
+    return value
 
 
 force_option = click.option("--force", "-f", is_flag=True, help="Overwrite the output file if it exists.")
 jobs_option = click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, metavar="N",
                            help="Cores to use on the bricks of a bricked file [default: all].")
-quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress output on stderr.")
+def _silence_notices(ctx, param, value):
+    if value:
+        from gatun_py._runtime import silence
+
+        silence()  # the first-run compile notice too
+    return value
+
+
+quiet_option = click.option("--quiet", "-q", is_flag=True, callback=_silence_notices,
+                            help="No progress output on stderr.")
 json_option = click.option("--json", "as_json", is_flag=True, help="Print one JSON object on stdout.")
 
 

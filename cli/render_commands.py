@@ -7,8 +7,7 @@ import time
 import click
 
 import gatun_py
-from gatun_py._runtime import (check_output_path, compile_for_render, load_render_kernels, peak_rss_mb,
-                               render_kernels_cached)
+from gatun_py._runtime import check_output_path, compile_for_render, load_render_kernels, peak_rss_mb
 
 from .options import (POSITIVE, RATIO, Colour, FiniteFloat, camera_options, check_step, echo_json, force_option,
                       interruptible, logger, mesh_input_options, output_option, progress_reporter, quiet_option,
@@ -40,7 +39,8 @@ def _component(text):
 @click.option("--mode", type=click.Choice(["volume", "face"]), default="volume", show_default=True,
               help="volume: uniform samples every --step; face: one sample per tet (at its faces).")
 @click.option("--step", type=POSITIVE, default=None,
-              help="Sample spacing for --mode volume [default: half the median boundary edge].")
+              help="Sample spacing for --mode volume [default: half the median boundary edge, at most 1/512 of "
+                   "the bounding-box diagonal; a .tetc file uses the step recorded when it was compressed].")
 @camera_options()
 @click.option("--component", default=None, metavar="K|magnitude",
               help="For a vector point array (--scalar NAME): render component K (0-based) or its magnitude "
@@ -69,7 +69,7 @@ def _component(text):
               help="Render on a local Dask cluster of N worker processes: the mesh is cut into bricks that stay on "
                    "the workers, and their ray fragments are composited exactly (same image as without). INPUT "
                    "may then be a glob ('steps/*.tetc', quoted): time steps, rendered file after file. "
-                   "Needs pip install 'gatun_py[dask]'.")
+                   "Needs Dask: pip install 'dask[distributed]' (or the extra: pip install 'gatun_py[dask]').")
 @click.option("--scheduler", default=None, metavar="tcp://HOST:PORT",
               help="Render on a running Dask cluster (workers started with `dask worker`, NUMBA_CACHE_DIR on a "
                    "shared folder so they compile nothing). The input must be readable by the client.")
@@ -87,7 +87,7 @@ def _component(text):
               help="A .tetc time series: render steps A, A+S, ... below B (a Python slice; B empty: to the last), "
                    "one image each, named by {frame} and {step} in OUTPUT (e.g. run_{step:04d}.png), the scalar "
                    "range common to all of them unless --range.")
-@selective_options
+@selective_options(budget=True)
 @mesh_input_options
 @force_option
 @quiet_option
@@ -101,7 +101,7 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     from both ends of each segment. The camera follows VTK: 30 degree perspective fitted to the
     bounding sphere, then --azimuth, --elevation, refit, --zoom.
     """
-    from gatun_py.pipeline.stream import is_tetc  # start-up time: numba loads after the options are checked
+    from gatun_py._runtime import announce, is_tetc
     from gatun_py.render.image import image_format
 
     t_start = time.perf_counter()
@@ -146,9 +146,10 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     require_file(input)
     decoder = is_tetc(input)  # a mesh file is rendered without the decoder: no need to compile it
     simplify = selective or any(x is not None for x in (ratio, level, budget, tets))
-    if not render_kernels_cached(decoder=decoder, simplify=simplify):
-        what = "the decoder and the renderer side by side" if decoder else "the renderer"
-        status(f"compiling {what} (first run only, under half a minute; `make install` does it ahead)...", quiet)
+    parts = (["decoder"] if decoder else []) + ["renderer"] + (["forest decoder", "filter"] if decoder and simplify
+                                                               else [])
+    missing = announce(parts, side_by_side=decoder, quiet=quiet)
+    if missing:
         compile_for_render(decoder=decoder, simplify=simplify, lean=lean, mode=mode)
     startup_s = load_render_kernels(lean=lean, decoder=decoder, simplify=simplify) + (time.perf_counter() - t_start)
     t_start = time.perf_counter()  # total_s: from opening the input to the image written
@@ -185,7 +186,7 @@ def _check_series_options(workers, scheduler, n_bricks, ratio, colorbar, lean, p
 
 
 def _render_on_cluster(input, output, *, show_stats, quiet, **options):
-    from gatun_py.api import render_frames  # start-up time: numba loads after the options are checked
+    from gatun_py.api import render_frames  # start-up time: numba loads with it
 
     t0 = time.perf_counter()
     done = {"n": 0}

@@ -48,14 +48,18 @@ def view(input, port, host, no_browser, token, quiet):
     POST /api/frame?token=... with a JSON request (camera, tf, budget) returns the image and its
     stats (header X-Tetc-Stats); see the module gatun_py.viewer.server.
     """
-    from gatun_py.pipeline.stream import is_tetc
-    from gatun_py.viewer import ViewerSession, require_web
+    from gatun_py._runtime import announce, is_tetc
 
     if token is not None and (len(token) < 8 or not token.isalnum()):
         raise OptionError("--token must be at least 8 letters or digits")
     require_file(input)
     if not is_tetc(input):
         raise OptionError(f"{input}: tetc view needs a .tetc file (make one with: tetc compress {input} -o FILE.tetc)")
+    # the kernels are loaded (or compiled) before the file is checked: say so first, before the
+    # viewer's imports load numba
+    compiling = announce(["decoder", "forest decoder", "filter", "renderer"], quiet=quiet)
+    from gatun_py.viewer import ViewerSession, require_web
+
     server = require_web()
     if not _is_loopback(host):
         status(f"warning: listening on {host}: other machines that can reach it may connect (with the token); "
@@ -64,7 +68,8 @@ def view(input, port, host, no_browser, token, quiet):
     from gatun_py._runtime import load_render_kernels
 
     t0 = time.perf_counter()
-    status("loading the decoder and renderer...", quiet)
+    if not compiling:
+        status("loading the decoder and renderer...", quiet)
     load_render_kernels()
     if load_costs() is None:
         status("measuring this machine's rendering costs (once, under a second)...", quiet)

@@ -22,6 +22,7 @@ import resource
 import sys
 from pathlib import Path
 
+from ._compile_notice import announce, is_tetc, silence  # noqa: F401  (the CLI's first-run notice)
 from ._atomic import check_output_path  # noqa: F401  (the CLI's check before the work, with the rest it runs first)
 
 

@@ -38,6 +38,8 @@ from .codec.cells import read_cells, restore_order
 from .codec.info import tetc_info
 from .codec.stepreader import StepDecoder
 from .codec.tetcfile import encode_level, find_copies
+from ._compile_notice import announce as _announce_compiling
+from ._compile_notice import watch as _watch_compiles
 from .errors import OptionError, OutputError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.cells import Cells
@@ -66,6 +68,8 @@ from .simplify.filter import SimplifyFilter
 from .simplify.levels import MAX_LEVEL, max_stored_level, next_level, resolve_target, target_ancestors
 
 __all__ = ["compress", "decompress", "convert", "info", "open", "render", "render_frames", "render_steps", "append", "TetcFile", "Frame"]
+
+_watch_compiles()  # a verb (or method) whose first run compiles says so on stderr, once per process
 
 
 # -- reading the source --------------------------------------------------------------------------
@@ -208,6 +212,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
         raise OptionError(f"bricks must be a positive integer, got {bricks!r}")
     threads = check_jobs(jobs)
     _check_output(source, output, force=force)  # fail before the (long) work
+    _announce_compiling(["encoder"] + ([] if mesh_only else ["decimation"]) + (["dependencies"] if dependencies else []))
     t0 = time.perf_counter()
     mesh, cells = _as_mesh_and_cells(source, dict(scalar=scalar, q_file=q_file, q_var=q_var,
                                                   cell_to_point=cell_to_point, time_step=time_step),
@@ -380,6 +385,7 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
             return f.mesh(ratio, level=level, jobs=jobs, step=f.n_steps - 1)
     _check_output(source, output, force=force, mesh_file=True)  # before decoding
     f = source if isinstance(source, TetcFile) else TetcFile(source)
+    _announce_compiling(["decoder"] + (["forest decoder"] if ratio is not None or selective else []))
     if step is not None or time is not None:
         k = f.step_index(step=step, time=time)
         if selective and k != 0:
@@ -960,7 +966,8 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
     mode : {"volume", "face"}
         Uniform samples every ``step``, or one sample per tet at its faces.
     step : float, optional
-        Sample spacing (default: half the median boundary edge of the full mesh).
+        Sample spacing (default: half the median boundary edge of the full mesh, at most 1/512 of
+        its bounding-box diagonal; a file compressed by an earlier version keeps the step it recorded).
     scalar_range : (float, float), optional
         The range the transfer function is normalised to (default: the mesh's). Fix it to compare
         files or time steps.
@@ -1042,6 +1049,10 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
         tf = tf.with_opacity_model(opacity_model)
     view = View(Camera(width, height, azimuth, elevation, zoom), tf, mode, step, bool(lean), scalar_range,
                 terminate=bool(terminate))
+    tetc_input = isinstance(source, TetcFile) or (isinstance(source, (str, os.PathLike)) and is_tetc(source))
+    simplifies = tetc_input and (selective or any(x is not None for x in (ratio, level, budget, tets)))
+    _announce_compiling((["decoder"] if tetc_input else []) + ["renderer"]
+                        + (["forest decoder", "filter"] if simplifies else []))
 
     t0 = _perf_counter()
     planned = {}

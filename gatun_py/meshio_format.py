@@ -1,7 +1,8 @@
 """``.tetc`` as a meshio format: ``meshio.read("x.tetc")`` and ``meshio.write("x.tetc", mesh)``.
 
-Registered by ``import gatun_py``, so ``meshio convert``, PyVista (``pyvista.read`` goes through
-meshio for formats VTK does not know) and any meshio user can open compressed files.
+Registered by ``import gatun_py``, so that in the same Python process PyVista (``pyvista.read`` goes
+through meshio for formats VTK does not know) and any meshio user can open compressed files.
+meshio's command line (``meshio convert``) cannot load plugins and does not know ``.tetc``.
 """
 
 from __future__ import annotations

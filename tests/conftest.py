@@ -16,6 +16,9 @@ ROOT = Path(__file__).resolve().parent.parent
 SAMPLE_FILES = {name: (path, kw) for name, (path, kw, _tf) in _TABLE.items()}
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "2")
+# no first-run compile notices: the output checks must not depend on what numba's cache holds
+# (tests/test_compile_notice.py runs the commands with notices on, in processes of their own)
+os.environ.setdefault("TETC_COMPILE_NOTICE", "0")
 
 
 _cache: dict = {}

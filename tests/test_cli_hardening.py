@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from cli_util import assert_error, run
+from cli_util import assert_error, assert_usage_error, run
 from samples import SAMPLES
 
 POST = SAMPLES["post"][0]
@@ -44,8 +44,27 @@ def test_output_equal_to_input_is_refused_even_with_force(tmp_path):
     src = tmp_path / "post.vtk"
     src.write_bytes(Path(POST).read_bytes())
     assert_error(run("convert", src, "-o", src, "--force", "--quiet"), "is the input file")
-    assert_error(run("compress", src, "-o", src, "--force", "--quiet"), "is the input file")
-    assert src.read_bytes() == Path(POST).read_bytes()
+    assert_usage_error(run("compress", src, "-o", src, "--force", "--quiet"), "NAME.tetc")  # not even tried
+    tetc = tmp_path / "post.tetc"
+    assert run("compress", src, "-o", tetc, "--mesh-only", "--quiet").exit_code == 0
+    before = tetc.read_bytes()
+    assert_error(run("compress", tetc, "-o", tetc, "--force", "--quiet"), "is the input file")
+    assert src.read_bytes() == Path(POST).read_bytes() and tetc.read_bytes() == before
+
+
+def test_compress_writes_only_names_ending_in_tetc(tmp_path):
+    for name in ("x.png", "x.vtu", "x"):
+        res = run("compress", POST, "-o", tmp_path / name, "--quiet")
+        assert_usage_error(res, "NAME.tetc", "tetc render", "tetc decompress")
+        assert not (tmp_path / name).exists()
+    assert run("compress", POST, "-o", tmp_path / "X.TETC", "--mesh-only", "--quiet").exit_code == 0
+
+
+def test_decompress_to_a_tetc_name_says_it_writes_a_mesh_format(tmp_path, post_tetc):
+    out = tmp_path / "y.tetc"
+    assert_error(run("decompress", post_tetc, "-o", out, "--quiet"), "decompress and convert write a mesh file",
+                 ".vtu", ".msh", "tetc compress")
+    assert not out.exists()
 
 
 @pytest.mark.parametrize("ext", [".stl", ".ply", ".obj"])

@@ -14,6 +14,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import time
 import venv
 from pathlib import Path
 
@@ -102,3 +103,96 @@ def test_python_api_from_the_wheel(installed, tmp_path):
     assert res.returncode == 0, res.stderr
     assert res.stdout.split()[0] == "8750" and "(24, 24, 3)" in res.stdout
 
+
+
+def _usage_lines():
+    """The README's Usage block, line by line, as argv lists (comments and `source` left out)."""
+    import re
+    import shlex
+
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    start = readme.index("## Usage")
+    block = re.search(r"```sh\n(.*?)```", readme[start:], re.S).group(1)
+    for line in block.splitlines():
+        argv = shlex.split(line, comments=True)
+        if argv and argv[0] != "source":
+            yield line.split("#")[0].strip(), argv
+
+
+def _cache_files(d: Path) -> set:
+    return {p.relative_to(d) for p in d.rglob("*") if p.suffix in (".nbi", ".nbc")} if d.exists() else set()
+
+
+def test_readme_walkthrough_from_the_wheel(installed, tmp_path):
+    """A newcomer's first hour: the wheel in a fresh venv, an empty numba cache, every line of the
+    README's Usage section in order from a folder holding the samples. Every line exits 0 and writes
+    what it names; every line that compiled (numba's cache grew) said so on stderr, and none said so
+    without compiling; what still compiles after `tetc warmup` (the README's first line) is printed.
+    Then the README's Python block, in the same folder."""
+    import re
+
+    env_dir, env, _, _ = installed
+    env = dict(env, NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"), TETC_COMPILE_NOTICE="1")
+    # the Dask line: the README says to install Dask for it (make install does)
+    res = _run([env_dir / "bin" / "python", "-m", "pip", "install", "-q", "dask[distributed]"], tmp_path, env)
+    if res.returncode != 0:
+        pytest.skip(f"cannot install dask without the package index: {res.stderr.strip()[-300:]}")
+    cwd = tmp_path / "walk"
+    cwd.mkdir()
+    (cwd / "sample_meshes").symlink_to(ROOT / "sample_meshes")
+    cache = Path(env["NUMBA_CACHE_DIR"])
+    compiled_after_warmup = []
+    warmed = False
+    for line, argv in _usage_lines():
+        assert argv[0] == "tetc", line
+        before = _cache_files(cache)
+        t0 = time.perf_counter()
+        # generous: a loaded CI machine compiles the warm-up many times slower than two free cores
+        res = _run([env_dir / "bin" / "tetc", *argv[1:]], cwd, env, timeout=3600)
+        assert res.returncode == 0, f"{line}\n{res.stderr[-3000:]}"
+        grew = _cache_files(cache) - before
+        said = "tetc: compiling" in res.stderr
+        print(f"{time.perf_counter() - t0:7.1f} s  compiled {len(grew):3d}  said {said!s:5}  {line}")  # -rA shows it
+        if argv[1] != "warmup":
+            assert said == bool(grew), f"{line}: compiled {len(grew)} kernels, said so: {said}\n{res.stderr[-2000:]}"
+            if grew and warmed:
+                compiled_after_warmup.append((line, sorted(str(p) for p in grew)[:5]))
+        else:
+            warmed = True
+            assert "ready" in res.stderr and grew, res.stderr
+        for opt in ("-o", "--png"):
+            if opt in argv:
+                out = argv[argv.index(opt) + 1]
+                if "{frame}" in out:
+                    assert len(list(cwd.glob(out.replace("{frame}", "*")))) >= 1, line
+                else:
+                    assert (cwd / out).stat().st_size > 0, line
+        if "--json" in argv or "--stats" in argv:
+            json.loads(res.stdout)
+        if argv[1] == "compare":
+            assert re.search(r'"ssim"', res.stdout), res.stdout
+    # what the warm-up leaves to a first run (kernels typed or reached differently on real data): said
+    # on stderr like any compile (checked above), listed here so that the warm-up can be extended
+    print("compiled after tetc warmup:", compiled_after_warmup or "nothing")
+    code = (ROOT / "README.md").read_text(encoding="utf-8")
+    code = re.search(r"The same from Python.*?```python\n(.*?)```", code, re.S).group(1)
+    res = _run([env_dir / "bin" / "python", "-c", code], cwd, env, timeout=1200)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert (cwd / "bf90_api.png").stat().st_size > 0 and (cwd / "bf99.tetc").stat().st_size > 0
+
+
+def test_a_checkout_shadowing_the_wheel_is_named_when_it_compiles(installed, tmp_path):
+    """`python` started in the repository root imports the checkout's gatun_py, not the installed
+    one, and would compile a second cache: the compile notice says so and how to avoid it."""
+    env_dir, env, _, _ = installed
+    env = dict(env, NUMBA_CACHE_DIR=str(tmp_path / "cache"), TETC_COMPILE_NOTICE="1")
+    code = ("import gatun_py, gatun_py._compile_notice as n\n"
+            "assert 'site-packages' not in gatun_py.__file__\n"
+            "print(n.shadowed_install())\n"
+            "n.announce(['filter'])\n")
+    res = _run([env_dir / "bin" / "python", "-c", code], ROOT, env)
+    assert res.returncode == 0, res.stderr
+    assert "site-packages" in res.stdout and "compile a second time" in res.stderr, res.stderr
+    res = _run([env_dir / "bin" / "python", "-c", "import gatun_py._compile_notice as n; print(n.shadowed_install())"],
+               tmp_path, env)
+    assert res.returncode == 0 and res.stdout.strip() == "None", res.stdout + res.stderr

@@ -124,3 +124,24 @@ def test_surface_preview_matches_the_cli_png(tmp_path, post_tetc):
     assert res.exit_code == 0, res.output
     want = isosurface(post_tetc, values=_mid()).preview(size=(80, 60), elevation=25)
     np.testing.assert_array_equal(read_png_rgb(png), want)
+
+
+def test_the_preview_frames_the_surface_unless_asked_for_the_volume(tmp_path, post_tetc):
+    """A surface in a corner of the mesh fills the default preview (its lit pixels span most of the
+    picture), and --frame-volume shows it where tetc render would, smaller."""
+    from gatun_py.isosurface import isosurface
+
+    lo, hi = json.loads(run("info", post_tetc, "--json").output)["scalar_range"]
+    surf = isosurface(post_tetc, values=lo + 0.7 * (hi - lo))
+    assert surf.n_triangles > 0
+    spans = {}
+    for frame in ("surface", "volume"):
+        lit = surf.preview(size=96, frame=frame).sum(axis=2) > 0
+        rows, cols = np.nonzero(lit)
+        spans[frame] = max(rows.max() - rows.min(), cols.max() - cols.min()) + 1
+    assert spans["surface"] >= 0.5 * 96 and spans["surface"] > 4 * spans["volume"], spans
+    png = tmp_path / "v.png"
+    res = run("isosurface", post_tetc, "--value", lo + 0.7 * (hi - lo), "-o", tmp_path / "v.ply", "--png", png,
+              "--size", 96, "--frame-volume", "--quiet")
+    assert res.exit_code == 0, res.output
+    np.testing.assert_array_equal(read_png_rgb(png), surf.preview(size=96, frame="volume"))

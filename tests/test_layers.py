@@ -2,7 +2,8 @@
 
 The stages and what each may import (besides the standard library and third-party packages):
 
-* base: ``gatun_py.errors``, ``gatun_py._atomic``, ``gatun_py._runtime`` (anyone may import them)
+* base: ``gatun_py.errors``, ``gatun_py._atomic``, ``gatun_py._runtime``, ``gatun_py._compile_notice``
+  (anyone may import them)
 * mesh: base
 * codec: mesh
 * simplify: codec, mesh
@@ -27,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "gatun_py"
 CLI = ROOT / "cli"
 
-BASE = {"errors", "_atomic", "_runtime", "_version", "_lazy", "limits"}
+BASE = {"errors", "_atomic", "_runtime", "_version", "_lazy", "limits", "_compile_notice"}
 # gatun_py._runtime imports no stage itself; its hooks import, when called, the stages whose kernels
 # they probe in numba's cache or load ahead of a run (and numba)
 HOOKS = "_runtime"
@@ -60,6 +61,7 @@ LOCAL_OK_REASONS = {
     "PIL": "image I/O only where images are read",
     "paraview": "the ParaView plugin's decorators, present only in ParaView's own Python",
     "numpy": "the ParaView plugin, guarded: a ParaView built without numpy gets VTKHDF files instead",
+    "numba": "start-up time: the first-run compile notice is said before numba loads (gatun_py._compile_notice)",
 }
 
 

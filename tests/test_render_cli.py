@@ -99,13 +99,14 @@ def test_malformed_tf_json(mesh_file, tmp_path):
 
 def test_missing_input_fails_before_any_compiling(tmp_path, monkeypatch):
     """With an empty numba cache a missing input must not first cost a minute of compiling."""
-    import gatun_py.cli.render_commands as rc
     import gatun_py.warmup as warmup
 
     def refuse(**_):
         raise AssertionError("compiled or loaded kernels for a missing input")
 
-    monkeypatch.setattr(rc, "render_kernels_cached", lambda **_: False)
+    import gatun_py._compile_notice as notice
+
+    monkeypatch.setattr(notice, "uncached", lambda parts: list(parts))
     monkeypatch.setattr(warmup, "compile_for_render", refuse)
     monkeypatch.setattr(warmup, "load_kernels", refuse)
     res = run("render", tmp_path / "none.tetc", "-o", tmp_path / "o.png")

@@ -349,3 +349,15 @@ def test_missing_web_package_is_a_clear_error(monkeypatch):
     monkeypatch.delattr(viewer, "server", raising=False)
     with pytest.raises(OptionError, match=r"pip install 'gatun_py\[view\]'"):
         viewer.require_web()
+
+
+def test_view_command_on_a_damaged_file_fails_before_it_is_ready(own_copy, fake_serve):
+    """A byte flipped inside a section: one line, exit 1, and the server never starts (no "ready")."""
+    data = bytearray(own_copy.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    own_copy.write_bytes(bytes(data))
+    r = CliRunner().invoke(tetc, ["view", str(own_copy), "--no-browser"])
+    assert r.exit_code == 1 and not fake_serve, r.output
+    assert "ready" not in r.output and "checksum mismatch" in r.output
+    assert [ln for ln in r.output.splitlines() if ln.startswith("tetc: error:")] == [
+        ln for ln in r.output.splitlines() if "error" in ln]

@@ -23,6 +23,7 @@ import os
 import struct
 import zlib
 
+from .._compile_notice import is_tetc  # noqa: F401  (the one test of a .tetc file; a base module needs no codec)
 from ..errors import CorruptFileError, FormatVersionError, ReadError
 
 MAGIC = b"TETC\x89\r\n\x1a"
@@ -223,11 +224,3 @@ class Container:
         return payload
 
 
-def is_tetc(path) -> bool:
-    """Whether ``path`` is a ``.tetc`` file: its first bytes are the magic (a file that cannot be
-    opened, or a path of no file yet, by its suffix)."""
-    try:
-        with open(path, "rb") as fh:
-            return fh.read(len(MAGIC)) == MAGIC
-    except (OSError, TypeError):
-        return str(path).lower().endswith(".tetc")

@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import check_output_path
+from .._compile_notice import announce as _announce_compiling
+from .._compile_notice import watch as _watch_compiles
 from .._runtime import peak_rss_mb, release_code_pages, rss_mb, trim_heap
 from ..codec import TetcReader
 from ..codec.stepreader import StepDecoder
@@ -123,12 +125,14 @@ class Surface:
         """Write the surface; the format follows the extension (``.vtp``, ``.ply``, ``.obj``, ``.stl``, ...)."""
         write_surface(self, path, force=force)
 
-    def preview(self, *, size=512, azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0) -> np.ndarray:
+    def preview(self, *, size=512, azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0,
+                frame: str = "surface") -> np.ndarray:
         """A shaded picture of the surface: (H, W, 3) uint8, Lambert with a headlight.
 
-        The camera follows ``tetc render``'s conventions and is fitted to the box of the mesh the
-        surface was extracted from (``stats["bbox"]``), so the preview lines up with a volume
-        render of the same view. Several isovalues are coloured by value.
+        The camera follows ``tetc render``'s conventions, fitted to the surface's own bounding box
+        (``frame="surface"``: a small surface fills the picture) or to the box of the mesh it was
+        extracted from (``frame="volume"``, ``stats["bbox"]``: the preview lines up with a volume
+        render of the same view). Several isovalues are coloured by value.
 
         Examples
         --------
@@ -151,20 +155,26 @@ class Surface:
                 raise OptionError(f"{name} must be a finite number, got {v}")
         if zoom <= 0:
             raise OptionError(f"zoom must be > 0, got {zoom}")
+        if frame not in ("surface", "volume"):
+            raise OptionError(f"frame must be 'surface' or 'volume', got {frame!r}")
         box = self.stats.get("bbox")
-        bbox = (np.asarray(box[0], float), np.asarray(box[1], float)) if box is not None else None
+        if frame == "surface" and self.n_triangles:
+            bbox = self.bbox  # an empty surface keeps the volume's frame: a black picture of the right view
+        else:
+            bbox = (np.asarray(box[0], float), np.asarray(box[1], float)) if box is not None else None
         scal = self.point_data.get("scalar") if len(self.stats.get("values", ())) > 1 else None
         rgba = render_surface(self.points, self.triangles, Camera(w, h, azimuth, elevation, zoom), scalar=scal,
                               bbox=bbox)
         return to_rgb8(rgba)
 
     def save_preview(self, path, *, size=512, azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0,
-                     force: bool = False) -> None:
+                     frame: str = "surface", force: bool = False) -> None:
         """Write :meth:`preview` as an image (PNG, JPEG, WebP, TIFF or BMP from the extension), atomically."""
         from ..render.image import write_image  # PIL only for a preview (see preview)
 
         check_output_path(path, force=force)
-        write_image(path, self.preview(size=size, azimuth=azimuth, elevation=elevation, zoom=zoom), force=force)
+        write_image(path, self.preview(size=size, azimuth=azimuth, elevation=elevation, zoom=zoom, frame=frame),
+                    force=force)
 
     def _repr_png_(self) -> bytes:
         from ..render.image import png_bytes  # PIL only for a preview (see preview)
@@ -412,6 +422,8 @@ class _Extractor:
 #: a tiny ``.tetc`` file shipped with the package (:mod:`gatun_py.warmup` writes and tests it)
 TINY_TETC = Path(__file__).resolve().parent.parent / "warmup.tetc"
 
+_watch_compiles()  # a first extraction that compiles says so on stderr, once per process
+
 
 def load_kernels(source=None, *, simplify: bool = True) -> float:
     """Load the kernels an extraction of ``source`` runs into this process, then hand back the
@@ -526,6 +538,8 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
     vals, ratio = _check_options(values, ratio, faces, batch_faces)
     jobs = check_jobs(jobs)
     imp = load_importance(importance_tf) if importance_tf is not None else None
+    decoder = isinstance(source, TetcReader) or (isinstance(source, (str, os.PathLike)) and _is_tetc(source))
+    _announce_compiling((["decoder"] if decoder else []) + ["isosurface"])
     t_start = time.perf_counter()
     stream, info = _open_stream(source, level=level, ratio_mesh=ratio_mesh, read_kwargs=read_kwargs, values=vals,
                                 jobs=jobs)

@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import OptionError, ReadError
 
 EXODUS_SUFFIXES = (".e", ".exo", ".ex2")
-INSTALL_HINT = "reading Exodus files needs netCDF4: pip install 'gatun_py[exodus]' (or: pip install netCDF4)"
+INSTALL_HINT = "reading Exodus files needs netCDF4: pip install netCDF4 (or the extra: pip install 'gatun_py[exodus]')"
 
 # Exodus element type (upper case, digits stripped of the node count where it is the linear one)
 # -> meshio cell type; only volume cells matter here, the rest are reported as ignored

@@ -416,6 +416,10 @@ def mesh_output_format(path) -> str:
         fmt = _prefer_gmsh(_helpers._filetypes_from_path(path))[0]
     except Exception:
         fmt = None
+    if path.suffix.lower() == ".tetc":
+        raise OutputError(f"{path.name}: decompress and convert write a mesh file, not a .tetc file (tetc compress "
+                          "makes those); "
+                          f"name it with a mesh format's extension: {', '.join(TET_EXTENSIONS)}")
     if fmt not in TET_FORMATS:
         raise OutputError(f"cannot write a tet mesh as {path.name!r}: "
                           f"{'that format holds no tetrahedra' if fmt else 'unknown extension'}; "

@@ -271,18 +271,27 @@ def scalar_of(point_data: dict, name: str, component=None) -> np.ndarray:
     raise ValueError(f"{name!r} has components 0..{k - 1} and 'magnitude', not {component!r}")
 
 
+# The default step samples the bounding-box diagonal at least this often. Half a boundary edge alone
+# is too coarse on meshes of few or large cells (hex grids, quadratic FEM meshes, coarse CFD grids):
+# their volume renders showed wood-grain bands, whose contrast grows with the opacity a sample
+# takes, a fraction of the diagonal (the transfer functions' unit distance); bench/sections/banding.md.
+MIN_SAMPLES_PER_DIAGONAL = 512
+
+
 def default_step(points, boundary_faces) -> float:
-    """Half the median edge length of the boundary surface: the volume-mode sample spacing.
+    """The volume-mode sample spacing: half the median edge length of the boundary surface, and at
+    most 1/512 of the bounding-box diagonal.
 
     Boundary edges are used because they are known before the first tet arrives, so a streaming
-    renderer and an in-memory one agree on the step, and the codec can record it in the file.
+    renderer and an in-memory one agree on the step, and the codec can record it in the file. The
+    bound on the diagonal keeps meshes of few or large cells from banding.
 
     Examples
     --------
     >>> import numpy as np
     >>> pts = np.array([[0, 0, 0], [2, 0, 0], [0, 2, 0], [0, 0, 2]], np.float32)
-    >>> default_step(pts, np.array([[0, 2, 1]]))
-    1.0
+    >>> default_step(pts, np.array([[0, 2, 1]])) == float(np.sqrt(8) / 512)
+    True
     """
     faces = np.asarray(boundary_faces)
     if len(faces) == 0:
@@ -292,7 +301,14 @@ def default_step(points, boundary_faces) -> float:
                         p[faces[:, 0]] - p[faces[:, 2]]])
     lengths = np.linalg.norm(e, axis=1)
     lengths = lengths[lengths > 0]
-    return float(np.median(lengths)) * 0.5 if len(lengths) else 1.0
+    if not len(lengths):
+        return 1.0
+    step = float(np.median(lengths)) * 0.5
+    used = p[np.unique(faces)]  # the boundary's box is the mesh's (unreferenced points aside)
+    diag = float(np.linalg.norm(used.max(axis=0) - used.min(axis=0)))
+    if diag > 0 and np.isfinite(diag):
+        step = min(step, diag / MIN_SAMPLES_PER_DIAGONAL)
+    return step
 
 
 # Tets per chunk of signed_volumes.

@@ -26,7 +26,7 @@ VTK_TO_MESHIO = {1: "vertex", 3: "line", 5: "triangle", 9: "quad", 10: "tetra", 
 VTK_REORDERED = {11: ("hexahedron", [0, 1, 3, 2, 4, 5, 7, 6]), 8: ("quad", [0, 1, 3, 2])}
 
 VTK_SUFFIXES = (".vtk", ".vtu", ".vts", ".vtr", ".pvtu", ".pvts")
-INSTALL_HINT = "VTK can read more of these files: pip install 'gatun_py[vtk]' (or: pip install vtk)"
+INSTALL_HINT = "VTK can read more of these files: pip install vtk (or the extra: pip install 'gatun_py[vtk]')"
 
 
 def vtk_available() -> bool:

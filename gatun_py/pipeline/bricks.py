@@ -19,6 +19,7 @@ from concurrent.futures.process import BrokenProcessPool
 import numba
 import numpy as np
 
+from .._compile_notice import worker_init, worker_initargs
 from ..codec import LevelPayload, TetcReader
 from ..codec.bricks import (BrickLevels, brick_jobs, check_jobs, decode_bricked, distinct_points, encode_brick,
                             encode_bricked, map_bricks, read_cut, stitch_bricks)
@@ -110,7 +111,8 @@ def compress_bricks(mesh: TetMesh, n_bricks: int, *, jobs: int | None = None, me
                 progress(done, total)
     else:
         threads = max(1, numba.config.NUMBA_NUM_THREADS // jobs)
-        with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"), initializer=worker_init,
+                                 initargs=worker_initargs()) as pool:
             order = sorted(bricks, key=lambda b: -b.mesh.n_tets)  # largest first: the pool drains evenly
             futures = {pool.submit(_brick_job, b.mesh, cut_index[b.vertex_ids], options, threads):
                        (b.index, b.mesh.n_points) for b in order}

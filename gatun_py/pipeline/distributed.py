@@ -63,8 +63,8 @@ def _distributed():
     try:
         import distributed  # optional dependency: only for --workers / --scheduler
     except ImportError:
-        raise OptionError("rendering on a cluster needs Dask: pip install 'gatun_py[dask]' "
-                          "(dask[distributed])") from None
+        raise OptionError("rendering on a cluster needs Dask: pip install 'dask[distributed]' (or pip install "
+                          "'gatun_py[dask]'; in a checkout: pip install '.[dask]')") from None
     return distributed
 
 

@@ -92,7 +92,7 @@ def bounded_step(step: float, lo, hi, what: str = "step") -> tuple[float, list[s
 def file_render_defaults(reader) -> tuple[np.ndarray, np.ndarray, tuple[float, float], float]:
     """bbox lo, hi, scalar range and volume-mode step of the full mesh (level 0).
 
-    The step is the one the full mesh renders with (half its median boundary edge): recorded at
+    The step is the one the full mesh renders with (:func:`~gatun_py.mesh.default_step`): recorded at
     compression as ``render_step``, else computed from level 0's boundary, which is the first
     thing its stream holds. Every level and ratio then samples the same positions.
     """

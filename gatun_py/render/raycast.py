@@ -77,7 +77,7 @@ class StreamingRaycaster:
         ``volume``: samples every ``step`` along the ray, at t = k * step from the eye;
         ``face``: one sample per tet interval, the average of the two face samples.
     step : float, optional
-        Sample spacing for ``volume``; default half the median boundary edge length.
+        Sample spacing for ``volume``; default :func:`~gatun_py.mesh.default_step`.
     scalar_range : (float, float), optional
         Range the transfer function's normalised ``x`` maps to; default the range of the
         vertices received before the first tet.
@@ -647,7 +647,7 @@ def render_mesh(mesh, camera, tf, *, mode: str = "volume", step: float | None = 
     tf : TransferFunction, str or dict
     mode : {"volume", "face"}
     step : float, optional
-        Default half the median boundary edge length.
+        Default :func:`~gatun_py.mesh.default_step`.
     scalar_range : (float, float), optional
         Default the mesh's scalar range.
     fragments : bool

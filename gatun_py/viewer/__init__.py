@@ -2,7 +2,7 @@
 
 * :mod:`gatun_py.viewer.session`  frame requests -> planned, rendered, encoded frames (no web code);
 * :mod:`gatun_py.viewer.server`   the local web server: the page, its websocket, ``POST /api/frame``
-  (needs the optional extra ``view``: ``pip install 'gatun_py[view]'``);
+  (needs aiohttp, part of the core install);
 * ``static/``                     the page (HTML, script, style), package data.
 
 A script can drive the frame service without a browser; see :mod:`gatun_py.viewer.server` for the
@@ -12,8 +12,8 @@ routes and :func:`gatun_py.viewer.session.parse_request` for the request.
 from ..errors import OptionError
 from .session import Frame, FrameRequest, ViewerSession, parse_request
 
-WEB_EXTRA_MESSAGE = ("tetc view needs the optional web server package aiohttp: "
-                     "pip install 'gatun_py[view]' (or: pip install aiohttp)")
+WEB_EXTRA_MESSAGE = ("tetc view needs the web server package aiohttp, which this install lacks: "
+                     "pip install aiohttp (or pip install 'gatun_py[view]'; in a checkout: pip install '.[view]')")
 
 
 def require_web():

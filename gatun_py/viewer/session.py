@@ -230,7 +230,10 @@ class ViewerSession:
                 data = fh.read()
         except OSError as e:
             raise TetcError(f"{self.path}: cannot read ({e.strerror or e})") from None
-        self.reader = CachingReader(data)
+        reader = CachingReader(data)
+        for name in reader.container.section_names():  # every checksum, before the page is served:
+            reader.container.read_section(name)  # a damaged file fails here, not in every frame
+        self.reader = reader
         self.bbox_lo, self.bbox_hi, self.scalar_range, self.step = file_render_defaults(self.reader)
         self.planners = {}  # by mode: each keeps its own view statistics, the costs are shared
         self.spread = collections.deque(maxlen=SPREAD_FRAMES)  # measured / predicted of budget frames

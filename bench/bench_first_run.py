@@ -1,0 +1,90 @@
+"""A newcomer's first runs: what a command costs with an empty numba cache, with and without the
+README's set-up step (`tetc warmup`), and when it says that it compiles.
+
+Each row runs the installed ``tetc`` in a fresh process with its own empty ``NUMBA_CACHE_DIR``
+(so nothing of this checkout's cache is used): the command cold, then ``tetc warmup`` and the same
+command after it. Writes ``bench/sections/first_run.md``.
+
+    python bench/bench_first_run.py [--quick]
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from common import SAMPLE_FILES, TETC, code_state, table, write_section
+
+BLUNTFIN = str(SAMPLE_FILES["bluntfin"][0])
+POST = str(SAMPLE_FILES["post"][0])
+
+
+def timed_run(args, env, cwd) -> tuple[float, float | None, int, str]:
+    """(wall seconds, seconds until the compile notice or None, exit code, first stderr line)."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([str(TETC), *args], cwd=cwd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    notice_s, first = None, ""
+    for line in proc.stderr:
+        if not first and line.strip():
+            first = line.strip()
+        if notice_s is None and line.startswith("tetc: compiling"):
+            notice_s = time.perf_counter() - t0
+    code = proc.wait()
+    return time.perf_counter() - t0, notice_s, code, first
+
+
+def main(argv) -> int:
+    quick = "--quick" in argv
+    work = Path(tempfile.mkdtemp(prefix="tetc_first_run_"))
+    shutil.copy(POST, work / "post.vtk")
+    base = {k: v for k, v in os.environ.items() if k != "TETC_COMPILE_NOTICE"}
+    cases = [("compress Blunt-fin", ["compress", BLUNTFIN, "-o", "bf.tetc", "--force"])]
+    if not quick:
+        cases += [("decompress", ["decompress", "post.tetc", "-o", "post.vtu", "--force"]),
+                  ("render", ["render", "post.tetc", "-o", "post.png", "--force"]),
+                  ("isosurface", ["isosurface", "post.tetc", "--value", "0.5", "-o", "iso.vtp", "--force"])]
+    rows = []
+    try:
+        # the .tetc input of the later rows, made with this checkout's warm cache
+        subprocess.run([str(TETC), "compress", "post.vtk", "-o", "post.tetc", "--force", "-q"], cwd=work, check=True)
+        warmup_s = None
+        for label, args in cases:
+            cache = work / f"cache-{len(rows)}"
+            env = dict(base, NUMBA_CACHE_DIR=str(cache))
+            cold, notice_s, code, first = timed_run(args, env, work)
+            shutil.rmtree(cache, ignore_errors=True)
+            w, _, wcode, _ = timed_run(["warmup", "-q"], env, work)
+            warmup_s = w if warmup_s is None else warmup_s
+            after, after_notice, acode, _ = timed_run(args, env, work)
+            warm, _, _, _ = timed_run(args, env, work)
+            shutil.rmtree(cache, ignore_errors=True)
+            rows.append([label, cold, "-" if notice_s is None else f"{notice_s:.2f}", w, after,
+                         "yes" if after_notice is not None else "no", warm, f"{code}/{wcode}/{acode}"])
+            print(rows[-1], flush=True)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    text = [
+        "## First runs: compile notices and `tetc warmup`\n",
+        f"`python bench/bench_first_run.py` ({code_state()}; load average {load:.1f} at the end, on "
+        f"{os.cpu_count()} cores). Each row: the installed `tetc` with an empty `NUMBA_CACHE_DIR`; *cold* is the "
+        "command's first run (it compiles what it needs, and says so: *notice at* is the seconds from the "
+        "start to that line on stderr); then `tetc warmup` (the README's set-up step) in a fresh empty cache, "
+        "the command's first run after it, and a second run.\n",
+        table(["command", "cold s", "notice at s", "tetc warmup s", "first run after warmup s",
+               "notice after warmup", "warm s", "exit codes"], rows),
+        "",
+        "Inputs: Blunt-fin (`sample_meshes/bluntfin`), post.vtk compressed for the other rows.",
+    ]
+    write_section("first_run", "\n".join(text))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

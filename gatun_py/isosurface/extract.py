@@ -538,7 +538,7 @@ def isosurface(source, *, values, ratio: float | None = None, faces: int | None 
     vals, ratio = _check_options(values, ratio, faces, batch_faces)
     jobs = check_jobs(jobs)
     imp = load_importance(importance_tf) if importance_tf is not None else None
-    decoder = isinstance(source, TetcReader) or (isinstance(source, (str, os.PathLike)) and _is_tetc(source))
+    decoder = isinstance(source, TetcReader) or (not isinstance(source, TetMesh) and is_tetc(source))
     _announce_compiling((["decoder"] if decoder else []) + ["isosurface"])
     t_start = time.perf_counter()
     stream, info = _open_stream(source, level=level, ratio_mesh=ratio_mesh, read_kwargs=read_kwargs, values=vals,

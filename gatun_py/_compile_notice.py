@@ -29,12 +29,12 @@ PACKAGE_DIR = Path(__file__).resolve().parent
 # probe's evidence that the part is compiled. Not every kernel (their callees compile with them);
 # tests/test_compile_notice.py checks that each is a cached numba kernel of that module.
 PARTS = {
-    "encoder": {"codec._cutborder_kernels": ("encode_tets2", "encode_boundary", "tet_neighbours"),
+    "encoder": {"codec._cutborder_kernels": ("_encode_tets_run", "encode_boundary", "tet_neighbours"),
                 "codec._geometry_kernels": ("encode_kernel",), "codec.rangecoder": ("enc_sym",)},
     "decimation": {"simplify._decimate_kernels": ("_run_rounds", "_accumulate_quadrics", "_vertex_topology"),
                    "codec._forest_kernels": ("encode_rounds3_kernel",)},
     "dependencies": {"simplify._dependency_kernels": ("_dependencies",)},
-    "decoder": {"codec._cutborder_kernels": ("_decode_tets2_run", "decode_boundary"),
+    "decoder": {"codec._cutborder_kernels": ("_decode_tets_run", "decode_boundary"),
                 "codec._geometry_kernels": ("_decode_vertices_run",), "codec.rangecoder": ("dec_init",)},
     "forest decoder": {"codec._forest_kernels": ("decode_rounds3_kernel",),
                        "simplify._decimate_kernels": ("_ancestors",)},

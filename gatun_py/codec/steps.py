@@ -307,7 +307,9 @@ class StepIndex:
             if not isinstance(maps, list) or not all(isinstance(i, int) and not isinstance(i, bool) for i in maps):
                 raise CorruptFileError("corrupt metadata: bad level maps")
             self.maps = maps
-        self.end = max([off + length for off, length, _ in container.index.values()]
+        # a brick's view of a bricked file has no index of its own (and no steps: a series is one stream)
+        index = getattr(container, "index", None) or {}
+        self.end = max([off + length for off, length, _ in index.values()]
                        + [container.base_end if hasattr(container, "base_end") else 0])
         if self.series:
             self._read_appended(container)

@@ -28,7 +28,7 @@ from .._atomic import atomic_path
 from ..errors import MeshError, OptionError, ReadError
 from .exodus import read_exodus
 from .io import mesh_from_meshio, read_mesh, write_mesh
-from .model import TetMesh
+from .model import MIN_SAMPLES_PER_DIAGONAL, TetMesh
 from .validate import MeshReport
 
 __all__ = ["PVTU_SUFFIX", "BoundaryPart", "InterfaceTable", "boundary_part", "exodus_pieces", "interface_table",
@@ -348,7 +348,8 @@ def _where(parts, own, local, order, pos) -> str:
 
 
 def _outer_faces(parts, shared, n_shared: int, names) -> tuple[int, float]:
-    """Faces on the boundary of the whole mesh, and half their edges' median length."""
+    """Faces on the boundary of the whole mesh, and :func:`~gatun_py.mesh.default_step` of them (half
+    their edges' median length, at most 1/512 of their bounding box's diagonal)."""
     face_keys, face_part = [], []
     cut_of = []
     for k, (part, (verts, ids)) in enumerate(zip(parts, shared)):
@@ -375,6 +376,7 @@ def _outer_faces(parts, shared, n_shared: int, names) -> tuple[int, float]:
     else:
         interior_of = [np.zeros(0, bool) for _ in parts]
     n_faces, lengths = 0, []
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for part, cid, inner_int in zip(parts, cut_of, interior_of):
         inner = (cid[part.faces] >= 0).all(axis=1)
         keep = np.ones(part.faces.shape[0], bool)
@@ -386,8 +388,17 @@ def _outer_faces(parts, shared, n_shared: int, names) -> tuple[int, float]:
                             p[faces[:, 0]] - p[faces[:, 2]]])
         ln = np.linalg.norm(e, axis=1)
         lengths.append(ln[ln > 0])
+        if faces.size:
+            used = p[np.unique(faces)]
+            lo, hi = np.minimum(lo, used.min(axis=0)), np.maximum(hi, used.max(axis=0))
     ln = np.concatenate(lengths) if lengths else np.zeros(0)
-    return n_faces, (float(np.median(ln)) * 0.5 if ln.size else 1.0)
+    if not ln.size:
+        return n_faces, 1.0
+    step = float(np.median(ln)) * 0.5
+    diag = float(np.linalg.norm(hi - lo))
+    if diag > 0 and np.isfinite(diag):
+        step = min(step, diag / MIN_SAMPLES_PER_DIAGONAL)
+    return n_faces, step
 
 
 # -- writing pieces (test data, and what a solver writes) ---------------------------------------------

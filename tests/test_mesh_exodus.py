@@ -66,7 +66,7 @@ def test_bad_time_steps(exo, tmp_path):
     path, _ = exo
     with pytest.raises(OptionError, match="time step 3 does not exist .*0..2"):
         read_mesh(path, scalar="p", time_step=3)
-    with pytest.raises(OptionError, match="Exodus files"):
+    with pytest.raises(OptionError, match="applies to Exodus"):
         read_mesh(SAMPLES["post"][0], time_step=1)
     assert_error(run("info", path, "--scalar", "p", "--time-step", 9), "does not exist")
     res = run("info", path, "--scalar", "p", "--time-step", 1, "--json")

@@ -27,12 +27,12 @@ TOL = 1e-5
 VIEW = View(Camera(48, 40, 30, 20), tf="post")
 
 
-@pytest.fixture(scope="module")
 def _tet_key(m):
     """The mesh's tets as sorted coordinate tuples: equal for the same tets in any order."""
     return sorted(map(tuple, np.sort(m.points[m.tets].reshape(-1, 12), axis=1).tolist()))
 
 
+@pytest.fixture(scope="module")
 def reader(post_deps_tetc):
     return TetcReader(post_deps_tetc)
 

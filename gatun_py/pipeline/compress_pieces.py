@@ -70,12 +70,16 @@ _REC_LEN = struct.Struct("<QI")
 
 
 def parse_memory(text) -> int:
-    """Bytes of a size such as ``8G``, ``500M``, ``2.5GB`` or a plain number of bytes.
+    """Bytes of a size such as ``8G``, ``500M``, ``2.5GB`` or a plain number of bytes, at least 64M.
 
     Examples
     --------
-    >>> parse_memory("8G"), parse_memory("500M"), parse_memory(1024)
-    (8589934592, 524288000, 1024)
+    >>> parse_memory("8G"), parse_memory("500M"), parse_memory(1 << 30)
+    (8589934592, 524288000, 1073741824)
+    >>> parse_memory(1024)
+    Traceback (most recent call last):
+    ...
+    gatun_py.errors.OptionError: memory limit 1024: at least 64M
     """
     if isinstance(text, (int, np.integer)) and not isinstance(text, bool):
         value = int(text)

@@ -42,14 +42,7 @@ def read_exodus(path, *, time_step: int | None = None) -> tuple[meshio.Mesh, lis
     (meshio.Mesh, notes)
     """
     path = Path(path)
-    try:
-        import netCDF4  # optional dependency
-    except ImportError:
-        raise ReadError(f"{path}: {INSTALL_HINT}") from None
-    try:
-        nc = netCDF4.Dataset(str(path))
-    except OSError as e:
-        raise ReadError(f"cannot read {path} as Exodus: {e}") from None
+    nc = _open(path)
     notes = []
     with nc:
         nc.set_auto_mask(False)
@@ -109,17 +102,22 @@ def read_exodus(path, *, time_step: int | None = None) -> tuple[meshio.Mesh, lis
     return meshio.Mesh(points, cells, point_data=point_data, cell_data=cell_data, point_sets=point_sets), notes
 
 
-def exodus_times(path) -> list[float]:
-    """The time of every step of an Exodus file (``time_whole``; 0, 1, ... when it has none)."""
-    path = Path(path)
+def _open(path):
+    """The Exodus file as a netCDF4 dataset (ReadError when netCDF4 is missing or cannot read it)."""
     try:
         import netCDF4  # optional dependency
     except ImportError:
         raise ReadError(f"{path}: {INSTALL_HINT}") from None
     try:
-        nc = netCDF4.Dataset(str(path))
+        return netCDF4.Dataset(str(path))
     except OSError as e:
         raise ReadError(f"cannot read {path} as Exodus: {e}") from None
+
+
+def exodus_times(path) -> list[float]:
+    """The time of every step of an Exodus file (``time_whole``; 0, 1, ... when it has none)."""
+    path = Path(path)
+    nc = _open(path)
     with nc:
         nc.set_auto_mask(False)
         n = len(nc.dimensions["time_step"]) if "time_step" in nc.dimensions else 0

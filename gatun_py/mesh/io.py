@@ -27,18 +27,11 @@ from .cells import Cells, check_cell_type, check_cells
 from .model import NO_SCALAR, TetMesh, signed_volumes
 from .split import orient_positive, split_hexes_two_colour, split_min_id_star, two_colour
 from .validate import MeshReport, validate_tets
+from .cells import VOLUME_CELLS  # meshio volume cell type -> (linear type, corners)
 from .exodus import EXODUS_SUFFIXES, read_exodus
 from .vtk_reader import INSTALL_HINT, VTK_SUFFIXES, read_with_vtk, vtk_available
 from .vtkhdf import is_vtkhdf, read_vtkhdf, write_vtkhdf
 
-# meshio cell type -> (linear type, number of corner vertices)
-VOLUME_CELLS = {
-    "tetra": ("tetra", 4), "tetra10": ("tetra", 4), "tetra20": ("tetra", 4),
-    "hexahedron": ("hexahedron", 8), "hexahedron20": ("hexahedron", 8), "hexahedron24": ("hexahedron", 8),
-    "hexahedron27": ("hexahedron", 8),
-    "wedge": ("wedge", 6), "wedge12": ("wedge", 6), "wedge15": ("wedge", 6), "wedge18": ("wedge", 6),
-    "pyramid": ("pyramid", 5), "pyramid13": ("pyramid", 5), "pyramid14": ("pyramid", 5),
-}
 
 
 # meshio formats that hold linear tetrahedra with point data (written by write_mesh)

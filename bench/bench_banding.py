@@ -58,7 +58,7 @@ def rmse(a: np.ndarray, b: np.ndarray) -> float:
 def main(argv) -> int:
     import gatun_py
     from gatun_py.mesh import default_step
-    from gatun_py.render.image import write_image
+    from gatun_py.raycast.image import write_image
 
     quick = "--quick" in argv
     size = 128 if quick else SIZE

@@ -37,8 +37,8 @@ from gatun_py._runtime import peak_rss_mb  # noqa: E402
 from gatun_py.mesh import read_mesh  # noqa: E402
 from gatun_py.pipeline.sortlast import split_for_render, render_bricks  # noqa: E402
 from gatun_py.pipeline.stream import View, render_mesh_file  # noqa: E402
-from gatun_py.render.camera import Camera  # noqa: E402
-from gatun_py.render.image import to_rgb8  # noqa: E402
+from gatun_py.raycast.camera import Camera  # noqa: E402
+from gatun_py.raycast.image import to_rgb8  # noqa: E402
 
 
 def _diff(a, b):
@@ -233,7 +233,7 @@ def main(argv=None):
         "",
         f"`python bench/bench_bricks_render.py{' --quick' if args.quick else ''}` ({code_state()}). Each mesh is cut "
         "into K k-d bricks (`split_for_render`), every brick ray-cast on its own into fragments, the fragments sorted "
-        "by depth per pixel and composited (`render.composite`), against the whole mesh's render (same camera, "
+        "by depth per pixel and composited (`raycast.composite`), against the whole mesh's render (same camera, "
         "transfer function, step).",
         "",
         "### Bricked == whole",

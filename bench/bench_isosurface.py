@@ -203,8 +203,8 @@ def isovalue(density, q: float) -> float:
 
 
 def part_quality(quick: bool):
-    from gatun_py.isosurface import isosurface
-    from gatun_py.isosurface.metrics import surface_distance
+    from gatun_py.contour import isosurface
+    from gatun_py.contour.metrics import surface_distance
 
     rows, curves, exact_rows = [], {}, []
     samples = 60_000 if quick else 150_000
@@ -272,8 +272,8 @@ def part_bricked_quality(quick: bool):
     the one-stream file, at every ratio of the quality table: faces, RMS and Hausdorff distance to
     the full-resolution surface."""
     from gatun_py.codec import TetcReader
-    from gatun_py.isosurface import isosurface
-    from gatun_py.isosurface.metrics import surface_distance
+    from gatun_py.contour import isosurface
+    from gatun_py.contour.metrics import surface_distance
     from gatun_py.pipeline.bricks import compress_bricks
 
     rows = []
@@ -311,8 +311,8 @@ def part_bricked_quality(quick: bool):
 
 
 def part_importance():
-    from gatun_py.isosurface import isosurface
-    from gatun_py.isosurface.metrics import one_sided
+    from gatun_py.contour import isosurface
+    from gatun_py.contour.metrics import one_sided
     from gatun_py.mesh import read_mesh
 
     mesh = read_mesh(ROOT / "sample_meshes" / "bluntfin" / "bluntfinxyz.bin")[0]
@@ -341,8 +341,8 @@ def part_importance():
 def part_levels():
     """Extraction from pre-simplified levels of the tet mesh (crack-free coarse surfaces), then QEM."""
     from gatun_py.codec import TetcReader, write_tetc  # noqa: F401
-    from gatun_py.isosurface import isosurface
-    from gatun_py.isosurface.metrics import surface_distance
+    from gatun_py.contour import isosurface
+    from gatun_py.contour.metrics import surface_distance
     from gatun_py.mesh import read_mesh
 
     src = ROOT / "sample_meshes" / "bluntfin" / "bluntfinxyz.bin"
@@ -516,7 +516,7 @@ def _memory_stages_child(tetc: str, value: float) -> int:
     import numba  # noqa: F401
 
     rec["numba"] = _rss_now()
-    ex = importlib.import_module("gatun_py.isosurface.extract")
+    ex = importlib.import_module("gatun_py.contour.extract")
     importlib.import_module("gatun_py.cli.main")  # what the command imports before the verb
     from gatun_py.codec import _cutborder_kernels as CK
     from gatun_py.codec.cutborder import ConnectivityDecoder

@@ -64,7 +64,7 @@ def build_files(name):
 
 def view(name, size, mode="volume"):
     from gatun_py.pipeline.stream import View
-    from gatun_py.render.camera import Camera
+    from gatun_py.raycast.camera import Camera
 
     az, el = ANGLES[name]
     return View(Camera(size, size, az, el), tf=TF[name], mode=mode)
@@ -73,7 +73,7 @@ def view(name, size, mode="volume"):
 def frame(path, v, **kw):
     """One end-to-end frame: open → decode/filter/render → PNG written. Returns (seconds, result)."""
     from gatun_py.pipeline.stream import render_tetc
-    from gatun_py.render.image import write_png
+    from gatun_py.raycast.image import write_png
 
     out = WORK / "frame.png"
     t0 = time.perf_counter()
@@ -89,7 +89,7 @@ def median_frame(path, v, **kw):
 
 
 def rgb8(img):
-    from gatun_py.render.image import to_rgb8
+    from gatun_py.raycast.image import to_rgb8
 
     return to_rgb8(img)
 
@@ -172,10 +172,10 @@ def main():
                 errs.append(d.rmse)
                 q_rows.append([n, mode, r, f"{d.rmse:.3f}", f"{d.psnr:.2f}", f"{d.ssim:.4f}"])
                 if n == "bluntfin" and mode == "volume" and r in (0.9, 0.99):
-                    from gatun_py.render.image import write_png
+                    from gatun_py.raycast.image import write_png
                     write_png(FIGURES / f"bluntfin_r{int(r * 100)}.png", img, force=True)
             if n == "bluntfin" and mode == "volume":
-                from gatun_py.render.image import write_png
+                from gatun_py.raycast.image import write_png
                 write_png(FIGURES / "bluntfin_r0.png", ref, force=True)
             ax.plot(RATIOS[1:], errs, "o-", label=f"{n} {mode}")
     ax.set_xlabel("simplification ratio")
@@ -250,7 +250,7 @@ def ray_steps(path, v, level):
     Read from the ray caster's per-segment step counters after the frame; used only to explain
     where the time goes, never inside the timed runs.
     """
-    import gatun_py.render.stream as render_stream
+    import gatun_py.raycast.stream as render_stream
 
     base = render_stream.StreamingRaycaster
     box = {}
@@ -446,8 +446,8 @@ def mem_worker(spec: str) -> None:
     t0 = time.perf_counter()
     from gatun_py._runtime import peak_rss_mb
     from gatun_py.pipeline.stream import View, render_tetc
-    from gatun_py.render.camera import Camera
-    from gatun_py.render.image import write_png
+    from gatun_py.raycast.camera import Camera
+    from gatun_py.raycast.image import write_png
 
     a = json.loads(spec)
     if a["path"] is None:  # the floor: everything imported and the kernels run once on one tet
@@ -455,7 +455,7 @@ def mem_worker(spec: str) -> None:
         from meshgen import single_tet
 
         from gatun_py.codec import TetcReader  # noqa: F401
-        from gatun_py.render.raycast import render_mesh
+        from gatun_py.raycast.caster import render_mesh
 
         render_mesh(single_tet(), Camera(4, 4), "default")
         print(json.dumps({"peak_rss_mb": peak_rss_mb()}))
@@ -577,8 +577,8 @@ def vtk_quality_section(files) -> str:
     from gatun_py.mesh import validate_tets
     from gatun_py.pipeline.quality import compare_images
     from gatun_py.pipeline.stream import View, file_render_defaults
-    from gatun_py.render import Camera
-    from gatun_py.render.raycast import render_mesh
+    from gatun_py.raycast import Camera
+    from gatun_py.raycast.caster import render_mesh
 
     out.append(f"Command: `python bench/bench_pipeline.py --only quality` (also part of the full run), "
                f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}. For each data set and ratio: our render at "

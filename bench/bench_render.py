@@ -45,7 +45,7 @@ def _rss_mb() -> float:
 def _shuffled_stream(mesh, camera, tf, **kw):
     """Stream-render ``mesh`` with its tets in a random order, in 20 batches."""
     from gatun_py.mesh import mesh_batches
-    from gatun_py.render.stream import render_batches
+    from gatun_py.raycast.stream import render_batches
 
     perm = np.random.default_rng(0).permutation(mesh.n_tets)
     batches = mesh_batches(mesh, batch_tets=-(-mesh.n_tets // 20), order=perm)
@@ -90,7 +90,7 @@ def worker_vtk(args) -> dict:
     import vtk
     from vtk.util.numpy_support import vtk_to_numpy
 
-    from gatun_py.render.transfer import load_transfer_function
+    from gatun_py.raycast.transfer import load_transfer_function
 
     rss_import = _rss_mb()
     t0 = time.perf_counter()
@@ -219,7 +219,7 @@ def worker_vtkslab(args) -> dict:
 def slab_expected(value, opacity, colour_x, data_range, unit, length):
     """Closed forms for one slab case: opacity of the path under our model, VTK's attenuation with
     the opacity function as given, and with VTK's control points (the vtk model)."""
-    from gatun_py.render.transfer import vtk_opacity_points
+    from gatun_py.raycast.transfer import vtk_opacity_points
 
     ox, oa = (np.array(v, dtype=np.float64) for v in zip(*opacity))
     a = float(np.interp(value, ox, oa))
@@ -232,7 +232,7 @@ def worker_inmemory(args) -> dict:
     """Decompress-then-render: decode the whole .tetc into a mesh, then render it in memory."""
     t0 = time.perf_counter()
     from gatun_py.codec.tetcfile import TetcReader
-    from gatun_py.render import Camera, render_mesh, write_png
+    from gatun_py.raycast import Camera, render_mesh, write_png
 
     rss_import = _rss_mb()
     reader = TetcReader(args.input)
@@ -252,7 +252,7 @@ def worker_frame(args) -> dict:
     the frame a viewer redraws); with ``--range`` none, the scalar range is the file's."""
     from gatun_py.codec.tetcfile import TetcReader
     from gatun_py.pipeline.stream import View, file_view
-    from gatun_py.render import Camera, render_mesh
+    from gatun_py.raycast import Camera, render_mesh
 
     reader = TetcReader(args.input)
     mesh = reader.decode_mesh(0)
@@ -278,7 +278,7 @@ def _worker_asm(args) -> dict:
 def worker_baseline(args) -> dict:
     """Peak RSS of the interpreter with our modules imported and the kernels loaded, no data."""
     import gatun_py.codec.tetcfile  # noqa: F401
-    from gatun_py.render import Camera, render_mesh
+    from gatun_py.raycast import Camera, render_mesh
 
     sys.path.insert(0, str(ROOT / "tests"))
     from meshgen import single_tet
@@ -328,7 +328,7 @@ def exact_pixels(mesh, cam, tf, pixels, h=0.002):
     our opacity model (1-(1-a)^(d/u)) and for the vtk model (attenuation a/u, opacity read at VTK's
     control points; ``TransferFunction.opacity_model``)."""
     from gatun_py.mesh.model import TET_FACES
-    from gatun_py.render.transfer import load_transfer_function
+    from gatun_py.raycast.transfer import load_transfer_function
 
     base = load_transfer_function(tf)
     models = [base.with_opacity_model(m).resolve(mesh.scalar_range) for m in ("gatun", "vtk")]
@@ -459,7 +459,7 @@ def memory_rows(datasets, work, have_vtk, repeats, log=print) -> tuple[list, flo
     VTK_MAX_TETS tets). Returns (rows, baseline MB).
     """
     from gatun_py.codec import TetcReader
-    from gatun_py.render.image import read_png_rgb
+    from gatun_py.raycast.image import read_png_rgb
 
     global CODE_BEFORE
     CODE_BEFORE = code_state()
@@ -569,7 +569,7 @@ def lean_check_section(datasets, load) -> list[str]:
     """
     from gatun_py.codec import TetcReader
     from gatun_py.pipeline.stream import View, file_render_defaults, render_tetc
-    from gatun_py.render import Camera, render_mesh
+    from gatun_py.raycast import Camera, render_mesh
 
     global CODE_BEFORE
     CODE_BEFORE = code_state()
@@ -616,7 +616,7 @@ VIEW_SCAN = [(0.0, 0.0), (30.0, 20.0), (90.0, 20.0), (200.0, -45.0), (45.0, 70.0
 def view_scan_section(datasets, load) -> list[str]:
     """Diagnostic: the lean face table's peak (``face_table_peak_mb``) over view directions, in process."""
     from gatun_py.pipeline.stream import View, render_tetc
-    from gatun_py.render import Camera
+    from gatun_py.raycast import Camera
 
     global CODE_BEFORE
     CODE_BEFORE = code_state()
@@ -649,7 +649,7 @@ def robustness_section(quick, load) -> list[str]:
     """Every sample from every view in ``VIEWS`` at ``ROBUST_SIZES``: unfinished rays, NaN pixels,
     stuck walks, and the streamed (shuffled batches) image against the in-memory one."""
     from gatun_py.mesh import read_mesh
-    from gatun_py.render import Camera, render_mesh
+    from gatun_py.raycast import Camera, render_mesh
 
     sizes = ROBUST_SIZES[:1] if quick else ROBUST_SIZES
     out = [f"{ROBUST_HEAD} ({'/'.join(f'{n}²' for n in sizes)}, in-process, volume mode)", "",
@@ -700,7 +700,7 @@ def prefetch_section(work, load, quick=False) -> list[str]:
 
     from gatun_py.codec import TetcReader
     from gatun_py.pipeline.stream import View, render_tetc
-    from gatun_py.render import Camera
+    from gatun_py.raycast import Camera
 
     sets = [sample_tetc(n, work) for n in (["bluntfin"] if quick else ["bluntfin", "combustion"])]
     flange = ROOT / "bench/out/gmsh/flange-1m.vtu"
@@ -925,8 +925,8 @@ def main():
 
     from gatun_py.codec.tetcfile import write_tetc
     from gatun_py.mesh import read_mesh, write_mesh
-    from gatun_py.render import Camera
-    from gatun_py.render.image import read_png_rgb
+    from gatun_py.raycast import Camera
+    from gatun_py.raycast.image import read_png_rgb
 
     try:
         import vtk  # noqa: F401

@@ -32,7 +32,7 @@ DEFAULT_SIZES = (256, 512, 1024)
 def tf_transparent_below(name: str, work: Path, cut: float = 0.75) -> Path:
     """The preset ``name`` made transparent below ``cut`` of the scalar range: its colours, opacity 0
     up to ``cut``, then a ramp over a twentieth of the range to the preset's largest opacity."""
-    from gatun_py.render.transfer import PRESETS
+    from gatun_py.raycast.transfer import PRESETS
 
     obj = json.loads((PRESETS / f"{name}.json").read_text())
     top = max(p["a"] for p in obj["opacity"])
@@ -206,9 +206,9 @@ def worker_asm(args=None) -> dict:
     sys.path.insert(0, str(ROOT / "tests"))
     from meshgen import delaunay_mesh
 
-    from gatun_py.render import Camera, render_mesh
+    from gatun_py.raycast import Camera, render_mesh
 
-    walk = importlib.import_module("gatun_py.render._walk")
+    walk = importlib.import_module("gatun_py.raycast._walk")
     render_mesh(delaunay_mesh(40), Camera(8, 8), "default")
     asm = "\n".join(walk.advance_rays.inspect_asm(sig) for sig in walk.advance_rays.signatures)
     ins = collections.Counter(m.group(1) for line in asm.splitlines()
@@ -252,8 +252,8 @@ def profile_section(work: Path, args, log=print) -> list[str]:
     from bench_render import code_note, machine_load
     from gatun_py.codec import TetcReader
     from gatun_py.pipeline.stream import View, file_view
-    from gatun_py.render import Camera, render_mesh
-    from gatun_py.render.image import to_rgb8
+    from gatun_py.raycast import Camera, render_mesh
+    from gatun_py.raycast.image import to_rgb8
 
     names = (args.data.split(",") if args and args.data else list(DEFAULT_DATA))
     size = 512

@@ -70,8 +70,8 @@ def main(argv=None):
     from gatun_py.mesh.model import default_step
     from gatun_py.pipeline.quality import compare_images
     from gatun_py.pipeline.stream import View
-    from gatun_py.render import Camera
-    from gatun_py.render.raycast import render_mesh
+    from gatun_py.raycast import Camera
+    from gatun_py.raycast.caster import render_mesh
     from gatun_py.simplify import decimate, simplified_mesh
     from gatun_py.simplify.decimation import canonical_key
 

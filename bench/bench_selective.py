@@ -59,7 +59,7 @@ def transfer_functions(name, *, cutoff: bool = False):
 def _preset(name):
     from importlib.resources import files
 
-    spec = json.loads(files("gatun_py.render.presets").joinpath(f"{name}.json").read_text())
+    spec = json.loads(files("gatun_py.raycast.presets").joinpath(f"{name}.json").read_text())
     spec.pop("comment", None)
     return spec
 
@@ -83,14 +83,14 @@ def _cutoff(name):
 def _transparent(name):
     from importlib.resources import files
 
-    spec = json.loads(files("gatun_py.render.presets").joinpath(f"{name}.json").read_text())
+    spec = json.loads(files("gatun_py.raycast.presets").joinpath(f"{name}.json").read_text())
     spec.pop("comment", None)
     spec["opacity"] = [dict(p, a=p["a"] * 0.3) for p in spec["opacity"]]
     return spec
 
 
 def rgb(res):
-    from gatun_py.render.image import to_rgb8
+    from gatun_py.raycast.image import to_rgb8
 
     return to_rgb8(res.image, (0.0, 0.0, 0.0))
 
@@ -113,8 +113,8 @@ class InMemoryRenderer:
 
     def __call__(self, mesh):
         """(H, W, 3) uint8 on black."""
-        from gatun_py.render.image import to_rgb8
-        from gatun_py.render.raycast import render_mesh
+        from gatun_py.raycast.image import to_rgb8
+        from gatun_py.raycast.caster import render_mesh
 
         res = render_mesh(mesh, self.camera, self.view.tf, mode=self.view.mode, step=self.step, scalar_range=self.rng)
         return to_rgb8(res.image, (0.0, 0.0, 0.0))
@@ -136,7 +136,7 @@ def rmse(full, img) -> float:
 def target_table(reader, name, rows, ablation):
     from gatun_py.pipeline.selective import FACTORS, render_selective
     from gatun_py.pipeline.stream import View, render_tetc
-    from gatun_py.render.camera import Camera
+    from gatun_py.raycast.camera import Camera
 
     n = int(reader.meta["points"])
     for label, tf in transfer_functions(name):
@@ -214,7 +214,7 @@ def diagnose(reader, name, rows):
     from gatun_py.pipeline import _importance_kernels as IK
     from gatun_py.pipeline.selective import render_selective, selective_source
     from gatun_py.pipeline.stream import View, render_tetc
-    from gatun_py.render.camera import Camera
+    from gatun_py.raycast.camera import Camera
     from gatun_py.simplify.dependencies import legal_cut, legal_cut_base
 
     n = int(reader.meta["points"])
@@ -254,7 +254,7 @@ def order_sensitivity(reader, name):
     (30, 20): RMSE / uniform of the closed, unsafe, legal and legal children-first cuts it gives."""
     from gatun_py.pipeline.selective import choose_cut, render_selective, selective_source
     from gatun_py.pipeline.stream import View, render_tetc
-    from gatun_py.render.camera import Camera
+    from gatun_py.raycast.camera import Camera
     from gatun_py.simplify.dependencies import legal_cut, legal_cut_base
 
     view = View(Camera(SIZE, SIZE, *VIEWS[0]), tf=name)
@@ -286,7 +286,7 @@ def per_merge_correlation(reader, name, n_merges):
 
     from gatun_py.pipeline.selective import render_selective, selective_source
     from gatun_py.pipeline.stream import View
-    from gatun_py.render.camera import Camera
+    from gatun_py.raycast.camera import Camera
 
     view = View(Camera(128, 128, *VIEWS[0]), tf=name)
     src = selective_source(reader, view.scalar, view.component)
@@ -308,7 +308,7 @@ def psnr_curve(reader, name):
     """(tets, uniform PSNR, selective PSNR) over a geometric series of tet counts."""
     from gatun_py.pipeline.selective import render_selective
     from gatun_py.pipeline.stream import View, render_tetc
-    from gatun_py.render.camera import Camera
+    from gatun_py.raycast.camera import Camera
 
     view = View(Camera(SIZE, SIZE, *VIEWS[0]), tf=name)
     full = rgb(render_tetc(reader, view))
@@ -339,7 +339,7 @@ def budget_runs(path, name):
     import gatun_py
 
     from gatun_py.pipeline.stream import View, render_tetc
-    from gatun_py.render.camera import Camera
+    from gatun_py.raycast.camera import Camera
 
     f = gatun_py.open(path)
     full = rgb(render_tetc(f.reader, View(Camera(SIZE, SIZE, *VIEWS[0]), tf=name)))

@@ -134,7 +134,7 @@ def group_weights(frame, src, group, n, n2):
 def cell(reader, name, label, tf, az, el, rows):
     from gatun_py.pipeline.selective import choose_cut, flipped_tets, selective_source, uniform_cut
     from gatun_py.pipeline.stream import View
-    from gatun_py.render.camera import Camera
+    from gatun_py.raycast.camera import Camera
 
     view = View(Camera(SIZE, SIZE, az, el), tf=tf)
     src = selective_source(reader, view.scalar, view.component)

@@ -220,7 +220,7 @@ def allocation_rows(name, k, shares, rows, *, views=None, tfs=None):
     from gatun_py.codec import TetcReader
     from gatun_py.pipeline.selective import selective_source
     from gatun_py.pipeline.stream import View
-    from gatun_py.render.camera import Camera
+    from gatun_py.raycast.camera import Camera
 
     base = TetcReader(tetc_file(name))
     src = selective_source(base)
@@ -289,7 +289,7 @@ def tier_rows(name, k, rows, switch: float = 1.0):
     from gatun_py.codec import TetcReader
     from gatun_py.pipeline.selective import selective_source, uniform_cut
     from gatun_py.pipeline.stream import View
-    from gatun_py.render.camera import Camera
+    from gatun_py.raycast.camera import Camera
     from gatun_py.simplify.forest import ancestors, mesh_from_ancestors
 
     base = TetcReader(tetc_file(name))

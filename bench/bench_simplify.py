@@ -592,9 +592,9 @@ def sampled_section(names) -> str:
     from gatun_py.mesh import validate_tets
     from gatun_py.pipeline.quality import compare_images
     from gatun_py.pipeline.stream import View, file_render_defaults, render_tetc
-    from gatun_py.render import Camera
-    from gatun_py.render.image import to_rgb8
-    from gatun_py.render.raycast import render_mesh
+    from gatun_py.raycast import Camera
+    from gatun_py.raycast.image import to_rgb8
+    from gatun_py.raycast.caster import render_mesh
     from gatun_py.simplify import level_payloads
 
     decimate(delaunay_mesh(30, 0))  # load / compile the kernels

@@ -79,18 +79,18 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
         raise click.UsageError("give either --ratio or --faces, not both")
     if level is not None and mesh_ratio is not None:
         raise click.UsageError("give either --level or --mesh-ratio, not both")
-    from gatun_py.isosurface.io import check_surface_path
+    from gatun_py.contour.io import check_surface_path
 
     require_file(input)  # before saying that it compiles
     check_surface_path(output, force=force)  # fail before the work, not after
     announce((["decoder"] if is_tetc(input) else []) + ["isosurface"], quiet=quiet)
-    from gatun_py.isosurface import isosurface as extract  # after the notice: numba loads with it
+    from gatun_py.contour import isosurface as extract  # after the notice: numba loads with it
 
     if png is not None:
         from gatun_py._runtime import check_output_path
-        from gatun_py.render.image import image_format
+        from gatun_py.raycast.image import image_format
 
-        from gatun_py.isosurface.extract import MAX_PREVIEW_PIXELS
+        from gatun_py.contour.extract import MAX_PREVIEW_PIXELS
 
         w, h = size
         if w * h > MAX_PREVIEW_PIXELS:
@@ -136,7 +136,7 @@ def _expected_tets(path, values, level) -> int:
     file, those of the bricks an isovalue cuts."""
     try:
         from gatun_py.codec import TetcReader
-        from gatun_py.isosurface.bricked import bricks_to_decode
+        from gatun_py.contour.bricked import bricks_to_decode
 
         reader = TetcReader(path)
         level = level or 0

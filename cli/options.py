@@ -67,7 +67,7 @@ class Colour(click.ParamType):
     name = "COLOUR"
 
     def convert(self, value, param, ctx):
-        from gatun_py.render.image import parse_colour  # start-up time (numba loads after the options are checked)
+        from gatun_py.raycast.image import parse_colour  # start-up time (numba loads after the options are checked)
 
         try:
             return parse_colour(value)

@@ -12,7 +12,8 @@ The stages, in pipeline order (each imports only the ones before it):
 * :mod:`gatun_py.mesh`      mesh model, input formats, validation, the tet stream
 * :mod:`gatun_py.codec`     lossless cut-border compression and the streaming decoder, ``.tetc`` files
 * :mod:`gatun_py.simplify`  offline decimation (merge forest, levels) and the on-the-fly filter
-* :mod:`gatun_py.render`    object-space ray casting, camera, transfer functions (imports only mesh)
+* :mod:`gatun_py.raycast`   object-space ray casting, camera, transfer functions (imports only mesh)
+* :mod:`gatun_py.contour`   isosurfaces from the tet stream, simplified while extracted
 * :mod:`gatun_py.pipeline`  decompress -> simplify -> render in one pass, time budgets, quality
 
 The verbs load ``gatun_py.api`` (and with it numba and the kernels) on first use, as scikit-image
@@ -23,11 +24,6 @@ loads its submodules, so ``import gatun_py``, a command's ``--help`` and its usa
 import importlib
 import inspect
 
-# The stages named like verbs are bound first, so that the verbs below win the names `render` and
-# `isosurface` (a later `import gatun_py.render.camera` finds the package in sys.modules and leaves
-# the attribute alone); both packages load their contents lazily.
-from . import isosurface as _isosurface_stage  # noqa: F401
-from . import render as _render_stage  # noqa: F401
 from ._lazy import attach
 from ._version import __version__
 from .errors import (CorruptFileError, FormatVersionError, MeshError, OptionError, OutputError,
@@ -76,13 +72,13 @@ convert = _Verb("convert")
 info = _Verb("info")
 open = _Verb("open")  # noqa: A001 (the verb users look for, as gzip.open)
 render = _Verb("render")
-isosurface = _Verb("isosurface", ".isosurface.extract")
+isosurface = _Verb("isosurface", ".contour.extract")
 append = _Verb("append")
 render_steps = _Verb("render_steps")
 compress_pieces = _Verb("compress_pieces", ".pipeline.compress_pieces")
 
 # classes load with their module on first access
-_LAZY = {"TetcFile": "api", "Frame": "api", "Surface": "isosurface.extract", "TetMesh": "mesh", "TetBatch": "mesh", "read_mesh": "mesh",
+_LAZY = {"TetcFile": "api", "Frame": "api", "Surface": "contour.extract", "TetMesh": "mesh", "TetBatch": "mesh", "read_mesh": "mesh",
          "read_series": "mesh.series", "Series": "mesh.series",
          "write_mesh": "mesh"}
 

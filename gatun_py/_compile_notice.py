@@ -39,9 +39,9 @@ PARTS = {
     "forest decoder": {"codec._forest_kernels": ("decode_rounds3_kernel",),
                        "simplify._decimate_kernels": ("_ancestors",)},
     "filter": {"simplify._filter_kernels": ("filter_items",)},
-    "renderer": {"render._walk": ("advance", "settle"), "render._boundary": ("_boundary_hits",),
-                 "render._facetable": ("insert_tets",)},
-    "isosurface": {"isosurface.marching": ("extract_batch",), "isosurface.qem": ("decimate",)},
+    "renderer": {"raycast._walk": ("advance", "settle"), "raycast._boundary": ("_boundary_hits",),
+                 "raycast._facetable": ("insert_tets",)},
+    "isosurface": {"contour.marching": ("extract_batch",), "contour.qem": ("decimate",)},
 }
 
 # Seconds of compiling per part on two cores in one process (the first run of a command compiles

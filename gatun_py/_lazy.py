@@ -13,7 +13,7 @@ import sys
 
 def attach(package: str, names: dict[str, str]):
     """``(__getattr__, __dir__, __all__)`` for ``package``; ``names`` maps a public name to the
-    submodule (relative to the package, e.g. ``"camera"`` or ``"isosurface.extract"``) defining it."""
+    submodule (relative to the package, e.g. ``"camera"`` or ``"contour.extract"``) defining it."""
 
     def __getattr__(name):
         if name in names:

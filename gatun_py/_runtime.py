@@ -6,7 +6,7 @@ handing memory back to the system.
   kernels already (a first run on a fresh install compiles them ahead, on two cores).
 * :func:`compile_for_render`, :func:`load_render_kernels`, :func:`load_isosurface_kernels`: the
   warm-up hooks a command calls before it opens the user's file (:mod:`gatun_py.warmup`,
-  :func:`gatun_py.isosurface.extract.load_kernels`), imported when called.
+  :func:`gatun_py.contour.extract.load_kernels`), imported when called.
 * :func:`release_code_pages`, :func:`trim_heap`: resident pages of LLVM's code and of the C heap
   handed back.
 
@@ -163,7 +163,7 @@ def render_kernels_cached(*, decoder: bool, simplify: bool = False) -> bool:
     """Whether numba has compiled the render kernels (with ``decoder`` today's decoder's, with
     ``simplify`` the forest decoder's and the filter's) into its cache already."""
     from .codec import _cutborder_kernels, _forest_kernels, _geometry_kernels
-    from .render import _walk
+    from .raycast import _walk
     from .simplify import _filter_kernels
 
     return kernels_cached(_walk, *((_cutborder_kernels, _geometry_kernels) if decoder else ()),
@@ -185,7 +185,7 @@ def load_render_kernels(**kwargs) -> float:
 
 
 def load_isosurface_kernels(source=None, **kwargs) -> float:
-    """:func:`gatun_py.isosurface.extract.load_kernels`: load an extraction's kernels first."""
-    from .isosurface.extract import load_kernels
+    """:func:`gatun_py.contour.extract.load_kernels`: load an extraction's kernels first."""
+    from .contour.extract import load_kernels
 
     return load_kernels(source, **kwargs)

@@ -58,10 +58,10 @@ from .limits import MAX_IMAGE_SIDE
 from .pipeline.distributed import BrickCluster
 from .pipeline.selective import SELECTION_ALLOWANCE_S, budget_tets, render_selective, selective_mesh
 from .pipeline.stream import PIPELINES, View, is_tetc, render_mesh_file, render_tetc
-from .render.camera import Camera
-from .render.image import add_colorbar, image_bytes, image_format, parse_colour, to_rgb8, upscale_rgb8, write_image
-from .render.raycast import MODES
-from .render.transfer import load_transfer_function
+from .raycast.camera import Camera
+from .raycast.image import add_colorbar, image_bytes, image_format, parse_colour, to_rgb8, upscale_rgb8, write_image
+from .raycast.caster import MODES
+from .raycast.transfer import load_transfer_function
 from .simplify import build_levels, decimate, level_payloads
 from .simplify.dependencies import merge_dependencies
 from .simplify.filter import SimplifyFilter
@@ -972,7 +972,7 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
         The range the transfer function is normalised to (default: the mesh's). Fix it to compare
         files or time steps.
     opacity_model : {"gatun", "vtk"}, optional
-        How opacity accumulates (see :mod:`gatun_py.render.transfer`).
+        How opacity accumulates (see :mod:`gatun_py.raycast.transfer`).
     background : str or (r, g, b)
         A colour name, ``#rrggbb`` or RGB in 0..1.
     colorbar : bool

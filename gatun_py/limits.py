@@ -4,7 +4,7 @@ against them before numba or a kernel loads."""
 # The largest image a verb renders: the camera takes up to MAX_CAMERA_SIDE, but 4096² already
 # takes 200 MB of float RGBA; larger is nearly always a typo.
 MAX_IMAGE_SIDE = 8192
-# The camera's own bound on an image side (gatun_py.render.camera.Camera).
+# The camera's own bound on an image side (gatun_py.raycast.camera.Camera).
 MAX_CAMERA_SIDE = 16384
 # A zoom factor lies in [1 / MAX_ZOOM, MAX_ZOOM].
 MAX_ZOOM = 1.0e4

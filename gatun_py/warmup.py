@@ -20,16 +20,16 @@ from .codec import LevelPayload, TetcReader, encode_tetc
 from .codec.geometry import GeometryDecoder
 from .codec.forest import FOREST_CODING, decode_forest_on_geometry, decode_forest_on_mesh, decode_forest_rounds
 from .errors import CorruptFileError, TetcError
-from .isosurface.extract import TINY_TETC, isosurface
+from .contour.extract import TINY_TETC, isosurface
 from .mesh import TetMesh, mesh_batches
 from .mesh.synthetic import jittered_grid
 from .pipeline.bricks import compress_bricks, read_bricked
 from .pipeline.stream import View, render_tetc
-from .render._facetable import count_live, make_face_table, rehash
-from .render.camera import Camera
-from .render.composite import composite
-from .render.raycast import render_mesh
-from .render.stream import render_batches
+from .raycast._facetable import count_live, make_face_table, rehash
+from .raycast.camera import Camera
+from .raycast.composite import composite
+from .raycast.caster import render_mesh
+from .raycast.stream import render_batches
 from .simplify import ROOT_RANK, ancestors, available_levels, build_levels, decimate
 from .pipeline import _importance_kernels as IK
 from .simplify.dependencies import closed_cut_order, cut_ancestors, merge_dependencies

@@ -1,4 +1,4 @@
-"""A slow, obviously correct compositor: the reference for ``render.composite``.
+"""A slow, obviously correct compositor: the reference for ``raycast.composite``.
 
 For every pixel: collect its fragments, sort them by (front depth, back depth) with Python's
 sort, and blend them front to back, one at a time: C += (1 - A) * c, A += (1 - A) * a.

@@ -1,4 +1,4 @@
-"""Slow plain references for gatun_py.isosurface.qem: quadrics, cost and placement.
+"""Slow plain references for gatun_py.contour.qem: quadrics, cost and placement.
 
 A quadric is the 10 numbers (a00, a01, a02, b0, a11, a12, b1, a22, b2, c) of
 Q(x) = x^T A x + 2 b^T x + c. The placement of an edge collapse is the cheapest point the kernel may
@@ -133,7 +133,7 @@ def naive_fan_distance(points, triangles, u, v, new_pos, samples):
     """The largest squared distance from ``samples`` to the faces around u and v once u and v merge
     at ``new_pos`` (the faces on edge uv gone), or to ``new_pos`` when no face is left. Exact
     point-to-triangle distances from the metric module's own routine (a separate implementation)."""
-    from gatun_py.isosurface.metrics import _point_triangle
+    from gatun_py.contour.metrics import _point_triangle
 
     p = np.asarray(points, np.float64).copy()
     p[u] = p[v] = new_pos

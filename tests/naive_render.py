@@ -20,7 +20,7 @@ def _table_eval(tab, lo, inv, s):
     return np.array([np.interp(s, xs, tab[:, c]) for c in range(4)])
 
 
-OPAQUE = 0.99  # early ray termination, as the ray caster's (gatun_py.render._walk.OPAQUE)
+OPAQUE = 0.99  # early ray termination, as the ray caster's (gatun_py.raycast._walk.OPAQUE)
 
 
 def naive_render(mesh, fitted, tf, *, mode="volume", step=None, scalar_range=None, terminate=True, cull=False):
@@ -32,7 +32,7 @@ def naive_render(mesh, fitted, tf, *, mode="volume", step=None, scalar_range=Non
     the tet's smallest scalar to the one above its largest); the image must not change.
     """
     from gatun_py.mesh import default_step
-    from gatun_py.render.transfer import load_transfer_function
+    from gatun_py.raycast.transfer import load_transfer_function
 
     tf = load_transfer_function(tf)
     rng = mesh.scalar_range if scalar_range is None else scalar_range

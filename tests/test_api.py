@@ -10,7 +10,7 @@ import pytest
 
 import gatun_py
 from cli_util import run
-from gatun_py.render.image import read_png_rgb
+from gatun_py.raycast.image import read_png_rgb
 from samples import SAMPLES
 
 POST = SAMPLES["post"][0]

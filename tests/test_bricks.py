@@ -437,8 +437,8 @@ def test_one_brick_renders_through_the_plain_pipeline(tmp_path):
     # what the compositor builds on: a brick's reader goes through render_tetc unchanged (its
     # stream, levels and forest), with the file's scalar range and step in its metadata
     from gatun_py.pipeline.stream import View, file_view, render_tetc
-    from gatun_py.render.camera import Camera
-    from gatun_py.render.raycast import render_mesh
+    from gatun_py.raycast.camera import Camera
+    from gatun_py.raycast.caster import render_mesh
 
     m = jittered_grid((6, 6, 5), jitter=0.2, seed=11)
     f = gatun_py.compress(m, tmp_path / "b.tetc", bricks=3, jobs=1)
@@ -459,7 +459,7 @@ def test_brick_budget_probes_once_and_follows_the_budget(tmp_path, monkeypatch):
     from gatun_py.pipeline import budget as budget_module
     from gatun_py.pipeline.sortlast import BrickBudget, MeshExtent, frame_setup
     from gatun_py.pipeline.stream import View
-    from gatun_py.render import Camera
+    from gatun_py.raycast import Camera
 
     monkeypatch.setenv("TETC_CACHE_DIR", str(tmp_path))
     m = jittered_grid((12, 12, 12), jitter=0.25, seed=4)

@@ -7,7 +7,7 @@ import subprocess
 import sys
 
 from gatun_py.cli.options import progress_reporter, status
-from gatun_py.render.camera import MAX_ZOOM
+from gatun_py.raycast.camera import MAX_ZOOM
 
 
 def test_zoom_bound_matches_the_camera():

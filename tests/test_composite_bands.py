@@ -11,8 +11,8 @@ from conftest import load_sample
 from gatun_py.pipeline.sortlast import (composite_frame, composite_rows, frame_setup, join_rows, render_brick,
                                         split_for_render)
 from gatun_py.pipeline.stream import View
-from gatun_py.render import Camera
-from gatun_py.render.composite import Fragments, composite, merge_fragments, row_bands, split_rows
+from gatun_py.raycast import Camera
+from gatun_py.raycast.composite import Fragments, composite, merge_fragments, row_bands, split_rows
 
 
 def _fragments(rng, width, height, n):

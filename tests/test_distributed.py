@@ -19,8 +19,8 @@ from cli_util import assert_error, assert_usage_error, run
 from conftest import SAMPLE_FILES, load_sample
 from gatun_py.pipeline.sortlast import render_bricks, split_for_render
 from gatun_py.pipeline.stream import View, render_mesh_file
-from gatun_py.render import Camera
-from gatun_py.render.image import to_rgb8
+from gatun_py.raycast import Camera
+from gatun_py.raycast.image import to_rgb8
 
 distributed = pytest.importorskip("distributed", reason="dask[distributed] is not installed (pip install 'gatun_py[dask]')")
 from gatun_py.pipeline.distributed import BrickCluster, ClusterError  # noqa: E402

@@ -21,7 +21,7 @@ import pytest
 
 import gatun_py
 from gatun_py.codec import TetcReader
-from gatun_py.render.image import read_png_rgb
+from gatun_py.raycast.image import read_png_rgb
 from samples import SAMPLES
 
 DATA = Path(__file__).resolve().parent / "data"

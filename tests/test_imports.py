@@ -10,17 +10,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "gatun_py"
 CLI = ROOT / "cli"
-
-# The verbs gatun_py.render and gatun_py.isosurface take the names of the stage packages, so that
-# `import gatun_py.render.camera as camera` finds the verb where the package should be. The packages
-# are to be renamed; until then their modules are a known failure of the dotted import.
-SHADOWED = ("gatun_py.render", "gatun_py.isosurface")
-
 
 def _modules() -> list[str]:
     names = []
@@ -33,10 +26,6 @@ def _modules() -> list[str]:
 
 
 MODULES = _modules()
-
-
-def _shadowed(name: str) -> bool:
-    return any(name == s or name.startswith(s + ".") for s in SHADOWED)
 
 
 def _failing_imports(names) -> dict:
@@ -60,21 +49,24 @@ def _failing_imports(names) -> dict:
 
 def test_the_walk_finds_every_stage():
     assert {"gatun_py.codec.formats", "gatun_py.codec.legacy.tets1", "gatun_py._runtime",
-            "gatun_py.render.camera", "gatun_py.simplify.decimation"} <= set(MODULES)
+            "gatun_py.raycast.camera", "gatun_py.simplify.decimation"} <= set(MODULES)
 
 
 def test_every_module_imports_by_its_dotted_name():
-    assert _failing_imports([n for n in MODULES if not _shadowed(n)]) == {}
+    assert _failing_imports(MODULES) == {}
 
 
-@pytest.mark.xfail(reason="the verbs gatun_py.render and gatun_py.isosurface shadow the stage packages of the same "
-                          "names (the packages are to be renamed)", strict=True)
-def test_the_shadowed_stage_modules_import_by_their_dotted_names():
-    assert _failing_imports([n for n in MODULES if _shadowed(n)]) == {}
+def test_the_import_check_sees_a_bad_module():
+    assert set(_failing_imports(["gatun_py.raycast.no_such_module", "gatun_py.codec.formats"])) == {
+        "gatun_py.raycast.no_such_module"}
 
 
-def test_the_import_check_sees_a_shadowed_module():
-    assert set(_failing_imports(["gatun_py.render.camera", "gatun_py.codec.formats"])) == {"gatun_py.render.camera"}
+def test_the_verbs_and_the_stage_packages_have_their_own_names():
+    """The verbs ``render`` and ``isosurface`` and the stages ``raycast`` and ``contour`` never meet."""
+    code = ("import gatun_py, gatun_py.raycast.camera as c, gatun_py.contour.qem as q\n"
+            "print(callable(gatun_py.render), callable(gatun_py.isosurface), c.__name__, q.__name__)\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert p.stdout.split() == ["True", "True", "gatun_py.raycast.camera", "gatun_py.contour.qem"], p.stderr[-2000:]
 
 
 def _private(module: str) -> bool:

@@ -60,7 +60,7 @@ def test_wheel_contents(installed):
     import zipfile
 
     names = zipfile.ZipFile(installed[3]).namelist()
-    assert "gatun_py/cli/main.py" in names and "gatun_py/render/presets/bluntfin.json" in names
+    assert "gatun_py/cli/main.py" in names and "gatun_py/raycast/presets/bluntfin.json" in names
     assert "gatun_py/warmup.tetc" in names
     assert not any(n.startswith("cli/") for n in names), "a bare top-level 'cli' package must not be installed"
 

@@ -12,8 +12,8 @@ from meshgen import grid_mesh, mesh_strategy
 from naive_isosurface import naive_isosurface
 
 from gatun_py.errors import OptionError
-from gatun_py.isosurface import isosurface, load_importance
-from gatun_py.isosurface.marching import CASE_COUNT
+from gatun_py.contour import isosurface, load_importance
+from gatun_py.contour.marching import CASE_COUNT
 
 
 def canonical(points, tris):
@@ -256,7 +256,7 @@ def test_result_does_not_depend_on_how_far_the_decoder_runs_ahead(post_tetc, mon
     import functools
 
     from gatun_py.codec.prefetch import PrefetchedDecode
-    from gatun_py.isosurface import extract
+    from gatun_py.contour import extract
 
     v = 0.5 * sum(isosurface(post_tetc, values=0.0).stats["scalar_range"])
     # small batches, so that the queues fill and drain many times over the stream
@@ -285,7 +285,7 @@ def test_trim_heap_is_safe_to_call_between_batches():
 
 
 def test_faces_target_and_error_small():
-    from gatun_py.isosurface.metrics import surface_distance
+    from gatun_py.contour.metrics import surface_distance
 
     mesh = load_sample("bluntfin")[0]
     v = iso_values(mesh)[1]
@@ -299,7 +299,7 @@ def test_faces_target_and_error_small():
 
 
 def test_importance_keeps_detail_where_weighted():
-    from gatun_py.isosurface.metrics import one_sided
+    from gatun_py.contour.metrics import one_sided
 
     mesh = load_sample("bluntfin")[0]
     v = iso_values(mesh)[1]

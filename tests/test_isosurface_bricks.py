@@ -15,8 +15,8 @@ from gatun_py.codec import TetcReader
 from gatun_py.codec.bricks import decode_bricked
 from gatun_py.codec.container import build_container, split_container
 from gatun_py.errors import CorruptFileError, OptionError
-from gatun_py.isosurface import isosurface
-from gatun_py.isosurface.bricked import BrickedStream, bricks_to_decode
+from gatun_py.contour import isosurface
+from gatun_py.contour.bricked import BrickedStream, bricks_to_decode
 from gatun_py.mesh.synthetic import jittered_grid
 from gatun_py.pipeline.bricks import compress_bricks
 
@@ -253,7 +253,7 @@ def test_cli_on_a_bricked_file(tmp_path):
 
 
 def test_point_table_finds_adds_and_bounds():
-    from gatun_py.isosurface.bricked import _TAKEN, _new_point_table, _point_slots
+    from gatun_py.contour.bricked import _TAKEN, _new_point_table, _point_slots
 
     bits, ids = _new_point_table(5)
     keys = np.array([[1, 2, 3], [3, 2, 1], [1, 2, 3], [0, 0, 0]], np.uint32)

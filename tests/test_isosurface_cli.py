@@ -11,7 +11,7 @@ import pytest
 from cli_util import assert_error, assert_usage_error, run
 from conftest import SAMPLE_FILES, load_sample
 
-from gatun_py.render.image import read_png_rgb
+from gatun_py.raycast.image import read_png_rgb
 
 POST = SAMPLE_FILES["post"][0]
 
@@ -37,7 +37,7 @@ def test_writes_every_format(tmp_path, post_tetc, ext):
     else:
         m = meshio.read(out)
         n_tri = sum(len(c.data) for c in m.cells if c.type == "triangle")
-    from gatun_py.isosurface import isosurface
+    from gatun_py.contour import isosurface
 
     assert n_tri == isosurface(post_tetc, values=_mid()).n_triangles > 0
 
@@ -116,7 +116,7 @@ def test_preview_options_are_checked_before_the_work(tmp_path, post_tetc):
 
 def test_surface_preview_matches_the_cli_png(tmp_path, post_tetc):
     """The library's Surface.preview is what the CLI writes (one code path)."""
-    from gatun_py.isosurface import isosurface
+    from gatun_py.contour import isosurface
 
     png = tmp_path / "iso.png"
     res = run("isosurface", post_tetc, "--value", _mid(), "-o", tmp_path / "iso.ply", "--png", png, "--size", "80x60",
@@ -129,7 +129,7 @@ def test_surface_preview_matches_the_cli_png(tmp_path, post_tetc):
 def test_the_preview_frames_the_surface_unless_asked_for_the_volume(tmp_path, post_tetc):
     """A surface in a corner of the mesh fills the default preview (its lit pixels span most of the
     picture), and --frame-volume shows it where tetc render would, smaller."""
-    from gatun_py.isosurface import isosurface
+    from gatun_py.contour import isosurface
 
     lo, hi = json.loads(run("info", post_tetc, "--json").output)["scalar_range"]
     surf = isosurface(post_tetc, values=lo + 0.7 * (hi - lo))

@@ -16,8 +16,8 @@ from meshgen import grid_mesh
 
 from gatun_py import _runtime
 from gatun_py.codec import LevelPayload, TetcReader, encode_tetc
-from gatun_py.isosurface import extract as iso_extract
-from gatun_py.isosurface import isosurface
+from gatun_py.contour import extract as iso_extract
+from gatun_py.contour import isosurface
 from gatun_py.mesh import TetMesh
 
 

@@ -1,4 +1,4 @@
-"""QEM cost and placement (gatun_py.isosurface.qem) against the plain reference in naive_qem."""
+"""QEM cost and placement (gatun_py.contour.qem) against the plain reference in naive_qem."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from naive_qem import (DET_FLOOR, naive_border_planes, naive_current_quadric, naive_edge_cost, naive_face_quadrics,
                        naive_fan_distance, naive_placement, naive_segment_min, plane_quadric, quadric_cost)
 
-from gatun_py.isosurface import qem
+from gatun_py.contour import qem
 
 
 def _place(q, pu, pv, bu=False, bv=False):

@@ -17,8 +17,8 @@ from meshgen import grid_mesh
 from gatun_py.codec import LevelPayload, TetcReader, encode_tetc
 from gatun_py.codec.prefetch import iter_decode_prefetched
 from gatun_py.errors import CorruptFileError
-from gatun_py.isosurface import extract as iso_extract
-from gatun_py.isosurface import isosurface
+from gatun_py.contour import extract as iso_extract
+from gatun_py.contour import isosurface
 from gatun_py.mesh import TetMesh
 
 
@@ -165,7 +165,7 @@ def test_an_extraction_does_not_load_scipy_linalg_and_blas_still_works():
     code = """if True:
         import sys
         import numpy as np
-        from gatun_py.isosurface import isosurface
+        from gatun_py.contour import isosurface
         from gatun_py.warmup import SHIPPED_TETC
         from gatun_py.codec import TetcReader
         lo, hi = TetcReader(SHIPPED_TETC).meta["scalar_range"]

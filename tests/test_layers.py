@@ -7,8 +7,8 @@ The stages and what each may import (besides the standard library and third-part
 * mesh: base
 * codec: mesh
 * simplify: codec, mesh
-* render: mesh
-* the stages built on the pipeline's products (isosurface: mesh, codec, simplify, render's preview)
+* raycast: mesh
+* the stages built on the pipeline's products (contour: mesh, codec, simplify, raycast's preview)
 * pipeline: every stage
 * the top (``api``, ``meshio_format``, ``warmup``, ``viewer``, ``gatun_py/__init__``), then the CLI.
 
@@ -37,9 +37,9 @@ ALLOWED = {
     "mesh": {"mesh"},
     "codec": {"codec", "mesh"},
     "simplify": {"simplify", "codec", "mesh"},
-    "render": {"render", "mesh"},
-    "isosurface": {"isosurface", "simplify", "codec", "mesh", "render"},
-    "pipeline": {"pipeline", "simplify", "codec", "mesh", "render", "isosurface"},
+    "raycast": {"raycast", "mesh"},
+    "contour": {"contour", "simplify", "codec", "mesh", "raycast"},
+    "pipeline": {"pipeline", "simplify", "codec", "mesh", "raycast", "contour"},
 }
 TOP = {"api", "meshio_format", "pyvista_reader", "warmup", "viewer", "paraview", "__init__", "cli", "bricks"}
 # function-local imports that are allowed, and why (module, imported name prefix)
@@ -73,9 +73,9 @@ LOCAL_OK_MODULES = {
     "codec.cells": "start-up time: meshio's .tetc reader loads the codec when first called",
     "mesh.io": "start-up time: meshio's .tetc writer loads the mesh writers when first called",
     # an isosurface extraction loads the renderer (and PIL) only when a preview is asked for
-    "render.camera": "memory and start-up of an isosurface without a preview",
-    "render.image": "memory and start-up of an isosurface without a preview",
-    "render.surface": "memory and start-up of an isosurface without a preview",
+    "raycast.camera": "memory and start-up of an isosurface without a preview",
+    "raycast.image": "memory and start-up of an isosurface without a preview",
+    "raycast.surface": "memory and start-up of an isosurface without a preview",
 }
 
 
@@ -165,11 +165,11 @@ def test_checker_catches_a_violation(tmp_path, monkeypatch):
     """The checker itself: an upward import, hidden in a function, is reported."""
     fake = tmp_path / "gatun_py"
     (fake / "codec").mkdir(parents=True)
-    (fake / "codec" / "x.py").write_text("def f():\n    from ..render import raycast\n")
+    (fake / "codec" / "x.py").write_text("def f():\n    from ..raycast import caster\n")
     monkeypatch.setattr(__import__(__name__), "PACKAGE", fake)
     monkeypatch.setattr(__import__(__name__), "ROOT", tmp_path)
     found = _violations()
-    assert any("codec imports render" in v for v in found) and any("function-local" in v for v in found)
+    assert any("codec imports raycast" in v for v in found) and any("function-local" in v for v in found)
 
 
 def test_install_names_every_package():

@@ -228,7 +228,7 @@ def test_exodus_decomposition(tmp_path):
 # -- everything else works from the pieced file --------------------------------------------------------
 
 def test_render_budget_and_isosurface_of_a_pieced_file(pvtu, tmp_path):
-    from gatun_py.isosurface import isosurface
+    from gatun_py.contour import isosurface
     from test_isosurface_bricks import same_surface
 
     path, mesh = pvtu

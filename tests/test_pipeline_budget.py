@@ -23,7 +23,7 @@ from gatun_py.pipeline import budget as B
 from gatun_py.pipeline.budget import (BudgetPlan, Costs, FramePlanner, LevelSize, TimeModel, Work, WorkEstimator,
                                       estimated_tets, load_costs, plan_for_budget, save_costs)
 from gatun_py.pipeline.stream import View, render_tetc
-from gatun_py.render.camera import Camera
+from gatun_py.raycast.camera import Camera
 
 
 def _levels(n_points=4096, tets0=20000, k=8):
@@ -160,7 +160,7 @@ def test_work_estimate_learns_the_tets_the_transfer_function_culls():
 def test_first_guess_overestimates_rays_from_the_bounding_box():
     """Before any frame, the hits are the projected box's rectangle: at least the real hits."""
     mesh, _ = load_sample("post")
-    from gatun_py.render.raycast import render_mesh
+    from gatun_py.raycast.caster import render_mesh
 
     cam = Camera(64, 48, 30, 20)
     fitted = cam.fit(*mesh.bbox)

@@ -18,9 +18,9 @@ from gatun_py.mesh import read_mesh
 from gatun_py.pipeline.selective import (EPS, FACTORS, choose_cut, merge_importance, plan_cut, render_selective,
                                          selective_mesh, selective_source, uniform_cut)
 from gatun_py.pipeline.stream import View, file_render_defaults
-from gatun_py.render.camera import Camera
-from gatun_py.render.raycast import render_mesh
-from gatun_py.render.transfer import load_transfer_function
+from gatun_py.raycast.camera import Camera
+from gatun_py.raycast.caster import render_mesh
+from gatun_py.raycast.transfer import load_transfer_function
 from gatun_py.simplify.dependencies import merge_dependencies
 
 TOL = 1e-5

@@ -9,8 +9,8 @@ from gatun_py.codec import LevelPayload, TetcReader, write_tetc
 from gatun_py.errors import OptionError
 from gatun_py.pipeline.stream import View, render_tetc
 from gatun_py.simplify.levels import Target, resolve_target
-from gatun_py.render.camera import Camera
-from gatun_py.render.raycast import render_mesh
+from gatun_py.raycast.camera import Camera
+from gatun_py.raycast.caster import render_mesh
 from gatun_py.simplify import build_levels, decimate, simplified_mesh
 
 TOL = 1e-5

@@ -7,9 +7,9 @@ import pytest
 from meshgen import AWKWARD, grid_mesh
 from naive_render import naive_boundary_hits
 
-from gatun_py.render import Camera, FittedCamera
-from gatun_py.render import _boundary as K
-from gatun_py.render.raycast import _ray_grid
+from gatun_py.raycast import Camera, FittedCamera
+from gatun_py.raycast import _boundary as K
+from gatun_py.raycast.caster import _ray_grid
 
 
 def kernel_hits(mesh, fitted):

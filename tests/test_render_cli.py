@@ -12,8 +12,8 @@ from meshgen import delaunay_mesh, grid_mesh
 
 from gatun_py.cli.main import tetc
 from gatun_py.mesh import write_mesh
-from gatun_py.render import Camera, render_mesh, to_rgb8
-from gatun_py.render.image import read_png_rgb
+from gatun_py.raycast import Camera, render_mesh, to_rgb8
+from gatun_py.raycast.image import read_png_rgb
 
 
 @pytest.fixture

@@ -15,10 +15,10 @@ from gatun_py.errors import OptionError
 from gatun_py.mesh.synthetic import jittered_grid
 from gatun_py.pipeline.sortlast import MeshExtent, frame_setup, render_bricks, split_for_render
 from gatun_py.pipeline.stream import View, render_mesh_file
-from gatun_py.render import Camera, render_mesh
-from gatun_py.render.composite import Fragments, composite, merge_fragments
-from gatun_py.render._walk import OPAQUE
-from gatun_py.render.image import to_rgb8
+from gatun_py.raycast import Camera, render_mesh
+from gatun_py.raycast.composite import Fragments, composite, merge_fragments
+from gatun_py.raycast._walk import OPAQUE
+from gatun_py.raycast.image import to_rgb8
 from naive_composite import naive_composite
 from samples import SAMPLES
 

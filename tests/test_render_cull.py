@@ -11,11 +11,11 @@ from meshgen import delaunay_mesh, grid_mesh, mesh_strategy
 from naive_render import naive_render
 
 from gatun_py.mesh import TetMesh
-from gatun_py.render import Camera, StreamingRaycaster, render_mesh
-from gatun_py.render._cull import visible_prefix, visible_tets
-from gatun_py.render._walk import OPAQUE
-from gatun_py.render.image import to_rgb8
-from gatun_py.render.transfer import from_dict
+from gatun_py.raycast import Camera, StreamingRaycaster, render_mesh
+from gatun_py.raycast._cull import visible_prefix, visible_tets
+from gatun_py.raycast._walk import OPAQUE
+from gatun_py.raycast.image import to_rgb8
+from gatun_py.raycast.transfer import from_dict
 
 
 def tf_above(cut: float, a: float = 0.3, unit: float = 3.0):

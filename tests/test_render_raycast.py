@@ -11,8 +11,8 @@ from meshgen import AWKWARD, delaunay_mesh, grid_mesh, mesh_strategy
 from naive_render import naive_render
 
 from gatun_py.mesh import TetMesh
-from gatun_py.render import Camera, FittedCamera, StreamingRaycaster, render_mesh
-from gatun_py.render.transfer import from_dict
+from gatun_py.raycast import Camera, FittedCamera, StreamingRaycaster, render_mesh
+from gatun_py.raycast.transfer import from_dict
 
 # Semi-transparent everywhere, so that every tet along a ray shows in the pixel.
 TF = from_dict({
@@ -178,7 +178,7 @@ def test_bad_input():
 
 # -- lean streaming: faces freed once no ray needs them --------------------------------------------
 def _crossings(mesh, cam):
-    from gatun_py.render import _facetable as K
+    from gatun_py.raycast import _facetable as K
 
     fitted_cam = fitted(mesh, cam)
     P = mesh.points.astype(np.float64) - fitted_cam.position
@@ -231,7 +231,7 @@ def test_lean_frees_every_face_of_a_clean_mesh():
     cam = Camera(40, 40, azimuth=33.0, elevation=21.0)
     rc, res = stream_rc(mesh, cam, "volume", order_seed=5, n_batches=25, lean=True)
     assert res.stats["rays_unfinished"] == 0 and res.stats["rays_hit"] > 500
-    from gatun_py.render._facetable import FT_A, FT_COUNT, FT_TABLE
+    from gatun_py.raycast._facetable import FT_A, FT_COUNT, FT_TABLE
 
     table = rc._ft[FT_TABLE]
     counters = table[table[:, FT_A] >= 0, FT_COUNT]
@@ -242,8 +242,8 @@ def test_compose_counts_incomplete_segments_only_in_front_of_opacity():
     """A segment left unfinished behind an opaque one (opacity >= 0.99, the early-termination
     threshold) does not leave its ray unfinished; in front of it, it does. Colours combine by
     eq. (3)/(4) either way."""
-    from gatun_py.render import _segments as K
-    from gatun_py.render._walk import compose
+    from gatun_py.raycast import _segments as K
+    from gatun_py.raycast._walk import compose
 
     # ray 0: done segment of opacity 0.995, then a stuck one; ray 1: 0.5 then stuck;
     # ray 2: stuck first, then a done opaque one; ray 3: a stuck segment whose front
@@ -301,8 +301,8 @@ def test_face_table_holds_each_face_with_its_two_tets_across_rehash(mul):
     (grouped or scattered slots), with the fourth vertex of each of its tets; boundary faces have
     one tet, interior faces two; the face count is exact."""
     from gatun_py.mesh.model import TET_FACES
-    from gatun_py.render import _facetable as FT
-    from gatun_py.render._segments import make_segments
+    from gatun_py.raycast import _facetable as FT
+    from gatun_py.raycast._segments import make_segments
 
     mesh = delaunay_mesh(80, 4)
     tets = np.ascontiguousarray(mesh.tets, dtype=np.int32)
@@ -338,7 +338,7 @@ def test_snapshots_fill_in_toward_the_final_image(mesh, seed, mode, n_batches):
     """Partial images of a streaming render only gain opacity, never exceed the final image's, the
     pixels they call finished already hold their final colour, and taking them changes nothing."""
     from gatun_py.mesh import mesh_batches
-    from gatun_py.render.stream import render_batches
+    from gatun_py.raycast.stream import render_batches
 
     cam = Camera(12, 10, azimuth=25.0, elevation=15.0)
     order = np.random.default_rng(seed).permutation(mesh.n_tets)

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from gatun_py.errors import OptionError
-from gatun_py.render import Camera, load_transfer_function, preset_names, to_rgb8, write_png
-from gatun_py.render.image import png_bytes, read_png_rgb
-from gatun_py.render.transfer import TABLE_SIZE, from_dict
+from gatun_py.raycast import Camera, load_transfer_function, preset_names, to_rgb8, write_png
+from gatun_py.raycast.image import png_bytes, read_png_rgb
+from gatun_py.raycast.transfer import TABLE_SIZE, from_dict
 
 PROJECT_TF = {
     "color": [{"x": 0.0, "rgb": [0, 0, 1]}, {"x": 1.0, "rgb": [1, 0, 0]}],

@@ -18,9 +18,9 @@ from naive_render import naive_render
 
 from gatun_py.errors import OptionError
 from gatun_py.mesh import TetMesh, write_mesh
-from gatun_py.render import FittedCamera, render_mesh
-from gatun_py.render.image import read_png_rgb
-from gatun_py.render.transfer import from_dict, load_transfer_function, vtk_opacity_points
+from gatun_py.raycast import FittedCamera, render_mesh
+from gatun_py.raycast.image import read_png_rgb
+from gatun_py.raycast.transfer import from_dict, load_transfer_function, vtk_opacity_points
 
 COLOUR = [0.2, 0.6, 1.0]
 THICK = 2.0  # the slab is grid_mesh(4, 4, 3): [0, 3] x [0, 3] x [0, 2]
@@ -125,7 +125,7 @@ def test_resolve_and_table_follow_the_model():
 def test_vtk_model_matches_reference():
     mesh = grid_mesh(4, 3, 3, jitter=0.15, seed=4)
     used = np.unique(mesh.boundary_faces())
-    from gatun_py.render import Camera
+    from gatun_py.raycast import Camera
 
     cam = Camera(12, 10, azimuth=25.0, elevation=10.0).fit(mesh.points[used].min(axis=0),
                                                             mesh.points[used].max(axis=0))

@@ -9,8 +9,8 @@ import pytest
 
 from conftest import load_sample
 from gatun_py.mesh import mesh_batches
-from gatun_py.render import Camera, render_mesh
-from gatun_py.render.stream import render_batches
+from gatun_py.raycast import Camera, render_mesh
+from gatun_py.raycast.stream import render_batches
 from samples import SAMPLES
 
 pytestmark = pytest.mark.slow

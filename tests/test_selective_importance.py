@@ -13,8 +13,8 @@ from gatun_py.pipeline import _importance_kernels as K
 from gatun_py.pipeline.selective import (REGION_FACTORS, merge_importance, merge_regions, region_error,
                                          selective_source)
 from gatun_py.pipeline.stream import file_render_defaults
-from gatun_py.render.camera import Camera
-from gatun_py.render.transfer import load_transfer_function
+from gatun_py.raycast.camera import Camera
+from gatun_py.raycast.transfer import load_transfer_function
 
 TFS = ["post", {"color": [{"x": 0, "rgb": [0, 0, 1]}, {"x": 1, "rgb": [1, 0, 0]}],
                 "opacity": [{"x": 0, "a": 0}, {"x": 0.4, "a": 0}, {"x": 1, "a": 0.8}]}]

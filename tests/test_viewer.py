@@ -22,9 +22,9 @@ from gatun_py.cli.main import tetc  # noqa: E402
 from gatun_py.errors import OptionError, TetcError  # noqa: E402
 from gatun_py.pipeline.budget import Costs  # noqa: E402
 from gatun_py.pipeline.stream import View, render_tetc  # noqa: E402
-from gatun_py.render.camera import Camera  # noqa: E402
-from gatun_py.render.image import to_rgb8  # noqa: E402
-from gatun_py.render.transfer import load_transfer_function  # noqa: E402
+from gatun_py.raycast.camera import Camera  # noqa: E402
+from gatun_py.raycast.image import to_rgb8  # noqa: E402
+from gatun_py.raycast.transfer import load_transfer_function  # noqa: E402
 from gatun_py.viewer import ViewerSession, parse_request  # noqa: E402
 from gatun_py.viewer.server import SERVICE, make_app  # noqa: E402
 

@@ -44,8 +44,8 @@ from ..codec import LevelPayload, TetcReader, encode_tetc
 from ..errors import OptionError
 from ..mesh import mesh_batches
 from ..mesh.synthetic import jittered_grid
-from ..render.camera import Camera
-from ..render.stream import render_batches
+from ..raycast.camera import Camera
+from ..raycast.stream import render_batches
 from ..simplify import ROOT_RANK, ancestors
 from ..simplify.levels import Target, forest_merges, stored_levels
 from .stream import file_render_defaults, render_tetc

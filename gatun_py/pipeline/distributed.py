@@ -38,7 +38,7 @@ from dataclasses import dataclass
 from ..codec import TetcReader
 from ..errors import OptionError, TetcError
 from ..mesh import TetMesh
-from ..render.composite import row_bands, split_rows
+from ..raycast.composite import row_bands, split_rows
 from .sortlast import (BrickBudget, BrickRef, FrameSetup, brick_tets, composite_rows, frame_setup, join_rows,
                        load_brick_kernels, open_brick, place, render_brick, shared_rays)
 
@@ -151,7 +151,7 @@ class BrickCluster:
     >>> from gatun_py.mesh.synthetic import jittered_grid
     >>> from gatun_py.pipeline.sortlast import split_for_render
     >>> from gatun_py.pipeline.stream import View
-    >>> from gatun_py.render.camera import Camera
+    >>> from gatun_py.raycast.camera import Camera
     >>> bricks, extent = split_for_render(jittered_grid((5, 5, 5), jitter=0.2), 4)
     >>> with BrickCluster(workers=2) as cluster:  # doctest: +SKIP
     ...     cluster.load(bricks)

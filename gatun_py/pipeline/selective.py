@@ -90,7 +90,7 @@ import numpy as np
 from ..codec import TetcReader
 from ..errors import CorruptFileError, OptionError
 from ..mesh.model import boundary_faces
-from ..render.transfer import load_transfer_function
+from ..raycast.transfer import load_transfer_function
 from ..simplify.dependencies import MergeDependencies, closed_cut_order, cut_ancestors
 from ..simplify.forest import ROOT_RANK, mesh_from_ancestors
 from ..simplify.levels import Target, stored_levels

@@ -1,8 +1,8 @@
 """Render a mesh as bricks and composite their fragments: the same image as rendering it whole.
 
-Every brick is ray-cast on its own into fragments (:class:`~gatun_py.render.composite.Fragments`)
+Every brick is ray-cast on its own into fragments (:class:`~gatun_py.raycast.composite.Fragments`)
 and the fragments of all bricks are sorted by depth per pixel and composited
-(:func:`~gatun_py.render.composite.composite`). For the result to equal the whole mesh's render,
+(:func:`~gatun_py.raycast.composite.composite`). For the result to equal the whole mesh's render,
 every brick must see the frame the whole mesh would: the camera fitted to the whole mesh's
 bounding box, the transfer function normalised to its scalar range and its relative opacity unit
 resolved against its size, and one sample step (volume samples sit at t = k * step from the eye on
@@ -28,10 +28,10 @@ from ..errors import OptionError
 from ..mesh import TetMesh, default_step
 from ..mesh.partition import partition_tets, split_bricks
 from ..mesh.synthetic import jittered_grid
-from ..render.camera import Camera, FittedCamera
-from ..render.composite import Fragments, composite, merge_fragments
-from ..render.raycast import render_mesh
-from ..render.transfer import TransferFunction, load_transfer_function
+from ..raycast.camera import Camera, FittedCamera
+from ..raycast.composite import Fragments, composite, merge_fragments
+from ..raycast.caster import render_mesh
+from ..raycast.transfer import TransferFunction, load_transfer_function
 from ..simplify.levels import Target, resolve_target, target_ancestors
 from .budget import FramePlanner, TimeModel, machine_costs, plan_file_budget
 from .stream import PipelineResult, View, _run_streaming, bounded_step, file_render_defaults
@@ -278,7 +278,7 @@ def composite_frame(parts: list[Fragments], per_brick: list[dict]) -> PipelineRe
 
 
 def composite_rows(rows, parts: list[Fragments], per_brick: list[dict] | None = None) -> tuple[np.ndarray, dict]:
-    """One row band of a frame (see :func:`~gatun_py.render.composite.split_rows`): its image rows
+    """One row band of a frame (see :func:`~gatun_py.raycast.composite.split_rows`): its image rows
     and counts that add up over bands; with ``per_brick``, also the frame's stats of the bricks."""
     t0 = time.perf_counter()
     merged = merge_fragments(*parts)
@@ -411,7 +411,7 @@ def render_bricks(sources, view: View, extent: MeshExtent, *, ratio: float | Non
 
     Examples
     --------
-    >>> from gatun_py.render.camera import Camera
+    >>> from gatun_py.raycast.camera import Camera
     >>> from gatun_py.mesh.synthetic import jittered_grid
     >>> mesh = jittered_grid((6, 6, 6), jitter=0.2)
     >>> bricks, extent = split_for_render(mesh, 4)

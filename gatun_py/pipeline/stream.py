@@ -25,10 +25,10 @@ from ..codec import TetcReader
 from ..codec.container import is_tetc  # noqa: F401  (the api and the CLI take it from here)
 from ..errors import CorruptFileError, OptionError
 from ..mesh import TetMesh, default_step, mesh_batches, read_mesh
-from ..render.camera import Camera
-from ..render.raycast import render_mesh
-from ..render.stream import render_batches
-from ..render.transfer import load_transfer_function
+from ..raycast.camera import Camera
+from ..raycast.caster import render_mesh
+from ..raycast.stream import render_batches
+from ..raycast.transfer import load_transfer_function
 from ..simplify.filter import SimplifyFilter
 from ..simplify.forest import mesh_from_ancestors
 from ..simplify.levels import Target, resolve_target, stored_levels, target_ancestors  # noqa: F401 (re-exported)
@@ -157,7 +157,7 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
         The target level's stream, already decoded (streaming pipeline): used instead of decoding.
     partial, partial_every_s : optional
         Streaming pipeline: ``partial(image, finished)`` is called with the image so far at most every
-        ``partial_every_s`` seconds (see :func:`gatun_py.render.stream.render_batches`).
+        ``partial_every_s`` seconds (see :func:`gatun_py.raycast.stream.render_batches`).
 
     Returns
     -------

@@ -22,9 +22,9 @@ from ..codec import TetcReader
 from ..errors import OptionError, TetcError
 from ..pipeline.budget import FramePlanner, TimeModel, machine_costs
 from ..pipeline.stream import View, file_render_defaults, render_tetc
-from ..render.camera import MAX_ZOOM, Camera
-from ..render.image import png_bytes, to_rgb8
-from ..render.transfer import from_dict, load_transfer_function, preset_names
+from ..raycast.camera import MAX_ZOOM, Camera
+from ..raycast.image import png_bytes, to_rgb8
+from ..raycast.transfer import from_dict, load_transfer_function, preset_names
 from ..simplify.levels import resolve_target
 
 FORMATS = {"jpeg": "image/jpeg", "png": "image/png", "webp": "image/webp"}

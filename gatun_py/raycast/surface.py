@@ -1,6 +1,6 @@
 """A shaded preview of a triangle surface: z-buffered rasterisation with Lambert shading.
 
-Same camera as the volume renderer (:class:`~gatun_py.render.camera.Camera`, VTK's conventions),
+Same camera as the volume renderer (:class:`~gatun_py.raycast.camera.Camera`, VTK's conventions),
 a headlight at the camera (as VTK's default light), two-sided diffuse shading plus a little ambient
 light, colour by a per-vertex scalar through a matplotlib-free two-tone ramp. Enough to see what an
 isosurface looks like without another tool; not a replacement for ParaView.
@@ -72,7 +72,7 @@ def render_surface(points, triangles, camera, *, scalar=None, bbox=None) -> np.n
 
     Examples
     --------
-    >>> from gatun_py.render.camera import Camera
+    >>> from gatun_py.raycast.camera import Camera
     >>> pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
     >>> img = render_surface(pts, np.array([[0, 1, 2]]), Camera(32, 32))
     >>> img.shape, bool(img[..., 3].any())

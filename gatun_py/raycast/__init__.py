@@ -10,7 +10,7 @@ from .._lazy import attach
 _LAZY = {
     "Camera": "camera", "FittedCamera": "camera",
     "to_rgb8": "image", "write_png": "image",
-    "MODES": "raycast", "RenderResult": "raycast", "StreamingRaycaster": "raycast", "render_mesh": "raycast",
+    "MODES": "caster", "RenderResult": "caster", "StreamingRaycaster": "caster", "render_mesh": "caster",
     "render_batches": "stream",
     "TransferFunction": "transfer", "load_transfer_function": "transfer", "preset_names": "transfer",
 }

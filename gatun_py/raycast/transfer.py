@@ -313,7 +313,7 @@ DEFAULT_OPACITY = (np.array([0.0, 1.0]), np.array([0.0, 0.5]))
 
 
 def preset_names() -> list[str]:
-    """Names of the bundled presets (``gatun_py/render/presets/*.json``)."""
+    """Names of the bundled presets (``gatun_py/raycast/presets/*.json``)."""
     return sorted(p.name[:-5] for p in PRESETS.iterdir() if p.name.endswith(".json"))
 
 

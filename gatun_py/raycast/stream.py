@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 
-from .raycast import RenderResult, StreamingRaycaster
+from .caster import RenderResult, StreamingRaycaster
 
 
 def render_batches(batches, camera, tf, *, mode: str = "volume", step: float | None = None, scalar_range=None,

@@ -142,9 +142,9 @@ class Surface:
         (32, 48, 3)
         """
         # the renderer (and PIL, for images) load only for a preview: start-up and memory of a plain extraction
-        from ..render.camera import Camera
-        from ..render.image import to_rgb8
-        from ..render.surface import render_surface
+        from ..raycast.camera import Camera
+        from ..raycast.image import to_rgb8
+        from ..raycast.surface import render_surface
 
         w, h = (int(size), int(size)) if np.isscalar(size) else (int(size[0]), int(size[1]))
         if w <= 0 or h <= 0 or w * h > MAX_PREVIEW_PIXELS:
@@ -170,14 +170,14 @@ class Surface:
     def save_preview(self, path, *, size=512, azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0,
                      frame: str = "surface", force: bool = False) -> None:
         """Write :meth:`preview` as an image (PNG, JPEG, WebP, TIFF or BMP from the extension), atomically."""
-        from ..render.image import write_image  # PIL only for a preview (see preview)
+        from ..raycast.image import write_image  # PIL only for a preview (see preview)
 
         check_output_path(path, force=force)
         write_image(path, self.preview(size=size, azimuth=azimuth, elevation=elevation, zoom=zoom, frame=frame),
                     force=force)
 
     def _repr_png_(self) -> bytes:
-        from ..render.image import png_bytes  # PIL only for a preview (see preview)
+        from ..raycast.image import png_bytes  # PIL only for a preview (see preview)
 
         return png_bytes(self.preview(size=384, azimuth=30, elevation=20))
 

@@ -56,7 +56,7 @@ class RenderResult:
         out before the walk.
     fragments : Fragments or None
         Every segment's composited colour and depth interval (asked for with ``fragments=True``),
-        what :func:`~gatun_py.render.composite.composite` sorts and blends with other bricks'.
+        what :func:`~gatun_py.raycast.composite.composite` sorts and blends with other bricks'.
     """
 
     image: np.ndarray

@@ -1,1 +1,0 @@
-"""Transfer-function presets (JSON files read with importlib.resources by ``gatun_py.render.transfer``)."""

@@ -78,7 +78,8 @@ render_steps = _Verb("render_steps")
 compress_pieces = _Verb("compress_pieces", ".pipeline.compress_pieces")
 
 # classes load with their module on first access
-_LAZY = {"TetcFile": "api", "Frame": "api", "Surface": "contour.extract", "TetMesh": "mesh", "TetBatch": "mesh", "read_mesh": "mesh",
+_LAZY = {"TetcFile": "api", "Frame": "pipeline.requests", "View": "pipeline.requests", "Detail": "pipeline.requests",
+         "ReadOptions": "mesh.io", "Surface": "contour.extract", "TetMesh": "mesh", "TetBatch": "mesh", "read_mesh": "mesh",
          "read_series": "mesh.series", "Series": "mesh.series",
          "write_mesh": "mesh"}
 
@@ -89,7 +90,7 @@ __getattr__, __dir__, _ = attach(__name__, _LAZY)
 _register_meshio()
 
 __all__ = ["compress", "decompress", "convert", "info", "open", "render", "isosurface", "append", "render_steps",
-           "compress_pieces", "TetcFile", "Frame",
+           "compress_pieces", "TetcFile", "Frame", "View", "Detail", "ReadOptions",
            "Surface", "TetMesh",
            "TetBatch", "read_mesh", "write_mesh", "read_series", "Series", "TetcError", "ReadError", "MeshError", "CorruptFileError",
            "FormatVersionError", "OptionError", "OutputError", "OutputExistsError", "__version__"]

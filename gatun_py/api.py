@@ -24,7 +24,6 @@ import tempfile
 import time
 from time import perf_counter as _perf_counter  # render's own argument `time` hides the module
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import meshio
@@ -54,44 +53,45 @@ from .mesh.pieces import is_partitioned
 from .pipeline.sortlast import BrickRef, MeshExtent, render_bricks, split_for_render
 from .pipeline.series import append_step, write_series
 from .pipeline.budget import load_costs, plan_file_budget, remember_frame
-from .limits import MAX_IMAGE_SIDE
 from .pipeline.distributed import BrickCluster
 from .pipeline.selective import SELECTION_ALLOWANCE_S, budget_tets, render_selective, selective_mesh
-from .pipeline.stream import PIPELINES, View, is_tetc, render_mesh_file, render_tetc
-from .raycast.camera import Camera
-from .raycast.image import add_colorbar, image_bytes, image_format, parse_colour, to_rgb8, upscale_rgb8, write_image
-from .raycast.caster import MODES
-from .raycast.transfer import load_transfer_function
+from .limits import PIPELINES
+from .pipeline.requests import Detail, Frame, ReadOptions, View, split_options
+from .pipeline.requests import check_number as _check_number
+from .pipeline.stream import View as _StreamView  # the fitted view the stages draw with
+from .pipeline.stream import is_tetc, render_mesh_file, render_tetc
+from .raycast.image import add_colorbar, image_format, to_rgb8, upscale_rgb8, write_image
 from .simplify import build_levels, decimate, level_payloads
 from .simplify.dependencies import merge_dependencies
 from .simplify.filter import SimplifyFilter
 from .simplify.levels import MAX_LEVEL, max_stored_level, next_level, resolve_target, target_ancestors
 
-__all__ = ["compress", "decompress", "convert", "info", "open", "render", "render_frames", "render_steps", "append", "TetcFile", "Frame"]
+__all__ = ["compress", "decompress", "convert", "info", "open", "render", "render_frames", "render_steps", "append", "TetcFile", "Frame",
+           "View", "Detail", "ReadOptions"]
 
 _watch_compiles()  # a verb (or method) whose first run compiles says so on stderr, once per process
 
 
 # -- reading the source --------------------------------------------------------------------------
 
-def _as_mesh(source, read_options: dict, log, *, storing: bool = False, drop_cell_data: bool = False) -> TetMesh:
+def _as_mesh(source, read: ReadOptions, log, *, storing: bool = False, drop_cell_data: bool = False) -> TetMesh:
     """A TetMesh from a path, a TetMesh or a meshio.Mesh (notes of the reader go to ``log``).
 
     ``storing``: the mesh is about to be compressed with its cells (:func:`_as_mesh_and_cells`),
     so ``drop_cell_data`` leaves its cell arrays out, with a note.
     """
-    return _as_mesh_and_cells(source, read_options, log, storing=storing, drop_cell_data=drop_cell_data)[0]
+    return _as_mesh_and_cells(source, read, log, storing=storing, drop_cell_data=drop_cell_data)[0]
 
 
-def _as_mesh_and_cells(source, read_options: dict, log, *, storing: bool = False, drop_cell_data: bool = False):
+def _as_mesh_and_cells(source, read: ReadOptions, log, *, storing: bool = False, drop_cell_data: bool = False):
     """(TetMesh, the cells as given or None) from a path, a TetMesh or a meshio.Mesh."""
     if isinstance(source, TetMesh):
         return source, None
     if type(source).__name__ == "Mesh" and hasattr(source, "cells") and hasattr(source, "points"):
-        mesh, report = mesh_from_meshio(source, scalar=read_options.get("scalar"),
-                                        cell_to_point=read_options.get("cell_to_point", False), source="<meshio.Mesh>")
+        mesh, report = mesh_from_meshio(source, scalar=read.scalar, cell_to_point=read.cell_to_point,
+                                        source="<meshio.Mesh>")
     elif isinstance(source, (str, os.PathLike)):
-        mesh, report = read_mesh(source, **read_options)
+        mesh, report = read_mesh(source, **read.kwargs())
     else:
         raise OptionError(f"cannot read a mesh from a {type(source).__name__}: give a path, a TetMesh or a meshio.Mesh")
     for note in report.notes:
@@ -214,8 +214,8 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     _check_output(source, output, force=force)  # fail before the (long) work
     _announce_compiling(["encoder"] + ([] if mesh_only else ["decimation"]) + (["dependencies"] if dependencies else []))
     t0 = time.perf_counter()
-    mesh, cells = _as_mesh_and_cells(source, dict(scalar=scalar, q_file=q_file, q_var=q_var,
-                                                  cell_to_point=cell_to_point, time_step=time_step),
+    mesh, cells = _as_mesh_and_cells(source, ReadOptions(scalar=scalar, q_file=q_file, q_var=q_var,
+                                                         cell_to_point=cell_to_point, time_step=time_step),
                                      log, storing=True, drop_cell_data=drop_cell_data)
     if keep_order:
         if bricks > 1:
@@ -341,11 +341,9 @@ def _counter(progress, total: int):
     return update
 
 
-def decompress(source, output, *, ratio: float | None = None, level: int | None = None, force: bool = False,
-               jobs: int | None = None, selective: bool = False, tets: int | None = None, size=256,
-               tf="default", azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0, scalar_range=None,
-               as_tets: bool = False, log=None, step: int | None = None, time: float | None = None,
-               piece: int | None = None) -> TetMesh:
+def decompress(source, output, *, detail: Detail | None = None, view: View | None = None, force: bool = False,
+               jobs: int | None = None, as_tets: bool = False, log=None, step: int | None = None,
+               time: float | None = None, piece: int | None = None, **options) -> TetMesh:
     """Decode a ``.tetc`` file (optionally simplified) and write it in any meshio format.
 
     The full mesh of a file that stores its cells as given (hexahedra, wedges, quadratic cells,
@@ -355,21 +353,23 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
     A time series: ``step`` (index, negative from the end) or ``time`` picks the step written
     (default step 0); an output ending in ``.pvd`` or ``.xdmf`` without either gets every step.
 
+    ``detail``: a :class:`Detail` with a ``ratio`` or ``level`` (default: the full mesh), or
+    ``selective`` with a ``ratio`` or ``tets``: the mesh a selective render with ``view`` (a
+    :class:`View`: size, camera, transfer function, scalar range) would draw, so it can be checked
+    and used elsewhere. A file without merge dependencies gives the uniform mesh, with a note
+    through ``log``. Their fields may be given as flat keywords (``ratio=0.5``, ``azimuth=30``).
+
     ``jobs``: threads decoding (default: all cores): the connectivity ahead of the geometry, the
-    bricks of a bricked file in parallel (:meth:`TetcFile.mesh`). With
-    ``selective``, the mesh a selective render of that view and transfer function (``size``,
-    ``tf``, ``azimuth``, ``elevation``, ``zoom``, ``scalar_range``, see :func:`render`) would draw,
-    at ``ratio`` or ``tets``: so it can be checked and used elsewhere. A file without merge
-    dependencies gives the uniform mesh, with a note through ``log``. With ``piece`` (a file
+    bricks of a bricked file in parallel (:meth:`TetcFile.mesh`). With ``piece`` (a file
     compressed from pieces), only that piece's bricks, at ``level``.
 
     Returns the mesh written.
     """
     log = log or _quiet
-    if tets is not None and not selective:
-        raise OptionError("tets needs selective=True")
-    if selective and level is not None:
-        raise OptionError("selective refinement takes a ratio or tets, not a stored level")
+    detail, view = split_options("decompress", options, detail=detail, view=view)
+    if detail.budget is not None:
+        raise OptionError("decompress takes a ratio, a level or selective tets, not a budget")
+    ratio, level, selective, tets = detail.ratio, detail.level, detail.selective, detail.tets
     if step is not None and time is not None:
         raise OptionError("give a step or a time, not both")
     kind = _series_output(output)
@@ -400,14 +400,10 @@ def decompress(source, output, *, ratio: float | None = None, level: int | None 
             raise OptionError("a piece is decoded at a stored level: not with a ratio or selective")
         mesh = piece_mesh(f.reader, piece, level=0 if level is None else int(level), jobs=jobs)
     if selective:
-        w, h = _size(size)
-        view = View(Camera(w, h, _check_number("azimuth", azimuth, allow_none=False),
-                           _check_number("elevation", elevation, allow_none=False),
-                           _check_number("zoom", zoom, lo=0.0, lo_open=True, allow_none=False)),
-                    load_transfer_function(tf), scalar_range=None if scalar_range is None else tuple(scalar_range))
+        sview = _StreamView(view.camera, view.tf, scalar_range=view.scalar_range)
         if ratio is None and tets is None:
             ratio = 0.5
-        mesh, cut = selective_mesh(f.reader, view, ratio=ratio, tets=tets)
+        mesh, cut = selective_mesh(f.reader, sview, ratio=ratio, tets=tets)
         if mesh is None:
             log("note: this file stores no merge dependencies (it was compressed without them): decoding uniformly")
             ratio = ratio if tets is None else None
@@ -462,7 +458,7 @@ def convert(source, output, *, refine: int = 1, force: bool = False, scalar: str
             log(f"note: cell data not written ({', '.join(map(repr, report.cell_arrays))}): only point data "
                 "follows the split into tets; average it to the points with cell-to-point")
     else:
-        mesh = _as_mesh(source, dict(scalar=scalar, cell_to_point=cell_to_point), log)
+        mesh = _as_mesh(source, ReadOptions(scalar=scalar, cell_to_point=cell_to_point), log)
     write_mesh(mesh, output, force=force)
     return mesh
 
@@ -596,7 +592,7 @@ def append(path, source, *, time: float | None = None, scalar: str | None = None
     leaves the earlier steps readable, and the next append cuts its bytes off first.
     """
     log = log or _quiet
-    mesh = _as_mesh(source, dict(scalar=scalar, cell_to_point=cell_to_point), log, storing=True,
+    mesh = _as_mesh(source, ReadOptions(scalar=scalar, cell_to_point=cell_to_point), log, storing=True,
                     drop_cell_data=drop_cell_data)
     if time is not None:
         time = _check_number("time", time, allow_none=False)
@@ -857,153 +853,36 @@ def open(path) -> TetcFile:  # noqa: A001 (the verb users look for, as gzip.open
 
 # -- render --------------------------------------------------------------------------------------
 
-@dataclass
-class Frame:
-    """A rendered image.
-
-    Attributes
-    ----------
-    rgb : (H, W, 3) uint8
-        The picture (over the background, with the colour bar if one was asked for).
-    image : (H, W, 4) float32
-        The ray caster's premultiplied RGBA, before background and colour bar.
-    stats : dict
-        Timings and counts (what ``tetc render --stats`` prints).
-    """
-
-    rgb: np.ndarray
-    image: np.ndarray
-    stats: dict = field(default_factory=dict)
-
-    def __repr__(self) -> str:
-        h, w, _ = self.rgb.shape
-        return f"Frame({w}x{h}, tets_rendered={self.stats.get('tets_rendered')}, render_s={self.stats.get('render_s', 0):.3f})"
-
-    def save(self, path, *, force: bool = False) -> None:
-        """Write the picture atomically, in the format of the extension (.png, .jpg, .webp, .tif, .bmp)."""
-        write_image(path, self.rgb, force=force)
-
-    def _repr_png_(self) -> bytes:
-        return image_bytes(self.rgb, "PNG")
-
-
-def _render_selective(reader, view, *, ratio, tets, budget, pipeline, progress, log):
-    """(PipelineResult, planned stats) of a selective render of a file with merge dependencies;
-    without ratio, tets or budget: ratio 0.5 (half the vertices merged where they matter least)."""
-    planned = {}
-    level = 0
-    if budget is not None:
-        if load_costs() is None:
-            log("measuring this machine's rendering costs for the budget (once, under a second)...")
-        # the uniform plan's level and tets, chosen selectively within that level's forest
-        target, plan, _, _ = plan_file_budget(reader, view, max(budget - SELECTION_ALLOWANCE_S, 1e-3))
-        level, tets = target.level, budget_tets(reader, view, target)
-        planned = {"predicted_s": plan.predicted_s, "budget_s": budget}
-    elif ratio is None and tets is None:
-        ratio = 0.5
-    total = int(reader.level_meta(0)["tets"])
-    result = render_selective(reader, view, ratio=ratio, tets=tets, pipeline=pipeline, level=level,
-                              progress=_counter(progress, total), log=log)
-    return result, planned
-
-
-def _note_if_unsimplifiable(reader, name, log) -> None:
-    """Say once that a budget cannot simplify a file stored without levels or a forest
-    (``--mesh-only``): the render then meets the budget only by drawing fewer pixels, or not at all."""
-    parts = [reader.brick(k) for k in range(reader.n_bricks)] if reader.n_bricks > 1 else [reader]
-    if not any(len(r.levels) > 1 or any(lv.get("has_forest") for lv in r.levels) for r in parts):
-        log(f"note: {name} stores no simplified levels and no merge forest (compressed with --mesh-only): "
-            "a budget cannot simplify its mesh; compress it without --mesh-only to let a budget pick "
-            "a coarser level")
-
-
-def _check_number(name, v, *, lo=None, lo_open=False, hi=None, allow_none=True):
-    if v is None and allow_none:
-        return None
-    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
-        raise OptionError(f"{name} must be a finite number, got {v!r}")
-    if lo is not None and (v <= lo if lo_open else v < lo):
-        raise OptionError(f"{name} must be {'>' if lo_open else '>='} {lo:g}, got {v!r}")
-    if hi is not None and v > hi:
-        raise OptionError(f"{name} must be <= {hi:g}, got {v!r}")
-    return float(v)
-
-
-def _size(size) -> tuple[int, int]:
-    w, h = (size, size) if isinstance(size, (int, np.integer)) else tuple(size)
-    for v in (w, h):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= MAX_IMAGE_SIDE:
-            raise OptionError(f"image size must be whole pixels in 1..{MAX_IMAGE_SIDE}, got {size!r}")
-    return int(w), int(h)
-
-
-def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: float = 0.0, zoom: float = 1.0,
-           ratio: float | None = None, level: int | None = None, budget: float | None = None, mode: str = "volume",
-           step: float | None = None, scalar_range=None, opacity_model: str | None = None,
-           background="black", colorbar: bool = False, lean: bool = False, pipeline: str = "streaming",
-           scalar: str | None = None, q_file=None, q_var: str = "density", cell_to_point: bool = False,
-           time_step: int | None = None, component=None, selective: bool = False, tets: int | None = None,
-           progress=None, log=None, time: float | None = None, terminate: bool = True) -> Frame:
+def render(source, *, view: View | None = None, detail: Detail | None = None, read: ReadOptions | None = None,
+           pipeline: str = "streaming", time: float | None = None, progress=None, log=None, **options) -> Frame:
     """Volume-render a mesh: decode, simplify and ray-cast in one streaming pass.
 
     Parameters
     ----------
     source : path-like, TetcFile, TetMesh or meshio.Mesh
         A ``.tetc`` file (opened once), any mesh file, or a mesh in memory.
-    size : int or (int, int)
-        Image width and height in pixels.
-    tf : str, path-like, dict or TransferFunction
-        Transfer function: a preset name (``default``, ``bluntfin``, ``combustion``, ``post``,
-        ``fire``), a JSON file (project or ParaView format), a matplotlib colormap name, or a dict.
-    azimuth, elevation, zoom : float
-        VTK's camera: 30 degree perspective fitted to the bounding sphere, then these.
-    ratio : float, optional
-        Simplify to this ratio (merged / all vertices), ``.tetc`` only.
-    level : int, optional
-        Render a stored level as it is, ``.tetc`` only.
-    budget : float, optional
-        Seconds per frame: the finest level and ratio predicted to fit, ``.tetc`` only.
-    mode : {"volume", "face"}
-        Uniform samples every ``step``, or one sample per tet at its faces.
-    step : float, optional
-        Sample spacing (default: half the median boundary edge of the full mesh, at most 1/512 of
-        its bounding-box diagonal; a file compressed by an earlier version keeps the step it recorded).
-    scalar_range : (float, float), optional
-        The range the transfer function is normalised to (default: the mesh's). Fix it to compare
-        files or time steps.
-    opacity_model : {"gatun", "vtk"}, optional
-        How opacity accumulates (see :mod:`gatun_py.raycast.transfer`).
-    background : str or (r, g, b)
-        A colour name, ``#rrggbb`` or RGB in 0..1.
-    colorbar : bool
-        Add a colour bar with the scalar's name and range on the right.
-    lean : bool
-        Hold only the tets in flight (less memory, slower).
-    terminate : bool
-        Stop each ray where its opacity reaches 0.99 (early ray termination, as VTK; what lies behind
-        would change the pixel by less than 1 %). Off: every ray is walked to its end, as a bricked
-        file's bricks are (sort-last compositing needs whole segments).
-    pipeline : {"streaming", "generic"}
-        One pass, or decode-all-then-render (the paper's baseline).
-    scalar, q_file, q_var, cell_to_point, time_step
+    view : View, optional
+        How to draw: image size, camera, transfer function, mode, step, scalar range, background,
+        colour bar, lean, early ray termination, vector component (default: ``View()``).
+    detail : Detail, optional
+        How much to draw, ``.tetc`` only: a ratio, a stored level, a frame-time budget, or a
+        selective cut to a ratio, tets or budget (default: the full mesh).
+    read : ReadOptions, optional
         How to read a mesh file (see :func:`gatun_py.read_mesh`). For a ``.tetc`` file, ``scalar``
         names the stored point array to render (default: the file's default scalar), and
-        ``time_step`` the step of a time series (default 0; ``step`` is the sample spacing).
+        ``time_step`` the step of a time series (default 0).
+    pipeline : {"streaming", "generic"}
+        One pass, or decode-all-then-render (the paper's baseline).
     time : float, optional
         ``.tetc`` time series: render the step at this time (instead of ``time_step``).
-    component : None, int or "magnitude"
-        ``.tetc``: for a vector array, the component to render or its magnitude.
-    selective : bool
-        ``.tetc``: simplify where this view and transfer function say it matters least (a closed
-        cut of the merge forest, never a flipped tet; :mod:`gatun_py.pipeline.selective`), to
-        ``ratio``, ``tets`` or ``budget``. A file without merge dependencies renders uniformly,
-        with a note.
-    tets : int, optional
-        With ``selective``: render at most this many tets (above the mesh's count: the full mesh).
     progress : callable, optional
         ``progress(done, total)``: tets rendered so far, of ``total``.
     log : callable, optional
         Called with one-line notes (reader notes, an unmeetable budget, a black image).
+    **options
+        Shorthand: any field of :class:`View`, :class:`Detail` or :class:`ReadOptions` by its name
+        (``size=512, tf="bluntfin", azimuth=30, ratio=0.9, scalar="rho"``), changing the record
+        given or the default one.
 
     Returns
     -------
@@ -1013,129 +892,136 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
     --------
     >>> import gatun_py
     >>> from gatun_py.warmup import tiny_mesh
-    >>> frame = gatun_py.render(tiny_mesh(), size=32, azimuth=30, elevation=20)
+    >>> frame = gatun_py.render(tiny_mesh(), view=gatun_py.View(size=32, azimuth=30), elevation=20)
     >>> frame.rgb.shape, frame.stats["rays_unfinished"]
     ((32, 32, 3), 0)
     """
     log = log or _quiet
-    width, height = _size(size)
-    azimuth = _check_number("azimuth", azimuth, allow_none=False)
-    elevation = _check_number("elevation", elevation, allow_none=False)
-    zoom = _check_number("zoom", zoom, lo=0.0, lo_open=True, allow_none=False)
-    step = _check_number("step", step, lo=0.0, lo_open=True)
-    budget = _check_number("budget", budget, lo=0.0, lo_open=True)
-    ratio = _check_number("ratio", ratio, lo=0.0, hi=1.0)
-    if mode not in MODES:
-        raise OptionError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+    view, detail, read = split_options("render", options, view=view, detail=detail, read=read)
     if pipeline not in PIPELINES:
         raise OptionError(f"pipeline must be one of {', '.join(PIPELINES)}, got {pipeline!r}")
-    if sum(x is not None for x in (ratio, level, budget, tets)) > 1:
-        raise OptionError("give at most one of ratio, level, budget and tets")
-    if tets is not None:
-        if isinstance(tets, bool) or not isinstance(tets, (int, np.integer)) or tets < 1:
-            raise OptionError(f"tets must be a whole number >= 1, got {tets!r}")
-        if not selective:
-            raise OptionError("tets needs selective=True (a uniform render takes a ratio or a level)")
-    if selective and level is not None:
-        raise OptionError("selective refinement takes a ratio, tets or a budget, not a stored level")
-    if scalar_range is not None:
-        lo, hi = (_check_number("scalar_range", v, allow_none=False) for v in scalar_range)
-        if not hi > lo:
-            raise OptionError(f"scalar_range must be (min, max) with min < max, got {tuple(scalar_range)}")
-        scalar_range = (lo, hi)
-    bg = parse_colour(background)
-    tf = load_transfer_function(tf)
-    if opacity_model is not None:
-        tf = tf.with_opacity_model(opacity_model)
-    view = View(Camera(width, height, azimuth, elevation, zoom), tf, mode, step, bool(lean), scalar_range,
-                terminate=bool(terminate))
     tetc_input = isinstance(source, TetcFile) or (isinstance(source, (str, os.PathLike)) and is_tetc(source))
-    simplifies = tetc_input and (selective or any(x is not None for x in (ratio, level, budget, tets)))
     _announce_compiling((["decoder"] if tetc_input else []) + ["renderer"]
-                        + (["forest decoder", "filter"] if simplifies else []))
-
+                        + (["forest decoder", "filter"] if tetc_input and detail.simplifies else []))
     t0 = _perf_counter()
+    sview = _StreamView(view.camera, view.tf, view.mode, view.step, view.lean, view.scalar_range,
+                        terminate=view.terminate)
+    if not tetc_input:
+        result, name, rng = _render_mesh_source(source, sview, detail, read, time=time, progress=progress, log=log)
+        return _finish_frame(result, {}, view, name, rng, t0, log)
+    f = source if isinstance(source, TetcFile) else TetcFile(source)
+    if read.time_step is not None or time is not None:  # a step of a series
+        f = f.at(read.time_step, time=time)
+    if detail.budget is not None:
+        _note_if_unsimplifiable(f.reader, os.path.basename(os.fspath(f.reader.container.name)), log)
+    if read.scalar is not None or view.component is not None:
+        sview = dataclasses.replace(sview, scalar=read.scalar or f.scalar_name, component=view.component)
+    planner = _render_bricked if f.n_bricks > 1 else _render_selective if detail.selective else _render_uniform
+    result, planned = planner(f.reader, sview, detail, pipeline=pipeline, progress=progress, log=log)
+    name = f.scalar_name if sview.scalar is None else sview.scalar + (
+        "" if sview.component is None else f"[{sview.component}]")
+    return _finish_frame(result, planned, view, name, f.reader.array_range(sview.scalar, sview.component) or (0.0, 1.0),
+                         t0, log)
+
+
+def _render_mesh_source(source, sview, detail: Detail, read: ReadOptions, *, time, progress, log):
+    """(PipelineResult, scalar name, scalar range) of a mesh file or a mesh in memory."""
+    if time is not None:
+        raise OptionError("time picks a step of a .tetc time series")
+    if detail.simplifies:
+        raise OptionError("ratio, level, budget and selective need a .tetc file with a merge forest "
+                          "(make one with gatun_py.compress or `tetc compress`)")
+    mesh = _as_mesh(source, read, log)
+    result = render_mesh_file(mesh, sview, progress=_counter(progress, mesh.n_tets))
+    return result, mesh.scalar_name, mesh.scalar_range
+
+
+def _render_bricked(reader, sview, detail: Detail, *, pipeline, progress, log):
+    """(PipelineResult, planned stats) of a bricked file: each brick streams on its own into
+    fragments, composited by depth; nothing is stitched, and under a budget each brick picks its
+    own level."""
+    if detail.selective:
+        raise OptionError("selective refinement needs a file of one plain stream, not a bricked one")
+    total = int(reader.meta.get("tets", 0))
+    result = render_bricks([reader.brick(k) for k in range(reader.n_bricks)], sview, MeshExtent.of_reader(reader),
+                           ratio=detail.ratio, level=detail.level, budget=detail.budget,
+                           progress=_counter(progress, total))
+    return result, ({"budget_s": detail.budget} if detail.budget is not None else {})
+
+
+def _render_uniform(reader, sview, detail: Detail, *, pipeline, progress, log):
+    """(PipelineResult, planned stats) of a stored level, simplified on the fly to a ratio, or
+    planned to a budget (drawn smaller and scaled up when no level fits)."""
     planned = {}
-    bricked = None
-    if isinstance(source, TetcFile) or (isinstance(source, (str, os.PathLike)) and is_tetc(source)):
-        f = source if isinstance(source, TetcFile) else TetcFile(source)
-        if time_step is not None or time is not None:  # a step of a series
-            f = f.at(time_step, time=time)
-        if budget is not None:
-            _note_if_unsimplifiable(f.reader, os.path.basename(os.fspath(f.reader.container.name)), log)
-        if f.n_bricks > 1:
-            if selective:
-                raise OptionError("selective refinement needs a file of one plain stream, not a bricked one")
-            if scalar is not None or component is not None:
-                view = dataclasses.replace(view, scalar=scalar or f.scalar_name, component=component)
-            # each brick streams on its own into fragments, composited by depth: nothing is stitched,
-            # and under a budget each brick picks its own level
-            bricked = render_bricks([f.reader.brick(k) for k in range(f.n_bricks)], view,
-                                    MeshExtent.of_reader(f.reader), ratio=ratio, level=level, budget=budget,
-                                    progress=_counter(progress, f.n_tets))
-            if budget is not None:
-                planned = {"budget_s": budget}
-            name = f.scalar_name if view.scalar is None else view.scalar + ("" if component is None else f"[{component}]")
-            rng = f.reader.array_range(view.scalar, view.component) or (0.0, 1.0)
-    if bricked is not None:
-        result = bricked
-    elif isinstance(source, TetcFile) or (isinstance(source, (str, os.PathLike)) and is_tetc(source)):
-        if scalar is not None or component is not None:
-            view = dataclasses.replace(view, scalar=scalar or f.scalar_name, component=component)
-        if selective and not f.reader.has_dependencies():
-            log("note: this file stores no merge dependencies (it was compressed without them): rendering uniformly")
-            selective, planned["selective"] = False, False
-            if tets is not None:  # the stored level with the fewest tets still at least that many
-                lvs = [lv for lv in f.reader.levels if int(lv["tets"]) >= tets] or f.reader.levels[:1]
-                level, tets = int(min(lvs, key=lambda lv: int(lv["tets"]))["level"]), None
-        if selective:
-            result, planned = _render_selective(f.reader, view, ratio=ratio, tets=tets, budget=budget,
-                                                pipeline=pipeline, progress=progress, log=log)
-        else:
-            target = resolve_target(f.reader, ratio=ratio, level=level)
-            if budget is not None:
-                if load_costs() is None:
-                    log("measuring this machine's rendering costs for the budget (once, under a second)...")
-                target, plan, planner, _ = plan_file_budget(f.reader, view, budget)
-                planned.update(predicted_s=plan.predicted_s, budget_s=budget, image_scale=plan.scale)
-                if plan.scale != 1.0:
-                    view = dataclasses.replace(view, camera=dataclasses.replace(
-                        view.camera, width=max(1, round(width * plan.scale)),
-                        height=max(1, round(height * plan.scale))))
-                    log(f"note: no level renders {width}x{height} within {budget:g} s: rendering "
-                        f"{view.camera.width}x{view.camera.height} and scaling it up")
-                if not plan.feasible:
-                    log(f"note: the budget of {budget:g} s cannot be met: rendering the coarsest level "
-                        f"(predicted {plan.predicted_s:.3f} s)")
-            total = int(f.reader.level_meta(target.level)["tets"])
-            t_frame = _perf_counter()
-            result = render_tetc(f.reader, view, pipeline=pipeline, target=target, progress=_counter(progress, total))
-            if budget is not None:  # the machine's costs learn from every budget render
-                remember_frame(planner, result.stats, total_s=_perf_counter() - t_frame)
-        name = f.scalar_name if view.scalar is None else view.scalar + ("" if component is None else f"[{component}]")
-        rng = f.reader.array_range(view.scalar, view.component) or (0.0, 1.0)
-    else:
-        if time is not None:
-            raise OptionError("time picks a step of a .tetc time series")
-        if ratio is not None or level is not None or budget is not None or selective:
-            raise OptionError("ratio, level, budget and selective need a .tetc file with a merge forest "
-                              "(make one with gatun_py.compress or `tetc compress`)")
-        mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point,
-                              time_step=time_step), log)
-        result = render_mesh_file(mesh, view, progress=_counter(progress, mesh.n_tets))
-        name, rng = mesh.scalar_name, mesh.scalar_range
+    target = resolve_target(reader, ratio=detail.ratio, level=detail.level)
+    budget = detail.budget
+    if budget is not None:
+        if load_costs() is None:
+            log("measuring this machine's rendering costs for the budget (once, under a second)...")
+        target, plan, planner, _ = plan_file_budget(reader, sview, budget)
+        planned.update(predicted_s=plan.predicted_s, budget_s=budget, image_scale=plan.scale)
+        if plan.scale != 1.0:
+            width, height = sview.camera.width, sview.camera.height
+            sview = dataclasses.replace(sview, camera=dataclasses.replace(
+                sview.camera, width=max(1, round(width * plan.scale)), height=max(1, round(height * plan.scale))))
+            log(f"note: no level renders {width}x{height} within {budget:g} s: rendering "
+                f"{sview.camera.width}x{sview.camera.height} and scaling it up")
+        if not plan.feasible:
+            log(f"note: the budget of {budget:g} s cannot be met: rendering the coarsest level "
+                f"(predicted {plan.predicted_s:.3f} s)")
+    total = int(reader.level_meta(target.level)["tets"])
+    t_frame = _perf_counter()
+    result = render_tetc(reader, sview, pipeline=pipeline, target=target, progress=_counter(progress, total))
+    if budget is not None:  # the machine's costs learn from every budget render
+        remember_frame(planner, result.stats, total_s=_perf_counter() - t_frame)
+    return result, planned
+
+
+def _render_selective(reader, sview, detail: Detail, *, pipeline, progress, log):
+    """(PipelineResult, planned stats) of a selective render of a file with merge dependencies;
+    without ratio, tets or budget: ratio 0.5 (half the vertices merged where they matter least).
+    A file without them renders uniformly, with a note."""
+    if not reader.has_dependencies():
+        log("note: this file stores no merge dependencies (it was compressed without them): rendering uniformly")
+        level = detail.level
+        if detail.tets is not None:  # the stored level with the fewest tets still at least that many
+            lvs = [lv for lv in reader.levels if int(lv["tets"]) >= detail.tets] or reader.levels[:1]
+            level = int(min(lvs, key=lambda lv: int(lv["tets"]))["level"])
+        result, planned = _render_uniform(reader, sview, detail.replace(selective=False, tets=None, level=level),
+                                          pipeline=pipeline, progress=progress, log=log)
+        return result, {"selective": False, **planned}
+    planned = {}
+    level, ratio, tets = 0, detail.ratio, detail.tets
+    if detail.budget is not None:
+        if load_costs() is None:
+            log("measuring this machine's rendering costs for the budget (once, under a second)...")
+        # the uniform plan's level and tets, chosen selectively within that level's forest
+        target, plan, _, _ = plan_file_budget(reader, sview, max(detail.budget - SELECTION_ALLOWANCE_S, 1e-3))
+        level, tets = target.level, budget_tets(reader, sview, target)
+        planned = {"predicted_s": plan.predicted_s, "budget_s": detail.budget}
+    elif ratio is None and tets is None:
+        ratio = 0.5
+    total = int(reader.level_meta(0)["tets"])
+    result = render_selective(reader, sview, ratio=ratio, tets=tets, pipeline=pipeline, level=level,
+                              progress=_counter(progress, total), log=log)
+    return result, planned
+
+
+def _finish_frame(result, planned: dict, view: View, name: str, rng, t0: float, log) -> Frame:
+    """The Frame of a render: over the background, at the size asked for, with the colour bar, and
+    its stats (the notes of the stages go to ``log``)."""
     st = result.stats
     st.pop("filter", None)
     for note in st.pop("notes", []):
         log(f"note: {note}")
     st.update(planned)
-    rng = scalar_range if scalar_range is not None else tuple(float(v) for v in rng)
-    rgb = to_rgb8(result.image, bg)
+    rng = view.scalar_range if view.scalar_range is not None else tuple(float(v) for v in rng)
+    width, height = view.size
+    rgb = to_rgb8(result.image, view.background)
     if rgb.shape[:2] != (height, width):  # a budget render drawn smaller
         rgb = upscale_rgb8(rgb, width, height)
-    if colorbar:
-        table = tf.table(rng)[0]
-        rgb = add_colorbar(rgb, table, rng, name, bg)
+    if view.colorbar:
+        rgb = add_colorbar(rgb, view.tf.table(rng)[0], rng, name, view.background)
     st["render_total_s"] = _perf_counter() - t0
     st["peak_rss_mb"] = peak_rss_mb()
     st["size"] = [width, height]
@@ -1150,9 +1036,19 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
     return Frame(rgb, result.image, st)
 
 
+def _note_if_unsimplifiable(reader, name, log) -> None:
+    """Say once that a budget cannot simplify a file stored without levels or a forest
+    (``--mesh-only``): the render then meets the budget only by drawing fewer pixels, or not at all."""
+    parts = [reader.brick(k) for k in range(reader.n_bricks)] if reader.n_bricks > 1 else [reader]
+    if not any(len(r.levels) > 1 or any(lv.get("has_forest") for lv in r.levels) for r in parts):
+        log(f"note: {name} stores no simplified levels and no merge forest (compressed with --mesh-only): "
+            "a budget cannot simplify its mesh; compress it without --mesh-only to let a budget pick "
+            "a coarser level")
 
-def render_steps(source, output, *, steps=(None, None, None), force: bool = False, scalar_range=None,
-                 scalar: str | None = None, component=None, progress=None, log=None, **options) -> list[dict]:
+
+def render_steps(source, output, *, steps=(None, None, None), force: bool = False, view: View | None = None,
+                 detail: Detail | None = None, read: ReadOptions | None = None, pipeline: str = "streaming",
+                 progress=None, log=None, **options) -> list[dict]:
     """Render steps of a ``.tetc`` time series, one image each: an animation.
 
     Parameters
@@ -1164,11 +1060,10 @@ def render_steps(source, output, *, steps=(None, None, None), force: bool = Fals
         before the extension.
     steps : (start, stop, stride)
         As a Python slice of the steps (stop excluded; None: the ends).
-    scalar_range : (float, float), optional
-        Default: the range of the rendered array over every rendered step, so that the frames
-        compare.
-    options
-        As :func:`render` (size, tf, azimuth, ratio, budget, ...).
+    view, detail, read, pipeline, options
+        As for :func:`render` (size, tf, azimuth, ratio, budget, scalar, ...). The view's
+        ``scalar_range`` defaults to the range of the rendered array over every rendered step, so
+        that the frames compare.
 
     Returns
     -------
@@ -1176,6 +1071,7 @@ def render_steps(source, output, *, steps=(None, None, None), force: bool = Fals
         Every frame's stats, with its ``output``, ``step`` and ``time``.
     """
     log = log or _quiet
+    view, detail, read = split_options("render_steps", options, view=view, detail=detail, read=read)
     f = source if isinstance(source, TetcFile) else TetcFile(source)
     start, stop, stride = steps
     if stride == 0:
@@ -1197,17 +1093,18 @@ def render_steps(source, output, *, steps=(None, None, None), force: bool = Fals
     for p in paths:
         image_format(p)
         check_output_path(p, force=force)
-    if scalar_range is None:
+    if view.scalar_range is None:
         lo, hi = math.inf, -math.inf
         for k in ks:
-            r = f.at(k).reader.array_range(scalar, component)
+            r = f.at(k).reader.array_range(read.scalar, view.component)
             if r is not None:
                 lo, hi = min(lo, r[0]), max(hi, r[1])
-        scalar_range = (lo, hi) if hi > lo else None
+        if hi > lo:
+            view = view.replace(scalar_range=(lo, hi))
     stats = []
     for i, (k, p) in enumerate(zip(ks, paths)):
-        frame = render(f, time_step=k, scalar_range=scalar_range, scalar=scalar, component=component, log=log,
-                       **options)
+        frame = render(f, view=view, detail=detail, read=dataclasses.replace(read, time_step=k), pipeline=pipeline,
+                       log=log)
         frame.save(p, force=force)
         st = dict(frame.stats, output=str(p), step=k, time=f.times[k])
         stats.append(st)
@@ -1239,11 +1136,9 @@ def frame_paths(output, n_frames: int) -> list[Path]:
 
 
 def render_frames(source, output, *, workers: int | None = None, scheduler: str | None = None,
-                  bricks: int | None = None, orbit: int = 1, size=256, tf="default", azimuth: float = 0.0,
-                  elevation: float = 0.0, zoom: float = 1.0, level: int | None = None, budget: float | None = None,
-                  mode: str = "volume", step: float | None = None, scalar_range=None,
-                  opacity_model: str | None = None, background="black", force: bool = False,
-                  read_options: dict | None = None, timeout: float = 10.0, progress=None, log=None) -> list[dict]:
+                  bricks: int | None = None, orbit: int = 1, view: View | None = None, detail: Detail | None = None,
+                  read: ReadOptions | None = None, force: bool = False, timeout: float = 10.0, progress=None, log=None,
+                  **options) -> list[dict]:
     """Render ``source`` as bricks on a Dask cluster, frame by frame, each frame written as it completes.
 
     The bricks go to the workers once and stay there for every frame. Each frame's fragments are
@@ -1267,22 +1162,25 @@ def render_frames(source, output, *, workers: int | None = None, scheduler: str 
         Bricks to cut an unbricked source into (default 4 per worker).
     orbit : int
         Frames at azimuths ``azimuth + 360 k / orbit``.
-    size, tf, azimuth, elevation, zoom, level, mode, step, scalar_range, opacity_model, background
-        As for :func:`render`.
-    budget : float, optional
-        Seconds per frame (a bricked ``.tetc`` file): every frame, each brick picks the level and
-        ratio it can render in its share of the budget (the bricks of one worker share it; workers
-        run side by side).
+    view : View, optional
+        As for :func:`render` (size, tf, azimuth, elevation, zoom, mode, step, scalar_range,
+        opacity_model, background); the orbit turns from its azimuth.
+    detail : Detail, optional
+        A stored ``level``, or a ``budget``: seconds per frame (a bricked ``.tetc`` file): every
+        frame, each brick picks the level and ratio it can render in its share of the budget (the
+        bricks of one worker share it; workers run side by side).
+    read : ReadOptions, optional
+        How to read a mesh file (see :func:`read_mesh`).
     force : bool
         Overwrite existing frames.
-    read_options : dict, optional
-        How to read a mesh file (see :func:`read_mesh`).
     timeout : float
         Seconds to wait for the scheduler.
     progress : callable, optional
         ``progress(frames_done, frames)``.
     log : callable, optional
         One-line notes.
+    **options
+        Shorthand: fields of ``view``, ``detail`` and ``read`` by name, as for :func:`render`.
 
     Returns
     -------
@@ -1290,27 +1188,18 @@ def render_frames(source, output, *, workers: int | None = None, scheduler: str 
         Every frame's stats (``output``, ``frame_s``, ``tets_rendered``, ``fragment_mb``, ...).
     """
     log = log or _quiet
-    width, height = _size(size)
+    view, detail, read = split_options("render_frames", options, view=view, detail=detail, read=read)
     orbit = int(orbit)
     if orbit < 1:
         raise OptionError(f"orbit must be a number of frames >= 1, got {orbit}")
     if bricks is not None and not (isinstance(bricks, (int, np.integer)) and bricks >= 1):
         raise OptionError(f"bricks must be a whole number >= 1, got {bricks!r}")
-    if mode not in MODES:
-        raise OptionError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
-    azimuth = _check_number("azimuth", azimuth, allow_none=False)
-    elevation = _check_number("elevation", elevation, allow_none=False)
-    zoom = _check_number("zoom", zoom, lo=0.0, lo_open=True, allow_none=False)
-    step = _check_number("step", step, lo=0.0, lo_open=True)
-    if scalar_range is not None:
-        scalar_range = tuple(_check_number("scalar_range", v, allow_none=False) for v in scalar_range)
-        if not scalar_range[1] > scalar_range[0]:
-            raise OptionError(f"scalar_range must be (min, max) with min < max, got {scalar_range}")
+    if detail.ratio is not None or detail.selective:
+        raise OptionError("a cluster renders a stored level or a budget: a ratio or a selective cut renders on "
+                          "one machine (gatun_py.render)")
+    level, budget = detail.level, detail.budget
     inputs = _frame_inputs(source)
     if budget is not None:
-        budget = _check_number("budget", budget, lo=0.0, lo_open=True)
-        if level is not None:
-            raise OptionError("give either a level or a budget, not both")
         for src in inputs:
             reader = TetcReader(src) if isinstance(src, (str, os.PathLike)) and is_tetc(src) else None
             if reader is None or reader.n_bricks <= 1:
@@ -1321,28 +1210,24 @@ def render_frames(source, output, *, workers: int | None = None, scheduler: str 
     for p in paths:
         image_format(p)  # refuse what cannot be written before the work, not after
         check_output_path(p, force=force)
-    bg = parse_colour(background)
-    tf = load_transfer_function(tf)
-    if opacity_model is not None:
-        tf = tf.with_opacity_model(opacity_model)
-    views = [View(Camera(width, height, azimuth + 360.0 * k / orbit, elevation, zoom), tf, mode, step, False,
-                  scalar_range) for k in range(orbit)]
+    views = [_StreamView(dataclasses.replace(view.camera, azimuth=view.azimuth + 360.0 * k / orbit), view.tf,
+                         view.mode, view.step, False, view.scalar_range) for k in range(orbit)]
     with BrickCluster(scheduler=scheduler, workers=workers if scheduler is None else None, timeout=timeout,
                       log=log) as cluster:
         n_workers = len(cluster.workers)
         k = bricks or 4 * n_workers
         out = []
         for src in inputs:  # time steps: one file's bricks on the workers at a time
-            sources, extent = _cluster_bricks(src, k, level, read_options, log)
+            sources, extent = _cluster_bricks(src, k, level, read, log)
             log(f"placing {len(sources)} bricks on {n_workers} workers...")
             cluster.load(sources, budget=budget is not None)
-            for res, view in zip(cluster.render_series(views, extent, budget=budget), views):
+            for res, frame_view in zip(cluster.render_series(views, extent, budget=budget), views):
                 i = len(out)
                 for note in res.stats.pop("notes", []):
                     log(f"note: {note}")
-                write_image(paths[i], to_rgb8(res.image, bg), force=force)
+                write_image(paths[i], to_rgb8(res.image, view.background), force=force)
                 st = res.stats
-                st.update(output=str(paths[i]), azimuth=view.camera.azimuth,
+                st.update(output=str(paths[i]), azimuth=frame_view.camera.azimuth,
                           input=str(src) if isinstance(src, (str, os.PathLike)) else "<mesh>")
                 out.append(st)
                 if progress is not None:
@@ -1365,7 +1250,7 @@ def _frame_inputs(source) -> list:
     return [source]
 
 
-def _cluster_bricks(source, n_bricks: int, level, read_options, log):
+def _cluster_bricks(source, n_bricks: int, level, read: ReadOptions, log):
     """(brick sources, whole-mesh extent) of one input: a bricked file's own bricks, else its mesh
     (a .tetc level, a mesh file or a TetMesh) cut into ``n_bricks``."""
     if isinstance(source, (str, os.PathLike)) and is_tetc(source):
@@ -1378,4 +1263,4 @@ def _cluster_bricks(source, n_bricks: int, level, read_options, log):
         return split_for_render(reader.decode_mesh(lv), n_bricks)[0], extent
     if level is not None:
         raise OptionError("level needs a .tetc file")
-    return split_for_render(_as_mesh(source, read_options or {}, log), n_bricks)
+    return split_for_render(_as_mesh(source, read, log), n_bricks)

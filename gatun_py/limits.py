@@ -8,3 +8,7 @@ MAX_IMAGE_SIDE = 8192
 MAX_CAMERA_SIDE = 16384
 # A zoom factor lies in [1 / MAX_ZOOM, MAX_ZOOM].
 MAX_ZOOM = 1.0e4
+# The ray caster's sampling modes: uniform samples every step, or one sample per tet at its faces.
+MODES = ("volume", "face")
+# How a render runs: one streaming pass, or decode-all-then-render (the paper's baseline).
+PIPELINES = ("streaming", "generic")

@@ -24,6 +24,7 @@ from .._runtime import peak_rss_mb
 from ..codec import TetcReader
 from ..codec.container import is_tetc  # noqa: F401  (the api and the CLI take it from here)
 from ..errors import CorruptFileError, OptionError
+from ..limits import PIPELINES
 from ..mesh import TetMesh, default_step, mesh_batches, read_mesh
 from ..raycast.camera import Camera
 from ..raycast.caster import render_mesh
@@ -33,7 +34,6 @@ from ..simplify.filter import SimplifyFilter
 from ..simplify.forest import mesh_from_ancestors
 from ..simplify.levels import Target, resolve_target, stored_levels, target_ancestors  # noqa: F401 (re-exported)
 
-PIPELINES = ("streaming", "generic")
 # The finest volume-mode step: this many samples along the bounding-box diagonal (the default step
 # gives a few hundred to a few thousand). A step from the user or from a file below it is raised to
 # it with a note, so no render can sample for ever (a 1e-9 step would take years).

@@ -20,6 +20,7 @@ import numba
 import numpy as np
 
 from ..errors import MeshError, OptionError
+from ..limits import MODES  # one home of the render modes (the request records check them)
 from ..mesh.model import default_step
 
 from ._boundary import find_segments
@@ -33,7 +34,6 @@ from .camera import Camera, FittedCamera
 from .composite import Fragments, segment_fragments
 from .transfer import TransferFunction, load_transfer_function
 
-MODES = ("volume", "face")
 TILE = 4  # rays walk in square tiles of pixels (see StreamingRaycaster._runs)
 
 

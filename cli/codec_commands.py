@@ -11,7 +11,7 @@ from gatun_py._runtime import announce
 from gatun_py.mesh.pieces import is_partitioned
 
 from .options import (RATIO, FiniteFloat, camera_options, check_step, echo_json, force_option, jobs_option, json_option,
-                      logger, mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs,
+                      logger, mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs, records,
                       require_file, selective_options, status, tetc_name, transfer_function_options)
 
 
@@ -217,8 +217,9 @@ def compress(inputs, output, times, keyframe_interval, n_levels, mesh_only, w_de
 @jobs_option
 @force_option
 @quiet_option
-def decompress(input, output, level, ratio, step, at_time, piece, selective, tets, size, tf_spec, azimuth, elevation,
-               zoom, scalar_range, as_tets, jobs, force, quiet):
+@records("view", "detail", only={"size", "tf", "azimuth", "elevation", "zoom", "scalar_range", "ratio", "level",
+                                 "selective", "tets"})
+def decompress(input, output, detail, view, step, at_time, piece, as_tets, jobs, force, quiet):
     """Decompress a .tetc file into any mesh format meshio writes that holds tets.
 
     The full mesh comes back as the cells it was compressed from (hexahedra, wedges, pyramids,
@@ -231,24 +232,16 @@ def decompress(input, output, level, ratio, step, at_time, piece, selective, tet
     mesh `tetc render --selective` draws for that view and transfer function (same options), e.g.
     to check it or use it elsewhere.
     """
-    if sum(x is not None for x in (level, ratio, tets)) > 1:
-        raise click.UsageError("--level, --ratio and --tets are exclusive")
     if step is not None and at_time is not None:
         raise click.UsageError("--step and --time are exclusive")
     check_step(input, step, at_time)
-    if tets is not None and not selective:
-        raise click.UsageError("--tets needs --selective")
-    if selective and level is not None:
-        raise click.UsageError("--selective takes --ratio or --tets, not --level")
-    if piece is not None and (selective or ratio is not None):
+    if piece is not None and (detail.selective or detail.ratio is not None):
         raise click.UsageError("--piece decodes a stored level: not with --ratio or --selective")
     require_file(input)  # before saying that it compiles
     check_output_path(output, force=force)
-    announce(["decoder"] + (["forest decoder"] if ratio is not None or selective else []), quiet=quiet)
-    mesh = gatun_py.decompress(input, output, ratio=ratio, level=level, force=force, jobs=jobs, selective=selective,
-                               tets=tets, size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom,
-                               scalar_range=scalar_range, as_tets=as_tets, step=step, time=at_time, piece=piece,
-                               log=logger(quiet))
+    announce(["decoder"] + (["forest decoder"] if detail.ratio is not None or detail.selective else []), quiet=quiet)
+    mesh = gatun_py.decompress(input, output, detail=detail, view=view, force=force, jobs=jobs, as_tets=as_tets,
+                               step=step, time=at_time, piece=piece, log=logger(quiet))
     status(f"wrote {output}: {mesh.n_points} points, {mesh.n_tets} tets", quiet)
 
 

@@ -7,6 +7,7 @@ message naming the option; whatever depends on the input file is checked by the 
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import math
 import os
@@ -18,9 +19,21 @@ import threading
 import click
 import numpy as np
 
-from gatun_py.errors import ReadError
+from gatun_py.errors import OptionError, ReadError
 from gatun_py.limits import MAX_IMAGE_SIDE, MAX_ZOOM  # light: parsing the options loads no numba
 from gatun_py.mesh.plot3d import Q_VARIABLES
+from gatun_py.pipeline.requests import Detail, ReadOptions, View  # numba-free: the records check the options
+
+# record field -> the click parameter that gives it, per record a command receives
+VIEW_PARAMS = {"size": "size", "tf": "tf_spec", "azimuth": "azimuth", "elevation": "elevation", "zoom": "zoom",
+               "scalar_range": "scalar_range", "mode": "mode", "step": "step", "opacity_model": "opacity_model",
+               "background": "background", "colorbar": "colorbar", "lean": "lean", "component": "component"}
+DETAIL_PARAMS = {"ratio": "ratio", "level": "level", "budget": "budget", "selective": "selective", "tets": "tets"}
+READ_PARAMS = {"scalar": "scalar", "q_file": "q_file", "q_var": "q_var", "cell_to_point": "cell_to_point",
+               "time_step": "time_step"}
+_RECORDS = {"view": (View, VIEW_PARAMS), "detail": (Detail, DETAIL_PARAMS), "read": (ReadOptions, READ_PARAMS)}
+# the options whose flag is not the parameter's name with dashes
+_FLAGS = {"tf_spec": "--tf", "scalar_range": "--range", "q_file": "--q"}
 
 
 class FiniteFloat(click.ParamType):
@@ -157,6 +170,50 @@ def transfer_function_options(prefix: str = ""):
         return f
 
     return decorate
+
+
+def records(*names: str, only=None):
+    """Give the command the request records ``names`` (``"view"``, ``"detail"``, ``"read"``) built from
+    its options, in place of those options (:data:`VIEW_PARAMS`...; ``only``: the record fields the
+    command has options for, when not all). Put it right above the function, below the options.
+
+    The records check every value and combination (:mod:`gatun_py.pipeline.requests`); what they
+    refuse is a usage error (exit 2) naming the command's options. What the library finds wrong
+    with a file an option names (a transfer-function JSON) stays an error of the input (exit 1).
+    """
+
+    def decorate(f):
+        @functools.wraps(f)
+        def wrapper(*args, **kwargs):
+            flags = {}
+            for name in names:
+                cls, params = _RECORDS[name]
+                fields = {field: param for field, param in params.items()
+                          if param in kwargs and (only is None or field in only)}
+                values = {field: kwargs.pop(param) for field, param in fields.items()}
+                flags.update({field: _FLAGS.get(param, "--" + param.replace("_", "-")) for field, param in fields.items()})
+                try:
+                    kwargs[name] = cls(**values)
+                except OptionError as e:
+                    if not getattr(e, "fields", None):
+                        raise
+                    raise click.UsageError(_name_flags(str(e), flags)) from None
+            return f(*args, **kwargs)
+
+        return wrapper
+
+    return decorate
+
+
+def _name_flags(message: str, flags: dict) -> str:
+    """A record's message with its field names as the command's options (``selective=True`` -> ``--selective``).
+
+    >>> _name_flags("tets needs selective=True", {"tets": "--tets", "selective": "--selective"})
+    '--tets needs --selective'
+    """
+    for field in sorted(flags, key=len, reverse=True):
+        message = re.sub(rf"(?<![\w-]){field}(=True)?(?![\w])", flags[field], message)
+    return message
 
 
 def require_file(path) -> None:

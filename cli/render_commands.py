@@ -11,10 +11,10 @@ from gatun_py._runtime import check_output_path, compile_for_render, load_render
 
 from .options import (POSITIVE, RATIO, Colour, FiniteFloat, camera_options, check_step, echo_json, force_option,
                       interruptible, logger, mesh_input_options, output_option, progress_reporter, quiet_option,
-                      read_kwargs, require_file, selective_options, status, transfer_function_options)
+                      records, require_file, selective_options, status, transfer_function_options)
 
 
-def _component(text):
+def _component(ctx, param, text):
     """--component: None, a component index, or "magnitude"."""
     if text is None or text == "magnitude":
         return text
@@ -42,7 +42,7 @@ def _component(text):
               help="Sample spacing for --mode volume [default: half the median boundary edge, at most 1/512 of "
                    "the bounding-box diagonal; a .tetc file uses the step recorded when it was compressed].")
 @camera_options()
-@click.option("--component", default=None, metavar="K|magnitude",
+@click.option("--component", default=None, metavar="K|magnitude", callback=_component,
               help="For a vector point array (--scalar NAME): render component K (0-based) or its magnitude "
                    "[default: component 0]. .tetc input.")
 @click.option("--background", type=Colour(), default="black", show_default=True,
@@ -91,10 +91,9 @@ def _component(text):
 @mesh_input_options
 @force_option
 @quiet_option
-def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, elevation, zoom, scalar_range, component,
-           background, colorbar, ratio, level, budget, pipeline, lean, workers, scheduler, n_bricks, orbit, timeout,
-           show_stats, at_time, step_range, selective, tets, scalar, q_file, q_var, cell_to_point, time_step, force,
-           quiet):
+@records("view", "detail", "read")
+def render(input, output, view, detail, read, pipeline, workers, scheduler, n_bricks, orbit, timeout, show_stats,
+           at_time, step_range, force, quiet):
     """Volume-render INPUT (a .tetc file or any mesh file) into an image.
 
     Tets are rendered as they are decoded: rays start on the boundary surface and walk inward
@@ -105,39 +104,23 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     from gatun_py.raycast.image import image_format
 
     t_start = time.perf_counter()
-    if sum(x is not None for x in (ratio, level, budget, tets)) > 1:
-        raise click.UsageError("give at most one of --ratio, --level, --budget and --tets")
-    if tets is not None and not selective:
-        raise click.UsageError("--tets needs --selective")
-    if selective and level is not None:
-        raise click.UsageError("--selective takes --ratio, --tets or --budget, not --level")
-    if scalar_range is not None and not scalar_range[0] < scalar_range[1]:
-        raise click.BadParameter(f"MIN must be below MAX, got {scalar_range[0]:g} {scalar_range[1]:g}",
-                                 param_hint="'--range'")
-    if sum(x is not None for x in (at_time, step_range, time_step)) > 1:
+    if sum(x is not None for x in (at_time, step_range, read.time_step)) > 1:
         raise click.UsageError("give at most one of --time, --steps and --time-step")
-    check_step(input, time_step, at_time)
+    check_step(input, read.time_step, at_time)
     if step_range is not None:
         if workers is not None or scheduler is not None or orbit > 1:
             raise click.UsageError("--steps renders on this machine: not with --workers, --scheduler or --orbit")
-        _render_steps(input, output, _slice(step_range), dict(
-            size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom, ratio=ratio, level=level,
-            budget=budget, mode=mode, step=step, scalar_range=scalar_range, opacity_model=opacity_model,
-            background=background, colorbar=colorbar, lean=lean, pipeline=pipeline, component=_component(component),
-            selective=selective, tets=tets, scalar=scalar), force=force, quiet=quiet, show_stats=show_stats)
+        _render_steps(input, output, _slice(step_range), dict(view=view, detail=detail, read=read, pipeline=pipeline),
+                      force=force, quiet=quiet, show_stats=show_stats)
         return
     if n_bricks is not None and workers is None and scheduler is None:
         raise click.UsageError("--bricks is for rendering on a cluster (--workers or --scheduler)")
     if workers is not None or scheduler is not None or orbit > 1:
-        _check_series_options(workers, scheduler, n_bricks, ratio, colorbar, lean, pipeline, component)
+        _check_series_options(workers, scheduler, detail, view, pipeline)
     if workers is not None or scheduler is not None:
         _render_on_cluster(input, output, workers=workers, scheduler=scheduler, bricks=n_bricks, orbit=orbit,
-                           size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom, level=level,
-                           budget=budget, mode=mode,
-                           step=step, scalar_range=scalar_range, opacity_model=opacity_model, background=background,
-                           force=force, timeout=timeout, read_options=read_kwargs(scalar, q_file, q_var, cell_to_point,
-                                                                                   time_step),
-                           show_stats=show_stats, quiet=quiet)
+                           view=view, detail=detail, read=read, force=force, timeout=timeout, show_stats=show_stats,
+                           quiet=quiet)
         return
     if orbit > 1:
         raise click.UsageError("--orbit renders a series on a cluster: give --workers N (a local one) or --scheduler")
@@ -145,22 +128,17 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     check_output_path(output, force=force)
     require_file(input)
     decoder = is_tetc(input)  # a mesh file is rendered without the decoder: no need to compile it
-    simplify = selective or any(x is not None for x in (ratio, level, budget, tets))
+    simplify = detail.simplifies
     parts = (["decoder"] if decoder else []) + ["renderer"] + (["forest decoder", "filter"] if decoder and simplify
                                                                else [])
     missing = announce(parts, side_by_side=decoder, quiet=quiet)
     if missing:
-        compile_for_render(decoder=decoder, simplify=simplify, lean=lean, mode=mode)
-    startup_s = load_render_kernels(lean=lean, decoder=decoder, simplify=simplify) + (time.perf_counter() - t_start)
+        compile_for_render(decoder=decoder, simplify=simplify, lean=view.lean, mode=view.mode)
+    startup_s = load_render_kernels(lean=view.lean, decoder=decoder, simplify=simplify) + (time.perf_counter() - t_start)
     t_start = time.perf_counter()  # total_s: from opening the input to the image written
     with progress_reporter("rendering", quiet) as progress, interruptible():
-        frame = gatun_py.render(input, size=size, tf=tf_spec, azimuth=azimuth, elevation=elevation, zoom=zoom,
-                                ratio=ratio, level=level, budget=budget, mode=mode, step=step,
-                                scalar_range=scalar_range, opacity_model=opacity_model, background=background,
-                                colorbar=colorbar, lean=lean, pipeline=pipeline, progress=progress,
-                                component=_component(component), selective=selective, tets=tets,
-                                log=logger(quiet), time=at_time,
-                                **read_kwargs(scalar, q_file, q_var, cell_to_point, time_step))
+        frame = gatun_py.render(input, view=view, detail=detail, read=read, pipeline=pipeline, progress=progress,
+                                log=logger(quiet), time=at_time)
     frame.save(output, force=force)
     st = frame.stats
     st["total_s"] = time.perf_counter() - t_start
@@ -174,13 +152,13 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
         status(f"wrote {output} ({w}x{h}, {st['tets_rendered']} tets, {st['total_s']:.2f} s)", quiet)
 
 
-def _check_series_options(workers, scheduler, n_bricks, ratio, colorbar, lean, pipeline, component):
+def _check_series_options(workers, scheduler, detail, view, pipeline):
     if workers is not None and scheduler is not None:
         raise click.UsageError("give either --workers (a local cluster) or --scheduler (a running one), not both")
-    unsupported = [name for name, given in (("--ratio", ratio is not None),
-                                            ("--colorbar", colorbar), ("--lean", lean),
+    unsupported = [name for name, given in (("--ratio", detail.ratio is not None),
+                                            ("--colorbar", view.colorbar), ("--lean", view.lean),
                                             ("--pipeline generic", pipeline != "streaming"),
-                                            ("--component", component is not None)) if given]
+                                            ("--component", view.component is not None)) if given]
     if unsupported:
         raise click.UsageError(f"{', '.join(unsupported)} cannot be used with --workers, --scheduler or --orbit")
 

@@ -31,7 +31,15 @@ from ..raycast.camera import Camera
 from ..raycast.image import image_bytes, parse_colour, write_image
 from ..raycast.transfer import load_transfer_function
 
-__all__ = ["View", "Detail", "ReadOptions", "Frame", "split_options", "check_number"]
+__all__ = ["View", "Detail", "ReadOptions", "Frame", "split_options", "check_number", "refused"]
+
+
+def refused(message: str, *fields: str) -> OptionError:
+    """An OptionError about the values of ``fields`` (record field names): the command line turns it
+    into a usage error naming its own options (``ratio`` -> ``--ratio``)."""
+    e = OptionError(message)
+    e.fields = fields
+    return e
 
 
 def check_number(name, v, *, lo=None, lo_open=False, hi=None, allow_none=True):
@@ -39,18 +47,12 @@ def check_number(name, v, *, lo=None, lo_open=False, hi=None, allow_none=True):
     if v is None and allow_none:
         return None
     if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
-        raise OptionError(f"{name} must be a finite number, got {v!r}")
+        raise refused(f"{name} must be a finite number, got {v!r}", name)
     if lo is not None and (v <= lo if lo_open else v < lo):
-        raise OptionError(f"{name} must be {'>' if lo_open else '>='} {lo:g}, got {v!r}")
+        raise refused(f"{name} must be {'>' if lo_open else '>='} {lo:g}, got {v!r}", name)
     if hi is not None and v > hi:
-        raise OptionError(f"{name} must be <= {hi:g}, got {v!r}")
+        raise refused(f"{name} must be <= {hi:g}, got {v!r}", name)
     return float(v)
-
-
-def _whole(name, v, lo=1):
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-        raise OptionError(f"{name} must be a whole number >= {lo}, got {v!r}")
-    return int(v)
 
 
 def _image_size(size) -> tuple[int, int]:
@@ -60,7 +62,7 @@ def _image_size(size) -> tuple[int, int]:
         w = h = None
     for v in (w, h):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= MAX_IMAGE_SIDE:
-            raise OptionError(f"image size must be whole pixels in 1..{MAX_IMAGE_SIDE}, got {size!r}")
+            raise refused(f"image size must be whole pixels in 1..{MAX_IMAGE_SIDE}, got {size!r}", "size")
     return int(w), int(h)
 
 
@@ -139,11 +141,11 @@ class View:
         _set(self, "zoom", check_number("zoom", self.zoom, lo=0.0, lo_open=True, allow_none=False))
         _set(self, "step", check_number("step", self.step, lo=0.0, lo_open=True))
         if self.mode not in MODES:
-            raise OptionError(f"mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+            raise refused(f"mode must be one of {', '.join(MODES)}, got {self.mode!r}", "mode")
         if self.scalar_range is not None:
             lo, hi = (check_number("scalar_range", v, allow_none=False) for v in self.scalar_range)
             if not hi > lo:
-                raise OptionError(f"scalar_range (MIN, MAX): MIN must be below MAX, got {lo:g} {hi:g}")
+                raise refused(f"scalar_range (MIN, MAX): MIN must be below MAX, got {lo:g} {hi:g}", "scalar_range")
             _set(self, "scalar_range", (lo, hi))
         _set(self, "background", parse_colour(self.background))
         tf = load_transfer_function(self.tf)
@@ -197,14 +199,14 @@ class Detail:
         _set(self, "budget", check_number("budget", self.budget, lo=0.0, lo_open=True))
         _set(self, "ratio", check_number("ratio", self.ratio, lo=0.0, hi=1.0))
         if sum(x is not None for x in (self.ratio, self.level, self.budget, self.tets)) > 1:
-            raise OptionError("give at most one of ratio, level, budget and tets")
+            raise refused("give at most one of ratio, level, budget and tets", "ratio", "level", "budget", "tets")
         if self.tets is not None:
             if isinstance(self.tets, bool) or not isinstance(self.tets, (int, np.integer)) or self.tets < 1:
-                raise OptionError(f"tets must be a whole number >= 1, got {self.tets!r}")
+                raise refused(f"tets must be a whole number >= 1, got {self.tets!r}", "tets")
             if not self.selective:
-                raise OptionError("tets needs selective=True (a uniform render takes a ratio or a level)")
+                raise refused("tets needs selective=True (a uniform render takes a ratio or a level)", "tets", "selective")
         if self.selective and self.level is not None:
-            raise OptionError("selective refinement takes a ratio, tets or a budget, not a stored level")
+            raise refused("selective refinement takes a ratio, tets or a budget, not a stored level", "selective", "level")
         _set(self, "selective", bool(self.selective))
 
     @property

@@ -147,13 +147,15 @@ def image_format(path) -> str:
     return IMAGE_FORMATS[ext]
 
 
-def image_bytes(rgb8, fmt: str) -> bytes:
-    """Encode (H, W, 3) uint8 in ``fmt`` (a value of :data:`IMAGE_FORMATS`)."""
+def image_bytes(rgb8, fmt: str, *, quality: int = 92) -> bytes:
+    """Encode (H, W, 3) uint8 in ``fmt`` (a value of :data:`IMAGE_FORMATS`, any case); ``quality``
+    for JPEG and WebP (the files renders write use 92, the viewer's frames what the page asks)."""
+    fmt = fmt.upper()
     if fmt == "PNG":
         return png_bytes(rgb8)
     buf = io.BytesIO()
     Image.fromarray(np.ascontiguousarray(rgb8, dtype=np.uint8)).save(buf, format=fmt, **(
-        {"quality": 92} if fmt in ("JPEG", "WEBP") else {}))
+        {"quality": quality} if fmt in ("JPEG", "WEBP") else {}))
     return buf.getvalue()
 
 

@@ -13,7 +13,7 @@ import io
 import math
 import os
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from PIL import Image
@@ -21,9 +21,11 @@ from PIL import Image
 from ..codec import TetcReader
 from ..errors import OptionError, TetcError
 from ..pipeline.budget import FramePlanner, TimeModel, machine_costs
-from ..pipeline.stream import View, file_render_defaults, render_tetc
+from ..pipeline.requests import Frame, View
+from ..pipeline.stream import View as _StreamView  # the fitted view the stages draw with
+from ..pipeline.stream import file_render_defaults, render_tetc
 from ..raycast.camera import MAX_ZOOM, Camera
-from ..raycast.image import png_bytes, to_rgb8
+from ..raycast.image import image_bytes, to_rgb8
 from ..raycast.transfer import from_dict, load_transfer_function, preset_names
 from ..simplify.levels import resolve_target
 
@@ -50,16 +52,29 @@ class FrameCancelled(Exception):
 
 @dataclass(frozen=True)
 class FrameRequest:
-    """A validated frame request (see :func:`parse_request` for the JSON it comes from)."""
+    """A validated frame request (see :func:`parse_request` for the JSON it comes from): the view
+    (the same record :func:`gatun_py.render` takes, which checks it), the viewer's pan, and how
+    the frame is planned and sent."""
 
-    camera: Camera
-    tf: object  # a TransferFunction
+    view: View
     budget_s: float | None  # None: full quality (the file's level 0, or ``level``)
     level: int | None = None
     fmt: str = "jpeg"
     quality: int = 85
-    mode: str = "volume"
     interacting: bool = False
+    pan: tuple = (0.0, 0.0)  # the focal point's shift, in radii of the bounding sphere (Camera.pan_x, pan_y)
+
+    @property
+    def camera(self) -> Camera:
+        return replace(self.view.camera, pan_x=self.pan[0], pan_y=self.pan[1])
+
+    @property
+    def tf(self):
+        return self.view.tf
+
+    @property
+    def mode(self) -> str:
+        return self.view.mode
 
 
 def _number(obj: dict, key: str, default, lo=-math.inf, hi=math.inf, integer=False):
@@ -108,15 +123,11 @@ def parse_request(obj) -> FrameRequest:
     cam = obj.get("camera", {})
     if not isinstance(cam, dict):
         raise OptionError("'camera' must be an object")
-    camera = Camera(
-        width=_number(cam, "width", 512, 1, MAX_VIEW_SIZE, integer=True),
-        height=_number(cam, "height", 512, 1, MAX_VIEW_SIZE, integer=True),
-        azimuth=float(_number(cam, "azimuth", 0.0, -1e6, 1e6)),
-        elevation=float(_number(cam, "elevation", 0.0, -1e6, 1e6)),
-        zoom=float(_number(cam, "zoom", 1.0, 1 / MAX_ZOOM, MAX_ZOOM)),
-        pan_x=float(_number(cam, "pan_x", 0.0, -100, 100)),
-        pan_y=float(_number(cam, "pan_y", 0.0, -100, 100)),
-    )
+    size = (_number(cam, "width", 512, 1, MAX_VIEW_SIZE, integer=True),
+            _number(cam, "height", 512, 1, MAX_VIEW_SIZE, integer=True))
+    angles = {k: float(_number(cam, k, 0.0, -1e6, 1e6)) for k in ("azimuth", "elevation")}
+    zoom = float(_number(cam, "zoom", 1.0, 1 / MAX_ZOOM, MAX_ZOOM))
+    pan = (float(_number(cam, "pan_x", 0.0, -100, 100)), float(_number(cam, "pan_y", 0.0, -100, 100)))
     spec = obj.get("tf", "default")
     if isinstance(spec, str):
         if spec not in preset_names():
@@ -131,30 +142,9 @@ def parse_request(obj) -> FrameRequest:
     fmt = obj.get("format", "jpeg")
     if fmt not in FORMATS:
         raise OptionError(f"'format' must be one of {', '.join(FORMATS)}, got {fmt!r}")
-    mode = obj.get("mode", "volume")
-    if mode not in ("volume", "face"):
-        raise OptionError(f"'mode' must be volume or face, got {mode!r}")
-    return FrameRequest(camera, tf, budget, level, fmt, _number(obj, "quality", 85, 1, 100, integer=True),
-                        mode, bool(obj.get("interacting", False)))
-
-
-def encode_image(rgb8: np.ndarray, fmt: str, quality: int = 85) -> bytes:
-    """JPEG/WebP (Pillow, which scikit-image brings) or PNG bytes of an (H, W, 3) uint8 image."""
-    if fmt == "png":
-        return png_bytes(rgb8)
-    buf = io.BytesIO()
-    Image.fromarray(rgb8).save(buf, format=fmt.upper(), quality=quality)
-    return buf.getvalue()
-
-
-@dataclass
-class Frame:
-    """An encoded image and what it took (``stats`` is JSON-ready)."""
-
-    data: bytes
-    mime: str
-    stats: dict = field(default_factory=dict)
-    rgb8: np.ndarray | None = None
+    view = View(size=size, tf=tf, zoom=zoom, mode=obj.get("mode", "volume"), **angles)
+    return FrameRequest(view, budget, level, fmt, _number(obj, "quality", 85, 1, 100, integer=True),
+                        bool(obj.get("interacting", False)), pan)
 
 
 class CachingReader(TetcReader):
@@ -213,7 +203,7 @@ class ViewerSession:
         self.costs = costs if costs is not None else machine_costs()[0]
         self._open()
         for fmt in FORMATS:  # Pillow loads each encoder on first use (~50 ms): not in the first frame
-            encode_image(np.zeros((8, 8, 3), np.uint8), fmt)
+            image_bytes(np.zeros((8, 8, 3), np.uint8), fmt)
 
     def _signature(self):
         try:
@@ -323,7 +313,7 @@ class ViewerSession:
         if scale != 1.0:
             camera = replace(camera, width=max(1, round(camera.width * scale)),
                              height=max(1, round(camera.height * scale)))
-        view = View(camera, req.tf, req.mode, self.step * step_factor if step_factor != 1.0 else None, False)
+        view = _StreamView(camera, req.tf, req.mode, self.step * step_factor if step_factor != 1.0 else None, False)
         decoded = self.reader.is_decoded(target.level)
         work = planner.estimate(target.level, target.merges, camera.width * camera.height,
                                 planner.estimator.coverage(fitted), step_factor)
@@ -352,7 +342,7 @@ class ViewerSession:
                           partial_every_s=self.partial_every_s)
         t_render = time.perf_counter()
         rgb8 = to_rgb8(res.image)
-        data = encode_image(rgb8, req.fmt, req.quality)
+        data = image_bytes(rgb8, req.fmt, quality=req.quality)
         t_end = time.perf_counter()
         st = res.stats
         encode_s = t_end - t_render
@@ -373,7 +363,7 @@ class ViewerSession:
             "full_quality": plan is None and req.level is None,
             "format": req.fmt, "bytes": len(data), "width": camera.width, "height": camera.height,
         }
-        return Frame(data, FORMATS[req.fmt], stats, rgb8)
+        return Frame(rgb8, res.image, stats, data, FORMATS[req.fmt])
 
 
 def _tf_json(tf) -> dict:

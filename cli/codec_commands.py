@@ -132,8 +132,8 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
                    "pieces (the paths must be readable there, e.g. a shared folder).")
 @force_option
 @quiet_option
-def compress(inputs, output, times, keyframe_interval, n_levels, mesh_only, w_density, w_geometry, w_sample, n_bricks,
-             jobs, dependencies, scalar, q_file, q_var, cell_to_point, time_step, keep_order, drop_cell_data, pieces,
+@records("forest", "read")
+def compress(inputs, output, forest, read, times, keyframe_interval, n_bricks, jobs, keep_order, drop_cell_data, pieces,
              memory, workers, scheduler, force, quiet):
     """Compress INPUT (any readable mesh or PLOT3D grid) losslessly into a .tetc file.
 
@@ -158,21 +158,18 @@ def compress(inputs, output, times, keyframe_interval, n_levels, mesh_only, w_de
     for path in inputs:
         require_file(path)  # before saying that it compiles
     check_output_path(output, force=force)
-    announce(["encoder"] + ([] if mesh_only else ["decimation"]) + (["dependencies"] if dependencies else []),
-             quiet=quiet)
+    announce(["encoder"] + ([] if forest.mesh_only else ["decimation"]) + (["dependencies"] if forest.dependencies
+                                                                           else []), quiet=quiet)
     if pieces or is_partitioned(inputs[0]) or memory is not None:
         if times is not None or keyframe_interval is not None:
             raise click.UsageError("--times and --keyframe-interval are for a time series, not pieces")
-        if n_bricks != 1 or dependencies or keep_order:
+        if n_bricks != 1 or forest.dependencies or keep_order:
             raise click.UsageError("--bricks, --dependencies and --keep-order do not apply to pieces (each piece is a brick)")
         if workers is not None and scheduler is not None:
             raise click.UsageError("give either --workers (a local cluster) or --scheduler (a running one), not both")
         with progress_reporter("compressing pieces", quiet, min_total=1) as progress:
-            gatun_py.compress_pieces(list(inputs), output, levels=n_levels, mesh_only=mesh_only, force=force,
-                                     w_density=w_density, w_geometry=w_geometry, w_sample=w_sample, memory=memory,
+            gatun_py.compress_pieces(list(inputs), output, forest=forest, read=read, force=force, memory=memory,
                                      jobs=jobs, workers=workers, scheduler=scheduler, drop_cell_data=drop_cell_data,
-                                     read_options=dict(scalar=scalar, cell_to_point=cell_to_point,
-                                                       time_step=time_step),
                                      progress=progress, log=logger(quiet))
         return
     if workers is not None or scheduler is not None:
@@ -186,11 +183,9 @@ def compress(inputs, output, times, keyframe_interval, n_levels, mesh_only, w_de
     series = len(input) > 1 or times is not None or keyframe_interval is not None
     with progress_reporter("decimating", quiet, min_total=1) as progress:
         gatun_py.compress(list(input) if series else input[0], output, times=times,
-                          keyframe_interval=keyframe_interval, levels=n_levels, mesh_only=mesh_only, force=force, w_density=w_density,
-                          w_geometry=w_geometry, w_sample=w_sample, progress=progress, log=logger(quiet),
-                          drop_cell_data=drop_cell_data, bricks=n_bricks, jobs=jobs, dependencies=dependencies,
-                          keep_order=keep_order,
-                          **read_kwargs(scalar, q_file, q_var, cell_to_point, time_step))
+                          keyframe_interval=keyframe_interval, forest=forest, read=read, force=force,
+                          progress=progress, log=logger(quiet), drop_cell_data=drop_cell_data, bricks=n_bricks,
+                          jobs=jobs, keep_order=keep_order)
 
 
 @click.command()

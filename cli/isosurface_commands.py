@@ -7,8 +7,8 @@ import math
 import click
 
 from gatun_py._runtime import load_isosurface_kernels, peak_rss_mb
-from .options import (camera_options, check_step, echo_json, force_option, jobs_option, mesh_input_options, progress_bar,
-                      quiet_option, read_kwargs, require_file, status)
+from .options import (READ_PARAMS, camera_options, check_step, echo_json, force_option, jobs_option, mesh_input_options,
+                      progress_bar, quiet_option, records, require_file, status)
 
 
 def _finite(ctx, param, values):
@@ -53,9 +53,10 @@ def _finite(ctx, param, values):
 @jobs_option
 @force_option
 @quiet_option
-def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_ratio, importance_tf, png, frame_volume, size,
-               azimuth, elevation, zoom, show_stats, scalar, q_file, q_var, cell_to_point, time_step, jobs, force,
-               quiet):
+@records("detail", "view", "read", detail={"ratio": "mesh_ratio"},
+         only={"ratio", "level", "size", "azimuth", "elevation", "zoom", *READ_PARAMS})
+def isosurface(input, values, output, ratio, faces, batch_faces, detail, view, read, importance_tf, png, frame_volume,
+               show_stats, jobs, force, quiet):
     """Extract the isosurface(s) of INPUT (a .tetc file or any mesh file) at --value V.
 
     Marching tetrahedra on each decoded batch, so the surface is exact (no ambiguous cases) and
@@ -72,13 +73,12 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
       tetc isosurface bf.tetc --value 1.5 --value 3 --ratio 0.1 -o iso.ply --png iso.png
       tetc isosurface big.tetc --value 0.3 --faces 50000 --stats -o iso.ply
     """
-    check_step(input, time_step)
+    check_step(input, read.time_step)
     from gatun_py._runtime import announce, is_tetc
 
     if ratio is not None and faces is not None:
         raise click.UsageError("give either --ratio or --faces, not both")
-    if level is not None and mesh_ratio is not None:
-        raise click.UsageError("give either --level or --mesh-ratio, not both")
+    level = detail.level
     from gatun_py.contour.io import check_surface_path
 
     require_file(input)  # before saying that it compiles
@@ -92,7 +92,7 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
 
         from gatun_py.contour.extract import MAX_PREVIEW_PIXELS
 
-        w, h = size
+        w, h = view.size
         if w * h > MAX_PREVIEW_PIXELS:
             raise click.BadParameter(f"{w}x{h} is more than {MAX_PREVIEW_PIXELS} pixels", param_hint="--size")
         check_output_path(png, force=force)
@@ -109,8 +109,7 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
             last[0] = done
 
         surf = extract(input, values=list(values), ratio=ratio, faces=faces, batch_faces=batch_faces, level=level,
-                       ratio_mesh=mesh_ratio, importance_tf=importance_tf,
-                       read_kwargs=read_kwargs(scalar, q_file, q_var, cell_to_point, time_step), jobs=jobs,
+                       ratio_mesh=detail.ratio, importance_tf=importance_tf, read_kwargs=read.kwargs(), jobs=jobs,
                        progress=progress)
     st = surf.stats
     lo_s, hi_s = st["scalar_range"]
@@ -118,7 +117,7 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
         status(f"note: isovalue {v:g} is outside the scalar range [{lo_s:g}, {hi_s:g}]: its surface is empty", quiet)
     surf.save(output, force=force)
     if png is not None:
-        surf.save_preview(png, size=(w, h), azimuth=azimuth, elevation=elevation, zoom=zoom,
+        surf.save_preview(png, size=view.size, azimuth=view.azimuth, elevation=view.elevation, zoom=view.zoom,
                           frame="volume" if frame_volume else "surface", force=force)
     st["peak_rss_mb"] = peak_rss_mb()
     st["output"] = str(output)

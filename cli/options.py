@@ -22,7 +22,7 @@ import numpy as np
 from gatun_py.errors import OptionError, ReadError
 from gatun_py.limits import MAX_IMAGE_SIDE, MAX_ZOOM  # light: parsing the options loads no numba
 from gatun_py.mesh.plot3d import Q_VARIABLES
-from gatun_py.pipeline.requests import Detail, ReadOptions, View  # numba-free: the records check the options
+from gatun_py.pipeline.requests import Detail, ForestOptions, ReadOptions, View  # numba-free: the records check the options
 
 # record field -> the click parameter that gives it, per record a command receives
 VIEW_PARAMS = {"size": "size", "tf": "tf_spec", "azimuth": "azimuth", "elevation": "elevation", "zoom": "zoom",
@@ -31,9 +31,12 @@ VIEW_PARAMS = {"size": "size", "tf": "tf_spec", "azimuth": "azimuth", "elevation
 DETAIL_PARAMS = {"ratio": "ratio", "level": "level", "budget": "budget", "selective": "selective", "tets": "tets"}
 READ_PARAMS = {"scalar": "scalar", "q_file": "q_file", "q_var": "q_var", "cell_to_point": "cell_to_point",
                "time_step": "time_step"}
-_RECORDS = {"view": (View, VIEW_PARAMS), "detail": (Detail, DETAIL_PARAMS), "read": (ReadOptions, READ_PARAMS)}
+FOREST_PARAMS = {"levels": "n_levels", "mesh_only": "mesh_only", "w_density": "w_density", "w_geometry": "w_geometry",
+                 "w_sample": "w_sample", "dependencies": "dependencies"}
+_RECORDS = {"view": (View, VIEW_PARAMS), "detail": (Detail, DETAIL_PARAMS), "read": (ReadOptions, READ_PARAMS),
+            "forest": (ForestOptions, FOREST_PARAMS)}
 # the options whose flag is not the parameter's name with dashes
-_FLAGS = {"tf_spec": "--tf", "scalar_range": "--range", "q_file": "--q"}
+_FLAGS = {"tf_spec": "--tf", "scalar_range": "--range", "q_file": "--q", "n_levels": "--levels"}
 
 
 class FiniteFloat(click.ParamType):
@@ -172,10 +175,12 @@ def transfer_function_options(prefix: str = ""):
     return decorate
 
 
-def records(*names: str, only=None):
-    """Give the command the request records ``names`` (``"view"``, ``"detail"``, ``"read"``) built from
-    its options, in place of those options (:data:`VIEW_PARAMS`...; ``only``: the record fields the
-    command has options for, when not all). Put it right above the function, below the options.
+def records(*names: str, only=None, **params):
+    """Give the command the request records ``names`` (``"view"``, ``"detail"``, ``"read"``,
+    ``"forest"``) built from its options, in place of those options (:data:`VIEW_PARAMS`...;
+    ``params``: {field: parameter} where a command names an option otherwise, e.g.
+    ``detail={"ratio": "mesh_ratio"}``; ``only``: the record fields the command has options for,
+    when not all). Put it right above the function, below the options.
 
     The records check every value and combination (:mod:`gatun_py.pipeline.requests`); what they
     refuse is a usage error (exit 2) naming the command's options. What the library finds wrong
@@ -187,8 +192,8 @@ def records(*names: str, only=None):
         def wrapper(*args, **kwargs):
             flags = {}
             for name in names:
-                cls, params = _RECORDS[name]
-                fields = {field: param for field, param in params.items()
+                cls, given = _RECORDS[name]
+                fields = {field: param for field, param in {**given, **params.get(name, {})}.items()
                           if param in kwargs and (only is None or field in only)}
                 values = {field: kwargs.pop(param) for field, param in fields.items()}
                 flags.update({field: _FLAGS.get(param, "--" + param.replace("_", "-")) for field, param in fields.items()})

@@ -56,7 +56,7 @@ from .pipeline.budget import load_costs, plan_file_budget, remember_frame
 from .pipeline.distributed import BrickCluster
 from .pipeline.selective import SELECTION_ALLOWANCE_S, budget_tets, render_selective, selective_mesh
 from .limits import PIPELINES
-from .pipeline.requests import Detail, Frame, ReadOptions, View, split_options
+from .pipeline.requests import Detail, ForestOptions, Frame, ReadOptions, View, split_options
 from .pipeline.requests import check_number as _check_number
 from .pipeline.stream import View as _StreamView  # the fitted view the stages draw with
 from .pipeline.stream import is_tetc, render_mesh_file, render_tetc
@@ -67,7 +67,7 @@ from .simplify.filter import SimplifyFilter
 from .simplify.levels import MAX_LEVEL, max_stored_level, next_level, resolve_target, target_ancestors
 
 __all__ = ["compress", "decompress", "convert", "info", "open", "render", "render_frames", "render_steps", "append", "TetcFile", "Frame",
-           "View", "Detail", "ReadOptions"]
+           "View", "Detail", "ReadOptions", "ForestOptions"]
 
 _watch_compiles()  # a verb (or method) whose first run compiles says so on stderr, once per process
 
@@ -109,12 +109,10 @@ def _quiet(_msg: str) -> None:
 
 # -- compress ------------------------------------------------------------------------------------
 
-def compress(source, output, *, levels: int | None = None, mesh_only: bool = False, force: bool = False,
-             w_density: float = 1.0, w_geometry: float = 1.0, w_sample: float = 1.0, scalar: str | None = None,
-             q_file=None, q_var: str = "density", cell_to_point: bool = False, time_step: int | None = None,
-             drop_cell_data: bool = False, bricks: int = 1, jobs: int | None = None, dependencies: bool = False,
-             keep_order: bool = False, progress=None, log=None, times=None,
-             keyframe_interval: int | None = None) -> "TetcFile":
+def compress(source, output, *, forest: ForestOptions | None = None, read: ReadOptions | None = None,
+             force: bool = False, drop_cell_data: bool = False, bricks: int = 1, jobs: int | None = None,
+             keep_order: bool = False, progress=None, log=None, times=None, keyframe_interval: int | None = None,
+             **options) -> "TetcFile":
     """Compress a mesh losslessly into a ``.tetc`` file, with its merge forest and levels.
 
     Parameters
@@ -123,21 +121,10 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
         Any meshio volume format or a PLOT3D grid (see :func:`gatun_py.read_mesh`).
     output : path-like
         The ``.tetc`` file, written atomically.
-    levels : int, optional
-        Store pre-simplified levels 1..K (ratio 1 - 1/2^i), those the forest reaches; default
-        every level up to 13 that keeps at least 128 points
-        (:data:`~gatun_py.simplify.MIN_LEVEL_POINTS`; coarser ratios simplify on the fly from the
-        last stored level).
-    mesh_only : bool
-        Store the mesh alone: no merge forest, no levels.
-    force : bool
-        Overwrite ``output`` if it exists.
-    w_density, w_geometry : float
-        Decimation weights of the mass error and the boundary geometry error (>= 0).
-    w_sample : float
-        Factor on the decimation's sampled error (>= 0; 0: a 2-2.5x faster forest with worse
-        coarse levels, see :func:`~gatun_py.simplify.decimate`).
-    scalar, q_file, q_var, cell_to_point, time_step
+    forest : ForestOptions, optional
+        How the merge forest and levels are built: ``levels``, ``mesh_only``, ``w_density``,
+        ``w_geometry``, ``w_sample``, ``dependencies`` (see :class:`ForestOptions`).
+    read : ReadOptions, optional
         How to read ``source`` (see :func:`gatun_py.read_mesh`). Every point array is stored, in its
         dtype; ``scalar`` is the default one (rendered and decimated).
     drop_cell_data : bool
@@ -154,10 +141,6 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
         Also store the original point order, cell order and every cell's vertex order (tets
         included), coded against the decoder's order: decompressing gives the input's numbering
         back exactly (``tetc info`` reports what it cost).
-    dependencies : bool
-        Also store the merge dependencies that selective refinement needs (``render(...,
-        selective=True)``): every cut closed under them is flip-free. They add 13-70 % to the
-        default file on the samples (bench/sections/cells.md), so they are stored only when asked for.
     progress : callable, optional
         ``progress(done, total)``: vertices the decimation has processed so far, of ``total``.
     log : callable, optional
@@ -170,6 +153,10 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     keyframe_interval : int, optional
         A series: steps coded alone every this many (default: chosen so that any step decodes in
         about 1.5x the time of step 0).
+    force : bool
+        Overwrite ``output`` if it exists.
+    **options
+        Shorthand: the fields of ``forest`` and ``read`` by name (``levels=3, scalar="rho"``).
 
     Returns
     -------
@@ -186,18 +173,18 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     (48, 90, 90)
     """
     log = log or _quiet
+    forest, read = split_options("compress", options, forest=forest, read=read)
+    levels, mesh_only, dependencies = forest.levels, forest.mesh_only, forest.dependencies
+    w_density, w_geometry, w_sample = forest.w_density, forest.w_geometry, forest.w_sample
+    scalar, cell_to_point, time_step = read.scalar, read.cell_to_point, read.time_step
     # a list of files is a time series (compress_pieces takes a list of pieces); a .pvtu or an
     # Exodus decomposition names its pieces
     if isinstance(source, (str, os.PathLike)) and is_partitioned(source):
         if bricks != 1 or dependencies:  # a partitioned mesh is bricked by its pieces
             raise OptionError("a partitioned mesh is compressed one brick per piece: no bricks or dependencies")
-        compress_pieces(source, output, levels=levels, mesh_only=mesh_only, force=force, w_density=w_density,
-                        w_geometry=w_geometry, w_sample=w_sample, jobs=jobs, drop_cell_data=drop_cell_data,
-                        read_options=dict(scalar=scalar, cell_to_point=cell_to_point, time_step=time_step),
-                        progress=progress, log=log)
+        compress_pieces(source, output, forest=forest, read=read, force=force, jobs=jobs,
+                        drop_cell_data=drop_cell_data, progress=progress, log=log)
         return TetcFile(output)
-    if levels is not None and (not isinstance(levels, (int, np.integer)) or levels < 0):
-        raise OptionError(f"levels must be a non-negative integer, got {levels!r}")
     if times is not None or keyframe_interval is not None or is_series_source(source) \
             or (isinstance(source, (str, os.PathLike)) and Path(source).suffix.lower() in (".e", ".exo", ".ex2")
                 and time_step is None and _exodus_steps(source) > 1):
@@ -205,18 +192,13 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
                                 w_density=w_density, w_geometry=w_geometry, w_sample=w_sample, scalar=scalar,
                                 cell_to_point=cell_to_point, drop_cell_data=drop_cell_data, bricks=bricks,
                                 dependencies=dependencies, jobs=jobs, keyframe_interval=keyframe_interval, log=log)
-    for name, w in (("w_density", w_density), ("w_geometry", w_geometry), ("w_sample", w_sample)):
-        if not (isinstance(w, (int, float)) and math.isfinite(w) and w >= 0):
-            raise OptionError(f"{name} must be a finite number >= 0, got {w!r}")
     if isinstance(bricks, bool) or not isinstance(bricks, (int, np.integer)) or bricks < 1:
         raise OptionError(f"bricks must be a positive integer, got {bricks!r}")
     threads = check_jobs(jobs)
     _check_output(source, output, force=force)  # fail before the (long) work
     _announce_compiling(["encoder"] + ([] if mesh_only else ["decimation"]) + (["dependencies"] if dependencies else []))
     t0 = time.perf_counter()
-    mesh, cells = _as_mesh_and_cells(source, ReadOptions(scalar=scalar, q_file=q_file, q_var=q_var,
-                                                         cell_to_point=cell_to_point, time_step=time_step),
-                                     log, storing=True, drop_cell_data=drop_cell_data)
+    mesh, cells = _as_mesh_and_cells(source, read, log, storing=True, drop_cell_data=drop_cell_data)
     if keep_order:
         if bricks > 1:
             raise OptionError("keep_order needs one plain stream: not with bricks")
@@ -861,32 +843,18 @@ def render(source, *, view: View | None = None, detail: Detail | None = None, re
     ----------
     source : path-like, TetcFile, TetMesh or meshio.Mesh
         A ``.tetc`` file (opened once), any mesh file, or a mesh in memory.
-    view : View, optional
-        How to draw: image size, camera, transfer function, mode, step, scalar range, background,
-        colour bar, lean, early ray termination, vector component (default: ``View()``).
-    detail : Detail, optional
-        How much to draw, ``.tetc`` only: a ratio, a stored level, a frame-time budget, or a
-        selective cut to a ratio, tets or budget (default: the full mesh).
-    read : ReadOptions, optional
-        How to read a mesh file (see :func:`gatun_py.read_mesh`). For a ``.tetc`` file, ``scalar``
-        names the stored point array to render (default: the file's default scalar), and
-        ``time_step`` the step of a time series (default 0).
+    view, detail, read : View, Detail, ReadOptions, optional
+        How to draw (size, camera, transfer function, mode, step, background...), how much of the
+        mesh (``.tetc``: a ratio, level, budget or selective cut; default all) and how to read it
+        (for a ``.tetc`` file ``scalar`` is the stored array to draw, ``time_step`` a series' step).
     pipeline : {"streaming", "generic"}
         One pass, or decode-all-then-render (the paper's baseline).
     time : float, optional
         ``.tetc`` time series: render the step at this time (instead of ``time_step``).
-    progress : callable, optional
-        ``progress(done, total)``: tets rendered so far, of ``total``.
-    log : callable, optional
-        Called with one-line notes (reader notes, an unmeetable budget, a black image).
+    progress, log : callable, optional
+        ``progress(done, total)`` of the tets rendered; ``log(line)`` for notes.
     **options
-        Shorthand: any field of :class:`View`, :class:`Detail` or :class:`ReadOptions` by its name
-        (``size=512, tf="bluntfin", azimuth=30, ratio=0.9, scalar="rho"``), changing the record
-        given or the default one.
-
-    Returns
-    -------
-    Frame
+        Shorthand: the records' fields by name (``size=512, tf="bluntfin", ratio=0.9``).
 
     Examples
     --------

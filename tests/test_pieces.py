@@ -91,8 +91,8 @@ def test_several_files_and_jobs_give_the_same_bytes(pvtu, tmp_path):
     path, _ = pvtu
     files = [str(p) for p in piece_paths(path)]
     opts = {"scalar": "density"}  # no .pvtu to name the default one: the first array would be
-    a = compress_pieces(files, tmp_path / "a.tetc", mesh_only=True, jobs=1, read_options=opts)
-    b = compress_pieces(files, tmp_path / "b.tetc", mesh_only=True, jobs=2, read_options=opts)
+    a = compress_pieces(files, tmp_path / "a.tetc", mesh_only=True, jobs=1, **opts)
+    b = compress_pieces(files, tmp_path / "b.tetc", mesh_only=True, jobs=2, **opts)
     assert a == b and (tmp_path / "a.tetc").read_bytes() == (tmp_path / "b.tetc").read_bytes()
 
 
@@ -110,7 +110,7 @@ def test_memory_limit_splits_pieces_and_piece_k_decodes_alone(pvtu, tmp_path, mo
     # one plain mesh file under a memory limit: split into bricks before any forest is built
     write_pvtu([mesh], tmp_path / "one.pvtu")
     stats = compress_pieces(tmp_path / "one_0.vtu", tmp_path / "one.tetc", mesh_only=True, memory="64M",
-                            read_options={"scalar": "density"})
+                            scalar="density")
     assert stats["bricks"] >= 10
     assert_same_mesh(decode_bricked(TetcReader(tmp_path / "one.tetc")), mesh)
     pieces = read_piece_meshes(path)

@@ -55,6 +55,7 @@ from ..mesh.partition import MAX_BRICKS, partition_tets, split_bricks
 from ..mesh.pieces import boundary_part, interface_table, piece_paths, pvtu_scalar, read_piece
 from .bricks import _brick_payload, _with_loose_points
 from .distributed import ClusterError, _distributed, _numba_cache_dir
+from .requests import ForestOptions, ReadOptions, split_options
 
 __all__ = ["PIECES_KEY", "compress_pieces", "parse_memory", "piece_bricks", "piece_mesh"]
 
@@ -318,11 +319,10 @@ def piece_bricks(meta: dict, piece: int) -> range:
     return range(first, first + n)
 
 
-def compress_pieces(inputs, output, *, levels=None, mesh_only: bool = False, w_density: float = 1.0,
-                    w_geometry: float = 1.0, w_sample: float = 1.0, memory=None, jobs: int | None = 1,
-                    workers: int | None = None, scheduler: str | None = None, read_options: dict | None = None,
+def compress_pieces(inputs, output, *, forest: ForestOptions | None = None, read: ReadOptions | None = None,
+                    memory=None, jobs: int | None = 1, workers: int | None = None, scheduler: str | None = None,
                     drop_cell_data: bool = False, force: bool = False, timeout: float = 10.0,
-                    progress=None, log=None) -> dict:
+                    progress=None, log=None, **options) -> dict:
     """Compress the pieces of a partitioned mesh into one bricked ``.tetc`` file.
 
     Parameters
@@ -339,8 +339,8 @@ def compress_pieces(inputs, output, *, levels=None, mesh_only: bool = False, w_d
         Processes compressing pieces side by side on this machine (each holds one piece).
     workers, scheduler
         Compress on a local Dask cluster of ``workers`` processes, or on a running one.
-    levels, mesh_only, w_density, w_geometry, w_sample, read_options, drop_cell_data, force
-        As for :func:`gatun_py.compress`.
+    forest, read, drop_cell_data, force, options
+        As for :func:`gatun_py.compress` (``options``: the records' fields by name).
 
     Returns
     -------
@@ -348,6 +348,8 @@ def compress_pieces(inputs, output, *, levels=None, mesh_only: bool = False, w_d
         ``pieces``, ``bricks``, ``points``, ``tets``, ``shared_points``, ``bytes``.
     """
     log = log or (lambda _m: None)
+    forest, read = split_options("compress_pieces", options, forest=forest, read=read)
+    mesh_only, levels = forest.mesh_only, forest.levels
     paths = piece_paths(inputs, single=memory is not None)
     output = Path(output)
     if any(os.path.exists(output) and os.path.samefile(p, output) for p in paths):
@@ -359,9 +361,9 @@ def compress_pieces(inputs, output, *, levels=None, mesh_only: bool = False, w_d
     if memory is not None:
         per_tet = BYTES_PER_TET_MESH_ONLY if mesh_only else BYTES_PER_TET
         unit_tets = max(MIN_BRICK_TETS, parse_memory(memory) // per_tet)
-    options = dict(mesh_only=bool(mesh_only), levels=levels, w_density=float(w_density),
-                   w_geometry=float(w_geometry), w_sample=float(w_sample))
-    ropts = dict(read_options or {})
+    build = dict(mesh_only=bool(mesh_only), levels=levels, w_density=float(forest.w_density),
+                   w_geometry=float(forest.w_geometry), w_sample=float(forest.w_sample))
+    ropts = read.kwargs()
     single = inputs[0] if isinstance(inputs, (list, tuple)) and len(inputs) == 1 else inputs
     if ropts.get("scalar") is None and isinstance(single, (str, os.PathLike)) and pvtu_scalar(single):
         ropts["scalar"] = pvtu_scalar(single)  # the solver's choice of default scalar
@@ -394,7 +396,7 @@ def compress_pieces(inputs, output, *, levels=None, mesh_only: bool = False, w_d
         spool = _Spool(output)
         try:
             args = [(str(p), ropts, unit_tets, drop_cell_data, s.units,
-                     table.shared[firsts[i]:firsts[i + 1]], table.n_shared, int(firsts[i]), options)
+                     table.shared[firsts[i]:firsts[i + 1]], table.n_shared, int(firsts[i]), build)
                     for i, (p, s) in enumerate(zip(paths, summaries))]
             total, done = meta["tets"], 0
             for i, bricks in run.each(encode_piece, args, sizes=[s.n_tets for s in summaries]):

@@ -5,6 +5,7 @@
 * :class:`Detail`: how much of the mesh to draw (a uniform ratio or stored level, a selective
   ratio or tet count, or a frame-time budget);
 * :class:`~gatun_py.mesh.io.ReadOptions`: how to read a mesh file (re-exported here);
+* :class:`ForestOptions`: how compression builds the merge forest and levels;
 * :class:`Frame`: the picture a render returns, and its encoded bytes.
 
 Every check of a render option is in ``__post_init__`` here: the verbs, the command line and the
@@ -31,7 +32,7 @@ from ..raycast.camera import Camera
 from ..raycast.image import image_bytes, parse_colour, write_image
 from ..raycast.transfer import load_transfer_function
 
-__all__ = ["View", "Detail", "ReadOptions", "Frame", "split_options", "check_number", "refused"]
+__all__ = ["View", "Detail", "ReadOptions", "ForestOptions", "Frame", "split_options", "check_number", "refused"]
 
 
 def refused(message: str, *fields: str) -> OptionError:
@@ -219,7 +220,55 @@ class Detail:
         return dataclasses.replace(self, **changes)
 
 
-_RECORDS = {"view": View, "detail": Detail, "read": ReadOptions}  # a verb's keyword -> its record
+@dataclass(frozen=True)
+class ForestOptions:
+    """How compression builds the merge forest and the stored levels.
+
+    Parameters
+    ----------
+    levels : int, optional
+        Store pre-simplified levels 1..K (ratio 1 - 1/2^i), those the forest reaches; default
+        every level up to 13 that keeps at least 128 points
+        (:data:`~gatun_py.simplify.MIN_LEVEL_POINTS`; coarser ratios simplify on the fly from the
+        last stored level).
+    mesh_only : bool
+        Store the mesh alone: no merge forest, no levels.
+    w_density, w_geometry : float
+        Decimation weights of the mass error and the boundary geometry error (>= 0).
+    w_sample : float
+        Factor on the decimation's sampled error (>= 0; 0: a faster forest with worse coarse
+        levels, see :func:`~gatun_py.simplify.decimate`).
+    dependencies : bool
+        Also store the merge dependencies that selective refinement needs (``render(...,
+        selective=True)``): every cut closed under them is flip-free. They cost file size
+        (bench/sections/cells.md), so they are stored only when asked for.
+
+    Examples
+    --------
+    >>> ForestOptions(levels=3).levels, ForestOptions().w_sample
+    (3, 1.0)
+    """
+
+    levels: int | None = None
+    mesh_only: bool = False
+    w_density: float = 1.0
+    w_geometry: float = 1.0
+    w_sample: float = 1.0
+    dependencies: bool = False
+
+    def __post_init__(self):
+        if self.levels is not None and (isinstance(self.levels, bool) or not isinstance(self.levels, (int, np.integer))
+                                        or self.levels < 0):
+            raise refused(f"levels must be a non-negative integer, got {self.levels!r}", "levels")
+        for name in ("w_density", "w_geometry", "w_sample"):
+            w = getattr(self, name)
+            if not (isinstance(w, (int, float)) and math.isfinite(w) and w >= 0):
+                raise refused(f"{name} must be a finite number >= 0, got {w!r}", name)
+        _set(self, "mesh_only", bool(self.mesh_only))
+        _set(self, "dependencies", bool(self.dependencies))
+
+
+_RECORDS = {"view": View, "detail": Detail, "read": ReadOptions, "forest": ForestOptions}  # a verb's keyword -> its record
 _FIELDS = {cls: {f.name for f in dataclasses.fields(cls)} for cls in _RECORDS.values()}
 
 

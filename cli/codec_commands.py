@@ -132,9 +132,9 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
                    "pieces (the paths must be readable there, e.g. a shared folder).")
 @force_option
 @quiet_option
-@records("forest", "read")
-def compress(inputs, output, forest, read, times, keyframe_interval, n_bricks, jobs, keep_order, drop_cell_data, pieces,
-             memory, workers, scheduler, force, quiet):
+@records("forest", "read", "cluster")
+def compress(inputs, output, forest, read, cluster, times, keyframe_interval, n_bricks, jobs, keep_order, drop_cell_data,
+             pieces, memory, force, quiet):
     """Compress INPUT (any readable mesh or PLOT3D grid) losslessly into a .tetc file.
 
     Connectivity is cut-border coded; coordinates (float32 or float64) and every point array, in its
@@ -165,14 +165,13 @@ def compress(inputs, output, forest, read, times, keyframe_interval, n_bricks, j
             raise click.UsageError("--times and --keyframe-interval are for a time series, not pieces")
         if n_bricks != 1 or forest.dependencies or keep_order:
             raise click.UsageError("--bricks, --dependencies and --keep-order do not apply to pieces (each piece is a brick)")
-        if workers is not None and scheduler is not None:
-            raise click.UsageError("give either --workers (a local cluster) or --scheduler (a running one), not both")
         with progress_reporter("compressing pieces", quiet, min_total=1) as progress:
             gatun_py.compress_pieces(list(inputs), output, forest=forest, read=read, force=force, memory=memory,
-                                     jobs=jobs, workers=workers, scheduler=scheduler, drop_cell_data=drop_cell_data,
+                                     jobs=jobs, workers=cluster.workers, scheduler=cluster.scheduler,
+                                     drop_cell_data=drop_cell_data,
                                      progress=progress, log=logger(quiet))
         return
-    if workers is not None or scheduler is not None:
+    if cluster.used:
         raise click.UsageError("--workers and --scheduler apply to pieces (--pieces, .pvtu, name.e.N.i)")
     input = inputs
     if times is not None:

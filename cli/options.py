@@ -22,7 +22,7 @@ import numpy as np
 from gatun_py.errors import OptionError, ReadError
 from gatun_py.limits import MAX_IMAGE_SIDE, MAX_ZOOM  # light: parsing the options loads no numba
 from gatun_py.mesh.plot3d import Q_VARIABLES
-from gatun_py.pipeline.requests import Detail, ForestOptions, ReadOptions, View  # numba-free: the records check the options
+from gatun_py.pipeline.requests import Cluster, Detail, ForestOptions, ReadOptions, View  # numba-free: the records check the options
 
 # record field -> the click parameter that gives it, per record a command receives
 VIEW_PARAMS = {"size": "size", "tf": "tf_spec", "azimuth": "azimuth", "elevation": "elevation", "zoom": "zoom",
@@ -33,8 +33,9 @@ READ_PARAMS = {"scalar": "scalar", "q_file": "q_file", "q_var": "q_var", "cell_t
                "time_step": "time_step"}
 FOREST_PARAMS = {"levels": "n_levels", "mesh_only": "mesh_only", "w_density": "w_density", "w_geometry": "w_geometry",
                  "w_sample": "w_sample", "dependencies": "dependencies"}
+CLUSTER_PARAMS = {"workers": "workers", "scheduler": "scheduler", "timeout": "timeout"}
 _RECORDS = {"view": (View, VIEW_PARAMS), "detail": (Detail, DETAIL_PARAMS), "read": (ReadOptions, READ_PARAMS),
-            "forest": (ForestOptions, FOREST_PARAMS)}
+            "forest": (ForestOptions, FOREST_PARAMS), "cluster": (Cluster, CLUSTER_PARAMS)}
 # the options whose flag is not the parameter's name with dashes
 _FLAGS = {"tf_spec": "--tf", "scalar_range": "--range", "q_file": "--q", "n_levels": "--levels"}
 

@@ -91,9 +91,9 @@ def _component(ctx, param, text):
 @mesh_input_options
 @force_option
 @quiet_option
-@records("view", "detail", "read")
-def render(input, output, view, detail, read, pipeline, workers, scheduler, n_bricks, orbit, timeout, show_stats,
-           at_time, step_range, force, quiet):
+@records("view", "detail", "read", "cluster")
+def render(input, output, view, detail, read, cluster, pipeline, n_bricks, orbit, show_stats, at_time, step_range, force,
+           quiet):
     """Volume-render INPUT (a .tetc file or any mesh file) into an image.
 
     Tets are rendered as they are decoded: rays start on the boundary surface and walk inward
@@ -108,19 +108,19 @@ def render(input, output, view, detail, read, pipeline, workers, scheduler, n_br
         raise click.UsageError("give at most one of --time, --steps and --time-step")
     check_step(input, read.time_step, at_time)
     if step_range is not None:
-        if workers is not None or scheduler is not None or orbit > 1:
+        if cluster.used or orbit > 1:
             raise click.UsageError("--steps renders on this machine: not with --workers, --scheduler or --orbit")
         _render_steps(input, output, _slice(step_range), dict(view=view, detail=detail, read=read, pipeline=pipeline),
                       force=force, quiet=quiet, show_stats=show_stats)
         return
-    if n_bricks is not None and workers is None and scheduler is None:
+    if n_bricks is not None and not cluster.used:
         raise click.UsageError("--bricks is for rendering on a cluster (--workers or --scheduler)")
-    if workers is not None or scheduler is not None or orbit > 1:
-        _check_series_options(workers, scheduler, detail, view, pipeline)
-    if workers is not None or scheduler is not None:
-        _render_on_cluster(input, output, workers=workers, scheduler=scheduler, bricks=n_bricks, orbit=orbit,
-                           view=view, detail=detail, read=read, force=force, timeout=timeout, show_stats=show_stats,
-                           quiet=quiet)
+    if cluster.used or orbit > 1:
+        _check_series_options(detail, view, pipeline)
+    if cluster.used:
+        _render_on_cluster(input, output, workers=cluster.workers, scheduler=cluster.scheduler, bricks=n_bricks,
+                           orbit=orbit, view=view, detail=detail, read=read, force=force, timeout=cluster.timeout,
+                           show_stats=show_stats, quiet=quiet)
         return
     if orbit > 1:
         raise click.UsageError("--orbit renders a series on a cluster: give --workers N (a local one) or --scheduler")
@@ -152,9 +152,7 @@ def render(input, output, view, detail, read, pipeline, workers, scheduler, n_br
         status(f"wrote {output} ({w}x{h}, {st['tets_rendered']} tets, {st['total_s']:.2f} s)", quiet)
 
 
-def _check_series_options(workers, scheduler, detail, view, pipeline):
-    if workers is not None and scheduler is not None:
-        raise click.UsageError("give either --workers (a local cluster) or --scheduler (a running one), not both")
+def _check_series_options(detail, view, pipeline):
     unsupported = [name for name, given in (("--ratio", detail.ratio is not None),
                                             ("--colorbar", view.colorbar), ("--lean", view.lean),
                                             ("--pipeline generic", pipeline != "streaming"),

@@ -12,10 +12,10 @@ import pytest
 import gatun_py
 from gatun_py import api
 from gatun_py.errors import OptionError
-from gatun_py.pipeline.requests import Detail, ForestOptions, ReadOptions, View, split_options
+from gatun_py.pipeline.requests import Cluster, Detail, ForestOptions, ReadOptions, View, split_options
 
 # records: a verb's keyword that takes one counts as one grouped argument, not as its fields
-GROUPED = {"view", "detail", "read", "forest"}
+GROUPED = {"view", "detail", "read", "forest", "cluster"}
 MAX_LOOSE = 12
 RENDER_MAX_LINES = 60
 
@@ -30,7 +30,7 @@ def _verbs():
 
 
 def _commands():
-    from cli.main import tetc
+    from gatun_py.cli.main import tetc
 
     def walk(group, prefix=""):
         for name, cmd in group.commands.items():
@@ -93,6 +93,8 @@ def test_one_frame_and_one_encoder():
     (lambda: ReadOptions(time_step=1.5), "time_step"),
     (lambda: ForestOptions(levels=-1), "levels"),
     (lambda: ForestOptions(w_sample=float("nan")), "w_sample"),
+    (lambda: Cluster(workers=2, scheduler="tcp://h:1"), "either"),
+    (lambda: Cluster(workers=0), "workers"),
 ])
 def test_records_refuse_with_one_message(make, message):
     with pytest.raises(OptionError, match=message):
@@ -133,7 +135,7 @@ def test_render_with_records_equals_the_shorthand():
 def test_cli_names_its_options_in_the_records_refusals(tmp_path):
     from click.testing import CliRunner
 
-    from cli.main import tetc
+    from gatun_py.cli.main import tetc
 
     mesh = tmp_path / "m.vtu"
     gatun_py.write_mesh(__import__("gatun_py.warmup", fromlist=["tiny_mesh"]).tiny_mesh(), mesh)

@@ -6,6 +6,7 @@
   ratio or tet count, or a frame-time budget);
 * :class:`~gatun_py.mesh.io.ReadOptions`: how to read a mesh file (re-exported here);
 * :class:`ForestOptions`: how compression builds the merge forest and levels;
+* :class:`Cluster`: a local or running Dask cluster for the work that spreads over processes;
 * :class:`Frame`: the picture a render returns, and its encoded bytes.
 
 Every check of a render option is in ``__post_init__`` here: the verbs, the command line and the
@@ -32,7 +33,7 @@ from ..raycast.camera import Camera
 from ..raycast.image import image_bytes, parse_colour, write_image
 from ..raycast.transfer import load_transfer_function
 
-__all__ = ["View", "Detail", "ReadOptions", "ForestOptions", "Frame", "split_options", "check_number", "refused"]
+__all__ = ["View", "Detail", "ReadOptions", "ForestOptions", "Cluster", "Frame", "split_options", "check_number", "refused"]
 
 
 def refused(message: str, *fields: str) -> OptionError:
@@ -268,7 +269,42 @@ class ForestOptions:
         _set(self, "dependencies", bool(self.dependencies))
 
 
-_RECORDS = {"view": View, "detail": Detail, "read": ReadOptions, "forest": ForestOptions}  # a verb's keyword -> its record
+@dataclass(frozen=True)
+class Cluster:
+    """Where work that spreads over processes runs: a local Dask cluster of ``workers`` processes,
+    or a running one at ``scheduler`` (``tcp://HOST:PORT``, waited for ``timeout`` seconds).
+
+    Examples
+    --------
+    >>> Cluster(workers=2).local, Cluster().local
+    (True, False)
+    """
+
+    workers: int | None = None
+    scheduler: str | None = None
+    timeout: float = 10.0
+
+    def __post_init__(self):
+        if self.workers is not None and self.scheduler is not None:
+            raise refused("give either workers (a local cluster) or scheduler (a running one), not both",
+                          "workers", "scheduler")
+        if self.workers is not None and (isinstance(self.workers, bool) or not isinstance(self.workers, (int, np.integer))
+                                         or self.workers < 1):
+            raise refused(f"workers must be a whole number >= 1, got {self.workers!r}", "workers")
+        _set(self, "timeout", check_number("timeout", self.timeout, lo=0.0, lo_open=True, allow_none=False))
+
+    @property
+    def local(self) -> bool:
+        """A local cluster is asked for."""
+        return self.workers is not None
+
+    @property
+    def used(self) -> bool:
+        """Any cluster is asked for."""
+        return self.workers is not None or self.scheduler is not None
+
+
+_RECORDS = {"view": View, "detail": Detail, "read": ReadOptions, "forest": ForestOptions, "cluster": Cluster}  # a verb's keyword -> its record
 _FIELDS = {cls: {f.name for f in dataclasses.fields(cls)} for cls in _RECORDS.values()}
 
 

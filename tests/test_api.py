@@ -149,5 +149,5 @@ def test_import_is_light_and_the_verbs_document_themselves():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.stdout.split() == ["False", "False"], out
     text = pydoc.render_doc(gatun_py.render, renderer=pydoc.plaintext)
-    assert "Volume-render a mesh" in text and "render(source, *, size=256" in text
+    assert "Volume-render a mesh" in text and "render(source, *, view:" in text
     assert callable(gatun_py.open) and gatun_py.TetcFile.__name__ == "TetcFile"

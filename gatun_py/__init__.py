@@ -79,7 +79,7 @@ compress_pieces = _Verb("compress_pieces", ".pipeline.compress_pieces")
 
 # classes load with their module on first access
 _LAZY = {"TetcFile": "api", "Frame": "pipeline.requests", "View": "pipeline.requests", "Detail": "pipeline.requests",
-         "ReadOptions": "mesh.io", "Surface": "contour.extract", "TetMesh": "mesh", "TetBatch": "mesh", "read_mesh": "mesh",
+         "ReadOptions": "mesh.io", "ForestOptions": "pipeline.requests", "Surface": "contour.extract", "TetMesh": "mesh", "TetBatch": "mesh", "read_mesh": "mesh",
          "read_series": "mesh.series", "Series": "mesh.series",
          "write_mesh": "mesh"}
 
@@ -90,7 +90,7 @@ __getattr__, __dir__, _ = attach(__name__, _LAZY)
 _register_meshio()
 
 __all__ = ["compress", "decompress", "convert", "info", "open", "render", "isosurface", "append", "render_steps",
-           "compress_pieces", "TetcFile", "Frame", "View", "Detail", "ReadOptions",
+           "compress_pieces", "TetcFile", "Frame", "View", "Detail", "ReadOptions", "ForestOptions",
            "Surface", "TetMesh",
            "TetBatch", "read_mesh", "write_mesh", "read_series", "Series", "TetcError", "ReadError", "MeshError", "CorruptFileError",
            "FormatVersionError", "OptionError", "OutputError", "OutputExistsError", "__version__"]

@@ -30,7 +30,7 @@ from ..mesh.partition import partition_tets, split_bricks
 from ..mesh.synthetic import jittered_grid
 from ..raycast.camera import Camera, FittedCamera
 from ..raycast.composite import Fragments, composite, merge_fragments
-from ..raycast.caster import render_mesh
+from ..raycast.caster import box_in_view, range_can_show, render_mesh
 from ..raycast.transfer import TransferFunction, load_transfer_function
 from ..simplify.levels import Target, resolve_target, target_ancestors
 from .budget import FramePlanner, TimeModel, machine_costs, plan_file_budget
@@ -236,6 +236,11 @@ def render_brick(source, setup: FrameSetup, *, ratio: float | None = None, level
             reader = source if isinstance(source, TetcReader) else TetcReader(source)
         if target is None:
             target = resolve_target(reader, ratio=ratio, level=level)
+        hidden = brick_hidden(reader, target, setup)
+        if hidden is not None:  # nothing of it can show: not decoded (its fragments would be none)
+            return Fragments.empty(cam.width, cam.height), {
+                "tets_rendered": 0, "render_s": 0.0, "bricks_skipped": 1, "skipped": hidden, "level": target.level,
+                "ratio": target.ratio, "merges": target.merges, "tets_decoded": 0}
         times = {"decode_s": 0.0, "filter_s": 0.0}
         anc = target_ancestors(reader, target)
         view = View(None, setup.tf, setup.mode, setup.step, False, setup.scalar_range, setup.scalar,
@@ -244,14 +249,49 @@ def render_brick(source, setup: FrameSetup, *, ratio: float | None = None, level
                                 fragments=True)
         stats = dict(res.stats)
         stats.update(times, level=target.level, ratio=target.ratio, merges=target.merges,
-                     tets_decoded=int(reader.level_meta(target.level)["tets"]))
+                     tets_decoded=int(reader.level_meta(target.level)["tets"]), bricks_decoded=1)
     stats["brick_s"] = time.perf_counter() - t0
     return res.fragments, stats
 
 
 # stats of the bricks' renders that add up over bricks
 _SUMMED = ("tets_rendered", "samples", "steps", "segments", "rays_unfinished", "segments_stuck", "boundary_anomalies",
-           "render_s", "decode_s", "filter_s", "fragments")
+           "render_s", "decode_s", "filter_s", "fragments", "bricks_decoded", "bricks_skipped")
+
+
+def brick_hidden(reader: TetcReader, target: Target, setup: FrameSetup) -> str | None:
+    """Why brick ``reader`` drawn at ``target`` adds nothing to the frame, from its index alone: "tf"
+    (the transfer function makes its stored scalar range invisible), "off-screen" (its stored box
+    projects outside the image); None when it may show.
+
+    The stored range and box are those of a stored level's points, so they bound the brick only
+    at a stored level: at a ratio between two levels (merges past the level) nothing is skipped.
+    The scalar range is the file's default scalar's: another array is never skipped by it.
+    """
+    if target.merges != target.level_merges:
+        return None
+    meta = reader.level_meta(target.level)
+    default_scalar = setup.scalar is None or setup.scalar == reader.scalar_name
+    rng = _finite_pair(meta.get("scalar_range"))
+    if default_scalar and setup.component is None and rng is not None and rng[0] <= rng[1] \
+            and not range_can_show(setup.tf, setup.scalar_range, rng[0], rng[1]):
+        return "tf"
+    box = meta.get("bbox")
+    try:
+        lo, hi = np.asarray(box[0], np.float64), np.asarray(box[1], np.float64)
+    except (TypeError, ValueError, IndexError):
+        return None
+    if lo.shape == hi.shape == (3,) and not box_in_view(setup.camera, lo, hi):
+        return "off-screen"
+    return None
+
+
+def _finite_pair(v):
+    try:
+        lo, hi = (float(x) for x in v)
+    except (TypeError, ValueError):
+        return None
+    return (lo, hi) if np.isfinite(lo) and np.isfinite(hi) else None
 
 
 def combine_stats(per_brick: list[dict]) -> dict:

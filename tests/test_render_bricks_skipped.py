@@ -131,3 +131,18 @@ def test_box_in_view():
     assert not box_in_view(cam, np.array([50.0, 0, 0]), np.array([51.0, 1, 1]))  # far to one side
     behind = cam.position - 5.0 * (cam.focal_point - cam.position)
     assert box_in_view(cam, behind - 1.0, behind + 1.0) is True  # behind the eye: not decided, kept
+
+
+def test_a_budget_gives_hidden_bricks_no_time(files):
+    """Under a budget, the bricks that will not be decoded take no share of the frame's time."""
+    _, _, bricked = files
+    whole = TetcReader(bricked)
+    readers = [whole.brick(k) for k in range(whole.n_bricks)]
+    setup, _ = frame_setup(View(Camera(32, 32, 30, 20), tf_above(0.7)), MeshExtent.of_reader(whole))
+    hidden = [sortlast.brick_hidden(r, sortlast.resolve_target(r, level=0), setup) is not None for r in readers]
+    assert any(hidden) and not all(hidden)
+    share = sortlast._budget_shares(readers, 2.0, None, setup)
+    assert all(s == 0.0 for s, h in zip(share, hidden) if h)
+    assert all(s > 0.0 for s, h in zip(share, hidden) if not h)
+    assert sum(share) == pytest.approx(2.0)
+    assert sum(sortlast._budget_shares(readers, 2.0, None, None)) == pytest.approx(2.0)

@@ -353,24 +353,35 @@ def join_rows(bands: list[tuple[np.ndarray, dict]], width: int) -> PipelineResul
     return PipelineResult(image, stats)
 
 
-def plan_brick_budgets(sources, view: View, budget_s: float, *, groups=None) -> list[Target]:
+def plan_brick_budgets(sources, view: View, budget_s: float, *, groups=None, setup: FrameSetup | None = None
+                       ) -> list[Target]:
     """A target for every ``.tetc`` brick so that one frame fits ``budget_s`` seconds.
 
     Each brick picks its own level and ratio (the time-budget planner on its own file,
     :func:`~gatun_py.pipeline.budget.plan_file_budget`) for its share of the frame: the budget
     split in proportion to the tets among the bricks that run one after another (``groups``: the
-    bricks of each worker, which run side by side; default one group, one process).
+    bricks of each worker, which run side by side; default one group, one process). With the
+    frame's ``setup``, a brick that cannot show at its full level (:func:`brick_hidden`: not
+    decoded) takes no share: the others get its time.
     """
     readers = [open_brick(s) if isinstance(s, BrickRef) else s if isinstance(s, TetcReader) else TetcReader(s)
                for s in sources]
+    share = _budget_shares(readers, budget_s, groups, setup)
+    return [plan_file_budget(r, view, max(share[i], 1e-3))[0] for i, r in enumerate(readers)]
+
+
+def _budget_shares(readers, budget_s: float, groups, setup: FrameSetup | None) -> list[float]:
+    """Each brick's seconds of ``budget_s``: in proportion to its tets within its group, bricks
+    hidden from ``setup``'s frame counted as none."""
     tets = [int(r.level_meta(0)["tets"]) for r in readers]
-    groups = groups or [list(range(len(readers)))]
+    if setup is not None:
+        tets = [0 if brick_hidden(r, resolve_target(r, level=0), setup) else n for r, n in zip(readers, tets)]
     share = [0.0] * len(readers)
-    for g in groups:
+    for g in groups or [list(range(len(readers)))]:
         total = max(sum(tets[i] for i in g), 1)
         for i in g:
             share[i] = budget_s * tets[i] / total
-    return [plan_file_budget(r, view, max(share[i], 1e-3))[0] for i, r in enumerate(readers)]
+    return share
 
 
 class BrickBudget:
@@ -408,11 +419,7 @@ class BrickBudget:
                 planner = FramePlanner(r, model, step=setup.step, mode=setup.mode)
                 planner.probe(r, view)  # as one file's budget probes: the brick fitted to the view
                 self._planners.append(planner)
-        share = [0.0] * len(self.readers)
-        for g in groups or [list(range(len(self.readers)))]:
-            total = max(sum(self.tets[i] for i in g), 1)
-            for i in g:
-                share[i] = budget_s * self.tets[i] / total
+        share = _budget_shares(self.readers, budget_s, groups, setup)
         return [p.target(p.plan(max(share[i], 1e-3), setup.camera)) for i, p in enumerate(self._planners)]
 
     def observe(self, per_brick: list[dict]) -> None:
@@ -466,7 +473,7 @@ def render_bricks(sources, view: View, extent: MeshExtent, *, ratio: float | Non
         raise OptionError("give at most one of ratio, level and budget")
     setup, notes = frame_setup(view, extent)
     setup = shared_rays(setup)
-    targets = plan_brick_budgets(sources, view, budget) if budget is not None else [None] * len(sources)
+    targets = plan_brick_budgets(sources, view, budget, setup=setup) if budget is not None else [None] * len(sources)
     parts, per_brick = [], []
     for src, target in zip(sources, targets):
         frags, st = render_brick(src, setup, ratio=ratio, level=level, target=target)

@@ -32,6 +32,10 @@ def tf_above(cut: float):
     })
 
 
+NOTHING = from_dict({"color": [{"x": 0.0, "rgb": [1.0, 1.0, 1.0]}, {"x": 1.0, "rgb": [1.0, 1.0, 1.0]}],
+                     "opacity": [{"x": 0.0, "a": 0.0}, {"x": 1.0, "a": 0.0}]})
+
+
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     """A grid whose scalar grows along y, as one plain stream and as 8 bricks."""
@@ -81,7 +85,7 @@ def test_invisible_bricks_are_not_decoded(files, monkeypatch, mode):
 
 def test_a_transfer_function_showing_nothing_decodes_no_brick(files, monkeypatch):
     _, _, bricked = files
-    view = View(Camera(32, 32, 30, 20), tf_above(1.0))
+    view = View(Camera(32, 32, 30, 20), NOTHING)
     res, n_decoded = _render_counting(bricked, view, monkeypatch)
     assert n_decoded == 0 and res.stats["bricks_skipped"] == N_BRICKS
     assert not res.image.any()
@@ -90,7 +94,7 @@ def test_a_transfer_function_showing_nothing_decodes_no_brick(files, monkeypatch
 def test_off_screen_bricks_are_not_decoded(files, monkeypatch):
     """Zoomed on the middle, panned: bricks outside the image are skipped, the image unchanged."""
     _, _, bricked = files
-    view = View(Camera(40, 40, 0, 0, zoom=3.0, pan_x=0.3), "default", terminate=False)
+    view = View(Camera(40, 40, 0, 0, zoom=4.0, pan_x=0.5, pan_y=0.5), "default", terminate=False)
     res, n_decoded = _render_counting(bricked, view, monkeypatch)
     full, _ = _render_counting(bricked, view, monkeypatch, skip=False)
     assert n_decoded < N_BRICKS
@@ -102,7 +106,7 @@ def test_a_ratio_between_levels_skips_nothing_by_its_stored_range(files):
     """The stored range and box bound a stored level's points only."""
     _, _, bricked = files
     reader = TetcReader(bricked).brick(0)
-    setup, _ = frame_setup(View(Camera(16, 16), tf_above(1.0)), MeshExtent.of_reader(TetcReader(bricked)))
+    setup, _ = frame_setup(View(Camera(16, 16), NOTHING), MeshExtent.of_reader(TetcReader(bricked)))
     target = sortlast.resolve_target(reader, level=0)
     assert sortlast.brick_hidden(reader, target, setup) == "tf"
     between = sortlast.Target(target.level, target.merges + 1, target.ratio, target.level_merges)

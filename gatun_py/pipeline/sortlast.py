@@ -30,7 +30,7 @@ from ..mesh.partition import partition_tets, split_bricks
 from ..mesh.synthetic import jittered_grid
 from ..raycast.camera import Camera, FittedCamera
 from ..raycast.composite import Fragments, composite, merge_fragments
-from ..raycast.caster import render_mesh
+from ..raycast.caster import box_in_view, range_can_show, render_mesh
 from ..raycast.transfer import TransferFunction, load_transfer_function
 from ..simplify.levels import Target, resolve_target, target_ancestors
 from .budget import FramePlanner, TimeModel, machine_costs, plan_file_budget
@@ -236,6 +236,11 @@ def render_brick(source, setup: FrameSetup, *, ratio: float | None = None, level
             reader = source if isinstance(source, TetcReader) else TetcReader(source)
         if target is None:
             target = resolve_target(reader, ratio=ratio, level=level)
+        hidden = brick_hidden(reader, target, setup)
+        if hidden is not None:  # nothing of it can show: not decoded (its fragments would be none)
+            return Fragments.empty(cam.width, cam.height), {
+                "tets_rendered": 0, "render_s": 0.0, "bricks_skipped": 1, "skipped": hidden, "level": target.level,
+                "ratio": target.ratio, "merges": target.merges, "tets_decoded": 0}
         times = {"decode_s": 0.0, "filter_s": 0.0}
         anc = target_ancestors(reader, target)
         view = View(None, setup.tf, setup.mode, setup.step, False, setup.scalar_range, setup.scalar,
@@ -244,14 +249,49 @@ def render_brick(source, setup: FrameSetup, *, ratio: float | None = None, level
                                 fragments=True)
         stats = dict(res.stats)
         stats.update(times, level=target.level, ratio=target.ratio, merges=target.merges,
-                     tets_decoded=int(reader.level_meta(target.level)["tets"]))
+                     tets_decoded=int(reader.level_meta(target.level)["tets"]), bricks_decoded=1)
     stats["brick_s"] = time.perf_counter() - t0
     return res.fragments, stats
 
 
 # stats of the bricks' renders that add up over bricks
 _SUMMED = ("tets_rendered", "samples", "steps", "segments", "rays_unfinished", "segments_stuck", "boundary_anomalies",
-           "render_s", "decode_s", "filter_s", "fragments")
+           "render_s", "decode_s", "filter_s", "fragments", "bricks_decoded", "bricks_skipped")
+
+
+def brick_hidden(reader: TetcReader, target: Target, setup: FrameSetup) -> str | None:
+    """Why brick ``reader`` drawn at ``target`` adds nothing to the frame, from its index alone: "tf"
+    (the transfer function makes its stored scalar range invisible), "off-screen" (its stored box
+    projects outside the image); None when it may show.
+
+    The stored range and box are those of a stored level's points, so they bound the brick only
+    at a stored level: at a ratio between two levels (merges past the level) nothing is skipped.
+    The scalar range is the file's default scalar's: another array is never skipped by it.
+    """
+    if target.merges != target.level_merges:
+        return None
+    meta = reader.level_meta(target.level)
+    default_scalar = setup.scalar is None or setup.scalar == reader.scalar_name
+    rng = _finite_pair(meta.get("scalar_range"))
+    if default_scalar and setup.component is None and rng is not None and rng[0] <= rng[1] \
+            and not range_can_show(setup.tf, setup.scalar_range, rng[0], rng[1]):
+        return "tf"
+    box = meta.get("bbox")
+    try:
+        lo, hi = np.asarray(box[0], np.float64), np.asarray(box[1], np.float64)
+    except (TypeError, ValueError, IndexError):
+        return None
+    if lo.shape == hi.shape == (3,) and not box_in_view(setup.camera, lo, hi):
+        return "off-screen"
+    return None
+
+
+def _finite_pair(v):
+    try:
+        lo, hi = (float(x) for x in v)
+    except (TypeError, ValueError):
+        return None
+    return (lo, hi) if np.isfinite(lo) and np.isfinite(hi) else None
 
 
 def combine_stats(per_brick: list[dict]) -> dict:
@@ -313,24 +353,35 @@ def join_rows(bands: list[tuple[np.ndarray, dict]], width: int) -> PipelineResul
     return PipelineResult(image, stats)
 
 
-def plan_brick_budgets(sources, view: View, budget_s: float, *, groups=None) -> list[Target]:
+def plan_brick_budgets(sources, view: View, budget_s: float, *, groups=None, setup: FrameSetup | None = None
+                       ) -> list[Target]:
     """A target for every ``.tetc`` brick so that one frame fits ``budget_s`` seconds.
 
     Each brick picks its own level and ratio (the time-budget planner on its own file,
     :func:`~gatun_py.pipeline.budget.plan_file_budget`) for its share of the frame: the budget
     split in proportion to the tets among the bricks that run one after another (``groups``: the
-    bricks of each worker, which run side by side; default one group, one process).
+    bricks of each worker, which run side by side; default one group, one process). With the
+    frame's ``setup``, a brick that cannot show at its full level (:func:`brick_hidden`: not
+    decoded) takes no share: the others get its time.
     """
     readers = [open_brick(s) if isinstance(s, BrickRef) else s if isinstance(s, TetcReader) else TetcReader(s)
                for s in sources]
+    share = _budget_shares(readers, budget_s, groups, setup)
+    return [plan_file_budget(r, view, max(share[i], 1e-3))[0] for i, r in enumerate(readers)]
+
+
+def _budget_shares(readers, budget_s: float, groups, setup: FrameSetup | None) -> list[float]:
+    """Each brick's seconds of ``budget_s``: in proportion to its tets within its group, bricks
+    hidden from ``setup``'s frame counted as none."""
     tets = [int(r.level_meta(0)["tets"]) for r in readers]
-    groups = groups or [list(range(len(readers)))]
+    if setup is not None:
+        tets = [0 if brick_hidden(r, resolve_target(r, level=0), setup) else n for r, n in zip(readers, tets)]
     share = [0.0] * len(readers)
-    for g in groups:
+    for g in groups or [list(range(len(readers)))]:
         total = max(sum(tets[i] for i in g), 1)
         for i in g:
             share[i] = budget_s * tets[i] / total
-    return [plan_file_budget(r, view, max(share[i], 1e-3))[0] for i, r in enumerate(readers)]
+    return share
 
 
 class BrickBudget:
@@ -368,11 +419,7 @@ class BrickBudget:
                 planner = FramePlanner(r, model, step=setup.step, mode=setup.mode)
                 planner.probe(r, view)  # as one file's budget probes: the brick fitted to the view
                 self._planners.append(planner)
-        share = [0.0] * len(self.readers)
-        for g in groups or [list(range(len(self.readers)))]:
-            total = max(sum(self.tets[i] for i in g), 1)
-            for i in g:
-                share[i] = budget_s * self.tets[i] / total
+        share = _budget_shares(self.readers, budget_s, groups, setup)
         return [p.target(p.plan(max(share[i], 1e-3), setup.camera)) for i, p in enumerate(self._planners)]
 
     def observe(self, per_brick: list[dict]) -> None:
@@ -426,7 +473,7 @@ def render_bricks(sources, view: View, extent: MeshExtent, *, ratio: float | Non
         raise OptionError("give at most one of ratio, level and budget")
     setup, notes = frame_setup(view, extent)
     setup = shared_rays(setup)
-    targets = plan_brick_budgets(sources, view, budget) if budget is not None else [None] * len(sources)
+    targets = plan_brick_budgets(sources, view, budget, setup=setup) if budget is not None else [None] * len(sources)
     parts, per_brick = [], []
     for src, target in zip(sources, targets):
         frags, st = render_brick(src, setup, ratio=ratio, level=level, target=target)

@@ -49,16 +49,24 @@ def _entry(s, lo, inv, n):
     return int(x)
 
 
+@njit(cache=True, _nrt=False)
+def range_visible(prefix, lo, inv, smin, smax):
+    """Whether a scalar interval [smin, smax] can show: some table entry it reaches, widened by one
+    entry each way, has opacity > 0 (``prefix``: :func:`visible_prefix` of the table's opacity).
+    A tet's interval is that of its four vertices; a brick's, the range its file stores."""
+    n = prefix.shape[0] - 1
+    i0 = max(_entry(smin, lo, inv, n) - 1, 0)
+    i1 = min(_entry(smax, lo, inv, n) + 2, n - 1)
+    return prefix[i1 + 1] - prefix[i0] > 0
+
+
 @njit(cache=True, parallel=True)
 def visible_tets(tets, dens, prefix, lo, inv, out):
-    """``out[t]`` = 1 if tet t can show (some table entry its scalar interval reaches, widened by one
-    entry each way, has opacity > 0), else 0. One task per tet, each writing its own entry."""
-    n = prefix.shape[0] - 1
+    """``out[t]`` = 1 if tet t can show (:func:`range_visible` of its vertices' scalar interval),
+    else 0. One task per tet, each writing its own entry."""
     for t in prange(tets.shape[0]):
         d0, d1, d2, d3 = dens[tets[t, 0]], dens[tets[t, 1]], dens[tets[t, 2]], dens[tets[t, 3]]
-        i0 = max(_entry(min(min(d0, d1), min(d2, d3)), lo, inv, n) - 1, 0)
-        i1 = min(_entry(max(max(d0, d1), max(d2, d3)), lo, inv, n) + 2, n - 1)
-        out[t] = 1 if prefix[i1 + 1] - prefix[i0] > 0 else 0
+        out[t] = 1 if range_visible(prefix, lo, inv, min(min(d0, d1), min(d2, d3)), max(max(d0, d1), max(d2, d3))) else 0
 
 
 @njit(cache=True)

@@ -125,15 +125,15 @@ def _first_sample_at(t, step, mode):
 # ---------------------------------------------------------------------------------------------
 # walking
 @njit(cache=True, _nrt=False)
-def _sort3w(a, b, c, wa, wb, wc):
-    """Sort three ids, carrying a weight with each."""
+def _sort3p(a, b, c, wa, wb, wc, ta, tb, tc, da, db, dc):
+    """Sort three ids, carrying a weight, a depth and a scalar with each."""
     if a > b:
-        a, b, wa, wb = b, a, wb, wa
+        a, b, wa, wb, ta, tb, da, db = b, a, wb, wa, tb, ta, db, da
     if b > c:
-        b, c, wb, wc = c, b, wc, wb
+        b, c, wb, wc, tb, tc, db, dc = c, b, wc, wb, tc, tb, dc, db
     if a > b:
-        a, b, wa, wb = b, a, wb, wa
-    return a, b, c, wa, wb, wc
+        a, b, wa, wb, ta, tb, da, db = b, a, wb, wa, tb, ta, db, da
+    return a, b, c, wa, wb, wc, ta, tb, tc, da, db, dc
 
 
 @njit(cache=True, _nrt=False)
@@ -200,6 +200,10 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
     have_face_sides = False
     k_here = _first_sample_at(t_here, step, mode)
     vab = sab = vbc = sbc = vac = sac = 0.0
+    # the face's vertices' depths along the ray and scalars, carried like its sides: a step
+    # computes only its new vertex's
+    ta, tb, tc = _depth(P, a, dx, dy, dz), _depth(P, b, dx, dy, dz), _depth(P, c, dx, dy, dz)
+    da, db, dc = dens[a], dens[b], dens[c]
     slot = _hash_find(htab, mul, a, b, c)
     while True:
         if slot < 0:
@@ -220,8 +224,10 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
         v3 = code >> 1
         if (code & 1) == 0:
             v0, v1, v2 = a, c, b
+            t0, t1, t2, d0, d1, d2 = ta, tc, tb, da, dc, db
         else:
             v0, v1, v2 = a, b, c
+            t0, t1, t2, d0, d1, d2 = ta, tb, tc, da, db, dc
         # the six edge sides; face 0 = (v1, v2, v3), 1 = (v0, v3, v2), 2 = (v0, v1, v3).
         # The entry face's three were computed at the previous step (as its exit face).
         if have_face_sides:
@@ -252,6 +258,7 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
         x03, g03 = _side(P, dx, dy, dz, v0, v3)
         x13, g13 = _side(P, dx, dy, dz, v1, v3)
         x23, g23 = _side(P, dx, dy, dz, v2, v3)
+        t3, d3 = _depth(P, v3, dx, dy, dz), dens[v3]
         best_k = -1
         best_score = -1
         best_min = -np.inf
@@ -286,19 +293,19 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
             best_k = reversed_k
         # exit face (f0, f1, f2) outward, barycentric weight of f_i = side of the opposite edge
         if best_k == 0:
-            na, nb, nc, wa, wb, wc = _sort3w(v1, v2, v3, x23, -x13, x12)
+            na, nb, nc, wa, wb, wc, ta, tb, tc, da, db, dc = _sort3p(v1, v2, v3, x23, -x13, x12, t1, t2, t3, d1, d2, d3)
             came_from = v0
             e0 = _canon(v1, v2, x12, g12)
             e1 = _canon(v2, v3, x23, g23)
             e2 = _canon(v1, v3, x13, g13)
         elif best_k == 1:
-            na, nb, nc, wa, wb, wc = _sort3w(v0, v3, v2, -x23, x20, x03)
+            na, nb, nc, wa, wb, wc, ta, tb, tc, da, db, dc = _sort3p(v0, v3, v2, -x23, x20, x03, t0, t3, t2, d0, d3, d2)
             came_from = v1
             e0 = _canon(v0, v3, x03, g03)
             e1 = _canon(v2, v3, x23, g23)
             e2 = _canon(v2, v0, x20, g20)
         else:
-            na, nb, nc, wa, wb, wc = _sort3w(v0, v1, v3, x13, -x03, x01)
+            na, nb, nc, wa, wb, wc, ta, tb, tc, da, db, dc = _sort3p(v0, v1, v3, x13, -x03, x01, t0, t1, t3, d0, d1, d3)
             came_from = v2
             e0 = _canon(v0, v1, x01, g01)
             e1 = _canon(v1, v3, x13, g13)
@@ -311,8 +318,7 @@ def _walk(s, sub, P, dens, dirs, seg_ray, seg_face, seg_from, seg_clean, seg_ts,
         slot = _hash_find(htab, mul, na, nb, nc)
         if counting and clean and slot >= 0:
             _atomic_sub_i32(htab, slot, FT_COUNT, 1)
-        t_next, s_next, ok = _barycentric(_depth(P, na, dx, dy, dz), _depth(P, nb, dx, dy, dz),
-                                          _depth(P, nc, dx, dy, dz), dens[na], dens[nb], dens[nc], wa, wb, wc)
+        t_next, s_next, ok = _barycentric(ta, tb, tc, da, db, dc, wa, wb, wc)
         if not ok:  # the ray lies in the exit face's plane
             t_next, s_next = _chord_midpoint(P, dens, dx, dy, dz, na, nb, nc)
         k_next = _first_sample_at(t_next, step, mode)

@@ -24,7 +24,7 @@ from ..limits import MODES  # one home of the render modes (the request records 
 from ..mesh.model import default_step
 
 from ._boundary import find_segments
-from ._cull import table_boundary, visible_prefix, visible_tets
+from ._cull import range_visible, table_boundary, visible_prefix, visible_tets
 from ._facetable import (FT_INFO, FT_NODES, FT_PARKED, FT_TABLE, INFO_FACES, INFO_MUL, INFO_NODES, count_crossings,
                          count_live, insert_tets, make_face_table, park, rehash, with_nodes, with_table)
 from ._segments import (ACC_A, FOLD_END, FRONT, SEG_ACC, SEG_FACE, SEG_FROM, SEG_RAY, SEG_SAMPLES,
@@ -390,10 +390,7 @@ class StreamingRaycaster:
         if self.scalar_range is None:
             self.scalar_range = (float(self._dens[: self._nv].min()), float(self._dens[: self._nv].max())) \
                 if self._nv else (0.0, 1.0)
-        tf = tf.resolve(self.scalar_range)
-        tab, lo, inv = tf.table(self.scalar_range)
-        if self.mode == "volume":  # opacity for a path of one step
-            tab[:, 3] = 1.0 - np.power(1.0 - tab[:, 3], self.step / tf.unit_distance)
+        tf, tab, lo, inv = sampling_table(tf, self.scalar_range, self.mode, self.step)
         self._sampling = make_sampling(MODE_VOLUME if self.mode == "volume" else MODE_FACE, self.step, tab, lo, inv,
                                        tf.unit_distance)
         visible = tab[:, 3] > 0.0
@@ -622,6 +619,53 @@ class StreamingRaycaster:
         if self._notes:
             stats["notes"] = list(self._notes)
         return RenderResult(img, stats)
+
+
+def sampling_table(tf: TransferFunction, scalar_range, mode: str, step: float):
+    """The transfer function resolved against ``scalar_range`` and the lookup table the walk reads:
+    ``(tf, tab, lo, inv)``, row i of ``tab`` the r, g, b, a at scalar ``lo + i / inv``; in volume
+    mode the opacity of a path of one ``step``."""
+    tf = tf.resolve(scalar_range)
+    tab, lo, inv = tf.table(scalar_range)
+    if mode == "volume":  # opacity for a path of one step
+        tab[:, 3] = 1.0 - np.power(1.0 - tab[:, 3], step / tf.unit_distance)
+    return tf, tab, lo, inv
+
+
+def range_can_show(tf: TransferFunction, scalar_range, lo: float, hi: float) -> bool:
+    """Whether points whose scalar lies in [``lo``, ``hi``] can add anything to an image drawn with
+    ``tf`` over ``scalar_range``: False only when every tet among them would be culled (the same
+    test, :func:`~._cull.range_visible`). The table's opacity before it is scaled to the step: an
+    entry above 0 there may round to 0 after, never the other way, so the answer errs to True.
+
+    Examples
+    --------
+    >>> x = np.array([0.0, 0.7, 1.0])  # transparent below 70 % of the range
+    >>> tf = TransferFunction(x, np.ones((3, 3)), x, np.array([0.0, 0.0, 0.5]))
+    >>> range_can_show(tf, (0.0, 1.0), 0.0, 0.5), range_can_show(tf, (0.0, 1.0), 0.5, 0.9)
+    (False, True)
+    """
+    tab, t_lo, inv = tf.resolve(scalar_range).table(scalar_range)
+    return bool(range_visible(visible_prefix(tab[:, 3]), float(t_lo), float(inv), float(lo), float(hi)))
+
+
+def box_in_view(camera: FittedCamera, lo, hi, *, margin: float = 1.0) -> bool:
+    """Whether a pixel ray of ``camera`` can meet the box [``lo``, ``hi``]: False only when the whole
+    box lies in front of the eye and its projection misses the image's pixel centres by more than
+    ``margin`` pixels (a box partly behind the eye, or around it, counts as in view)."""
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])],
+                       dtype=np.float64)
+    if not np.all(np.isfinite(corners)):
+        return True
+    fwd, _, _ = camera.basis()
+    if not np.all((corners - camera.position) @ fwd > 0.0):
+        return True
+    uv = camera.project(corners)
+    if not np.all(np.isfinite(uv)):
+        return True
+    (c0, r0), (c1, r1) = uv.min(axis=0), uv.max(axis=0)
+    return bool(c1 >= 0.5 - margin and c0 <= camera.width - 0.5 + margin
+                and r1 >= 0.5 - margin and r0 <= camera.height - 0.5 + margin)
 
 
 def _ray_grid(cam):

@@ -40,7 +40,7 @@ from .codec.stepreader import StepDecoder
 from .codec.tetcfile import encode_level, find_copies
 from ._compile_notice import announce as _announce_compiling
 from ._compile_notice import watch as _watch_compiles
-from .errors import OptionError, OutputError
+from .errors import OptionError, OutputError, ReadError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.cells import Cells
 from .mesh.exodus import exodus_times
@@ -57,7 +57,7 @@ from .pipeline.budget import load_costs, plan_file_budget, remember_frame
 from .limits import MAX_IMAGE_SIDE
 from .pipeline.distributed import BrickCluster
 from .pipeline.selective import SELECTION_ALLOWANCE_S, budget_tets, render_selective, selective_mesh
-from .pipeline.stream import PIPELINES, View, is_tetc, render_mesh_file, render_tetc
+from .pipeline.stream import PIPELINES, View, file_render_defaults, is_tetc, render_cell_array, render_mesh_file, render_tetc
 from .raycast.camera import Camera
 from .raycast.image import add_colorbar, image_bytes, image_format, parse_colour, to_rgb8, upscale_rgb8, write_image
 from .raycast.caster import MODES
@@ -105,6 +105,15 @@ def _as_mesh_and_cells(source, read_options: dict, log, *, storing: bool = False
 
 def _quiet(_msg: str) -> None:
     pass
+
+
+def _names_cell_array(reader, name: str | None) -> bool:
+    """Whether ``name`` is one of the file's cell arrays and none of its point arrays."""
+    if name is None or name in {a[0] for a in reader.arrays}:
+        return False
+    cells = reader.meta.get("cells")
+    return isinstance(cells, dict) and any(isinstance(e, dict) and e.get("name") == name
+                                           for e in cells.get("cell_data") or [])
 
 
 # -- compress ------------------------------------------------------------------------------------
@@ -1077,6 +1086,15 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
                 planned = {"budget_s": budget}
             name = f.scalar_name if view.scalar is None else view.scalar + ("" if component is None else f"[{component}]")
             rng = f.reader.array_range(view.scalar, view.component) or (0.0, 1.0)
+    if bricked is None and tetc_input and _names_cell_array(f.reader, scalar):
+        if selective or budget is not None or tets is not None or ratio not in (None, 0.0) or level not in (None, 0):
+            raise OptionError(f"{scalar!r} is a cell array: it renders on the full mesh's cells only (no ratio, "
+                              "level, budget or selective refinement)")
+        mesh = f.mesh()
+        cells = read_cells(f.reader, mesh.tets, mesh.n_points, mesh.points)
+        bricked, rng = render_cell_array(mesh, cells, scalar, dataclasses.replace(view, component=component),
+                                         step=file_render_defaults(f.reader)[3], progress=_counter(progress, mesh.n_tets))
+        name = scalar + ("" if component is None else f"[{component}]")
     if bricked is not None:
         result = bricked
     elif isinstance(source, TetcFile) or (isinstance(source, (str, os.PathLike)) and is_tetc(source)):
@@ -1120,10 +1138,24 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
         if ratio is not None or level is not None or budget is not None or selective:
             raise OptionError("ratio, level, budget and selective need a .tetc file with a merge forest "
                               "(make one with gatun_py.compress or `tetc compress`)")
-        mesh = _as_mesh(source, dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point,
-                              time_step=time_step), log)
-        result = render_mesh_file(mesh, view, progress=_counter(progress, mesh.n_tets))
-        name, rng = mesh.scalar_name, mesh.scalar_range
+        read_options = dict(scalar=scalar, q_file=q_file, q_var=q_var, cell_to_point=cell_to_point,
+                            time_step=time_step)
+        try:
+            mesh = _as_mesh(source, read_options, log)
+        except ReadError:
+            # a cell array is no point scalar to read the mesh with: read it with its default one
+            # and render the cell array as a constant per cell
+            if scalar is None or cell_to_point:
+                raise
+            mesh, cells = _as_mesh_and_cells(source, dict(read_options, scalar=None), _quiet)
+            if cells is None or scalar not in cells.cell_data:
+                raise
+            result, rng = render_cell_array(mesh, cells, scalar, dataclasses.replace(view, component=component),
+                                            progress=_counter(progress, mesh.n_tets))
+            name = scalar + ("" if component is None else f"[{component}]")
+        else:
+            result = render_mesh_file(mesh, view, progress=_counter(progress, mesh.n_tets))
+            name, rng = mesh.scalar_name, mesh.scalar_range
     st = result.stats
     st.pop("filter", None)
     for note in st.pop("notes", []):

@@ -17,7 +17,9 @@ example data listed in ``VTK_FILES`` found there, e.g. a checkout of pyvista/vtk
 
 Every file round-trips exactly (tests/cells_check.py) before its figures are written.
 
-    python bench/bench_cells.py [--quick]      # --quick: no default (levels) files above 60k tets
+    python bench/bench_cells.py [--quick] [--no-costs]
+        # --quick: no default (levels) files above 60k tets; --no-costs: keep the level-cost table
+        # of the last run (the samples' forests and levels, which this script does not change)
 """
 
 from __future__ import annotations
@@ -194,7 +196,12 @@ def main(argv) -> int:
             except Exception as e:
                 rows.append({"input": label, "error": f"{type(e).__name__}: {e}"})
             print(rows[-1], flush=True)
-        costs = level_costs(tmp)
+        if "--no-costs" in argv and (SECTIONS / "cells.md").exists():
+            old = (SECTIONS / "cells.md").read_text().splitlines()
+            at = next((i for i, ln in enumerate(old) if ln.startswith("What the forest")), len(old))
+            costs = [""] + old[at:]
+        else:
+            costs = level_costs(tmp)
     lines = [
         "## Cells as given: cost of the cells, the cell arrays and the file against xz -9 of the arrays",
         "",

@@ -37,7 +37,7 @@ from .codec.bricks import check_jobs
 from .codec.cells import read_cells, restore_order
 from .codec.info import tetc_info
 from .codec.stepreader import StepDecoder
-from .codec.tetcfile import encode_level, find_copies
+from .codec.tetcfile import encode_level, find_copies, node_blocks
 from ._compile_notice import announce as _announce_compiling
 from ._compile_notice import watch as _watch_compiles
 from .errors import OptionError, OutputError, ReadError
@@ -260,7 +260,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
             # loop releases the GIL), each as soon as the merges before it are done; their forests
             # are added afterwards.
             beside = _LevelsBeside(mesh, pool, max_stored_level(mesh.n_points) if levels is None
-                                   else min(int(levels), MAX_LEVEL))
+                                   else min(int(levels), MAX_LEVEL), node_blocks(cells))
             forest = decimate(mesh, w_density=w_density, w_geometry=w_geometry, w_sample=w_sample,
                               progress=_counter(progress, mesh.n_points),
                               on_level=beside.submit if threads > 1 else None)
@@ -296,15 +296,16 @@ class _LevelsBeside:
     validated mesh to the first merge: 45-47 s with level 0 encoded beside, 29-30 s without, on a
     machine loaded by another job); the merge loop leaves the second core idle."""
 
-    def __init__(self, mesh: TetMesh, pool: ThreadPoolExecutor, max_level: int):
-        self.mesh, self.pool, self.max_level = mesh, pool, max_level
+    def __init__(self, mesh: TetMesh, pool: ThreadPoolExecutor, max_level: int, nodes: tuple = ()):
+        self.mesh, self.pool, self.max_level, self.nodes = mesh, pool, max_level, nodes
         self.copies = find_copies(mesh)  # what encode_tetc will ask every level for
         self.prev = None  # the last level built (the worker's chain)
         self.jobs = {}
 
     def submit(self, i: int, prefix) -> None:
         if 0 not in self.jobs:
-            self.jobs[0] = self.pool.submit(encode_level, LevelPayload(0, 0.0, 0, self.mesh, copies=self.copies))
+            self.jobs[0] = self.pool.submit(encode_level, LevelPayload(0, 0.0, 0, self.mesh, copies=self.copies,
+                                                                       node_blocks=self.nodes))
         if i <= self.max_level:
             self.jobs[i] = self.pool.submit(self._encode, i, prefix)
 

@@ -148,3 +148,65 @@ def test_cell_array_render_from_a_file_and_the_command_line(tmp_path):
     assert png.exists()
     res = run("render", out, "-o", tmp_path / "x.png", "--scalar", "w", "--ratio", "0.5")
     assert_error(res, "cell array")
+
+
+# -- quadratic nodes predicted from their edges; constant and counter cell arrays -------------------
+
+def test_quadratic_nodes_are_coded_on_their_edges(tmp_path):
+    from cells_check import check_round_trip, vertex_order_of
+    from gatun_py.codec.tetcfile import LevelPayload, encode_level
+    from mixedgen import tetra10_mesh
+
+    orig = tetra10_mesh(n=4)
+    tm, rep = mesh_from_meshio(orig)
+    out = tmp_path / "t10.tetc"
+    gatun_py.compress(orig, out, mesh_only=True)
+    r = TetcReader(out)
+    assert r.meta["cells"].get("node_refs") is True
+    check_round_trip(orig, meshio.read(out), vertex_order_of(tm))
+    # the nodes sit at their edges' midpoints: their coordinates cost far less than coded as loose points
+    plain = encode_level(LevelPayload(0, 0.0, 0, tm))
+    quad = tuple((t, d) for t, d in rep.cells.blocks)
+    on_edges = encode_level(LevelPayload(0, 0.0, 0, tm, node_blocks=quad))
+    assert on_edges.node_refs and not plain.node_refs
+    assert len(on_edges.sections["L0/geometry"]) < 0.8 * len(plain.sections["L0/geometry"])
+
+
+def test_quadratic_nodes_off_their_midpoints_and_streaming_decode(tmp_path):
+    from cells_check import check_round_trip, vertex_order_of
+    from mixedgen import tetra10_mesh
+
+    orig = tetra10_mesh(seed=2, n=3)
+    pts = np.asarray(orig.points).copy()
+    nodes = np.unique(orig.cells[0].data[:, 4:])
+    pts[nodes] += np.random.default_rng(1).normal(scale=0.01, size=(len(nodes), 3))  # curved edges
+    orig = meshio.Mesh(pts, [("tetra10", orig.cells[0].data)], point_data={"u": pts[:, 0] ** 2})
+    tm, _ = mesh_from_meshio(orig)
+    out = tmp_path / "c.tetc"
+    gatun_py.compress(orig, out)  # with levels
+    check_round_trip(orig, meshio.read(out), vertex_order_of(tm))
+    whole = TetcReader(out).decode_mesh(0, jobs=1)
+    streamed = np.concatenate([b.points for b in TetcReader(out).iter_decode(0, batch_tets=50)])
+    assert np.array_equal(streamed, whole.points.astype(np.float32))
+
+
+def test_constant_and_counter_cell_arrays_cost_a_few_bytes(tmp_path):
+    from cells_check import check_round_trip, vertex_order_of
+
+    m = mixed_mesh(4, 4, 3, 5)
+    m.cell_data = {"tag": [np.full(len(c.data), 7 + i, np.int32) for i, c in enumerate(m.cells)],
+                   "zero": [np.full((len(c.data), 3), -0.0) for c in m.cells],
+                   "CellId": [np.arange(len(c.data), dtype=np.int64) * 2 + 5 for c in m.cells]}
+    tm, _ = mesh_from_meshio(m)
+    for keep in (False, True):
+        out = tmp_path / f"k{keep}.tetc"
+        gatun_py.compress(m, out, mesh_only=True, keep_order=keep)
+        back = meshio.read(out)
+        check_round_trip(m, back, vertex_order_of(tm))
+        r = TetcReader(out)
+        sizes = {n: r.container.section_size(n) for n in r.container.section_names() if n.startswith("C/data")}
+        j = [e["name"] for e in r.meta["cells"]["cell_data"]]
+        for name in ("tag", "zero"):
+            assert all(v < 40 for k, v in sizes.items() if k.startswith(f"C/data/{j.index(name)}/")), sizes
+        if keep:  # in the order given, a counter is two numbers
+            assert all(v < 40 for k, v in sizes.items() if k.startswith(f"C/data/{j.index('CellId')}/")), sizes

@@ -332,6 +332,14 @@ def file_meta(mesh0, n_boundary_faces: int, source: str = "", *, render_step: fl
     }
 
 
+def node_blocks(cells) -> tuple:
+    """The blocks of ``cells`` whose higher-order nodes level 0 codes on their edges and faces
+    (:attr:`LevelPayload.node_blocks`): the quadratic volume blocks of cells a file stores."""
+    if cells is None or not cells.needed():
+        return ()
+    return tuple((t, d) for t, d in cells.blocks if t in VOLUME_CELLS and d.shape[1] > VOLUME_CELLS[t][1])
+
+
 def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, dependencies=None,
                 mesh_codes: dict | None = None, threads: int = 1, copies: tuple | None = None,
                 cells=None) -> bytes:
@@ -375,9 +383,7 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
     mesh_codes = mesh_codes or {}
     copies = find_copies(mesh0) if copies is None else tuple(copies)
     levels = [dataclasses.replace(lv, copies=copies) for lv in levels]
-    if cells is not None and cells.needed():
-        quadratic = tuple((t, d) for t, d in cells.blocks if t in VOLUME_CELLS and d.shape[1] > VOLUME_CELLS[t][1])
-        levels[0] = dataclasses.replace(levels[0], node_blocks=quadratic)
+    levels[0] = dataclasses.replace(levels[0], node_blocks=node_blocks(cells))
 
     chainable = len(levels) > 1
 

@@ -17,9 +17,10 @@ example data listed in ``VTK_FILES`` found there, e.g. a checkout of pyvista/vtk
 
 Every file round-trips exactly (tests/cells_check.py) before its figures are written.
 
-    python bench/bench_cells.py [--quick] [--no-costs]
+    python bench/bench_cells.py [--quick] [--no-costs] [--nodes]
         # --quick: no default (levels) files above 60k tets; --no-costs: keep the level-cost table
-        # of the last run (the samples' forests and levels, which this script does not change)
+        # of the last run (the samples' forests and levels, which this script does not change);
+        # --nodes: only the quadratic nodes' cost before / after their edge prediction (cells_nodes.md)
 """
 
 from __future__ import annotations
@@ -161,6 +162,46 @@ def measure(label, path, tmp: Path, quick: bool) -> dict:
     return row
 
 
+def node_costs(inputs_: list, tmp: Path) -> list[str]:
+    """Quadratic inputs: the mesh-only file with the higher-order nodes coded on their edges and
+    faces (today) and as loose points (before), over the file of the same mesh split into tets
+    (the nodes kept as loose points there). The two files differ only in level 0's geometry and
+    point-array sections, so "before" is today's file with those sections coded without the refs."""
+    import gatun_py
+    from gatun_py.codec.tetcfile import LevelPayload, encode_level, node_blocks
+    from gatun_py.mesh import read_mesh
+
+    lines = ["", "Quadratic cells: the nodes' coordinates (and point arrays) predicted from their edge's or face's "
+             "corners (`node_costs`; mesh-only files, bytes exact):", "",
+             "| input | nodes | split (tets) | before | after | before / split | after / split | after / before |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for label, path in inputs_:
+        try:
+            tm, rep = read_mesh(path)
+            quad = node_blocks(rep.cells)
+            if not quad:
+                continue
+            mo = tmp / "nodes.tetc"
+            gatun_py.compress(path, mo, mesh_only=True, force=True)
+            split = tmp / "nodes_split.tetc"
+            gatun_py.compress(tm, split, mesh_only=True, force=True)
+
+            def level0(nb):
+                enc = encode_level(LevelPayload(0, 0.0, 0, tm, node_blocks=nb), chainable=False)
+                return sum(len(v) for v in enc.sections.values())
+
+            after = mo.stat().st_size
+            before = after - level0(quad) + level0(())
+            n_nodes = tm.n_points - len(np.unique(tm.tets))
+            sp = split.stat().st_size
+            lines.append(f"| {label} | {n_nodes:,} | {sp:,} | {before:,} | {after:,} | {before / sp:.3f} | "
+                         f"{after / sp:.3f} | {after / before:.3f} |")
+        except Exception as e:  # one line per input, as the main table
+            lines.append(f"| {label} | {type(e).__name__}: {str(e)[:80]} | | | | | | |")
+        print(lines[-1], flush=True)
+    return lines
+
+
 def level_costs(tmp: Path) -> list[str]:
     """What the merge forest with its levels, and the merge dependencies, add to the samples' files
     (the figures the --mesh-only and --dependencies help texts quote)."""
@@ -189,6 +230,11 @@ def main(argv) -> int:
     rows = []
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
+        if "--nodes" in argv:  # the quadratic nodes' before / after alone
+            lines = node_costs(inputs(tmp), tmp)
+            SECTIONS.mkdir(parents=True, exist_ok=True)
+            (SECTIONS / "cells_nodes.md").write_text("\n".join(lines[1:]) + "\n")
+            return 0
         for label, path in inputs(tmp):
             print(f"-- {label}", flush=True)
             try:

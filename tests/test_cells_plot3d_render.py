@@ -14,7 +14,7 @@ from gatun_py.codec import TetcReader
 from gatun_py.codec.cells import read_cells
 from gatun_py.mesh import mesh_from_meshio, read_mesh
 from gatun_py.mesh.cells import constant_per_cell, tet_values
-from gatun_py.mesh.plot3d import FREE_STREAM, Q_STORED, read_q_file, read_xyz
+from gatun_py.mesh.plot3d import FREE_STREAM, Q_STORED, grid_hexes, read_q_file, read_xyz
 from gatun_py.raycast.camera import Camera
 
 from mixedgen import mixed_mesh
@@ -35,33 +35,27 @@ def test_bluntfin_keeps_its_whole_q_file_bit_exactly(tmp_path):
     raw = (BLUNT / "bluntfinq.bin").read_bytes()
     bo = ">" if np.frombuffer(raw[:4], ">i4")[0] == grid.dims[0] else "<"
     n = int(np.prod(grid.dims))
-    planes = np.frombuffer(raw, f"{bo}f4", count=5 * n, offset=28).reshape(5, n)
-    head = np.frombuffer(raw, f"{bo}f4", count=4, offset=12)
+    planes = np.frombuffer(raw, f"{bo}f4", count=5 * n, offset=28).reshape(5, n).astype(np.float32)
+    head = np.frombuffer(raw, f"{bo}f4", count=4, offset=12).astype(np.float32)
     out = tmp_path / "bf.tetc"
-    gatun_py.compress(xyz, out, mesh_only=True)
+    gatun_py.compress(xyz, out, mesh_only=True, keep_order=True)
     r = TetcReader(out)
     mesh = gatun_py.TetcFile(out).mesh()
     assert mesh.scalar_name == "density"
-    order = np.argsort(np.lexsort(mesh.points.T))  # decoded points matched to the grid's by position
-    grid_order = np.argsort(np.lexsort(grid.xyz.T))
-    back = np.empty(n, np.int64)
-    back[grid_order] = order
-    assert np.array_equal(mesh.points[back].view(np.uint32), grid.xyz.view(np.uint32))
-    for i, name in enumerate(Q_STORED):
-        a = mesh.point_data[name]
-        assert a.dtype == np.float32
-        assert np.array_equal(a[back].view(np.uint32), planes[i].astype(np.float32).view(np.uint32)), name
     cells = read_cells(r, mesh.tets, mesh.n_points, mesh.points)
     assert list(cells.field_data) == list(FREE_STREAM)
     for i, k in enumerate(FREE_STREAM):
-        assert cells.field_data[k].view(np.uint32).tolist() == head[i:i + 1].astype(np.float32).view(np.uint32).tolist()
-        assert sol.free_stream[k].tobytes() == cells.field_data[k].tobytes()
-    # decompressed: the grid's hexahedra, every Q variable, the header as field data
+        assert cells.field_data[k].tobytes() == head[i:i + 1].tobytes() == sol.free_stream[k].tobytes()
+    # decompressed in the grid's own numbering: points, the five Q planes, the hexahedra, bit for bit
     vtu = tmp_path / "bf.vtu"
     gatun_py.decompress(out, vtu)
     m = meshio.read(vtu)
-    assert [c.type for c in m.cells] == ["hexahedron"] and len(m.cells[0].data) == np.prod(np.subtract(grid.dims, 1))
-    assert set(Q_STORED) <= set(m.point_data)
+    assert np.asarray(m.points).astype(np.float32).tobytes() == grid.xyz.tobytes()
+    for i, name in enumerate(Q_STORED):
+        a = np.asarray(m.point_data[name])
+        assert a.dtype == np.float32 and a.tobytes() == planes[i].tobytes(), name
+    assert [c.type for c in m.cells] == ["hexahedron"]
+    assert np.array_equal(m.cells[0].data, grid_hexes(grid.dims)[0])
     assert set(FREE_STREAM) <= set(m.field_data)
 
 

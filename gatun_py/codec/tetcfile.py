@@ -449,8 +449,7 @@ def _with_forest(done: EncodedLevel, payload: LevelPayload) -> EncodedLevel:
                                                         meta["boundary_vertices"])
     meta.update(ratio=float(payload.ratio), merges_before=int(payload.merges_before),
                 has_forest=payload.forest is not None)
-    return EncodedLevel(i, sections, meta, done.vertex_order, done.peak_border, done.render_step,
-                        done.geometry_parts, done.copies, done.tets)
+    return dataclasses.replace(done, sections=sections, meta=meta)
 
 
 def _dependency_section(dependencies, level0: LevelPayload) -> tuple[dict, bytes]:

@@ -103,6 +103,19 @@ def inputs(tmp: Path) -> list:
     return out
 
 
+def _reference(path):
+    """The input as meshio (or tetc's Exodus reader) gives it: what the round trip must give back."""
+    from gatun_py.mesh.exodus import EXODUS_SUFFIXES, read_exodus
+    from gatun_py.mesh.io import _meshio_read, _unescape_names
+
+    if Path(path).suffix.lower() in EXODUS_SUFFIXES:
+        return read_exodus(Path(path))[0]
+    orig = _meshio_read(Path(path))
+    if Path(path).suffix.lower() == ".vtk":
+        _unescape_names(orig)
+    return orig
+
+
 def measure(label, path, tmp: Path, quick: bool) -> dict:
     import meshio
 
@@ -110,16 +123,8 @@ def measure(label, path, tmp: Path, quick: bool) -> dict:
     from cells_check import check_round_trip, vertex_order_of
     from gatun_py.codec import TetcReader
     from gatun_py.mesh import read_mesh
-    from gatun_py.mesh.io import _meshio_read, _unescape_names
 
-    from gatun_py.mesh.exodus import EXODUS_SUFFIXES, read_exodus
-
-    if Path(path).suffix.lower() in EXODUS_SUFFIXES:
-        orig = read_exodus(Path(path))[0]
-    else:
-        orig = _meshio_read(Path(path))
-    if Path(path).suffix.lower() == ".vtk":
-        _unescape_names(orig)
+    orig = _reference(path)
     tm, rep = read_mesh(path)
     raw = _raw(orig)
     row = {"input": label, "cells": ", ".join(f"{c.type} {len(c.data)}" for c in orig.cells),
@@ -165,16 +170,22 @@ def measure(label, path, tmp: Path, quick: bool) -> dict:
 def node_costs(inputs_: list, tmp: Path) -> list[str]:
     """Quadratic inputs: the mesh-only file with the higher-order nodes coded on their edges and
     faces (today) and as loose points (before), over the file of the same mesh split into tets
-    (the nodes kept as loose points there). The two files differ only in level 0's geometry and
-    point-array sections, so "before" is today's file with those sections coded without the refs."""
+    (the nodes kept as loose points there, and no cell arrays: the last column leaves them out).
+    The two files differ only in level 0's geometry and point-array sections, so "before" is
+    today's file with those sections coded without the refs. Each file round-trips first."""
+    import meshio
+
     import gatun_py
+    from cells_check import check_round_trip, vertex_order_of
+    from gatun_py.codec import TetcReader
     from gatun_py.codec.tetcfile import LevelPayload, encode_level, node_blocks
     from gatun_py.mesh import read_mesh
 
     lines = ["", "Quadratic cells: the nodes' coordinates (and point arrays) predicted from their edge's or face's "
              "corners (`node_costs`; mesh-only files, bytes exact):", "",
-             "| input | nodes | split (tets) | before | after | before / split | after / split | after / before |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|"]
+             "| input | nodes | split (tets) | before | after | before / split | after / split | after / before "
+             "| cell arrays (C/data) | after without them / split |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for label, path in inputs_:
         try:
             tm, rep = read_mesh(path)
@@ -183,6 +194,8 @@ def node_costs(inputs_: list, tmp: Path) -> list[str]:
                 continue
             mo = tmp / "nodes.tetc"
             gatun_py.compress(path, mo, mesh_only=True, force=True)
+            orig = _reference(path)
+            check_round_trip(orig, meshio.read(mo), vertex_order_of(tm))
             split = tmp / "nodes_split.tetc"
             gatun_py.compress(tm, split, mesh_only=True, force=True)
 
@@ -194,10 +207,12 @@ def node_costs(inputs_: list, tmp: Path) -> list[str]:
             before = after - level0(quad) + level0(())
             n_nodes = tm.n_points - len(np.unique(tm.tets))
             sp = split.stat().st_size
+            r = TetcReader(mo)
+            data = sum(r.container.section_size(k) for k in r.container.section_names() if k.startswith("C/data"))
             lines.append(f"| {label} | {n_nodes:,} | {sp:,} | {before:,} | {after:,} | {before / sp:.3f} | "
-                         f"{after / sp:.3f} | {after / before:.3f} |")
+                         f"{after / sp:.3f} | {after / before:.3f} | {data:,} | {(after - data) / sp:.3f} |")
         except Exception as e:  # one line per input, as the main table
-            lines.append(f"| {label} | {type(e).__name__}: {str(e)[:80]} | | | | | | |")
+            lines.append(f"| {label} | {type(e).__name__}: {str(e)[:80]} | | | | | | | | |")
         print(lines[-1], flush=True)
     return lines
 

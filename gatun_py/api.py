@@ -996,8 +996,11 @@ def render(source, *, size=256, tf="default", azimuth: float = 0.0, elevation: f
     pipeline : {"streaming", "generic"}
         One pass, or decode-all-then-render (the paper's baseline).
     scalar, q_file, q_var, cell_to_point, time_step
-        How to read a mesh file (see :func:`gatun_py.read_mesh`). For a ``.tetc`` file, ``scalar``
-        names the stored point array to render (default: the file's default scalar), and
+        How to read a mesh file (see :func:`gatun_py.read_mesh`). ``scalar`` may also name a cell
+        array (of a mesh file or of a ``.tetc`` file's cells): each cell is drawn in its value,
+        constant inside it (the full mesh only: no ratio, level, budget or selective). For a
+        ``.tetc`` file, ``scalar`` names the stored point array to render (default: the file's
+        default scalar), and
         ``time_step`` the step of a time series (default 0; ``step`` is the sample spacing).
     time : float, optional
         ``.tetc`` time series: render the step at this time (instead of ``time_step``).

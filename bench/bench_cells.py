@@ -17,7 +17,10 @@ example data listed in ``VTK_FILES`` found there, e.g. a checkout of pyvista/vtk
 
 Every file round-trips exactly (tests/cells_check.py) before its figures are written.
 
-    python bench/bench_cells.py [--quick]      # --quick: no default (levels) files above 60k tets
+    python bench/bench_cells.py [--quick] [--no-costs] [--nodes]
+        # --quick: no default (levels) files above 60k tets; --no-costs: keep the level-cost table
+        # of the last run (the samples' forests and levels, which this script does not change);
+        # --nodes: only the quadratic nodes' cost before / after their edge prediction (cells_nodes.md)
 """
 
 from __future__ import annotations
@@ -100,6 +103,19 @@ def inputs(tmp: Path) -> list:
     return out
 
 
+def _reference(path):
+    """The input as meshio (or tetc's Exodus reader) gives it: what the round trip must give back."""
+    from gatun_py.mesh.exodus import EXODUS_SUFFIXES, read_exodus
+    from gatun_py.mesh.io import _meshio_read, _unescape_names
+
+    if Path(path).suffix.lower() in EXODUS_SUFFIXES:
+        return read_exodus(Path(path))[0]
+    orig = _meshio_read(Path(path))
+    if Path(path).suffix.lower() == ".vtk":
+        _unescape_names(orig)
+    return orig
+
+
 def measure(label, path, tmp: Path, quick: bool) -> dict:
     import meshio
 
@@ -107,16 +123,8 @@ def measure(label, path, tmp: Path, quick: bool) -> dict:
     from cells_check import check_round_trip, vertex_order_of
     from gatun_py.codec import TetcReader
     from gatun_py.mesh import read_mesh
-    from gatun_py.mesh.io import _meshio_read, _unescape_names
 
-    from gatun_py.mesh.exodus import EXODUS_SUFFIXES, read_exodus
-
-    if Path(path).suffix.lower() in EXODUS_SUFFIXES:
-        orig = read_exodus(Path(path))[0]
-    else:
-        orig = _meshio_read(Path(path))
-    if Path(path).suffix.lower() == ".vtk":
-        _unescape_names(orig)
+    orig = _reference(path)
     tm, rep = read_mesh(path)
     raw = _raw(orig)
     row = {"input": label, "cells": ", ".join(f"{c.type} {len(c.data)}" for c in orig.cells),
@@ -159,6 +167,56 @@ def measure(label, path, tmp: Path, quick: bool) -> dict:
     return row
 
 
+def node_costs(inputs_: list, tmp: Path) -> list[str]:
+    """Quadratic inputs: the mesh-only file with the higher-order nodes coded on their edges and
+    faces (today) and as loose points (before), over the file of the same mesh split into tets
+    (the nodes kept as loose points there, and no cell arrays: the last column leaves them out).
+    The two files differ only in level 0's geometry and point-array sections, so "before" is
+    today's file with those sections coded without the refs. Each file round-trips first."""
+    import meshio
+
+    import gatun_py
+    from cells_check import check_round_trip, vertex_order_of
+    from gatun_py.codec import TetcReader
+    from gatun_py.codec.tetcfile import LevelPayload, encode_level, node_blocks
+    from gatun_py.mesh import read_mesh
+
+    lines = ["", "Quadratic cells: the nodes' coordinates (and point arrays) predicted from their edge's or face's "
+             "corners (`node_costs`; mesh-only files, bytes exact):", "",
+             "| input | nodes | split (tets) | before | after | before / split | after / split | after / before "
+             "| cell arrays (C/data) | after without them / split |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for label, path in inputs_:
+        try:
+            tm, rep = read_mesh(path)
+            quad = node_blocks(rep.cells)
+            if not quad:
+                continue
+            mo = tmp / "nodes.tetc"
+            gatun_py.compress(path, mo, mesh_only=True, force=True)
+            orig = _reference(path)
+            check_round_trip(orig, meshio.read(mo), vertex_order_of(tm))
+            split = tmp / "nodes_split.tetc"
+            gatun_py.compress(tm, split, mesh_only=True, force=True)
+
+            def level0(nb):
+                enc = encode_level(LevelPayload(0, 0.0, 0, tm, node_blocks=nb), chainable=False)
+                return sum(len(v) for v in enc.sections.values())
+
+            after = mo.stat().st_size
+            before = after - level0(quad) + level0(())
+            n_nodes = tm.n_points - len(np.unique(tm.tets))
+            sp = split.stat().st_size
+            r = TetcReader(mo)
+            data = sum(r.container.section_size(k) for k in r.container.section_names() if k.startswith("C/data"))
+            lines.append(f"| {label} | {n_nodes:,} | {sp:,} | {before:,} | {after:,} | {before / sp:.3f} | "
+                         f"{after / sp:.3f} | {after / before:.3f} | {data:,} | {(after - data) / sp:.3f} |")
+        except Exception as e:  # one line per input, as the main table
+            lines.append(f"| {label} | {type(e).__name__}: {str(e)[:80]} | | | | | | | | |")
+        print(lines[-1], flush=True)
+    return lines
+
+
 def level_costs(tmp: Path) -> list[str]:
     """What the merge forest with its levels, and the merge dependencies, add to the samples' files
     (the figures the --mesh-only and --dependencies help texts quote)."""
@@ -187,6 +245,11 @@ def main(argv) -> int:
     rows = []
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
+        if "--nodes" in argv:  # the quadratic nodes' before / after alone
+            lines = node_costs(inputs(tmp), tmp)
+            SECTIONS.mkdir(parents=True, exist_ok=True)
+            (SECTIONS / "cells_nodes.md").write_text("\n".join(lines[1:]) + "\n")
+            return 0
         for label, path in inputs(tmp):
             print(f"-- {label}", flush=True)
             try:
@@ -194,7 +257,12 @@ def main(argv) -> int:
             except Exception as e:
                 rows.append({"input": label, "error": f"{type(e).__name__}: {e}"})
             print(rows[-1], flush=True)
-        costs = level_costs(tmp)
+        if "--no-costs" in argv and (SECTIONS / "cells.md").exists():
+            old = (SECTIONS / "cells.md").read_text().splitlines()
+            at = next((i for i, ln in enumerate(old) if ln.startswith("What the forest")), len(old))
+            costs = [""] + old[at:]
+        else:
+            costs = level_costs(tmp)
     lines = [
         "## Cells as given: cost of the cells, the cell arrays and the file against xz -9 of the arrays",
         "",

@@ -36,10 +36,10 @@ from .codec.bricks import check_jobs
 from .codec.cells import read_cells, restore_order
 from .codec.info import tetc_info
 from .codec.stepreader import StepDecoder
-from .codec.tetcfile import encode_level, find_copies
+from .codec.tetcfile import encode_level, find_copies, node_blocks
 from ._compile_notice import announce as _announce_compiling
 from ._compile_notice import watch as _watch_compiles
-from .errors import OptionError, OutputError
+from .errors import OptionError, OutputError, ReadError
 from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.cells import Cells
 from .mesh.exodus import exodus_times
@@ -59,7 +59,7 @@ from .limits import PIPELINES
 from .pipeline.requests import Detail, ForestOptions, Frame, ReadOptions, View, split_options
 from .pipeline.requests import check_number as _check_number
 from .pipeline.stream import View as _StreamView  # the fitted view the stages draw with
-from .pipeline.stream import is_tetc, render_mesh_file, render_tetc
+from .pipeline.stream import file_render_defaults, is_tetc, render_cell_array, render_mesh_file, render_tetc
 from .raycast.image import add_colorbar, image_format, to_rgb8, upscale_rgb8, write_image
 from .simplify import build_levels, decimate, level_payloads
 from .simplify.dependencies import merge_dependencies
@@ -105,6 +105,15 @@ def _as_mesh_and_cells(source, read: ReadOptions, log, *, storing: bool = False,
 
 def _quiet(_msg: str) -> None:
     pass
+
+
+def _names_cell_array(reader, name: str | None) -> bool:
+    """Whether ``name`` is one of the file's cell arrays and none of its point arrays."""
+    if name is None or name in {a[0] for a in reader.arrays}:
+        return False
+    cells = reader.meta.get("cells")
+    return isinstance(cells, dict) and any(isinstance(e, dict) and e.get("name") == name
+                                           for e in cells.get("cell_data") or [])
 
 
 # -- compress ------------------------------------------------------------------------------------
@@ -233,7 +242,7 @@ def compress(source, output, *, forest: ForestOptions | None = None, read: ReadO
             # loop releases the GIL), each as soon as the merges before it are done; their forests
             # are added afterwards.
             beside = _LevelsBeside(mesh, pool, max_stored_level(mesh.n_points) if levels is None
-                                   else min(int(levels), MAX_LEVEL))
+                                   else min(int(levels), MAX_LEVEL), node_blocks(cells))
             forest = decimate(mesh, w_density=w_density, w_geometry=w_geometry, w_sample=w_sample,
                               progress=_counter(progress, mesh.n_points),
                               on_level=beside.submit if threads > 1 else None)
@@ -269,15 +278,16 @@ class _LevelsBeside:
     validated mesh to the first merge: 45-47 s with level 0 encoded beside, 29-30 s without, on a
     machine loaded by another job); the merge loop leaves the second core idle."""
 
-    def __init__(self, mesh: TetMesh, pool: ThreadPoolExecutor, max_level: int):
-        self.mesh, self.pool, self.max_level = mesh, pool, max_level
+    def __init__(self, mesh: TetMesh, pool: ThreadPoolExecutor, max_level: int, nodes: tuple = ()):
+        self.mesh, self.pool, self.max_level, self.nodes = mesh, pool, max_level, nodes
         self.copies = find_copies(mesh)  # what encode_tetc will ask every level for
         self.prev = None  # the last level built (the worker's chain)
         self.jobs = {}
 
     def submit(self, i: int, prefix) -> None:
         if 0 not in self.jobs:
-            self.jobs[0] = self.pool.submit(encode_level, LevelPayload(0, 0.0, 0, self.mesh, copies=self.copies))
+            self.jobs[0] = self.pool.submit(encode_level, LevelPayload(0, 0.0, 0, self.mesh, copies=self.copies,
+                                                                       node_blocks=self.nodes))
         if i <= self.max_level:
             self.jobs[i] = self.pool.submit(self._encode, i, prefix)
 
@@ -847,6 +857,8 @@ def render(source, *, view: View | None = None, detail: Detail | None = None, re
         How to draw (size, camera, transfer function, mode, step, background...), how much of the
         mesh (``.tetc``: a ratio, level, budget or selective cut; default all) and how to read it
         (for a ``.tetc`` file ``scalar`` is the stored array to draw, ``time_step`` a series' step).
+        ``scalar`` may name a cell array: each cell is drawn in its value, constant inside it (the
+        full mesh only).
     pipeline : {"streaming", "generic"}
         One pass, or decode-all-then-render (the paper's baseline).
     time : float, optional
@@ -882,12 +894,14 @@ def render(source, *, view: View | None = None, detail: Detail | None = None, re
         f = f.at(read.time_step, time=time)
     if detail.budget is not None:
         _note_if_unsimplifiable(f.reader, os.path.basename(os.fspath(f.reader.container.name)), log)
+    if f.n_bricks == 1 and _names_cell_array(f.reader, read.scalar):
+        result, rng = _render_cell_array_file(f, read.scalar, sview, detail, view.component, progress)
+        return _finish_frame(result, {}, view, _label(read.scalar, view.component), rng, t0, log)
     if read.scalar is not None or view.component is not None:
         sview = dataclasses.replace(sview, scalar=read.scalar or f.scalar_name, component=view.component)
     planner = _render_bricked if f.n_bricks > 1 else _render_selective if detail.selective else _render_uniform
     result, planned = planner(f.reader, sview, detail, pipeline=pipeline, progress=progress, log=log)
-    name = f.scalar_name if sview.scalar is None else sview.scalar + (
-        "" if sview.component is None else f"[{sview.component}]")
+    name = f.scalar_name if sview.scalar is None else _label(sview.scalar, sview.component)
     return _finish_frame(result, planned, view, name, f.reader.array_range(sview.scalar, sview.component) or (0.0, 1.0),
                          t0, log)
 
@@ -899,9 +913,39 @@ def _render_mesh_source(source, sview, detail: Detail, read: ReadOptions, *, tim
     if detail.simplifies:
         raise OptionError("ratio, level, budget and selective need a .tetc file with a merge forest "
                           "(make one with gatun_py.compress or `tetc compress`)")
-    mesh = _as_mesh(source, read, log)
+    try:
+        mesh = _as_mesh(source, read, log)
+    except ReadError:
+        # a cell array is no point scalar to read the mesh with: read it with its default one and
+        # render the cell array as a constant per cell
+        if read.scalar is None or read.cell_to_point:
+            raise
+        mesh, cells = _as_mesh_and_cells(source, dataclasses.replace(read, scalar=None), _quiet)
+        if cells is None or read.scalar not in cells.cell_data:
+            raise
+        result, rng = render_cell_array(mesh, cells, read.scalar, sview,
+                                        progress=_counter(progress, mesh.n_tets))
+        return result, _label(read.scalar, sview.component), rng
     result = render_mesh_file(mesh, sview, progress=_counter(progress, mesh.n_tets))
     return result, mesh.scalar_name, mesh.scalar_range
+
+
+def _label(scalar: str, component) -> str:
+    """The colour bar's name of an array, or of one component of it."""
+    return scalar + ("" if component is None else f"[{component}]")
+
+
+def _render_cell_array_file(f, scalar: str, sview, detail: Detail, component, progress):
+    """(PipelineResult, scalar range) of a ``.tetc`` file drawn by one of its cell arrays,
+    constant inside each cell: the full mesh and its cells, decoded whole."""
+    if detail.selective or detail.budget is not None or detail.tets is not None or detail.ratio not in (None, 0.0) \
+            or detail.level not in (None, 0):
+        raise OptionError(f"{scalar!r} is a cell array: it renders on the full mesh's cells only (no ratio, "
+                          "level, budget or selective refinement)")
+    mesh = f.mesh()
+    cells = read_cells(f.reader, mesh.tets, mesh.n_points, mesh.points)
+    return render_cell_array(mesh, cells, scalar, dataclasses.replace(sview, component=component),
+                             step=file_render_defaults(f.reader)[3], progress=_counter(progress, mesh.n_tets))
 
 
 def _render_bricked(reader, sview, detail: Detail, *, pipeline, progress, log):

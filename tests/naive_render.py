@@ -23,13 +23,16 @@ def _table_eval(tab, lo, inv, s):
 OPAQUE = 0.99  # early ray termination, as the ray caster's (gatun_py.raycast._walk.OPAQUE)
 
 
-def naive_render(mesh, fitted, tf, *, mode="volume", step=None, scalar_range=None, terminate=True, cull=False):
+def naive_render(mesh, fitted, tf, *, mode="volume", step=None, scalar_range=None, terminate=True, cull=False,
+                 tet_values=None):
     """Premultiplied RGBA (H, W, 4) float64 of ``mesh`` seen by the fitted camera ``fitted``.
 
     ``terminate``: a ray stops at the first sample (face mode: piece) that brings its opacity to
     ``OPAQUE``. ``cull``: leave out, before casting, the tets whose scalar interval the transfer
     function's table shows nowhere, tested the plain way (every table entry from the one below
     the tet's smallest scalar to the one above its largest); the image must not change.
+    ``tet_values``: one value per tet, the scalar everywhere inside it (a cell array rendered as a
+    constant per cell) instead of the interpolated point scalar.
     """
     from gatun_py.mesh import default_step
     from gatun_py.raycast.transfer import load_transfer_function
@@ -56,6 +59,7 @@ def naive_render(mesh, fitted, tf, *, mode="volume", step=None, scalar_range=Non
         i1 = np.clip(np.floor((smax - lo) * inv).astype(np.int64) + 2, 0, n - 1)
         keep &= np.array([np.any(tab[a: b + 1, 3] > 0) for a, b in zip(i0, i1)], dtype=bool)
     tets = tets[keep]
+    per_tet = None if tet_values is None else np.asarray(tet_values, np.float32).astype(np.float64)[keep]
     corners = pts[tets]  # (m, 4, 3)
     # outward face normals and a point on each face
     fa = corners[:, TET_FACES[:, 0]]
@@ -91,6 +95,8 @@ def naive_render(mesh, fitted, tf, *, mode="volume", step=None, scalar_range=Non
         done = False
 
         def scalar_at(m, t):
+            if per_tet is not None:
+                return float(per_tet[m])
             x = eye + t * d
             l123 = Tinv[m] @ (x - corners[m, 0])
             w = np.concatenate([[1.0 - l123.sum()], l123])

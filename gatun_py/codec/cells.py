@@ -108,27 +108,63 @@ def _decode(data: bytes, n: int, dtype: str, k: int = 1, refs=None, positions=No
     return dec.finish()
 
 
-_TAG_PREDICTED, _TAG_XZ = 0, 1
+_TAG_PREDICTED, _TAG_XZ, _TAG_CONSTANT, _TAG_ARITHMETIC = 0, 1, 2, 3
+
+
+def _arithmetic(values: np.ndarray):
+    """(first, step) when the integer values are ``first + i * step`` (a counter such as VTK's
+    CellId in the order given), else None."""
+    if values.ndim != 1 or values.dtype.kind not in "iu" or len(values) < 2:
+        return None
+    if values.dtype == np.uint64 and int(values.max()) >= 1 << 63:
+        return None
+    v = values.astype(np.int64)
+    first, step = int(v[0]), int(v[1]) - int(v[0])
+    if not -(1 << 62) < step < 1 << 62:
+        return None
+    with np.errstate(over="ignore"):
+        again = np.int64(first) + np.arange(len(v), dtype=np.int64) * np.int64(step)
+    return (first, step) if np.array_equal(again, v) else None
 
 
 def _code_values(values, refs, positions) -> bytes:
-    """A cell array's stream: a tag byte, then the predicted coding (:func:`_code`) or, when smaller,
-    ``xz -9`` of the raw little-endian values in this order (long repeats, as in arrays that count
-    or cycle, are what xz finds and a predictor does not)."""
+    """A cell array's stream: a tag byte, then one row when every row has the same bytes (a tag
+    per block, a constant), the first value and step of an integer counter, the predicted coding
+    (:func:`_code`) or, when smaller, ``xz -9`` of the raw little-endian values in this order
+    (long repeats, as in arrays that cycle, are what xz finds and a predictor does not)."""
     values = np.ascontiguousarray(values)
+    le = values.astype(values.dtype.newbyteorder("<"))
+    rows = np.ascontiguousarray(le.reshape(len(le), -1)).view(np.uint8)
+    if len(rows) and np.all(rows == rows[:1]):  # bit for bit: -0.0 is not 0.0, NaN payloads count
+        return bytes([_TAG_CONSTANT]) + rows[0].tobytes()
+    ar = _arithmetic(values)
+    if ar is not None:
+        return bytes([_TAG_ARITHMETIC]) + np.array(ar, "<i8").tobytes()
     predicted = _code(values, refs, positions)
-    raw = lzma.compress(values.astype(values.dtype.newbyteorder("<")).tobytes(), preset=9 | lzma.PRESET_EXTREME)
+    raw = lzma.compress(le.tobytes(), preset=9 | lzma.PRESET_EXTREME)
     if len(raw) < len(predicted):
         return bytes([_TAG_XZ]) + raw
     return bytes([_TAG_PREDICTED]) + predicted
 
 
 def _decode_values(data: bytes, n: int, dtype: str, k: int, refs, positions) -> np.ndarray:
-    if not data or data[0] not in (_TAG_PREDICTED, _TAG_XZ):
+    if not data or data[0] not in (_TAG_PREDICTED, _TAG_XZ, _TAG_CONSTANT, _TAG_ARITHMETIC):
         raise CorruptFileError("corrupt cells section: bad cell array stream")
     if data[0] == _TAG_PREDICTED:
         return _decode(data[1:], n, dtype, k, refs, positions)
     dt = check_dtype(dtype)
+    if data[0] == _TAG_CONSTANT:
+        if len(data) != 1 + k * dt.itemsize:
+            raise CorruptFileError("corrupt cells section: a constant cell array has the wrong length")
+        row = np.frombuffer(data[1:], dt)
+        out = np.repeat(row[None, :], n, axis=0)
+        return out.reshape(n) if k == 1 else out
+    if data[0] == _TAG_ARITHMETIC:
+        if len(data) != 17 or k != 1 or dt.kind not in "iu":
+            raise CorruptFileError("corrupt cells section: bad counter cell array")
+        first, step = (int(x) for x in np.frombuffer(data[1:], "<i8"))
+        with np.errstate(over="ignore"):
+            return (np.int64(first) + np.arange(n, dtype=np.int64) * np.int64(step)).astype(dt)
     size = n * k * dt.itemsize
     try:
         dec = lzma.LZMADecompressor(format=lzma.FORMAT_XZ)
@@ -292,6 +328,48 @@ def _field_value(e) -> np.ndarray:
         return np.frombuffer(raw, dt).reshape(e["shape"]).copy()
     except (KeyError, TypeError, ValueError, AttributeError):
         raise CorruptFileError("corrupt metadata: bad field data entry") from None
+
+
+def node_refs(blocks, n_referenced: int, n_points: int) -> np.ndarray:
+    """(n_points - n_referenced, 4) int32 geometry refs of the points no tet holds (decoded last, in
+    that order), from the volume blocks ``blocks`` [(type, (n, k) decode ids)]: a higher-order node
+    gets the corners of its edge (the geometry and array coders then predict it at their midpoint),
+    of its triangle, or two opposite corners of its quadrilateral or hexahedron (their midpoint is
+    the centre of a parallelogram face or a parallelepiped); -1 rows for the rest (the previous
+    point, as before). A node on several supports takes the smallest, so neither the order of
+    the cells nor of the blocks matters: encoder and decoder see the same blocks in other orders."""
+    tail = n_points - n_referenced
+    out = np.full((max(tail, 0), 4), -1, np.int32)
+    if tail <= 0:
+        return out
+    nodes, rows = [], []
+    for t, data in blocks:
+        sup = _node_keys(t) if t in VOLUME_CELLS else None
+        if sup is None or not len(data):
+            continue
+        data = np.asarray(data, np.int64)
+        k = VOLUME_CELLS[t][1]
+        for j, corners in enumerate(sup):
+            c = list(corners)
+            if len(c) == 4:
+                c = [c[0], c[2]]
+            elif len(c) == 8:
+                c = [c[0], c[6]]
+            r = np.full((len(data), 4), -1, np.int64)
+            r[:, :len(c)] = np.sort(data[:, c], axis=1)
+            nodes.append(data[:, k + j])
+            rows.append(r)
+    if not nodes:
+        return out
+    node = np.concatenate(nodes)
+    r = np.concatenate(rows)
+    keep = node >= n_referenced
+    node, r = node[keep], r[keep]
+    order = np.lexsort((r[:, 3], r[:, 2], r[:, 1], r[:, 0], node))
+    node, r = node[order], r[order]
+    first = np.r_[True, node[1:] != node[:-1]] if len(node) else np.zeros(0, bool)
+    out[node[first] - n_referenced] = r[first].astype(np.int32)
+    return out
 
 
 # -- encoder ---------------------------------------------------------------------------------------

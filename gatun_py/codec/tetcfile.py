@@ -30,7 +30,8 @@ from ..errors import CorruptFileError, MeshError, OptionError
 from ..mesh import TetBatch, TetMesh, default_step
 from ..mesh.model import NO_SCALAR, scalar_of
 from ..mesh.validate import check_tet_ids
-from .cells import encode_cells
+from ..mesh.cells import VOLUME_CELLS
+from .cells import decode_cells, encode_cells, node_refs
 from .brickindex import BrickView, brick_levels_summary, parse_brick_index
 from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
 from .container import Container, build_container
@@ -78,6 +79,10 @@ class LevelPayload:
     copies : tuple of (j, c, k, kc)
         Components stored as references, :func:`find_copies` of level 0 (the file's ``copies``):
         component c of array j is component kc of array k. Empty: every component is coded.
+    node_blocks : tuple of (str, (n, k) array)
+        Level 0 only: the quadratic volume blocks of the cells as given (point ids of ``mesh``),
+        whose higher-order nodes, points no tet holds, are then coded against the corners of
+        their edge or face (:func:`.cells.node_refs`) instead of the previous point.
     """
 
     level: int
@@ -86,6 +91,7 @@ class LevelPayload:
     mesh: object
     forest: tuple | None = None
     copies: tuple = ()
+    node_blocks: tuple = ()
 
 
 @dataclass
@@ -103,6 +109,7 @@ class EncodedLevel:
     geometry_parts: object = None
     copies: tuple = ()  # the payload's: what the array sections leave out
     tets: np.ndarray = None  # the tets in decode order and ids, as the decoder gives them (for the cells)
+    node_refs: bool = False  # the points no tet holds were coded against their cells' edges and faces
 
 
 def encode_level(payload: LevelPayload, *, chainable: bool = True) -> EncodedLevel:
@@ -123,6 +130,13 @@ def _encode_level_mesh(payload: LevelPayload, *, chainable: bool = True) -> Enco
     conn = encode_connectivity(mesh.n_points, mesh.tets)
     vo = conn.vertex_order
     refs = np.ascontiguousarray(conn.predictors, dtype=np.int32)
+    use_nodes = bool(payload.node_blocks) and conn.n_referenced < mesh.n_points
+    if use_nodes:
+        dec_of = np.empty(mesh.n_points, np.int64)
+        dec_of[vo] = np.arange(mesh.n_points)
+        refs = refs.copy()
+        refs[conn.n_referenced:] = node_refs([(t, dec_of[d]) for t, d in payload.node_blocks],
+                                             conn.n_referenced, mesh.n_points)
     p32, d32 = mesh.points32[vo], mesh.density[vo]
     # The boundary in decode ids and order has the same edges as mesh.boundary_faces(), so the same
     # median; deriving it again from the tets would sort all 4m faces (4 GB at 7.8 M tets).
@@ -167,7 +181,7 @@ def _encode_level_mesh(payload: LevelPayload, *, chainable: bool = True) -> Enco
         "has_forest": False,
     }
     return EncodedLevel(i, sections, meta, vo, conn.peak_border, render_step, parts if chainable else None,
-                        tuple(payload.copies), conn.tets)
+                        tuple(payload.copies), conn.tets, use_nodes)
 
 
 def _chain_geometry(encoded: list) -> None:
@@ -318,6 +332,14 @@ def file_meta(mesh0, n_boundary_faces: int, source: str = "", *, render_step: fl
     }
 
 
+def node_blocks(cells) -> tuple:
+    """The blocks of ``cells`` whose higher-order nodes level 0 codes on their edges and faces
+    (:attr:`LevelPayload.node_blocks`): the quadratic volume blocks of cells a file stores."""
+    if cells is None or not cells.needed():
+        return ()
+    return tuple((t, d) for t, d in cells.blocks if t in VOLUME_CELLS and d.shape[1] > VOLUME_CELLS[t][1])
+
+
 def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, dependencies=None,
                 mesh_codes: dict | None = None, threads: int = 1, copies: tuple | None = None,
                 cells=None) -> bytes:
@@ -361,12 +383,14 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
     mesh_codes = mesh_codes or {}
     copies = find_copies(mesh0) if copies is None else tuple(copies)
     levels = [dataclasses.replace(lv, copies=copies) for lv in levels]
+    levels[0] = dataclasses.replace(levels[0], node_blocks=node_blocks(cells))
 
     chainable = len(levels) > 1
 
     def encode(lv):
         done = mesh_codes.get(lv.level)
-        if done is None or done.copies != copies:  # coded beforehand with other copies: again
+        if done is None or done.copies != copies or bool(lv.node_blocks) != done.node_refs:
+            # coded beforehand with other copies, or without the nodes' refs: again
             return encode_level(lv, chainable=chainable)
         return _with_forest(done, lv)
 
@@ -401,6 +425,8 @@ def encode_tetc(levels: list[LevelPayload], *, source: str = "", progress=None, 
 
         meta["cells"], cell_sections = encode_cells(cells, mesh0.tets, encoded[0].vertex_order, encoded[0].tets,
                                                     mesh0.points32[encoded[0].vertex_order])
+        if encoded[0].node_refs:
+            meta["cells"]["node_refs"] = True
         sections += cell_sections
     return build_container(meta, sections)
 
@@ -423,8 +449,7 @@ def _with_forest(done: EncodedLevel, payload: LevelPayload) -> EncodedLevel:
                                                         meta["boundary_vertices"])
     meta.update(ratio=float(payload.ratio), merges_before=int(payload.merges_before),
                 has_forest=payload.forest is not None)
-    return EncodedLevel(i, sections, meta, done.vertex_order, done.peak_border, done.render_step,
-                        done.geometry_parts, done.copies, done.tets)
+    return dataclasses.replace(done, sections=sections, meta=meta)
 
 
 def _dependency_section(dependencies, level0: LevelPayload) -> tuple[dict, bytes]:
@@ -888,19 +913,35 @@ class TetcReader:
                 return out
 
             known = 0
+            node_tets = [] if level == 0 and self._nodes_coded_on_cells() else None
             for first, tets, refs, faces in source:
                 pts, dens = geo.decode(refs)
                 batch = TetBatch.of_vertices(0, pts, dens, faces) if faces is not None else \
                     TetBatch.of_tets(first, tets, pts, dens)
+                if node_tets is not None and faces is None:
+                    node_tets.append(np.array(tets, np.int32))
                 yield batch, exact(refs, pts, dens)
                 known = first + len(refs)
-        if known < n:  # vertices no tet references: no refs
-            none = np.full((n - known, 4), -1, np.int32)
+        if known < n:  # vertices no tet references: no refs, or their cells' edges and faces
+            none = (np.full((n - known, 4), -1, np.int32) if node_tets is None else
+                    self._node_refs(np.concatenate(node_tets) if node_tets else np.zeros((0, 4), np.int32), known, n))
             pts, dens = geo.decode(none)
             yield TetBatch.of_vertices(known, pts, dens), exact(none, pts, dens)
         geo.finish()
         for dec in extra.values():
             dec.finish()
+
+    def _nodes_coded_on_cells(self) -> bool:
+        cells = self.meta.get("cells")
+        return isinstance(cells, dict) and cells.get("node_refs") is True
+
+    def _node_refs(self, tets: np.ndarray, known: int, n: int) -> np.ndarray:
+        """The geometry refs of level 0's points no tet holds, from the cells' higher-order nodes
+        (the blocks alone are decoded here: no cell arrays, sets or order)."""
+        meta = dict(self.meta["cells"], cell_data=[], point_sets=[], cell_sets=[], keep_order=False,
+                    cell_order=False)
+        cells = decode_cells(meta, self.read_section, self.container.has_section, tets, n)
+        return node_refs(cells.blocks, known, n)
 
     def iter_decode(self, level: int = 0, *, scalar: str | None = None, component=None,
                     batch_tets: int = DEFAULT_BATCH_TETS, jobs: int = 1, depth: int = 4) -> Iterator[TetBatch]:

@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import MeshError
+from ..errors import MeshError, OptionError
+from .model import TetMesh, scalar_of
 
 try:  # meshio's table of cell dimensions, which CellBlock consults (see _register_with_meshio)
     from meshio._mesh import topological_dimension as _MESHIO_DIMENSION
@@ -174,3 +175,49 @@ def check_cells(cells: Cells, n_points: int, source: str = "mesh") -> None:
             ids = np.asarray([] if ids is None else ids)
             if ids.size and (ids.dtype.kind not in "iu" or int(ids.min()) < 0 or int(ids.max()) >= len(d)):
                 raise MeshError(f"{source}: cell set {name!r} names a cell outside the {len(d)} {t} cells")
+
+
+def tet_values(cells: Cells, name: str, component=None) -> np.ndarray:
+    """One float64 value per tet from the cell array ``name``: the value of the tet's cell (a
+    vector's ``component``, or its ``"magnitude"``).
+
+    Raises
+    ------
+    OptionError
+        No such cell array, or a component that does not fit it.
+    """
+    if name not in cells.cell_data:
+        raise OptionError(f"no cell array named {name!r}; cell arrays: "
+                          f"{', '.join(map(repr, cells.cell_data)) or 'none'}")
+    per_block = [np.asarray(a) for (t, _), a in zip(cells.blocks, cells.cell_data[name]) if t in VOLUME_CELLS]
+    widths = {a.reshape(len(a), -1).shape[1] for a in per_block}
+    if len(widths) > 1:
+        raise OptionError(f"cell array {name!r} has a different number of components per block")
+    flat = np.concatenate([a.reshape(len(a), -1) for a in per_block]) if per_block else np.zeros((0, 1))
+    try:
+        per_cell = scalar_of({name: flat[:, 0] if flat.shape[1] == 1 else flat}, name, component)
+    except ValueError as e:
+        raise OptionError(str(e)) from None
+    return per_cell[cells.tet_cell]
+
+
+def constant_per_cell(mesh: TetMesh, values: np.ndarray, name: str) -> TetMesh:
+    """``mesh`` with ``values`` (one per tet) as its scalar, constant inside every tet.
+
+    A point scalar is interpolated inside each tet, so a value per tet is rendered as a point scalar
+    on points that are not shared across a change of value: every point gets one copy per distinct
+    value among its tets (the value rounded to float32, as a rendered scalar is). Tets of equal value
+    keep sharing their faces, so a cell array that is constant over large regions (material ids,
+    tags) adds few points; where the value changes, the two tets no longer share the face, and
+    rays cross from one to the other as between two touching parts of a mesh.
+    """
+    v32 = np.asarray(values, dtype=np.float32).reshape(-1)
+    if len(v32) != mesh.n_tets:
+        raise OptionError(f"{len(v32)} values for {mesh.n_tets} tets")
+    tets = np.asarray(mesh.tets, np.int64)
+    bits = np.repeat(v32.view(np.uint32).astype(np.int64), 4)
+    key = tets.reshape(-1) * (1 << 32) + bits
+    uniq, inverse = np.unique(key, return_inverse=True)
+    vertex = uniq >> 32
+    density = (uniq & 0xFFFFFFFF).astype(np.uint32).view(np.float32)
+    return TetMesh(np.asarray(mesh.points)[vertex], density, inverse.reshape(-1, 4).astype(np.int32), name)

@@ -137,6 +137,9 @@ def read_mesh(path, *, scalar: str | None = None, q_file=None, q_var: str = "den
 
 
 def _read_plot3d(path: Path, q_file, q_var: str, refine: int = 1) -> tuple[TetMesh, MeshReport]:
+    """A PLOT3D grid with everything its Q file holds: the five Q planes as point arrays (``q_var``
+    the default scalar, computed and added when it is a derived quantity), the free-stream header
+    as field data, the grid's hexahedra as the cells."""
     grid = plot3d.read_xyz(path)
     notes = []
     if q_file is None:
@@ -144,7 +147,13 @@ def _read_plot3d(path: Path, q_file, q_var: str, refine: int = 1) -> tuple[TetMe
         if q_file is None:
             raise ReadError(f"{path} is a PLOT3D grid: give its solution file (the Q file; none found beside it)")
         notes.append(f"scalar from {Path(q_file).name}")
-    dens = plot3d.read_q(q_file, grid.dims, q_var)
+    if q_var not in plot3d.Q_VARIABLES:
+        raise ReadError(f"unknown Q variable {q_var!r}; choose one of {', '.join(plot3d.Q_VARIABLES)}")
+    solution = plot3d.read_q_file(q_file, grid.dims)
+    point_data = {k: solution.planes[i] for i, k in enumerate(plot3d.Q_STORED)}
+    if q_var not in point_data:
+        point_data[q_var] = plot3d.q_variable(solution.planes, q_var)
+        notes.append(f"{q_var!r} computed from the Q variables and stored beside them as the default scalar")
     xyz, dims = grid.xyz, grid.dims
     keep = None
     if grid.iblank is not None:
@@ -152,18 +161,24 @@ def _read_plot3d(path: Path, q_file, q_var: str, refine: int = 1) -> tuple[TetMe
         if not keep.all():
             notes.append(f"{int((~keep).sum())} cells dropped by IBLANK")
     if refine != 1:
-        xyz, dens, fine = plot3d.refine_grid(xyz, dens, dims, refine)
+        xyz, dens, fine = plot3d.refine_grid(xyz, point_data[q_var], dims, refine)
+        point_data = {q_var: dens}  # interpolated, not data: only the scalar the refinement is for
         if keep is not None:
             keep = plot3d.refine_cell_mask(keep, dims, refine)
         notes.append(f"grid refined {refine}x per axis ({'x'.join(map(str, dims))} -> "
-                     f"{'x'.join(map(str, fine))}), scalar trilinearly interpolated")
+                     f"{'x'.join(map(str, fine))}), scalar trilinearly interpolated, the other Q variables "
+                     "not kept")
         dims = fine
     hexes, colour = plot3d.grid_hexes(dims)
     if keep is not None:
         hexes = hexes[keep]
     tets = orient_positive(xyz, split_hexes_two_colour(hexes, colour))
-    mesh, report = _validated(str(path), xyz, dens, tets, q_var)
+    mesh, report = _validated(str(path), xyz, None, tets, q_var, point_data)
     report.notes += notes
+    cells = Cells([("hexahedron", hexes)], np.repeat(np.arange(len(hexes), dtype=np.int64), 5),
+                  field_data=dict(solution.free_stream))
+    check_cells(cells, len(xyz), str(path))
+    report.cells = cells
     return mesh, report
 
 

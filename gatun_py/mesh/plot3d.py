@@ -7,6 +7,10 @@ Layout (no Fortran record markers, no block count, either byte order):
 * Q file: ``int32 ni, nj, nk``, ``float32 fsmach, alpha, re, time``, then
   ``float32 Q[5][nk][nj][ni]`` = density, x/y/z momentum, stagnation energy.
 
+A grid read as a mesh keeps all of it: the five Q planes as point arrays under their names
+(:data:`Q_STORED`), the free-stream header as field data (:data:`FREE_STREAM`), the grid's hexahedra
+as its cells.
+
 Trailing bytes after the data (padding) are ignored.
 
 :func:`refine_grid` makes larger meshes from these grids for scale tests: every cell's trilinear
@@ -101,12 +105,22 @@ def read_xyz(path) -> Plot3DGrid:
     return Plot3DGrid(dims, np.ascontiguousarray(xyz), iblank)
 
 
-def read_q(path, dims: tuple[int, int, int], variable: str = "density", *, dtype=np.float32) -> np.ndarray:
-    """One scalar per grid point from a Q file, as float32 (or ``dtype=np.float64``: the derived
-    variables computed and kept in float64, the stored ones exactly)."""
+Q_STORED = ("density", "momentum-x", "momentum-y", "momentum-z", "energy")  # the five planes, file order
+FREE_STREAM = ("fsmach", "alpha", "re", "time")  # the Q file's header after the sizes
+
+
+@dataclass(frozen=True)
+class Plot3DSolution:
+    """A Q file as stored: the free-stream header and the five planes, float32 bit for bit."""
+
+    free_stream: dict  # name -> (1,) float32, in FREE_STREAM order
+    planes: np.ndarray  # (5, N) float32, Q_STORED order
+
+
+def read_q_file(path, dims: tuple[int, int, int]) -> Plot3DSolution:
+    """Every value of a Q file: the header ``fsmach, alpha, re, time`` and the five Q planes, each as
+    float32 in native byte order (the file's bits)."""
     path = Path(path)
-    if variable not in Q_VARIABLES:
-        raise ReadError(f"unknown Q variable {variable!r}; choose one of {', '.join(Q_VARIABLES)}")
     try:
         raw = path.read_bytes()
     except OSError as e:
@@ -118,11 +132,19 @@ def read_q(path, dims: tuple[int, int, int], variable: str = "density", *, dtype
     need = 12 + 16 + 20 * n
     if len(raw) < need:
         raise ReadError(f"{path}: PLOT3D Q file needs {need} bytes, file has {len(raw)}")
-    q = np.frombuffer(raw, dtype=f"{bo}f4", count=5 * n, offset=28).reshape(5, n)
-    direct = {"density": 0, "momentum-x": 1, "momentum-y": 2, "momentum-z": 3, "energy": 4}
-    if variable in direct:
-        return np.ascontiguousarray(q[direct[variable]].astype(dtype))
-    q64 = q.astype(np.float64)
+    head = np.frombuffer(raw, dtype=f"{bo}f4", count=4, offset=12).astype(np.float32)
+    planes = np.frombuffer(raw, dtype=f"{bo}f4", count=5 * n, offset=28).reshape(5, n).astype(np.float32)
+    return Plot3DSolution({k: head[i:i + 1].copy() for i, k in enumerate(FREE_STREAM)}, planes)
+
+
+def q_variable(planes: np.ndarray, variable: str, *, dtype=np.float32) -> np.ndarray:
+    """One quantity of :data:`Q_VARIABLES` from the five planes: a stored plane exactly, a derived
+    one computed in float64 and returned as ``dtype``."""
+    if variable not in Q_VARIABLES:
+        raise ReadError(f"unknown Q variable {variable!r}; choose one of {', '.join(Q_VARIABLES)}")
+    if variable in Q_STORED:
+        return np.ascontiguousarray(planes[Q_STORED.index(variable)].astype(dtype))
+    q64 = planes.astype(np.float64)
     rho = q64[0]
     with np.errstate(divide="ignore", invalid="ignore"):
         if variable.startswith("velocity-") and variable != "velocity-magnitude":
@@ -134,6 +156,14 @@ def read_q(path, dims: tuple[int, int, int], variable: str = "density", *, dtype
         else:  # pressure, ideal gas
             out = (GAMMA - 1.0) * (q64[4] - 0.5 * (q64[1:4] ** 2).sum(axis=0) / rho)
     return out.astype(dtype)
+
+
+def read_q(path, dims: tuple[int, int, int], variable: str = "density", *, dtype=np.float32) -> np.ndarray:
+    """One scalar per grid point from a Q file, as float32 (or ``dtype=np.float64``: the derived
+    variables computed and kept in float64, the stored ones exactly)."""
+    if variable not in Q_VARIABLES:
+        raise ReadError(f"unknown Q variable {variable!r}; choose one of {', '.join(Q_VARIABLES)}")
+    return q_variable(read_q_file(path, dims).planes, variable, dtype=dtype)
 
 
 def grid_hexes(dims: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:

@@ -26,6 +26,7 @@ from ..codec.container import is_tetc  # noqa: F401  (the api and the CLI take i
 from ..errors import CorruptFileError, OptionError
 from ..limits import PIPELINES
 from ..mesh import TetMesh, default_step, mesh_batches, read_mesh
+from ..mesh.cells import constant_per_cell, tet_values
 from ..raycast.camera import Camera
 from ..raycast.caster import render_mesh
 from ..raycast.stream import render_batches
@@ -266,3 +267,23 @@ def render_mesh_file(source, view: View, *, read_kwargs: dict | None = None, pro
                  ratio=0.0, merges=0, tets_decoded=mesh.n_tets, notes=notes + stats.get("notes", []),
                  peak_rss_mb=peak_rss_mb())
     return PipelineResult(res.image, stats)
+
+
+def render_cell_array(mesh: TetMesh, cells, name: str, view: View, *, step: float | None = None,
+                      progress=None) -> tuple[PipelineResult, tuple[float, float]]:
+    """Render the cell array ``name`` of ``cells`` (the cells of ``mesh``) as a constant per cell.
+
+    Every tet takes its cell's value (``view.component`` of a vector), so the scalar is constant
+    inside a cell and jumps at its faces (:func:`~gatun_py.mesh.cells.constant_per_cell`); the
+    renderer's kernels are the point-scalar ones. The sample step is ``view.step``, else ``step``
+    (a file's recorded step), else the full mesh's default, so the samples fall where a point
+    scalar's would. Returns the result and the values' range.
+    """
+    values = tet_values(cells, name, view.component)
+    if view.step is None:
+        view = replace(view, step=step if step is not None else default_step(mesh.points, mesh.boundary_faces()))
+    label = name if view.component is None else f"{name}[{view.component}]"
+    per_cell = constant_per_cell(mesh, values, label)
+    res = render_mesh_file(per_cell, view, progress=progress)
+    res.stats["notes"] = res.stats.get("notes", []) + [f"cell array {label!r} rendered as a constant per cell"]
+    return res, per_cell.scalar_range

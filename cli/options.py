@@ -16,11 +16,8 @@ import sys
 import threading
 
 import click
-import numpy as np
-
 from gatun_py.errors import ReadError
-from gatun_py.limits import MAX_IMAGE_SIDE, MAX_ZOOM  # light: parsing the options loads no numba
-from gatun_py.mesh.plot3d import Q_VARIABLES
+from gatun_py.limits import MAX_IMAGE_SIDE, MAX_ZOOM, Q_VARIABLES  # light: parsing the options loads no numba
 
 
 class FiniteFloat(click.ParamType):
@@ -204,10 +201,9 @@ def echo_json(obj) -> None:
 
 
 def _json_default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
+    tolist = getattr(o, "tolist", None)  # numpy scalars and arrays (numpy is not imported to parse options)
+    if tolist is not None:
+        return tolist()
     raise TypeError(type(o).__name__)
 
 

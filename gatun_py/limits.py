@@ -8,3 +8,18 @@ MAX_IMAGE_SIDE = 8192
 MAX_CAMERA_SIDE = 16384
 # A zoom factor lies in [1 / MAX_ZOOM, MAX_ZOOM].
 MAX_ZOOM = 1.0e4
+
+# The PLOT3D Q-file quantities a reader derives (gatun_py.mesh.plot3d; the CLI's --q-var choices).
+Q_VARIABLES = (
+    "density",
+    "momentum-x",
+    "momentum-y",
+    "momentum-z",
+    "energy",
+    "velocity-x",
+    "velocity-y",
+    "velocity-z",
+    "velocity-magnitude",
+    "momentum-magnitude",
+    "pressure",
+)

@@ -10,7 +10,6 @@ import base64
 import struct
 from pathlib import Path
 
-import meshio
 import numpy as np
 
 from .._atomic import atomic_path, check_output_path
@@ -45,6 +44,8 @@ def write_surface(surface, path, *, force: bool = False) -> None:
             pdata = {} if suffix in (".stl", ".obj", ".off", ".wkt") else dict(surface.point_data)
             if suffix == ".ply":  # meshio's PLY writer wants float32/64 point data of one component
                 pdata = {k: np.asarray(v, np.float32) for k, v in pdata.items()}
+            import meshio  # start-up time: `tetc isosurface` checks its output path before its notice
+
             try:
                 meshio.write(str(tmp), meshio.Mesh(pts, cells, point_data=pdata), file_format=MESHIO_SURFACE[suffix])
             except (OSError, ValueError, KeyError, TypeError) as e:

@@ -224,3 +224,26 @@ def test_import_gatun_py_loads_no_meshio_and_still_registers_tetc(order):
                             "sorted(sys.modules)\n", "")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-2000:]
+
+
+def test_a_checkout_shares_the_cache_of_an_installed_copy_of_the_same_kernels(tmp_path, monkeypatch):
+    """numba keys its cache by source path: a checkout shadowing an installed copy (python started in
+    the repository root) takes the installed copy's cache, unless one module using numba differs
+    (a kernel's cached code holds the kernels it calls from other modules)."""
+    import shutil
+
+    installed = tmp_path / "site" / "gatun_py"
+    shutil.copytree(notice.PACKAGE_DIR, installed, ignore=shutil.ignore_patterns("__pycache__"))
+    monkeypatch.setattr(notice, "shadowed_install", lambda: str(installed))
+    notice.cache_twin.cache_clear()
+    try:
+        assert notice.cache_twin() == installed
+        source = notice.PACKAGE_DIR / "simplify" / "_filter_kernels.py"
+        assert notice._cached_as(source) == installed / "simplify" / "_filter_kernels.py"
+        assert notice._cache_dirs(notice._cached_as(source)) != notice._cache_dirs(source)
+        with open(installed / "simplify" / "_filter_kernels.py", "a") as fh:
+            fh.write("\n# changed\n")
+        notice.cache_twin.cache_clear()
+        assert notice.cache_twin() is None and notice._cached_as(source) == source
+    finally:
+        notice.cache_twin.cache_clear()

@@ -7,8 +7,6 @@ the command could say anything. So registration waits until something imports me
 
 from __future__ import annotations
 
-import importlib.abc
-import importlib.util
 import sys
 import threading
 import warnings
@@ -16,8 +14,8 @@ import warnings
 _lock = threading.Lock()
 
 
-class _Loader(importlib.abc.Loader):
-    """The module's own loader, then ``then``."""
+class _Loader:
+    """The module's own loader, then ``then`` (importlib.abc not imported: start-up time)."""
 
     def __init__(self, loader, then):
         self._loader, self._then = loader, then
@@ -37,7 +35,7 @@ class _Loader(importlib.abc.Loader):
             warnings.warn(f"after importing {module.__name__}: {e!r}", RuntimeWarning, stacklevel=2)
 
 
-class _Finder(importlib.abc.MetaPathFinder):
+class _Finder:
     def __init__(self, name, then):
         self.name, self.then = name, then
 
@@ -48,7 +46,12 @@ class _Finder(importlib.abc.MetaPathFinder):
             if self not in sys.meta_path:
                 return None
             sys.meta_path.remove(self)  # once; and the real finders find the spec below
-        spec = importlib.util.find_spec(fullname)
+        spec = None
+        for finder in list(sys.meta_path):
+            find = getattr(finder, "find_spec", None)
+            spec = find(fullname, path, target) if find is not None else None
+            if spec is not None:
+                break
         if spec is not None and spec.loader is not None and hasattr(spec.loader, "exec_module"):
             spec.loader = _Loader(spec.loader, self.then)
         return spec

@@ -24,6 +24,18 @@ BLUNTFIN = str(SAMPLE_FILES["bluntfin"][0])
 POST = str(SAMPLE_FILES["post"][0])
 
 
+def kernels(cache: Path) -> set:
+    """The compiled kernels (one .nbc file per kernel and signature) numba's cache holds."""
+    return {p.relative_to(cache) for p in cache.rglob("*.nbc")} if cache.exists() else set()
+
+
+def version_s(env, cwd) -> float:
+    """Seconds `tetc --version` takes: the start-up every command pays (importing the CLI)."""
+    t0 = time.perf_counter()
+    subprocess.run([str(TETC), "--version"], cwd=cwd, env=env, capture_output=True, check=True)
+    return time.perf_counter() - t0
+
+
 def timed_run(args, env, cwd) -> tuple[float, float | None, int, str]:
     """(wall seconds, seconds until the compile notice or None, exit code, first stderr line)."""
     t0 = time.perf_counter()
@@ -57,15 +69,19 @@ def main(argv) -> int:
         for label, args in cases:
             cache = work / f"cache-{len(rows)}"
             env = dict(base, NUMBA_CACHE_DIR=str(cache))
+            ver = version_s(env, work)  # interleaved with the cold run: the same load
             cold, notice_s, code, first = timed_run(args, env, work)
+            n_cold = len(kernels(cache))
             shutil.rmtree(cache, ignore_errors=True)
             w, _, wcode, _ = timed_run(["warmup", "-q"], env, work)
             warmup_s = w if warmup_s is None else warmup_s
+            before = kernels(cache)
             after, after_notice, acode, _ = timed_run(args, env, work)
+            n_after = len(kernels(cache) - before)
             warm, _, _, _ = timed_run(args, env, work)
             shutil.rmtree(cache, ignore_errors=True)
-            rows.append([label, cold, "-" if notice_s is None else f"{notice_s:.2f}", w, after,
-                         "yes" if after_notice is not None else "no", warm, f"{code}/{wcode}/{acode}"])
+            rows.append([label, cold, n_cold, "-" if notice_s is None else f"{notice_s:.2f}", f"{ver:.2f}", w, after,
+                         n_after, "yes" if after_notice is not None else "no", warm, f"{code}/{wcode}/{acode}"])
             print(rows[-1], flush=True)
     finally:
         shutil.rmtree(work, ignore_errors=True)
@@ -75,10 +91,13 @@ def main(argv) -> int:
         f"`python bench/bench_first_run.py` ({code_state()}; load average {load:.1f} at the end, on "
         f"{os.cpu_count()} cores). Each row: the installed `tetc` with an empty `NUMBA_CACHE_DIR`; *cold* is the "
         "command's first run (it compiles what it needs, and says so: *notice at* is the seconds from the "
-        "start to that line on stderr); then `tetc warmup` (the README's set-up step) in a fresh empty cache, "
+        "start to that line on stderr, against `tetc --version` just before it; *kernels compiled*: the "
+        "compiled kernels (.nbc files, one per kernel and signature) the run added to the cache, which "
+        "does not depend on load); then `tetc warmup` (the README's set-up step) in a fresh empty cache, "
         "the command's first run after it, and a second run.\n",
-        table(["command", "cold s", "notice at s", "tetc warmup s", "first run after warmup s",
-               "notice after warmup", "warm s", "exit codes"], rows),
+        table(["command", "cold s", "kernels compiled cold", "notice at s", "tetc --version s", "tetc warmup s",
+               "first run after warmup s", "kernels compiled after warmup", "notice after warmup", "warm s",
+               "exit codes"], rows),
         "",
         "Inputs: Blunt-fin (`sample_meshes/bluntfin`), post.vtk compressed for the other rows.",
     ]

@@ -6,6 +6,12 @@ Each row runs the installed ``tetc`` in a fresh process with its own empty ``NUM
 command after it. Writes ``bench/sections/first_run.md``.
 
     python bench/bench_first_run.py [--quick]
+    python bench/bench_first_run.py --notice [--before OTHER_TETC] [--rounds N]
+
+``--notice`` measures only the start-up: seconds from the start of each command (empty cache) to its
+compile notice, against `tetc --version` run just before it, median of N interleaved rounds; with
+``--before``, another install's `tetc` (e.g. the main checkout's) in the same rounds. Writes
+``bench/sections/first_run_notice.md``.
 """
 
 from __future__ import annotations
@@ -51,7 +57,81 @@ def timed_run(args, env, cwd) -> tuple[float, float | None, int, str]:
     return time.perf_counter() - t0, notice_s, code, first
 
 
+def notice_s(tetc, args, env, cwd) -> float | None:
+    """Seconds from the start of ``tetc args`` to its compile notice (the process is ended then)."""
+    import signal
+
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([str(tetc), *args], cwd=cwd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    seconds = None
+    try:
+        for line in proc.stderr:
+            if line.startswith("tetc: compiling"):
+                seconds = time.perf_counter() - t0
+                break
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.wait()
+    return seconds
+
+
+def notice_main(argv) -> int:
+    import statistics
+
+    rounds = int(argv[argv.index("--rounds") + 1]) if "--rounds" in argv else 5
+    installs = [("this checkout", TETC)]
+    if "--before" in argv:
+        installs.append(("before", Path(argv[argv.index("--before") + 1])))
+    work = Path(tempfile.mkdtemp(prefix="tetc_notice_"))
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(work / "empty-cache"), TETC_COMPILE_NOTICE="1")
+    tiny = Path(__file__).resolve().parents[1] / "gatun_py" / "warmup.tetc"
+    cases = [("compress", ["compress", BLUNTFIN, "-o", "x.tetc", "--force"]),
+             ("decompress", ["decompress", tiny, "-o", "x.vtu", "--force"]),
+             ("render", ["render", tiny, "-o", "x.png", "--force"]),
+             ("isosurface", ["isosurface", tiny, "--value", "0.5", "-o", "x.vtp", "--force"])]
+    times = {(who, case): [] for who, _ in installs for case in ["--version"] + [c for c, _ in cases]}
+    loads = []
+    try:
+        for _ in range(rounds):
+            for who, tetc in installs:
+                t0 = time.perf_counter()
+                # a session of its own as the commands below (Linux schedules sessions as groups: the same share)
+                subprocess.run([str(tetc), "--version"], cwd=work, env=env, capture_output=True, check=True,
+                               start_new_session=True)
+                times[who, "--version"].append(time.perf_counter() - t0)
+                for case, args in cases:
+                    s = notice_s(tetc, [str(a) for a in args], env, work)
+                    times[who, case].append(float("nan") if s is None else s)
+            loads.append(os.getloadavg()[0])
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    rows = []
+    for who, _ in installs:
+        ver = statistics.median(times[who, "--version"])
+        for case in ["--version"] + [c for c, _ in cases]:
+            med = statistics.median(times[who, case])
+            rows.append([who, case, f"{med:.2f}", f"{med / ver:.2f}"])
+        print(rows[-5:], flush=True)
+    text = [
+        "## First runs: seconds to the compile notice\n",
+        f"`python bench/bench_first_run.py --notice{' --before ...' if len(installs) > 1 else ''}` ({code_state()}; "
+        f"load average {min(loads):.1f}-{max(loads):.1f} during the rounds, on {os.cpu_count()} cores). Each command "
+        "with an empty `NUMBA_CACHE_DIR`: seconds from its start to the `tetc: compiling` line on stderr (the "
+        f"process is ended there), median of {rounds} rounds interleaved with `tetc --version` (the start-up every "
+        "command pays) and with the other install. A loaded machine stretches both alike: compare the ratios.\n",
+        table(["install", "command", "median s", "/ tetc --version"], rows),
+    ]
+    write_section("first_run_notice", "\n".join(text))
+    return 0
+
+
 def main(argv) -> int:
+    if "--notice" in argv:
+        return notice_main(argv)
     quick = "--quick" in argv
     work = Path(tempfile.mkdtemp(prefix="tetc_first_run_"))
     shutil.copy(POST, work / "post.vtk")

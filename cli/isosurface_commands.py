@@ -88,7 +88,7 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
 
     if png is not None:
         from gatun_py._runtime import check_output_path
-        from gatun_py.raycast.image import image_format
+        from gatun_py.raycast.options import image_format
 
         from gatun_py.contour.extract import MAX_PREVIEW_PIXELS
 

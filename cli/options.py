@@ -64,7 +64,7 @@ class Colour(click.ParamType):
     name = "COLOUR"
 
     def convert(self, value, param, ctx):
-        from gatun_py.raycast.image import parse_colour  # start-up time (numba loads after the options are checked)
+        from gatun_py.raycast.options import parse_colour  # start-up time (numpy loads after the notice)
 
         try:
             return parse_colour(value)

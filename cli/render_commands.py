@@ -102,7 +102,7 @@ def render(input, output, tf_spec, opacity_model, mode, step, size, azimuth, ele
     bounding sphere, then --azimuth, --elevation, refit, --zoom.
     """
     from gatun_py._runtime import announce, is_tetc
-    from gatun_py.raycast.image import image_format
+    from gatun_py.raycast.options import image_format
 
     t_start = time.perf_counter()
     if sum(x is not None for x in (ratio, level, budget, tets)) > 1:

@@ -25,7 +25,7 @@ import importlib
 import inspect
 
 from ._compile_notice import share_installed_cache as _share_installed_cache
-from ._after_import import after_import as _after_import
+from ._after_import import after_import as _when_imported
 from ._lazy import attach
 from ._version import __version__
 from .errors import (CorruptFileError, FormatVersionError, MeshError, OptionError, OutputError,
@@ -96,7 +96,7 @@ def _register_meshio():
 
 
 # .tetc for meshio once meshio is imported (now, if it is): importing it here would delay every command
-_after_import("meshio", _register_meshio)
+_when_imported("meshio", _register_meshio)
 # before any kernel module is imported: a checkout shadowing an installed copy of the same kernels
 # uses that copy's numba cache (no numba import otherwise)
 _share_installed_cache()

@@ -79,7 +79,7 @@ def isosurface(input, values, output, ratio, faces, batch_faces, level, mesh_rat
         raise click.UsageError("give either --ratio or --faces, not both")
     if level is not None and mesh_ratio is not None:
         raise click.UsageError("give either --level or --mesh-ratio, not both")
-    from gatun_py.contour.io import check_surface_path
+    from gatun_py.contour.paths import check_surface_path
 
     require_file(input)  # before saying that it compiles
     check_surface_path(output, force=force)  # fail before the work, not after

@@ -8,7 +8,6 @@ import gatun_py
 from gatun_py._runtime import check_output_path
 from gatun_py._runtime import announce
 
-from gatun_py.mesh.pieces import is_partitioned
 
 from .options import (RATIO, FiniteFloat, camera_options, check_step, echo_json, force_option, jobs_option, json_option,
                       logger, mesh_input_options, output_option, progress_reporter, quiet_option, read_kwargs, records,
@@ -160,6 +159,8 @@ def compress(inputs, output, forest, read, cluster, times, keyframe_interval, n_
     check_output_path(output, force=force)
     announce(["encoder"] + ([] if forest.mesh_only else ["decimation"]) + (["dependencies"] if forest.dependencies
                                                                            else []), quiet=quiet)
+    from gatun_py.mesh.pieces import is_partitioned  # start-up time: the notice above comes first
+
     if pieces or is_partitioned(inputs[0]) or memory is not None:
         if times is not None or keyframe_interval is not None:
             raise click.UsageError("--times and --keyframe-interval are for a time series, not pieces")

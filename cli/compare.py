@@ -9,12 +9,13 @@ import sys
 import click
 
 from gatun_py.errors import TetcError
-from gatun_py.pipeline.quality import compare_files
 
 from .options import echo_json, json_option
 
 
 def _compare(a, b, as_json):
+    from gatun_py.pipeline.quality import compare_files  # start-up time of every other command
+
     d = compare_files(a, b)
     if as_json:
         out = d.as_dict()

@@ -79,7 +79,7 @@ def isosurface(input, values, output, ratio, faces, batch_faces, detail, view, r
     if ratio is not None and faces is not None:
         raise click.UsageError("give either --ratio or --faces, not both")
     level = detail.level
-    from gatun_py.contour.io import check_surface_path
+    from gatun_py.contour.paths import check_surface_path
 
     require_file(input)  # before saying that it compiles
     check_surface_path(output, force=force)  # fail before the work, not after
@@ -88,7 +88,7 @@ def isosurface(input, values, output, ratio, faces, batch_faces, detail, view, r
 
     if png is not None:
         from gatun_py._runtime import check_output_path
-        from gatun_py.raycast.image import image_format
+        from gatun_py.raycast.options import image_format
 
         from gatun_py.contour.extract import MAX_PREVIEW_PIXELS
 

@@ -17,11 +17,9 @@ import sys
 import threading
 
 import click
-import numpy as np
 
 from gatun_py.errors import OptionError, ReadError
-from gatun_py.limits import MAX_IMAGE_SIDE, MAX_ZOOM  # light: parsing the options loads no numba
-from gatun_py.mesh.plot3d import Q_VARIABLES
+from gatun_py.limits import MAX_IMAGE_SIDE, MAX_ZOOM, Q_VARIABLES  # light: parsing the options loads no numba
 from gatun_py.pipeline.requests import Cluster, Detail, ForestOptions, ReadOptions, View  # numba-free: the records check the options
 
 # record field -> the click parameter that gives it, per record a command receives
@@ -84,7 +82,7 @@ class Colour(click.ParamType):
     name = "COLOUR"
 
     def convert(self, value, param, ctx):
-        from gatun_py.raycast.image import parse_colour  # start-up time (numba loads after the options are checked)
+        from gatun_py.raycast.options import parse_colour  # start-up time (numpy loads after the notice)
 
         try:
             return parse_colour(value)
@@ -267,10 +265,9 @@ def echo_json(obj) -> None:
 
 
 def _json_default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
+    tolist = getattr(o, "tolist", None)  # numpy scalars and arrays (numpy is not imported to parse options)
+    if tolist is not None:
+        return tolist()
     raise TypeError(type(o).__name__)
 
 

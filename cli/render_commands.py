@@ -101,7 +101,7 @@ def render(input, output, view, detail, read, cluster, pipeline, n_bricks, orbit
     bounding sphere, then --azimuth, --elevation, refit, --zoom.
     """
     from gatun_py._runtime import announce, is_tetc
-    from gatun_py.raycast.image import image_format
+    from gatun_py.raycast.options import image_format
 
     t_start = time.perf_counter()
     if sum(x is not None for x in (at_time, step_range, read.time_step)) > 1:

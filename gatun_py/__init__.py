@@ -18,17 +18,18 @@ The stages, in pipeline order (each imports only the ones before it):
 
 The verbs load ``gatun_py.api`` (and with it numba and the kernels) on first use, as scikit-image
 loads its submodules, so ``import gatun_py``, a command's ``--help`` and its usage errors are quick.
-``import gatun_py`` registers ``.tetc`` with meshio.
+``import gatun_py`` registers ``.tetc`` with meshio (when meshio is imported, before or after).
 """
 
 import importlib
 import inspect
 
+from ._compile_notice import share_installed_cache as _share_installed_cache
+from ._after_import import after_import as _when_imported
 from ._lazy import attach
 from ._version import __version__
 from .errors import (CorruptFileError, FormatVersionError, MeshError, OptionError, OutputError,
                      OutputExistsError, ReadError, TetcError)
-from .meshio_format import register as _register_meshio
 
 
 class _Verb:
@@ -79,7 +80,7 @@ compress_pieces = _Verb("compress_pieces", ".pipeline.compress_pieces")
 
 # classes load with their module on first access
 _LAZY = {"TetcFile": "api", "Frame": "pipeline.requests", "View": "pipeline.requests", "Detail": "pipeline.requests",
-         "ReadOptions": "mesh.io", "ForestOptions": "pipeline.requests", "Surface": "contour.extract", "TetMesh": "mesh", "TetBatch": "mesh", "read_mesh": "mesh",
+         "ReadOptions": "read_options", "ForestOptions": "pipeline.requests", "Surface": "contour.extract", "TetMesh": "mesh", "TetBatch": "mesh", "read_mesh": "mesh",
          "read_series": "mesh.series", "Series": "mesh.series",
          "write_mesh": "mesh"}
 
@@ -87,7 +88,19 @@ _LAZY = {"TetcFile": "api", "Frame": "pipeline.requests", "View": "pipeline.requ
 __getattr__, __dir__, _ = attach(__name__, _LAZY)
 
 
-_register_meshio()
+
+
+def _register_meshio():
+    from .meshio_format import register  # start-up time: meshio loads in a second or more, numba after it
+
+    register()
+
+
+# .tetc for meshio once meshio is imported (now, if it is): importing it here would delay every command
+_when_imported("meshio", _register_meshio)
+# before any kernel module is imported: a checkout shadowing an installed copy of the same kernels
+# uses that copy's numba cache (no numba import otherwise)
+_share_installed_cache()
 
 __all__ = ["compress", "decompress", "convert", "info", "open", "render", "isosurface", "append", "render_steps",
            "compress_pieces", "TetcFile", "Frame", "View", "Detail", "ReadOptions", "ForestOptions",

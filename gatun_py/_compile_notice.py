@@ -16,11 +16,12 @@ on what the cache holds); the commands' ``--quiet`` does too.
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import importlib.machinery
 import os
 import sys
 import threading
-from importlib import metadata
 from pathlib import Path
 
 PACKAGE_DIR = Path(__file__).resolve().parent
@@ -80,24 +81,25 @@ def silence() -> None:
         _said = True
 
 
+@functools.lru_cache(maxsize=None)
 def shadowed_install() -> str | None:
     """Where the installed gatun_py is, when this process imported another copy: a source checkout
-    in the working folder (``python`` puts it first on the path) shadowing a plain ``pip install``.
-    Its kernels then compile into a second cache, beside the checkout's files; None otherwise (an
-    editable install is the checkout itself)."""
-    if not (PACKAGE_DIR.parent / "pyproject.toml").is_file():
+    in the working folder (``python`` puts it first on the path) shadowing a plain ``pip install``;
+    None otherwise (an editable install is the checkout itself). Found on ``sys.path`` as the import
+    system would without the checkout (importlib.metadata would cost a command's start-up a tenth
+    of a second)."""
+    root = PACKAGE_DIR.parent
+    if not (root / "pyproject.toml").is_file():
         return None
     try:
-        for dist in metadata.distributions(name="gatun_py"):  # the checkout's egg-info is one of them
-            init = next((f for f in dist.files or () if str(f).replace("\\", "/") == "gatun_py/__init__.py"), None)
-            if init is None:  # an editable install maps the checkout instead of copying it
-                continue
-            installed = Path(dist.locate_file(init)).resolve().parent
-            if installed != PACKAGE_DIR and installed.is_dir():
-                return str(installed)
-    except Exception:  # unreadable metadata: nothing to say
+        paths = [p for p in sys.path if Path(p or ".").resolve() != root]
+        spec = importlib.machinery.PathFinder.find_spec("gatun_py", paths)
+        if spec is None or not spec.submodule_search_locations:
+            return None
+        installed = Path(next(iter(spec.submodule_search_locations))).resolve()
+    except (OSError, ValueError, ImportError):
         return None
-    return None
+    return str(installed) if installed != PACKAGE_DIR and (installed / "__init__.py").is_file() else None
 
 
 def say(text: str) -> bool:
@@ -108,14 +110,85 @@ def say(text: str) -> bool:
             return False
         _said = True
     installed = shadowed_install()
-    if installed:
+    if installed and cache_twin() is None:
         text += (f"\ntetc: note: this Python imported gatun_py from the checkout {PACKAGE_DIR.parent}, not the "
-                 f"installed package ({installed}), so its kernels compile a second time; run Python from "
-                 "another folder, or install the checkout editable (pip install -e ., as make install does)")
+                 f"installed package ({installed}), whose kernels' sources differ, so they compile a second time; "
+                 "run Python from another folder, or install the checkout editable (pip install -e ., as make "
+                 "install does)")
     try:
         print(text, file=sys.stderr, flush=True)
     except (OSError, ValueError):
         pass
+    return True
+
+
+# -- one cache for a checkout and its installed copy ----------------------------------------------
+
+@functools.lru_cache(maxsize=None)
+def cache_twin() -> Path | None:
+    """The installed gatun_py whose numba cache this process's kernels use instead of their own: when
+    this process imported a checkout (``python`` started in the repository root) that shadows a
+    plain ``pip install`` of the same kernels (every module that uses numba byte for byte the same).
+    numba keys its cache by the source file's path, so without this the checkout would compile
+    everything a second time. None otherwise (the kernels then cache as numba places them)."""
+    installed = shadowed_install()
+    if installed is None:
+        return None
+    twin = Path(installed)
+    try:
+        for source in PACKAGE_DIR.rglob("*.py"):
+            data = source.read_bytes()
+            # all of them: a kernel inlines the kernels it calls from other modules into its own
+            # cached code, so one differing callee makes every cached caller wrong
+            if b"numba" in data and (twin / source.relative_to(PACKAGE_DIR)).read_bytes() != data:
+                return None
+    except OSError:
+        return None
+    return twin
+
+
+def _cached_as(source: Path) -> Path:
+    """The file whose numba cache holds the kernels of ``source`` (its installed twin, see
+    :func:`cache_twin`, or itself)."""
+    twin = cache_twin()
+    if twin is not None:
+        try:
+            return twin / source.resolve().relative_to(PACKAGE_DIR)
+        except ValueError:
+            pass
+    return source
+
+
+def share_installed_cache() -> bool:
+    """When :func:`cache_twin` names an installed copy, make numba cache this checkout's kernels
+    where it caches that copy's (before any kernel module is imported: numba finds a kernel's cache
+    when it is decorated); whether it does. Costs nothing (no numba import) otherwise."""
+    if cache_twin() is None:
+        return False
+    from numba.core import caching
+
+    impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl
+    if any(getattr(c, "tetc_twin", False) for c in impl._locator_classes):
+        return True
+    defaults = list(impl._locator_classes)
+
+    class InstalledTwinLocator:
+        """numba's own locators, handed the installed twin of a gatun_py source file."""
+
+        tetc_twin = True
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            twin = _cached_as(Path(py_file))
+            if twin == Path(py_file):
+                return None
+            for locator in defaults:
+                found = locator.from_function(py_func, str(twin))
+                if found is not None:
+                    return found
+            return None
+
+    impl._locator_classes.insert(0, InstalledTwinLocator)
     return True
 
 
@@ -135,7 +208,7 @@ def _cache_dirs(source: Path) -> list[Path]:
 
 
 def _kernel_cached(module: str, name: str) -> bool:
-    source = PACKAGE_DIR.joinpath(*module.split(".")).with_suffix(".py")
+    source = _cached_as(PACKAGE_DIR.joinpath(*module.split(".")).with_suffix(".py"))
     try:
         mtime = source.stat().st_mtime
     except OSError:

@@ -12,3 +12,18 @@ MAX_ZOOM = 1.0e4
 MODES = ("volume", "face")
 # How a render runs: one streaming pass, or decode-all-then-render (the paper's baseline).
 PIPELINES = ("streaming", "generic")
+
+# The PLOT3D Q-file quantities a reader derives (gatun_py.mesh.plot3d; the CLI's --q-var choices).
+Q_VARIABLES = (
+    "density",
+    "momentum-x",
+    "momentum-y",
+    "momentum-z",
+    "energy",
+    "velocity-x",
+    "velocity-y",
+    "velocity-z",
+    "velocity-magnitude",
+    "momentum-magnitude",
+    "pressure",
+)

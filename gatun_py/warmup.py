@@ -11,19 +11,23 @@ from __future__ import annotations
 import dataclasses
 import os
 import sys
+import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 
 import numpy as np
 
+from . import api
 from .codec import LevelPayload, TetcReader, encode_tetc
 from .codec.geometry import GeometryDecoder
 from .codec.forest import FOREST_CODING, decode_forest_on_geometry, decode_forest_on_mesh, decode_forest_rounds
 from .errors import CorruptFileError, TetcError
 from .contour.extract import TINY_TETC, isosurface
-from .mesh import TetMesh, mesh_batches
+from .mesh import TetMesh, mesh_batches, write_mesh
 from .mesh.synthetic import jittered_grid
 from .pipeline.bricks import compress_bricks, read_bricked
+from .pipeline.sortlast import render_bricks, split_for_render
 from .pipeline.stream import View, render_tetc
 from .raycast._facetable import count_live, make_face_table, rehash
 from .raycast.camera import Camera
@@ -273,9 +277,43 @@ def _bricks() -> str:
     return "bricks"
 
 
+def _readme() -> str:
+    """The README's Usage lines through the verbs the commands call, on a tiny mesh file with the
+    arrays real files carry (a float32 vector too): numba compiles a kernel per argument types, and
+    the paths above reach some kernels with other types (or not at all) than a real run does:
+    compress --dependencies from a file, bricks without levels and their decode on worker
+    processes, render at a ratio, under a budget, selective, lean, VTK's opacity, a vector's
+    magnitude, a bricked render (as on Dask workers), isosurfaces with a preview and of bricks."""
+    mesh = tiny_mesh()
+    n = mesh.n_points
+    uvw = np.random.default_rng(0).normal(size=(n, 3)).astype(np.float32)
+    mesh = TetMesh(mesh.points, None, mesh.tets, "density", point_data={"density": mesh.density, "uvw": uvw})
+    with tempfile.TemporaryDirectory(prefix="tetc_warmup_") as tmp:
+        d = Path(tmp)
+        write_mesh(mesh, d / "tiny.vtu")
+        whole = api.compress(d / "tiny.vtu", d / "tiny.tetc", dependencies=True, levels=2)
+        bricked = api.compress(d / "tiny.vtu", d / "tiny8.tetc", bricks=2, mesh_only=True, jobs=2)
+        api.decompress(d / "tiny.tetc", d / "back.vtu")
+        api.decompress(d / "tiny.tetc", d / "back90.vtu", ratio=0.9)
+        api.decompress(d / "tiny8.tetc", d / "back8.vtu", jobs=2)
+        views = [{}, {"ratio": 0.9}, {"budget": 0.1}, {"selective": True, "tets": 100}, {"lean": True},
+                 {"opacity_model": "vtk", "background": "white", "colorbar": True},
+                 {"scalar": "uvw", "component": "magnitude"}, {"scalar_range": (0.2, 0.8), "colorbar": True}]
+        for view in views:
+            api.render(whole, size=16, tf="default", azimuth=30, elevation=20, **view)
+        api.render(bricked, size=16)
+        bricks, extent = split_for_render(whole.reader.decode_mesh(0), 2)
+        render_bricks(bricks, View(Camera(16, 16, 30, 20), tf="default"), extent)
+        lo, hi = whole.reader.meta["scalar_range"]
+        mid = lo + 0.5 * (hi - lo)
+        isosurface(whole, values=[mid], ratio=0.1).preview(size=16, azimuth=30, elevation=20)
+        isosurface(bricked, values=[mid], ratio=0.1)
+    return "the README's commands"
+
+
 # What `tetc warmup` (and `make install`) compiles, in two processes (numba compiles one function
 # at a time per process): each job with the seconds it takes on two cores, for the progress line.
-JOBS = ((_simplify_and_render, 60), (_codec_and_filter, 50), (_isosurface, 30), (_bricks, 20))
+JOBS = ((_simplify_and_render, 60), (_codec_and_filter, 50), (_isosurface, 30), (_bricks, 20), (_readme, 40))
 
 
 def warm_up(log=None) -> float:

@@ -185,3 +185,65 @@ def test_bricks_compiled_in_worker_processes_say_so(tmp_path):
     finally:
         _end(proc)
     assert line.startswith(NOTICE), line
+
+
+@pytest.mark.parametrize("name", sorted(COMMANDS))
+def test_the_notice_comes_before_numba_is_imported(name, tmp_path):
+    """Start-up: a command parses its options and says that it compiles before it imports numba (or
+    meshio, or anything that loads them), so the notice comes within a second. ``-X importtime``
+    writes each import on stderr as it ends, in order with the notice."""
+    argv = [str(a).format(post=notice.PACKAGE_DIR / "warmup.tetc") for a in COMMANDS[name]]  # a shipped small file
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "empty-cache"), TETC_COMPILE_NOTICE="1")
+    proc = subprocess.Popen([sys.executable, "-X", "importtime", "-m", "gatun_py.cli.main", *argv], cwd=tmp_path,
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    before = []
+    try:
+        for line in proc.stderr:
+            if line.startswith(NOTICE):
+                break
+            before.append(line.rsplit("|", 1)[-1].strip())
+        else:
+            pytest.fail(f"{name}: no notice; stderr ends with {before[-5:]}")
+    finally:
+        _end(proc)
+    heavy = [m for m in before if m.split(".")[0] in ("numba", "meshio", "scipy", "llvmlite")]
+    assert heavy == [], f"{name}: imported before the notice: {heavy[:10]}"
+
+
+@pytest.mark.parametrize("order", ["gatun_py, meshio", "meshio, gatun_py"])
+def test_import_gatun_py_loads_no_meshio_and_still_registers_tetc(order):
+    """``import gatun_py`` is light (no meshio, no numba) and meshio knows ``.tetc`` whichever comes first."""
+    code = (f"import sys\nassert 'meshio' not in sys.modules\nimport gatun_py\n"
+            "assert 'numba' not in sys.modules and 'meshio' not in sys.modules, sorted(sys.modules)\n"
+            f"import {order}\n"
+            "from meshio._helpers import extension_to_filetypes, reader_map\n"
+            "assert extension_to_filetypes['.tetc'] == ['tetc'] and 'tetc' in reader_map\n")
+    if order.startswith("meshio"):
+        code = code.replace("import gatun_py\nassert 'numba' not in sys.modules and 'meshio' not in sys.modules, "
+                            "sorted(sys.modules)\n", "")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+
+
+def test_a_checkout_shares_the_cache_of_an_installed_copy_of_the_same_kernels(tmp_path, monkeypatch):
+    """numba keys its cache by source path: a checkout shadowing an installed copy (python started in
+    the repository root) takes the installed copy's cache, unless one module using numba differs
+    (a kernel's cached code holds the kernels it calls from other modules)."""
+    import shutil
+
+    installed = tmp_path / "site" / "gatun_py"
+    shutil.copytree(notice.PACKAGE_DIR, installed, ignore=shutil.ignore_patterns("__pycache__"))
+    monkeypatch.setattr(notice, "shadowed_install", lambda: str(installed))
+    notice.cache_twin.cache_clear()
+    try:
+        assert notice.cache_twin() == installed
+        source = notice.PACKAGE_DIR / "simplify" / "_filter_kernels.py"
+        assert notice._cached_as(source) == installed / "simplify" / "_filter_kernels.py"
+        assert notice._cache_dirs(notice._cached_as(source)) != notice._cache_dirs(source)
+        with open(installed / "simplify" / "_filter_kernels.py", "a") as fh:
+            fh.write("\n# changed\n")
+        notice.cache_twin.cache_clear()
+        assert notice.cache_twin() is None and notice._cached_as(source) == source
+    finally:
+        notice.cache_twin.cache_clear()

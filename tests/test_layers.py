@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "gatun_py"
 CLI = ROOT / "cli"
 
-BASE = {"errors", "_atomic", "_runtime", "_version", "_lazy", "limits", "_compile_notice"}
+BASE = {"errors", "_atomic", "_runtime", "_version", "_lazy", "limits", "read_options", "_compile_notice", "_after_import"}
 # gatun_py._runtime imports no stage itself; its hooks import, when called, the stages whose kernels
 # they probe in numba's cache or load ahead of a run (and numba)
 HOOKS = "_runtime"
@@ -57,7 +57,8 @@ LOCAL_OK_REASONS = {
     "dask": "optional dependency",
     "distributed": "optional dependency",
     "gmsh": "optional dependency",
-    "meshio": "meshio's private table of cell dimensions, guarded: another meshio layout has none",
+    "meshio": "meshio's private table of cell dimensions, guarded: another meshio layout has none; "
+              "start-up time (1-3 s): a command says that it compiles before anything loads meshio",
     "PIL": "image I/O only where images are read",
     "paraview": "the ParaView plugin's decorators, present only in ParaView's own Python",
     "numpy": "the ParaView plugin, guarded: a ParaView built without numpy gets VTKHDF files instead",
@@ -72,6 +73,7 @@ LOCAL_OK_MODULES = {
     "api": "start-up time: meshio's .tetc reader and writer load the verbs (and numba) when first called",
     "codec.cells": "start-up time: meshio's .tetc reader loads the codec when first called",
     "mesh.io": "start-up time: meshio's .tetc writer loads the mesh writers when first called",
+    "meshio_format": "start-up time: import gatun_py registers .tetc once meshio is imported, not by importing it",
     # an isosurface extraction loads the renderer (and PIL) only when a preview is asked for
     "raycast.camera": "memory and start-up of an isosurface without a preview",
     "raycast.image": "memory and start-up of an isosurface without a preview",

@@ -8,29 +8,12 @@ from __future__ import annotations
 
 import base64
 import struct
-from pathlib import Path
 
-import meshio
 import numpy as np
 
-from .._atomic import atomic_path, check_output_path
-from ..errors import OptionError, OutputError
-
-#: meshio formats that hold a triangle surface (the rest are volume-only or exotic)
-MESHIO_SURFACE = {".ply": "ply", ".obj": "obj", ".stl": "stl", ".off": "off", ".vtk": "vtk", ".vtu": "vtu",
-                  ".xdmf": "xdmf", ".xmf": "xdmf", ".msh": "gmsh", ".mesh": "medit", ".wkt": "wkt"}
-SURFACE_SUFFIXES = (".vtp",) + tuple(MESHIO_SURFACE)
-
-
-def check_surface_path(path, *, force: bool = False) -> Path:
-    """Refuse an output nobody can write (listing the choices) before any work is done."""
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in SURFACE_SUFFIXES:
-        raise OptionError(f"cannot write a surface to {path.name!r}: unknown extension {suffix or '(none)'!r}; "
-                          f"choose one of {', '.join(SURFACE_SUFFIXES)}")
-    return check_output_path(path, force=force)
-
+from .._atomic import atomic_path
+from ..errors import OutputError
+from .paths import MESHIO_SURFACE, SURFACE_SUFFIXES, check_surface_path  # noqa: F401  (light: the CLI's check)
 
 def write_surface(surface, path, *, force: bool = False) -> None:
     """Write ``surface`` to ``path``; the format follows the extension (see ``SURFACE_SUFFIXES``)."""
@@ -45,6 +28,8 @@ def write_surface(surface, path, *, force: bool = False) -> None:
             pdata = {} if suffix in (".stl", ".obj", ".off", ".wkt") else dict(surface.point_data)
             if suffix == ".ply":  # meshio's PLY writer wants float32/64 point data of one component
                 pdata = {k: np.asarray(v, np.float32) for k, v in pdata.items()}
+            import meshio  # start-up time: `tetc isosurface` checks its output path before its notice
+
             try:
                 meshio.write(str(tmp), meshio.Mesh(pts, cells, point_data=pdata), file_format=MESHIO_SURFACE[suffix])
             except (OSError, ValueError, KeyError, TypeError) as e:

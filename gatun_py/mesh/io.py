@@ -10,10 +10,7 @@ from __future__ import annotations
 import contextlib
 import importlib.util
 import io
-import os
 import warnings
-import dataclasses
-from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import unquote
 
@@ -23,6 +20,7 @@ from meshio import _helpers
 
 from .._atomic import atomic_path
 from ..errors import MeshError, OptionError, OutputError, ReadError
+from ..read_options import ReadOptions  # noqa: F401  (the readers' record; re-exported where it was)
 from . import plot3d
 from .cells import Cells, check_cell_type, check_cells
 from .model import NO_SCALAR, TetMesh, signed_volumes
@@ -40,42 +38,6 @@ TET_FORMATS = {"vtu", "vtk", "gmsh", "xdmf", "medit", "exodus", "abaqus", "avsuc
                "nastran", "permas", "su2", "tetgen", "ugrid", "dolfin-xml", "cgns", "netgen", "mdpa", "hmf"}
 TET_EXTENSIONS = (".vtu", ".vtk", ".msh", ".xdmf", ".mesh", ".exo", ".inp", ".avs", ".f3grid", ".med", ".bdf",
                   ".su2", ".ugrid", ".xml", ".vol", ".mdpa", ".vtkhdf")
-
-
-@dataclass(frozen=True)
-class ReadOptions:
-    """How to turn a file into a mesh: the keywords of :func:`read_mesh`, as one record.
-
-    The verbs take it as ``read=`` (and their flat ``scalar=``, ``q_file=``... as shorthand for it);
-    ``read_mesh(path, **options.kwargs())`` reads with it.
-
-    Parameters
-    ----------
-    scalar, q_file, q_var, cell_to_point, time_step, refine
-        As for :func:`read_mesh`. For a ``.tetc`` file, ``scalar`` names the stored point array to
-        use and ``time_step`` the step of a time series.
-
-    Examples
-    --------
-    >>> ReadOptions(scalar="rho").kwargs()["scalar"]
-    'rho'
-    """
-
-    scalar: str | None = None
-    q_file: str | os.PathLike | None = None
-    q_var: str = "density"
-    cell_to_point: bool = False
-    time_step: int | None = None
-    refine: int = 1
-
-    def __post_init__(self):
-        if self.time_step is not None and (isinstance(self.time_step, bool) or not isinstance(self.time_step, (int, np.integer))):
-            raise OptionError(f"time_step must be a whole number, got {self.time_step!r}")
-        object.__setattr__(self, "cell_to_point", bool(self.cell_to_point))
-
-    def kwargs(self) -> dict:
-        """The keywords of :func:`read_mesh`."""
-        return dataclasses.asdict(self)
 
 
 def read_mesh(path, *, scalar: str | None = None, q_file=None, q_var: str = "density",

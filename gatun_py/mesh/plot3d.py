@@ -26,22 +26,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OptionError, ReadError
+from ..limits import Q_VARIABLES
 
 GAMMA = 1.4
 
-Q_VARIABLES = (
-    "density",
-    "momentum-x",
-    "momentum-y",
-    "momentum-z",
-    "energy",
-    "velocity-x",
-    "velocity-y",
-    "velocity-z",
-    "velocity-magnitude",
-    "momentum-magnitude",
-    "pressure",
-)
 
 PLOT3D_SUFFIXES = {".bin", ".xyz", ".x", ".p3d", ".q", ".g", ".grd"}
 

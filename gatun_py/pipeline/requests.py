@@ -4,7 +4,7 @@
   background, colour bar, early ray termination);
 * :class:`Detail`: how much of the mesh to draw (a uniform ratio or stored level, a selective
   ratio or tet count, or a frame-time budget);
-* :class:`~gatun_py.mesh.io.ReadOptions`: how to read a mesh file (re-exported here);
+* :class:`~gatun_py.read_options.ReadOptions`: how to read a mesh file (re-exported here);
 * :class:`ForestOptions`: how compression builds the merge forest and levels;
 * :class:`Cluster`: a local or running Dask cluster for the work that spreads over processes;
 * :class:`Frame`: the picture a render returns, and its encoded bytes.
@@ -28,7 +28,7 @@ import numpy as np
 
 from ..errors import OptionError
 from ..limits import MAX_IMAGE_SIDE, MODES
-from ..mesh.io import ReadOptions
+from ..read_options import ReadOptions
 from ..raycast.camera import Camera
 from ..raycast.image import image_bytes, parse_colour, write_image
 from ..raycast.transfer import load_transfer_function

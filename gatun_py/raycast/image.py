@@ -10,17 +10,14 @@ from __future__ import annotations
 import io
 import struct
 import zlib
-from pathlib import Path
 
 import numpy as np
-from PIL import Image, ImageColor, ImageDraw, ImageFont
+from PIL import Image, ImageDraw, ImageFont
 
 from .._atomic import write_bytes_atomic
-from ..errors import OptionError, OutputError
+from .options import IMAGE_FORMATS, image_format, parse_colour  # noqa: F401  (light: the CLI's checks)
 
 # extension -> Pillow format name (PNG is ours)
-IMAGE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".webp": "WEBP", ".tif": "TIFF",
-                 ".tiff": "TIFF", ".bmp": "BMP"}
 
 
 def to_rgb8(image, background=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -53,33 +50,6 @@ def upscale_rgb8(rgb8: np.ndarray, width: int, height: int) -> np.ndarray:
     """
     img = Image.fromarray(np.ascontiguousarray(rgb8, dtype=np.uint8))
     return np.asarray(img.resize((int(width), int(height)), Image.BILINEAR))
-
-
-def parse_colour(text) -> tuple[float, float, float]:
-    """A colour as RGB in 0..1 from a name (``white``), ``#rrggbb`` or ``r,g,b`` in 0..1.
-
-    Examples
-    --------
-    >>> parse_colour("white"), parse_colour("#ff8000"), parse_colour("0, 0.5, 1")
-    ((1.0, 1.0, 1.0), (1.0, 0.5019607843137255, 0.0), (0.0, 0.5, 1.0))
-    """
-    if isinstance(text, (tuple, list, np.ndarray)):
-        vals = [float(v) for v in text]
-    else:
-        s = str(text).strip()
-        if "," in s:
-            try:
-                vals = [float(v) for v in s.split(",")]
-            except ValueError:
-                raise OptionError(f"colour {text!r}: expected r,g,b in 0..1") from None
-        else:
-            try:
-                vals = [c / 255.0 for c in ImageColor.getrgb(s)[:3]]
-            except ValueError:
-                raise OptionError(f"unknown colour {text!r} (a name, #rrggbb or r,g,b in 0..1)") from None
-    if len(vals) != 3 or not all(np.isfinite(vals)) or min(vals) < 0.0 or max(vals) > 1.0:
-        raise OptionError(f"colour {text!r}: expected three values in 0..1")
-    return tuple(float(v) for v in vals)
 
 
 def add_colorbar(rgb8: np.ndarray, table: np.ndarray, scalar_range, label: str,
@@ -136,15 +106,6 @@ def png_bytes(rgb8) -> bytes:
     header = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)
     return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(raw.tobytes(), 6))
             + chunk(b"IEND", b""))
-
-
-def image_format(path) -> str:
-    """The image format a file name asks for; :class:`OutputError` listing the choices otherwise."""
-    ext = Path(path).suffix.lower()
-    if ext not in IMAGE_FORMATS:
-        raise OutputError(f"{path}: cannot write images as {ext or 'a file without an extension'!r}; "
-                          f"choose one of {', '.join(sorted(IMAGE_FORMATS))}")
-    return IMAGE_FORMATS[ext]
 
 
 def image_bytes(rgb8, fmt: str, *, quality: int = 92) -> bytes:

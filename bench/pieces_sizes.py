@@ -1,0 +1,64 @@
+"""Where the bytes of a pieced (or bricked) ``.tetc`` file go, against the same mesh as one piece.
+
+A per-section size table: every section's payload summed over the bricks by its name without the
+brick prefix (``B3/L0/points`` counts as ``L0/points``), the cut lists, the record heads (name and
+length of every section), the metadata split into its section index, its brick index and the rest.
+Sizes are exact bytes (independent of the machine's load)::
+
+    python bench/pieces_sizes.py pieces.tetc whole.tetc
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+from common import table  # noqa: E402
+
+
+def breakdown(path) -> dict:
+    """``{row name: bytes}`` of one file; the rows add up to the file size."""
+    from gatun_py.codec.container import PREAMBLE_SIZE, Container
+
+    c = Container(Path(path).read_bytes())
+    rows = defaultdict(int)
+    n_records = 0
+    for name in c.section_names():
+        plain = re.sub(r"^B\d+/", "", name)
+        kind = re.sub(r"^L\d+/", "L*/", plain) if not plain.startswith("L0/") else plain
+        rows[kind] += c.section_size(name)
+        rows["record heads"] += 2 + len(name.encode("utf-8")) + 12
+        n_records += 1
+    meta = dict(c.meta)
+    dumps = lambda v: len(json.dumps(v, separators=(",", ":")).encode("utf-8"))  # noqa: E731
+    total_meta = dumps(meta)
+    rows["meta: section index"] = dumps(meta.pop("sections", []))
+    rows["meta: brick index"] = dumps(meta.pop("bricks", [])) if "bricks" in meta else 0
+    rows["meta: pieces"] = dumps(meta.pop("pieces", [])) if "pieces" in meta else 0
+    rows["meta: rest"] = total_meta - rows["meta: section index"] - rows["meta: brick index"] - rows["meta: pieces"]
+    rows["preamble"] = PREAMBLE_SIZE
+    rows["(records)"] = n_records
+    return dict(rows)
+
+
+def compare(a, b) -> str:
+    ra, rb = breakdown(a), breakdown(b)
+    size_a, size_b = Path(a).stat().st_size, Path(b).stat().st_size
+    keys = sorted(set(ra) | set(rb), key=lambda k: (k.startswith("("), k.startswith("meta") or k in (
+        "record heads", "preamble"), not k.startswith("L0/"), k))
+    rows = [[k, ra.get(k, 0), rb.get(k, 0), ra.get(k, 0) - rb.get(k, 0),
+             f"{100.0 * (ra.get(k, 0) - rb.get(k, 0)) / size_b:+.3f} %"] for k in keys]
+    rows.append(["file", size_a, size_b, size_a - size_b, f"{100.0 * (size_a - size_b) / size_b:+.3f} %"])
+    return table(["section", Path(a).name, Path(b).name, "difference", "of the second file"], rows)
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 3:
+        raise SystemExit(__doc__.split("::")[-1])
+    print(compare(sys.argv[1], sys.argv[2]))

@@ -5,7 +5,8 @@ brick prefix (``B3/L0/points`` counts as ``L0/points``), the cut lists, the reco
 length of every section), the metadata split into its section index, its brick index and the rest.
 Sizes are exact bytes (independent of the machine's load)::
 
-    python bench/pieces_sizes.py pieces.tetc whole.tetc
+    python bench/pieces_sizes.py pieces.tetc whole.tetc           # prints the table
+    python bench/pieces_sizes.py pieces.tetc whole.tetc --write   # also bench/sections/pieces_sizes.md
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from common import table  # noqa: E402
+from common import code_state, table, write_section  # noqa: E402
 
 
 def breakdown(path) -> dict:
@@ -61,7 +62,37 @@ def compare(a, b) -> str:
     return table(["section", Path(a).name, Path(b).name, "difference", "of the second file"], rows)
 
 
+def counts(path) -> str:
+    """Points, shared points, the points the bricks hold (a shared point in every brick holding it)
+    and levels per brick of a pieced file, or the levels of a plain file."""
+    from gatun_py.codec.container import Container
+
+    m = Container(Path(path).read_bytes()).meta
+    if "bricks" not in m:
+        return f"`{Path(path).name}`: {m['points']:,} points, {len(m['levels'])} levels"
+    held = sum(b["points"] for b in m["bricks"])
+    return (f"`{Path(path).name}`: {m['points']:,} points, {m['cut_points']:,} shared; the bricks hold {held:,} "
+            f"({100.0 * (held / m['points'] - 1):+.2f} %); boundary faces of the bricks "
+            f"{sum(b['boundary_faces'] for b in m['bricks']):,} against {m['boundary_faces']:,} of the mesh; "
+            f"levels per brick {sorted({len(b['levels']) for b in m['bricks']})}")
+
+
 if __name__ == "__main__":
-    if len(sys.argv) != 3:
+    args = [a for a in sys.argv[1:] if a != "--write"]
+    if len(args) != 2:
         raise SystemExit(__doc__.split("::")[-1])
-    print(compare(sys.argv[1], sys.argv[2]))
+    text = compare(*args)
+    print(text)
+    if "--write" in sys.argv:
+        write_section("pieces_sizes", f"""## Pieces: where the bytes of a pieced file go
+
+`python bench/pieces_sizes.py {Path(args[0]).name} {Path(args[1]).name} --write` ({code_state()}; exact bytes,
+independent of the load). Each row sums a section kind over the bricks; `L*` are the levels above 0.
+The files: `tetc compress --jobs 1` of `bench/pieces_data.py`'s pieces (the `.pvtu`) and of the same mesh
+as one file (`whole.vtu`, `--whole`).
+
+{text}
+
+{counts(args[0])}.
+{counts(args[1])}.
+""")

@@ -19,6 +19,8 @@ not the whole mesh; ``--workers 2`` byte-identical and faster; isosurface memory
     python bench/bench_pieces.py --reuse      # sizes measured before are taken from bench/out/pieces/
     python bench/bench_pieces.py --big        # adds the ~75 M-tet run (flange-12m refined; ~1 h,
                                               # 8 GB; needs the whole quiet machine)
+    python bench/bench_pieces.py --big-only --big-target 8e6   # only the --big path, at ~6.5 M
+                                              # tets (flange-1m refined): a check of the script
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 from common import code_state, run_tetc, table, write_section  # noqa: E402
-from pieces_data import make  # noqa: E402
+from pieces_data import base_for, make  # noqa: E402
 
 SIZES = [("flange-1m", 0), ("flange-1m", 1)]  # 0.81 M and 6.5 M tets
 BIG = ("flange-12m", 1)  # about 75 M tets (the gmsh flange is built first: minutes, several GB)
@@ -132,13 +134,16 @@ def measure(base: str, refine: int, work: Path, *, workers: bool = True, one_pie
 
 
 def main(argv: list[str]) -> int:
-    quick, big, reuse = "--quick" in argv, "--big" in argv, "--reuse" in argv
-    sizes = SIZES[:1] if quick else SIZES
+    quick, big, reuse = "--quick" in argv, "--big" in argv or "--big-only" in argv, "--reuse" in argv
+    sizes = [] if "--big-only" in argv else SIZES[:1] if quick else SIZES
+    big_size = BIG
+    if "--big-target" in argv:  # the --big run at another size (the flange nearest target / 8, refined once)
+        big_size = (base_for(float(argv[argv.index("--big-target") + 1]), 1), 1)
     load = os.getloadavg()[0]
     results = []
     (HERE / "out").mkdir(exist_ok=True)
     with tempfile.TemporaryDirectory(dir=HERE / "out") as tmp:
-        for base, refine in sizes + ([BIG] if big else []):
+        for base, refine in sizes + ([big_size] if big and big_size not in sizes else []):
             cache = HERE / "out" / "pieces" / f"result-{base}-r{refine}.json"
             if reuse and cache.exists():  # a size measured by an earlier run (--reuse only)
                 results.append(json.loads(cache.read_text()))
@@ -146,7 +151,8 @@ def main(argv: list[str]) -> int:
             work = Path(tmp) / f"{base}-{refine}"
             work.mkdir()
             t0 = time.perf_counter()
-            results.append(measure(base, refine, work, one_piece=(base, refine) != BIG, workers=True))
+            results.append(measure(base, refine, work, one_piece=not (big and (base, refine) == big_size),
+                                   workers=True))
             results[-1]["load"] = os.getloadavg()[0]
             cache.write_text(json.dumps(results[-1]))
             print(results[-1], f"({time.perf_counter() - t0:.0f} s)", flush=True)

@@ -45,7 +45,7 @@ from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.cells import Cells
 from .mesh.exodus import exodus_times
 from .mesh.io import mesh_output_format
-from .mesh.series import is_series_source, read_series
+from .mesh.series import is_series_source, read_series, vtkhdf_steps
 from .mesh.pyvista_grid import to_pyvista
 from .mesh.vtkhdf import is_vtkhdf, write_vtkhdf
 from .pipeline.bricks import compress_bricks, read_bricked
@@ -164,7 +164,7 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
         Called with one-line status messages (notes about the input, the forest, the sizes).
     times : sequence of float, optional
         A time series (``source`` a list of files, a ``.pvd``, an XDMF temporal collection, an
-        Exodus file with several steps, or a :class:`~gatun_py.mesh.series.Series`): the steps'
+        Exodus or a VTKHDF file with several steps, or a :class:`~gatun_py.mesh.series.Series`): the steps'
         times (default: the source's own, else 0, 1, ...). Every step must have step 0's points and
         tets; the forest and levels are built on step 0 (see :mod:`gatun_py.codec.steps`).
     keyframe_interval : int, optional
@@ -186,9 +186,9 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     (48, 90, 90)
     """
     log = log or _quiet
-    # a list of files is a time series (compress_pieces takes a list of pieces); a .pvtu or an
-    # Exodus decomposition names its pieces
-    if isinstance(source, (str, os.PathLike)) and is_partitioned(source):
+    # a list of files is a time series (compress_pieces takes a list of pieces); a .pvtu, an
+    # Exodus decomposition or a VTKHDF file of several partitions names its pieces
+    if isinstance(source, (str, os.PathLike)) and is_partitioned(source, step=time_step):
         if bricks != 1 or dependencies:  # a partitioned mesh is bricked by its pieces
             raise OptionError("a partitioned mesh is compressed one brick per piece: no bricks or dependencies")
         compress_pieces(source, output, levels=levels, mesh_only=mesh_only, force=force, w_density=w_density,
@@ -199,8 +199,9 @@ def compress(source, output, *, levels: int | None = None, mesh_only: bool = Fal
     if levels is not None and (not isinstance(levels, (int, np.integer)) or levels < 0):
         raise OptionError(f"levels must be a non-negative integer, got {levels!r}")
     if times is not None or keyframe_interval is not None or is_series_source(source) \
-            or (isinstance(source, (str, os.PathLike)) and Path(source).suffix.lower() in (".e", ".exo", ".ex2")
-                and time_step is None and _exodus_steps(source) > 1):
+            or (isinstance(source, (str, os.PathLike)) and time_step is None
+                and ((Path(source).suffix.lower() in (".e", ".exo", ".ex2") and _exodus_steps(source) > 1)
+                     or (is_vtkhdf(source) and vtkhdf_steps(source) > 1))):
         return _compress_series(source, output, times=times, levels=levels, mesh_only=mesh_only, force=force,
                                 w_density=w_density, w_geometry=w_geometry, w_sample=w_sample, scalar=scalar,
                                 cell_to_point=cell_to_point, drop_cell_data=drop_cell_data, bricks=bricks,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import meshio
 import numpy as np
 import pytest
 
@@ -281,3 +282,218 @@ def test_series_decompress_to_temporal_vtkhdf(tmp_path):
         want = f.mesh(step=k)
         for name, a in want.user_point_data.items():
             assert _same(s.step_mesh(k).point_data[name], a)
+
+
+# -- a temporal VTKHDF compressed: every step -------------------------------------------------------
+
+HEAT = ROOT / "tests" / "data" / "series_heat.npz"  # scikit-fem heat conduction: 40 steps, float64
+
+
+def _heat_vtkhdf(path):
+    """The solver's 40 steps as one temporal VTKHDF (the mesh once), three arrays of three dtypes."""
+    d = np.load(HEAT)
+    mesh = meshio.Mesh(d["points"], [("tetra", d["tets"].astype(np.int64))])
+    steps = [(t, {"temperature": d["temperature"][k], "t32": d["temperature"][k].astype(np.float32),
+                  "band": np.floor(d["temperature"][k] / 10).astype(np.int16)}, {})
+             for k, t in enumerate(d["times"])]
+    write_vtkhdf(path, mesh, steps=steps)
+    return d, steps
+
+
+def _step_arrays(path):
+    """(times, points, tets, [point arrays of every step]) of a VTKHDF file through VTK's own reader."""
+    vtkHDFReader, vtk_to_numpy, sddp = _vtk()
+    r = vtkHDFReader()
+    r.SetFileName(str(path))
+    r.UpdateInformation()
+    times = list(r.GetOutputInformation(0).Get(sddp.TIME_STEPS()))
+    per_step, points, tets = [], None, None
+    for t in times:
+        r.UpdateTimeStep(t)
+        g = r.GetOutput()
+        pd = g.GetPointData()
+        per_step.append({pd.GetArrayName(i): vtk_to_numpy(pd.GetArray(i)).copy() for i in range(pd.GetNumberOfArrays())})
+        points = vtk_to_numpy(g.GetPoints().GetData()).copy()
+        tets = vtk_to_numpy(g.GetCells().GetConnectivityArray()).reshape(-1, 4).copy()
+    return times, points, tets, per_step
+
+
+def test_temporal_vtkhdf_compresses_every_step_bit_exact(tmp_path):
+    """run.vtkhdf -> .tetc -> run.vtkhdf: one series file with every step and its exact time; back
+    in VTKHDF every step's every array holds the input's bits (the points in the decoder's order,
+    matched by their coordinate bits), as VTK's own vtkHDFReader reads it."""
+    src = tmp_path / "run.vtkhdf"
+    d, steps = _heat_vtkhdf(src)
+    res = run("compress", src, "-o", tmp_path / "run.tetc", "--scalar", "temperature", "--levels", "2", "-q")
+    assert res.exit_code == 0, res.output
+    f = gatun_py.open(tmp_path / "run.tetc")
+    assert f.n_steps == 40 and f.times == tuple(float(t) for t in d["times"])  # exact, not rounded
+    res = run("decompress", tmp_path / "run.tetc", "-o", tmp_path / "back.vtkhdf")
+    assert res.exit_code == 0, res.output
+    times, points, tets, per_step = _step_arrays(tmp_path / "back.vtkhdf")
+    assert times == list(f.times)
+    where = {p.tobytes(): i for i, p in enumerate(np.ascontiguousarray(d["points"]))}
+    perm = np.array([where[p.tobytes()] for p in np.ascontiguousarray(points)])
+    assert _same(points, d["points"][perm])
+    assert {tuple(r) for r in np.sort(perm[tets], axis=1)} == {tuple(r) for r in np.sort(d["tets"], axis=1)}
+    for k, (_, want, _) in enumerate(steps):
+        assert set(per_step[k]) == set(want), k
+        for name, a in want.items():
+            assert _same(per_step[k][name], a[perm]), (k, name)
+    # once in the decoder's order, the round trip gives the same file content back, bit for bit
+    res = run("compress", tmp_path / "back.vtkhdf", "-o", tmp_path / "again.tetc", "--scalar", "temperature",
+              "--levels", "2", "-q")
+    assert res.exit_code == 0, res.output
+    gatun_py.decompress(tmp_path / "again.tetc", tmp_path / "again.vtkhdf")
+    t2, p2, c2, s2 = _step_arrays(tmp_path / "again.vtkhdf")
+    assert t2 == times and _same(p2, points) and _same(c2, tets)
+    assert all(_same(s2[k][n], per_step[k][n]) for k in range(40) for n in per_step[k])
+
+
+def test_temporal_vtkhdf_step_options(tmp_path):
+    src = tmp_path / "run.vtkhdf"
+    d, steps = _heat_vtkhdf(src)
+    # --time-step picks one step, compressed as a snapshot
+    res = run("compress", src, "-o", tmp_path / "one.tetc", "--time-step", "7", "--scalar", "temperature",
+              "--mesh-only", "-q")
+    assert res.exit_code == 0, res.output
+    one = gatun_py.open(tmp_path / "one.tetc")
+    assert one.n_steps == 1
+    got = one.mesh().user_point_data["temperature"]
+    assert sorted(got.tobytes()[i:i + 8] for i in range(0, got.nbytes, 8)) == \
+        sorted(steps[7][1]["temperature"].tobytes()[i:i + 8] for i in range(0, got.nbytes, 8))
+    # cell data per step is refused by the series path with its one clear message
+    mesh = meshio.Mesh(d["points"], [("tetra", d["tets"].astype(np.int64))])
+    write_vtkhdf(tmp_path / "cd.vtkhdf", mesh, steps=[(t, {"T": d["temperature"][k]},
+                                                         {"q": d["heat_flux"][k]}) for k, t in
+                                                        enumerate(d["times"][:3])])
+    assert_error(run("compress", tmp_path / "cd.vtkhdf", "-o", tmp_path / "cd.tetc"), "cell data")
+
+
+# -- VTKHDF partitions are pieces ----------------------------------------------------------------------
+
+def _write_partitions(path, pieces):
+    """``pieces`` (TetMeshes with their own numbering) as the partitions of one VTKHDF file, every
+    point array in its dtype, laid out as the specification says."""
+    parts = [(p.points, p.tets, p.user_point_data) for p in pieces]
+    with h5py.File(path, "w") as f:
+        g = f.create_group("VTKHDF")
+        g.attrs["Version"] = np.array([2, 0])
+        g.attrs["Type"] = np.bytes_(b"UnstructuredGrid")
+        g["NumberOfPoints"] = np.array([len(p) for p, _, _ in parts], np.int64)
+        g["NumberOfCells"] = np.array([len(t) for _, t, _ in parts], np.int64)
+        g["NumberOfConnectivityIds"] = np.array([t.size for _, t, _ in parts], np.int64)
+        g["Points"] = np.concatenate([p for p, _, _ in parts])
+        g["Connectivity"] = np.concatenate([t.reshape(-1) for _, t, _ in parts]).astype(np.int64)
+        g["Offsets"] = np.concatenate([np.arange(len(t) + 1) * 4 for _, t, _ in parts]).astype(np.int64)
+        g["Types"] = np.full(sum(len(t) for _, t, _ in parts), 10, np.uint8)
+        pd = g.create_group("PointData")
+        for name in parts[0][2]:
+            pd[name] = np.concatenate([d[name] for _, _, d in parts])
+        g.create_group("CellData")
+
+
+def test_partitions_compress_as_pieces_like_the_same_pvtu(tmp_path):
+    """A VTKHDF file of 5 partitions goes through the pieces path (each partition a brick, the
+    points repeated on the seams stored once) and gives the same bricks, byte for byte, and the same
+    decode as the same pieces written as a .pvtu file."""
+    from gatun_py.codec import TetcReader
+    from gatun_py.codec.bricks import decode_bricked
+    from gatun_py.codec.container import split_container
+    from gatun_py.mesh.pieces import is_partitioned, piece_paths, read_piece, write_pvtu
+    from gatun_py.pipeline.compress_pieces import PIECES_KEY
+    from test_bricks import assert_same_mesh
+    from test_pieces import rich_mesh, solver_pieces
+    mesh = rich_mesh()
+    pieces = solver_pieces(mesh, 5)
+    write_pvtu(pieces, tmp_path / "run.pvtu")
+    _write_partitions(tmp_path / "run.vtkhdf", pieces)
+    write_vtkhdf(tmp_path / "whole.vtkhdf", mesh)
+    assert is_partitioned(tmp_path / "run.vtkhdf") and not is_partitioned(tmp_path / "whole.vtkhdf")
+    parts = piece_paths(tmp_path / "run.vtkhdf")
+    assert [p.name for p in parts] == [f"run.vtkhdf#{i}" for i in range(5)]
+    for p, want in zip(parts, pieces):  # each partition alone, in its own numbering
+        got, _ = read_piece(p, {"scalar": "density"})
+        assert _same(got.points, want.points) and np.array_equal(got.tets, want.tets)
+        assert all(_same(got.user_point_data[n], a) for n, a in want.user_point_data.items())
+    outs = {}
+    for src in ("run.pvtu", "run.vtkhdf"):
+        res = run("compress", tmp_path / src, "-o", tmp_path / f"{src}.tetc", "--scalar", "density",
+                  "--levels", "2", "-q")
+        assert res.exit_code == 0, res.output
+        outs[src] = tmp_path / f"{src}.tetc"
+    r = TetcReader(outs["run.vtkhdf"])
+    assert r.n_bricks == 5 and [p["source"] for p in r.meta[PIECES_KEY]] == [p.name for p in parts]
+    assert_same_mesh(decode_bricked(r, jobs=1), mesh)  # every shared point once, every bit kept
+    (ma, sa), (mb, sb) = (split_container(outs[k].read_bytes()) for k in ("run.pvtu", "run.vtkhdf"))
+    assert sa == sb  # the same bricks, byte for byte; only the names of the source and pieces differ
+    assert {k: v for k, v in ma.items() if k not in ("source", PIECES_KEY)} == \
+        {k: v for k, v in mb.items() if k not in ("source", PIECES_KEY)}
+    a, b = (decode_bricked(TetcReader(outs[k]), jobs=1) for k in ("run.pvtu", "run.vtkhdf"))
+    assert _same(a.points, b.points) and np.array_equal(a.tets, b.tets)
+
+
+def test_partition_bad_input(tmp_path):
+    from gatun_py.mesh.vtkhdf import read_vtkhdf_partition
+    from test_pieces import rich_mesh, solver_pieces
+    pieces = solver_pieces(rich_mesh(), 3)
+    _write_partitions(tmp_path / "run.vtkhdf", pieces)
+    with pytest.raises(ReadError, match="no partition 3"):
+        read_vtkhdf_partition(tmp_path / "run.vtkhdf", 3)
+    moved = pieces[1].points.copy()
+    moved[:, 0] += 1e-3  # the middle piece no longer meets its neighbours: not a decomposition
+    bad = [pieces[0], type(pieces[1])(moved, None, pieces[1].tets, pieces[1].scalar_name,
+                                      point_data=pieces[1].point_data), pieces[2]]
+    _write_partitions(tmp_path / "nc.vtkhdf", bad)
+    res = run("compress", tmp_path / "nc.vtkhdf", "-o", tmp_path / "nc.tetc", "--mesh-only")
+    assert res.exit_code == 1 and not (tmp_path / "nc.tetc").exists()
+
+
+# -- the cells as given through VTKHDF --------------------------------------------------------------
+
+CELLS = ROOT / "tests" / "data" / "cells_v10.tetc"  # hexahedra, pyramids, tets, tetra10, wedges; cell arrays
+
+
+def test_original_cells_and_cell_data_through_vtkhdf(tmp_path):
+    """decompress -o x.vtkhdf writes the cells as given (VTK's types and offsets) with every point and
+    cell array, as the .vtu the verb writes; VTK reads them so; compressing the VTKHDF keeps them."""
+    vtkHDFReader, vtk_to_numpy, _ = _vtk()
+    gatun_py.decompress(CELLS, tmp_path / "want.vtu")
+    want = meshio.read(tmp_path / "want.vtu")
+    res = run("decompress", CELLS, "-o", tmp_path / "x.vtkhdf")
+    assert res.exit_code == 0, res.output
+    got = read_vtkhdf(tmp_path / "x.vtkhdf").mesh
+    assert [(c.type, len(c.data)) for c in got.cells] == [(c.type, len(c.data)) for c in want.cells]
+    assert len({c.type for c in got.cells}) == 5
+    assert all(np.array_equal(a.data, b.data) for a, b in zip(got.cells, want.cells))
+    assert _same(got.points, want.points)
+    assert set(got.point_data) == set(want.point_data) and set(got.cell_data) == set(want.cell_data)
+    for name, a in want.point_data.items():
+        assert _same(got.point_data[name], a), name
+    for name, blocks in want.cell_data.items():
+        assert all(_same(x, y) for x, y in zip(got.cell_data[name], blocks)), name
+    r = vtkHDFReader()
+    r.SetFileName(str(tmp_path / "x.vtkhdf"))
+    r.Update()
+    g = r.GetOutput()
+    assert g.GetNumberOfCells() == sum(len(c.data) for c in want.cells)
+    types = vtk_to_numpy(g.GetCellTypesArray())
+    assert sorted(set(types.tolist())) == [10, 12, 13, 14, 24]
+    for name, blocks in want.cell_data.items():
+        assert _same(vtk_to_numpy(g.GetCellData().GetArray(name)), np.concatenate(blocks)), name
+    # a mixed VTKHDF compresses with its cells kept: decompressing gives them back
+    res = run("compress", tmp_path / "x.vtkhdf", "-o", tmp_path / "again.tetc", "--mesh-only", "-q")
+    assert res.exit_code == 0, res.output
+    gatun_py.decompress(tmp_path / "again.tetc", tmp_path / "again.vtkhdf")
+    back = read_vtkhdf(tmp_path / "again.vtkhdf").mesh
+    assert sorted((c.type, len(c.data)) for c in back.cells) == sorted((c.type, len(c.data)) for c in want.cells)
+    assert set(back.cell_data) == set(want.cell_data)
+    for name in want.cell_data:  # the same values per cell type (the cells in the decoder's order)
+        for t in {c.type for c in want.cells}:
+            x = np.concatenate([v for c, v in zip(want.cells, want.cell_data[name]) if c.type == t])
+            y = np.concatenate([v for c, v in zip(back.cells, back.cell_data[name]) if c.type == t])
+            assert sorted(x.reshape(len(x), -1).tolist()) == sorted(y.reshape(len(y), -1).tolist()), (name, t)
+    # --as-tets writes the split
+    res = run("decompress", CELLS, "-o", tmp_path / "tets.vtkhdf", "--as-tets")
+    assert res.exit_code == 0, res.output
+    assert [c.type for c in read_vtkhdf(tmp_path / "tets.vtkhdf").mesh.cells] == ["tetra"]

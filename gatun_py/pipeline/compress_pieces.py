@@ -52,7 +52,7 @@ from ..codec.threads import check_jobs
 from ..errors import CorruptFileError, MeshError, OptionError, OutputError, TetcError
 from ..mesh import TetMesh
 from ..mesh.partition import MAX_BRICKS, partition_tets, split_bricks
-from ..mesh.pieces import boundary_part, interface_table, piece_paths, pvtu_scalar, read_piece
+from ..mesh.pieces import boundary_part, interface_table, piece_file, piece_paths, pvtu_scalar, read_piece
 from .bricks import _brick_payload, _with_loose_points
 from .distributed import ClusterError, _distributed, _numba_cache_dir
 
@@ -328,7 +328,8 @@ def compress_pieces(inputs, output, *, levels=None, mesh_only: bool = False, w_d
     Parameters
     ----------
     inputs : path-like or list of path-like
-        A ``.pvtu`` file, one file of an Exodus decomposition (``name.e.N.i``), or several mesh
+        A ``.pvtu`` file, one file of an Exodus decomposition (``name.e.N.i``), a VTKHDF file of
+        several partitions (those of ``read_options``' ``time_step``, default the last), or several mesh
         files, each one piece (:func:`~gatun_py.mesh.pieces.piece_paths`); with ``memory``, also
         one plain mesh file, split into bricks before any forest is built.
     output : path-like
@@ -348,9 +349,10 @@ def compress_pieces(inputs, output, *, levels=None, mesh_only: bool = False, w_d
         ``pieces``, ``bricks``, ``points``, ``tets``, ``shared_points``, ``bytes``.
     """
     log = log or (lambda _m: None)
-    paths = piece_paths(inputs, single=memory is not None)
+    ropts = dict(read_options or {})
+    paths = piece_paths(inputs, single=memory is not None, step=ropts.get("time_step"))
     output = Path(output)
-    if any(os.path.exists(output) and os.path.samefile(p, output) for p in paths):
+    if any(os.path.exists(output) and os.path.samefile(piece_file(p), output) for p in paths):
         raise OptionError(f"the output {output} is one of the pieces")
     if workers is not None and scheduler is not None:
         raise OptionError("give either a number of local workers or a scheduler address, not both")
@@ -361,7 +363,6 @@ def compress_pieces(inputs, output, *, levels=None, mesh_only: bool = False, w_d
         unit_tets = max(MIN_BRICK_TETS, parse_memory(memory) // per_tet)
     options = dict(mesh_only=bool(mesh_only), levels=levels, w_density=float(w_density),
                    w_geometry=float(w_geometry), w_sample=float(w_sample))
-    ropts = dict(read_options or {})
     single = inputs[0] if isinstance(inputs, (list, tuple)) and len(inputs) == 1 else inputs
     if ropts.get("scalar") is None and isinstance(single, (str, os.PathLike)) and pvtu_scalar(single):
         ropts["scalar"] = pvtu_scalar(single)  # the solver's choice of default scalar

@@ -289,12 +289,14 @@ def test_series_decompress_to_temporal_vtkhdf(tmp_path):
 HEAT = ROOT / "tests" / "data" / "series_heat.npz"  # scikit-fem heat conduction: 40 steps, float64
 
 
-def _heat_vtkhdf(path):
-    """The solver's 40 steps as one temporal VTKHDF (the mesh once), three arrays of three dtypes."""
+def _heat_vtkhdf(path, moving=False):
+    """The solver's 40 steps as one temporal VTKHDF (the cells once; the points once, or every
+    step's deformed ones), three arrays of three dtypes."""
     d = np.load(HEAT)
     mesh = meshio.Mesh(d["points"], [("tetra", d["tets"].astype(np.int64))])
     steps = [(t, {"temperature": d["temperature"][k], "t32": d["temperature"][k].astype(np.float32),
-                  "band": np.floor(d["temperature"][k] / 10).astype(np.int16)}, {})
+                  "band": np.floor(d["temperature"][k] / 10).astype(np.int16)}, {},
+              d["moved"][k] if moving else d["points"])
              for k, t in enumerate(d["times"])]
     write_vtkhdf(path, mesh, steps=steps)
     return d, steps
@@ -307,23 +309,25 @@ def _step_arrays(path):
     r.SetFileName(str(path))
     r.UpdateInformation()
     times = list(r.GetOutputInformation(0).Get(sddp.TIME_STEPS()))
-    per_step, points, tets = [], None, None
+    per_step, points, tets = [], [], None
     for t in times:
         r.UpdateTimeStep(t)
         g = r.GetOutput()
         pd = g.GetPointData()
         per_step.append({pd.GetArrayName(i): vtk_to_numpy(pd.GetArray(i)).copy() for i in range(pd.GetNumberOfArrays())})
-        points = vtk_to_numpy(g.GetPoints().GetData()).copy()
+        points.append(vtk_to_numpy(g.GetPoints().GetData()).copy())
         tets = vtk_to_numpy(g.GetCells().GetConnectivityArray()).reshape(-1, 4).copy()
     return times, points, tets, per_step
 
 
-def test_temporal_vtkhdf_compresses_every_step_bit_exact(tmp_path):
+@pytest.mark.parametrize("moving", [False, True], ids=["static", "deforming"])
+def test_temporal_vtkhdf_compresses_every_step_bit_exact(tmp_path, moving):
     """run.vtkhdf -> .tetc -> run.vtkhdf: one series file with every step and its exact time; back
-    in VTKHDF every step's every array holds the input's bits (the points in the decoder's order,
-    matched by their coordinate bits), as VTK's own vtkHDFReader reads it."""
+    in VTKHDF every step's every array (and its coordinates, where the mesh moves) holds the input's
+    bits (the points in the decoder's order, matched by their coordinate bits), as VTK's own
+    vtkHDFReader reads it."""
     src = tmp_path / "run.vtkhdf"
-    d, steps = _heat_vtkhdf(src)
+    d, steps = _heat_vtkhdf(src, moving)
     res = run("compress", src, "-o", tmp_path / "run.tetc", "--scalar", "temperature", "--levels", "2", "-q")
     assert res.exit_code == 0, res.output
     f = gatun_py.open(tmp_path / "run.tetc")
@@ -332,11 +336,11 @@ def test_temporal_vtkhdf_compresses_every_step_bit_exact(tmp_path):
     assert res.exit_code == 0, res.output
     times, points, tets, per_step = _step_arrays(tmp_path / "back.vtkhdf")
     assert times == list(f.times)
-    where = {p.tobytes(): i for i, p in enumerate(np.ascontiguousarray(d["points"]))}
-    perm = np.array([where[p.tobytes()] for p in np.ascontiguousarray(points)])
-    assert _same(points, d["points"][perm])
+    where = {p.tobytes(): i for i, p in enumerate(np.ascontiguousarray(steps[0][3]))}
+    perm = np.array([where[p.tobytes()] for p in np.ascontiguousarray(points[0])])
     assert {tuple(r) for r in np.sort(perm[tets], axis=1)} == {tuple(r) for r in np.sort(d["tets"], axis=1)}
-    for k, (_, want, _) in enumerate(steps):
+    for k, (_, want, _, pts) in enumerate(steps):
+        assert _same(points[k], pts[perm]), k
         assert set(per_step[k]) == set(want), k
         for name, a in want.items():
             assert _same(per_step[k][name], a[perm]), (k, name)
@@ -346,7 +350,7 @@ def test_temporal_vtkhdf_compresses_every_step_bit_exact(tmp_path):
     assert res.exit_code == 0, res.output
     gatun_py.decompress(tmp_path / "again.tetc", tmp_path / "again.vtkhdf")
     t2, p2, c2, s2 = _step_arrays(tmp_path / "again.vtkhdf")
-    assert t2 == times and _same(p2, points) and _same(c2, tets)
+    assert t2 == times and _same(c2, tets) and all(_same(a, b) for a, b in zip(p2, points))
     assert all(_same(s2[k][n], per_step[k][n]) for k in range(40) for n in per_step[k])
 
 

@@ -123,9 +123,10 @@ def write_vtkhdf(path, mesh, *, steps=None, force: bool = False, deflate: int = 
     mesh : TetMesh or meshio.Mesh
         The points and cells (a meshio.Mesh keeps its cell blocks and cell data), and the arrays
         of a file without ``steps``.
-    steps : sequence of (float, dict, dict), optional
+    steps : sequence of (float, dict, dict) or (float, dict, dict, array), optional
         ``(time, point_data, cell_data)`` of every step, over ``mesh``'s points and cells: written
-        temporal (VTKHDF 2.0), the mesh once. The mesh's own arrays that no step names are written
+        temporal (VTKHDF 2.0), the mesh once; a 4th item gives the step's own coordinates (a
+        moving mesh: every step's points are written, the cells once). The mesh's own arrays that no step names are written
         once and shared by every step. Cell data: one array over all cells (blocks in order), or a
         list per block as in meshio.
     force : bool
@@ -167,7 +168,11 @@ def write_vtkhdf(path, mesh, *, steps=None, force: bool = False, deflate: int = 
         for name, v in (("NumberOfPoints", n_points), ("NumberOfCells", n_cells),
                         ("NumberOfConnectivityIds", len(conn))):
             g.create_dataset(name, data=np.array([v], np.int64))
-        put(g, "Points", points.reshape(n_points, 3) if points.size else np.zeros((0, 3)))
+        moved = _moved_points(steps, points) if steps is not None else None
+        if moved is None:
+            put(g, "Points", points.reshape(n_points, 3) if points.size else np.zeros((0, 3)))
+        else:  # every step's coordinates, one after the other (Steps/PointOffsets); the cells once
+            put(g, "Points", np.concatenate(moved))
         put(g, "Types", types)
         put(g, "Offsets", offsets)
         put(g, "Connectivity", conn)
@@ -186,6 +191,29 @@ def write_vtkhdf(path, mesh, *, steps=None, force: bool = False, deflate: int = 
                 put(cg, name, a)
             return
         _write_steps(g, put, steps, static_pd, static_cd, n_points, n_cells, cells_array, block_rows)
+        if moved is not None:
+            del g["Steps/PointOffsets"]
+            g["Steps"].create_dataset("PointOffsets", data=np.arange(len(steps), dtype=np.int64) * n_points)
+
+
+def _moved_points(steps, points):
+    """Every step's coordinates when some step gives its own (a 4th item) other than ``points``,
+    else None."""
+    own = [st[3] if isinstance(st, (tuple, list)) and len(st) == 4 and st[3] is not None else None for st in steps]
+    if all(p is None or _same_bits(p, points) for p in own):
+        return None
+    out = []
+    for i, p in enumerate(own):
+        p = points if p is None else np.asarray(p)
+        if p.shape != points.shape or p.dtype != points.dtype:
+            raise OutputError(f"step {i}'s points are {p.dtype} {p.shape}, the mesh's {points.dtype} {points.shape}")
+        out.append(p.reshape(len(points), 3))
+    return out
+
+
+def _same_bits(a, b) -> bool:
+    a, b = np.asarray(a), np.asarray(b)
+    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
 
 
 def _write_steps(g, put, steps, static_pd, static_cd, n_points, n_cells, cells_array, block_rows):
@@ -194,10 +222,10 @@ def _write_steps(g, put, steps, static_pd, static_cd, n_points, n_cells, cells_a
     per_pd, per_cd = {}, {}
     for i, step in enumerate(steps):
         try:
-            t, pd, cd = step
+            t, pd, cd = step[:3] if isinstance(step, (tuple, list)) and len(step) == 4 else step
             t = float(t)
         except (TypeError, ValueError):
-            raise OutputError(f"step {i}: give (time, point_data, cell_data)") from None
+            raise OutputError(f"step {i}: give (time, point_data, cell_data[, points])") from None
         times.append(t)
         for store, data, kind in ((per_pd, pd or {}, "point"), (per_cd, cd or {}, "cell")):
             if i and set(data) != set(store):

@@ -162,7 +162,8 @@ def test_reads_vtk_writers_temporal_file(tmp_path):
 
 def _partitioned_file(path, parts):
     """A VTKHDF unstructured grid of several partitions, laid out as the specification says (one
-    per MPI rank: each part's ids local to its points, cells + 1 offsets per part)."""
+    per MPI rank: each part's ids local to its points, cells + 1 offsets per part); each part
+    ``(points, tets, point arrays by name, or one array named rho)``."""
     with h5py.File(path, "w") as f:
         g = f.create_group("VTKHDF")
         g.attrs["Version"] = np.array([1, 0])
@@ -174,7 +175,10 @@ def _partitioned_file(path, parts):
         g["Connectivity"] = np.concatenate([t.reshape(-1) for _, t, _ in parts]).astype(np.int64)
         g["Offsets"] = np.concatenate([np.arange(len(t) + 1) * 4 for _, t, _ in parts]).astype(np.int64)
         g["Types"] = np.full(sum(len(t) for _, t, _ in parts), 10, np.uint8)
-        g.create_group("PointData")["rho"] = np.concatenate([d for _, _, d in parts])
+        pd = g.create_group("PointData")
+        data = [d if isinstance(d, dict) else {"rho": d} for _, _, d in parts]  # one array: rho
+        for name in data[0]:
+            pd[name] = np.concatenate([d[name] for d in data])
 
 
 def test_partitioned_file_read_as_vtk_reads_it(tmp_path, post):
@@ -378,23 +382,8 @@ def test_temporal_vtkhdf_step_options(tmp_path):
 
 def _write_partitions(path, pieces):
     """``pieces`` (TetMeshes with their own numbering) as the partitions of one VTKHDF file, every
-    point array in its dtype, laid out as the specification says."""
-    parts = [(p.points, p.tets, p.user_point_data) for p in pieces]
-    with h5py.File(path, "w") as f:
-        g = f.create_group("VTKHDF")
-        g.attrs["Version"] = np.array([2, 0])
-        g.attrs["Type"] = np.bytes_(b"UnstructuredGrid")
-        g["NumberOfPoints"] = np.array([len(p) for p, _, _ in parts], np.int64)
-        g["NumberOfCells"] = np.array([len(t) for _, t, _ in parts], np.int64)
-        g["NumberOfConnectivityIds"] = np.array([t.size for _, t, _ in parts], np.int64)
-        g["Points"] = np.concatenate([p for p, _, _ in parts])
-        g["Connectivity"] = np.concatenate([t.reshape(-1) for _, t, _ in parts]).astype(np.int64)
-        g["Offsets"] = np.concatenate([np.arange(len(t) + 1) * 4 for _, t, _ in parts]).astype(np.int64)
-        g["Types"] = np.full(sum(len(t) for _, t, _ in parts), 10, np.uint8)
-        pd = g.create_group("PointData")
-        for name in parts[0][2]:
-            pd[name] = np.concatenate([d[name] for _, _, d in parts])
-        g.create_group("CellData")
+    point array in its dtype."""
+    _partitioned_file(path, [(p.points, p.tets, p.user_point_data) for p in pieces])
 
 
 def test_partitions_compress_as_pieces_like_the_same_pvtu(tmp_path):

@@ -284,7 +284,8 @@ def _read_vtkhdf_series(path: Path, opts: dict) -> Series:
 
     def load(k):  # the step's own notes, without the reader's "temporal, step k read" ones
         mesh, report = read_mesh(path, time_step=k, **opts)
-        report.notes[:] = [n for n in report.notes if not n.startswith(("temporal VTKHDF", "time step "))]
+        said = ("temporal VTKHDF", "time step ") + (("default scalar",) if k else ())  # step 0 says it
+        report.notes[:] = [n for n in report.notes if not n.startswith(said)]
         return mesh, report
 
     return Series(_increasing(times, names), [(lambda k=k: load(k)) for k in range(len(times))], names)

@@ -332,7 +332,7 @@ def test_temporal_vtkhdf_compresses_every_step_bit_exact(tmp_path, moving):
     vtkHDFReader reads it."""
     src = tmp_path / "run.vtkhdf"
     d, steps = _heat_vtkhdf(src, moving)
-    res = run("compress", src, "-o", tmp_path / "run.tetc", "--scalar", "temperature", "--levels", "2", "-q")
+    res = run("compress", src, "-o", tmp_path / "run.tetc", "--scalar", "temperature", "--mesh-only", "-q")
     assert res.exit_code == 0, res.output
     f = gatun_py.open(tmp_path / "run.tetc")
     assert f.n_steps == 40 and f.times == tuple(float(t) for t in d["times"])  # exact, not rounded
@@ -350,7 +350,7 @@ def test_temporal_vtkhdf_compresses_every_step_bit_exact(tmp_path, moving):
             assert _same(per_step[k][name], a[perm]), (k, name)
     # once in the decoder's order, the round trip gives the same file content back, bit for bit
     res = run("compress", tmp_path / "back.vtkhdf", "-o", tmp_path / "again.tetc", "--scalar", "temperature",
-              "--levels", "2", "-q")
+              "--mesh-only", "-q")
     assert res.exit_code == 0, res.output
     gatun_py.decompress(tmp_path / "again.tetc", tmp_path / "again.vtkhdf")
     t2, p2, c2, s2 = _step_arrays(tmp_path / "again.vtkhdf")
@@ -412,7 +412,7 @@ def test_partitions_compress_as_pieces_like_the_same_pvtu(tmp_path):
     outs = {}
     for src in ("run.pvtu", "run.vtkhdf"):
         res = run("compress", tmp_path / src, "-o", tmp_path / f"{src}.tetc", "--scalar", "density",
-                  "--levels", "2", "-q")
+                  "--mesh-only", "-q")
         assert res.exit_code == 0, res.output
         outs[src] = tmp_path / f"{src}.tetc"
     r = TetcReader(outs["run.vtkhdf"])

@@ -461,6 +461,7 @@ def test_original_cells_and_cell_data_through_vtkhdf(tmp_path):
     assert all(np.array_equal(a.data, b.data) for a, b in zip(got.cells, want.cells))
     assert _same(got.points, want.points)
     assert set(got.point_data) == set(want.point_data) and set(got.cell_data) == set(want.cell_data)
+    assert sorted(got.field_data) == ["air", "steel"]  # gmsh's physical names: [tag, dimension]
     for name, a in want.point_data.items():
         assert _same(got.point_data[name], a), name
     for name, blocks in want.cell_data.items():

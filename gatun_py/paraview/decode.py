@@ -115,10 +115,11 @@ def write_arrays(mesh, folder) -> dict:
     if types is not None:
         save["types"] = types
     for i, (name, a) in enumerate(point_data.items()):
-        save[f"p{i}"] = a
+        save[f"p{i}"] = a.view(np.uint8) if a.dtype == np.bool_ else a
         out["point_data"].append([name, f"p{i}.npy"])
     for i, (name, blocks) in enumerate(cell_data.items()):
-        save[f"c{i}"] = np.concatenate([np.asarray(b) for b in blocks])
+        a = np.concatenate([np.asarray(b) for b in blocks])
+        save[f"c{i}"] = a.view(np.uint8) if a.dtype == np.bool_ else a  # VTK has no bool arrays
         out["cell_data"].append([name, f"c{i}.npy"])
     for key, a in save.items():
         np.save(os.path.join(folder, f"{key}.npy"), np.ascontiguousarray(a), allow_pickle=False)

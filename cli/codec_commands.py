@@ -118,7 +118,8 @@ def convert(input, output, scalar, q_file, q_var, cell_to_point, time_step, refi
               help="The INPUTs are the pieces of one mesh (a parallel solver's files, each with its own "
                    "numbering), not time steps: each piece becomes a brick, compressed on its own (--jobs pieces "
                    "at a time), the points repeated at the interfaces stored once. A .pvtu file or one file of an "
-                   "Exodus decomposition (name.e.N.i) is read as its pieces without this flag.")
+                   "Exodus decomposition (name.e.N.i) or a VTKHDF file of several partitions is read as its pieces "
+                   "without this flag.")
 @click.option("--memory", default=None, metavar="LIMIT",
               help="Split every piece (or one large INPUT) into bricks small enough that compressing one takes "
                    "at most about LIMIT (e.g. 4G) in a process (an estimate of a few hundred bytes per tet), "
@@ -146,11 +147,11 @@ def compress(inputs, output, forest, read, cluster, times, keyframe_interval, n_
     --jobs threads code the levels (level 0 while the decimation runs); the file is the same.
 
     A time series goes into one file: several INPUT files in time order, a ParaView .pvd, an XDMF
-    temporal collection or an Exodus file's steps. Every step must have the same points and tets;
+    temporal collection, an Exodus file's steps or a temporal VTKHDF file's. Every step must have the same points and tets;
     the mesh, forest and levels are stored once (built on step 0), each step's point arrays (and
     coordinates, when they move) coded from the steps before it. `tetc append` adds steps later.
 
-    Pieces (--pieces, a .pvtu file, an Exodus decomposition) are never held whole: each is read,
+    Pieces (--pieces, a .pvtu file, an Exodus decomposition, a VTKHDF file's partitions) are never held whole: each is read,
     decimated and coded on its own (on --jobs processes, or Dask --workers/--scheduler), so
     memory is that of the largest piece plus the pieces' boundaries.
     """
@@ -161,7 +162,7 @@ def compress(inputs, output, forest, read, cluster, times, keyframe_interval, n_
                                                                            else []), quiet=quiet)
     from gatun_py.mesh.pieces import is_partitioned  # start-up time: the notice above comes first
 
-    if pieces or is_partitioned(inputs[0]) or memory is not None:
+    if pieces or is_partitioned(inputs[0], step=read.time_step) or memory is not None:
         if times is not None or keyframe_interval is not None:
             raise click.UsageError("--times and --keyframe-interval are for a time series, not pieces")
         if n_bricks != 1 or forest.dependencies or keep_order:

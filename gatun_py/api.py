@@ -44,7 +44,7 @@ from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.cells import Cells
 from .mesh.exodus import exodus_times
 from .mesh.io import mesh_output_format
-from .mesh.series import is_series_source, read_series
+from .mesh.series import is_series_source, read_series, vtkhdf_steps
 from .mesh.pyvista_grid import to_pyvista
 from .mesh.vtkhdf import is_vtkhdf, write_vtkhdf
 from .pipeline.bricks import compress_bricks, read_bricked
@@ -156,7 +156,7 @@ def compress(source, output, *, forest: ForestOptions | None = None, read: ReadO
         Called with one-line status messages (notes about the input, the forest, the sizes).
     times : sequence of float, optional
         A time series (``source`` a list of files, a ``.pvd``, an XDMF temporal collection, an
-        Exodus file with several steps, or a :class:`~gatun_py.mesh.series.Series`): the steps'
+        Exodus or a VTKHDF file with several steps, or a :class:`~gatun_py.mesh.series.Series`): the steps'
         times (default: the source's own, else 0, 1, ...). Every step must have step 0's points and
         tets; the forest and levels are built on step 0 (see :mod:`gatun_py.codec.steps`).
     keyframe_interval : int, optional
@@ -186,17 +186,18 @@ def compress(source, output, *, forest: ForestOptions | None = None, read: ReadO
     levels, mesh_only, dependencies = forest.levels, forest.mesh_only, forest.dependencies
     w_density, w_geometry, w_sample = forest.w_density, forest.w_geometry, forest.w_sample
     scalar, cell_to_point, time_step = read.scalar, read.cell_to_point, read.time_step
-    # a list of files is a time series (compress_pieces takes a list of pieces); a .pvtu or an
-    # Exodus decomposition names its pieces
-    if isinstance(source, (str, os.PathLike)) and is_partitioned(source):
+    # a list of files is a time series (compress_pieces takes a list of pieces); a .pvtu, an
+    # Exodus decomposition or a VTKHDF file of several partitions names its pieces
+    if isinstance(source, (str, os.PathLike)) and is_partitioned(source, step=time_step):
         if bricks != 1 or dependencies:  # a partitioned mesh is bricked by its pieces
             raise OptionError("a partitioned mesh is compressed one brick per piece: no bricks or dependencies")
         compress_pieces(source, output, forest=forest, read=read, force=force, jobs=jobs,
                         drop_cell_data=drop_cell_data, progress=progress, log=log)
         return TetcFile(output)
     if times is not None or keyframe_interval is not None or is_series_source(source) \
-            or (isinstance(source, (str, os.PathLike)) and Path(source).suffix.lower() in (".e", ".exo", ".ex2")
-                and time_step is None and _exodus_steps(source) > 1):
+            or (isinstance(source, (str, os.PathLike)) and time_step is None
+                and ((Path(source).suffix.lower() in (".e", ".exo", ".ex2") and _exodus_steps(source) > 1)
+                     or (is_vtkhdf(source) and vtkhdf_steps(source) > 1))):
         return _compress_series(source, output, times=times, levels=levels, mesh_only=mesh_only, force=force,
                                 w_density=w_density, w_geometry=w_geometry, w_sample=w_sample, scalar=scalar,
                                 cell_to_point=cell_to_point, drop_cell_data=drop_cell_data, bricks=bricks,
@@ -419,14 +420,14 @@ def decompress(source, output, *, detail: Detail | None = None, view: View | Non
 
 
 def _write_vtkhdf_series(f, mesh, output, *, ratio, level, jobs, force) -> None:
-    """Every step of ``f`` into one temporal VTKHDF file: ``mesh`` (step 0's) once, each step's arrays."""
+    """Every step of ``f`` into one temporal VTKHDF file: ``mesh`` (step 0's) once, each step's arrays
+    (and its coordinates, where the mesh moves)."""
     steps = []
     for k, t in enumerate(f.times):
         m = mesh if k == 0 else f.mesh(ratio=ratio, level=level, jobs=jobs, step=k)
-        if not (_same_bits(m.tets, mesh.tets) and _same_bits(m.points, mesh.points)):
-            raise OptionError(f"step {k} moves the mesh of step 0: the VTKHDF writer stores one mesh for every "
-                              "step; write the steps one by one (--step)")
-        steps.append((float(t), dict(m.user_point_data), {}))
+        if not _same_bits(m.tets, mesh.tets):  # a series keeps one topology: a decoder's bug otherwise
+            raise OptionError(f"step {k} has other tets than step 0: write the steps one by one (--step)")
+        steps.append((float(t), dict(m.user_point_data), {}, m.points))
     write_vtkhdf(output, mesh, steps=steps, force=force)
 
 

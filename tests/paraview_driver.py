@@ -2,8 +2,9 @@
 
     xvfb-run -a pvbatch tests/paraview_driver.py PLUGIN FILE OUTDIR '{"props": {...}, "render": true}'
 
-Writes OUTDIR/result.json (cells, points, arrays, time steps, per-step checksums, timings) and
-OUTDIR/arrays.npz (points, connectivity and every point array of the first output), and with
+Writes OUTDIR/result.json (cells, cell types, points, arrays, time steps, per-step checksums, timings)
+and OUTDIR/arrays.npz (points, connectivity, offsets, cell types and every point and cell array of
+the first output), and with
 "render" a volume rendering OUTDIR/volume.png.
 """
 
@@ -49,7 +50,14 @@ def describe(data):
         "point_arrays": {pd.GetArrayName(i): [pd.GetArray(i).GetDataTypeAsString(), pd.GetArray(i).GetNumberOfComponents()]
                          for i in range(pd.GetNumberOfArrays())},
         "cell_arrays": [cd.GetArrayName(i) for i in range(cd.GetNumberOfArrays())],
+        "cell_types": {str(t): int(n) for t, n in zip(*np.unique(cell_types(data), return_counts=True))},
     }
+
+
+def cell_types(data):
+    if not data.GetNumberOfCells():
+        return np.zeros(0, np.uint8)
+    return vtk_to_numpy(data.GetCellTypesArray()).astype(np.uint8)
 
 
 data = servermanager.Fetch(reader)
@@ -57,8 +65,12 @@ res.update(describe(data))
 if data.GetNumberOfPoints():
     arrays = {"points": vtk_to_numpy(data.GetPoints().GetData()),
               "connectivity": vtk_to_numpy(data.GetCells().GetConnectivityArray())}
+    arrays["offsets"] = vtk_to_numpy(data.GetCells().GetOffsetsArray())
+    arrays["types"] = cell_types(data)
     for name in res["point_arrays"]:
         arrays["point:" + name] = vtk_to_numpy(data.GetPointData().GetArray(name))
+    for name in res["cell_arrays"]:
+        arrays["cell:" + name] = vtk_to_numpy(data.GetCellData().GetArray(name))
     np.savez(os.path.join(outdir, "arrays.npz"), **arrays)
 # stepping through a series: every step's checksum of its first point array
 res["step_sums"] = []

@@ -136,7 +136,7 @@ def test_bad_input_one_clear_message(tmp_path, make, python, words):
     assert len(messages) == 1 and words in messages[0], stderr
 
 
-def make_series(tmp_path, n_steps: int = 40) -> Path:
+def make_series(tmp_path, n_steps: int = 40, *, mesh_only: bool = False) -> Path:
     """A 40-step series over the post mesh (its Pressure scaled per step), compressed from .vtu files
     given in time order."""
     import meshio
@@ -149,7 +149,8 @@ def make_series(tmp_path, n_steps: int = 40) -> Path:
         files.append(str(p))
     out = tmp_path / "series.tetc"
     tetc = Path(sys.executable).parent / "tetc"
-    proc = subprocess.run([str(tetc), "compress", *files, "-o", str(out), "-q"], capture_output=True, text=True)
+    proc = subprocess.run([str(tetc), "compress", *files, "-o", str(out), "-q"] + (["--mesh-only"] if mesh_only else []),
+                          capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     return out
 
@@ -310,3 +311,109 @@ def test_plugin_time_steps_with_a_stand_in_series(tmp_path):
     base = float(np.asarray(gatun_py.open(POST).mesh().user_point_data["Pressure"], np.float64).sum())
     want = [base * (1 + 0.05 * k) for k in (0, 1, 39, 14)]  # t = 7.3 shows step 14 (t = 7.0)
     assert res["step_sums"] == pytest.approx(want, rel=1e-5) and len(set(res["step_sums"])) == 4
+
+
+CELLS = ROOT / "tests" / "data" / "cells_v10.tetc"  # hexahedra, pyramids, tets, tetra10, wedges; cell arrays
+
+
+@needs_paraview
+def test_original_cells_by_default_tets_on_request(tmp_path):
+    """A file that stores its cells as given opens in ParaView as those cells (VTK types and counts,
+    the connectivity, every point and cell array bit for bit); Output Tets gives the tets."""
+    from meshio._vtk_common import meshio_to_vtk_type
+    from test_vtkhdf import _cells_as_given
+    f = gatun_py.open(CELLS)
+    want = _cells_as_given(CELLS)  # the cells as given, as the decompress verb writes them
+    res, arrays, _, _ = pvbatch(CELLS, tmp_path)
+    counts = {}
+    for c in want.cells:
+        key = str(meshio_to_vtk_type[c.type])
+        counts[key] = counts.get(key, 0) + len(c.data)
+    assert res["cell_types"] == counts and len(counts) == 5
+    assert res["cells"] == sum(len(c.data) for c in want.cells) and res["points"] == len(want.points)
+    assert arrays["connectivity"].tolist() == np.concatenate([c.data.reshape(-1) for c in want.cells]).tolist()
+    assert sorted(res["cell_arrays"]) == sorted(want.cell_data) and want.cell_data
+    for name, blocks in want.cell_data.items():
+        a = np.concatenate([np.asarray(b) for b in blocks])
+        got = arrays["cell:" + name]
+        assert got.dtype == a.dtype and got.tobytes() == np.ascontiguousarray(a).tobytes(), name
+    for name, a in want.point_data.items():
+        assert arrays["point:" + name].tobytes() == np.ascontiguousarray(a).tobytes(), name
+    res, _, _, _ = pvbatch(CELLS, tmp_path, props={"OutputTets": 1})
+    assert res["cell_types"] == {"10": f.n_tets} and res["cell_arrays"] == []
+
+
+PARAVIEW_GUI = shutil.which("paraview")
+
+GUI_SCRIPT = '''
+import json, os, sys
+out = {OUT!r}
+open(out + ".started", "w").close()  # the GUI came up and runs its Python
+try:
+    {SHELL_LINE}                      # the README's line for View > Python Shell
+    from paraview.simple import *
+    LoadPlugin({PLUGIN!r}, remote=False, ns=globals())   # Tools > Manage Plugins > Load New...
+    reader = OpenDataFile({FILE!r})                       # File > Open
+    Show(reader)
+    scene = GetAnimationScene()
+    scene.UpdateAnimationUsingDataTimeSteps()              # what the GUI does when data with time is opened
+    keeper = GetTimeKeeper()
+    res = {{"proxy": reader.GetXMLName(), "reader_times": list(reader.TimestepValues),
+           "gui_times": list(keeper.TimestepValues), "sums": []}}
+    from paraview import servermanager
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    for t in (res["gui_times"][0], res["gui_times"][-1]):
+        scene.AnimationTime = t                            # the time controls: first and last step
+        data = servermanager.Fetch(reader)
+        res["sums"].append(float(vtk_to_numpy(data.GetPointData().GetArray("Pressure")).astype("float64").sum()))
+except Exception as e:
+    res = {{"error": repr(e)}}
+with open(out, "w") as fh:
+    json.dump(res, fh)
+os._exit(0)
+'''
+
+
+def _readme_shell_line() -> str:
+    """The Python line the README's GUI steps type into View > Python Shell before loading the plugin."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    m = re.search(r"`([^`]*getargspec[^`]*)` in \*View › Python Shell\*", text)
+    assert m, "the README's GUI steps no longer name the View > Python Shell line"
+    return m.group(1)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(PARAVIEW_GUI is None or XVFB is None,
+                    reason="no paraview GUI or xvfb-run here: install Debian's paraview and xvfb (make test does)")
+def test_gui_steps_as_written(tmp_path):
+    """The README's GUI steps in the real ParaView GUI (under xvfb-run, its --script run at start-up):
+    `tetc paraview-plugin` gives the file, the Python Shell line, Tools > Manage Plugins > Load New
+    (LoadPlugin, what that dialog calls), File > Open of a 40-step series: the GUI's time keeper shows
+    its 40 TimestepValues and the time controls change the data."""
+    series = make_series(tmp_path, mesh_only=True)  # the GUI's side is under test, not the levels
+    env = {k: v for k, v in os.environ.items() if k != "TETC_PYTHON"}
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+    plugin = subprocess.run(["tetc", "paraview-plugin"], env=env, capture_output=True, text=True, check=True)
+    assert len(plugin.stdout.splitlines()) == 1
+    out = tmp_path / "gui.json"
+    script = tmp_path / "gui_steps.py"
+    script.write_text(GUI_SCRIPT.format(OUT=str(out), SHELL_LINE=_readme_shell_line(),
+                                        PLUGIN=plugin.stdout.strip(), FILE=str(series)))
+    try:
+        proc = subprocess.run([XVFB, "-a", PARAVIEW_GUI, "--dr", f"--script={script}"], env=env, cwd=tmp_path,
+                              capture_output=True, text=True, timeout=900)
+        log = proc.stdout + proc.stderr
+    except subprocess.TimeoutExpired as e:
+        log = f"timed out after {e.timeout} s"
+    if not Path(str(out) + ".started").exists():
+        pytest.skip(f"the ParaView GUI did not start headless under xvfb-run: {log[-400:]}")
+    assert out.exists(), log
+    res = json.loads(out.read_text())
+    assert "error" not in res, (res, log)
+    times = list(gatun_py.open(series).times)
+    assert res["proxy"] == "TetcReader" and res["reader_times"] == times and len(times) == 40
+    assert res["gui_times"] == times  # the GUI's time controls step through the 40 steps
+    f = gatun_py.open(series)
+    want = [float(np.asarray(f.mesh(step=k).user_point_data["Pressure"], np.float64).sum()) for k in (0, 39)]
+    assert res["sums"] == pytest.approx(want, rel=1e-12) and res["sums"][0] != res["sums"][1]
+    assert "Traceback" not in log, log

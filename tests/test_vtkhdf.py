@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import meshio
 import numpy as np
 import pytest
 
@@ -161,7 +162,8 @@ def test_reads_vtk_writers_temporal_file(tmp_path):
 
 def _partitioned_file(path, parts):
     """A VTKHDF unstructured grid of several partitions, laid out as the specification says (one
-    per MPI rank: each part's ids local to its points, cells + 1 offsets per part)."""
+    per MPI rank: each part's ids local to its points, cells + 1 offsets per part); each part
+    ``(points, tets, point arrays by name, or one array named rho)``."""
     with h5py.File(path, "w") as f:
         g = f.create_group("VTKHDF")
         g.attrs["Version"] = np.array([1, 0])
@@ -173,7 +175,10 @@ def _partitioned_file(path, parts):
         g["Connectivity"] = np.concatenate([t.reshape(-1) for _, t, _ in parts]).astype(np.int64)
         g["Offsets"] = np.concatenate([np.arange(len(t) + 1) * 4 for _, t, _ in parts]).astype(np.int64)
         g["Types"] = np.full(sum(len(t) for _, t, _ in parts), 10, np.uint8)
-        g.create_group("PointData")["rho"] = np.concatenate([d for _, _, d in parts])
+        pd = g.create_group("PointData")
+        data = [d if isinstance(d, dict) else {"rho": d} for _, _, d in parts]  # one array: rho
+        for name in data[0]:
+            pd[name] = np.concatenate([d[name] for d in data])
 
 
 def test_partitioned_file_read_as_vtk_reads_it(tmp_path, post):
@@ -281,3 +286,215 @@ def test_series_decompress_to_temporal_vtkhdf(tmp_path):
         want = f.mesh(step=k)
         for name, a in want.user_point_data.items():
             assert _same(s.step_mesh(k).point_data[name], a)
+
+
+# -- a temporal VTKHDF compressed: every step -------------------------------------------------------
+
+HEAT = ROOT / "tests" / "data" / "series_heat.npz"  # scikit-fem heat conduction: 40 steps, float64
+
+
+def _heat_vtkhdf(path, moving=False):
+    """The solver's 40 steps as one temporal VTKHDF (the cells once; the points once, or every
+    step's deformed ones), three arrays of three dtypes."""
+    d = np.load(HEAT)
+    mesh = meshio.Mesh(d["points"], [("tetra", d["tets"].astype(np.int64))])
+    steps = [(t, {"temperature": d["temperature"][k], "t32": d["temperature"][k].astype(np.float32),
+                  "band": np.floor(d["temperature"][k] / 10).astype(np.int16)}, {},
+              d["moved"][k] if moving else d["points"])
+             for k, t in enumerate(d["times"])]
+    write_vtkhdf(path, mesh, steps=steps)
+    return d, steps
+
+
+def _step_arrays(path):
+    """(times, points, tets, [point arrays of every step]) of a VTKHDF file through VTK's own reader."""
+    vtkHDFReader, vtk_to_numpy, sddp = _vtk()
+    r = vtkHDFReader()
+    r.SetFileName(str(path))
+    r.UpdateInformation()
+    times = list(r.GetOutputInformation(0).Get(sddp.TIME_STEPS()))
+    per_step, points, tets = [], [], None
+    for t in times:
+        r.UpdateTimeStep(t)
+        g = r.GetOutput()
+        pd = g.GetPointData()
+        per_step.append({pd.GetArrayName(i): vtk_to_numpy(pd.GetArray(i)).copy() for i in range(pd.GetNumberOfArrays())})
+        points.append(vtk_to_numpy(g.GetPoints().GetData()).copy())
+        tets = vtk_to_numpy(g.GetCells().GetConnectivityArray()).reshape(-1, 4).copy()
+    return times, points, tets, per_step
+
+
+@pytest.mark.parametrize("moving", [False, True], ids=["static", "deforming"])
+def test_temporal_vtkhdf_compresses_every_step_bit_exact(tmp_path, moving):
+    """run.vtkhdf -> .tetc -> run.vtkhdf: one series file with every step and its exact time; back
+    in VTKHDF every step's every array (and its coordinates, where the mesh moves) holds the input's
+    bits (the points in the decoder's order, matched by their coordinate bits), as VTK's own
+    vtkHDFReader reads it."""
+    src = tmp_path / "run.vtkhdf"
+    d, steps = _heat_vtkhdf(src, moving)
+    res = run("compress", src, "-o", tmp_path / "run.tetc", "--scalar", "temperature", "--mesh-only", "-q")
+    assert res.exit_code == 0, res.output
+    f = gatun_py.open(tmp_path / "run.tetc")
+    assert f.n_steps == 40 and f.times == tuple(float(t) for t in d["times"])  # exact, not rounded
+    res = run("decompress", tmp_path / "run.tetc", "-o", tmp_path / "back.vtkhdf")
+    assert res.exit_code == 0, res.output
+    times, points, tets, per_step = _step_arrays(tmp_path / "back.vtkhdf")
+    assert times == list(f.times)
+    where = {p.tobytes(): i for i, p in enumerate(np.ascontiguousarray(steps[0][3]))}
+    perm = np.array([where[p.tobytes()] for p in np.ascontiguousarray(points[0])])
+    assert {tuple(r) for r in np.sort(perm[tets], axis=1)} == {tuple(r) for r in np.sort(d["tets"], axis=1)}
+    for k, (_, want, _, pts) in enumerate(steps):
+        assert _same(points[k], pts[perm]), k
+        assert set(per_step[k]) == set(want), k
+        for name, a in want.items():
+            assert _same(per_step[k][name], a[perm]), (k, name)
+    # once in the decoder's order, the round trip gives the same file content back, bit for bit
+    res = run("compress", tmp_path / "back.vtkhdf", "-o", tmp_path / "again.tetc", "--scalar", "temperature",
+              "--mesh-only", "-q")
+    assert res.exit_code == 0, res.output
+    gatun_py.decompress(tmp_path / "again.tetc", tmp_path / "again.vtkhdf")
+    t2, p2, c2, s2 = _step_arrays(tmp_path / "again.vtkhdf")
+    assert t2 == times and _same(c2, tets) and all(_same(a, b) for a, b in zip(p2, points))
+    assert all(_same(s2[k][n], per_step[k][n]) for k in range(40) for n in per_step[k])
+
+
+def test_temporal_vtkhdf_step_options(tmp_path):
+    src = tmp_path / "run.vtkhdf"
+    d, steps = _heat_vtkhdf(src)
+    # --time-step picks one step, compressed as a snapshot
+    res = run("compress", src, "-o", tmp_path / "one.tetc", "--time-step", "7", "--scalar", "temperature",
+              "--mesh-only", "-q")
+    assert res.exit_code == 0, res.output
+    one = gatun_py.open(tmp_path / "one.tetc")
+    assert one.n_steps == 1
+    got = one.mesh().user_point_data["temperature"]
+    assert sorted(got.tobytes()[i:i + 8] for i in range(0, got.nbytes, 8)) == \
+        sorted(steps[7][1]["temperature"].tobytes()[i:i + 8] for i in range(0, got.nbytes, 8))
+    # cell data per step is refused by the series path with its one clear message
+    mesh = meshio.Mesh(d["points"], [("tetra", d["tets"].astype(np.int64))])
+    write_vtkhdf(tmp_path / "cd.vtkhdf", mesh, steps=[(t, {"T": d["temperature"][k]},
+                                                         {"q": d["heat_flux"][k]}) for k, t in
+                                                        enumerate(d["times"][:3])])
+    assert_error(run("compress", tmp_path / "cd.vtkhdf", "-o", tmp_path / "cd.tetc"), "cell data")
+
+
+# -- VTKHDF partitions are pieces ----------------------------------------------------------------------
+
+def _write_partitions(path, pieces):
+    """``pieces`` (TetMeshes with their own numbering) as the partitions of one VTKHDF file, every
+    point array in its dtype."""
+    _partitioned_file(path, [(p.points, p.tets, p.user_point_data) for p in pieces])
+
+
+def test_partitions_compress_as_pieces_like_the_same_pvtu(tmp_path):
+    """A VTKHDF file of 5 partitions goes through the pieces path (each partition a brick, the
+    points repeated on the seams stored once) and gives the same bricks, byte for byte, and the same
+    decode as the same pieces written as a .pvtu file."""
+    from gatun_py.codec import TetcReader
+    from gatun_py.codec.bricks import decode_bricked
+    from gatun_py.codec.container import split_container
+    from gatun_py.mesh.pieces import is_partitioned, piece_paths, read_piece, write_pvtu
+    from gatun_py.pipeline.compress_pieces import PIECES_KEY
+    from test_bricks import assert_same_mesh
+    from test_pieces import rich_mesh, solver_pieces
+    mesh = rich_mesh()
+    pieces = solver_pieces(mesh, 5)
+    write_pvtu(pieces, tmp_path / "run.pvtu")
+    _write_partitions(tmp_path / "run.vtkhdf", pieces)
+    write_vtkhdf(tmp_path / "whole.vtkhdf", mesh)
+    assert is_partitioned(tmp_path / "run.vtkhdf") and not is_partitioned(tmp_path / "whole.vtkhdf")
+    parts = piece_paths(tmp_path / "run.vtkhdf")
+    assert [p.name for p in parts] == [f"run.vtkhdf#{i}" for i in range(5)]
+    for p, want in zip(parts, pieces):  # each partition alone, in its own numbering
+        got, _ = read_piece(p, {"scalar": "density"})
+        assert _same(got.points, want.points) and np.array_equal(got.tets, want.tets)
+        assert all(_same(got.user_point_data[n], a) for n, a in want.user_point_data.items())
+    outs = {}
+    for src in ("run.pvtu", "run.vtkhdf"):
+        res = run("compress", tmp_path / src, "-o", tmp_path / f"{src}.tetc", "--scalar", "density",
+                  "--mesh-only", "-q")
+        assert res.exit_code == 0, res.output
+        outs[src] = tmp_path / f"{src}.tetc"
+    r = TetcReader(outs["run.vtkhdf"])
+    assert r.n_bricks == 5 and [p["source"] for p in r.meta[PIECES_KEY]] == [p.name for p in parts]
+    assert_same_mesh(decode_bricked(r, jobs=1), mesh)  # every shared point once, every bit kept
+    (_, sa), (_, sb) = (split_container(outs[k].read_bytes()) for k in ("run.pvtu", "run.vtkhdf"))
+    # the same bricks' meshes, byte for byte (HDF5 lists a file's arrays by name, the .pvtu in its
+    # order: the arrays' sections are numbered in that order), and the same decode
+    assert [x for x in sa if "/array/" not in x[0]] == [x for x in sb if "/array/" not in x[0]]
+    a, b = (decode_bricked(TetcReader(outs[k]), jobs=1) for k in ("run.pvtu", "run.vtkhdf"))
+    assert _same(a.points, b.points) and np.array_equal(a.tets, b.tets)
+    assert set(a.point_data) == set(b.point_data)
+    assert all(_same(a.point_data[n], b.point_data[n]) for n in a.point_data)
+
+
+def test_partition_bad_input(tmp_path):
+    from gatun_py.mesh.vtkhdf import read_vtkhdf_partition
+    from test_pieces import rich_mesh, solver_pieces
+    pieces = solver_pieces(rich_mesh(), 3)
+    _write_partitions(tmp_path / "run.vtkhdf", pieces)
+    with pytest.raises(ReadError, match="no partition 3"):
+        read_vtkhdf_partition(tmp_path / "run.vtkhdf", 3)
+
+
+# -- the cells as given through VTKHDF --------------------------------------------------------------
+
+CELLS = ROOT / "tests" / "data" / "cells_v10.tetc"  # hexahedra, pyramids, tets, tetra10, wedges; cell arrays
+
+
+def _cells_as_given(path):
+    """The cells as given of a .tetc file, as the decompress verb writes them (a meshio.Mesh); bool
+    arrays as uint8, as VTK (and so VTKHDF) holds them."""
+    from gatun_py.codec.cells import read_cells, restore_order
+    from gatun_py.mesh.io import to_meshio
+    f = gatun_py.open(path)
+    m = f.mesh()
+    want = to_meshio(*restore_order(m, read_cells(f.reader, m.tets, m.n_points, m.points)))
+    for name, blocks in want.cell_data.items():
+        want.cell_data[name] = [b.view(np.uint8) if b.dtype == np.bool_ else b for b in blocks]
+    return want
+
+
+def test_original_cells_and_cell_data_through_vtkhdf(tmp_path):
+    """decompress -o x.vtkhdf writes the cells as given (VTK's types and offsets) with every point and
+    cell array, as the .vtu the verb writes; VTK reads them so; compressing the VTKHDF keeps them."""
+    vtkHDFReader, vtk_to_numpy, _ = _vtk()
+    want = _cells_as_given(CELLS)
+    res = run("decompress", CELLS, "-o", tmp_path / "x.vtkhdf")
+    assert res.exit_code == 0, res.output
+    got = read_vtkhdf(tmp_path / "x.vtkhdf").mesh
+    assert [(c.type, len(c.data)) for c in got.cells] == [(c.type, len(c.data)) for c in want.cells]
+    assert len({c.type for c in got.cells}) == 5
+    assert all(np.array_equal(a.data, b.data) for a, b in zip(got.cells, want.cells))
+    assert _same(got.points, want.points)
+    assert set(got.point_data) == set(want.point_data) and set(got.cell_data) == set(want.cell_data)
+    assert sorted(got.field_data) == ["air", "steel"]  # gmsh's physical names: [tag, dimension]
+    for name, a in want.point_data.items():
+        assert _same(got.point_data[name], a), name
+    for name, blocks in want.cell_data.items():
+        assert all(_same(x, y) for x, y in zip(got.cell_data[name], blocks)), name
+    r = vtkHDFReader()
+    r.SetFileName(str(tmp_path / "x.vtkhdf"))
+    r.Update()
+    g = r.GetOutput()
+    assert g.GetNumberOfCells() == sum(len(c.data) for c in want.cells)
+    types = vtk_to_numpy(g.GetCellTypesArray())
+    assert sorted(set(types.tolist())) == [10, 12, 13, 14, 24]
+    for name, blocks in want.cell_data.items():
+        assert _same(vtk_to_numpy(g.GetCellData().GetArray(name)), np.concatenate(blocks)), name
+    # a mixed VTKHDF compresses with its cells kept: decompressing gives them back
+    res = run("compress", tmp_path / "x.vtkhdf", "-o", tmp_path / "again.tetc", "--mesh-only", "-q")
+    assert res.exit_code == 0, res.output
+    gatun_py.decompress(tmp_path / "again.tetc", tmp_path / "again.vtkhdf")
+    back = read_vtkhdf(tmp_path / "again.vtkhdf").mesh
+    assert sorted((c.type, len(c.data)) for c in back.cells) == sorted((c.type, len(c.data)) for c in want.cells)
+    assert set(back.cell_data) == set(want.cell_data)
+    for name in want.cell_data:  # the same values per cell type (the cells in the decoder's order)
+        for t in {c.type for c in want.cells}:
+            x = np.concatenate([v for c, v in zip(want.cells, want.cell_data[name]) if c.type == t])
+            y = np.concatenate([v for c, v in zip(back.cells, back.cell_data[name]) if c.type == t])
+            assert sorted(x.reshape(len(x), -1).tolist()) == sorted(y.reshape(len(y), -1).tolist()), (name, t)
+    # --as-tets writes the split
+    res = run("decompress", CELLS, "-o", tmp_path / "tets.vtkhdf", "--as-tets")
+    assert res.exit_code == 0, res.output
+    assert [c.type for c in read_vtkhdf(tmp_path / "tets.vtkhdf").mesh.cells] == ["tetra"]

@@ -441,8 +441,8 @@ def write_mesh(mesh: TetMesh, path, *, force: bool = False, cells: Cells | None 
     block of linear tets, or ``cells`` (the cells as given, in ``mesh``'s point ids)."""
     path = Path(path)
     fmt = mesh_output_format(path)
-    if fmt == "vtkhdf":
-        write_vtkhdf(path, mesh, force=force)
+    if fmt == "vtkhdf":  # VTK's cell types and offsets: the cells as given are native there
+        write_vtkhdf(path, mesh if cells is None else to_meshio(mesh, cells), force=force)
         return
     if fmt in ("xdmf", "h5m", "med") and importlib.util.find_spec("h5py") is None:
         raise OutputError(f"writing {fmt} files needs h5py (pip install h5py); .vtu needs nothing extra")

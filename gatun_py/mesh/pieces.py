@@ -1,7 +1,8 @@
 """Partitioned meshes: the pieces a parallel solver writes, and the table that joins them.
 
 A solver running on N ranks writes one piece per rank: a ``.pvtu`` file naming its ``.vtu``
-pieces, an Exodus decomposition ``name.e.N.0`` .. ``name.e.N.(N-1)``, or simply N files. Each piece
+pieces, an Exodus decomposition ``name.e.N.0`` .. ``name.e.N.(N-1)``, a VTKHDF file of N
+partitions (named here ``run.vtkhdf#i``: partition i of the file), or simply N files. Each piece
 has its own local numbering; the points on the interfaces between pieces are repeated in every
 piece that uses them.
 
@@ -28,17 +29,20 @@ from .._atomic import atomic_path
 from ..errors import MeshError, OptionError, ReadError
 from .exodus import read_exodus
 from .io import mesh_from_meshio, read_mesh, write_mesh
+from .vtkhdf import is_vtkhdf, read_vtkhdf_partition, vtkhdf_partitions
 from .model import MIN_SAMPLES_PER_DIAGONAL, TetMesh
 from .validate import MeshReport
 
 __all__ = ["PVTU_SUFFIX", "BoundaryPart", "InterfaceTable", "boundary_part", "exodus_pieces", "interface_table",
-           "is_partitioned", "piece_paths", "pvtu_pieces", "pvtu_scalar", "read_piece", "refine_midpoints",
-           "write_pvtu", "write_pvtu_index"]
+           "is_partitioned", "piece_file", "piece_paths", "pvtu_pieces", "pvtu_scalar", "read_piece",
+           "refine_midpoints", "vtkhdf_pieces", "write_pvtu", "write_pvtu_index"]
 
 PVTU_SUFFIX = ".pvtu"
 MAX_PIECES = 4096  # the bricked format's limit (a piece is one brick or more)
 # name.e.N.i or name.exo.N.i: Exodus's (Nemesis) file-per-rank naming, i zero-padded to N's width
 _EXODUS_PIECE = re.compile(r"^(?P<base>.+\.(?:e|exo|ex2))\.(?P<n>\d+)\.(?P<i>\d+)$", re.IGNORECASE)
+# run.vtkhdf#i: partition i of a VTKHDF file (no file of that name: a VTKHDF file ends in .vtkhdf)
+_VTKHDF_PART = re.compile(r"^(?P<file>.+\.vtkhdf)#(?P<i>\d+)$", re.IGNORECASE | re.DOTALL)
 
 
 # -- finding the pieces ----------------------------------------------------------------------------
@@ -98,16 +102,40 @@ def _existing(source: Path, paths: list[Path]) -> list[Path]:
     return paths
 
 
-def is_partitioned(path) -> bool:
-    """``path`` names a partitioned mesh (a ``.pvtu`` file or a piece of an Exodus decomposition)."""
+def is_partitioned(path, *, step: int | None = None) -> bool:
+    """``path`` names a partitioned mesh (a ``.pvtu`` file, a piece of an Exodus decomposition, or
+    a VTKHDF file whose ``step``, default the last, has several partitions)."""
     p = Path(path)
+    if is_vtkhdf(p) and p.is_file():
+        try:
+            return vtkhdf_partitions(p, step=step)[0] > 1
+        except (ReadError, OptionError):
+            return False  # the single-mesh reader says what is wrong with it
     return p.suffix.lower() == PVTU_SUFFIX or _EXODUS_PIECE.match(p.name) is not None
 
 
-def piece_paths(inputs, *, single: bool = False) -> list[Path]:
+def vtkhdf_pieces(path, *, step: int | None = None) -> list[Path] | None:
+    """The partitions of ``step`` (default the last) of a VTKHDF file, as pieces ``path#i``; None
+    when the file has one partition there."""
+    path = Path(path)
+    n, _, _ = vtkhdf_partitions(path, step=step)
+    if n < 2:
+        return None
+    if n > MAX_PIECES:
+        raise ReadError(f"{path}: {n} partitions; at most {MAX_PIECES}")
+    return [Path(f"{path}#{i}") for i in range(n)]
+
+
+def piece_file(piece) -> Path:
+    """The file a piece is read from (a VTKHDF partition's file; else the piece itself)."""
+    m = _VTKHDF_PART.match(os.fspath(piece))
+    return Path(m.group("file")) if m and not Path(piece).exists() else Path(piece)
+
+
+def piece_paths(inputs, *, single: bool = False, step: int | None = None) -> list[Path]:
     """The pieces of ``inputs``: a ``.pvtu`` file's pieces, an Exodus decomposition's files (any
-    one of them named), or several mesh files, each one piece; with ``single``, also one plain
-    mesh file (a piece on its own).
+    one of them named), a VTKHDF file's partitions (of ``step``, default the last), or several
+    mesh files, each one piece; with ``single``, also one plain mesh file (a piece on its own).
 
     Examples
     --------
@@ -124,6 +152,10 @@ def piece_paths(inputs, *, single: bool = False) -> list[Path]:
         ex = exodus_pieces(p)
         if ex is not None:
             return ex
+        if is_vtkhdf(p) and p.is_file():
+            parts = vtkhdf_pieces(p, step=step)
+            if parts is not None:
+                return parts
         if single:
             return _existing(p, [p])
         raise OptionError(f"{p} is one mesh, not pieces of one: give a .pvtu file, an Exodus decomposition "
@@ -141,6 +173,16 @@ def read_piece(path, read_options: dict | None = None) -> tuple[TetMesh, MeshRep
 
     opts = dict(read_options or {})
     path = Path(path)
+    part = _VTKHDF_PART.match(os.fspath(path))
+    if part and not path.exists():
+        file = Path(part.group("file"))
+        m = read_vtkhdf_partition(file, int(part.group("i")), step=opts.get("time_step"))
+        mesh, report = mesh_from_meshio(m, scalar=opts.get("scalar"), cell_to_point=opts.get("cell_to_point", False),
+                                        source=str(path))
+        _, k, n = vtkhdf_partitions(file, step=opts.get("time_step"))
+        if n > 1:  # pieces are one step: the file's other steps are not stored
+            report.notes.insert(0, f"time step {k} of 0..{n - 1} read (the partitions of one step)")
+        return mesh, report
     if _EXODUS_PIECE.match(path.name):
         if not path.is_file():
             raise ReadError(f"no such file: {path}")

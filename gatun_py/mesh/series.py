@@ -1,5 +1,5 @@
 """Time series of meshes: several files in time order, a ParaView ``.pvd`` collection, an XDMF
-temporal collection, or every step of an Exodus II file.
+temporal collection, or every step of an Exodus II or a temporal VTKHDF file.
 
 :func:`read_series` returns a :class:`Series`: the times and, per step, a loader that reads that
 step's :class:`~gatun_py.mesh.TetMesh` when it is asked for (a long run is never all in memory).
@@ -20,6 +20,7 @@ import meshio
 
 from .exodus import EXODUS_SUFFIXES, exodus_times, read_exodus
 from .io import _meshio_read, mesh_from_meshio, read_mesh
+from .vtkhdf import is_vtkhdf, read_vtkhdf, vtkhdf_partitions
 
 __all__ = ["Series", "read_series", "is_series_source", "SERIES_SUFFIXES"]
 
@@ -106,7 +107,7 @@ def read_series(source, *, times=None, scalar: str | None = None, cell_to_point:
     ----------
     source : path-like or list of path-likes
         Several mesh files in time order, one ``.pvd`` collection, one XDMF temporal collection,
-        or one Exodus file (every step).
+        one Exodus file or one temporal VTKHDF file (every step).
     times : sequence of float, optional
         The steps' times (several files only; default: each file's own ``TimeValue`` field, else
         0, 1, 2, ...). Must increase.
@@ -138,6 +139,8 @@ def read_series(source, *, times=None, scalar: str | None = None, cell_to_point:
             return _with_times(_read_xdmf(p, opts), times)
         if suffix in EXODUS_SUFFIXES:
             return _with_times(_read_exodus_series(p, opts), times)
+        if is_vtkhdf(p):
+            return _with_times(_read_vtkhdf_series(p, opts), times)
     for p in paths:
         if Path(p).suffix.lower() in SERIES_SUFFIXES:
             raise OptionError(f"{p}: a .pvd collection is a series of its own; give it alone")
@@ -262,4 +265,27 @@ def _read_exodus_series(path: Path, opts: dict) -> Series:
         return mesh, report
 
     names = [f"{path} step {k}" for k in range(len(times))]
+    return Series(_increasing(times, names), [(lambda k=k: load(k)) for k in range(len(times))], names)
+
+
+def vtkhdf_steps(path) -> int:
+    """Steps of a VTKHDF file (0 when it cannot tell: the single-mesh path reports the error)."""
+    try:
+        return vtkhdf_partitions(path)[2]
+    except Exception:
+        return 0
+
+
+def _read_vtkhdf_series(path: Path, opts: dict) -> Series:
+    """Every step of a temporal VTKHDF file, its ``Steps/Values`` exactly (each step's partitions
+    concatenated, as :func:`~gatun_py.mesh.read_mesh` reads one step)."""
+    times = read_vtkhdf(path, step=0).times
+    names = [f"{path} step {k}" for k in range(len(times))]
+
+    def load(k):  # the step's own notes, without the reader's "temporal, step k read" ones
+        mesh, report = read_mesh(path, time_step=k, **opts)
+        said = ("temporal VTKHDF", "time step ") + (("default scalar",) if k else ())  # step 0 says it
+        report.notes[:] = [n for n in report.notes if not n.startswith(said)]
+        return mesh, report
+
     return Series(_increasing(times, names), [(lambda k=k: load(k)) for k in range(len(times))], names)

@@ -2,8 +2,10 @@
 
 VTK and ParaView read it natively, with time steps; it compresses only with deflate, so it is the
 interchange format beside ``.tetc``. An unstructured grid is written as one partition: the
-points, the cells (every linear and quadratic type meshio names), every point and cell array in
-its own dtype. A series is written temporal (VTKHDF 2.0): the mesh once (every step's offsets 0),
+points, the cells (every linear and quadratic type meshio names, mixed: VTK's types, offsets and
+connectivity), every point and cell array in its own dtype, meshio's field data. Consecutive
+blocks of one cell type read back as one block (VTKHDF has no blocks); point and cell sets are
+not written. A series is written temporal (VTKHDF 2.0): the mesh once (every step's offsets 0),
 each step's arrays one after the other, the time values in ``Steps/Values``; arrays that do not
 change are written once and replayed by their offsets. Files of other writers may be partitioned
 (one partition per MPI rank) and temporal with a changing mesh: reading a step concatenates its
@@ -121,9 +123,10 @@ def write_vtkhdf(path, mesh, *, steps=None, force: bool = False, deflate: int = 
     mesh : TetMesh or meshio.Mesh
         The points and cells (a meshio.Mesh keeps its cell blocks and cell data), and the arrays
         of a file without ``steps``.
-    steps : sequence of (float, dict, dict), optional
+    steps : sequence of (float, dict, dict) or (float, dict, dict, array), optional
         ``(time, point_data, cell_data)`` of every step, over ``mesh``'s points and cells: written
-        temporal (VTKHDF 2.0), the mesh once. The mesh's own arrays that no step names are written
+        temporal (VTKHDF 2.0), the mesh once; a 4th item gives the step's own coordinates (a
+        moving mesh: every step's points are written, the cells once). The mesh's own arrays that no step names are written
         once and shared by every step. Cell data: one array over all cells (blocks in order), or a
         list per block as in meshio.
     force : bool
@@ -165,11 +168,22 @@ def write_vtkhdf(path, mesh, *, steps=None, force: bool = False, deflate: int = 
         for name, v in (("NumberOfPoints", n_points), ("NumberOfCells", n_cells),
                         ("NumberOfConnectivityIds", len(conn))):
             g.create_dataset(name, data=np.array([v], np.int64))
-        put(g, "Points", points.reshape(n_points, 3) if points.size else np.zeros((0, 3)))
+        moved = _moved_points(steps, points) if steps is not None else None
+        if moved is None:
+            put(g, "Points", points.reshape(n_points, 3) if points.size else np.zeros((0, 3)))
+        else:  # every step's coordinates, one after the other (Steps/PointOffsets); the cells once
+            put(g, "Points", np.concatenate(moved))
         put(g, "Types", types)
         put(g, "Offsets", offsets)
         put(g, "Connectivity", conn)
         pg, cg = g.create_group("PointData"), g.create_group("CellData")
+        field = {_dataset_name(k, "field"): np.asarray(v) for k, v in (getattr(mesh, "field_data", None) or {}).items()}
+        if field:  # meshio's field data (gmsh's physical names: [tag, dimension]), numbers only
+            fg = g.create_group("FieldData")
+            for name, a in field.items():
+                if a.dtype.kind not in "fiub":
+                    raise OutputError(f"cannot write the field array {name!r} as VTKHDF: dtype {a.dtype} (numbers only)")
+                fg.create_dataset(name, data=a)
         if steps is None:
             for name, a in static_pd.items():
                 put(pg, name, a)
@@ -177,6 +191,29 @@ def write_vtkhdf(path, mesh, *, steps=None, force: bool = False, deflate: int = 
                 put(cg, name, a)
             return
         _write_steps(g, put, steps, static_pd, static_cd, n_points, n_cells, cells_array, block_rows)
+        if moved is not None:
+            del g["Steps/PointOffsets"]
+            g["Steps"].create_dataset("PointOffsets", data=np.arange(len(steps), dtype=np.int64) * n_points)
+
+
+def _moved_points(steps, points):
+    """Every step's coordinates when some step gives its own (a 4th item) other than ``points``,
+    else None."""
+    own = [st[3] if isinstance(st, (tuple, list)) and len(st) == 4 and st[3] is not None else None for st in steps]
+    if all(p is None or _same_bits(p, points) for p in own):
+        return None
+    out = []
+    for i, p in enumerate(own):
+        p = points if p is None else np.asarray(p)
+        if p.shape != points.shape or p.dtype != points.dtype:
+            raise OutputError(f"step {i}'s points are {p.dtype} {p.shape}, the mesh's {points.dtype} {points.shape}")
+        out.append(p.reshape(len(points), 3))
+    return out
+
+
+def _same_bits(a, b) -> bool:
+    a, b = np.asarray(a), np.asarray(b)
+    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
 
 
 def _write_steps(g, put, steps, static_pd, static_cd, n_points, n_cells, cells_array, block_rows):
@@ -185,10 +222,10 @@ def _write_steps(g, put, steps, static_pd, static_cd, n_points, n_cells, cells_a
     per_pd, per_cd = {}, {}
     for i, step in enumerate(steps):
         try:
-            t, pd, cd = step
+            t, pd, cd = step[:3] if isinstance(step, (tuple, list)) and len(step) == 4 else step
             t = float(t)
         except (TypeError, ValueError):
-            raise OutputError(f"step {i}: give (time, point_data, cell_data)") from None
+            raise OutputError(f"step {i}: give (time, point_data, cell_data[, points])") from None
         times.append(t)
         for store, data, kind in ((per_pd, pd or {}, "point"), (per_cd, cd or {}, "cell")):
             if i and set(data) != set(store):
@@ -277,6 +314,37 @@ def read_vtkhdf(path, *, step: int | None = 0) -> VtkHdfSeries:
     return VtkHdfSeries(mesh, times, notes + more, path, static)
 
 
+def vtkhdf_partitions(path, *, step: int | None = None) -> tuple[int, int, int]:
+    """``(partitions of the step, the step, steps)`` of a VTKHDF unstructured grid: the step is
+    ``step`` (0-based, negative from the end), by default the last, as :func:`read_vtkhdf` reads it
+    through :func:`~gatun_py.mesh.read_mesh`."""
+    path = os.fspath(path)
+    times, _, _ = _read_times(path)
+    n = len(times)
+    k = -1 if step is None else int(step)
+    if not -n <= k < n:
+        raise ReadError(f"{path}: no time step {k}; the file has {n} (0..{n - 1})")
+    k %= n
+    f, g = _open(path)
+    with f:
+        try:
+            s = g["Steps"] if "Steps" in g else None
+            n_parts = _step_index(s, "NumberOfParts", k, len(np.asarray(g["NumberOfPoints"]).reshape(-1))
+                                  if s is None else 1)
+        except (KeyError, IndexError, ValueError, TypeError) as e:
+            raise ReadError(f"{path}: inconsistent VTKHDF unstructured grid ({type(e).__name__}: {e})") from None
+    return int(n_parts), k, n
+
+
+def read_vtkhdf_partition(path, part: int, *, step: int | None = None) -> meshio.Mesh:
+    """Partition ``part`` of a step (default the last) alone, with its own point numbering, as a
+    solver's rank wrote it: points on its seams with other partitions are its own copies. Only that
+    partition's slices of the file are read."""
+    path = os.fspath(path)
+    _, k, _ = vtkhdf_partitions(path, step=step)
+    return _read_step(path, k, int(part))[0]
+
+
 def _open(path):
     h5py = _h5py(reading=True)
     if not os.path.exists(path):
@@ -333,16 +401,18 @@ def _step_index(s, name, step, default=0):
     return int(a.reshape(-1)[0])
 
 
-def _read_step(path, step):
+def _read_step(path, step, part=None):
     f, g = _open(path)
     with f:
         try:
-            return _read_step_open(path, g, step)
+            return _read_step_open(path, g, step, part)
         except (KeyError, IndexError, ValueError, TypeError) as e:
             raise ReadError(f"{path}: inconsistent VTKHDF unstructured grid ({type(e).__name__}: {e})") from None
 
 
-def _read_step_open(path, g, step):
+def _read_step_open(path, g, step, part=None):
+    """The mesh of ``step``: all its partitions concatenated, or only partition ``part`` (0-based
+    within the step) with its own numbering, read without the others."""
     s = g["Steps"] if "Steps" in g else None
     n_pts_all = np.asarray(g["NumberOfPoints"], np.int64).reshape(-1)
     n_cells_all = np.asarray(g["NumberOfCells"], np.int64).reshape(-1)
@@ -354,12 +424,20 @@ def _read_step_open(path, g, step):
     conn0 = _step_index(s, "ConnectivityIdOffsets", step)
     if n_parts < 1 or part0 < 0 or part0 + n_parts > len(n_pts_all):
         raise ReadError(f"{path}: step {step} names partitions {part0}..{part0 + n_parts - 1} of {len(n_pts_all)}")
+    pshift = cshift = 0  # the points and cells of the step's partitions before ``part``
+    if part is not None:
+        if not 0 <= part < n_parts:
+            raise ReadError(f"{path}: no partition {part} at step {step}; it has {n_parts} (0..{n_parts - 1})")
+        before = slice(part0, part0 + part)
+        pshift, cshift = int(n_pts_all[before].sum()), int(n_cells_all[before].sum())
+        pt0, cell0, conn0 = pt0 + pshift, cell0 + cshift, conn0 + int(n_conn_all[before].sum())
+        part0, n_parts = part0 + part, 1
+    off_start = cell0 + part0  # every partition has its cells + 1 offsets
     parts = range(part0, part0 + n_parts)
     npts, ncells, nconn = (int(a[parts.start:parts.stop].sum()) for a in (n_pts_all, n_cells_all, n_conn_all))
     points = np.asarray(g["Points"][pt0:pt0 + npts])
     types = np.asarray(g["Types"][cell0:cell0 + ncells])
     conn_raw = np.asarray(g["Connectivity"][conn0:conn0 + nconn]).astype(np.int64, copy=False)
-    off_start = cell0 + part0  # every partition has its cells + 1 offsets
     offs_raw = np.asarray(g["Offsets"][off_start:off_start + ncells + n_parts]).astype(np.int64, copy=False)
     if len(points) != npts or len(types) != ncells or len(conn_raw) != nconn or len(offs_raw) != ncells + n_parts:
         raise ReadError(f"{path}: step {step}'s arrays are shorter than its sizes say (truncated file?)")
@@ -390,12 +468,15 @@ def _read_step_open(path, g, step):
         for name, ds in g[group].items():
             if not hasattr(ds, "shape"):
                 continue
-            start = base if offs is None or name not in offs else int(np.asarray(offs[name][step]).reshape(-1)[0])
+            start = base if offs is None or name not in offs else \
+                int(np.asarray(offs[name][step]).reshape(-1)[0]) + (pshift if kind == "point" else cshift)
             a = np.asarray(ds[start:start + rows])
             if len(a) != rows:
                 raise ReadError(f"{path}: {kind} array {name!r} has {len(a)} values at step {step}, not {rows}")
             store[name] = a if kind == "point" else [a[i:j] for i, j in runs]
-    return meshio.Mesh(points, blocks, point_data=point_data, cell_data=cell_data), notes
+    field_data = {name: np.asarray(ds) for name, ds in g["FieldData"].items() if hasattr(ds, "shape")} \
+        if "FieldData" in g else {}
+    return meshio.Mesh(points, blocks, point_data=point_data, cell_data=cell_data, field_data=field_data), notes
 
 
 def _cell_blocks(path, types, counts, conn):

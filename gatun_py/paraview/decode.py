@@ -1,7 +1,8 @@
 """The decoder the ParaView plugin runs: one step of a ``.tetc`` file into a VTKHDF file.
 
-``python -m gatun_py.paraview.decode FILE.tetc OUT [--step K] [--ratio R | --level L]`` writes the
-mesh of step K (at ratio R or stored level L) to OUT (a folder of ``.npy`` files when OUT ends in
+``python -m gatun_py.paraview.decode FILE.tetc OUT [--step K] [--ratio R | --level L] [--tets]``
+writes the mesh of step K (at ratio R or stored level L; the cells as given where the file stores
+them, unless --tets) to OUT (a folder of ``.npy`` files when OUT ends in
 ``.npydir``, what the plugin asks for; ``.vtkhdf``, as ``.vtu`` where h5py is missing; any mesh format)
 and prints one line of JSON on stdout: what the file holds (time values, arrays, levels, the largest
 ratio) and what was written. ``--info`` prints the JSON without decoding. An error prints one line,
@@ -30,23 +31,40 @@ import sys
 import tempfile
 from pathlib import Path
 
+import meshio
+
 from ..errors import OptionError, TetcError
 from ..mesh import write_mesh
+from ..mesh.io import to_meshio
 from ..mesh.vtkhdf import _parts, _topology, write_vtkhdf
 
 # the tiny file shipped for warming up the kernels (gatun_py/warmup.tetc)
 WARMUP_TETC = Path(__file__).resolve().parents[1] / "warmup.tetc"
 
 
+def _stored_cells(f) -> dict | None:
+    """The metadata of the cells as given that ``f`` stores (None: its tets are its cells)."""
+    meta = f.reader.meta.get("cells")
+    return meta if isinstance(meta, dict) else None
+
+
 def describe(f) -> dict:
     """What the plugin needs to know of an open file (a :class:`gatun_py.TetcFile`)."""
     n_steps = int(getattr(f, "n_steps", 1))
     times = [float(t) for t in getattr(f, "times", (0.0,))]
+    cells = _stored_cells(f) or {}
+    cell_arrays = []
+    for e in cells.get("cell_data") or []:
+        if isinstance(e, dict) and isinstance(e.get("name"), str) and e.get("blocks"):
+            shape = e["blocks"][0].get("shape") or []
+            cell_arrays.append([e["name"], int(np.prod(shape)) if shape else 1])
     return {
         "n_steps": n_steps,
         "times": times,
         "point_arrays": [[name, int(k)] for name, _, k in f.arrays if name],
-        "cell_arrays": [[name, int(k)] for name, _, k in getattr(f, "cell_arrays", [])],
+        "cell_arrays": cell_arrays,
+        "cell_blocks": [[str(b.get("type")), int(b.get("cells", 0))] for b in cells.get("blocks") or []
+                        if isinstance(b, dict)],
         "levels": f.levels,
         "max_ratio": float(f.max_ratio),
         "points": f.n_points,
@@ -54,14 +72,22 @@ def describe(f) -> dict:
     }
 
 
-def step_mesh(f, step: int, *, ratio: float | None = None, level: int | None = None):
-    """The mesh of ``step`` at ``ratio`` or ``level`` (what :func:`write_vtkhdf` takes)."""
+def step_mesh(f, step: int, *, ratio: float | None = None, level: int | None = None, tets: bool = False):
+    """The mesh of ``step`` at ``ratio`` or ``level`` (what :func:`write_vtkhdf` takes): the cells
+    as given (a ``meshio.Mesh`` of their blocks and cell arrays) where the file stores them and the
+    full mesh is asked for without ``tets``, else a TetMesh of the tets."""
     n_steps = int(getattr(f, "n_steps", 1))
     if not 0 <= step < n_steps:
         raise OptionError(f"no time step {step}: the file has {n_steps}")
     if n_steps > 1:
         return f.mesh(ratio, level=level, step=step)
-    return f.mesh(ratio, level=level)
+    mesh = f.mesh(ratio, level=level)
+    if tets or ratio is not None or level not in (None, 0) or _stored_cells(f) is None:
+        return mesh
+    from ..codec.cells import read_cells, restore_order  # the codec (numba) loads at the first decode
+
+    cells = read_cells(f.reader, mesh.tets, mesh.n_points, mesh.points)
+    return to_meshio(*restore_order(mesh, cells))
 
 
 ARRAYS_SUFFIX = ".npydir"
@@ -89,19 +115,22 @@ def write_arrays(mesh, folder) -> dict:
     if types is not None:
         save["types"] = types
     for i, (name, a) in enumerate(point_data.items()):
-        save[f"p{i}"] = a
+        save[f"p{i}"] = a.view(np.uint8) if a.dtype == np.bool_ else a
         out["point_data"].append([name, f"p{i}.npy"])
     for i, (name, blocks) in enumerate(cell_data.items()):
-        save[f"c{i}"] = np.concatenate([np.asarray(b) for b in blocks])
+        a = np.concatenate([np.asarray(b) for b in blocks])
+        save[f"c{i}"] = a.view(np.uint8) if a.dtype == np.bool_ else a  # VTK has no bool arrays
         out["cell_data"].append([name, f"c{i}.npy"])
     for key, a in save.items():
         np.save(os.path.join(folder, f"{key}.npy"), np.ascontiguousarray(a), allow_pickle=False)
     return out
 
 
-def decode(source, output, *, step: int = 0, ratio: float | None = None, level: int | None = None) -> dict:
+def decode(source, output, *, step: int = 0, ratio: float | None = None, level: int | None = None,
+           tets: bool = False) -> dict:
     """Decode ``step`` of ``source`` into ``output`` (overwritten) and return :func:`describe` of it
-    with the cells and points written."""
+    with the cells and points written: the cells as given where the file stores them (``tets``: the
+    tets they were split into)."""
     from ..api import open as open_tetc  # numba loads only here, not for --help
 
     f = open_tetc(source)
@@ -113,21 +142,24 @@ def decode(source, output, *, step: int = 0, ratio: float | None = None, level: 
     if ratio is not None and level is not None:
         raise OptionError("give a ratio or a level, not both")
     if output is not None:
-        mesh = step_mesh(f, step, ratio=ratio, level=level)
+        mesh = step_mesh(f, step, ratio=ratio, level=level, tets=tets)
         if str(output).endswith(ARRAYS_SUFFIX):
             out["arrays"] = write_arrays(mesh, output)
         elif str(output).endswith(".vtkhdf"):
             write_vtkhdf(output, mesh, force=True)
+        elif isinstance(mesh, meshio.Mesh):
+            mesh.write(output)
         else:
             write_mesh(mesh, output, force=True)
-        out.update(output=os.fspath(output), step=step, cells=int(mesh.n_tets), written_points=int(mesh.n_points))
+        n_cells = sum(len(c.data) for c in mesh.cells) if isinstance(mesh, meshio.Mesh) else int(mesh.n_tets)
+        out.update(output=os.fspath(output), step=step, cells=int(n_cells), written_points=int(len(mesh.points)))
     return out
 
 
 def _answer(req: dict) -> dict:
     try:
         return decode(req["file"], _output(req.get("output")), step=int(req.get("step", 0)), ratio=req.get("ratio"),
-                      level=req.get("level"))
+                      level=req.get("level"), tets=bool(req.get("tets", False)))
     except TetcError as e:
         return {"error": str(e)}
     except MemoryError:
@@ -173,6 +205,7 @@ def main(argv=None) -> int:
     p.add_argument("--step", type=int, default=0)
     p.add_argument("--ratio", type=float, default=None)
     p.add_argument("--level", type=int, default=None)
+    p.add_argument("--tets", action="store_true", help="the tets, not the cells as given")
     p.add_argument("--info", action="store_true", help="print what the file holds, decode nothing")
     p.add_argument("--serve", action="store_true", help="answer JSON requests on stdin, one per line")
     if argv is None and "--serve" in sys.argv[1:2] or argv == ["--serve"]:
@@ -182,7 +215,7 @@ def main(argv=None) -> int:
     if output is None and not args.info:
         p.error("give an output file, or --info")
     try:
-        out = decode(args.file, output, step=args.step, ratio=args.ratio, level=args.level)
+        out = decode(args.file, output, step=args.step, ratio=args.ratio, level=args.level, tets=args.tets)
     except TetcError as e:
         print(f"tetc: error: {e}", file=sys.stderr)
         return 1

@@ -16,9 +16,11 @@ That Python is found, in this order, in the ``TETC_PYTHON`` environment variable
 ``tetc_python.txt`` beside this file (written by ``tetc paraview-plugin``), as the virtual
 environment this file is installed in, or from the ``tetc`` command on ``PATH``.
 
-Properties: Ratio (simplify on the fly: merged / all vertices, 0 = the full mesh), Level (a stored
-level, -1 = none), the point and cell arrays to load, and the time steps of a series
-(``TimestepValues``). A file that cannot be read shows one message in the output window and gives
+The output is the cells as given (hexahedra, wedges, quadratic cells... with their cell arrays)
+where the file stores them, else its tets. Properties: Ratio (simplify on the fly: merged / all
+vertices, 0 = the full mesh), Level (a stored level, -1 = none; a simplified mesh is tets), Output
+Tets (the tets the cells were split into), the point and cell arrays to load, and the time steps of
+a series (``TimestepValues``). A file that cannot be read shows one message in the output window and gives
 an empty output.
 """
 
@@ -261,17 +263,18 @@ def step_for_time(times, t):
 @smproxy.reader(name="TetcReader", label="tetc compressed tetrahedral mesh", extensions="tetc",
                 file_description="tetc compressed tetrahedral mesh")
 class TetcReader(VTKPythonAlgorithmBase):
-    """Reads a ``.tetc`` file: the tets with every point array, a time step of a series, simplified
-    on the fly to a ratio or a stored level."""
+    """Reads a ``.tetc`` file: its cells as given (or its tets) with every point and cell array, a
+    time step of a series, simplified on the fly to a ratio or a stored level."""
 
     def __init__(self):
         VTKPythonAlgorithmBase.__init__(self, nInputPorts=0, nOutputPorts=1, outputType="vtkUnstructuredGrid")
         self._filename = None
         self._ratio = 0.0
         self._level = -1
+        self._tets = False
         self._info = None  # the decoder's description of the file, for its (name, mtime, size)
         self._info_key = None
-        self._decoded = {}  # (file key, step, ratio, level) -> (path, points), in decoding order
+        self._decoded = {}  # (file key, step, ratio, level, tets) -> (path, points), in decoding order
         self._manifests = {}  # path -> the decoder's list of its .npy files
         self._count = 0
         self._tmp = None
@@ -312,6 +315,14 @@ class TetcReader(VTKPythonAlgorithmBase):
             self._level = int(level)
             self.Modified()
 
+    @smproperty.intvector(name="OutputTets", label="Output Tets", default_values=0)
+    @smdomain.xml('<BooleanDomain name="bool"/>')
+    def SetOutputTets(self, tets):
+        """Output the tets the cells were split into (0: the cells as given, where the file stores them)."""
+        if bool(tets) != self._tets:
+            self._tets = bool(tets)
+            self.Modified()
+
     @smproperty.dataarrayselection(name="Point Arrays")
     def GetPointDataArraySelection(self):
         return self._point_sel
@@ -346,7 +357,7 @@ class TetcReader(VTKPythonAlgorithmBase):
         """Decode ``step`` at the current settings (once; kept for KEEP_DECODED requests):
         ``((path, points written), None)`` or ``(None, message)``."""
         ratio, level = self._settings()
-        want = (key, step, ratio, level)
+        want = (key, step, ratio, level, self._tets)
         if want in self._decoded and os.path.exists(self._decoded[want][0]):
             return self._decoded[want], None
         if self._tmp is None:
@@ -355,7 +366,8 @@ class TetcReader(VTKPythonAlgorithmBase):
         ext = {"npy": ".npydir", "vtkhdf": ".vtkhdf", "vtu": ".vtu"}.get(os.environ.get(TRANSFER_ENV, ""), ext)
         self._count += 1  # a new name every time: a kept decode is never overwritten
         out = os.path.join(self._tmp, f"decoded{self._count}_step{step}{ext}")
-        info, err = DECODER.request(file=self._filename, output=out, step=step, ratio=ratio, level=level)
+        info, err = DECODER.request(file=self._filename, output=out, step=step, ratio=ratio, level=level,
+                                    tets=self._tets)
         if err:
             return None, err
         self._remember(key, info)

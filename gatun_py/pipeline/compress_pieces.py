@@ -52,7 +52,7 @@ from ..codec.threads import check_jobs
 from ..errors import CorruptFileError, MeshError, OptionError, OutputError, TetcError
 from ..mesh import TetMesh
 from ..mesh.partition import MAX_BRICKS, partition_tets, split_bricks
-from ..mesh.pieces import boundary_part, interface_table, piece_paths, pvtu_scalar, read_piece
+from ..mesh.pieces import boundary_part, interface_table, piece_file, piece_paths, pvtu_scalar, read_piece
 from .bricks import _brick_payload, _with_loose_points
 from .distributed import ClusterError, _distributed, _numba_cache_dir
 from .requests import ForestOptions, ReadOptions, split_options
@@ -328,7 +328,8 @@ def compress_pieces(inputs, output, *, forest: ForestOptions | None = None, read
     Parameters
     ----------
     inputs : path-like or list of path-like
-        A ``.pvtu`` file, one file of an Exodus decomposition (``name.e.N.i``), or several mesh
+        A ``.pvtu`` file, one file of an Exodus decomposition (``name.e.N.i``), a VTKHDF file of
+        several partitions (those of ``read_options``' ``time_step``, default the last), or several mesh
         files, each one piece (:func:`~gatun_py.mesh.pieces.piece_paths`); with ``memory``, also
         one plain mesh file, split into bricks before any forest is built.
     output : path-like
@@ -350,9 +351,9 @@ def compress_pieces(inputs, output, *, forest: ForestOptions | None = None, read
     log = log or (lambda _m: None)
     forest, read = split_options("compress_pieces", options, forest=forest, read=read)
     mesh_only, levels = forest.mesh_only, forest.levels
-    paths = piece_paths(inputs, single=memory is not None)
+    paths = piece_paths(inputs, single=memory is not None, step=read.time_step)
     output = Path(output)
-    if any(os.path.exists(output) and os.path.samefile(p, output) for p in paths):
+    if any(os.path.exists(output) and os.path.samefile(piece_file(p), output) for p in paths):
         raise OptionError(f"the output {output} is one of the pieces")
     if workers is not None and scheduler is not None:
         raise OptionError("give either a number of local workers or a scheduler address, not both")

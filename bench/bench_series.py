@@ -24,7 +24,7 @@ float64; ``deforming`` adds the thermo-elastic displacement to the coordinates a
   budget (server side: plan, the step's decode, render, encode) and the budget model's prediction
   error per frame (measured / predicted, which depends on load much less than the times do).
 
-``python bench/bench_series.py [--quick]`` writes ``bench/sections/series.md``; ``--only play``
+``python bench/bench_series.py [--quick]`` writes ``bench/sections/series.md``; ``--only play [--series NAME]``
 writes its part of it (between ``<!-- play -->`` marks, which the other parts' run keeps).
 """
 
@@ -53,7 +53,7 @@ from series_data import load, series_path, write_pvd  # noqa: E402
 
 SECTION = HERE / "sections" / "series.md"
 PLAY_MARKS = ("<!-- play -->", "<!-- /play -->")
-PLAY_FILE = HERE / "out" / "series" / "play.tetc"
+PLAY_DIR = HERE / "out" / "series"
 
 
 def peers(arr) -> dict:
@@ -184,10 +184,12 @@ def append_rows(name, run, tmp, runs):
     return rows, alone
 
 
-def play_file() -> Path:
-    """The ~1 M-tet 40-step series compressed with its levels (cached: the forest takes minutes)."""
-    if not PLAY_FILE.exists():
-        run = load(series_path("play"))
+def play_file(name: str = "play") -> Path:
+    """A series compressed with its levels, cached (``play``: ~1 M tets, 40 steps; the forest
+    alone takes minutes)."""
+    path = PLAY_DIR / f"{name}.tetc"
+    if not path.exists():
+        run = load(series_path(name))
         meshes = [validate_tets(run["points"], None, run["tets"], scalar_name="temperature",
                                 point_data={"temperature": run["temperature"][k]})[0]
                   for k in range(len(run["times"]))]
@@ -195,10 +197,11 @@ def play_file() -> Path:
         data = encode_series(meshes, [float(x) for x in run["times"]])
         print(f"play series: {meshes[0].n_tets} tets, {len(meshes)} steps, {len(data):,} bytes "
               f"in {time.perf_counter() - t:.0f} s", flush=True)
-        tmp = PLAY_FILE.with_suffix(".part")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".part")
         tmp.write_bytes(data)
-        os.replace(tmp, PLAY_FILE)
-    return PLAY_FILE
+        os.replace(tmp, path)
+    return path
 
 
 def play_rows(path, budgets, loops: int, size: int):
@@ -227,7 +230,8 @@ def play_rows(path, budgets, loops: int, size: int):
 
 def play_section(rows, size: int, load_avg) -> str:
     out = ["## Time series: the viewer playing a series (`bench/bench_series.py --only play`)\n",
-           f"A 40-step scikit-fem heat run on a gmsh block of about 1 M tets (`series_data.py play`), played "
+           f"A scikit-fem heat run on a gmsh block (`series_data.py`; the target's series is `play`, 40 steps "
+           f"of about 1 M tets; `--series NAME` plays another), played "
            f"through the viewer's frame service (`ViewerSession.render`, driven by the script, no browser): "
            f"{size}x{size}, every frame asks for the next step within the budget while the camera turns 3 "
            f"degrees; the first pass decodes every step once (each frame pays its step's decode, which the "
@@ -257,7 +261,8 @@ def play_section(rows, size: int, load_avg) -> str:
 def main_play(argv) -> int:
     quick = "--quick" in argv
     size = 256 if quick else 512
-    path = play_file()
+    name = argv[argv.index("--series") + 1] if "--series" in argv else "play"
+    path = play_file(name)
     load_avg = os.getloadavg()
     rows = play_rows(path, [0.1] if quick else [0.1, 0.25], 1 if quick else 3, size)
     text = play_section(rows, size, load_avg)

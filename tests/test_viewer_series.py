@@ -129,7 +129,7 @@ def test_server_answers_a_step_refuses_a_bad_one_and_keeps_serving(series):
         info = await (await client.get(f"/api/info?token={TOKEN}")).json()
         assert info["steps"]["n_steps"] == N_STEPS and len(info["steps"]["times"]) == N_STEPS
         body = {"camera": CAM, "budget": None, "format": "png"}
-        r = await client.post(f"/api/frame?token=wrong", data=json.dumps({**body, "step": 3}))
+        r = await client.post("/api/frame?token=wrong", data=json.dumps({**body, "step": 3}))
         assert r.status == 403 and app[SERVICE].frames == 0
         r = await client.post(url, data=json.dumps({**body, "step": 3}))
         assert r.status == 200

@@ -443,3 +443,67 @@ class CellStepEncoder:
         for s in [s for s in self.held if s <= k - MAX_ORDER - 1]:
             del self.held[s]
         return out
+
+
+def encode_level_map(ids: np.ndarray) -> bytes:
+    """The ``L{i}/vmap`` section: every level vertex's level-0 decode id (level decode order),
+    predicted from the previous vertex's (both orders follow the connectivity's traversal)."""
+    ids = np.asarray(ids, np.int64)
+    return encode_array(ids, np.full((len(ids), 4), -1, np.int32))
+
+
+def encode_steps(meshes, vertex_order, refs, base_points, *, first: int = 1, interval: int, previous=None):
+    """The entries and sections of steps ``first, first + 1, ...`` (``meshes``, already checked
+    against step 0).
+
+    Parameters
+    ----------
+    meshes : iterable of TetMesh
+        The steps to code, in order (input vertex order, step 0's topology).
+    vertex_order : (n,) array
+        Level 0's decode order (decode id -> input id).
+    refs : (n, 4) int32
+        Level 0's refs.
+    base_points : (n, 3) array
+        Step 0's coordinates in decode order.
+    first : int
+        The step number of the first mesh.
+    interval : int
+        Keyframe interval.
+    previous : callable
+        ``previous(k)``: the values dict (decode order, with ``_POINTS``) of an earlier step ``k``
+        that comes before ``meshes`` (step 0, or the keyframe of an appended step).
+
+    Yields
+    ------
+    (entry, sections) per step
+    """
+    vo = np.asarray(vertex_order)
+    held = {}
+    base_pos = _pos4(base_points)[:, :3]
+    base_bits = np.ascontiguousarray(base_points).view(np.uint8)
+    for i, mesh in enumerate(meshes):
+        k = first + i
+        pts = np.ascontiguousarray(mesh.points[vo])
+        vals = {name: np.ascontiguousarray(mesh.point_data[name][vo]) for name in mesh.point_data}
+        vals[_POINTS] = pts
+        entry = step_entry(k, interval)
+        hist = [held[s] if s in held else previous(s) for s in history_steps(entry)]
+        moves = not np.array_equal(pts.view(np.uint8), base_bits)
+        ref_moves = bool(hist) and not np.array_equal(hist[0][_POINTS].view(np.uint8), base_bits)
+        pos = _pos4(hist[0][_POINTS])[:, :3] if ref_moves else base_pos
+        sections = []
+        if moves:
+            sections.append((f"S{k}/points", encode_step_array(pts, refs, positions=pos,
+                                                               history=[h[_POINTS] for h in hist])))
+            pos = _pos4(pts)[:, :3]
+        else:
+            pos = base_pos
+        for j, name in enumerate(mesh.point_data):
+            sections.append((f"S{k}/array/{j}", encode_step_array(vals[name], refs, positions=pos,
+                                                                  history=[h[name] for h in hist])))
+        held[k] = vals
+        for s in [s for s in held if s <= k - MAX_ORDER - 1]:
+            del held[s]
+        entry["points"] = bool(moves)
+        yield entry, sections

@@ -16,7 +16,12 @@ scalar) plus, under the metadata key ``"steps"``:
   coarse level gets a step's values by gathering them from level 0.
 
 Sections of step ``k >= 1``: ``S{k}/array/{j}`` for every point array j of the metadata's
-``arrays``, ``S{k}/points`` when the step's coordinates differ from step 0's; every one in level
+``arrays``, ``S{k}/points`` when the step's coordinates differ from step 0's; and, when the
+metadata's ``cells`` lists cell arrays (``{"name", "dtype", "components"}``, one row per tet),
+``S{k}/cell/{j}`` for every step, step 0 included, in level 0's tet decode order, each tet
+predicted from its earlier face neighbours at the tets' centres
+(:class:`~.stepreader.CellCoding`) after the same temporal prediction as a point array (a reader
+without cell arrays decodes every other section of such a file as before); every one in level
 0's decode order, each a byte (the mode) and an array block of :mod:`.arrays`: mode 0 codes the
 values (spatial predictors), mode ``1 + p`` the difference of their ordered integers
 (:func:`ordered`) to those of :func:`extrapolate` of degree p from the previous steps, modulo

@@ -342,8 +342,10 @@ class ViewerSession:
                                 planner.estimator.coverage(fitted), step_factor)
         predicted = planner.model.predict(work, key=target.level)
         # the step's arrays are decoded before the frame, so the model learns the frame alone
-        _, step_decode_s = self.series.values(time_step)
-        stream = self.series.batches(target.level, time_step) if time_step else None
+        step_decode_s, stream = 0.0, None
+        if time_step:  # step 0 is the file's own stream
+            _, step_decode_s = self.series.values(time_step)
+            stream = self.series.batches(target.level, time_step)
 
         def progress(_n):
             if cancelled is not None and cancelled():

@@ -369,11 +369,12 @@ class CellCoding:
         pos = np.asarray(positions, np.float32)[:, :3]
         cent = np.zeros((m, 4), np.float32)
         if m:
-            cent[:, :3] = (pos[t].astype(np.float64).sum(axis=1) / 4).astype(np.float32)
+            # summed in vertex id order: the same bits whichever way round a tet's rows hold them
+            cent[:, :3] = (pos[np.sort(t, axis=1)].astype(np.float64).sum(axis=1) / 4).astype(np.float32)
         self.centres = cent
 
     def encode(self, values, history=()) -> bytes:
-        return encode_step_array(values, self.refs, history=history, positions=self.centres)
+        return encode_step_array(values, self.refs, history=history, positions=self.centres[:, :3])
 
     def decode(self, data, dtype, components: int, history=()) -> np.ndarray:
         return decode_step_array(data, self.refs, n_points=self.n, dtype=dtype.name, components=components,

@@ -44,7 +44,7 @@ from .mesh import TetMesh, mesh_from_meshio, read_mesh, write_mesh
 from .mesh.cells import Cells
 from .mesh.exodus import exodus_times
 from .mesh.io import mesh_output_format
-from .mesh.series import is_series_source, read_series, vtkhdf_steps
+from .mesh.series import is_series_source, read_series, tet_cell_data, tet_cells, vtkhdf_steps
 from .mesh.pyvista_grid import to_pyvista
 from .mesh.vtkhdf import is_vtkhdf, write_vtkhdf
 from .pipeline.bricks import compress_bricks, read_bricked
@@ -385,7 +385,7 @@ def decompress(source, output, *, detail: Detail | None = None, view: View | Non
             raise OptionError("selective refinement is for step 0 of a series (its merge dependencies)")
         if k != 0 or f.n_steps > 1:
             mesh = f.mesh(ratio, level=level, jobs=jobs, step=k)
-            write_mesh(mesh, output, force=force)
+            write_mesh(mesh, output, force=force, cells=f._step_cells(mesh, k, ratio=ratio, level=level, log=log))
             return mesh
     mesh = None
     if piece is not None:
@@ -543,7 +543,7 @@ def _compress_series(source, output, *, times, levels, mesh_only, force, w_densi
     series = read_series(source, times=times, scalar=scalar, cell_to_point=cell_to_point)
     noted = set()
 
-    class _Steps:  # the series' meshes, each step's reader notes logged once, cell data refused
+    class _Steps:  # the series' meshes, each step's reader notes logged once; cell data per tet
         def __len__(self):
             return len(series)
 
@@ -555,15 +555,15 @@ def _compress_series(source, output, *, times, levels, mesh_only, force, w_densi
                 for note in report.notes:
                     if k == 0 or not note.startswith("ignored non-volume"):
                         log(f"note: step {k}: {note}")
-                if report.cell_arrays:
-                    names = ", ".join(map(repr, report.cell_arrays))
-                    if not drop_cell_data:
-                        raise OptionError(f"step {k} ({series.names[k]}) has cell data ({names}), which a .tetc "
-                                          "series does not store yet: average it to the points (cell-to-point) "
-                                          "or drop it explicitly (drop-cell-data)")
-                    if k == 0:
-                        log(f"note: cell data dropped on request: {names}")
+                if report.cell_arrays and drop_cell_data and k == 0:
+                    log(f"note: cell data dropped on request: {', '.join(map(repr, report.cell_arrays))}")
             return mesh
+
+        def cells(self, k):
+            report = series.reports[k]
+            if drop_cell_data or report is None or not report.cell_arrays:
+                return {}
+            return tet_cell_data(report.cells, f"step {k} ({series.names[k]})")
 
     meshes = _Steps()
     m0 = meshes[0]
@@ -571,7 +571,8 @@ def _compress_series(source, output, *, times, levels, mesh_only, force, w_densi
         f"{m0.n_tets} tets")
     n = write_series(output, meshes, series.times, force=force, levels=levels, mesh_only=mesh_only,
                      w_density=w_density, w_geometry=w_geometry, w_sample=w_sample, threads=check_jobs(jobs),
-                     keyframe_interval=keyframe_interval, source=Path(series.names[0]).name, log=log)
+                     keyframe_interval=keyframe_interval, source=Path(series.names[0]).name,
+                     cell_data=meshes.cells, log=log)
     log(f"wrote {output}: {n} bytes, {len(series)} steps, in {time.perf_counter() - t0:.1f} s")
     return TetcFile(output)
 
@@ -580,16 +581,18 @@ def append(path, source, *, time: float | None = None, scalar: str | None = None
            drop_cell_data: bool = False, log=None) -> int:
     """Append a step to a series file without re-encoding the others; returns its step number.
 
-    ``source``: a mesh file (or TetMesh) with the file's points and tets; ``time``: default the
-    last time + 1. The step is written after the last whole step: an append interrupted midway
+    ``source``: a mesh file (or TetMesh) with the file's points and tets, and its cell arrays
+    when the file's steps store them; ``time``: default the last time + 1. The step is written after the last whole step: an append interrupted midway
     leaves the earlier steps readable, and the next append cuts its bytes off first.
     """
     log = log or _quiet
-    mesh = _as_mesh(source, ReadOptions(scalar=scalar, cell_to_point=cell_to_point), log, storing=True,
-                    drop_cell_data=drop_cell_data)
+    mesh, cells = _as_mesh_and_cells(source, ReadOptions(scalar=scalar, cell_to_point=cell_to_point), log,
+                                     storing=True, drop_cell_data=drop_cell_data)
     if time is not None:
         time = _check_number("time", time, allow_none=False)
-    return append_step(path, mesh, time)
+    cell_data = {} if cell_to_point else tet_cell_data(cells, str(source) if isinstance(source, (str, os.PathLike))
+                                                       else "the step")
+    return append_step(path, mesh, time, cell_data=cell_data)
 
 
 def _series_output(output) -> str | None:
@@ -613,7 +616,8 @@ def _write_steps(f: "TetcFile", output, kind: str, *, ratio, level, jobs, force)
         folder.mkdir(exist_ok=True)
         rows = []
         for k, name in zip(steps, names):
-            write_mesh(f.mesh(ratio, level=level, jobs=jobs, step=k), folder / name, force=force)
+            m = f.mesh(ratio, level=level, jobs=jobs, step=k)
+            write_mesh(m, folder / name, force=force, cells=f._step_cells(m, k, ratio=ratio, level=level))
             rows.append(f'    <DataSet timestep="{f.times[k]!r}" part="0" file="{folder.name}/{name}"/>')
         text = ('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
                 + "\n".join(rows) + "\n  </Collection>\n</VTKFile>\n")
@@ -710,6 +714,23 @@ class TetcFile:
         renders carry that step's coordinates and arrays (step 0: this file)."""
         k = self.step_index(step=step, time=time)
         return self if k == 0 else TetcFile(self._series.reader(k))
+
+    def cell_data(self, step: int = 0) -> dict:
+        """A series' cell arrays of ``step`` (negative from the end): ``{name: array}`` with one row
+        per tet of the full mesh, in the order of :meth:`mesh`'s tets, bit for bit in its dtype
+        (a snapshot or a series without cell arrays: ``{}``)."""
+        return dict(self._series.cell_values(self.step_index(step=step)))
+
+    def _step_cells(self, mesh, k: int, *, ratio=None, level=None, log=None):
+        """The cells to write with ``mesh`` (step ``k``): its tets with the step's cell arrays, or
+        None (no cell arrays, or a simplified mesh, whose tets are not the stored ones)."""
+        if not self._series.index.cells:
+            return None
+        if ratio is not None or level not in (None, 0):
+            if log is not None:
+                log("note: the cell arrays are those of the full mesh's tets: not written with a simplified mesh")
+            return None
+        return tet_cells(mesh.tets, self._series.cell_values(k))
 
     def steps(self, ratio: float | None = None, *, level: int | None = None, jobs: int | None = None):
         """Iterate over the steps: yields ``(time, mesh)`` (see :meth:`mesh`), each step decoded once."""

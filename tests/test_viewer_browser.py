@@ -2,8 +2,8 @@
 
 Starts `tetc view FILE --no-browser` in its own process, opens the page, waits for the first
 full-quality frame, drags to rotate, shift-drags to pan, zooms with the wheel, adds an opacity point
-in the transfer-function editor and changes the colormap, and reads the stats the page exposes in
-``window.tetcStats``. Needs Debian's ``chromium`` and ``chromium-driver`` (``make test`` installs
+in the transfer-function editor and changes the colormap, moves a time series' step slider and
+presses play, and reads the stats the page exposes in ``window.tetcStats``. Needs Debian's ``chromium`` and ``chromium-driver`` (``make test`` installs
 them) and the pip packages ``selenium`` and ``aiohttp`` (the ``test`` extra); skips, saying which is
 missing, where they cannot be had.
 """
@@ -14,7 +14,9 @@ import shutil
 import subprocess
 import sys
 import time
+from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytest.importorskip("aiohttp", reason="the viewer's server needs aiohttp (pip install 'gatun_py[view]')")
@@ -30,6 +32,8 @@ from selenium.webdriver.support.ui import Select, WebDriverWait  # noqa: E402
 
 from conftest import load_sample  # noqa: E402
 from gatun_py.codec import LevelPayload, write_tetc  # noqa: E402
+from gatun_py.mesh.validate import validate_tets  # noqa: E402
+from gatun_py.pipeline.series import write_series  # noqa: E402
 from gatun_py.simplify import build_levels, decimate  # noqa: E402
 
 TOKEN = "browsertest0123456789"
@@ -42,6 +46,25 @@ pytestmark = pytest.mark.skipif(
     reason="no headless Chromium here: install Debian's chromium and chromium-driver (make test does)")
 
 
+def _view(path, tmp):
+    """Run `tetc view path` until the test is done; yields its URL."""
+    launcher = "import sys; from gatun_py.cli.main import main; sys.exit(main())"
+    env = dict(os.environ, TETC_CACHE_DIR=str(tmp / "cache"))
+    proc = subprocess.Popen([sys.executable, "-c", launcher, "view", str(path), "--no-browser", "-q", "--token", TOKEN],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        url = proc.stdout.readline().strip()
+        assert url.startswith("http://127.0.0.1:"), (url, proc.stderr.read() if proc.poll() is not None else "")
+        yield url
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
     mesh, _ = load_sample("post")
@@ -50,21 +73,22 @@ def server(tmp_path_factory):
     path = tmp / "post.tetc"
     write_tetc(path, [LevelPayload(lv.level, lv.ratio, lv.n_merges, lv.mesh, (lv.forest.parent, lv.forest.rank))
                       for lv in levels])
-    launcher = "import sys; from gatun_py.cli.main import main; sys.exit(main())"
-    env = dict(os.environ, TETC_CACHE_DIR=str(tmp / "cache"))
-    proc = subprocess.Popen([sys.executable, "-c", launcher, "view", str(path), "--no-browser", "-q", "--token", TOKEN],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    try:
-        url = proc.stdout.readline().strip()
-        assert url.startswith("http://127.0.0.1:"), (url, proc.stderr.read() if proc.poll() is not None else "")
+    for url in _view(path, tmp):
         yield url, path
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+
+
+@pytest.fixture(scope="module")
+def series_server(tmp_path_factory):
+    """The committed solver run (scikit-fem heat conduction, 40 steps) as a series with levels."""
+    with np.load(Path(__file__).parent / "data" / "series_heat.npz") as z:
+        run = {k: z[k] for k in z.files}
+    meshes = [validate_tets(run["points"], None, run["tets"], scalar_name="temperature",
+                            point_data={"temperature": run["temperature"][k]})[0] for k in range(len(run["times"]))]
+    tmp = tmp_path_factory.mktemp("browser_series")
+    path = tmp / "run.tetc"
+    write_series(path, meshes, [float(t) for t in run["times"]], levels=2)
+    for url in _view(path, tmp):
+        yield url, len(meshes), [float(t) for t in run["times"]]
 
 
 @pytest.fixture(scope="module")
@@ -191,3 +215,38 @@ def test_a_vanished_file_shows_an_error_and_the_server_stays_up(server, browser,
     browser.execute_script("window.tetcViewer.requestFrame(); window.tetcViewer.endInteraction();")
     final_after(browser, first["id"], "a frame once the file is back")
     assert not error.is_displayed()
+
+
+def test_step_slider_and_play(series_server, browser):
+    url, n_steps, times = series_server
+    browser.get(url)
+    first = final_after(browser, 0, "the first frame of the series")
+    assert first["time_step"] == 0
+    slider = browser.find_element(By.ID, "step")
+    assert browser.find_element(By.ID, "steps").is_displayed() and slider.get_attribute("max") == str(n_steps - 1)
+    # the slider moved with the keyboard: three steps on, a frame of that step, then its still frame
+    slider.click()
+    browser.execute_script("arguments[0].value = '0'; arguments[0].dispatchEvent(new Event('input'));", slider)
+    slider.send_keys(Keys.RIGHT, Keys.RIGHT, Keys.RIGHT)
+    moved = wait_for(browser, lambda d: (s := stats(d)) and s["final"] and s["time_step"] == 3 and s,
+                     what="the still frame of step 3")
+    assert moved["time"] == times[3]
+    assert browser.find_element(By.ID, "step-label").text.startswith(f"3 / {n_steps - 1} · t = ")
+    # play: frames of the following steps arrive one after another, within the budget's plan
+    browser.find_element(By.ID, "play").click()
+    seen = set()
+    t0 = time.perf_counter()
+    while len(seen) < 6 and time.perf_counter() - t0 < 60:
+        s = stats(browser)
+        if s and not s["final"]:
+            seen.add(s["time_step"])
+            assert s["budget_s"] is not None
+        time.sleep(0.02)
+    assert len(seen) >= 6, seen
+    browser.find_element(By.ID, "play").click()  # pause: the step stays, a full-quality frame follows
+    state = browser.execute_script("return window.tetcViewer.state")
+    assert not state["playing"] and browser.find_element(By.ID, "play").text == "play"
+    paused = wait_for(browser, lambda d: (s := stats(d)) and s["final"] and s["id"] > moved["id"] and s,
+                      what="the still frame after pausing")
+    assert paused["time_step"] == browser.execute_script("return window.tetcViewer.state.step")
+    assert browser.find_element(By.ID, "error").get_attribute("hidden") is not None

@@ -12,15 +12,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import CorruptFileError, OptionError
+from ..errors import CorruptFileError, MeshError, OptionError
 from ..mesh import TetMesh
 from ..mesh.model import scalar_of
-from .arrays import ArrayDecoder, encode_array
+from . import _cutborder_kernels as CK
+from .arrays import ArrayDecoder, dtype_name, encode_array
 from .decoded_connectivity import DecodedConnectivity
 from .steps import MAX_ORDER, StepIndex, decode_step_array, encode_step_array, history_steps, step_entry
 from .tetcfile import _POINTS, DEFAULT_BATCH_TETS, TetcReader, _finite_range
 
-__all__ = ["StepDecoder", "StepReader", "step_index", "encode_steps", "encode_level_map"]
+__all__ = ["StepDecoder", "StepReader", "step_index", "encode_steps", "encode_level_map", "CellCoding",
+           "CellStepEncoder", "tet_decode_order"]
 
 _CACHE_STEPS = MAX_ORDER + 2  # the last steps a prediction uses: a walk decodes every step once
 
@@ -46,11 +48,15 @@ class StepDecoder:
     Parameters
     ----------
     reader : TetcReader
+    cache_steps : int
+        Decoded steps kept (least recently used out first; step 0 stays): at least the steps a
+        prediction reaches back to, so that a walk through the steps decodes each step once.
     """
 
-    def __init__(self, reader: TetcReader):
+    def __init__(self, reader: TetcReader, *, cache_steps: int = _CACHE_STEPS):
         self.base = reader
         self.index = step_index(reader.container)
+        self.cache_steps = max(int(cache_steps), _CACHE_STEPS)
         self._level0 = None
         self._cache = {}
         self._maps = {}
@@ -104,23 +110,40 @@ class StepDecoder:
         self._base()
         return self._conn, self._level0[1]
 
-    def values(self, step: int) -> dict:
-        """{array name: values, ``_POINTS``: coordinates} of ``step`` in level 0's decode order."""
-        k = self.check_step(step)
-        if k in self._cache:
-            return self._cache[k]
-        need, todo = [k], []
+    def pending(self, step: int) -> list:
+        """The steps that decoding ``step`` would decode (none when it is cached), in order."""
+        need, todo = [self.check_step(step)], []
         while need:  # the steps the prediction reaches back to, as far as the cache or a keyframe
             s = need.pop()
             if s in self._cache or s in todo:
                 continue
             todo.append(s)
             need.extend(history_steps(self.index.entries[s]))
+        return sorted(todo)
+
+    def is_cached(self, step: int) -> bool:
+        return self.check_step(step) in self._cache
+
+    def values(self, step: int) -> dict:
+        """{array name: values, ``_POINTS``: coordinates} of ``step`` in level 0's decode order."""
+        k = self.check_step(step)
+        if k in self._cache:
+            self._cache[k] = self._cache.pop(k)  # most recently used last
+            return self._cache[k]
         have = dict(self._cache)
-        for s in sorted(todo):
+        for s in self.pending(k):
             have[s] = self._decode(s, have)
-        self._cache = {s: have[s] for s in sorted(have)[-_CACHE_STEPS:]}  # a walk needs the latest ones
-        self._cache[k] = have[k]
+            self._cache.pop(s, None)
+            self._cache[s] = have[s]
+        self._cache[k] = self._cache.pop(k)
+        # least recently used out first; step 0 (a whole mesh decode) and the steps a walk from
+        # ``k`` predicts from stay
+        keep = {0, *range(k - MAX_ORDER - 1, k + 1)}
+        for s in list(self._cache):
+            if len(self._cache) <= self.cache_steps:
+                break
+            if s not in keep:
+                del self._cache[s]
         return have[k]
 
     def _decode(self, k: int, have: dict) -> dict:
@@ -185,6 +208,48 @@ class StepDecoder:
                 raise CorruptFileError(f"corrupt section {name!r}: a vertex maps outside level 0")
             self._maps[level] = m
         return self._maps[level]
+
+    # -- cell arrays -------------------------------------------------------------------------------
+
+    @property
+    def cell_arrays(self) -> list:
+        """``(name, dtype, components)`` of the cell arrays every step stores (one value per tet)."""
+        return list(self.index.cells)
+
+    def cell_values(self, step) -> dict:
+        """{name: values} of ``step``'s cell arrays, one row per tet of level 0 in decode order
+        (the rows of :meth:`~.tetcfile.TetcReader.decode_mesh`'s tets), bit for bit."""
+        k = self.check_step(step)
+        if not self.index.cells:
+            return {}
+        cache = self.__dict__.setdefault("_cell_cache", {})
+        if k in cache:
+            return cache[k]
+        need, todo = [k], []
+        while need:
+            s = need.pop()
+            if s in cache or s in todo:
+                continue
+            todo.append(s)
+            need.extend(history_steps(self.index.entries[s]))
+        coding = self._cell_coding()
+        for s in sorted(todo):
+            hist = [cache[h] for h in history_steps(self.index.entries[s])]
+            cache[s] = {name: coding.decode(self.base.read_section(f"S{s}/cell/{j}"), dt, c,
+                                            history=[h[name] for h in hist])
+                        for j, (name, dt, c) in enumerate(self.index.cells)}
+        keep = {*range(k - MAX_ORDER - 1, k + 1)}
+        for s in [s for s in cache if s not in keep]:
+            if len(cache) <= self.cache_steps:
+                break
+            del cache[s]
+        return cache[k]
+
+    def _cell_coding(self) -> "CellCoding":
+        if getattr(self, "_cells_coding", None) is None:
+            conn, _ = self.kept_level0()
+            self._cells_coding = CellCoding(conn.tets, self._level0[1])
+        return self._cells_coding
 
     def reader(self, step) -> TetcReader:
         """A reader of ``step`` (the base reader itself for step 0)."""
@@ -272,6 +337,114 @@ class StepReader(TetcReader):
 
 
 # -- coding ------------------------------------------------------------------------------------------
+
+class CellCoding:
+    """How a step's cell arrays (one value per tet) are coded: in level 0's tet decode order, each
+    tet predicted from its earlier face neighbours (up to four, latest first; the previous tet
+    when it has none), the linear predictor evaluated at the tets' centres in step 0's float32
+    coordinates, after the temporal prediction of :func:`~.steps.encode_step_array`.
+
+    Parameters
+    ----------
+    tets : (m, 4) int
+        Level 0's tets in decode order and decode ids.
+    positions : (n, 4) float32
+        Step 0's coordinates in decode order (the geometry's float32 values).
+    """
+
+    def __init__(self, tets, positions):
+        t = np.ascontiguousarray(tets, np.int32)
+        m = len(t)
+        self.n = m
+        nbr = np.full((m, 4), -1, np.int32)
+        if m and CK.tet_neighbours(t, nbr):
+            raise CorruptFileError("corrupt file: a face is shared by more than two tets")
+        i = np.arange(m, dtype=np.int64)[:, None]
+        earlier = np.where((nbr >= 0) & (nbr < i), nbr, -1)
+        refs = -np.sort(-earlier, axis=1)  # latest first, none (-1) last
+        lone = np.flatnonzero(refs[:, 0] < 0)
+        lone = lone[lone > 0]
+        refs[lone, 0] = lone - 1
+        self.refs = np.ascontiguousarray(refs, np.int32)
+        pos = np.asarray(positions, np.float32)[:, :3]
+        cent = np.zeros((m, 4), np.float32)
+        if m:
+            # summed in vertex id order: the same bits whichever way round a tet's rows hold them
+            cent[:, :3] = (pos[np.sort(t, axis=1)].astype(np.float64).sum(axis=1) / 4).astype(np.float32)
+        self.centres = cent
+
+    def encode(self, values, history=()) -> bytes:
+        return encode_step_array(values, self.refs, history=history, positions=self.centres[:, :3])
+
+    def decode(self, data, dtype, components: int, history=()) -> np.ndarray:
+        return decode_step_array(data, self.refs, n_points=self.n, dtype=dtype.name, components=components,
+                                 history=history, positions=self.centres)
+
+
+def tet_decode_order(mesh_tets, vertex_order, decoded_tets) -> np.ndarray:
+    """Input index of every decoded tet: the decoded tets (decode ids) matched to the input's
+    tets (input ids, mapped through ``vertex_order``) by their vertex sets."""
+    vo = np.asarray(vertex_order, np.int64)
+    a = np.sort(vo[np.asarray(decoded_tets, np.int64)], axis=1)
+    b = np.sort(np.asarray(mesh_tets, np.int64), axis=1)
+    ka, kb = np.lexsort(a.T[::-1]), np.lexsort(b.T[::-1])
+    if len(a) != len(b) or not np.array_equal(a[ka], b[kb]):
+        raise RuntimeError("the connectivity coder's tets are not the mesh's")
+    out = np.empty(len(a), np.int64)
+    out[ka] = kb
+    return out
+
+
+def cell_arrays_meta(cell_data: dict, n_tets: int, k: int = 0) -> list:
+    """``[(name, dtype, components)]`` of one step's cell arrays (one row per tet), checked."""
+    out = []
+    for name, a in cell_data.items():
+        a = np.asarray(a)
+        if a.ndim not in (1, 2) or a.shape[0] != n_tets:
+            raise MeshError(f"step {k}: cell array {name!r} has shape {a.shape}, not one row per tet ({n_tets})")
+        out.append((str(name), dtype_name(a.dtype), 1 if a.ndim == 1 else int(a.shape[1])))
+    return out
+
+
+class CellStepEncoder:
+    """Codes the ``S{k}/cell/{j}`` sections of the steps given to :meth:`step`, in step order.
+
+    Parameters
+    ----------
+    coding : CellCoding
+    tet_order : (m,) int
+        Input index of every decoded tet (:func:`tet_decode_order`).
+    interval : int
+        The file's keyframe interval.
+    arrays : list of (name, dtype name, components), optional
+        The cell arrays every step must have (default: the first step's).
+    previous : callable, optional
+        ``previous(k)``: the cell values (decode order) of a step before the first one given.
+    """
+
+    def __init__(self, coding: CellCoding, tet_order, *, interval: int, arrays=None, previous=None):
+        self.coding, self.order, self.interval = coding, np.asarray(tet_order), int(interval)
+        self.arrays = None if arrays is None else list(arrays)
+        self.previous = previous
+        self.held = {}
+
+    def step(self, k: int, cell_data: dict) -> list:
+        """The sections of step ``k`` from ``{name: (m,) or (m, c) array}`` in the input's tet order."""
+        meta = cell_arrays_meta(cell_data, self.coding.n, k)
+        if self.arrays is None:
+            self.arrays = meta
+        if meta != self.arrays:
+            raise MeshError(f"step {k}: cell arrays {meta} differ from step 0's {self.arrays}")
+        vals = {name: np.ascontiguousarray(np.asarray(cell_data[name])[self.order]) for name, _, _ in self.arrays}
+        hist = [self.held[s] if s in self.held else self.previous(s)
+                for s in history_steps(step_entry(k, self.interval))]
+        out = [(f"S{k}/cell/{j}", self.coding.encode(vals[name], history=[h[name] for h in hist]))
+               for j, (name, _, _) in enumerate(self.arrays)]
+        self.held[k] = vals
+        for s in [s for s in self.held if s <= k - MAX_ORDER - 1]:
+            del self.held[s]
+        return out
+
 
 def encode_level_map(ids: np.ndarray) -> bytes:
     """The ``L{i}/vmap`` section: every level vertex's level-0 decode id (level decode order),

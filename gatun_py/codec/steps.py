@@ -16,7 +16,12 @@ scalar) plus, under the metadata key ``"steps"``:
   coarse level gets a step's values by gathering them from level 0.
 
 Sections of step ``k >= 1``: ``S{k}/array/{j}`` for every point array j of the metadata's
-``arrays``, ``S{k}/points`` when the step's coordinates differ from step 0's; every one in level
+``arrays``, ``S{k}/points`` when the step's coordinates differ from step 0's; and, when the
+metadata's ``cells`` lists cell arrays (``{"name", "dtype", "components"}``, one row per tet),
+``S{k}/cell/{j}`` for every step, step 0 included, in level 0's tet decode order, each tet
+predicted from its earlier face neighbours at the tets' centres
+(:class:`~.stepreader.CellCoding`) after the same temporal prediction as a point array (a reader
+without cell arrays decodes every other section of such a file as before); every one in level
 0's decode order, each a byte (the mode) and an array block of :mod:`.arrays`: mode 0 codes the
 values (spatial predictors), mode ``1 + p`` the difference of their ordered integers
 (:func:`ordered`) to those of :func:`extrapolate` of degree p from the previous steps, modulo
@@ -47,7 +52,7 @@ import zlib
 import numpy as np
 
 from ..errors import CorruptFileError, MeshError, OptionError
-from .arrays import ArrayDecoder, check_dtype, dtype_name, encode_array
+from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
 from .container import _record
 
 __all__ = ["STEP_MAGIC", "encode_step_array", "decode_step_array", "ordered", "mesh_digest", "points_digest",
@@ -264,6 +269,22 @@ def _entry(e, k: int) -> dict:
     return {"ref": ref, "order": order, "points": pts}
 
 
+def _cell_arrays(entries) -> list:
+    """``(name, dtype, components)`` of the metadata's per-step cell arrays."""
+    if not isinstance(entries, list):
+        raise CorruptFileError("corrupt metadata: bad step cell arrays")
+    out = []
+    for e in entries:
+        try:
+            name, dt, c = e["name"], check_dtype(e["dtype"]), e["components"]
+        except (TypeError, KeyError, ValueError, OptionError):
+            raise CorruptFileError("corrupt metadata: bad step cell array") from None
+        if not isinstance(name, str) or isinstance(c, bool) or not isinstance(c, int) or not 1 <= c <= MAX_COMPONENTS:
+            raise CorruptFileError("corrupt metadata: bad step cell array")
+        out.append((name, dt, c))
+    return out
+
+
 class StepIndex:
     """The steps of a file: times, references, which ones store coordinates, and the sections of
     appended steps (registered in the container's index, so they read like any section).
@@ -273,6 +294,8 @@ class StepIndex:
     times : list of float
     entries : list of dict
         ``{"ref", "points"}`` per step (step 0: ``{"ref": -1, "points": False}``).
+    cells : list of (name, dtype, components)
+        The cell arrays every step stores (``S{k}/cell/{j}``, step 0 included; one row per tet).
     end : int
         The file offset after the last whole step (where the next append goes).
     """
@@ -285,6 +308,7 @@ class StepIndex:
             self.times, self.entries, self.interval = [0.0], [{"ref": -1, "order": 0, "points": False}], 1
             self.mesh_digest = self.points_digest = None
             self.maps = []
+            self.cells = []
         else:
             if container.major < 10:
                 raise CorruptFileError("corrupt metadata: steps in a file of format 9 or older")
@@ -307,6 +331,7 @@ class StepIndex:
             if not isinstance(maps, list) or not all(isinstance(i, int) and not isinstance(i, bool) for i in maps):
                 raise CorruptFileError("corrupt metadata: bad level maps")
             self.maps = maps
+            self.cells = _cell_arrays(info.get("cells", []))
         # a brick's view of a bricked file has no index of its own (and no steps: a series is one stream)
         index = getattr(container, "index", None) or {}
         self.end = max([off + length for off, length, _ in index.values()]

@@ -15,14 +15,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import OptionError, ReadError
+from ..errors import MeshError, OptionError, ReadError
 import meshio
 
+from .cells import VOLUME_CELLS, Cells
 from .exodus import EXODUS_SUFFIXES, exodus_times, read_exodus
 from .io import _meshio_read, mesh_from_meshio, read_mesh
 from .vtkhdf import is_vtkhdf, read_vtkhdf, vtkhdf_partitions
 
-__all__ = ["Series", "read_series", "is_series_source", "SERIES_SUFFIXES"]
+__all__ = ["Series", "read_series", "is_series_source", "SERIES_SUFFIXES", "tet_cell_data", "tet_cells"]
 
 SERIES_SUFFIXES = (".pvd",)
 
@@ -73,6 +74,36 @@ class Series:
         if not self.times:
             return "Series(0 steps)"
         return f"Series({len(self)} step{'s' if len(self) != 1 else ''}, times {self.times[0]:g} .. {self.times[-1]:g})"
+
+
+def tet_cell_data(cells, where: str = "") -> dict:
+    """A step's volume cell arrays as one row per tet (the mesh's tet order), as a series stores
+    them: every volume block must be of tets (a series keeps tets only); arrays of other blocks
+    (faces, lines) are not kept. ``{}`` when there are none."""
+    if cells is None or not cells.cell_data:
+        return {}
+    vol = [bi for bi, (t, _) in enumerate(cells.blocks) if t in VOLUME_CELLS]
+    other = sorted({t for t, _ in (cells.blocks[bi] for bi in vol)} - {"tetra"})
+    if other:
+        raise MeshError(f"{where}: cell arrays of {', '.join(other)} cells: a series keeps its cell arrays per tet, "
+                        "of tet meshes (average them to the points with cell-to-point, or drop them with "
+                        "drop-cell-data)")
+    out = {}
+    for name, per in cells.cell_data.items():
+        parts = [np.asarray(per[bi]) for bi in vol]
+        if any(p.dtype == bool for p in parts):
+            parts = [p.astype(np.uint8) for p in parts]  # the array coder's dtypes: booleans as 0/1 bytes
+        a = parts[0] if len(parts) == 1 else np.concatenate(parts)
+        if a.ndim > 2:
+            a = a.reshape(len(a), -1)
+        out[str(name)] = a[np.asarray(cells.tet_cell)]
+    return out
+
+
+def tet_cells(tets, cell_data: dict) -> Cells:
+    """The :class:`Cells` of one block of tets carrying ``cell_data`` (one row per tet), to write."""
+    return Cells([("tetra", np.asarray(tets, np.int64))], np.arange(len(tets), dtype=np.int64),
+                 {name: [np.asarray(a)] for name, a in cell_data.items()})
 
 
 def is_series_source(source) -> bool:

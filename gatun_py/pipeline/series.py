@@ -17,7 +17,8 @@ from .._atomic import check_output_path, write_bytes_atomic
 from ..codec import LevelPayload
 from ..codec.container import build_container, split_container
 from ..codec.cutborder import encode_connectivity
-from ..codec.stepreader import StepDecoder, encode_level_map, encode_steps, step_index
+from ..codec.stepreader import (CellCoding, CellStepEncoder, StepDecoder, encode_level_map, encode_steps,
+                                step_index, tet_decode_order)
 from ..codec.steps import (append_block, keyframe_interval_for, check_step_mesh, check_times, mesh_digest,
                            points_digest)
 from ..codec.arrays import dtype_name
@@ -36,7 +37,8 @@ def _level0_order(mesh):
 
 def encode_series(meshes, times, *, levels: int | None = None, mesh_only: bool = False, source: str = "",
                   keyframe_interval: int | None = None, w_density: float = 1.0,
-                  w_geometry: float = 1.0, w_sample: float = 1.0, threads: int = 1, log=None) -> bytes:
+                  w_geometry: float = 1.0, w_sample: float = 1.0, threads: int = 1, cell_data=None,
+                  log=None) -> bytes:
     """A whole series file: step 0 as a snapshot with its levels, then every other step.
 
     Parameters
@@ -50,6 +52,11 @@ def encode_series(meshes, times, *, levels: int | None = None, mesh_only: bool =
         Steps ``k`` with ``k % K == 0`` are coded alone, the others from the steps before them back
         to their keyframe. Default: :func:`~gatun_py.codec.steps.keyframe_interval_for` (any step
         decodes in about 1.5x the time of step 0).
+    cell_data : callable, optional
+        ``cell_data(k)``: step ``k``'s cell arrays, ``{name: (m,) or (m, c) array}`` with one row
+        per tet in the mesh's tet order (called once per step, right after ``meshes[k]``); every
+        step the same names, dtypes and components. Stored per step, lossless, predicted from
+        the previous steps in the tets' decode order (``S{k}/cell/{j}``).
     """
     log = log or (lambda _m: None)
     times = check_times(times)
@@ -85,8 +92,15 @@ def encode_series(meshes, times, *, levels: int | None = None, mesh_only: bool =
             ids = dec0_of[np.asarray(lv.vertex_ids)[codes[lv.level].vertex_order]]
             sections.append((f"L{lv.level}/vmap", encode_level_map(ids)))
             maps.append(int(lv.level))
-    refs = _level0_refs(mesh0, vo)
+    conn0 = _level0_conn(mesh0, vo)
+    refs = np.ascontiguousarray(conn0.predictors, np.int32)
     base_points = np.ascontiguousarray(mesh0.points[vo])
+    cells = None
+    first_cells = cell_data(0) if cell_data is not None else {}
+    if first_cells:
+        cells = CellStepEncoder(CellCoding(conn0.tets, _pos4(base_points)), tet_decode_order(mesh0.tets, vo, conn0.tets),
+                                interval=int(keyframe_interval))
+        sections.extend(cells.step(0, first_cells))
     step0 = {name: np.ascontiguousarray(a[vo]) for name, a in mesh0.point_data.items()}
     step0[_POINTS] = base_points
     entries = [{"ref": -1, "order": 0, "points": False}]
@@ -97,21 +111,34 @@ def encode_series(meshes, times, *, levels: int | None = None, mesh_only: bool =
             check_step_mesh(mesh0, m, k)
             yield m
 
-    for entry, secs in encode_steps(later(), vo, refs, base_points, first=1, interval=int(keyframe_interval),
-                                    previous=lambda k: step0 if k == 0 else None):
+    for k, (entry, secs) in enumerate(encode_steps(later(), vo, refs, base_points, first=1,
+                                                   interval=int(keyframe_interval),
+                                                   previous=lambda k: step0 if k == 0 else None), 1):
         entries.append(entry)
         sections.extend(secs)
+        if cells is not None:
+            sections.extend(cells.step(k, cell_data(k)))
+        elif cell_data is not None and cell_data(k):
+            raise MeshError(f"step {k} has cell arrays ({', '.join(map(repr, cell_data(k)))}), step 0 none")
     meta["steps"] = {"times": times, "entries": entries, "keyframe_interval": int(keyframe_interval),
                      "mesh": mesh_digest(mesh0.n_points, mesh0.tets), "points": points_digest(mesh0.points),
                      "maps": maps}
+    if cells is not None:
+        meta["steps"]["cells"] = [{"name": n, "dtype": d, "components": c} for n, d, c in cells.arrays]
     return build_container(meta, sections)
 
 
-def _level0_refs(mesh0, vo) -> np.ndarray:
+def _pos4(points) -> np.ndarray:
+    p = np.zeros((len(points), 4), np.float32)
+    p[:, :3] = np.asarray(points).astype(np.float32)
+    return p
+
+
+def _level0_conn(mesh0, vo):
     conn = encode_connectivity(mesh0.n_points, mesh0.tets)
     if not np.array_equal(conn.vertex_order, vo):  # deterministic: the same tets, the same order
         raise RuntimeError("the connectivity coder gave two vertex orders for one mesh")
-    return np.ascontiguousarray(conn.predictors, np.int32)
+    return conn
 
 
 def write_series(path, meshes, times, *, force: bool = False, **kw) -> int:
@@ -127,12 +154,13 @@ def write_series(path, meshes, times, *, force: bool = False, **kw) -> int:
 _CRASH_HOOK = None  # tests: called with the bytes written so far of an append, may raise to simulate a kill
 
 
-def append_step(path, mesh, time: float | None = None) -> int:
+def append_step(path, mesh, time: float | None = None, *, cell_data: dict | None = None) -> int:
     """Append ``mesh`` as the next step of the series file ``path``; returns the new step's number.
 
     The earlier steps are not re-encoded: the step's sections are coded against its keyframe and
     written after the last whole step (an interrupted append before it is cut off first). The
-    mesh must have step 0's points and tets. ``time``: default the last time + 1.
+    mesh must have step 0's points and tets. ``time``: default the last time + 1. ``cell_data``:
+    the step's cell arrays (one row per tet), when the file stores cell arrays per step.
     """
     path = os.fspath(path)
     reader = TetcReader(path)
@@ -162,8 +190,19 @@ def append_step(path, mesh, time: float | None = None) -> int:
         base_points = np.ascontiguousarray(mesh.points[vo])  # the same bits as step 0's
     else:
         base_points = steps.base_points()
+    cell_data = dict(cell_data or {})
+    if bool(cell_data) != bool(idx.cells):
+        have = ", ".join(repr(n) for n, _, _ in idx.cells) or "none"
+        raise MeshError(f"step {k}: cell arrays {', '.join(map(repr, cell_data)) or 'none'}; the file's steps have "
+                        f"{have}")
     (entry, sections), = encode_steps([mesh], vo, refs, base_points, first=k, interval=idx.interval,
                                       previous=steps.values)
+    if idx.cells:
+        conn, pos0 = steps.kept_level0()
+        enc = CellStepEncoder(CellCoding(conn.tets, pos0), tet_decode_order(mesh.tets, vo, conn.tets),
+                              interval=idx.interval, arrays=[(n, dtype_name(d), c_) for n, d, c_ in idx.cells],
+                              previous=steps.cell_values)
+        sections = sections + enc.step(k, cell_data)
     block = append_block(k, t, entry, sections, idx.end)
     fd = os.open(path, os.O_RDWR)
     try:

@@ -28,6 +28,7 @@ from ..raycast.camera import MAX_ZOOM, Camera
 from ..raycast.image import image_bytes, to_rgb8
 from ..raycast.transfer import from_dict, load_transfer_function, preset_names
 from ..simplify.levels import resolve_target
+from .series import SeriesFrames, parse_step
 
 FORMATS = {"jpeg": "image/jpeg", "png": "image/png", "webp": "image/webp"}
 MAX_VIEW_SIZE = 2048  # pixels per side the viewer renders
@@ -63,6 +64,7 @@ class FrameRequest:
     quality: int = 85
     interacting: bool = False
     pan: tuple = (0.0, 0.0)  # the focal point's shift, in radii of the bounding sphere (Camera.pan_x, pan_y)
+    time_step: int = 0  # a time step of a series file (negative: from the end)
 
     @property
     def camera(self) -> Camera:
@@ -104,7 +106,8 @@ def parse_request(obj) -> FrameRequest:
          "level": null | 3,           # a stored level instead of a budget
          "mode": "volume" | "face",
          "format": "jpeg" | "png" | "webp", "quality": 85,
-         "interacting": false}
+         "interacting": false,
+         "step": 0}                   # a time step of a series file
 
     Raises
     ------
@@ -144,7 +147,7 @@ def parse_request(obj) -> FrameRequest:
         raise OptionError(f"'format' must be one of {', '.join(FORMATS)}, got {fmt!r}")
     view = View(size=size, tf=tf, zoom=zoom, mode=obj.get("mode", "volume"), **angles)
     return FrameRequest(view, budget, level, fmt, _number(obj, "quality", 85, 1, 100, integer=True),
-                        bool(obj.get("interacting", False)), pan)
+                        bool(obj.get("interacting", False)), pan, parse_step(obj))
 
 
 class CachingReader(TetcReader):
@@ -225,6 +228,7 @@ class ViewerSession:
             reader.container.read_section(name)  # a damaged file fails here, not in every frame
         self.reader = reader
         self.bbox_lo, self.bbox_hi, self.scalar_range, self.step = file_render_defaults(self.reader)
+        self.series = SeriesFrames(reader)  # one step for a snapshot
         self.planners = {}  # by mode: each keeps its own view statistics, the costs are shared
         self.spread = collections.deque(maxlen=SPREAD_FRAMES)  # measured / predicted of budget frames
         self.model = TimeModel(self.costs)
@@ -242,6 +246,12 @@ class ViewerSession:
             return PLAN_SHARE
         lo, hi = PLAN_SHARE_RANGE
         return min(max(1.2 / float(np.percentile(self.spread, 90)), lo), hi)
+
+    @staticmethod
+    def series_budget(budget_s: float, step_s: float) -> float:
+        """The budget left for the frame once the time step's predicted decode is taken off (at
+        least a fifth of it: a step that alone overruns gets the coarsest frames, not none)."""
+        return max(budget_s - step_s, 0.2 * budget_s)
 
     def planner(self, mode: str) -> FramePlanner:
         if mode not in self.planners:
@@ -278,6 +288,7 @@ class ViewerSession:
             "colormaps": colormap_tables(),
             "selective_refinement": False,
             "default_budget": DEFAULT_BUDGET_S,
+            "steps": self.series.info(),
         }
 
     # -- frames ---------------------------------------------------------------------------------
@@ -295,6 +306,8 @@ class ViewerSession:
         """
         t0 = time.perf_counter()
         self.check_file()
+        time_step = self.series.check(req.time_step)
+        step_s = self.series.predict_decode_s(time_step)
         planner = self.planner(req.mode)
         fitted = req.camera.fit(self.bbox_lo, self.bbox_hi)
         plan = None
@@ -305,7 +318,7 @@ class ViewerSession:
         else:
             # Before the first frame of a view the work is guessed from the bounding box (an
             # overestimate: the first frame comes out coarse and fast); each frame then teaches it.
-            plan = planner.plan(self.plan_share() * req.budget_s, fitted, drag=True)
+            plan = planner.plan(self.series_budget(self.plan_share() * req.budget_s, step_s), fitted, drag=True)
             target = planner.target(plan)
         scale = plan.scale if plan is not None else 1.0
         step_factor = plan.step_factor if plan is not None else 1.0
@@ -318,6 +331,11 @@ class ViewerSession:
         work = planner.estimate(target.level, target.merges, camera.width * camera.height,
                                 planner.estimator.coverage(fitted), step_factor)
         predicted = planner.model.predict(work, key=target.level)
+        # the step's arrays are decoded before the frame, so the model learns the frame alone
+        step_decode_s, stream = 0.0, None
+        if time_step:  # step 0 is the file's own stream
+            _, step_decode_s = self.series.values(time_step)
+            stream = self.series.batches(target.level, time_step)
 
         def progress(_n):
             if cancelled is not None and cancelled():
@@ -339,7 +357,7 @@ class ViewerSession:
 
         t_plan = time.perf_counter()
         res = render_tetc(self.reader, view, target=target, progress=progress, partial=on_image,
-                          partial_every_s=self.partial_every_s)
+                          partial_every_s=self.partial_every_s, decoded=stream)
         t_render = time.perf_counter()
         rgb8 = to_rgb8(res.image)
         data = image_bytes(rgb8, req.fmt, quality=req.quality)
@@ -348,7 +366,7 @@ class ViewerSession:
         encode_s = t_end - t_render
         planner.observe(st, total_s=t_end - t_plan, extra_s=encode_s, step_factor=step_factor, decoded=decoded)
         if plan is not None and predicted > 0:
-            self.spread.append((t_end - t0) / predicted)
+            self.spread.append((t_end - t0) / (predicted + step_s))
         stats = {
             "level": int(target.level), "merges": int(target.merges), "ratio": float(target.ratio),
             "cut": "uniform",
@@ -362,6 +380,8 @@ class ViewerSession:
             "feasible": True if plan is None else plan.feasible,
             "full_quality": plan is None and req.level is None,
             "format": req.fmt, "bytes": len(data), "width": camera.width, "height": camera.height,
+            "time_step": time_step, "time": float(self.series.steps.times[time_step]),
+            "step_decode_s": step_decode_s, "step_predicted_s": step_s,
         }
         return Frame(rgb8, res.image, stats, data, FORMATS[req.fmt])
 

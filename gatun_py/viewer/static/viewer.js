@@ -26,6 +26,8 @@
     interacting: false,
     received: [], // receive times of the last second's frames (fps)
     frames: 0,
+    step: 0, // the time step shown (series files)
+    playing: false, // while playing, each frame that arrives asks for the next step
   };
   window.tetcStats = null;
 
@@ -62,7 +64,7 @@
     const id = state.nextId++;
     const msg = { type: "frame", id, still, camera: cameraRequest(), tf: transferFunction(),
                   budget: parseFloat($("budget").value) || 0.1, interacting: !still,
-                  format: still ? "png" : $("format").value };
+                  format: still ? "png" : $("format").value, step: state.step };
     state.sent.set(id, performance.now());
     ws.send(JSON.stringify(msg));
   }
@@ -83,12 +85,12 @@
   }
 
   function interact() { clearTimeout(state.stillTimer); requestFrame(true); }
-  function endInteraction() { state.interacting = false; scheduleStill(); }
+  function endInteraction() { state.interacting = false; if (!state.playing) scheduleStill(); }
 
   async function onMessage(ev) {
     if (typeof ev.data === "string") {
       const msg = JSON.parse(ev.data);
-      if (msg.type === "error") { showError(msg.message); return; }
+      if (msg.type === "error") { showError(msg.message); if (state.playing) setPlaying(false); return; }
       state.pending = msg;
       return;
     }
@@ -130,7 +132,35 @@
       camera: { ...state.camera }, received_at: now,
     };
     showStats(window.tetcStats);
+    if (state.playing && !head.final && !head.preview) nextStep();
   }
+
+  // -- time steps: a slider and play/pause ------------------------------------------------------
+  // Playing asks for the next step as soon as a frame arrives (never more than one in flight): each
+  // frame is planned to the budget by the server, so the frame rate follows the budget.
+  function stepLabel() {
+    const steps = state.info.steps;
+    $("step-label").textContent = `${state.step} / ${steps.n_steps - 1} · t = ${+steps.times[state.step].toPrecision(6)}`;
+  }
+  function showStep(k) {
+    state.step = k;
+    $("step").value = String(k);
+    stepLabel();
+  }
+  function nextStep() {
+    const n = state.info.steps.n_steps;
+    if (state.step + 1 >= n && !$("loop").checked) { setPlaying(false); return; }
+    showStep((state.step + 1) % n);
+    send(false);
+  }
+  function setPlaying(on) {
+    state.playing = on;
+    $("play").textContent = on ? "pause" : "play";
+    if (on) { clearTimeout(state.stillTimer); nextStep(); } else scheduleStill();
+  }
+  $("step").addEventListener("input", () => { showStep(parseInt($("step").value, 10)); interact(); });
+  $("step").addEventListener("change", () => { if (!state.playing) endInteraction(); });
+  $("play").addEventListener("click", () => setPlaying(!state.playing));
 
   // -- drawing, blending the still frame in ----------------------------------------------------
   let blendAnim = null;
@@ -349,9 +379,14 @@
     $("preset").value = initial;
     $("colormap").innerHTML += Object.keys(info.colormaps).map((n) => `<option>${n}</option>`).join("");
     if (initial) loadPreset(initial);
+    if (info.steps && info.steps.n_steps > 1) {
+      $("steps").hidden = false;
+      $("step").max = String(info.steps.n_steps - 1);
+      showStep(0);
+    }
     drawEditor();
     connect();
   }
-  window.tetcViewer = { state, requestFrame: interact, endInteraction, transferFunction };
+  window.tetcViewer = { state, requestFrame: interact, endInteraction, transferFunction, setPlaying };
   start().catch((e) => showError(String(e)));
 })();

@@ -36,36 +36,14 @@ is what ``--budget`` does, with the level and tet count of the uniform plan, so 
 no more than the uniform one.
 
 Why a selective cut gains little at 95-99 % merged: the dependency closure of a late merge covers
-most earlier merges (on Blunt-fin, 94 % of them for a merge at rank 95 %), so a closed cut that
-applies 95 % of the merges is nearly the prefix whatever the importance says; the freedom is in the
-middle ranks (a merge at rank 80 % needs 3 % of the earlier ones). But the closure is not what
-binds (``bench/sections/selective.md``, "What limits the selective cut"): without it, the same
-importance order is 3-45x *worse* than uniform (overlapping tets: the *unsafe* cut), and with a
-run-time legality check instead (:func:`gatun_py.simplify.dependencies.legal_cut`: flip-free, no
-overlaps) still 2-14x worse, and it cannot reach the tet goal. Even the uniform order itself with
-0.1 % noise (sigma = 41 ranks on Blunt-fin) gives legal cuts 4-14x worse, while closed cuts of the
-same noisy order stay within 1.0-1.14x of uniform: a merge is only as good as the decimator made it
-in the state it was evaluated in, and only a closed cut reproduces that state. Per merge, the
-image change a merge makes in its prefix state is zero for 40-80 % of merges and is predicted about
-as well by the rank as by the view- and TF-dependent importance or the region error
-(:func:`region_error`; Spearman 0.55-0.71 for each). So the importance has nothing to exploit that
-the forest order does not already encode, and the closed cut, the only one that keeps the forest's
-quality, cannot move far from the prefix. Nor does a forest built in rounds of independent merges
-loosen the closure (tried and reverted, commit 139dcb4: the merge at rank 95 % still needs 86-94 %
-of the earlier ones): at 95 % merged a merge's star is a large region, and the merges that built
-it are most of the merges there.
-
-The bound (``bench/sections/selective_bound.md``, ``selective_bricks.md``): an *oracle* importance,
-the image error each region of merges (4^3 grid) is measured to make for the view and TF, with the
-same closed cut, gives 0.88-1.19x uniform's RMSE at 95 % merged and 0.95-2.7x at 99 % (median 0.99
-over 36 cells; the shipped importance 1.07), on both samples with three TFs, one of them fully
-transparent over 3/4 of the vertices: no importance reaches 0.5x with this forest. Bricked forests
-(issue 16), whose per-brick prefixes are free and flip-free by construction, cannot get to 95 or
-99 % at all (their locked cut vertices are 9.5-34 % of the points: 2.2-9.9x the 95 % goal's tets
-at the least), and where they reach, the locks cost more than the choice gains (oracle per-brick
-allocations 1.25-9.3x the unbricked uniform RMSE at equal tets, median 1.67); tiers above the
-bricks (groups decimated again with their shared cuts unlocked) leave no choice below the locked
-tiers' reach: there the cut is a prefix of the top tier's forest.
+most earlier merges, so a closed cut that applies most merges is nearly the prefix whatever the
+importance says; the freedom is in the middle ranks. The closure is still what keeps the quality: a
+merge is only as good as the decimator made it in the state it was evaluated in, and only a closed
+cut reproduces that state (an unclosed cut overlaps tets; a run-time legality check,
+:func:`gatun_py.simplify.dependencies.legal_cut`, is flip-free but loses to uniform). Bricked
+forests lock their cut vertices, which bounds how far their cuts reach. The measurements (the
+closure's reach, the oracle bound on any importance, bricked forests) are in
+``bench/sections/selective.md``, ``selective_bound.md`` and ``selective_bricks.md``.
 
 Examples
 --------

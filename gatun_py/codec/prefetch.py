@@ -43,7 +43,7 @@ class PrefetchedDecode:
     >>> a = [(b.first, len(b.points), len(b.tets)) for b in stream]
     >>> a == [(b.first, len(b.points), len(b.tets)) for b in r.iter_decode(batch_tets=40)]
     True
-    >>> stream.values.shape == (r.level_meta(0)["points"], 4)
+    >>> stream.values.shape == (r.level_meta(0).points, 4)
     True
     """
 

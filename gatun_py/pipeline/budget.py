@@ -41,6 +41,7 @@ import numpy as np
 
 from .._version import __version__
 from ..codec import LevelPayload, TetcReader, encode_tetc
+from ..codec.levelmeta import LevelMeta
 from ..errors import OptionError
 from ..mesh import mesh_batches
 from ..mesh.synthetic import jittered_grid
@@ -506,9 +507,8 @@ class FramePlanner:
         return w
 
 
-def levels_of(stored: list[dict]) -> list[LevelSize]:
-    return sorted((LevelSize(int(lv["level"]), int(lv.get("merges_before", 0)), int(lv["tets"]),
-                             int(lv.get("points", 0)), int(lv.get("boundary_faces", 0)), bool(lv.get("has_forest")))
+def levels_of(stored: list[LevelMeta]) -> list[LevelSize]:
+    return sorted((LevelSize(lv.level, lv.merges_before, lv.tets, lv.points, lv.boundary_faces, lv.has_forest)
                    for lv in stored), key=lambda x: x.merges)
 
 

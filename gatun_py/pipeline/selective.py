@@ -154,10 +154,10 @@ def selective_source(reader: TetcReader, scalar: str | None = None, component=No
         cache[key] = None
         return None
     lv = reader.level_meta(level)
-    first = int(lv.get("merges_before", 0))
+    first = lv.merges_before
     forest = reader.read_forest(level)
     if forest is None:  # a level with nothing left to merge
-        forest = (np.arange(int(lv["points"]), dtype=np.int32), np.full(int(lv["points"]), ROOT_RANK, np.int32))
+        forest = (np.arange(lv.points, dtype=np.int32), np.full(lv.points, ROOT_RANK, np.int32))
     parent, rank = forest
     n = parent.shape[0]
     merged = rank != ROOT_RANK
@@ -180,7 +180,7 @@ def selective_source(reader: TetcReader, scalar: str | None = None, component=No
     if keep_batches:
         reader.__dict__.setdefault("_selective_batches", {})[key] = kept
     src = SelectiveSource(deps, parent, rank, vertex, parent[vertex].astype(np.int64), points, scalars,
-                          int(lv["tets"]), level, first, tets)
+                          lv.tets, level, first, tets)
     cache[key] = src
     return src
 
@@ -416,10 +416,10 @@ def _start(reader, src: SelectiveSource, applied) -> Cut:
     best = levels[0]
     total = int(applied.sum())
     for j, lv in enumerate(levels):
-        n = int(lv.get("merges_before", 0))
+        n = lv.merges_before
         # level 0 and the last level keep every merge after them, the others those up to the next
-        upto = src.n_merges if j in (0, len(levels) - 1) else int(levels[j + 1].get("merges_before", 0))
-        if applied[:n].all() and not applied[upto:].any() and (lv.get("has_forest") or total == n):
+        upto = src.n_merges if j in (0, len(levels) - 1) else levels[j + 1].merges_before
+        if applied[:n].all() and not applied[upto:].any() and (lv.has_forest or total == n):
             best = lv
     level, n = int(best["level"]), int(best.get("merges_before", 0))
     cache = reader.__dict__.setdefault("_selective_forests", {0: (src.parent, src.rank)})
@@ -467,7 +467,7 @@ def plan_cut(reader, view: View, *, ratio=None, tets=None, merges=None, factors=
     if ratio is not None:
         if not 0.0 <= ratio <= 1.0:
             raise OptionError(f"ratio {ratio} is outside [0, 1]")
-        n0 = int(reader.level_meta(0)["points"])
+        n0 = reader.level_meta(0).points
         merges = int(np.floor(ratio * n0)) - src.first
         if not 0 <= merges <= src.n_merges:
             raise OptionError(f"ratio {ratio} needs {merges + src.first} merges; from level {src.level} this "
@@ -543,16 +543,16 @@ def render_selective(reader, view: View, *, ratio=None, tets=None, merges=None, 
         if log is not None:
             log("note: this file stores no merge dependencies (it was compressed without them): rendering uniformly")
         if tets is not None:
-            levels = [lv for lv in stored_levels(reader) if int(lv["tets"]) >= tets] or stored_levels(reader)[:1]
-            result = render_tetc(reader, view, level=int(min(levels, key=lambda lv: int(lv["tets"]))["level"]),
+            levels = [lv for lv in stored_levels(reader) if lv.tets >= tets] or stored_levels(reader)[:1]
+            result = render_tetc(reader, view, level=min(levels, key=lambda lv: lv.tets).level,
                                  pipeline=pipeline, progress=progress)
         else:
             result = render_tetc(reader, view, ratio=ratio, pipeline=pipeline, progress=progress)
         result.stats.update(selective=False)
         return result
     lv = reader.level_meta(cut.level)
-    counter = FlipCounter(int(lv["points"]))
-    n0 = int(reader.level_meta(0)["points"])
+    counter = FlipCounter(lv.points)
+    n0 = reader.level_meta(0).points
     kept = take_batches(reader, view.scalar, view.component, level)
     decoded = kept if cut.level == level and pipeline == "streaming" else None
     result = render_tetc(reader, view, pipeline=pipeline, target=cut.target(n0, src.first), ancestors=cut.ancestors,

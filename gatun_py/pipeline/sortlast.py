@@ -193,9 +193,9 @@ def brick_tets(source) -> int:
     if isinstance(source, TetMesh):
         return int(source.n_tets)
     if isinstance(source, BrickRef):
-        return int(open_brick(source).level_meta(source.level)["tets"])
+        return open_brick(source).level_meta(source.level).tets
     reader = source if isinstance(source, TetcReader) else TetcReader(source)
-    return int(reader.level_meta(0)["tets"])
+    return reader.level_meta(0).tets
 
 
 def render_brick(source, setup: FrameSetup, *, ratio: float | None = None, level: int | None = None,
@@ -244,7 +244,7 @@ def render_brick(source, setup: FrameSetup, *, ratio: float | None = None, level
                                 fragments=True)
         stats = dict(res.stats)
         stats.update(times, level=target.level, ratio=target.ratio, merges=target.merges,
-                     tets_decoded=int(reader.level_meta(target.level)["tets"]))
+                     tets_decoded=reader.level_meta(target.level).tets)
     stats["brick_s"] = time.perf_counter() - t0
     return res.fragments, stats
 
@@ -323,7 +323,7 @@ def plan_brick_budgets(sources, view: View, budget_s: float, *, groups=None) -> 
     """
     readers = [open_brick(s) if isinstance(s, BrickRef) else s if isinstance(s, TetcReader) else TetcReader(s)
                for s in sources]
-    tets = [int(r.level_meta(0)["tets"]) for r in readers]
+    tets = [r.level_meta(0).tets for r in readers]
     groups = groups or [list(range(len(readers)))]
     share = [0.0] * len(readers)
     for g in groups:
@@ -351,7 +351,7 @@ class BrickBudget:
 
     def __init__(self, readers):
         self.readers = list(readers)
-        self.tets = [int(r.level_meta(0)["tets"]) for r in self.readers]
+        self.tets = [r.level_meta(0).tets for r in self.readers]
         self._planners = None
 
     def __repr__(self) -> str:

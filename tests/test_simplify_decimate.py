@@ -438,19 +438,21 @@ def test_heap_pops_the_smallest_current_entry(ops, rnd):
     smallest (error, vkey) among them: against a dict of the current entries."""
     n = 12
     vkey = np.array(rnd.sample(range(100), n), np.int32)
-    heap = K.make_heap(n + 1, n)
+    h_err, h_v, h_b, h_ver = np.zeros(n + 1), np.zeros(n + 1, np.int32), np.zeros(n + 1, np.int32), \
+        np.zeros(n + 1, np.int32)
+    h_pos = np.full(n, -1, np.int32)
     counters = np.zeros(K.N_COUNTERS, np.int64)
     ref = {}
     for step, (op, v, e) in enumerate(ops):
         if op == 0:
-            K._heap_push(heap, vkey, counters, e, v, v + 1, step)
+            K._heap_push(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, e, v, v + 1, step)
             ref[v] = (e, v + 1, step)
         elif op == 1:
-            K._heap_remove(heap, vkey, counters, v)
+            K._heap_remove(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, v)
             ref.pop(v, None)
         elif ref:
             want = min(ref, key=lambda u: (ref[u][0], vkey[u]))
-            e_got, v_got, b_got, ver_got = K._heap_pop(heap, vkey, counters)
+            e_got, v_got, b_got, ver_got = K._heap_pop(h_err, h_v, h_b, h_ver, h_pos, vkey, counters)
             assert (v_got, (e_got, b_got, ver_got)) == (want, ref.pop(want))
         assert counters[K.C_HEAP] == len(ref)
-        assert all(heap.v[heap.pos[u]] == u for u in ref) and all(heap.pos[u] == -1 for u in range(n) if u not in ref)
+        assert all(h_v[h_pos[u]] == u for u in ref) and all(h_pos[u] == -1 for u in range(n) if u not in ref)

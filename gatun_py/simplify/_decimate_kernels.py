@@ -41,8 +41,6 @@ simplex), which guarantees that the collapse keeps the mesh a manifold with a cl
 
 from __future__ import annotations
 
-from collections import namedtuple
-
 import numpy as np
 from numba import get_thread_id, njit, prange
 
@@ -796,21 +794,10 @@ def _total_error(dm_w, di, ge_w, swept_w, qe_w, se, n_col, power):
     return (dm_w + di + ge_w + swept_w + qe_w + se) / float(n_col) ** power
 
 
-# What every candidate merge of a vertex shares about its star, and one evaluation's scratch arrays
-# (made by _star_context): the star's tets' old volumes, masses, density sums, face normals and
-# offsets, its volume, the bound that makes a new volume safely positive, its boundary faces with
-# their old normals and areas, the sample points (ids, their tets, the stride, their old error);
-# then scratch for the new volumes, the interpolant, the new normals and areas, the new tets'
-# planes and values.
-StarContext = namedtuple("StarContext", [
-    "vol_old", "mass_old", "dsum", "nrm", "off", "vol_star", "fast_ok", "bf", "n_old", "area_old", "area_sum",
-    "p_id", "p_k", "stride", "e_old", "v6n", "vout", "q", "n_new", "area_new", "s_ok", "s_lam", "s_val"])
-
-
 @njit(cache=True)
 def _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count, fbuf, ibuf, fo, io):
     """Everything about a's star that every candidate merge of a shares, and the scratch arrays of
-    one evaluation, as one :data:`StarContext`, all taken
+    one evaluation, as one tuple (see the names unpacked in :func:`_candidate_terms`), all taken
     from ``fbuf`` (from offset ``fo`` on) and ``ibuf`` (from ``io``) where they fit (see
     :func:`_take`). Returns (the tuple, the offset in ``ibuf`` after it)."""
     ns = st.shape[0]
@@ -855,21 +842,23 @@ def _star_context(a, st, T, nbr, pts, dens, isb, params, pdat, tp_head, tp_count
     e_old = 0.0
     if npt > 0:
         e_old = _star_samples(st, pdat, tp_head, tp_count, stride, p_id, p_k)
-    return StarContext(vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
-                       stride, e_old, v6n, vout, q, n_new, area_new, s_ok, s_lam, s_val), io
+    return (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
+            stride, e_old, v6n, vout, q, n_new, area_new, s_ok, s_lam, s_val), io
 
 
 @njit(cache=True, _nrt=False)
 def _exact_terms(a, b, st, T, pts, dens, params, pdat, ctx):
     """The two terms left out of the bound: (interpolation term, sampled error term), weighted."""
+    (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
+     stride, e_old, v6n, vout, q, n_new, area_new, s_ok, s_lam, s_val) = ctx
     di = 0.0
     if params[P_WI] > 0.0:
-        f_dev = _interp_deviation(a, b, st, T, pts, dens, ctx.v6n, ctx.q, ctx.vout)
-        di = params[P_WI] * f_dev * f_dev * ctx.vol_star
+        f_dev = _interp_deviation(a, b, st, T, pts, dens, v6n, q, vout)
+        di = params[P_WI] * f_dev * f_dev * vol_star
     se = 0.0
-    if ctx.p_id.shape[0] > 0:
-        se = _sample_error(b, st, T, pts, dens, pdat, ctx.p_id, ctx.p_k, ctx.s_ok, ctx.s_lam, ctx.s_val, ctx.q)
-        se = params[P_WS] * ctx.stride * (se - ctx.e_old)
+    if p_id.shape[0] > 0:
+        se = _sample_error(b, st, T, pts, dens, pdat, p_id, p_k, s_ok, s_lam, s_val, q)
+        se = params[P_WS] * stride * (se - e_old)
     return di, se
 
 
@@ -882,7 +871,9 @@ def _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pdat, m
     interpolation term, >= 0, left out; the sampled error at its most negative, every point's
     new error 0). Returns the number of candidates. Legality here covers volumes, boundary
     orientation and the boundary-into-interior rule; the link condition is the caller's."""
-    se_low = params[P_WS] * ctx.stride * (0.0 - ctx.e_old) if ctx.p_id.shape[0] > 0 else 0.0
+    (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
+     stride, e_old, v6n, vout, q, n_new, area_new, s_ok, s_lam, s_val) = ctx
+    se_low = params[P_WS] * stride * (0.0 - e_old) if p_id.shape[0] > 0 else 0.0
     a_bnd = isb[a]
     stamp = _next_stamp(counters)
     mark[a] = stamp
@@ -897,14 +888,14 @@ def _candidate_terms(a, st, T, pts, dens, isb, pinned, params, quad, u4, pdat, m
             if (pinned[b] != 0 and ((pinned[b] & PIN_NO_TARGET) != 0 or a_bnd)) or (a_bnd and not isb[b]):
                 continue
             counters[C_EVALS] += 1
-            n_col = _new_volumes(b, st, T, pts, ctx.vol_old, ctx.nrm, ctx.off, ctx.fast_ok, ctx.v6n, ctx.q)
+            n_col = _new_volumes(b, st, T, pts, vol_old, nrm, off, fast_ok, v6n, q)
             if n_col < 0:
                 continue
-            if not _boundary_ok(a, b, ctx.bf, ctx.n_old, ctx.area_old, pts, ctx.area_new, ctx.n_new):
+            if not _boundary_ok(a, b, bf, n_old, area_old, pts, area_new, n_new):
                 continue
-            terms_out[nc, 0] = params[P_WD] * _mass_error(b, st, T, dens, ctx.mass_old, ctx.dsum, ctx.v6n)
-            terms_out[nc, 1] = params[P_WG] * _area_error(a, b, ctx.bf, ctx.area_old, ctx.area_new, ctx.area_sum)
-            terms_out[nc, 2] = params[P_WV] * _swept_volume(b, ctx.bf, ctx.n_old, pts)
+            terms_out[nc, 0] = params[P_WD] * _mass_error(b, st, T, dens, mass_old, dsum, v6n)
+            terms_out[nc, 1] = params[P_WG] * _area_error(a, b, bf, area_old, area_new, area_sum)
+            terms_out[nc, 2] = params[P_WV] * _swept_volume(b, bf, n_old, pts)
             terms_out[nc, 3] = params[P_WQ] * (_quadric_at(quad, u4, a, b) if params[P_WQ] > 0.0 else 0.0)
             terms_out[nc, 4] = n_col
             di, se = _exact_terms(a, b, st, T, pts, dens, params, pdat, ctx) if exact else (0.0, se_low)
@@ -937,33 +928,35 @@ def _candidate_exact(a, b, terms, st, T, pts, dens, params, pdat, ctx, best_b, b
     rounding, so the bound never exceeds the exact error and the choice is the one of computing
     every error in full, bit for bit.
     """
+    (vol_old, mass_old, dsum, nrm, off, vol_star, fast_ok, bf, n_old, area_old, area_sum, p_id, p_k,
+     stride, e_old, v6n, vout, q, n_new, area_new, s_ok, s_lam, s_val) = ctx
     n_col = int(terms[4])
     counters[C_EXACT] += 1
     power = params[P_NCP]
-    _new_volumes(b, st, T, pts, ctx.vol_old, ctx.nrm, ctx.off, ctx.fast_ok, ctx.v6n, ctx.q)  # v6n, for the interpolant
+    _new_volumes(b, st, T, pts, vol_old, nrm, off, fast_ok, v6n, q)  # v6n, for the interpolant
     di = 0.0
     if params[P_WI] > 0.0:
-        f_dev = _interp_deviation(a, b, st, T, pts, dens, ctx.v6n, ctx.q, ctx.vout)
-        di = params[P_WI] * f_dev * f_dev * ctx.vol_star
+        f_dev = _interp_deviation(a, b, st, T, pts, dens, v6n, q, vout)
+        di = params[P_WI] * f_dev * f_dev * vol_star
     se = 0.0
-    npt = ctx.p_id.shape[0]
+    npt = p_id.shape[0]
     if npt > 0:
-        w = params[P_WS] * ctx.stride
-        if _loses(_total_error(terms[0], di, terms[1], terms[2], terms[3], w * (0.0 - ctx.e_old), n_col, power),
+        w = params[P_WS] * stride
+        if _loses(_total_error(terms[0], di, terms[1], terms[2], terms[3], w * (0.0 - e_old), n_col, power),
                   b, best_e, best_b, vkey):
             counters[C_PRUNED] += 1
             return 0.0, False
-        _new_star_planes(b, st, T, pts, dens, ctx.s_ok, ctx.s_lam, ctx.s_val, ctx.q)
+        _new_star_planes(b, st, T, pts, dens, s_ok, s_lam, s_val, q)
         acc = 0.0
         for lo in range(0, npt, _BOUND_EVERY):
             hi = min(npt, lo + _BOUND_EVERY)
-            acc = _sample_sum(acc, lo, hi, b, pts, dens, pdat, ctx.p_id, ctx.p_k, ctx.s_ok, ctx.s_lam, ctx.s_val)
+            acc = _sample_sum(acc, lo, hi, b, pts, dens, pdat, p_id, p_k, s_ok, s_lam, s_val)
             counters[C_POINTS] += hi - lo
-            if hi < npt and _loses(_total_error(terms[0], di, terms[1], terms[2], terms[3], w * (acc - ctx.e_old),
-                                                n_col, power), b, best_e, best_b, vkey):
+            if hi < npt and _loses(_total_error(terms[0], di, terms[1], terms[2], terms[3], w * (acc - e_old), n_col,
+                                                power), b, best_e, best_b, vkey):
                 counters[C_PRUNED] += 1
                 return 0.0, False
-        se = w * (acc - ctx.e_old)
+        se = w * (acc - e_old)
     return _total_error(terms[0], di, terms[1], terms[2], terms[3], se, n_col, power), True
 
 
@@ -1038,45 +1031,20 @@ def _evaluate(a, T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad,
 
 
 # -- a binary min-heap over (error, vertex), at most one entry per vertex ---------------------------
-# Entry i is (``err[i]``, ``v[i]``: the vertex, ``b[i]``: its target or -1, ``ver[i]``: the
-# vertex's version when it was made); ``pos[v]``: the index of v's entry, -1 if none. A vertex's
-# new entry replaces its old one, and a vertex re-evaluated without a legal merge loses it: every
-# entry is current (``ver`` stays for the callers' checks). The keys (error, ``vkey``)
+# ``h_pos[v]``: the index of v's entry, -1 if none. A vertex's new entry replaces its old one, and a
+# vertex re-evaluated without a legal merge loses it: every entry is current (``h_ver``, the
+# vertex's version when it was made, stays for the callers' checks). The keys (error, ``vkey``)
 # of distinct vertices are distinct and the errors are never NaN, so the entries come out in
 # one order whatever the heap's shape: the order of a heap that kept the superseded entries
 # and skipped them on their way out (the one before), with no such entries to pop.
-Heap = namedtuple("Heap", ["err", "v", "b", "ver", "pos"])
-
-# The decimation's state as :func:`_run` takes it (made by DecimationState, one constructor each
-# there; see the module docstring for each array): the tets and their incidence lists, the
-# vertices (points, values, boundary and pin flags, quadrics, 4-D points, the caller's ids), the
-# sample points, the per-thread stamp rows and counters, and the forest so far with each vertex's
-# version, last error and round locks.
-MeshState = namedtuple("MeshState", ["T", "alive", "nbr", "head", "nxt"])
-VertexState = namedtuple("VertexState", ["pts", "dens", "isb", "pinned", "quad", "u4", "vkey"])
-SampleState = namedtuple("SampleState", ["pdat", "tp_head", "tp_count", "vw", "prow"])
-ThreadScratch = namedtuple("ThreadScratch", ["marks", "marks_b", "marks_ab", "tcount"])
-ForestState = namedtuple("ForestState", ["parent", "rank", "ver", "last_err", "lock", "lock_b"])
-
-
-@njit(cache=True)
-def make_heap(cap, n):
-    """An empty :data:`Heap` of ``cap`` entries over ``n`` vertices (the entry count is the caller's
-    ``counters[C_HEAP]``). With ``n`` = 0 it is a plain list of entries (no ``pos``)."""
-    return Heap(np.zeros(cap), np.zeros(cap, np.int32), np.zeros(cap, np.int32), np.zeros(cap, np.int32),
-                np.full(n, -1, np.int32))
-
-
 @njit(cache=True, _nrt=False)
-def _heap_less(heap, vkey, i, j):
+def _heap_less(h_err, h_v, vkey, i, j):
     """(error, ``vkey`` of the vertex) of entry i below entry j's (the key only read on equal errors)."""
-    h_err, h_v = heap.err, heap.v
     return h_err[i] < h_err[j] or (h_err[i] == h_err[j] and vkey[h_v[i]] < vkey[h_v[j]])
 
 
 @njit(cache=True, _nrt=False)
-def _heap_swap(heap, i, j):
-    h_err, h_v, h_b, h_ver, h_pos = heap.err, heap.v, heap.b, heap.ver, heap.pos
+def _heap_swap(h_err, h_v, h_b, h_ver, h_pos, i, j):
     h_err[i], h_err[j] = h_err[j], h_err[i]
     h_v[i], h_v[j] = h_v[j], h_v[i]
     h_b[i], h_b[j] = h_b[j], h_b[i]
@@ -1086,11 +1054,11 @@ def _heap_swap(heap, i, j):
 
 
 @njit(cache=True, _nrt=False)
-def _sift_up(heap, vkey, i):
+def _sift_up(h_err, h_v, h_b, h_ver, h_pos, vkey, i):
     while i > 0:
         p = (i - 1) >> 1
-        if _heap_less(heap, vkey, i, p):
-            _heap_swap(heap, i, p)
+        if _heap_less(h_err, h_v, vkey, i, p):
+            _heap_swap(h_err, h_v, h_b, h_ver, h_pos, i, p)
             i = p
         else:
             break
@@ -1098,60 +1066,60 @@ def _sift_up(heap, vkey, i):
 
 
 @njit(cache=True, _nrt=False)
-def _heap_push(heap, vkey, counters, e, v, b, ver):
+def _heap_push(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, e, v, b, ver):
     """v's entry (error e, target b, version ver), replacing the one v has."""
-    i = heap.pos[v]
+    i = h_pos[v]
     if i < 0:
         i = counters[C_HEAP]
         counters[C_HEAP] = i + 1
-        heap.pos[v] = i
-    heap.err[i] = e
-    heap.v[i] = v
-    heap.b[i] = b
-    heap.ver[i] = ver
-    i = _sift_up(heap, vkey, i)
-    _sift_down(heap, vkey, i, counters[C_HEAP])
+        h_pos[v] = i
+    h_err[i] = e
+    h_v[i] = v
+    h_b[i] = b
+    h_ver[i] = ver
+    i = _sift_up(h_err, h_v, h_b, h_ver, h_pos, vkey, i)
+    _sift_down(h_err, h_v, h_b, h_ver, h_pos, vkey, i, counters[C_HEAP])
 
 
 @njit(cache=True, _nrt=False)
-def _heap_remove(heap, vkey, counters, v):
+def _heap_remove(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, v):
     """Drop v's entry, if it has one."""
-    i = heap.pos[v]
+    i = h_pos[v]
     if i < 0:
         return
     n = counters[C_HEAP] - 1
-    _heap_swap(heap, i, n)
-    heap.pos[v] = -1
+    _heap_swap(h_err, h_v, h_b, h_ver, h_pos, i, n)
+    h_pos[v] = -1
     counters[C_HEAP] = n
     if i < n:
-        i = _sift_up(heap, vkey, i)
-        _sift_down(heap, vkey, i, n)
+        i = _sift_up(h_err, h_v, h_b, h_ver, h_pos, vkey, i)
+        _sift_down(h_err, h_v, h_b, h_ver, h_pos, vkey, i, n)
 
 
 @njit(cache=True, _nrt=False)
-def _sift_down(heap, vkey, i, n):
+def _sift_down(h_err, h_v, h_b, h_ver, h_pos, vkey, i, n):
     while True:
         l = 2 * i + 1
         if l >= n:
             break
         m = l
-        if l + 1 < n and _heap_less(heap, vkey, l + 1, l):
+        if l + 1 < n and _heap_less(h_err, h_v, vkey, l + 1, l):
             m = l + 1
-        if _heap_less(heap, vkey, m, i):
-            _heap_swap(heap, i, m)
+        if _heap_less(h_err, h_v, vkey, m, i):
+            _heap_swap(h_err, h_v, h_b, h_ver, h_pos, i, m)
             i = m
         else:
             break
 
 
 @njit(cache=True, _nrt=False)
-def _heap_pop(heap, vkey, counters):
+def _heap_pop(h_err, h_v, h_b, h_ver, h_pos, vkey, counters):
     n = counters[C_HEAP] - 1
-    e, v, b, ver = heap.err[0], heap.v[0], heap.b[0], heap.ver[0]
-    _heap_swap(heap, 0, n)
-    heap.pos[v] = -1
+    e, v, b, ver = h_err[0], h_v[0], h_b[0], h_ver[0]
+    _heap_swap(h_err, h_v, h_b, h_ver, h_pos, 0, n)
+    h_pos[v] = -1
     counters[C_HEAP] = n
-    _sift_down(heap, vkey, 0, n)
+    _sift_down(h_err, h_v, h_b, h_ver, h_pos, vkey, 0, n)
     return e, v, b, ver
 
 
@@ -1449,11 +1417,9 @@ def _touches_target(st, T, lock_b, stamp):
 
 
 @njit(cache=True, _nrt=False)
-def _set_aside(aside, n_def, e, a, b, v_a, ver):
-    """Keep a blocked heap entry for the next round in ``aside`` (a :data:`Heap` used as a list);
-    returns the new count. Full: the stale entries are dropped first (the live ones, one per vertex
-    at most, always fit)."""
-    d_err, d_v, d_b, d_ver = aside.err, aside.v, aside.b, aside.ver
+def _set_aside(d_err, d_v, d_b, d_ver, n_def, e, a, b, v_a, ver):
+    """Keep a blocked heap entry for the next round; returns the new count. Full: the stale
+    entries are dropped first (the live ones, one per vertex at most, always fit)."""
     if n_def >= d_err.shape[0]:
         k = 0
         for i in range(n_def):
@@ -1472,7 +1438,9 @@ def _set_aside(aside, n_def, e, a, b, v_a, ver):
 
 
 @njit(cache=True, nogil=True)  # compress encodes the levels' meshes in a thread meanwhile
-def _run(mesh, verts, samples, threads, forest, heap, params, counters, max_merges, round_stamp, max_blocked):
+def _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab, tcount,
+         counters, ver, h_err, h_v, h_b, h_ver, h_pos, last_err, parent, rank, max_merges, pdat, tp_head, tp_count,
+         vw, prow, lock, lock_b, round_stamp, max_blocked):
     """Greedy decimation until ``max_merges`` merges are done in total; True when no legal merge is left.
 
     ``marks*`` and ``tcount`` have one row per thread (stamps, evaluation counts); the sequential
@@ -1488,21 +1456,13 @@ def _run(mesh, verts, samples, threads, forest, heap, params, counters, max_merg
     with the star walk the link test makes anyway); otherwise the entry is set aside unchanged and
     goes back into the heap when the round ends: at ``max_merges``, when every candidate left
     is blocked, or when more than ``max_blocked`` entries were set aside (False either way). ``round_stamp == 0`` is the plain greedy order.
-
-    The state comes in the structs of :mod:`gatun_py.simplify.decimation`'s ``DecimationState``
-    (:data:`MeshState`, :data:`VertexState`, :data:`SampleState`, :data:`ThreadScratch`,
-    :data:`ForestState`, :data:`Heap`); the kernels it calls take their plain arrays.
     """
-    T, alive, nbr, head, nxt = mesh.T, mesh.alive, mesh.nbr, mesh.head, mesh.nxt
-    pts, dens, isb, pinned, quad, u4, vkey = (verts.pts, verts.dens, verts.isb, verts.pinned, verts.quad, verts.u4,
-                                              verts.vkey)
-    pdat, tp_head, tp_count, vw, prow = samples.pdat, samples.tp_head, samples.tp_count, samples.vw, samples.prow
-    marks, marks_b, marks_ab, tcount = threads.marks, threads.marks_b, threads.marks_ab, threads.tcount
-    parent, rank, ver, last_err, lock, lock_b = (forest.parent, forest.rank, forest.ver, forest.last_err, forest.lock,
-                                                 forest.lock_b)
     n = head.shape[0]
     # entries set aside in this round (at most one live entry per vertex, see _heap_push)
-    aside = make_heap(heap.err.shape[0] if round_stamp > 0 else 0, 0)
+    d_err = np.empty(h_err.shape[0] if round_stamp > 0 else 0)
+    d_v = np.empty(d_err.shape[0], np.int32)
+    d_b = np.empty(d_err.shape[0], np.int32)
+    d_ver = np.empty(d_err.shape[0], np.int32)
     n_def = 0
     mark = marks[0]
     mark_b = marks_b[0]
@@ -1537,11 +1497,11 @@ def _run(mesh, verts, samples, threads, forest, heap, params, counters, max_merg
             ver[v] += 1
             if out_b[i] >= 0:
                 last_err[v] = out_e[i]
-                _heap_push(heap, vkey, counters, out_e[i], v, out_b[i], ver[v])
+                _heap_push(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, out_e[i], v, out_b[i], ver[v])
                 found = True
             else:
                 last_err[v] = -1.0
-                _heap_remove(heap, vkey, counters, v)
+                _heap_remove(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, v)
         n_todo = 0
         if sweeping and not found:
             return True
@@ -1549,8 +1509,8 @@ def _run(mesh, verts, samples, threads, forest, heap, params, counters, max_merg
         if counters[C_MERGES] >= max_merges or (n_def > 0 and (counters[C_HEAP] == 0 or n_def > max_blocked)):
             # the round is over: what it set aside goes back with its error unchanged
             for i in range(n_def):
-                if aside.ver[i] == ver[aside.v[i]]:
-                    _heap_push(heap, vkey, counters, aside.err[i], aside.v[i], aside.b[i], aside.ver[i])
+                if d_ver[i] == ver[d_v[i]]:
+                    _heap_push(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, d_err[i], d_v[i], d_b[i], d_ver[i])
             return False
         if counters[C_HEAP] == 0:
             # neighbourhoods two rings away from a merge may have become legal: look again
@@ -1561,13 +1521,13 @@ def _run(mesh, verts, samples, threads, forest, heap, params, counters, max_merg
                     n_todo += 1
             sweeping = True
             continue
-        e, a, b, v_a = _heap_pop(heap, vkey, counters)
+        e, a, b, v_a = _heap_pop(h_err, h_v, h_b, h_ver, h_pos, vkey, counters)
         tc[C_POPS] += 1
         if v_a != ver[a] or parent[a] != a:
             tc[C_STALE] += 1
             continue
         if round_stamp > 0 and (lock[a] == round_stamp or (b >= 0 and lock[b] == round_stamp)):
-            n_def = _set_aside(aside, n_def, e, a, b, v_a, ver)
+            n_def = _set_aside(d_err, d_v, d_b, d_ver, n_def, e, a, b, v_a, ver)
             continue
         if b < 0:
             tc[C_LAZY] += 1
@@ -1580,7 +1540,7 @@ def _run(mesh, verts, samples, threads, forest, heap, params, counters, max_merg
             continue
         st_a = _star(a, head, nxt, T, alive)
         if round_stamp > 0 and _touches_target(st_a, T, lock_b, round_stamp):
-            n_def = _set_aside(aside, n_def, e, a, b, v_a, ver)
+            n_def = _set_aside(d_err, d_v, d_b, d_ver, n_def, e, a, b, v_a, ver)
             continue
         tc[C_LINK] += 1
         # a's star is unchanged since the entry was made (that would have bumped its version),
@@ -1616,11 +1576,13 @@ def _run(mesh, verts, samples, threads, forest, heap, params, counters, max_merg
             w = nb[i]
             if parent[w] == w and not pinned[w]:
                 ver[w] += 1
-                _heap_push(heap, vkey, counters, max(e, last_err[w]), w, -1, ver[w])
+                _heap_push(h_err, h_v, h_b, h_ver, h_pos, vkey, counters, max(e, last_err[w]), w, -1, ver[w])
 
 
 @njit(cache=True, nogil=True)
-def _run_rounds(mesh, verts, samples, threads, forest, heap, params, counters, ends, max_blocked, round_no, starts):
+def _run_rounds(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab,
+                tcount, counters, ver, h_err, h_v, h_b, h_ver, h_pos, last_err, parent, rank, pdat, tp_head, tp_count,
+                vw, prow, lock, lock_b, ends, max_blocked, round_no, starts):
     """Rounds of :func:`_run` up to every ``ends[r]`` in turn (its ``max_blocked[r]``), in one call
     without the GIL: the round loop of :func:`gatun_py.simplify.decimation.decimate` (a return to
     Python between rounds waits for the GIL, which a numba encoder in another thread may hold for
@@ -1633,8 +1595,9 @@ def _run_rounds(mesh, verts, samples, threads, forest, heap, params, counters, e
             starts[k] = counters[C_MERGES]
             k += 1
             round_no[0] += 1
-            if _run(mesh, verts, samples, threads, forest, heap, params, counters, ends[r], round_no[0],
-                    max_blocked[r]):
+            if _run(T, alive, nbr, head, nxt, pts, dens, isb, pinned, params, quad, u4, vkey, marks, marks_b, marks_ab,
+                    tcount, counters, ver, h_err, h_v, h_b, h_ver, h_pos, last_err, parent, rank, ends[r], pdat,
+                    tp_head, tp_count, vw, prow, lock, lock_b, round_no[0], max_blocked[r]):
                 return k, True, r
     return k, False, ends.shape[0] - 1
 

@@ -333,9 +333,14 @@ class DecimationState:
         self.counters[K.C_PTOP] = m
         self.ver = np.zeros(n, np.int32)
         self.last_err = np.full(n, -1.0)
-        # at most one entry per vertex in the heap (its pos), and at most one current entry per
+        # at most one entry per vertex in the heap (h_pos), and at most one current entry per
         # vertex among those a round sets aside (a full list drops the others first)
-        self.heap = K.make_heap(2 * n + 1024, n)
+        cap = 2 * n + 1024
+        self.h_err = np.zeros(cap)
+        self.h_v = np.zeros(cap, np.int32)
+        self.h_b = np.zeros(cap, np.int32)
+        self.h_ver = np.zeros(cap, np.int32)
+        self.h_pos = np.full(n, -1, np.int32)  # every vertex's entry in the heap (at most one)
         # the forest so far, local: parent[v] (a local id), rank[v]
         self.parent = np.arange(n, dtype=np.int32)
         self.rank = np.full(n, K.ROOT_RANK, np.int32)
@@ -352,15 +357,8 @@ class DecimationState:
     def _sample_args(self):
         return (self.pdat, self.tp_head, self.tp_count)
 
-    def _structs(self):
-        """The state as :func:`~gatun_py.simplify._decimate_kernels._run` takes it (the arrays are
-        this object's, not copies)."""
-        return (K.MeshState(self.T, self.alive, self.nbr, self.head, self.nxt),
-                K.VertexState(self.pts, self.dens, self.isb, self.pinned, self.quad, self.u4, self.v_orig),
-                K.SampleState(self.pdat, self.tp_head, self.tp_count, self.vw, self.prow),
-                K.ThreadScratch(self.marks, self.marks_b, self.marks_ab, self.tcount),
-                K.ForestState(self.parent, self.rank, self.ver, self.last_err, self.lock, self.lock_b),
-                self.heap, self.params, self.counters)
+    def _heap_args(self):
+        return (self.ver, self.h_err, self.h_v, self.h_b, self.h_ver, self.h_pos, self.last_err)
 
     def start(self) -> None:
         """Evaluate every vertex's best merge (the first :meth:`run` does it too)."""
@@ -377,7 +375,9 @@ class DecimationState:
         if one_round:
             self.round += 1
             stamp = self.round
-        return bool(K._run(*self._structs(), np.int64(max_merges), np.int64(stamp), np.int64(max_blocked)))
+        return bool(K._run(*self._mesh_args(), self.marks, self.marks_b, self.marks_ab, self.tcount, self.counters,
+                           *self._heap_args(), self.parent, self.rank, np.int64(max_merges), *self._sample_args(),
+                           self.vw, self.prow, self.lock, self.lock_b, np.int64(stamp), np.int64(max_blocked)))
 
     def run_rounds(self, ends: np.ndarray, max_blocked: np.ndarray):
         """Rounds of independent merges (as :meth:`run` with ``one_round``) up to every ``ends[r]``
@@ -386,8 +386,10 @@ class DecimationState:
         ends = np.ascontiguousarray(ends, np.int64)
         starts = np.empty(max(0, int(ends[-1]) - self.n_merges) + 1 if ends.size else 0, np.int64)
         round_no = np.array([self.round], np.int64)
-        k, finished, r = K._run_rounds(*self._structs(), ends, np.ascontiguousarray(max_blocked, np.int64), round_no,
-                                       starts)
+        k, finished, r = K._run_rounds(*self._mesh_args(), self.marks, self.marks_b, self.marks_ab, self.tcount,
+                                       self.counters, *self._heap_args(), self.parent, self.rank,
+                                       *self._sample_args(), self.vw, self.prow, self.lock, self.lock_b, ends,
+                                       np.ascontiguousarray(max_blocked, np.int64), round_no, starts)
         self.round = int(round_no[0])
         return [int(x) for x in starts[:k]], bool(finished), int(r)
 

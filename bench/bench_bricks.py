@@ -6,7 +6,7 @@ and the whole-mesh decode of the K = 8 file on 1 and 2 threads (median of altern
 whether both give the same arrays). ``--full`` adds files with forest and levels (decimation:
 minutes per million tets).
 
-Targets (issue 16): size cost <= 5 % at K = 8 and <= 15 % at K = 64 on the ~10 M-tet mesh; decode
+Targets: size cost <= 5 % at K = 8 and <= 15 % at K = 64 on the ~10 M-tet mesh; decode
 on 2 cores >= 1.8 x faster than on 1.
 
     python bench/bench_bricks.py [--quick] [--full] [--big]   # --big adds flange-10m (built if missing)

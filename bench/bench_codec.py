@@ -27,7 +27,7 @@ QUICK = "--quick" in sys.argv
 DECODE_ONLY = "--decode" in sys.argv
 REPEAT = 1 if QUICK else 3
 CMD = "python bench/bench_codec.py" + (" --quick" if QUICK else "")
-# the gmsh flanges (issue 12's unstructured meshes), decoded beside the samples: TETC_FLANGE_DIR's
+# the gmsh flanges (the unstructured meshes), decoded beside the samples: TETC_FLANGE_DIR's
 # files when it is set, else bench/out/flanges/, built on first use (bench/gmsh_meshes.py, then
 # compressed with every level as `tetc compress` does; flange-10m takes some minutes; --quick: 1m only)
 FLANGE_DIR = Path(os.environ.get("TETC_FLANGE_DIR", str(WORK / "flanges")))
@@ -239,11 +239,11 @@ def decode_speed_text() -> str:
              "`TetcReader(bytes).decode_mesh(jobs=1)` (level 0 into a `TetMesh`: connectivity, geometry, point "
              "arrays, container) and `TetcReader(bytes).iter_decode()` (default batches of 65,536 tets, "
              "each dropped: the streaming path render and isosurface use). The flanges are the gmsh meshes "
-             f"of issue 12 (`{FLANGE_DIR}`, format {_formats()}; level 0 decoded). VTK: "
+             f"(`{FLANGE_DIR}`, format {_formats()}; level 0 decoded). VTK: "
              "`vtkXMLUnstructuredGridReader` on the same mesh written by VTK's own XML writer as appended "
              "raw binary (float32 points and density, int64 connectivity), uncompressed and zlib-compressed, "
              "and as this project writes a `.vtu` (`gatun_py.mesh.write_mesh`, meshio: inline base64, zlib); "
-             "best CPU seconds of the same number of runs. Targets (issue 12): ≥ 3 M tets/s, and ≤ 1.5 × "
+             "best CPU seconds of the same number of runs. Targets: ≥ 3 M tets/s, and ≤ 1.5 × "
              "VTK's read time. Wall-clock rates for reference (machine shared; load average at the start: "
              f"{os.getloadavg()[0]:.1f}).\n\n")
     text += table(["data set", "tets", "decode_mesh M tets/s", "iter_decode M tets/s", "stream / whole time",
@@ -272,7 +272,7 @@ def decode_speed_text() -> str:
                  "connectivity decode of flange-1m from 0.37 to 0.28 CPU s and `decode_mesh` from 0.65 to "
                  "0.52 s, on Combustion `decode_mesh` from 0.093 to 0.082 s, in that session (main against "
                  "its branch, alternating runs, the output byte-identical). "
-                 "Then (issue 12, profiled with perf down to instructions): a border node id is the offset "
+                 "Then (profiled with perf down to instructions): a border node id is the offset "
                  "of its next link in the row table, so a list walk's chain of dependent loads is "
                  "`node = E[node]` with nothing between the loads (the slot, needed beside the chain, a "
                  "multiply and a shift); the tet decoder prefetches ahead in its FIFO (the faces to come are "
@@ -362,7 +362,7 @@ def _formats() -> str:
 
 
 def flange_connectivity_text() -> str:
-    """Connectivity bits per tet of the gmsh flanges (issue 12 item 5): the sizes of level 0's
+    """Connectivity bits per tet of the gmsh flanges: the sizes of level 0's
     boundary and tet sections in the stored files (what the encoder wrote; no re-encoding), and the
     connectivity decode's CPU time, beside the same flanges in format 4 (coding 1) when present."""
     from gatun_py.codec import TetcReader
@@ -399,7 +399,7 @@ def flange_connectivity_text() -> str:
         return ""
     text = ("### Connectivity of the gmsh flanges\n\nLevel 0 of the stored files (`" + str(FLANGE_DIR) + "`, format "
             "in the table; coding 1 = the same flanges in format 4, `" + str(FLANGE_V4_DIR) + "`): the boundary "
-            "and tet sections' sizes per tet, against issue 12's target (≤ 2.0 bits/tet on the gmsh meshes, "
+            "and tet sections' sizes per tet, against the target (≤ 2.0 bits/tet on the gmsh meshes, "
             "stretch 1.8; the grid-derived samples are in the connectivity table above), and the "
             "connectivity decode alone (`ConnectivityDecoder`, boundary and tets, batches of 65,536; best "
             "process CPU seconds, the two codings' runs alternating).\n\n")
@@ -425,7 +425,7 @@ CODING2_NOTE = (
     'average of 6–12 on 2 cores. Against main as branched (format 4 file, coding 1), `decode_mesh` of '
     'flange-1m costs 1.17 × (0.53 against 0.45 CPU s per decode: whole-process medians of 5 alternating '
     "runs of 5 and of 1 decodes, differenced). Coding 1's decoder (the format ≤ 4 files) keeps its own loop and shares the "
-    "border's helpers (so the node ids and the case (c) hash of issue 12)."
+    "border's helpers (so the node ids and the case (c) hash)."
 )
 
 

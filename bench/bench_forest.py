@@ -1,4 +1,4 @@
-"""Benchmark of the merge forest's coding (issue 12): bits per vertex and the size of all levels.
+"""Benchmark of the merge forest's coding: bits per vertex and the size of all levels.
 
 Run as ``python bench/bench_forest.py [--quick] [names...]``; writes ``bench/sections/forest.md``.
 
@@ -176,7 +176,7 @@ def _level_forest_bytes(forest, mesh):
 
 
 def shared_vertex_trade(payloads):
-    """What storing each vertex's data once across the levels 1.. would give and cost (issue 12's
+    """What storing each vertex's data once across the levels 1.. would give and cost (the
     all-levels target), from the file ``tetc compress`` writes.
 
     A level's vertices are a subset of the finer level's, with the same values. If every level
@@ -292,7 +292,7 @@ def main(argv=None):
         return "cached" if x is None else f"{x:.1f}"
 
     lines = [
-        "## Merge forest coding (issue 12)", "",
+        "## Merge forest coding", "",
         f"Command: `python bench/bench_forest.py` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load average "
         + ", ".join(f"{x:.2f}" for x in os.getloadavg()) + ", 2 cores shared). Two forests per mesh from `decimate` "
         f"(cached in `bench/out/forests/`): *rounds* ({ROUNDS_PER_LEVEL} rounds of independent merges per level, the "
@@ -325,7 +325,7 @@ def main(argv=None):
         "",
     ]
     labels = list(rows[0]["predictability"])
-    lines += ["Can the order inside a rank bucket be predicted? (issue 12: code the rank as its place in a predicted "
+    lines += ["Can the order inside a rank bucket be predicted? (code the rank as its place in a predicted "
               "order only if that saves ≥ 1.5 bits/vertex.) Bits per vertex a predictor could save on the rank's place "
               f"in its bucket, measured offline (`rank_predictability`: {PREDICT_BINS} quantile bins of the place and of "
               "the predictor, buckets of ≥ 2,048 vertices; the estimate is biased in the predictor's favour). The "

@@ -3,7 +3,7 @@
 Run: ``python bench/bench_geometry.py [--quick] [--big]``  →  ``bench/sections/geometry.md``,
 ``bench/figures/geometry_bits.png``.
 
-Data: the four samples, then the gmsh meshes of issue 12 (block-50k and flange-1m; ``--big`` adds
+Data: the four samples, then the gmsh meshes (block-50k and flange-1m; ``--big`` adds
 flange-10m), taken from ``common.MESH_CACHE`` (``$TETC_MESH_CACHE``) when there, else built by
 ``bench/gmsh_meshes.py`` (slow). Vertices are coded in the real decode order of the cut-border
 connectivity coder (``encode_connectivity``), with its predictor refs. Peers run in the same process
@@ -26,7 +26,7 @@ from common import FIGURES, MESH_CACHE, SAMPLE_FILES, code_state, load, table, w
 COMMAND = "python bench/bench_geometry.py"
 GMSH = ["block-50k", "flange-1m"]
 GMSH_BIG = ["flange-10m"]
-TARGET = 0.9  # issue 12: geometry b/v <= 0.9 x the best peer on every mesh
+TARGET = 0.9  # geometry b/v <= 0.9 x the best peer on every mesh
 
 
 def _load_any(name):
@@ -216,7 +216,7 @@ def main(argv: list[str]) -> None:
              "((n,3) interleaved, (3,n) planar, one array per axis; the next table says which), its density "
              "as one array. b/v = bits per vertex for x, y, z and density together (a channel's b/v counts its "
              "value table's stream too; the rest of *bytes* is the block header). *Best peer* = the peer "
-             "with the smallest total; the target (issue 12) is ours ≤ 0.9 × that. *Per-array best* is "
+             "with the smallest total; the target is ours ≤ 0.9 × that. *Per-array best* is "
              "stricter: the best peer's coordinates plus the best peer's density, even from two different "
              "peers.\n\n")
     text += table(["data set", "points", "bytes", "b/v", "x / y / z / density b/v", "mode x/y/z/d",

@@ -1,4 +1,4 @@
-"""Every bad input of issue 17 that the command line meets, run as a user would: command, exit code,
+"""Every bad input that the command line meets, run as a user would: command, exit code,
 the message, wall time and peak memory (``python bench/bench_hostile.py`` -> ``sections/hostile.md``).
 
 The crafted ``.tetc`` files (forest bomb, tiny stored step) are built here from the golden file;
@@ -119,7 +119,7 @@ def main() -> int:
                  f"mean brightness {a.mean():.2f} vs {b.mean():.2f}; max pixel difference {np.abs(a - b).max():.0f}",
                  "", ""])
 
-    text = ("## Hostile and careless input (issue 17)\n\n"
+    text = ("## Hostile and careless input\n\n"
             f"`python bench/bench_hostile.py`, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}: every case run "
             "as a user would from a shell (exit 0 success, 1 error, 2 usage error); the message is the first "
             "error or note line on stderr; peak is the child's maximum resident memory. The decoder's own "

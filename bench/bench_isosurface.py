@@ -1,4 +1,4 @@
-"""Benchmark of on-the-fly isosurfaces (issue 14): quality, time and memory against the cascades.
+"""Benchmark of on-the-fly isosurfaces: quality, time and memory against the cascades.
 
 Run as ``python bench/bench_isosurface.py [--quick] [--big NAME.tetc]``; writes
 ``bench/sections/isosurface.md`` and ``bench/figures/iso_*.png``.
@@ -822,7 +822,7 @@ def _quality_tally(rows) -> str:
 
 
 def report(s) -> str:
-    out = ["## On-the-fly isosurfaces (issue 14)", ""]
+    out = ["## On-the-fly isosurfaces", ""]
     if "exact" in s:
         out += ["### Exactness at ratio 1 against VTK's vtkContour3DLinearGrid", "",
                 table(["data set", "isovalue", "our faces", "VTK faces", "max vertex distance / diagonal",

@@ -1,4 +1,4 @@
-"""What a file's levels cost over its level 0 (issue 12: all levels <= 2.0 x level 0).
+"""What a file's levels cost over its level 0 (all levels <= 2.0 x level 0).
 
 Run: ``python bench/bench_levels.py`` (writes ``bench/sections/levels.md``).
 
@@ -15,7 +15,7 @@ from __future__ import annotations
 import sys
 import time
 
-from common import SAMPLE_FILES, WORK, code_state, table, write_section  # noqa: E402
+from common import SAMPLE_FILES, WORK, code_state, note, table, write_section  # noqa: E402
 
 import gatun_py
 from gatun_py.codec.info import tetc_info
@@ -42,22 +42,12 @@ def measure(name: str) -> list:
 def main() -> None:
     rows = [measure(n) for n in (NAMES[:1] if "--quick" in sys.argv else NAMES)]
     text = "\n".join([
-        "## Levels against level 0 (issue 12: all levels ≤ 2.0 × level 0)", "",
+        "## Levels against level 0 (all levels ≤ 2.0 × level 0)", "",
         f"Command: `python bench/bench_levels.py` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; "
         f"{code_state()}). " + __doc__.split("\n\n")[2].replace("\n", " "), "",
         table(["sample", "levels", "format", "file bytes, with levels", "file bytes, level 0 and its forest",
                "all / level 0 (parts)", "file / level-0 file", "≤ 2.0 (parts)"], rows), "",
-        "Format 7 (session 15, the same samples): all / level 0 2.529 (Blunt-fin), 2.359 (Combustion), "
-        "2.555 (LOX post), 2.160 (Room fire). Format 8 chains each level's value tables to the next coarser "
-        "level's (geometry coding 4, `docs/format.md`), so a value is sent once for the levels that share it; Room fire's u, v and w are stored once, as copies of uvw's components (format 8's array copies: its file 664,928 -> 422,802 bytes with levels). "
-        "Levels of fewer than 128 points are not stored (`MIN_LEVEL_POINTS`: the level before them decodes in a "
-        "fraction of a millisecond and keeps the remaining merges); with every level down to a few points "
-        "(session 16, same code otherwise) the files were Blunt-fin 337,292 bytes (2.007), Combustion 933,696 "
-        "(2.292), LOX post 36,068 (1.891), Room fire 422,802 (2.176). Format 9 (geometry coding 5: rank steps "
-        "on the table-mode channels) against format 8 with the same levels (session 18): files with levels "
-        "Blunt-fin 332,139 -> 327,389 bytes (2.000 -> 1.992), LOX post 31,079 -> 30,724, Room fire 412,352 -> "
-        "406,097 (2.149 either way: the steps shrink level 0 and the levels alike); Combustion has no tables "
-        "(+1 header byte a level).", ""])
+        note("levels_history"), ""])
     write_section("levels", text)
 
 

@@ -11,7 +11,7 @@ Data:
   with gmsh's own float64 node coordinates, an analytic scalar in float64 and float32, and its
   float64 gradient as a vector array.
 
-Targets (issue 17): the whole ``.tetc`` (mesh only, no forest) <= 0.5 x ``xz -9`` of the raw arrays
+Targets: the whole ``.tetc`` (mesh only, no forest) <= 0.5 x ``xz -9`` of the raw arrays
 (coordinates, tets as int32, every point array, in file order); the coordinates' share of the file
 (geometry x/y/z streams + ``points64``) <= 0.9 x the best of fpzip, pcodec and ``xz -9`` on the
 same coordinate array. The adversarial-suite figures come from ``tests/test_hostile_files.py``.

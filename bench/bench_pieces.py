@@ -11,7 +11,7 @@ sizes. For every size, each a fresh ``tetc`` process under GNU time (wall second
 * ``tetc render --size 512`` and ``tetc isosurface`` of the pieced file (seconds, peak MB), and
   VTK's read of the ``.pvtu`` plus ``vtkContour3DLinearGrid`` (in a fresh process) as the peer.
 
-Targets (issue 39): bytes and bits per tet within 5 % of one piece; peak set by the largest piece,
+Targets: bytes and bits per tet within 5 % of one piece; peak set by the largest piece,
 not the whole mesh; ``--workers 2`` byte-identical and faster; isosurface memory <= 0.5x VTK's.
 
     python bench/bench_pieces.py              # 0.8 M (the flange in 16 pieces) and 6.5 M (refined)

@@ -3,7 +3,7 @@ generic vs streaming over ratio (Figure 9), stored levels (Table 3 / Figure 10),
 ratio (Figure 11), peak memory, and the time-budget flag.
 
 Run: ``python bench/bench_pipeline.py [--quick] [--only table3|memory|quality] [--flange MESH.vtu]`` →
-``bench/sections/pipeline.md`` + ``bench/figures/``. ``--flange`` adds the gmsh flange (issue 12's
+``bench/sections/pipeline.md`` + ``bench/figures/``. ``--flange`` adds the gmsh flange (the
 unstructured mesh, ``bench/gmsh_meshes.py``) to the image-quality table against VTK.
 All timings in-process with a warm JIT cache (interpreter start-up excluded, as ``--stats``'s
 ``total_s``): from opening the .tetc file to the PNG written.
@@ -429,7 +429,7 @@ def only_table3():
 
 
 
-# -- peak memory: streaming vs generic (issue 6 "Lean"), whole processes ------------------------------
+# -- peak memory: streaming vs generic ("Lean"), whole processes ------------------------------
 
 MEM_SIZES = (256, 512)
 MEM_REFINED = [("bluntfin", 2), ("combustion", 2), ("bluntfin", 3), ("combustion", 3)]
@@ -526,7 +526,7 @@ def memory_section(files) -> str:
     MEM_ROWS[:] = rows
     code = code_state()
     code = code if code == code_before else f"{code_before} at the start, {code} at the end (changed during the run)"
-    out = [f"{MEMORY_HEAD} (whole processes, issue 6 target ≤ 0.6 × generic on the largest data set)\n",
+    out = [f"{MEMORY_HEAD} (whole processes, target ≤ 0.6 × generic on the largest data set)\n",
            f"Command: `python bench/bench_pipeline.py --only memory` (also part of the full run), "
            f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load average {load} (1 / 5 / 15 min, 2 cores, "
            f"shared). Every point is a fresh interpreter (`bench_pipeline.py --mem-worker`) that renders the "

@@ -400,7 +400,7 @@ def absdiff(a, b):
 
 
 # ------------------------------------------------------------------------------------------------
-# memory (issue 5 "Lean") and lean streaming == in-memory
+# memory ("Lean") and lean streaming == in-memory
 MEM_SIZE = 512
 MEM_REFINED = [("bluntfin", 2), ("combustion", 2), ("bluntfin", 3), ("combustion", 3)]
 VTK_MAX_TETS = 2_000_000  # VTK on the K=3 meshes: one run only (minutes and GBs each)
@@ -854,7 +854,7 @@ def only(parts, quick=False, args=None):
     repeats = 2 if quick else 3
     work = Path(tempfile.mkdtemp(prefix="bench_render_"))
     sec = ROOT / "bench/sections/render.md"
-    text = sec.read_text() if sec.exists() else "## Rendering (issue 5): streaming object-space ray caster vs VTK\n"
+    text = sec.read_text() if sec.exists() else "## Rendering: streaming object-space ray caster vs VTK\n"
     names = ["bluntfin"] if quick else ["bluntfin", "combustion"]
     run_ours(sample_tetc(names[0], work)["tetc"], work / "warm.png", names[0], (64, 64))  # warm the JIT cache
     if "memory" in parts:
@@ -907,7 +907,7 @@ def main():
     ap.add_argument("--sizes", default=None, help="--only speed: image sizes (default 256,512,1024)")
     ap.add_argument("--data", default=None, help="--only speed: data sets (default bluntfin,combustion,flange-1m)")
     ap.add_argument("--peer", default=None, help="--only speed: another checkout whose .venv/bin/tetc is timed "
-                                                 "in the same runs (e.g. /work/main: the speed-up over it)")
+                                                 "in the same runs (e.g. the main checkout: the speed-up over it)")
     ap.add_argument("--repeats", type=int, default=None, help="--only speed: interleaved rounds (default 3)")
     args = ap.parse_args()
     if args.worker:
@@ -943,7 +943,7 @@ def main():
     figdir.mkdir(parents=True, exist_ok=True)
     secdir.mkdir(parents=True, exist_ok=True)
     me = "python bench/bench_render.py" + (" --quick" if args.quick else "")
-    lines = ["## Rendering (issue 5): streaming object-space ray caster vs VTK", "",
+    lines = ["## Rendering: streaming object-space ray caster vs VTK", "",
              f"Made by `{me}` on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, "
              f"{os.cpu_count()} cores, NUMBA_NUM_THREADS={os.environ.get('NUMBA_NUM_THREADS', 'default')}. "
              "Ours: `tetc render X.tetc -o X.png --tf NAME --size WxH --stats` (decode included, warm JIT cache; "

@@ -1,4 +1,4 @@
-"""Rounds of independent merges (issue 12): what the rounds cost in image quality and what they
+"""Rounds of independent merges: what the rounds cost in image quality and what they
 save in the forest's rank bits, per number of rounds per level.
 
 Run: ``python bench/bench_rounds.py [--rounds 0,16,32,64] [--meshes bluntfin,combustion]``
@@ -133,7 +133,7 @@ def main(argv=None):
     import os
 
     load_avg = ", ".join(f"{x:.2f}" for x in os.getloadavg())
-    text = ["## Rounds of independent merges (issue 12)\n",
+    text = ["## Rounds of independent merges\n",
             f"Command: `python bench/bench_rounds.py --rounds {args.rounds} --meshes {args.meshes}` "
             f"({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load average {load_avg}, 2 cores shared; "
             f"code: {code_state()}). *rounds* = rounds per level (0 = the greedy order of the previous versions, "

@@ -1,4 +1,4 @@
-"""Selective refinement (issue 13) against uniform refinement, in the same run.
+"""Selective refinement against uniform refinement, in the same run.
 
 * the issue's target table: Blunt-fin and Combustion, each with its transfer function and a more
   transparent one (opacities x 0.3), three views, 95 % and 99 % of the vertices merged; RMSE
@@ -6,7 +6,7 @@
 * PSNR over tets for both (Combustion, figure) and the tets each needs for equal quality;
 * ``--budget`` runs (0.05-0.5 s at 256²): selective vs uniform, PSNR and measured frame time;
 * selection cost against the frame time, the importance ablation, the ``deps`` section's size;
-* the diagnosis of what limits the selective cut (issue 13, second round): on the same cells, an
+* the diagnosis of what limits the selective cut (second round): on the same cells, an
   *unsafe* cut (the importance order without the dependency closure: overlaps allowed) and *legal*
   cuts (the importance order with a run-time legality check instead of the closure,
   :func:`gatun_py.simplify.dependencies.legal_cut`), with the shipped importance and with a region
@@ -460,7 +460,7 @@ def main():
     fig = plot(curves)
     ratios = [r[8] for r in rows]
     sel_share = [r[10] / 1e3 / r[11] for r in rows]
-    text = f"""# Selective refinement (issue 13)
+    text = f"""# Selective refinement
 
 Code: {code_state()}. {SIZE}², volume mode, in-process, warm JIT. Uniform = the first N merges;
 selective = the closed cut of the least important merges with the same number of tets (or fewer).

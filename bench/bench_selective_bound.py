@@ -1,4 +1,4 @@
-"""Selective refinement (issue 13, third round): how far any importance can take a closed cut.
+"""Selective refinement (third round): how far any importance can take a closed cut.
 
 An *oracle* importance: the image error each region of merges measurably makes for this view and
 transfer function (renders, not a model), then the same closed cut as the shipped one
@@ -199,7 +199,7 @@ def main():
                 cell(reader, name, label, tf, az, el, rows)
                 keep.write_text(json.dumps(rows + [r for r in done if r not in rows], default=float))
     ratios = [r[9] for r in rows]
-    text = f"""# Selective refinement: the oracle bound (issue 13)
+    text = f"""# Selective refinement: the oracle bound
 
 Code: {code_state()}. {SIZE}², volume mode, in memory (level 0 decoded once, cut, rendered with the
 full mesh's camera, scalar range and step). RMSE on 0-255 against the full-resolution render.

@@ -1,6 +1,6 @@
-"""Selective refinement from bricked forests (issue 13, third round, step 2).
+"""Selective refinement from bricked forests (third round, step 2).
 
-A bricked file (issue 16) holds one forest per brick, every brick's cut vertices locked, so any
+A bricked file holds one forest per brick, every brick's cut vertices locked, so any
 choice of one prefix length per brick is a conforming, flip-free mesh by construction (the cut
 faces are the same triangles at every prefix). A *selective* cut here = a prefix length per brick,
 chosen for the view and transfer function, against the uniform cut of the unbricked forest at
@@ -362,7 +362,7 @@ def main():
     WORK.mkdir(parents=True, exist_ok=True)
     keep.write_text(json.dumps([reach, alloc, tiers], default=float))
     ok = [r for r in alloc if r[10] != "-"]
-    text = f"""# Selective refinement from bricked forests (issue 13)
+    text = f"""# Selective refinement from bricked forests
 
 Code: {code_state()}. {SIZE}², volume mode, in memory: every mesh (stitched bricks, unbricked cuts)
 rendered with the full mesh's camera, scalar range and step. RMSE on 0-255 against the full

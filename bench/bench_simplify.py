@@ -1,4 +1,4 @@
-"""Benchmark of the offline decimation, the merge forest and the pre-simplified levels (issue 4).
+"""Benchmark of the offline decimation, the merge forest and the pre-simplified levels.
 
 Run as ``python bench/bench_simplify.py [--quick]``; writes ``bench/sections/simplify.md``.
 
@@ -36,6 +36,7 @@ from conftest import SAMPLE_FILES, load_sample  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "bench"))
 import gmsh_meshes  # noqa: E402
+from common import note  # noqa: E402
 
 from gatun_py.codec.forest import encode_forest_on_mesh  # noqa: E402
 from gatun_py.simplify import available_levels, build_levels, decimate, simplified_mesh  # noqa: E402
@@ -45,7 +46,7 @@ NAMES = {"bluntfin": "Blunt-fin", "combustion": "Combustion", "post": "LOX post"
 # The unstructured mesh beside the samples, and the series of the scaling table (bench/gmsh_meshes.py).
 GMSH_MESH = "flange-1m"
 SCALING = ["flange-200k", "flange-1m", "flange-2m", "flange-5m", "flange-10m"]
-# The mesh of the compress-at-scale table (issue 12: <= 4 min and <= 4 GB with levels, mesh-only
+# The mesh of the compress-at-scale table (<= 4 min and <= 4 GB with levels, mesh-only
 # <= 60 s and <= 3 GB).
 COMPRESS_MESH = "flange-10m"
 
@@ -353,7 +354,7 @@ def main(argv=None):
                 cold = float(res.stdout.strip().splitlines()[-1])
 
     # -- markdown -------------------------------------------------------------------------
-    L = ["## Offline decimation, merge forest and pre-simplified levels (issue 4)", "",
+    L = ["## Offline decimation, merge forest and pre-simplified levels", "",
          f"All figures from `{cmd}` in one run (2-core machine shared with other jobs: wall times are noisy; "
          f"CPU time of the decimation is given beside; Blunt-fin, Combustion and their VTK peers are the best of 3 "
          f"interleaved runs). Kernel load from the numba cache before timing: "
@@ -469,60 +470,6 @@ def forest_row(name, mesh, ug, reps):
 
 
 FOREST_HEAD = "### Whole forest: time and reach"
-# measured by hand (alternating checkouts), kept when the table is re-measured
-LOCAL_NUMBERING_NOTE = (
-    "Local numbering (issue 12, session 13): the gmsh flange's numbering has no locality (flange-1m: the "
-    'median tet spans 48,492 of 160,534 vertex ids, the median star 612,597 of 810,347 tet ids) and the '
-    'merge loop is bound by memory latency. `DecimationState` now works in a local numbering '
-    '(`local_order`: vertices along a 10-bit Morton curve of the position, tets by their smallest new '
-    "vertex id) and drops the dead tets, order kept, whenever half of the tet rows are dead; the set-up's "
-    "sums are taken in the caller's numbering and renumbered, every incidence list keeps the caller's tet "
-    "order and every tie between equal errors goes to the smaller caller's id, so the forests are "
-    'bit-identical (`bench/forest_identity.py --check` against main: post, fire, Blunt-fin, Combustion, '
-    'block-50k, flange-1m; the 7.8 M-tet compress writes the same file, sha256 a509ba7b…). Decimation '
-    'CPU, `forest_identity.py` on main and on the branch in turn, twice each (2026-11-24 21:43-21:45 UTC, '
-    'NUMBA_NUM_THREADS=2, load 1.5 to 2.3): flange-1m 20.45 / 21.44 s → 16.94 / 17.22 s (−19 %), '
-    'Blunt-fin 2.91 / 2.53 → 2.37 / 2.39 s, Combustion 3.25 / 3.12 → 2.80 / 2.74 s, block-50k 0.77 / 0.73 '
-    '→ 0.66 / 0.69 s; whole processes (read + decimate) in alternating pairs: flange-1m CPU ratio 0.864 '
-    '(median of 3), Combustion 1.02 (median of 5; in process 2.76 against 2.86 s: the grid-derived '
-    'samples are numbered with locality already). `NUMBA_NUM_THREADS=2 /usr/bin/time -v tetc compress '
-    'flange-10m.vtu --force --quiet` with all levels, warm cache, branch, main, branch one after the '
-    'other (21:45-22:03 UTC, load 0.6 to 1.2, nothing else running): branch 3 min 53.9 s and 3 min 39.9 s '
-    'wall, 246.8 + 12.8 s and 245.1 + 13.0 s CPU, 2,956,704 and 2,941,144 KB peak; main 4 min 27.8 s, '
-    '296.6 + 11.4 s, 2,971,216 KB (the 4-minute target met). Local orders tried on flange-1m (one '
-    'decimation each, two rounds, load 2 to 3, noisy): Morton 16.3 s CPU, Hilbert 16.9 / 18.8 s, reverse '
-    'Cuthill-McKee 19.4 / 20.1 s, Morton with the tets by the sum of their vertex ids 20.0 s, the '
-    "caller's numbering 17.8 / 18.6 s; dropping the dead tets alone: CPU ratio 0.92 (median of 3 pairs, "
-    '0.90 to 1.01, load ~3).'
-)
-
-# measured by hand (alternating checkouts), kept when the table is re-measured
-MERGE_LOOP_NOTE = (
-    "Merge loop (issue 12, session 14; forests bit-identical, `bench/forest_identity.py --check` against "
-    "main on post, fire, Blunt-fin, Combustion, block-50k and flange-1m after every step): every sample point "
-    "caches its weighted squared error in its tet, set where it gets the tet (the star sums read it instead of "
-    "forming every star tet's planes); a tet's sample points are a run of rows instead of a linked chain (a "
-    "merge writes its star's new runs at the top, the rows are rewritten in place when they run out, with room "
-    "for 1.25 × (points + tets) rows); an evaluation's ~30 scratch arrays are views of a per-thread buffer and a "
-    "star is walked once; the heap keeps one entry per vertex (Combustion: 2.6 pops per merge instead of 10.0, "
-    "7.4 of them superseded). Decimation CPU (`DecimationState` + `decimate()`, process time), main's code and "
-    "the branch in alternating processes, medians: one thread (4 pairs, load 2.1 to 2.7) Blunt-fin 3.53 → "
-    "2.89 s (×0.78), Combustion 3.84 → 3.34 s (×0.83), flange-1m 23.95 → 19.65 s (×0.83); two threads (3 "
-    "pairs, load 1.0 to 1.3) Blunt-fin ×0.80, Combustion ×0.83, flange-1m ×0.88. Tried and dropped: the "
-    "cached errors in their own array beside the rows (×1.01 / ×1.06, no gain), an early exit from the "
-    "containment tests (slower: the branch mispredicts), rewriting the chains every n/256 merges instead of "
-    "n/16 (the rewrites cost more than the walks saved). The set-up forms the tets' 4-D hyperplanes in one "
-    "kernel (`_tet_hyperplanes`) instead of stacked `np.linalg.det` calls (Combustion 0.15 → 0.011 s CPU; the "
-    "quadrics move by ≤ 4e-16 relative, so the three grid-derived samples' forests break some near-ties the "
-    "other way: the quality table in the pipeline section is unchanged within 0.003). Same window, quiet "
-    "(lead, 2026-11-25 01:00-01:04 UTC, load 1.0; this machine is not session 13's: VTK takes 1.0-1.4 s on "
-    "Blunt-fin against 0.68 s there): the session's starting code (e8c85f0, the same script with its "
-    "package on PYTHONPATH) Blunt-fin 3.80 s CPU (2.8× VTK's 1.36 s in that run), Combustion 3.97 s (6.4× "
-    "0.62 s), flange-1m 22.62 s (3.5× 6.51 s); this code before and in the table above: Blunt-fin 2.80 / "
-    "2.84 s (2.8× / 2.9×), Combustion 3.17 / 3.19 s (6.0× / 4.6×), flange-1m 18.19 / 18.86 s (2.8× / 2.9×). "
-    "Our CPU moves by 3 % between runs, VTK's best of 3 by up to 40 % (Blunt-fin 0.98-1.36 s, Combustion "
-    "0.53-0.70 s), so the ratios near 3 are within VTK's own spread."
-)
 
 
 def forest_table(rows) -> list[str]:
@@ -541,7 +488,7 @@ def forest_table(rows) -> list[str]:
         L.append(f"| {NAMES[r['name']]} | {r['points']} | {r['tets']} | {r['wall']:.2f} | {r['cpu']:.2f} | {v} | {q} | "
                  f"{vr} | {r['ratio']:.5f} | {r['vol9']:.4f} | {r['forest_bpv']:.1f} | 1…{r['levels']} |")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    L += ["", "Target (issue 12): whole forest ≤ 3× VTK's quadric decimation to 99 % on Blunt-fin, Combustion and "
+    L += ["", "Target: whole forest ≤ 3× VTK's quadric decimation to 99 % on Blunt-fin, Combustion and "
           "the ~1 M-tet gmsh mesh (`bench/gmsh_meshes.py` `flange-1m`: a flange with a bore and bolt holes, graded "
           "Delaunay tets, smooth analytic scalar). VTK's \"reached\" column is the tet reduction it actually "
           "achieved (it stalls short of 0.99). CPU time (process time: ours on "
@@ -549,15 +496,8 @@ def forest_table(rows) -> list[str]:
           "on a shared machine, where wall time mostly measures the other jobs. Best of 3 interleaved runs on "
           f"Blunt-fin and Combustion, one elsewhere; load average {load:.1f} at the end of the table "
           "(`python bench/bench_simplify.py --only forest` re-measures it alone).", "",
-          LOCAL_NUMBERING_NOTE, "", MERGE_LOOP_NOTE, "",
-          "Tried and dropped (issue 12, build12 session): evaluating the next lazy heap entries speculatively "
-          "on the second thread (a 2-task prange beside each lazy evaluation, results kept until the next "
-          "merge; forests identical). It would serve 34 % of the lazy evaluations on Combustion (43 % with "
-          "batches of 4) and 40 % on flange-1m, about 10 % of the loop at best, but measured slower: flange-1m "
-          "decimation 16.9 s wall against 14.1-14.8 s (load ~1.3), 54 s under load 2.4 (the batch's barrier "
-          "waits for a descheduled thread), Combustion 2.2-2.5 s against 2.3-2.4 s, CPU ×1.6-2.1 (OpenMP "
-          "workers spin between batches; a passive wait policy is slower still). A 2-task prange launch itself "
-          "costs 2 µs on the OpenMP layer (90-110 µs on workqueue).", ""]
+          note("simplify_local_numbering"), "", note("simplify_merge_loop"), "",
+          note("simplify_speculative"), ""]
     return L
 
 
@@ -661,7 +601,7 @@ def sampled_section(names) -> str:
                "w_sample 0 ≤ VTK"], rmse_rows), "",
         "Both renders at one ratio (the same number of merges): the `w_sample=0` forest keeps 1-5 % fewer tets "
         "there, so its RMSE is not at equal tets, and VTK's decimation is to the default forest's count. What it "
-        "says about issue 12's forest target (≤ 3 × VTK): without the sampled error the forest builds within it, "
+        "says about the forest target (≤ 3 × VTK): without the sampled error the forest builds within it, "
         "but its coarse levels lose the quality lead over VTK that the quality table holds (the issue's other "
         "condition: no cell of that table may get worse), so the default keeps the term and `--w-sample 0` is "
         "the user's choice where build time matters more than the coarse levels.", ""])
@@ -764,7 +704,7 @@ def compress_section(names) -> str:
     head = ["mesh", "tets", "mode", "exit", "wall s", "peak RSS MB", "peak bytes / tet", "file MB"]
     return _timed_table(COMPRESS_HEAD, "--only compress-scale`",
                         "The installed `tetc compress MESH.vtu -o out.tetc --quiet [--mesh-only]` under GNU time (its "
-                        "own peak resident set, wall from start to exit, warm numba cache). Target (issue 12): with all "
+                        "own peak resident set, wall from start to exit, warm numba cache). Target: with all "
                         "levels <= 4 min and <= 4 GB, mesh-only <= 60 s and <= 3 GB, on a ~10 M-tet unstructured mesh.",
                         head, rows)
 

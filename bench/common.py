@@ -92,6 +92,13 @@ def table(header: list[str], rows: list[list]) -> str:
     return "\n".join(lines)
 
 
+def note(name: str) -> str:
+    """A hand-measured note kept beside the sections (``bench/sections/notes/<name>.md``): figures
+    measured once by hand (alternating checkouts, studies) live there, not in the scripts, and a
+    script that re-measures its table copies the note in unchanged."""
+    return (SECTIONS / "notes" / f"{name}.md").read_text().strip()
+
+
 def write_section(area: str, text: str) -> Path:
     SECTIONS.mkdir(parents=True, exist_ok=True)
     p = SECTIONS / f"{area}.md"

@@ -38,7 +38,7 @@ PARTS = {
     "decoder": {"codec._cutborder_kernels": ("_decode_tets_run", "decode_boundary"),
                 "codec._geometry_kernels": ("_decode_vertices_run",), "codec.rangecoder": ("dec_init",)},
     "forest decoder": {"codec._forest_kernels": ("decode_rounds3_kernel",),
-                       "simplify._decimate_kernels": ("_ancestors",)},
+                       "simplify._forest_kernels": ("ancestors_kernel",)},
     "filter": {"simplify._filter_kernels": ("filter_items",)},
     "renderer": {"raycast._walk": ("advance", "settle"), "raycast._boundary": ("_boundary_hits",),
                  "raycast._facetable": ("insert_tets",)},

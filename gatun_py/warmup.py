@@ -191,7 +191,7 @@ def _geometry_decoder() -> str:
     types, so refs of the right type do (all -1: whether the stream then decodes cleanly does not
     matter, and a corrupt-file error is expected)."""
     reader = TetcReader(_tiny_tetc())
-    n = reader.level_meta(0)["points"]
+    n = reader.level_meta(0).points
     geometry = GeometryDecoder(reader.read_section("L0/geometry"), n_points=n)
     try:
         geometry.decode(np.full((n, 4), -1, np.int32))

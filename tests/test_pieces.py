@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import zlib
 
 import numpy as np
 import pytest
@@ -11,7 +12,7 @@ import gatun_py
 from cli_util import assert_error, assert_usage_error, run
 from gatun_py.codec import TetcReader
 from gatun_py.codec.bricks import decode_bricked
-from gatun_py.codec.container import build_container, split_container
+from gatun_py.codec.container import build_container, container_head, record_head, split_container
 from gatun_py.codec.tetcfile import file_meta
 from gatun_py.errors import MeshError, OptionError, ReadError
 from gatun_py.mesh import TetMesh
@@ -19,8 +20,7 @@ from gatun_py.mesh.partition import partition_tets, split_bricks
 from gatun_py.mesh.pieces import (boundary_part, exodus_pieces, interface_table, piece_paths, read_piece,
                                   refine_midpoints, write_pvtu)
 from gatun_py.mesh.synthetic import jittered_grid
-from gatun_py.pipeline.compress_pieces import (PIECES_KEY, compress_pieces, container_head, parse_memory,
-                                               piece_mesh)
+from gatun_py.pipeline.compress_pieces import PIECES_KEY, compress_pieces, parse_memory, piece_mesh
 from test_bricks import _faces, assert_same_mesh
 
 
@@ -131,10 +131,8 @@ def read_piece_meshes(pvtu_path):
 def test_streamed_container_is_build_container():
     meta = {"format": "x", "n": 3}
     sections = [("a", b"12"), ("B0/L0/tets", b"x" * 300), ("c", b"")]
-    from gatun_py.pipeline.compress_pieces import _record_head
-    import zlib
-    rows = [(n, len(_record_head(n, p)), len(p), zlib.crc32(p)) for n, p in sections]
-    body = b"".join(_record_head(n, p) + p for n, p in sections)
+    rows = [(n, len(record_head(n, p)), len(p), zlib.crc32(p)) for n, p in sections]
+    body = b"".join(record_head(n, p) + p for n, p in sections)
     assert container_head(meta, rows) + body == build_container(meta, sections)
     assert split_container(container_head(meta, rows) + body)[1] == sections
 

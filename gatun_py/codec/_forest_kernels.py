@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..mesh._quadric_kernels import sorted4, spatial_volume, tet_quadric_terms
 from .rangecoder import DEC_ERROR, dec_below, dec_bit, dec_failed, dec_init, dec_sym, enc_below, enc_bit, enc_finish, enc_sym
 
 ROOT_SYMBOL = 63  # bucket symbol of a vertex that is never merged
@@ -576,85 +577,6 @@ _BOUNDARY_MISMATCH = 1e300  # added to the score of an interior candidate of a b
 FIXED_ONE = 2.0**36  # a vertex's largest tet weight in the integer sums (terms <= 4 weights: room for 2^20 tets)
 
 
-@njit(cache=True, nogil=True, _nrt=False)
-def _sorted4(a, b, c, d):
-    """The four ids in ascending order (a sorting network)."""
-    if a > b:
-        a, b = b, a
-    if c > d:
-        c, d = d, c
-    if a > c:
-        a, c = c, a
-    if b > d:
-        b, d = d, b
-    if b > c:
-        b, c = c, b
-    return a, b, c, d
-
-
-@njit(cache=True, nogil=True, _nrt=False)
-def _spatial_volume(u, a, b, c, d):
-    """|det| of the tet's spatial edges from corner a (6 x its volume, in normalised units)."""
-    p0, p1, p2 = u[b, 0] - u[a, 0], u[b, 1] - u[a, 1], u[b, 2] - u[a, 2]
-    q0, q1, q2 = u[c, 0] - u[a, 0], u[c, 1] - u[a, 1], u[c, 2] - u[a, 2]
-    r0, r1, r2 = u[d, 0] - u[a, 0], u[d, 1] - u[a, 1], u[d, 2] - u[a, 2]
-    w = abs(p0 * (q1 * r2 - q2 * r1) - p1 * (q0 * r2 - q2 * r0) + p2 * (q0 * r1 - q1 * r0))
-    return w if w < np.inf else 0.0  # NaN and inf: no weight
-
-
-@njit(cache=True, nogil=True, _nrt=False, inline="always")
-def hyperplane_normal(u, a, b, c, d):
-    """(length, n0, n1, n2, n3): the unit normal of the hyperplane through rows a, b, c, d of
-    ``u`` (points in 4-D, e.g. (x, y, z, value)) and the length it had before normalising; n = 0
-    when that length is 0 or not finite (a flat tet: no unique hyperplane).
-
-    The normal is the generalised cross product of the three edges from a: n_j = (-1)^j det of
-    the edges without column j, from the 2 x 2 minors of the last two edges. Every operation is
-    spelled out in this order, so the result is the same bits on every machine: the forest
-    coder's quadrics (format 7 decodes from them) and the decimator's both come from here."""
-    # the three edges from corner a in (x, y, z, value)
-    p0, p1, p2, p3 = u[b, 0] - u[a, 0], u[b, 1] - u[a, 1], u[b, 2] - u[a, 2], u[b, 3] - u[a, 3]
-    q0, q1, q2, q3 = u[c, 0] - u[a, 0], u[c, 1] - u[a, 1], u[c, 2] - u[a, 2], u[c, 3] - u[a, 3]
-    r0, r1, r2, r3 = u[d, 0] - u[a, 0], u[d, 1] - u[a, 1], u[d, 2] - u[a, 2], u[d, 3] - u[a, 3]
-    m01 = q0 * r1 - q1 * r0
-    m02 = q0 * r2 - q2 * r0
-    m03 = q0 * r3 - q3 * r0
-    m12 = q1 * r2 - q2 * r1
-    m13 = q1 * r3 - q3 * r1
-    m23 = q2 * r3 - q3 * r2
-    n0 = p1 * m23 - p2 * m13 + p3 * m12
-    n1 = -(p0 * m23 - p2 * m03 + p3 * m02)
-    n2 = p0 * m13 - p1 * m03 + p3 * m01
-    n3 = -(p0 * m12 - p1 * m02 + p2 * m01)
-    length = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2 + n3 * n3)
-    if not (length > 0 and length < np.inf):
-        return length, 0.0, 0.0, 0.0, 0.0
-    return length, n0 / length, n1 / length, n2 / length, n3 / length
-
-
-@njit(cache=True, nogil=True, _nrt=False)
-def _tet_terms(u, a, b, c, d, w, terms):
-    """The 10 terms of A of one tet's quadric (corners in id order, ``w`` its
-    :func:`_spatial_volume`): its volume times the squared
-    distance to the hyperplane through its corners in (x, y, z, value), about any of its corners
-    (the plane passes through them: no b, no c). False for a flat tet."""
-    length, n0, n1, n2, n3 = hyperplane_normal(u, a, b, c, d)
-    if not (length > 0 and w > 0 and length < np.inf):
-        return False
-    w0, w1, w2, w3 = w * n0, w * n1, w * n2, w * n3
-    terms[0] = w0 * n0
-    terms[1] = w0 * n1
-    terms[2] = w0 * n2
-    terms[3] = w0 * n3
-    terms[4] = w1 * n1
-    terms[5] = w1 * n2
-    terms[6] = w1 * n3
-    terms[7] = w2 * n2
-    terms[8] = w2 * n3
-    terms[9] = w3 * n3
-    return True
-
-
 @njit(cache=True, nogil=True)
 def level_quadrics(tets, points, density, start, nbrs, boundary):
     """(q, u, best): the (n, 15) quadric of every vertex over its tets (see the section comment),
@@ -706,8 +628,8 @@ def level_quadrics(tets, points, density, start, nbrs, boundary):
     weight = np.empty(m)
     wmax = np.zeros(n)
     for t in range(m):
-        a, b, c, d = _sorted4(tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3])
-        w = _spatial_volume(u, a, b, c, d)
+        a, b, c, d = sorted4(tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3])
+        w = spatial_volume(u, a, b, c, d)
         weight[t] = w
         for x in (a, b, c, d):
             if w > wmax[x]:
@@ -720,8 +642,8 @@ def level_quadrics(tets, points, density, start, nbrs, boundary):
     fixed = np.zeros((n, QUADRIC_A_TERMS), np.int64)
     terms = np.empty(QUADRIC_A_TERMS)
     for t in range(m):
-        a, b, c, d = _sorted4(tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3])
-        if not _tet_terms(u, a, b, c, d, weight[t], terms):
+        a, b, c, d = sorted4(tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3])
+        if not tet_quadric_terms(u, a, b, c, d, weight[t], terms):
             continue
         for x in (a, b, c, d):
             f = unit[x]

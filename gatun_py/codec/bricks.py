@@ -227,7 +227,7 @@ def _keys(rows: np.ndarray) -> np.ndarray:
 def read_cut(reader: TetcReader, k: int, level: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """(decode ids, file-wide cut ids) of the cut vertices of brick ``k`` at ``level``."""
     b = reader.brick(k)
-    n = int(b.level_meta(level)["points"])
+    n = b.level_meta(level).points
     return decode_cut(b.read_section(f"L{level}/cut"), n, int(reader.meta.get("cut_points", 0)))
 
 
@@ -428,10 +428,10 @@ def decode_bricked(source, level: int = 0, *, jobs: int | None = None, progress=
     if reader.n_bricks == 1:
         return reader.decode_mesh(level, jobs=jobs)
     bricks = [reader.brick(k) for k in range(reader.n_bricks)]
-    missing = [k for k, b in enumerate(bricks) if level not in {lv["level"] for lv in b.levels}]
+    missing = [k for k, b in enumerate(bricks) if level not in {lv.level for lv in b.levels}]
     if missing:
         raise OptionError(f"level {level} is not stored in every brick (missing in brick {missing[0]}); "
-                          f"stored in all: {[lv['level'] for lv in reader.levels]}")
+                          f"stored in all: {[lv.level for lv in reader.levels]}")
     cuts = [read_cut(reader, k, level) for k in range(len(bricks))]  # checked before the long work
     per_brick = brick_jobs(jobs, len(bricks))
     meshes = map_bricks(lambda k: bricks[k].decode_mesh(level, jobs=per_brick), len(bricks), jobs, progress)

@@ -48,9 +48,14 @@ MAX_SECTIONS = 1 << 16  # 64 bricks x 13 levels x 5 sections already pass 4096
 MAX_NAME_BYTES = 256
 
 
-def _record(name: str, payload: bytes) -> bytes:
+def record_head(name: str, payload: bytes) -> bytes:
+    """The bytes before a section's payload in its record (name, length, crc32)."""
     nb = name.encode("utf-8")
-    return _REC_NAME.pack(len(nb)) + nb + _REC_LEN.pack(len(payload), zlib.crc32(payload)) + payload
+    return _REC_NAME.pack(len(nb)) + nb + _REC_LEN.pack(len(payload), zlib.crc32(payload))
+
+
+def _record(name: str, payload: bytes) -> bytes:
+    return record_head(name, payload) + payload
 
 
 def build_container(meta: dict, sections: list[tuple[str, bytes]]) -> bytes:
@@ -62,16 +67,24 @@ def build_container(meta: dict, sections: list[tuple[str, bytes]]) -> bytes:
     if len(set(names)) != len(names):
         raise ValueError("duplicate section names")
     records = [_record(n, bytes(p)) for n, p in sections]
+    rows = [(name, len(rec) - len(payload), len(payload), zlib.crc32(payload))
+            for (name, payload), rec in zip(sections, records)]
+    return container_head(meta, rows) + b"".join(records)
+
+
+def container_head(meta: dict, rows: list) -> bytes:
+    """Preamble and metadata of a container whose sections follow as records of ``rows``
+    (``(name, head length, payload length, crc32)`` in file order): the bytes
+    :func:`build_container` puts before its first record, for writers that stream the records."""
     # the metadata length depends on the offsets it contains: iterate until it is stable
     meta = dict(meta)
     meta_len = 0
     for _ in range(8):
         off = PREAMBLE_SIZE + meta_len
         index = []
-        for (name, payload), rec in zip(sections, records):
-            head = len(rec) - len(payload)
-            index.append({"name": name, "offset": off + head, "length": len(payload), "crc32": zlib.crc32(payload)})
-            off += len(rec)
+        for name, head, length, crc in rows:
+            index.append({"name": name, "offset": off + head, "length": length, "crc32": crc})
+            off += head + length
         meta["sections"] = index
         blob = json.dumps(meta, separators=(",", ":"), sort_keys=False).encode("utf-8")
         if len(blob) == meta_len:
@@ -79,8 +92,7 @@ def build_container(meta: dict, sections: list[tuple[str, bytes]]) -> bytes:
         meta_len = len(blob)
     else:  # pragma: no cover - lengths converge after two rounds
         raise RuntimeError("metadata length did not converge")
-    pre = _PREAMBLE.pack(MAGIC, VERSION_MAJOR, VERSION_MINOR, len(blob), zlib.crc32(blob))
-    return pre + blob + b"".join(records)
+    return _PREAMBLE.pack(MAGIC, VERSION_MAJOR, VERSION_MINOR, len(blob), zlib.crc32(blob)) + blob
 
 
 def split_container(source) -> tuple[dict, list[tuple[str, bytes]]]:

@@ -350,9 +350,8 @@ class GeometryParts:
 STEPS = "steps"  # the GeometryParts.streams key of ranks coded with rank steps
 # Rank steps are tried on a channel only where at most this share of the vertices escape (a step
 # beyond -2 .. 2 from the first ref's rank). An escape decodes as a step decision, the value as
-# without steps and a table look-up for its rank: Blunt-fin's x and y (40 % and 59 % escapes) were
-# 12 % smaller in steps but decoded 13 % slower; its z, Room fire's x, y, z and LOX post's z have
-# none (their blocks decode 5-8 % faster with steps).
+# without steps and a table look-up for its rank, so a channel with many escapes is smaller in steps
+# but decodes slower (bench/sections/levels.md holds the measurements).
 STEP_ESCAPE_SHARE = 0.1
 
 

@@ -43,17 +43,17 @@ def tetc_info(source) -> dict:
         key = _BRICK.sub("", name)
         plain[key] = plain.get(key, 0) + v
     lv0 = r.levels[0]
-    i0 = lv0["level"]
+    i0 = lv0.level
     conn = plain.get(f"L{i0}/boundary", 0) + plain.get(f"L{i0}/tets", 0)
     geo = plain.get(f"L{i0}/geometry", 0)
     levels = []
     for lv in r.levels:
-        i = lv["level"]
+        i = lv.level
         levels.append({
             "level": i,
-            "ratio": lv.get("ratio", 0.0),
-            "points": lv["points"],
-            "tets": lv["tets"],
+            "ratio": lv.ratio,
+            "points": lv.points,
+            "tets": lv.tets,
             "bytes": sum(v for k, v in plain.items() if k.startswith(f"L{i}/")),
         })
     return {
@@ -65,8 +65,8 @@ def tetc_info(source) -> dict:
         "scalar_range": r.meta.get("scalar_range") if r.has_scalar else None,
         "source": r.meta.get("source"),
         "bytes_total": c.size,
-        "bits_per_tet_connectivity": round(8.0 * conn / lv0["tets"], 4) if lv0["tets"] else 0.0,
-        "bits_per_vertex_geometry": round(8.0 * geo / lv0["points"], 4) if lv0["points"] else 0.0,
+        "bits_per_tet_connectivity": round(8.0 * conn / lv0.tets, 4) if lv0.tets else 0.0,
+        "bits_per_vertex_geometry": round(8.0 * geo / lv0.points, 4) if lv0.points else 0.0,
         "sections": sizes,
         "format_version": c.major,
         "points_dtype": r.points_dtype.name,
@@ -97,7 +97,7 @@ def _bricks_info(reader, sizes) -> list:
 def _forest_info(reader, sizes) -> dict:
     """``merges``, ``max_ratio`` and ``bytes`` of the stored merge forest (all zero without one)."""
     merges = reader.forest_merges()
-    n0 = reader.levels[0]["points"]
+    n0 = reader.levels[0].points
     return {"merges": merges, "max_ratio": merges / n0 if n0 else 0.0,
             "bytes": sum(v for k, v in sizes.items() if k.endswith("/forest"))}
 
@@ -116,7 +116,7 @@ def _table_streams(reader, sizes) -> tuple[dict, int]:
     if reader.container.major < 8:
         return {}, 0
     c = reader.container
-    order = [lv["level"] for lv in reader.levels]
+    order = [lv.level for lv in reader.levels]
     own, chained0 = {}, 0
     prefixes = sorted({m.group(0) for m in map(_BRICK.match, sizes) if m}) or [""]
     for prefix in prefixes:

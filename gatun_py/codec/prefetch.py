@@ -7,7 +7,7 @@ GIL, so here the connectivity decoder runs in a producer thread up to ``depth`` 
 hands over each batch's tets with a copy of its refs; the caller's thread decodes the geometry
 (the same path as :meth:`TetcReader.decode_mesh` with ``jobs`` > 1: :class:`~.threads.RunAhead`).
 On two cores the stream then costs about the slower of the two decoders instead of their sum
-(flange-10m: connectivity 4.8 s, geometry 2.0 s). The batches are the same, in the same order, as
+(``bench/sections/codec.md``). The batches are the same, in the same order, as
 the default scalar's :meth:`~TetcReader.iter_decode`.
 """
 
@@ -43,7 +43,7 @@ class PrefetchedDecode:
     >>> a = [(b.first, len(b.points), len(b.tets)) for b in stream]
     >>> a == [(b.first, len(b.points), len(b.tets)) for b in r.iter_decode(batch_tets=40)]
     True
-    >>> stream.values.shape == (r.level_meta(0)["points"], 4)
+    >>> stream.values.shape == (r.level_meta(0).points, 4)
     True
     """
 

@@ -199,11 +199,11 @@ class StepDecoder:
             if level not in self.index.maps or not self.base.container.has_section(name):
                 raise CorruptFileError(f"missing section {name!r}: a coarse level of a series maps its vertices "
                                        "to level 0's")
-            n = int(lv["points"])
+            n = lv.points
             dec = ArrayDecoder(self.base.read_section(name), n_points=n, dtype="int64", components=1)
             dec.decode(np.full((n, 4), -1, np.int32))  # coded without refs: no connectivity to decode
             m = dec.finish()
-            n0 = int(self.base.level_meta(0)["points"])
+            n0 = self.base.level_meta(0).points
             if m.size and (int(m.min()) < 0 or int(m.max()) >= n0):
                 raise CorruptFileError(f"corrupt section {name!r}: a vertex maps outside level 0")
             self._maps[level] = m
@@ -324,10 +324,10 @@ class StepReader(TetcReader):
             self._one_stream()
             tets = self.steps.kept_level0()[0].tets
         else:
-            tets = np.empty((lv["tets"], 4), np.int32)
+            tets = np.empty((lv.tets, 4), np.int32)
             for _ in TetcReader._batches(self, level, DEFAULT_BATCH_TETS, {}, tets_out=tets):
                 pass
-        got = self._gather(level, 0, int(lv["points"]))
+        got = self._gather(level, 0, lv.points)
         points = got.pop(_POINTS)
         data = {name: got[name] for name, _, _ in self.arrays}
         try:

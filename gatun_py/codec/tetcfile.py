@@ -35,6 +35,7 @@ from .cells import decode_cells, encode_cells, node_refs
 from .brickindex import BrickView, brick_levels_summary, parse_brick_index
 from .arrays import MAX_COMPONENTS, ArrayDecoder, check_dtype, dtype_name, encode_array
 from .container import Container, build_container
+from .levelmeta import LevelMeta
 from .cutborder import ConnectivityDecoder, encode_connectivity
 from .decoded_connectivity import DecodedConnectivity, DecodedGeometry
 from .dependencies import decode_dependencies, dependencies_header, encode_dependencies
@@ -492,7 +493,7 @@ class TetcReader:
     ----------
     meta : dict
         The file's metadata.
-    levels : list of dict
+    levels : list of LevelMeta
         Per-level metadata (level, ratio, merges_before, points, tets, ...), in file order.
     """
 
@@ -505,22 +506,7 @@ class TetcReader:
         levels = brick_levels_summary(self._brick_metas) if self._brick_metas else self.meta.get("levels")
         if not isinstance(levels, list) or not levels:
             raise CorruptFileError(f"{self.container.name}: no levels in the metadata")
-        self.levels = []
-        for lv in levels:
-            if not isinstance(lv, dict):
-                raise CorruptFileError("corrupt metadata: bad level entry")
-            _int(lv, "level", 0, 64)
-            n = _int(lv, "points")
-            _int(lv, "tets")
-            _int(lv, "boundary_faces")
-            _int(lv, "boundary_vertices", 0, n)
-            _int(lv, "referenced_points", 0, n)
-            if "merges_before" in lv:
-                _int(lv, "merges_before")
-            ratio = lv.get("ratio", 0.0)
-            if not isinstance(ratio, (int, float)) or isinstance(ratio, bool) or not 0.0 <= ratio <= 1.0:
-                raise CorruptFileError("corrupt metadata: bad level ratio")
-            self.levels.append(lv)
+        self.levels = [LevelMeta.from_json(lv) for lv in levels]
         _int(self.meta, "points")
         _int(self.meta, "tets")
         if not isinstance(self.meta.get("scalar", ""), str):
@@ -623,11 +609,11 @@ class TetcReader:
             raise OptionError(f"{self.container.name} is split into {self.n_bricks} bricks: decode them with "
                               "reader.brick(k) or the whole mesh with gatun_py.codec.bricks.decode_bricked")
 
-    def level_meta(self, level: int = 0) -> dict:
+    def level_meta(self, level: int = 0) -> LevelMeta:
         for lv in self.levels:
-            if lv["level"] == level:
+            if lv.level == level:
                 return lv
-        raise OptionError(f"level {level} is not stored in this file (stored: {[lv['level'] for lv in self.levels]})")
+        raise OptionError(f"level {level} is not stored in this file (stored: {[lv.level for lv in self.levels]})")
 
     def read_section(self, name: str) -> bytes:
         """The CRC-checked payload of section ``name``."""
@@ -662,35 +648,35 @@ class TetcReader:
         lv = self.level_meta(level)
         name = f"L{level}/geometry"
         head = self.container.read_section_head(name, MAX_HEADER_SIZE)
-        coding, _, _, _ = check_geometry_header(head, lv["points"], total=self._size(name))
+        coding, _, _, _ = check_geometry_header(head, lv.points, total=self._size(name))
         if coding > codings(self.container.major).geometry:
             raise CorruptFileError(f"corrupt geometry section of level {level}: coding {coding} "
                                    f"in a file of format {self.container.major}")
-        m, nf = lv["tets"], lv["boundary_faces"]
+        m, nf = lv.tets, lv.boundary_faces
         tlen, blen = (self._size(f"L{level}/{part}") for part in ("tets", "boundary"))
         if m > _MAX_TETS_PER_BYTE * (tlen + 8) or nf > _MAX_FACES_PER_BYTE * (blen + 8):
             raise CorruptFileError("corrupt metadata: counts cannot fit in the stored sections")
         if (m == 0) != (nf == 0):
             raise CorruptFileError("corrupt metadata: inconsistent tet and face counts")
-        return lv["points"]
+        return lv.points
 
     def read_forest(self, level: int = 0):
         """The merge forest of ``level`` in decode order as (parent, rank), or None if not stored."""
         lv = self.level_meta(level)
         name = f"L{level}/forest"
         if not self.container.has_section(name):
-            if lv.get("has_forest"):
+            if lv.has_forest:
                 raise CorruptFileError(f"missing section {name!r}")
             return None
         data = self.read_section(name)
         n, _ = forest_header(data)
-        if n != lv["points"]:
-            raise CorruptFileError(f"{name}: covers {n} vertices, the level has {lv['points']}")
+        if n != lv.points:
+            raise CorruptFileError(f"{name}: covers {n} vertices, the level has {lv.points}")
         n = self._checked_points(level)
         coding = codings(self.container.major).forest
         if coding == 0:
             return decode_forest(data, n)
-        boundary = np.arange(n) < lv["boundary_vertices"]
+        boundary = np.arange(n) < lv.boundary_vertices
         if coding == 1:
             return decode_forest_on_mesh(data, self._level_tets(level), n, boundary=boundary)
         tets, points, density = self._level_geometry(level)
@@ -735,7 +721,7 @@ class TetcReader:
         mask = chained_channels(data)
         if not mask:
             return None
-        order = [lv["level"] for lv in self.levels]
+        order = [lv.level for lv in self.levels]
         first = order.index(level) + 1
         cache = self._value_tables  # (level, channel) -> table
         # the tables missing, level by level from the next one: a level's chained channels among
@@ -758,7 +744,7 @@ class TetcReader:
             # the block's header is checked against the level's vertex count (the metadata's, checked
             # when the reader opened) before its tables are allocated: n caps their sizes
             tables = decode_value_tables(self.read_section(f"L{order[at]}/geometry"),
-                                         self.level_meta(order[at])["points"], base, channels=need)
+                                         self.level_meta(order[at]).points, base, channels=need)
             for ch in range(4):
                 if need >> ch & 1:
                     if tables[ch] is None:
@@ -777,8 +763,8 @@ class TetcReader:
     def _connectivity_decoder(self, level: int, *, keep_predictors: bool = True) -> ConnectivityDecoder:
         lv = self.level_meta(level)
         return ConnectivityDecoder(self.read_section(f"L{level}/boundary"), self.read_section(f"L{level}/tets"),
-                                   n_points=lv["points"], n_tets=lv["tets"], n_boundary_faces=lv["boundary_faces"],
-                                   n_referenced=lv["referenced_points"], keep_predictors=keep_predictors,
+                                   n_points=lv.points, n_tets=lv.tets, n_boundary_faces=lv.boundary_faces,
+                                   n_referenced=lv.referenced_points, keep_predictors=keep_predictors,
                                    coding=codings(self.container.major).tets)
 
     def _connectivity(self, level: int):
@@ -794,13 +780,13 @@ class TetcReader:
         """Merges the file's full forest holds (0 when it stores none), from the section header only."""
         if self._brick_metas:  # the bricks' forests together
             return sum(self.brick(k).forest_merges() for k in range(self.n_bricks))
-        lv0 = min(self.levels, key=lambda lv: lv["level"])
-        name = f"L{lv0['level']}/forest"
+        lv0 = min(self.levels, key=lambda lv: lv.level)
+        name = f"L{lv0.level}/forest"
         if not self.container.has_section(name):
             return 0
         n, k = forest_header(self.read_section(name))
-        if n != lv0["points"]:
-            raise CorruptFileError(f"{name}: covers {n} vertices, the level has {lv0['points']}")
+        if n != lv0.points:
+            raise CorruptFileError(f"{name}: covers {n} vertices, the level has {lv0.points}")
         return k
 
     def has_dependencies(self) -> bool:
@@ -861,25 +847,25 @@ class TetcReader:
             return None
         return ArrayDecoder(self.read_section(section), n_points=n, dtype="float64", components=3)
 
-    def _connectivity_batches(self, conn, lv: dict, batch_tets: int, tets_out, copy_refs: bool):
+    def _connectivity_batches(self, conn, lv: LevelMeta, batch_tets: int, tets_out, copy_refs: bool):
         """The connectivity stage of a decode: yields (first new vertex, tets or None, new vertices'
         refs, boundary faces or None), the boundary surface first, then batches of tets (into
         ``tets_out`` when given, see :meth:`_batches`). ``copy_refs``: hand over copies of the
         refs (the decoder rewrites its window of them on the next call)."""
         faces, nbv = conn.boundary()
-        if nbv != lv["boundary_vertices"]:
+        if nbv != lv.boundary_vertices:
             raise CorruptFileError("corrupt boundary section: vertex count does not match the metadata")
         refs = conn.last_refs
         yield 0, None, refs.copy() if copy_refs else refs, faces
         conn.start_tets()
         known = nbv
-        while conn.tets_done < lv["tets"]:
+        while conn.tets_done < lv.tets:
             out = None if tets_out is None else tets_out[conn.tets_done:]
             tets = conn.next_tets(batch_tets, out=out)
             refs = conn.last_refs  # the batch's new vertices
             yield known, tets, refs.copy() if copy_refs else refs, None
             known = conn.vertices_known
-        if known != lv["referenced_points"]:
+        if known != lv.referenced_points:
             raise CorruptFileError("corrupt tet section: vertex count does not match the metadata")
         self.last_peak_border = conn.peak_border
 
@@ -1003,7 +989,7 @@ class TetcReader:
         >>> from gatun_py.warmup import SHIPPED_TETC
         >>> r = TetcReader(SHIPPED_TETC)
         >>> m = r.decode_mesh(jobs=2)
-        >>> m.n_tets == r.level_meta(0)["tets"]
+        >>> m.n_tets == r.level_meta(0).tets
         True
         >>> bool((m.tets == r.decode_mesh(jobs=1).tets).all())
         True
@@ -1018,10 +1004,10 @@ class TetcReader:
         extra.update(self._array_decoders(level, range(len(self.arrays)), n))
         points = np.empty((n, 3), np.float32)
         density = np.empty(n, np.float32)
-        tets = np.empty((lv["tets"], 4), np.int32)  # decoded into in place, batch by batch
+        tets = np.empty((lv.tets, 4), np.int32)  # decoded into in place, batch by batch
         batch_tets = DEFAULT_BATCH_TETS
         if jobs > 1:  # the last batch's geometry waits for nothing to overlap: a dozen batches or more
-            batch_tets = min(DEFAULT_BATCH_TETS, max(_MIN_RUN_AHEAD_BATCH_TETS, lv["tets"] // 12))
+            batch_tets = min(DEFAULT_BATCH_TETS, max(_MIN_RUN_AHEAD_BATCH_TETS, lv.tets // 12))
         for b, _ in self._batches(level, batch_tets, extra, tets_out=tets, jobs=jobs):
             k = len(b.points)
             points[b.first:b.first + k] = b.points

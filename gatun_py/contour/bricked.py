@@ -118,7 +118,7 @@ def _level_of_brick(reader: TetcReader, k: int, level: int) -> dict:
     try:
         return reader.brick(k).level_meta(level)
     except OptionError:
-        stored = [lv["level"] for lv in reader.levels]
+        stored = [lv.level for lv in reader.levels]
         raise OptionError(f"level {level} is not stored in every brick (missing in brick {k}); "
                           f"stored in all: {stored}") from None
 

@@ -59,7 +59,7 @@ the simplified faces, dilutes a face weight: the importance test's hot region lo
 
 After a collapse only the survivor's edges are re-costed at once; an edge of the ring whose end's
 current quadric was rebuilt is re-costed when it surfaces (lazy update: pushing every ring edge at
-every collapse made the QEM 5x slower on the flange, this 1.5x).
+every collapse costs far more; ``bench/sections/isosurface.md``).
 
 State is plain arrays (the driver owns and grows them); the heap is local to a call: a 4-ary heap
 of 24-byte records (cost, edge, collapse count when costed), each edge pushed once (from its lower

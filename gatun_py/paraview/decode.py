@@ -95,8 +95,8 @@ ARRAYS_SUFFIX = ".npydir"
 
 def write_arrays(mesh, folder) -> dict:
     """The mesh as plain ``.npy`` files in ``folder`` (created): what the plugin turns into a VTK grid
-    with no parsing at all, which for ParaView's readers of 5.11 is 3-20x faster than a VTKHDF or
-    ``.vtu`` file. Returns the manifest: file of the points, the VTK cells (connectivity, offsets and
+    with no parsing at all, faster for ParaView 5.11 to load than a VTKHDF or ``.vtu`` file
+    (``bench/sections/paraview.md``). Returns the manifest: file of the points, the VTK cells (connectivity, offsets and
     one cell type or a types file) and every point and cell array by name."""
     points, cells, point_data, cell_data = _parts(mesh)
     os.makedirs(folder, exist_ok=True)

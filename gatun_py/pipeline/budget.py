@@ -41,6 +41,7 @@ import numpy as np
 
 from .._version import __version__
 from ..codec import LevelPayload, TetcReader, encode_tetc
+from ..codec.levelmeta import LevelMeta
 from ..errors import OptionError
 from ..mesh import mesh_batches
 from ..mesh.synthetic import jittered_grid
@@ -85,11 +86,10 @@ class Costs:
 
     The defaults are the reference machine's (2 cores, no GPU, where the project's figures are
     measured): a non-negative least-squares fit, on relative error, of 126 renders of the four
-    samples (five levels each, 96² to 512², two sample steps) and of the seeding grid. Predicted /
-    measured render time: median 0.97, 10th-90th percentile 0.39-1.23 (the low end: Combustion's
-    smallest frames, which took 20 ms whatever their size). Boundary faces came out at zero (their
-    cost hides in the per-tet and per-step terms) and the fixed part at 0.35 ms: both are given a
-    small non-zero value here; the forest pass is the seeding grid's measured figure.
+    samples (five levels each, 96² to 512², two sample steps) and of the seeding grid (the fit's
+    quality is in ``bench/sections/pipeline.md``). Boundary faces and the fixed part come out near
+    zero in the fit (their cost hides in the per-tet and per-step terms): both are given a small
+    non-zero value here; the forest pass is the seeding grid's measured figure.
     """
 
     fixed_s: float = 2e-3
@@ -507,9 +507,8 @@ class FramePlanner:
         return w
 
 
-def levels_of(stored: list[dict]) -> list[LevelSize]:
-    return sorted((LevelSize(int(lv["level"]), int(lv.get("merges_before", 0)), int(lv["tets"]),
-                             int(lv.get("points", 0)), int(lv.get("boundary_faces", 0)), bool(lv.get("has_forest")))
+def levels_of(stored: list[LevelMeta]) -> list[LevelSize]:
+    return sorted((LevelSize(lv.level, lv.merges_before, lv.tets, lv.points, lv.boundary_faces, lv.has_forest)
                    for lv in stored), key=lambda x: x.merges)
 
 

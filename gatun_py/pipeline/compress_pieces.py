@@ -25,13 +25,11 @@ it was made; Dask reruns the tasks of a worker that dies.
 
 from __future__ import annotations
 
-import json
 import math
 import multiprocessing
 import os
 import re
 import shutil
-import struct
 import tempfile
 import zlib
 from concurrent.futures import ProcessPoolExecutor
@@ -46,7 +44,7 @@ import numpy as np
 from .._atomic import atomic_path
 from ..codec.bricks import _keys, brick_jobs, encode_brick, encode_cut, map_bricks, read_cut, stitch_bricks
 from ..codec.brickindex import BRICKS_KEY, brick_prefix
-from ..codec.container import MAGIC, PREAMBLE_SIZE, VERSION_MAJOR, VERSION_MINOR
+from ..codec.container import container_head, record_head
 from ..codec.tetcfile import FORMAT_NAME, dtype_name
 from ..codec.threads import check_jobs
 from ..errors import CorruptFileError, MeshError, OptionError, OutputError, TetcError
@@ -65,9 +63,6 @@ PIECES_KEY = "pieces"  # metadata: per piece its source name and its first brick
 BYTES_PER_TET = 400
 BYTES_PER_TET_MESH_ONLY = 150
 MIN_BRICK_TETS = 1000  # a memory limit never cuts bricks smaller (their cut points would dominate)
-_PREAMBLE = struct.Struct("<8sHHII")
-_REC_NAME = struct.Struct("<H")
-_REC_LEN = struct.Struct("<QI")
 
 
 def parse_memory(text) -> int:
@@ -165,11 +160,6 @@ def summarise_piece(path, read_options: dict, unit_tets: int | None, drop_cell_d
 
 # -- pass 2: the bricks of a piece -------------------------------------------------------------------
 
-def _record_head(name: str, payload: bytes) -> bytes:
-    nb = name.encode("utf-8")
-    return _REC_NAME.pack(len(nb)) + nb + _REC_LEN.pack(len(payload), zlib.crc32(payload))
-
-
 def encode_piece(path, read_options: dict, unit_tets: int | None, drop_cell_data: bool, expect: list,
                  shared: list, n_shared: int, first_brick: int, options: dict, threads: int = 0) -> list:
     """Pass 2 for one piece: its bricks, each as ``(records, index rows, brick entry)``: the
@@ -194,7 +184,7 @@ def encode_piece(path, read_options: dict, unit_tets: int | None, drop_cell_data
         prefix = brick_prefix(first_brick + j)
         recs, rows = [], []
         for name, data in sections:
-            head = _record_head(prefix + name, data)
+            head = record_head(prefix + name, data)
             recs += [head, bytes(data)]
             rows.append((prefix + name, len(head), len(data), zlib.crc32(data)))
         out.append((b"".join(recs), rows, enc.entry))
@@ -244,28 +234,6 @@ def _describe(s: PieceSummary) -> str:
 def _join(ranges) -> list:
     have = [r for r in ranges if r is not None]
     return [min(r[0] for r in have), max(r[1] for r in have)] if have else [0.0, 0.0]
-
-
-def container_head(meta: dict, rows: list) -> bytes:
-    """Preamble and metadata of a container whose sections follow as records of ``rows``
-    (``(name, head length, payload length, crc32)`` in file order): the bytes
-    :func:`~gatun_py.codec.container.build_container` puts before its first record."""
-    meta = dict(meta)
-    meta_len = 0
-    for _ in range(8):
-        off = PREAMBLE_SIZE + meta_len
-        index = []
-        for name, head, length, crc in rows:
-            index.append({"name": name, "offset": off + head, "length": length, "crc32": crc})
-            off += head + length
-        meta["sections"] = index
-        blob = json.dumps(meta, separators=(",", ":"), sort_keys=False).encode("utf-8")
-        if len(blob) == meta_len:
-            break
-        meta_len = len(blob)
-    else:  # pragma: no cover - lengths converge after two rounds
-        raise RuntimeError("metadata length did not converge")
-    return _PREAMBLE.pack(MAGIC, VERSION_MAJOR, VERSION_MINOR, len(blob), zlib.crc32(blob)) + blob
 
 
 class _Spool:
@@ -521,7 +489,7 @@ def piece_mesh(reader, piece: int, *, level: int = 0, jobs: int | None = None) -
     if reader.n_bricks <= 1:
         raise OptionError("this file has no bricks")
     for k in ks:
-        if level not in {lv["level"] for lv in reader.brick(k).levels}:
+        if level not in {lv.level for lv in reader.brick(k).levels}:
             raise OptionError(f"level {level} is not stored in brick {k} of piece {piece}")
     meshes = map_bricks(lambda i: reader.brick(ks[i]).decode_mesh(level, jobs=brick_jobs(jobs, len(ks))), len(ks), jobs)
     if len(ks) == 1:

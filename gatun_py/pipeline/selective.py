@@ -36,36 +36,14 @@ is what ``--budget`` does, with the level and tet count of the uniform plan, so 
 no more than the uniform one.
 
 Why a selective cut gains little at 95-99 % merged: the dependency closure of a late merge covers
-most earlier merges (on Blunt-fin, 94 % of them for a merge at rank 95 %), so a closed cut that
-applies 95 % of the merges is nearly the prefix whatever the importance says; the freedom is in the
-middle ranks (a merge at rank 80 % needs 3 % of the earlier ones). But the closure is not what
-binds (``bench/sections/selective.md``, "What limits the selective cut"): without it, the same
-importance order is 3-45x *worse* than uniform (overlapping tets: the *unsafe* cut), and with a
-run-time legality check instead (:func:`gatun_py.simplify.dependencies.legal_cut`: flip-free, no
-overlaps) still 2-14x worse, and it cannot reach the tet goal. Even the uniform order itself with
-0.1 % noise (sigma = 41 ranks on Blunt-fin) gives legal cuts 4-14x worse, while closed cuts of the
-same noisy order stay within 1.0-1.14x of uniform: a merge is only as good as the decimator made it
-in the state it was evaluated in, and only a closed cut reproduces that state. Per merge, the
-image change a merge makes in its prefix state is zero for 40-80 % of merges and is predicted about
-as well by the rank as by the view- and TF-dependent importance or the region error
-(:func:`region_error`; Spearman 0.55-0.71 for each). So the importance has nothing to exploit that
-the forest order does not already encode, and the closed cut, the only one that keeps the forest's
-quality, cannot move far from the prefix. Nor does a forest built in rounds of independent merges
-loosen the closure (tried and reverted, commit 139dcb4: the merge at rank 95 % still needs 86-94 %
-of the earlier ones): at 95 % merged a merge's star is a large region, and the merges that built
-it are most of the merges there.
-
-The bound (``bench/sections/selective_bound.md``, ``selective_bricks.md``): an *oracle* importance,
-the image error each region of merges (4^3 grid) is measured to make for the view and TF, with the
-same closed cut, gives 0.88-1.19x uniform's RMSE at 95 % merged and 0.95-2.7x at 99 % (median 0.99
-over 36 cells; the shipped importance 1.07), on both samples with three TFs, one of them fully
-transparent over 3/4 of the vertices: no importance reaches 0.5x with this forest. Bricked forests
-(issue 16), whose per-brick prefixes are free and flip-free by construction, cannot get to 95 or
-99 % at all (their locked cut vertices are 9.5-34 % of the points: 2.2-9.9x the 95 % goal's tets
-at the least), and where they reach, the locks cost more than the choice gains (oracle per-brick
-allocations 1.25-9.3x the unbricked uniform RMSE at equal tets, median 1.67); tiers above the
-bricks (groups decimated again with their shared cuts unlocked) leave no choice below the locked
-tiers' reach: there the cut is a prefix of the top tier's forest.
+most earlier merges, so a closed cut that applies most merges is nearly the prefix whatever the
+importance says; the freedom is in the middle ranks. The closure is still what keeps the quality: a
+merge is only as good as the decimator made it in the state it was evaluated in, and only a closed
+cut reproduces that state (an unclosed cut overlaps tets; a run-time legality check,
+:func:`gatun_py.simplify.dependencies.legal_cut`, is flip-free but loses to uniform). Bricked
+forests lock their cut vertices, which bounds how far their cuts reach. The measurements (the
+closure's reach, the oracle bound on any importance, bricked forests) are in
+``bench/sections/selective.md``, ``selective_bound.md`` and ``selective_bricks.md``.
 
 Examples
 --------
@@ -176,10 +154,10 @@ def selective_source(reader: TetcReader, scalar: str | None = None, component=No
         cache[key] = None
         return None
     lv = reader.level_meta(level)
-    first = int(lv.get("merges_before", 0))
+    first = lv.merges_before
     forest = reader.read_forest(level)
     if forest is None:  # a level with nothing left to merge
-        forest = (np.arange(int(lv["points"]), dtype=np.int32), np.full(int(lv["points"]), ROOT_RANK, np.int32))
+        forest = (np.arange(lv.points, dtype=np.int32), np.full(lv.points, ROOT_RANK, np.int32))
     parent, rank = forest
     n = parent.shape[0]
     merged = rank != ROOT_RANK
@@ -202,7 +180,7 @@ def selective_source(reader: TetcReader, scalar: str | None = None, component=No
     if keep_batches:
         reader.__dict__.setdefault("_selective_batches", {})[key] = kept
     src = SelectiveSource(deps, parent, rank, vertex, parent[vertex].astype(np.int64), points, scalars,
-                          int(lv["tets"]), level, first, tets)
+                          lv.tets, level, first, tets)
     cache[key] = src
     return src
 
@@ -438,10 +416,10 @@ def _start(reader, src: SelectiveSource, applied) -> Cut:
     best = levels[0]
     total = int(applied.sum())
     for j, lv in enumerate(levels):
-        n = int(lv.get("merges_before", 0))
+        n = lv.merges_before
         # level 0 and the last level keep every merge after them, the others those up to the next
-        upto = src.n_merges if j in (0, len(levels) - 1) else int(levels[j + 1].get("merges_before", 0))
-        if applied[:n].all() and not applied[upto:].any() and (lv.get("has_forest") or total == n):
+        upto = src.n_merges if j in (0, len(levels) - 1) else levels[j + 1].merges_before
+        if applied[:n].all() and not applied[upto:].any() and (lv.has_forest or total == n):
             best = lv
     level, n = int(best["level"]), int(best.get("merges_before", 0))
     cache = reader.__dict__.setdefault("_selective_forests", {0: (src.parent, src.rank)})
@@ -489,7 +467,7 @@ def plan_cut(reader, view: View, *, ratio=None, tets=None, merges=None, factors=
     if ratio is not None:
         if not 0.0 <= ratio <= 1.0:
             raise OptionError(f"ratio {ratio} is outside [0, 1]")
-        n0 = int(reader.level_meta(0)["points"])
+        n0 = reader.level_meta(0).points
         merges = int(np.floor(ratio * n0)) - src.first
         if not 0 <= merges <= src.n_merges:
             raise OptionError(f"ratio {ratio} needs {merges + src.first} merges; from level {src.level} this "
@@ -565,16 +543,16 @@ def render_selective(reader, view: View, *, ratio=None, tets=None, merges=None, 
         if log is not None:
             log("note: this file stores no merge dependencies (it was compressed without them): rendering uniformly")
         if tets is not None:
-            levels = [lv for lv in stored_levels(reader) if int(lv["tets"]) >= tets] or stored_levels(reader)[:1]
-            result = render_tetc(reader, view, level=int(min(levels, key=lambda lv: int(lv["tets"]))["level"]),
+            levels = [lv for lv in stored_levels(reader) if lv.tets >= tets] or stored_levels(reader)[:1]
+            result = render_tetc(reader, view, level=min(levels, key=lambda lv: lv.tets).level,
                                  pipeline=pipeline, progress=progress)
         else:
             result = render_tetc(reader, view, ratio=ratio, pipeline=pipeline, progress=progress)
         result.stats.update(selective=False)
         return result
     lv = reader.level_meta(cut.level)
-    counter = FlipCounter(int(lv["points"]))
-    n0 = int(reader.level_meta(0)["points"])
+    counter = FlipCounter(lv.points)
+    n0 = reader.level_meta(0).points
     kept = take_batches(reader, view.scalar, view.component, level)
     decoded = kept if cut.level == level and pipeline == "streaming" else None
     result = render_tetc(reader, view, pipeline=pipeline, target=cut.target(n0, src.first), ancestors=cut.ancestors,

@@ -193,9 +193,9 @@ def brick_tets(source) -> int:
     if isinstance(source, TetMesh):
         return int(source.n_tets)
     if isinstance(source, BrickRef):
-        return int(open_brick(source).level_meta(source.level)["tets"])
+        return open_brick(source).level_meta(source.level).tets
     reader = source if isinstance(source, TetcReader) else TetcReader(source)
-    return int(reader.level_meta(0)["tets"])
+    return reader.level_meta(0).tets
 
 
 def render_brick(source, setup: FrameSetup, *, ratio: float | None = None, level: int | None = None,
@@ -249,7 +249,7 @@ def render_brick(source, setup: FrameSetup, *, ratio: float | None = None, level
                                 fragments=True)
         stats = dict(res.stats)
         stats.update(times, level=target.level, ratio=target.ratio, merges=target.merges,
-                     tets_decoded=int(reader.level_meta(target.level)["tets"]), bricks_decoded=1)
+                     tets_decoded=reader.level_meta(target.level).tets, bricks_decoded=1)
     stats["brick_s"] = time.perf_counter() - t0
     return res.fragments, stats
 
@@ -373,7 +373,7 @@ def plan_brick_budgets(sources, view: View, budget_s: float, *, groups=None, set
 def _budget_shares(readers, budget_s: float, groups, setup: FrameSetup | None) -> list[float]:
     """Each brick's seconds of ``budget_s``: in proportion to its tets within its group, bricks
     hidden from ``setup``'s frame counted as none."""
-    tets = [int(r.level_meta(0)["tets"]) for r in readers]
+    tets = [r.level_meta(0).tets for r in readers]
     if setup is not None:
         tets = [0 if brick_hidden(r, resolve_target(r, level=0), setup) else n for r, n in zip(readers, tets)]
     share = [0.0] * len(readers)
@@ -402,7 +402,7 @@ class BrickBudget:
 
     def __init__(self, readers):
         self.readers = list(readers)
-        self.tets = [int(r.level_meta(0)["tets"]) for r in self.readers]
+        self.tets = [r.level_meta(0).tets for r in self.readers]
         self._planners = None
 
     def __repr__(self) -> str:

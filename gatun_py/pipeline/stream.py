@@ -189,7 +189,7 @@ def render_tetc(source, view: View, *, ratio: float | None = None, level: int | 
     stats.update(forest_times)
     stats.update(
         pipeline=pipeline, level=target.level, ratio=target.ratio, merges=target.merges,
-        tets_decoded=int(lv["tets"]), filter=fstats, notes=notes + res.stats.get("notes", []),
+        tets_decoded=lv.tets, filter=fstats, notes=notes + res.stats.get("notes", []),
         peak_rss_mb=peak_rss_mb(),
     )
     return PipelineResult(res.image, stats)
@@ -211,7 +211,7 @@ def _run_streaming(reader, target, anc, camera, view, rng, step, times, progress
     if watch is not None:
         batches = watch(batches)
     res = render_batches(batches, camera, view.tf, mode=view.mode, step=step, scalar_range=rng,
-                         expected_tets=int(lv["tets"]), lean=view.lean, fragments=fragments, progress=progress,
+                         expected_tets=lv.tets, lean=view.lean, fragments=fragments, progress=progress,
                          terminate=view.terminate,
                          partial=partial, partial_every_s=partial_every_s)
     # render_batches times the wait for each batch: the decoder, plus the filter when there is one.

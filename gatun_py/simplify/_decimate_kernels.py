@@ -44,7 +44,7 @@ from __future__ import annotations
 import numpy as np
 from numba import get_thread_id, njit, prange
 
-from ..codec._forest_kernels import hyperplane_normal
+from ..mesh._quadric_kernels import hyperplane_normal
 from ..codec.forest import ROOT_RANK  # noqa: F401 (decimate.py reads it as K.ROOT_RANK)
 from ..mesh.model import TET_FACES as _TET_FACES
 
@@ -1792,7 +1792,7 @@ def _centroid_points(pts, dens, T, tet_w, centroid_weight, rows):
 def _tet_hyperplanes(u4, T, weight, planes):
     """``planes[t]`` = (unit normal n (4), offset d, weight w) of tet t's hyperplane through its
     corners' (x, y, z, s): n . u + d = 0 there, n from
-    :func:`gatun_py.codec._forest_kernels.hyperplane_normal` (edges from corner 0, every operation
+    :func:`gatun_py.mesh._quadric_kernels.hyperplane_normal` (edges from corner 0, every operation
     spelled out: the quadrics, and with them the forest, are the same bits on every machine); a
     flat tet (n = 0) or one of weight <= 0 gets n = 0 and w = 0."""
     for t in range(T.shape[0]):
@@ -1832,26 +1832,3 @@ def _accumulate_quadrics(T, planes, out):
             q[14] = (d * d) * w
             for j in range(15):
                 out[v, j] += q[j]
-
-
-@njit(cache=True)
-def _ancestors(parent, rank, n_merges):
-    """Ancestor of every vertex after the first ``n_merges`` merges.
-
-    One top-down pass, as in the paper's section 4.2: merges are visited from the latest to the
-    earliest (a parent always outranks its children), so a parent's ancestor is final before any
-    child copies it. Ranks below ``n_merges`` are distinct, so the order is a counting sort, O(n).
-    """
-    n = parent.shape[0]
-    anc = np.empty(n, np.int32)
-    by_rank = np.full(n, -1, np.int64)
-    for v in range(n):
-        anc[v] = v
-        r = rank[v]
-        if 0 <= r < n_merges and r < n:
-            by_rank[r] = v
-    for r in range(min(n_merges, n) - 1, -1, -1):
-        v = by_rank[r]
-        if v >= 0:
-            anc[v] = anc[parent[v]]
-    return anc

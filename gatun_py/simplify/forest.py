@@ -17,7 +17,7 @@ import numpy as np
 from ..codec.forest import ROOT_RANK, check_forest
 from ..errors import OptionError
 from ..mesh import TetMesh
-from ._decimate_kernels import _ancestors
+from ._forest_kernels import ancestors_kernel
 
 __all__ = ["ROOT_RANK", "MergeForest", "ancestors", "simplified_mesh", "mesh_from_ancestors", "check_forest",
            "forest_prefix"]
@@ -95,7 +95,7 @@ def ancestors(parent: np.ndarray, rank: np.ndarray, n_merges: int) -> np.ndarray
         raise OptionError(f"n_merges must be >= 0, got {n_merges}")
     if parent.shape[0] == 0:
         return np.zeros(0, np.int32)
-    return _ancestors(parent, rank, np.int64(n_merges))
+    return ancestors_kernel(parent, rank, np.int64(n_merges))
 
 
 def simplified_mesh(mesh: TetMesh, forest: MergeForest, n_merges: int, *, return_ids: bool = False):

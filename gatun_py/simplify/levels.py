@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..codec import LevelPayload, TetcReader
+from ..codec.levelmeta import LevelMeta
 from ..errors import CorruptFileError, OptionError
 from ..mesh import TetMesh
 from .forest import ROOT_RANK, MergeForest, ancestors, forest_prefix, mesh_from_ancestors, simplified_mesh
@@ -218,7 +219,7 @@ def level_payloads(levels: list[LevelMesh]) -> list[LevelPayload]:
 
 # -- reading levels back from a .tetc file ------------------------------------------------------
 def _describe_levels(levels_meta) -> str:
-    return ", ".join(f"{lv['level']} (ratio {float(lv.get('ratio', 0.0)):.6f})" for lv in levels_meta)
+    return ", ".join(f"{lv.level} (ratio {float(lv.ratio):.6f})" for lv in levels_meta)
 
 
 def forest_merges(reader: TetcReader) -> int:
@@ -237,9 +238,9 @@ class Target:
     level_merges: int
 
 
-def stored_levels(reader) -> list[dict]:
+def stored_levels(reader) -> list[LevelMeta]:
     """The file's level metadata, finest first."""
-    return sorted(reader.levels, key=lambda lv: int(lv.get("merges_before", 0)))
+    return sorted(reader.levels, key=lambda lv: lv.merges_before)
 
 
 def resolve_target(reader, *, ratio: float | None = None, level: int | None = None) -> Target:
@@ -257,12 +258,12 @@ def resolve_target(reader, *, ratio: float | None = None, level: int | None = No
     if ratio is not None and level is not None:
         raise OptionError("give either a ratio or a level, not both")
     stored = stored_levels(reader)
-    n0 = int(stored[0]["points"])
+    n0 = stored[0].points
     if ratio is None:
         level = 0 if level is None else int(level)
         for lv in stored:
-            if lv["level"] == level:
-                n = int(lv.get("merges_before", 0))
+            if lv.level == level:
+                n = lv.merges_before
                 return Target(level, n, n / n0 if n0 else 0.0, n)
         raise OptionError(f"level {level} is not stored in this file; stored levels: {_describe_levels(stored)}")
     total = forest_merges(reader)
@@ -272,15 +273,14 @@ def resolve_target(reader, *, ratio: float | None = None, level: int | None = No
                           f"(stored levels: {_describe_levels(stored)})")
     n = int(np.floor(ratio * n0))
     if n > total:
-        why = ("it stores no merge forest (compressed with --mesh-only)" if not stored[0].get("has_forest")
+        why = ("it stores no merge forest (compressed with --mesh-only)" if not stored[0].has_forest
                else f"its forest holds {total} merges (maximum ratio {max_ratio:.6f})")
         raise OptionError(f"ratio {ratio} needs {n} merges but {why}; stored levels: {_describe_levels(stored)}")
-    usable = [lv for lv in stored if int(lv.get("merges_before", 0)) <= n
-              and (lv.get("has_forest") or int(lv.get("merges_before", 0)) == n)]
+    usable = [lv for lv in stored if lv.merges_before <= n and (lv.has_forest or lv.merges_before == n)]
     if not usable:
         raise OptionError(f"no stored level can reach ratio {ratio}; stored levels: {_describe_levels(stored)}")
-    lv = max(usable, key=lambda x: int(x.get("merges_before", 0)))
-    return Target(int(lv["level"]), n, n / n0 if n0 else 0.0, int(lv.get("merges_before", 0)))
+    lv = max(usable, key=lambda x: x.merges_before)
+    return Target(lv.level, n, n / n0 if n0 else 0.0, lv.merges_before)
 
 
 def target_ancestors(reader, target: Target, *, times: dict | None = None) -> np.ndarray | None:

@@ -13,6 +13,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 import gatun_py
 from gatun_py.codec import TetcReader
+from gatun_py.codec.container import VERSION_MAJOR
 from gatun_py.errors import MeshError
 from gatun_py.mesh import mesh_from_meshio, read_mesh
 
@@ -61,7 +62,7 @@ def test_plain_tet_mesh_stores_no_cells(tmp_path):
     gatun_py.compress(POST, out, mesh_only=True)
     r = TetcReader(out)
     assert "cells" not in r.meta and not any(s.startswith("C/") for s in r.container.section_names())
-    assert r.container.major == 10
+    assert r.container.major == VERSION_MAJOR
 
 
 @pytest.mark.parametrize("seed,dims,kinds", [(0, (3, 3, 2), (0, 1, 2)), (1, (4, 3, 3), (0, 1, 2)),
@@ -315,10 +316,13 @@ def test_exodus_round_trip(tmp_path):
     check_round_trip(orig, meshio.read(out), vertex_order_of(tm))
 
 
-# -- golden file: format 10 with cells ---------------------------------------------------------
+# -- golden files: formats 10 and 11 with cells -------------------------------------------------
 
-def test_cells_golden_file_decodes_bit_exactly_and_is_rewritten_the_same(tmp_path):
-    import hashlib
+CELLS_GOLDEN_VERSIONS = (10, 11)  # one per format version since cells came
+
+
+@pytest.mark.parametrize("version", CELLS_GOLDEN_VERSIONS)
+def test_cells_golden_file_decodes_bit_exactly(version):
     import json
     import sys
 
@@ -326,17 +330,25 @@ def test_cells_golden_file_decodes_bit_exactly_and_is_rewritten_the_same(tmp_pat
     from make_cells_golden import digest, golden_mesh
 
     data = ROOT / "tests" / "data"
-    expected = json.loads((data / "cells_v10.json").read_text())
-    golden = data / "cells_v10.tetc"
-    assert digest(meshio.read(golden)) == expected["decoded"]
-    # the mesh it came from, compressed again: the same bytes (the format did not drift). Since
-    # the quadratic nodes are coded on their edges the writer's bytes differ from the golden
-    # file's (which keeps decoding as before): they are pinned as "rewritten_sha256".
-    out = tmp_path / "again.tetc"
-    gatun_py.compress(golden_mesh(), out, scalar="p")
-    assert digest(meshio.read(out)) == expected["decoded"]
-    assert hashlib.sha256(out.read_bytes()).hexdigest() == expected.get("rewritten_sha256", expected["file_sha256"])
-    # and what it holds is the mesh, cells, arrays and sets (checked the slow way once)
+    golden = data / f"cells_v{version}.tetc"
+    assert TetcReader(golden).container.major == version
+    assert digest(meshio.read(golden)) == json.loads((data / f"cells_v{version}.json").read_text())["decoded"]
     orig = golden_mesh()
     tm, _ = mesh_from_meshio(orig, scalar="p")
     check_round_trip(orig, meshio.read(golden), vertex_order_of(tm))
+
+
+def test_cells_golden_file_is_rewritten_the_same(tmp_path):
+    """Today's golden file's mesh, compressed again: the same bytes (the format did not drift)."""
+    import hashlib
+    import json
+    import sys
+
+    sys.path.insert(0, str(ROOT / "tests" / "data"))
+    from make_cells_golden import digest, golden_mesh
+
+    expected = json.loads((ROOT / "tests" / "data" / f"cells_v{VERSION_MAJOR}.json").read_text())
+    out = tmp_path / "again.tetc"
+    gatun_py.compress(golden_mesh(), out, scalar="p")
+    assert digest(meshio.read(out)) == expected["decoded"]
+    assert hashlib.sha256(out.read_bytes()).hexdigest() == expected["file_sha256"]

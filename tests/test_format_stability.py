@@ -1,6 +1,6 @@
 """Files written by earlier versions of the format still decode bit-exactly, and reference renders hold.
 
-``tests/data/post_v{2,...,10}.tetc`` (formats 2 to 10, each written by ``tests/data/make_golden.py N``
+``tests/data/post_v{2,...,11}.tetc`` (formats 2 to 11, each written by ``tests/data/make_golden.py N``
 with the code of its time: format 3 at commit e8af4f5) hold float64 coordinates and point arrays of
 four dtypes/shapes; ``post_v{N}.json`` the hashes of every level's decoded points, arrays, tets and
 forest.
@@ -59,7 +59,7 @@ def test_format_1_decodes_bit_exactly(level):
     _check_forest(r, level, want)
 
 
-GOLDEN_VERSIONS = (2, 3, 4, 5, 6, 7, 8, 9, 10)  # one golden file per format version since 2, each written when it came
+GOLDEN_VERSIONS = (2, 3, 4, 5, 6, 7, 8, 9, 10, 11)  # one golden file per format version since 2, each written when it came
 GOLDEN_OF = {v: DATA / f"post_v{v}.tetc" for v in GOLDEN_VERSIONS}
 EXPECTED_OF = {v: json.loads((DATA / f"post_v{v}.json").read_text()) for v in GOLDEN_VERSIONS}
 
@@ -189,7 +189,7 @@ def test_reference_renders(name):
     assert frame.stats["rays_unfinished"] == 0
 
 
-SERIES_GOLDEN = {10: DATA / "series_v10.tetc"}  # a time series per format version since 10
+SERIES_GOLDEN = {10: DATA / "series_v10.tetc", 11: DATA / "series_v11.tetc"}  # a time series per format version since 10
 
 
 @pytest.mark.parametrize("version", sorted(SERIES_GOLDEN))

@@ -27,7 +27,7 @@ from .._compile_notice import is_tetc  # noqa: F401  (the one test of a .tetc fi
 from ..errors import CorruptFileError, FormatVersionError, ReadError
 
 MAGIC = b"TETC\x89\r\n\x1a"
-VERSION_MAJOR = 10  # 2: float64 coordinates and every point array (points64, array/j); 3: forest coded after
+VERSION_MAJOR = 11  # 2: float64 coordinates and every point array (points64, array/j); 3: forest coded after
 #                    the mesh, bricks (B{k}/...), merge dependencies (deps); 4: geometry coding 2
 #                    (geometry.coding_for_format maps the version to the geometry block's coding);
 #                    5: new codings of the connectivity, geometry and forest sections (each module's
@@ -37,6 +37,9 @@ VERSION_MAJOR = 10  # 2: float64 coordinates and every point array (points64, ar
 #                    8: geometry coding 4 (value tables apart, chained to the next coarser level's)
 #                    9: geometry coding 5 (rank steps on the table-mode channels)
 #                    10: time series (steps) and cells as given
+#                    11: higher-order nodes coded on their cells' edges and faces (node_refs), cell
+#                    arrays as a constant or a counter, each step's cell arrays (S{k}/cell/j):
+#                    a version-10 reader would misread or drop them, so it refuses the file
 VERSION_MINOR = 0
 _PREAMBLE = struct.Struct("<8sHHII")
 PREAMBLE_SIZE = _PREAMBLE.size

@@ -70,6 +70,7 @@ FORMATS = {
     8: Codings(tets=2, geometry=4, forest=3, array_copies=True),
     9: Codings(tets=2, geometry=5, forest=3, array_copies=True),
     10: Codings(tets=2, geometry=5, forest=3, array_copies=True, steps=True, cells=True),
+    11: Codings(tets=2, geometry=5, forest=3, array_copies=True, steps=True, cells=True),
 }
 
 

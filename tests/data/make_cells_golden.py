@@ -1,9 +1,9 @@
-"""Write ``tests/data/cells_v10.tetc`` and ``cells_v10.json``: a small mesh of several components
+"""Write ``tests/data/cells_v{N}.tetc`` and ``cells_v{N}.json`` (N: today's format version): a small mesh of several components
 with every kind of cell block (hexahedra, pyramids, tets, wedges, tetra10), cell arrays of float,
 int and bool, field data, point and cell sets, compressed with its levels; the JSON holds the
 SHA-256 of everything ``meshio.read`` gives back (tests/test_cells.py checks it).
 
-    python tests/data/make_cells_golden.py
+    python tests/data/make_cells_golden.py        # once per format version, when it comes
 """
 
 from __future__ import annotations
@@ -67,12 +67,13 @@ def digest(m: meshio.Mesh) -> dict:
 
 def main() -> None:
     import gatun_py
+    from gatun_py.codec.container import VERSION_MAJOR
 
-    out = HERE / "cells_v10.tetc"
+    out = HERE / f"cells_v{VERSION_MAJOR}.tetc"
     gatun_py.compress(golden_mesh(), out, force=True, scalar="p")
     data = out.read_bytes()
     expected = {"file_sha256": hashlib.sha256(data).hexdigest(), "decoded": digest(meshio.read(out))}
-    (HERE / "cells_v10.json").write_text(json.dumps(expected, indent=1) + "\n")
+    (HERE / f"cells_v{VERSION_MAJOR}.json").write_text(json.dumps(expected, indent=1) + "\n")
     print(f"wrote {out} ({len(data)} bytes)")
 
 

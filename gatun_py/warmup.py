@@ -16,15 +16,18 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import meshio
 import numpy as np
 
 from . import api
 from .codec import LevelPayload, TetcReader, encode_tetc
+from .codec.arrays import ArrayDecoder, encode_array
 from .codec.geometry import GeometryDecoder
 from .codec.forest import FOREST_CODING, decode_forest_on_geometry, decode_forest_on_mesh, decode_forest_rounds
 from .errors import CorruptFileError, TetcError
 from .contour.extract import TINY_TETC, isosurface
 from .mesh import TetMesh, mesh_batches, write_mesh
+from .mesh.plot3d import grid_hexes
 from .mesh.synthetic import jittered_grid
 from .pipeline.bricks import compress_bricks, read_bricked
 from .pipeline.sortlast import render_bricks, split_for_render
@@ -308,7 +311,35 @@ def _readme() -> str:
         mid = lo + 0.5 * (hi - lo)
         isosurface(whole, values=[mid], ratio=0.1).preview(size=16, azimuth=30, elevation=20)
         isosurface(bricked, values=[mid], ratio=0.1)
+        _hex_grid(d)
+    _planes_coder()
     return "the README's commands"
+
+
+def _hex_grid(d: Path) -> None:
+    """What a PLOT3D grid (Blunt-fin) becomes: hexahedra on float32 points with five float32
+    arrays, compressed with its dependencies and decompressed to its cells: kernels typed by
+    float32 coordinates and reached by cells that the tet meshes above do not reach."""
+    dims = (5, 4, 3)
+    hexes, _ = grid_hexes(dims)
+    k, j, i = np.meshgrid(*(np.arange(n, dtype=np.float32) for n in dims[::-1]), indexing="ij")
+    rng = np.random.default_rng(1)
+    pts = np.stack([i, j, k], axis=-1).reshape(-1, 3) + rng.uniform(-0.1, 0.1, (i.size, 3)).astype(np.float32)
+    arrays = {name: rng.normal(size=len(pts)).astype(np.float32)
+              for name in ("density", "momentum-x", "momentum-y", "momentum-z", "energy")}
+    grid = meshio.Mesh(pts.astype(np.float32), [("hexahedron", hexes)], point_data=arrays)
+    api.compress(grid, d / "hex.tetc", dependencies=True, scalar="density")
+    api.decompress(d / "hex.tetc", d / "hex.vtu")
+
+
+def _planes_coder() -> None:
+    """An array coded by the planes coder (xz of the residuals' bytes), which wins only on long,
+    repetitive arrays: real files (Blunt-fin's Q variables) reach its decoder, a tiny mesh never."""
+    n = 4096
+    values = np.tile(np.arange(8, dtype=np.float32), n // 8)
+    refs = np.full((n, 4), -1, np.int32)
+    refs[1:, 0] = np.arange(n - 1)
+    ArrayDecoder(encode_array(values, refs), n_points=n, dtype="float32", components=1).decode(refs)
 
 
 # What `tetc warmup` (and `make install`) compiles, in two processes (numba compiles one function

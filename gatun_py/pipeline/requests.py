@@ -201,7 +201,8 @@ class Detail:
         _set(self, "budget", check_number("budget", self.budget, lo=0.0, lo_open=True))
         _set(self, "ratio", check_number("ratio", self.ratio, lo=0.0, hi=1.0))
         if sum(x is not None for x in (self.ratio, self.level, self.budget, self.tets)) > 1:
-            raise refused("give at most one of ratio, level, budget and tets", "ratio", "level", "budget", "tets")
+            raise refused("ratio, level, budget and tets are mutually exclusive: give at most one", "ratio", "level",
+                          "budget", "tets")
         if self.tets is not None:
             if isinstance(self.tets, bool) or not isinstance(self.tets, (int, np.integer)) or self.tets < 1:
                 raise refused(f"tets must be a whole number >= 1, got {self.tets!r}", "tets")

@@ -319,8 +319,9 @@ def _readme() -> str:
 def _hex_grid(d: Path) -> None:
     """What a PLOT3D grid (Blunt-fin) becomes: hexahedra on float32 points with five float32
     arrays, compressed with its dependencies and decompressed to its cells: kernels typed by
-    float32 coordinates and reached by cells that the tet meshes above do not reach."""
-    dims = (5, 4, 3)
+    float32 coordinates and reached by cells that the tet meshes above do not reach, and enough
+    tets (over 1024) for the decimation to compact its tet table as on real files."""
+    dims = (10, 8, 6)
     hexes, _ = grid_hexes(dims)
     k, j, i = np.meshgrid(*(np.arange(n, dtype=np.float32) for n in dims[::-1]), indexing="ij")
     rng = np.random.default_rng(1)
